@@ -1,0 +1,13 @@
+"""`bag_recorder`: see ../shared/design/INTERFACES.md. Not implemented yet (its issue is open)."""
+from __future__ import annotations
+
+import sys
+
+
+def main(argv: list[str] | None = None) -> int:
+    print('bag_recorder: not implemented yet', file=sys.stderr)
+    return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

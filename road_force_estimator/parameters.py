@@ -1,0 +1,309 @@
+"""Parameters: the one table of names, defaults, units and ranges, and the frozen dataclasses.
+
+Names are those of ``../shared/design/INTERFACES.md`` (``vehicle.*``, ``observer.*``,
+``simulator.*``); defaults are those of ``MODEL.md``. Nodes declare their ROS parameters
+from :data:`PARAMETERS`; offline commands read the same ``/**: ros__parameters:`` files with
+:func:`load_params_file`. Every value is validated once, when a dataclass is built: a bad value
+raises :class:`ValueError` naming the parameter, the value, the unit and the valid range.
+
+This module imports no ROS package (the core stays ROS-free).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+import math
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+__all__ = [
+    'ParameterSpec', 'PARAMETERS', 'SPECS', 'GRAVITY_MPS2',
+    'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
+    'validate_parameter', 'load_params_file', 'defaults',
+]
+
+GRAVITY_MPS2 = 9.80665
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter of the contract.
+
+    ``kind`` is ``'double'``, ``'double_pair'`` (``[left, right]``), ``'integer'`` or
+    ``'string'``; ``low``/``high`` bound every element (inclusive), ``choices`` a string.
+    """
+
+    name: str
+    kind: str
+    default: Any
+    unit: str
+    description: str
+    low: float = -math.inf
+    high: float = math.inf
+    choices: tuple[str, ...] = ()
+
+    def range_text(self) -> str:
+        if self.kind == 'string':
+            return 'one of ' + ', '.join(self.choices) if self.choices else 'any string'
+        return f'[{self.low:g}, {self.high:g}] {self.unit}'.rstrip()
+
+
+def _p(name, kind, default, unit, description, low=-math.inf, high=math.inf, choices=()):
+    return ParameterSpec(name, kind, default, unit, description, low, high, tuple(choices))
+
+
+# The one place where defaults live (MODEL.md "Parameters", INTERFACES.md "Parameters").
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    _p('vehicle.sprung_mass', 'double', 5000.0, 'kg',
+       'sprung mass carried by the front axle', 100.0, 1e5),
+    _p('vehicle.roll_inertia', 'double', 3000.0, 'kg m^2',
+       'roll inertia of the sprung mass about the roll axis', 10.0, 1e6),
+    _p('vehicle.track_width', 'double', 2.0, 'm', 'front axle track width', 0.5, 4.0),
+    _p('vehicle.cg_height_above_roll_axis', 'double', 0.8, 'm',
+       'height of the sprung-mass centre of gravity above the roll axis', 0.0, 5.0),
+    _p('vehicle.unsprung_mass', 'double_pair', [450.0, 450.0], 'kg',
+       'unsprung mass per side [left, right]', 1.0, 1e4),
+    _p('vehicle.suspension_stiffness', 'double_pair', [400e3, 400e3], 'N/m',
+       'suspension stiffness per side [left, right]', 1e3, 1e8),
+    _p('vehicle.suspension_damping', 'double_pair', [15e3, 15e3], 'N s/m',
+       'suspension damping per side [left, right]', 0.0, 1e7),
+    _p('vehicle.tire_stiffness', 'double_pair', [1000e3, 1000e3], 'N/m',
+       'tire vertical stiffness per side [left, right]', 1e4, 1e9),
+    _p('vehicle.tire_damping', 'double_pair', [0.0, 0.0], 'N s/m',
+       'tire vertical damping per side [left, right]', 0.0, 1e6),
+    _p('vehicle.static_load', 'double_pair', [0.0, 0.0], 'N',
+       'static wheel load per side [left, right]; 0 = (M/2 + m_i) g', 0.0, 1e7),
+    _p('observer.lipschitz_deflection', 'double', 5000.0, 'm/s^3',
+       'Lipschitz constant L of the deflection differentiators (bound on |dddq|)', 1e-3, 1e9),
+    _p('observer.lipschitz_roll', 'double', 50.0, 'rad/s^3',
+       'Lipschitz constant L of the roll differentiator (bound on |dddphi|)', 1e-6, 1e9),
+    _p('observer.discretization', 'string', 'implicit', '',
+       'differentiator scheme: "euler" is the paper\'s explicit scheme, the others ours',
+       choices=('euler', 'taylor', 'implicit')),
+    _p('observer.profile_cutoff_wavelength', 'double', 100.0, 'm',
+       'long-wavelength cutoff of the body-heave integration (profile high-pass)', 5.0, 1e4),
+    _p('observer.latency', 'double', 0.0, 's',
+       'delay of the published estimate behind the newest input sample', 0.0, 1.0),
+    _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
+    _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
+    _p('simulator.duration', 'double', 60.0, 's',
+       'simulated time; the drive also stops at the end of the road profile', 0.0, 1e6),
+    _p('simulator.road', 'string', 'iso8608:C:seed=1', '',
+       'road source: "iso8608:<A-H>[:seed=N]" or a path to an LPA bag, CSV or ERD profile'),
+    _p('simulator.noise.deflection', 'double', 1e-5, 'm',
+       'standard deviation of the deflection sensor noise', 0.0, 0.1),
+    _p('simulator.noise.roll', 'double', 1e-4, 'rad',
+       'standard deviation of the roll sensor noise', 0.0, 0.1),
+    _p('simulator.seed', 'integer', 1, '', 'seed of the sensor noise', 0, 2**31 - 1),
+    _p('simulator.tire_envelope_length', 'double', 0.25, 'm',
+       'moving-average length of the tire envelope; 0 = point contact', 0.0, 2.0),
+    _p('simulator.gnss.rate', 'double', 10.0, 'Hz', 'rate of /fix; 0 = no /fix', 0.0, 100.0),
+    _p('simulator.gnss.start_latitude', 'double', 48.1486, 'deg',
+       'WGS84 latitude of the start of the route', -90.0, 90.0),
+    _p('simulator.gnss.start_longitude', 'double', 17.1077, 'deg',
+       'WGS84 longitude of the start of the route', -180.0, 180.0),
+    _p('simulator.gnss.heading', 'double', 0.0, 'deg',
+       'route heading, clockwise from north', -360.0, 360.0),
+)
+
+SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
+
+
+def defaults(prefix: str = '') -> dict[str, Any]:
+    """Default values by dotted name, optionally only those starting with ``prefix``."""
+    return {s.name: s.default for s in PARAMETERS if s.name.startswith(prefix)}
+
+
+def validate_parameter(name: str, value: Any) -> Any:
+    """Return ``value`` checked and normalised for parameter ``name``.
+
+    Raises
+    ------
+    ValueError
+        Unknown name, wrong type or out of range; the message names the parameter, the value
+        and the valid range.
+    """
+    spec = SPECS.get(name)
+    if spec is None:
+        raise ValueError(f'unknown parameter {name!r}')
+    bad = f'{name} = {value!r}'
+    if spec.kind == 'string':
+        if not isinstance(value, str):
+            raise ValueError(f'{bad}: expected a string ({spec.range_text()})')
+        if spec.choices and value not in spec.choices:
+            raise ValueError(f'{bad}: must be {spec.range_text()}')
+        return value
+    if spec.kind == 'integer':
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f'{bad}: expected an integer in {spec.range_text()}')
+        if not spec.low <= value <= spec.high:
+            raise ValueError(f'{bad} is out of range {spec.range_text()}')
+        return int(value)
+    if spec.kind == 'double_pair':
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__len__') or len(value) != 2:
+            raise ValueError(f'{bad}: expected [left, right], each in {spec.range_text()}')
+        return tuple(_check_double(spec, v, bad) for v in value)
+    return _check_double(spec, value, bad)
+
+
+def _check_double(spec: ParameterSpec, value: Any, bad: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f'{bad}: expected a number in {spec.range_text()}')
+    value = float(value)
+    if not math.isfinite(value) or not spec.low <= value <= spec.high:
+        raise ValueError(f'{bad} is out of range {spec.range_text()}')
+    return value
+
+
+def _param(name: str):
+    """A dataclass field whose default and validation come from :data:`SPECS`."""
+    spec = SPECS[name]
+    default = tuple(spec.default) if spec.kind == 'double_pair' else spec.default
+    return field(default=default, metadata={'param': name})
+
+
+class _FromParameters:
+    """Build from / export to dotted parameter names; validate every field once."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            name = f.metadata.get('param')
+            if name is not None:
+                object.__setattr__(self, f.name, validate_parameter(name, getattr(self, f.name)))
+        self._check()
+
+    def _check(self) -> None:
+        """Cross-field checks (overridden where needed)."""
+
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, Any]):
+        """Build from a mapping of dotted names (others ignored); missing names take defaults."""
+        kwargs = {f.name: values[f.metadata['param']] for f in fields(cls)
+                  if 'param' in f.metadata and f.metadata['param'] in values}
+        return cls(**kwargs)
+
+    def to_parameters(self) -> dict[str, Any]:
+        """Dotted names to values (pairs as lists, as in a parameter file)."""
+        out = {}
+        for f in fields(self):
+            if 'param' in f.metadata:
+                v = getattr(self, f.name)
+                out[f.metadata['param']] = list(v) if isinstance(v, tuple) else v
+        return out
+
+
+@dataclass(frozen=True)
+class VehicleParameters(_FromParameters):
+    """Roll-plane half tractor, front axle (MODEL.md). Index 0 = left, 1 = right; SI units."""
+
+    sprung_mass_kg: float = _param('vehicle.sprung_mass')
+    roll_inertia_kgm2: float = _param('vehicle.roll_inertia')
+    track_width_m: float = _param('vehicle.track_width')
+    cg_height_m: float = _param('vehicle.cg_height_above_roll_axis')
+    unsprung_mass_kg: tuple[float, float] = _param('vehicle.unsprung_mass')
+    suspension_stiffness_npm: tuple[float, float] = _param('vehicle.suspension_stiffness')
+    suspension_damping_nspm: tuple[float, float] = _param('vehicle.suspension_damping')
+    tire_stiffness_npm: tuple[float, float] = _param('vehicle.tire_stiffness')
+    tire_damping_nspm: tuple[float, float] = _param('vehicle.tire_damping')
+    static_load_setting_n: tuple[float, float] = _param('vehicle.static_load')
+
+    @property
+    def half_track_m(self) -> float:
+        """s = T/2: lever arm of each suspension about the roll axis (m)."""
+        return 0.5 * self.track_width_m
+
+    @property
+    def static_load_n(self) -> tuple[float, float]:
+        """Static wheel loads F_c,i (N): the setting, or (M/2 + m_i) g where it is 0."""
+        return tuple(
+            setting if setting > 0.0 else (0.5 * self.sprung_mass_kg + m) * GRAVITY_MPS2
+            for setting, m in zip(self.static_load_setting_n, self.unsprung_mass_kg))
+
+
+@dataclass(frozen=True)
+class ObserverParameters(_FromParameters):
+    """Settings of the estimator (differentiator and reconstruction)."""
+
+    lipschitz_deflection_mps3: float = _param('observer.lipschitz_deflection')
+    lipschitz_roll_radps3: float = _param('observer.lipschitz_roll')
+    discretization: str = _param('observer.discretization')
+    profile_cutoff_wavelength_m: float = _param('observer.profile_cutoff_wavelength')
+    latency_s: float = _param('observer.latency')
+
+
+@dataclass(frozen=True)
+class SimulatorParameters(_FromParameters):
+    """Settings of the plant simulator (sensor noise, road, drive, GNSS)."""
+
+    rate_hz: float = _param('simulator.rate')
+    speed_mps: float = _param('simulator.speed')
+    duration_s: float = _param('simulator.duration')
+    road: str = _param('simulator.road')
+    noise_deflection_m: float = _param('simulator.noise.deflection')
+    noise_roll_rad: float = _param('simulator.noise.roll')
+    seed: int = _param('simulator.seed')
+    tire_envelope_length_m: float = _param('simulator.tire_envelope_length')
+    gnss_rate_hz: float = _param('simulator.gnss.rate')
+    gnss_start_latitude_deg: float = _param('simulator.gnss.start_latitude')
+    gnss_start_longitude_deg: float = _param('simulator.gnss.start_longitude')
+    gnss_heading_deg: float = _param('simulator.gnss.heading')
+
+
+def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            out.update(_flatten(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def _yaml_number(name: str, value: Any) -> Any:
+    """PyYAML reads ``1e-05`` (no dot) as a string, where ROS's parser reads a double."""
+    spec = SPECS.get(name)
+    if spec is not None and spec.kind == 'double' and isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def load_params_file(path: str | Path, node_names: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Read a ROS 2 parameter file into ``{dotted name: validated value}``.
+
+    Sections ``/**`` and any of ``node_names`` (with or without a leading ``/``) are merged in
+    file order; nested keys or dotted keys are both accepted. Unknown names and bad values raise
+    :class:`ValueError` naming the file and the parameter.
+    """
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ValueError(f'cannot read parameter file {path}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'parameter file {path} is not valid YAML: {exc}') from None
+    if not isinstance(doc, Mapping):
+        raise ValueError(f'parameter file {path}: expected "/**: ros__parameters:" at the top')
+    wanted = {'/**', '**'} | {n for name in node_names for n in (name, '/' + name.lstrip('/'))}
+    values: dict[str, Any] = {}
+    found = False
+    for section, body in doc.items():
+        if section not in wanted:
+            continue
+        if not isinstance(body, Mapping) or not isinstance(body.get('ros__parameters'), Mapping):
+            raise ValueError(f'parameter file {path}: section {section!r} has no ros__parameters')
+        found = True
+        for name, value in _flatten(body['ros__parameters']).items():
+            if name.startswith('use_sim_time') or name.startswith('qos_overrides'):
+                continue
+            try:
+                values[name] = validate_parameter(name, _yaml_number(name, value))
+            except ValueError as exc:
+                raise ValueError(f'parameter file {path}: {exc}') from None
+    if not found:
+        raise ValueError(f'parameter file {path}: no "/**: ros__parameters:" section')
+    return values
