@@ -53,7 +53,8 @@ setup(
     ],
     extras_require={
         'fleet': ['dask[distributed]>=2024.1', 'pyarrow>=14'],
-        'test': ['pytest>=7,<10', 'colcon-core>=0.15,<0.22', 'colcon-ros>=0.4,<0.6'],
+        'test': ['pytest>=7,<10', 'ruff>=0.5,<1', 'colcon-core>=0.15,<0.22',
+                 'colcon-ros>=0.4,<0.6'],
     },
     zip_safe=True,
     maintainer='road_force_estimator developers',
@@ -61,7 +62,6 @@ setup(
     description='Road profile and vertical wheel load estimation with a sliding-mode observer.',
     license='Apache-2.0',
     python_requires='>=3.10,<3.14',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             f'{name} = {PACKAGE}.{name}:main' for name in EXECUTABLES

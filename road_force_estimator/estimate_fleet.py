@@ -1,4 +1,4 @@
-"""`estimate_fleet`: see ../shared/design/INTERFACES.md. Not implemented yet (its issue is open)."""
+"""`estimate_fleet` (INTERFACES.md): not implemented yet."""
 from __future__ import annotations
 
 import sys

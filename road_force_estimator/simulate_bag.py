@@ -1,4 +1,4 @@
-"""`simulate_bag`: see ../shared/design/INTERFACES.md. Not implemented yet (its issue is open)."""
+"""`simulate_bag` (INTERFACES.md): not implemented yet."""
 from __future__ import annotations
 
 import sys

@@ -33,7 +33,7 @@ def test_dlc_peak_ltr_and_lift_offs_by_hand():
     assert table['dlc_right'][0] == pytest.approx(0.0, abs=1e-12)
     assert table['peak_load_right_n'].tolist() == [20000.0, 35000.0]
     assert table['peak_load_left_n'].tolist() == [11000.0, 11000.0]
-    assert table['max_abs_ltr'][1] == pytest.approx((35000 - 9000) / 44000)   # sample 150: left 9 kN
+    assert table['max_abs_ltr'][1] == pytest.approx((35000 - 9000) / 44000)  # left: 9 kN
     assert table['lift_offs'].tolist() == [1, 2]
     assert np.isnan(table['iri_left_m_per_km']).all() and np.isnan(table['start_lat']).all()
 
