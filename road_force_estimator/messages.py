@@ -1,0 +1,198 @@
+"""Messages of the nodes (INTERFACES.md "Topics"): names, frames, QoS and conversions.
+
+The nodes convert at this edge and nowhere else: ROS stamps to integer nanoseconds
+(``stamp_ns``), messages to plain floats and arrays for the core, core results to standard
+messages (std_msgs, sensor_msgs, geometry_msgs, diagnostic_msgs). A received JointState is
+mapped by joint NAME, never by position; one that cannot be read is refused with a
+:class:`MessageRejected` whose ``reason`` is a short key for the diagnostics counters.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
+from rclpy.qos import (
+    DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+__all__ = [
+    'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES', 'SIDES',
+    'TOPIC_TYPES', 'SENSOR_TOPICS', 'sensor_qos', 'reliable_qos', 'topic_qos',
+    'MessageRejected', 'stamp_to_ns', 'ns_to_stamp', 'deflections_msg', 'read_deflections',
+    'twist_msg', 'read_twist', 'wrench_msg', 'road_point_msg', 'float64_msg', 'states_msg',
+    'diagnostic_status',
+]
+
+DEFLECTION_JOINTS = ('left_suspension', 'right_suspension', 'roll')
+STATE_JOINTS = DEFLECTION_JOINTS + ('body_heave', 'left_wheel_heave', 'right_wheel_heave')
+BASE_FRAME = 'base_link'
+ROAD_FRAME = 'road'
+WHEEL_FRAMES = ('front_left_wheel', 'front_right_wheel')
+SIDES = ('left', 'right')
+
+# Every topic of INTERFACES.md and its type (as rosbag2 and rosbags spell it).
+TOPIC_TYPES: dict[str, str] = {
+    '/suspension/deflections': 'sensor_msgs/msg/JointState',
+    '/vehicle/twist': 'geometry_msgs/msg/TwistStamped',
+    '/ground_truth/wheel_load/left': 'geometry_msgs/msg/WrenchStamped',
+    '/ground_truth/wheel_load/right': 'geometry_msgs/msg/WrenchStamped',
+    '/ground_truth/road_profile/left': 'geometry_msgs/msg/PointStamped',
+    '/ground_truth/road_profile/right': 'geometry_msgs/msg/PointStamped',
+    '/wheel_load/left': 'geometry_msgs/msg/WrenchStamped',
+    '/wheel_load/right': 'geometry_msgs/msg/WrenchStamped',
+    '/road_profile/left': 'geometry_msgs/msg/PointStamped',
+    '/road_profile/right': 'geometry_msgs/msg/PointStamped',
+    '/load_transfer_ratio': 'std_msgs/msg/Float64',
+    '/observer/states': 'sensor_msgs/msg/JointState',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+    '/fix': 'sensor_msgs/msg/NavSatFix',
+    '/lpa/left': 'geometry_msgs/msg/PointStamped',
+    '/lpa/right': 'geometry_msgs/msg/PointStamped',
+}
+# Sensor streams: best effort, keep last (the sensor-data QoS); everything else is reliable.
+SENSOR_TOPICS = frozenset({'/suspension/deflections', '/fix'})
+
+
+def sensor_qos(depth: int = 5) -> QoSProfile:
+    """Sensor-data QoS (best effort, keep last ``depth``, volatile)."""
+    return QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
+                      durability=DurabilityPolicy.VOLATILE, depth=depth)
+
+
+def reliable_qos(depth: int = 100) -> QoSProfile:
+    """Reliable, keep last ``depth``, volatile: ground truth, estimates, diagnostics."""
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      durability=DurabilityPolicy.VOLATILE, depth=depth)
+
+
+def topic_qos(topic: str, depth: int = 100) -> QoSProfile:
+    """The QoS a topic of INTERFACES.md is published with (``depth`` deep)."""
+    return sensor_qos(depth) if topic in SENSOR_TOPICS else reliable_qos(depth)
+
+
+class MessageRejected(ValueError):
+    """A received message that cannot be used; ``reason`` is a short counter key."""
+
+    def __init__(self, reason: str, message: str):
+        super().__init__(message)
+        self.reason = reason
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    """``builtin_interfaces/Time`` to integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def ns_to_stamp(stamp_ns: int) -> Time:
+    """Integer nanoseconds to ``builtin_interfaces/Time`` (exact, no float on the way)."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def deflections_msg(stamp_ns: int, q_m: Sequence[float], roll_rad: float) -> JointState:
+    """``/suspension/deflections``: positions [q_1 (m), q_2 (m), phi (rad)] by name."""
+    msg = JointState(name=list(DEFLECTION_JOINTS),
+                     position=[float(q_m[0]), float(q_m[1]), float(roll_rad)])
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = BASE_FRAME
+    return msg
+
+
+def read_deflections(msg: JointState) -> tuple[int, tuple[float, float], float]:
+    """``(stamp_ns, (q_1, q_2) (m), phi (rad))`` from a JointState, mapped by joint name.
+
+    Raises
+    ------
+    MessageRejected
+        ``reason`` 'length' (position differs in length from name, or a velocity/effort array
+        that is neither empty nor as long), 'names' (a required joint missing, or a name
+        repeated), 'nonfinite' (NaN or infinite value).
+    """
+    names = list(msg.name)
+    n = len(names)
+    if len(msg.position) != n or any(len(a) not in (0, n) for a in (msg.velocity, msg.effort)):
+        raise MessageRejected('length', f'JointState arrays differ in length from name ({n}): '
+                                        f'position {len(msg.position)}, velocity '
+                                        f'{len(msg.velocity)}, effort {len(msg.effort)}')
+    if len(set(names)) != n or not set(DEFLECTION_JOINTS) <= set(names):
+        raise MessageRejected('names', f'JointState names {names} must include each of '
+                                       f'{list(DEFLECTION_JOINTS)} once')
+    by_name = dict(zip(names, msg.position))
+    q1, q2, phi = (float(by_name[j]) for j in DEFLECTION_JOINTS)
+    if not (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(phi)):
+        raise MessageRejected('nonfinite', f'JointState holds a non-finite value: '
+                                           f'q = ({q1}, {q2}), phi = {phi}')
+    return stamp_to_ns(msg.header.stamp), (q1, q2), phi
+
+
+def twist_msg(stamp_ns: int, speed_mps: float) -> TwistStamped:
+    """``/vehicle/twist``: ``twist.linear.x`` = speed v (m/s), frame ``base_link``."""
+    msg = TwistStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = BASE_FRAME
+    msg.twist.linear.x = float(speed_mps)
+    return msg
+
+
+def read_twist(msg: TwistStamped) -> tuple[int, float]:
+    """``(stamp_ns, speed (m/s))``; :class:`MessageRejected` ('nonfinite') for NaN or inf."""
+    speed = float(msg.twist.linear.x)
+    if not math.isfinite(speed):
+        raise MessageRejected('nonfinite', f'TwistStamped linear.x = {speed}')
+    return stamp_to_ns(msg.header.stamp), speed
+
+
+def wrench_msg(stamp_ns: int, frame: str, force_z_n: float) -> WrenchStamped:
+    """Vertical wheel load F_n (N, up) in ``wrench.force.z``."""
+    msg = WrenchStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame
+    msg.wrench.force.z = float(force_z_n)
+    return msg
+
+
+def road_point_msg(stamp_ns: int, distance_m: float, lateral_m: float,
+                   elevation_m: float) -> PointStamped:
+    """Road point under a tire: x = distance (m), y = +T/2 (left) / -T/2 (right), z (m)."""
+    msg = PointStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = ROAD_FRAME
+    msg.point.x, msg.point.y, msg.point.z = float(distance_m), float(lateral_m), float(
+        elevation_m)
+    return msg
+
+
+def float64_msg(value: float) -> Float64:
+    """A ``std_msgs/Float64`` (no header: it is published with its inputs' order)."""
+    return Float64(data=float(value))
+
+
+def states_msg(stamp_ns: int, position: Sequence[float], velocity: Sequence[float]) -> JointState:
+    """``/observer/states``: :data:`STATE_JOINTS` with estimated positions and velocities."""
+    msg = JointState(name=list(STATE_JOINTS), position=[float(v) for v in position],
+                     velocity=[float(v) for v in velocity])
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = BASE_FRAME
+    return msg
+
+
+_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+           'error': DiagnosticStatus.ERROR, 'stale': DiagnosticStatus.STALE}
+
+
+def diagnostic_status(name: str, hardware_id: str, level: str, message: str,
+                      values: Mapping[str, Any]) -> DiagnosticStatus:
+    """A ``DiagnosticStatus``; ``level`` is 'ok', 'warn', 'error' or 'stale'."""
+    return DiagnosticStatus(
+        level=_LEVELS[level], name=name, message=message, hardware_id=hardware_id,
+        values=[KeyValue(key=str(k), value=_text(v)) for k, v in values.items()])
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    return str(value)
