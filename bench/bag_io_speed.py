@@ -56,13 +56,15 @@ def generic_write(path: Path, trajectory, q, roll) -> int:
                 effort=np.zeros(0))
             msgs = [(bag_io.TOPIC_TWIST, tw), (bag_io.TOPIC_DEFLECTIONS, js)]
             for side in (0, 1):
-                msgs.append((bag_io.TOPIC_TRUE_LOAD[side], types['geometry_msgs/msg/WrenchStamped'](
+                wrench = types['geometry_msgs/msg/WrenchStamped'](
                     header=h, wrench=types['geometry_msgs/msg/Wrench'](
                         force=v3(x=0.0, y=0.0, z=trajectory.wheel_load_n[i, side]),
-                        torque=v3(x=0.0, y=0.0, z=0.0)))))
-                msgs.append((bag_io.TOPIC_TRUE_ROAD[side], types['geometry_msgs/msg/PointStamped'](
+                        torque=v3(x=0.0, y=0.0, z=0.0)))
+                point = types['geometry_msgs/msg/PointStamped'](
                     header=h, point=types['geometry_msgs/msg/Point'](
-                        x=trajectory.distance_m[i], y=1.0, z=trajectory.road_m[i, side]))))
+                        x=trajectory.distance_m[i], y=1.0, z=trajectory.road_m[i, side]))
+                msgs += [(bag_io.TOPIC_TRUE_LOAD[side], wrench),
+                         (bag_io.TOPIC_TRUE_ROAD[side], point)]
             for topic, msg in msgs:
                 writer.write(conns[topic], s,
                              TYPESTORE.serialize_cdr(msg, bag_io.MSGTYPES[topic]))

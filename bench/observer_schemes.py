@@ -14,7 +14,8 @@ convergence time t_0: the worst over six starts in mid-drive (the differentiator
 within 1.2 times the peak error of the estimator that ran from the start, on the same samples
 (see :func:`convergence`). With ``--tune``, also the best L_q of a grid per row.
 
-Cost: median over repeats of the wall time of :meth:`Estimator.update` per sample
+Cost: median over repeats of the CPU time (``time.process_time``, so that other processes on
+a shared machine disturb it less than wall time) of :meth:`Estimator.update` per sample
 (``--cost-samples`` samples per repeat), and of :func:`estimate_batch`.
 
 Run: ``.venv/bin/python -m bench.observer_schemes [--duration 30] [--tune]``.
@@ -106,13 +107,13 @@ def cost(observer: ObserverParameters, tr, q, phi, n: int, repeats: int) -> tupl
     for _ in range(repeats):
         est = Estimator(VehicleParameters(), observer)
         update = est.update
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         for k in range(n):
             update(st[k], ql[k], pl[k], SPEED)
-        per.append((time.perf_counter() - t0) / n)
-        t0 = time.perf_counter()
+        per.append((time.process_time() - t0) / n)
+        t0 = time.process_time()
         estimate_batch(stamps, q[:n], phi[:n], SPEED, VehicleParameters(), observer)
-        batch.append((time.perf_counter() - t0) / n)
+        batch.append((time.process_time() - t0) / n)
     return 1e6 * float(np.median(per)), 1e6 * float(np.median(batch))
 
 
@@ -166,7 +167,7 @@ def main(argv=None) -> int:
         for scheme, noise, (lq, r) in rows_tuned:
             print(f'| {scheme} | {1e6 * noise:g} | {lq:g} | {r["load_rms"]:.1f} | '
                   f'{r["prof_rms"]:.1f} |')
-    print('\nCost per sample (median of', args.repeats, 'repeats of', args.cost_samples,
+    print('\nCPU time per sample (median of', args.repeats, 'repeats of', args.cost_samples,
           'samples, 10 um noise):\n')
     print('| scheme | Estimator.update (us/sample) | estimate_batch (us/sample) |')
     print('|---|---|---|')

@@ -48,10 +48,14 @@ __all__ = [
     'lowpass_differences', 'zero_phase_differences',
     'kf_model', 'kf_model_lag', 'kf_model_rts', 'RollPlaneKalman', 'SteadyStateKalman', 'PEERS',
     'DEFAULT_TUNING', 'USES_SENSOR_NOISE', 'call_peer', 'iso_road_diffusion', 'van_loan',
+    'filter_riccati',
 ]
 
 #: Reference spatial frequency of ISO 8608 (cycles/m).
 ISO_N0 = 0.1
+#: Largest measurement-noise floor the Kalman peers raise their floor to (m), see
+#: :class:`RollPlaneKalman`.
+MAX_NOISE_FLOOR_M = 1e-6
 
 
 @dataclass
@@ -394,6 +398,44 @@ def zero_phase_offline(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
 # generic steady-state Kalman filter and smoothers (linear, time-invariant)
 
 
+def filter_riccati(a: np.ndarray, c: np.ndarray, q: np.ndarray, r: np.ndarray, *,
+                   rtol: float = 1e-13, max_iter: int = 200) -> np.ndarray:
+    """Stabilising solution P of ``P = A P A^T - A P C^T (C P C^T + R)^-1 C P A^T + Q``.
+
+    Structured doubling algorithm (SDA-1, Chu, Fan & Lin 2005, Linear Algebra Appl. 396): with
+    ``A_0 = A^T``, ``G_0 = C^T R^-1 C``, ``H_0 = Q`` and ``W = I + G_k H_k``::
+
+        A_{k+1} = A_k W^-1 A_k
+        G_{k+1} = G_k + A_k W^-1 G_k A_k^T
+        H_{k+1} = H_k + A_k^T H_k W^-1 A_k      -> P
+
+    Each iteration doubles the number of Riccati steps it covers, so slow modes (the road's
+    leak, eigenvalues within 1e-6 of the unit circle) converge in a few dozen iterations where
+    the QZ method of ``scipy.linalg.solve_discrete_are`` reports an ill-conditioned pencil.
+    ``R`` must be positive definite.
+    """
+    nx = a.shape[0]
+    lr = np.linalg.cholesky(r)
+    cw = linalg.solve_triangular(lr, c, lower=True)          # whitened measurement
+    ak = a.T.copy()
+    gk = cw.T @ cw
+    hk = 0.5 * (q + q.T)
+    eye = np.eye(nx)
+    for _ in range(max_iter):
+        w = eye + gk @ hk
+        aw = np.linalg.solve(w.T, ak.T).T                   # A_k W^-1
+        a_next = aw @ ak
+        g_next = gk + aw @ gk @ ak.T
+        h_next = hk + ak.T @ hk @ np.linalg.solve(w, ak)
+        g_next = 0.5 * (g_next + g_next.T)
+        h_next = 0.5 * (h_next + h_next.T)
+        done = np.max(np.abs(h_next - hk)) <= rtol * np.max(np.abs(h_next))
+        ak, gk, hk = a_next, g_next, h_next
+        if done:
+            return hk
+    raise ValueError(f'Riccati equation: no convergence in {max_iter} doubling steps')
+
+
 class SteadyStateKalman:
     """Kalman filter and smoothers for ``x_{k+1} = A x_k + w_k``, ``y_k = C x_k + v_k``.
 
@@ -413,14 +455,13 @@ class SteadyStateKalman:
         a_s = (a * s_inv[:, None]) * sc[None, :]
         c_s = c * sc[None, :]
         q_s = q * np.outer(s_inv, s_inv)
-        p_s = linalg.solve_discrete_are(a_s.T, c_s.T, q_s, r)
-        p_s = 0.5 * (p_s + p_s.T)
+        p_s = filter_riccati(a_s, c_s, q_s, r)
         innov = c_s @ p_s @ c_s.T + r
-        k_s = linalg.solve(innov, c_s @ p_s, assume_a='pos').T
+        k_s = np.linalg.solve(innov, c_s @ p_s).T
         pf_s = (np.eye(nx) - k_s @ c_s) @ p_s
         pf_s = 0.5 * (pf_s + pf_s.T)
         # G = P_f A^T P^-1, by least squares (P may be nearly singular on noise-free data)
-        g_s = linalg.lstsq(p_s, a_s @ pf_s)[0].T
+        g_s = np.linalg.lstsq(p_s, a_s @ pf_s, rcond=None)[0].T
         self.a, self.c, self.q, self.r = a, c, q, r
         self.p_prior = p_s * np.outer(sc, sc)
         self.p_post = pf_s * np.outer(sc, sc)
@@ -436,7 +477,7 @@ class SteadyStateKalman:
         """A-posteriori estimates x_{k|k}, (n, nx); ``x0_prior`` is the prior mean of x_0."""
         drive = y @ self.k.T
         # x_{0|0} = x0 + K (y_0 - C x0) = F x_{-1} + K y_0 with A x_{-1} := x0
-        x_m1 = linalg.lstsq(self.a, x0_prior)[0]
+        x_m1 = np.linalg.lstsq(self.a, x0_prior, rcond=None)[0]
         return _run_lti(self.f_closed, drive, x_m1)
 
     def rts(self, xf: np.ndarray) -> np.ndarray:
@@ -494,13 +535,22 @@ def kf_jerk(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
     d = np.empty((x.shape[0], 3, 3))
     for ch in range(3):
         psd = jerk_psd if ch < 2 else jerk_psd / s ** 2
-        r = (noise_deflection_m ** 2 + noise_floor_m ** 2 if ch < 2
-             else noise_roll_rad ** 2 + (noise_floor_m / s) ** 2)
         a_d, q_d = _irw_model(states, psd, dt_s)
         c = np.zeros((1, states))
         c[0, 0] = 1.0
-        scale = np.array([1.0, 1.0 / dt_s, 1.0 / dt_s ** 2, 1.0 / dt_s ** 3][:states])
-        kf = SteadyStateKalman(a_d, c, q_d, np.array([[r]]), scale * max(r, 1e-30) ** 0.5)
+        floor = noise_floor_m
+        while True:
+            r = (noise_deflection_m ** 2 + floor ** 2 if ch < 2
+                 else noise_roll_rad ** 2 + (floor / s) ** 2)
+            scale = np.array([1.0, 1.0 / dt_s, 1.0 / dt_s ** 2, 1.0 / dt_s ** 3][:states])
+            try:
+                kf = SteadyStateKalman(a_d, c, q_d, np.array([[r]]),
+                                       scale * max(r, 1e-30) ** 0.5)
+                break
+            except (ValueError, np.linalg.LinAlgError):
+                if floor >= MAX_NOISE_FLOOR_M:
+                    raise
+                floor = min(10.0 * max(floor, 1e-12), MAX_NOISE_FLOOR_M)
         x0 = np.zeros(states)
         x0[0] = x[0, ch]
         xf = kf.filter(x[:, ch:ch + 1], x0)
@@ -530,9 +580,18 @@ class RollPlaneKalman:
     does; u_i then integrates du_i (with the same leak as above).
 
     Process noise also enters each equation of motion as a white generalised force of two-sided
-    density ``force_psd`` (N^2 s), for unmodelled forces (parameter errors, lateral
-    acceleration, tire envelope); roll gets ``force_psd s^2``. Measurement noise: the known
-    sensor variances plus a floor.
+    density ``force_psd`` (N^2 s), for unmodelled forces (parameter errors, nonlinearity, tire
+    envelope); roll gets ``force_psd s^2``. With ``roll_moment_psd`` > 0 an unknown roll moment
+    (N m; e.g. ``M h a_y`` of an unmeasured lateral acceleration) is one more state, a random
+    walk of that density ((N m)^2 / s).
+
+    Measurement noise: the known sensor variances plus ``noise_floor_m^2`` (roll:
+    ``(noise_floor_m / s)^2``). Where the Riccati equation cannot be solved in double precision
+    (noise-free data, a floor of ~1e-10 m), the floor is raised tenfold until it can (at most
+    :data:`MAX_NOISE_FLOOR_M`); :attr:`noise_floor_m` is the floor used.
+
+    The model is discretized exactly at the sample step (matrix exponential; Van Loan for the
+    process noise) for one (mean) speed.
     """
 
     def __init__(self, vehicle: VehicleParameters, dt_s: float, speed_mps: float, *,
@@ -596,8 +655,6 @@ class RollPlaneKalman:
         cm = np.zeros((3, nx))
         cm[0:2, 0:4] = d
         cm[2, 1] = 1.0
-        r = np.diag([noise_deflection_m ** 2 + noise_floor_m ** 2] * 2
-                     + [noise_roll_rad ** 2 + (noise_floor_m / s) ** 2])
         # state scales for the Riccati solver: metres ~ 1e-2, rates ~ 1e-1, road ~ 1e-2
         scale = np.full(nx, 1e-2)
         scale[4:8] = 1e-1
@@ -605,7 +662,20 @@ class RollPlaneKalman:
             scale[idu:idu + 2] = 1e-1
         if n_dist:
             scale[idist] = 1e3
-        self.kf = SteadyStateKalman(a_d, cm, q_d, r, scale)
+        #: measurement-noise floor actually used (raised x10 while the Riccati equation is too
+        #: ill-conditioned to solve in double precision, as a user would)
+        self.noise_floor_m = noise_floor_m
+        while True:
+            r = np.diag([noise_deflection_m ** 2 + self.noise_floor_m ** 2] * 2
+                        + [noise_roll_rad ** 2 + (self.noise_floor_m / s) ** 2])
+            try:
+                self.kf = SteadyStateKalman(a_d, cm, q_d, r, scale)
+                break
+            except (ValueError, np.linalg.LinAlgError):
+                if self.noise_floor_m >= MAX_NOISE_FLOOR_M:
+                    raise
+                self.noise_floor_m = min(10.0 * max(self.noise_floor_m, 1e-12),
+                                         MAX_NOISE_FLOOR_M)
         self.nx = nx
         self.iu, self.idu = iu, idu
         # tire force output: dF = Kt (u - z_u) + Ct (du - dz_u)
@@ -716,9 +786,14 @@ USES_SENSOR_NOISE = frozenset({'kf-jerk', 'kf-model', 'kf-model-lag5ms', 'kf-mod
                                'kf-model-rts'})
 
 #: Untuned starting points (the tuned values live in bench/tuned_peers.json).
+#: The model Kalman peers carry an unknown roll moment (e.g. M h a_y of an unmeasured lateral
+#: acceleration) as a random-walk state of density ROLL_MOMENT_PSD ((N m)^2 / s): it costs
+#: nothing on straight drives and keeps the filter honest in curves (fixed, not tuned: the
+#: tuning drive is straight).
+ROLL_MOMENT_PSD = 1e6
 _KF_DEFAULT = {'road_model': 'position', 'road_gd_m3': 64e-6, 'force_psd': 1.0,
                'noise_floor_m': 1e-7, 'leak_wavelength_m': 500.0,
-               'profile_cutoff_wavelength_m': 0.0}
+               'roll_moment_psd': ROLL_MOMENT_PSD, 'profile_cutoff_wavelength_m': 0.0}
 DEFAULT_TUNING: dict[str, dict[str, Any]] = {
     'paper-euler': {'lipschitz_deflection_mps3': 5000.0, 'lipschitz_roll_radps3': 50.0,
                     'profile_cutoff_wavelength_m': 100.0},

@@ -1,23 +1,28 @@
 """Bag I/O: rosbag2 folders with MCAP storage, the only module that imports rosbags.
 
-Bags are written as a Jazzy rosbag2 writes them: a folder with ``metadata.yaml`` (version 9,
-storage ``mcap``, offered QoS profiles as YAML lists, RIHS01 type hashes) and one ``.mcap``
-file with ``ros2msg`` schemas and little-endian CDR messages, so that ``ros2 bag info/play``,
-the ``mcap`` / ``mcap-ros2-support`` libraries and rosbags read them. The message types come
-from the rosbags typestore for ROS 2 Jazzy (:data:`TYPESTORE`, chosen explicitly).
+Bags are written as Jazzy's rosbag2 writes them: a folder with ``metadata.yaml`` (version 9,
+storage ``mcap``, offered QoS profiles as YAML lists, RIHS01 type hashes, a ``custom_data``
+map) and ``<folder>_0.mcap`` (profile ``ros2``, ``ros2msg`` schemas, little-endian CDR
+messages in CRC-checked chunks, message and chunk indexes, the ``rosbag2`` metadata record),
+so that ``ros2 bag info/play``, the ``mcap`` / ``mcap-ros2-support`` libraries and rosbags read
+them. Message definitions, type hashes and the serialization of arbitrary messages come from
+the rosbags typestore for ROS 2 Jazzy (:data:`TYPESTORE`, chosen explicitly, never LATEST).
 
-Speed. Serialising a message object with rosbags costs several microseconds; the topics of
-INTERFACES.md have a fixed byte layout (a fixed frame id, names and array lengths), so they
-are encoded and decoded here a whole column at a time: one message is serialised by rosbags
-as a template, its layout (the offset of every number, the bytes of every length and string)
-is found by walking the CDR stream, and all numbers are then written into, or read out of, an
-(n, size) byte array with numpy. A received message whose lengths or strings differ from the
-template is parsed on its own, so the fast path never misreads one (test_bag_io checks the
-bytes against rosbags' ``serialize_cdr`` and rclpy's ``serialize_message``).
+Speed. Serialising a message object with rosbags and writing it record by record costs
+about 15 microseconds; the topics of INTERFACES.md have a fixed byte layout (a fixed frame
+id, names and array lengths), so they are encoded and decoded here a whole column at a time:
+one message is serialised by rosbags as a template, its layout (the offset of every number,
+the bytes of every length and string) is found by walking the CDR stream, and all numbers
+are then written into, or read out of, an (n, size) byte array with numpy; the MCAP records
+around them are laid out with numpy too. A received message whose lengths or strings differ
+from the template is parsed on its own, so the fast path never misreads one (test_bag_io
+checks the bytes against rosbags' ``serialize_cdr`` and rclpy's ``serialize_message``, and
+bench/bag_io_speed.py measures both paths).
 
 Robustness. Reading walks each MCAP file record by record from its start, so a bag whose
 recording was cut (no summary, a truncated chunk, a missing ``metadata.yaml``) or that is
-corrupt yields every message before the break and a one-line description of the break.
+corrupt yields every message it can trust and one line per break: a chunk that fails its CRC
+is skipped and reading goes on; a cut or corrupt record outside chunks ends the file.
 Messages come in file order, which is log-time order for the bags rosbag2, the bag_recorder
 node and this module write. The ``read_*`` functions reject and count what cannot be trusted
 (undecodable, non-finite, a JointState without a required name or with arrays of the wrong
@@ -60,7 +65,7 @@ __all__ = [
     'decode_columns', 'stamps_to_ns', 'ns_to_stamps',
     'BagWriter', 'BagInfo', 'bag_info', 'iter_messages', 'TopicColumns', 'read_topic_columns',
     'write_lpa_bag', 'read_lpa_bag', 'GroundTruth', 'Fixes', 'Drive', 'write_drive_bag',
-    'read_drive_bag', 'write_estimate_bag',
+    'read_drive_bag', 'write_estimate_bag', 'diagnostic_array', 'ESTIMATE_FIELDS',
 ]
 
 #: The message definitions and hashes of ROS 2 Jazzy (never ``Stores.LATEST``).
@@ -517,7 +522,7 @@ def _template(msgtype: str, frame_id: str = '', names: Sequence[str] = (),
                                   position=np.zeros(k), velocity=np.zeros(k if velocity else 0),
                                   effort=np.zeros(0))
     if msgtype == _NAVSATFIX:
-        status = _msg('sensor_msgs/msg/NavSatStatus')(status=0, service=1)
+        status = _msg('sensor_msgs/msg/NavSatStatus')(status=0, service=0)
         return _msg(_NAVSATFIX)(header=_header(frame_id), status=status, latitude=0.0,
                                 longitude=0.0, altitude=0.0, position_covariance=np.zeros(9),
                                 position_covariance_type=0)
@@ -842,8 +847,8 @@ class BagWriter:
         self.path = Path(path)
         self._overwrite = overwrite
         self._file: _McapFile | None = None
-        # Never empty: rosbags writes an empty custom_data as null, which yaml-cpp (rosbag2)
-        # refuses to read as a map; a writer tag also tells where a bag came from.
+        # A map, never null (yaml-cpp in rosbag2 refuses a null custom_data), with a tag
+        # that tells where the bag came from.
         self._custom: dict[str, str] = {'road_force_estimator.writer': 'bag_io'}
         for key, value in (custom_data or {}).items():
             self.set_custom_data(key, value)
@@ -1194,6 +1199,12 @@ class _McapScan:
         self.issues.append(f'{self.path.name}: {text}')
 
     def records(self) -> Iterator[tuple[_Channel, int, bytes]]:
+        """The wanted messages ``(channel, log_ns, payload)`` in file order."""
+        for batch in self.batches():
+            yield from batch
+
+    def batches(self) -> Iterator[list[tuple[_Channel, int, bytes]]]:
+        """The wanted messages in lists of about a chunk each (cheaper than one by one)."""
         try:
             buf = self.path.read_bytes()
         except OSError as err:
@@ -1202,56 +1213,72 @@ class _McapScan:
         if len(buf) < len(_MAGIC) or buf[:len(_MAGIC)] != _MAGIC:
             self._note('not an MCAP file (bad magic)')
             return
+        out: list[tuple[_Channel, int, bytes]] = []
+        pos, end = len(_MAGIC), len(buf)
         try:
-            done = yield from self._parse(buf, len(_MAGIC), len(buf), top=True)
+            while pos < end:
+                pos = self._parse(buf, pos, end, out, top=True)
+                if out:
+                    self.messages += len(out)
+                    yield out
+                    out = []
+                if pos < 0:                      # end-of-data record reached
+                    return
         except _Truncated as err:
+            if out:
+                self.messages += len(out)
+                yield out
             self._note(f'{err.args[0]}; read {self.messages} messages before it')
             return
-        if not done:
-            self._note(f'ends at byte {len(buf)} without the MCAP end-of-data record '
-                       f'(recording cut short?); read {self.messages} messages')
+        self._note(f'ends at byte {len(buf)} without the MCAP end-of-data record '
+                   f'(recording cut short?); read {self.messages} messages')
 
-    def _parse(self, buf, start: int, end: int, *, top: bool,
-               base: int = 0) -> Iterator[tuple[_Channel, int, bytes]]:
-        """Yield the wanted messages of records in ``buf[start:end]``; True at data end."""
+    def _parse(self, buf, start: int, end: int, out: list, *, top: bool) -> int:
+        """Append the wanted messages of the records in ``buf[start:end]`` to ``out``.
+
+        At the top level it returns after each chunk (the position to go on from), or -1 at
+        the end-of-data record; inside a chunk it parses all of it.
+        """
         pos = start
         unpack_record, unpack_message = _RECORD.unpack_from, _MESSAGE.unpack_from
         keep, channels = self.keep, self.channels
+        append = out.append
         where = 'file' if top else 'chunk'
         while pos < end:
             if end - pos < 9:
-                raise _Truncated(f'{where} ends inside a record header at byte {base + pos}')
+                raise _Truncated(f'{where} ends inside a record header at byte {pos}')
             op, length = unpack_record(buf, pos)
             body = pos + 9
             nxt = body + length
             if op == 0x05:
                 if nxt > end or length < 22:
-                    raise _Truncated(f'message record at byte {base + pos} is cut or corrupt '
+                    raise _Truncated(f'message record at byte {pos} is cut or corrupt '
                                      f'({length} bytes claimed)')
                 cid, _, log_ns, _ = unpack_message(buf, body)
                 channel = keep.get(cid)
                 if channel is not None:
-                    self.messages += 1
-                    yield channel, log_ns, buf[body + 22:nxt]
+                    append((channel, log_ns, buf[body + 22:nxt]))
                 elif cid not in channels:
                     self.unknown_channel += 1
             elif op == 0x06 and top:
-                yield from self._chunk(buf, pos, body, min(nxt, end), complete=nxt <= end)
+                self._chunk(buf, pos, body, min(nxt, end), out, complete=nxt <= end)
+                return nxt
             elif nxt > end:
                 raise _Truncated(f'{where} ends inside a record (op 0x{op:02x}) at byte '
-                                 f'{base + pos}: {nxt - end} bytes missing')
+                                 f'{pos}: {nxt - end} bytes missing')
             elif op == 0x03:
-                self._schema(buf, body, nxt, base + pos)
+                self._schema(buf, body, nxt, pos)
             elif op == 0x04:
-                self._channel(buf, body, nxt, base + pos)
+                self._channel(buf, body, nxt, pos)
             elif op in (0x0F, 0x02) and top:
-                return True
+                return -1
             elif op == 0x00 or 0x0F < op < 0x80:   # 0x80-0xFF: private records, skipped
-                raise _Truncated(f'corrupt record (op 0x{op:02x}) at byte {base + pos}')
+                raise _Truncated(f'corrupt record (op 0x{op:02x}) at byte {pos}')
             pos = nxt
-        return False
+        return pos
 
-    def _chunk(self, buf, pos: int, body: int, end: int, *, complete: bool):
+    def _chunk(self, buf, pos: int, body: int, end: int, out: list, *,
+               complete: bool) -> None:
         try:
             _, _, size, crc = _CHUNK.unpack_from(buf, body)
             compression, rpos = _string(buf, body + 28)
@@ -1262,7 +1289,7 @@ class _McapScan:
         if not (complete and rstart + rlen <= end):
             # The file ends inside this chunk: recover its complete records, then stop.
             data = _decompress_partial(buf[rstart:end], compression)
-            inner = yield from self._records_in_chunk(data)
+            inner = self._records_in_chunk(data, out)
             raise _Truncated(f'file ends inside the chunk at byte {pos} '
                              f'({rstart + rlen - end} bytes missing'
                              + (f'; {inner}' if inner else '') + ')')
@@ -1279,14 +1306,16 @@ class _McapScan:
             self._note(f'chunk at byte {pos} fails its CRC check (corrupt): its messages '
                        'are skipped')
             return
-        inner = yield from self._records_in_chunk(data)
+        inner = self._records_in_chunk(data, out)
         if inner is not None:
             self._note(f'{inner} in the chunk at byte {pos}: the rest of that chunk is '
                        'skipped')
 
-    def _records_in_chunk(self, data: bytes):
+    def _records_in_chunk(self, data: bytes, out: list) -> str | None:
+        """Parse a chunk's records into ``out``; the break, if any (positions inside the
+        chunk's records)."""
         try:
-            yield from self._parse(data, 0, len(data), top=False)
+            self._parse(data, 0, len(data), out, top=False)
         except _Truncated as err:
             return err.args[0]
         return None
@@ -1357,9 +1386,10 @@ def _bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
     return files, info, issues
 
 
-def _raw_messages(path: Path, topics: Iterable[str] | None, issues: list[str],
-                  channels_seen: dict[str, _Channel] | None = None,
-                  ) -> Iterator[tuple[_Channel, int, bytes]]:
+def _raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],
+                 channels_seen: dict[str, _Channel] | None = None,
+                 ) -> Iterator[list[tuple[_Channel, int, bytes]]]:
+    """Lists of wanted ``(channel, log_ns, payload)`` of every file of a bag, file order."""
     wanted = None if topics is None else set(topics)
     files, _, file_issues = _bag_files(path)
     issues.extend(file_issues)
@@ -1371,11 +1401,18 @@ def _raw_messages(path: Path, topics: Iterable[str] | None, issues: list[str],
 
     for f in files:
         scan = _McapScan(f, want)
-        yield from scan.records()
+        yield from scan.batches()
         issues.extend(scan.issues)
         if scan.unknown_channel:
             issues.append(f'{f.name}: {scan.unknown_channel} messages on undeclared channels '
                           'skipped')
+
+
+def _raw_messages(path: Path, topics: Iterable[str] | None, issues: list[str],
+                  channels_seen: dict[str, _Channel] | None = None,
+                  ) -> Iterator[tuple[_Channel, int, bytes]]:
+    for batch in _raw_batches(path, topics, issues, channels_seen):
+        yield from batch
 
 
 @dataclass(frozen=True)
@@ -1561,11 +1598,12 @@ def read_topic_columns(path: str | Path, topics: Mapping[str, str], *,
     sink = issues if issues is not None else []
     logs: dict[str, list[int]] = {t: [] for t in topics}
     datas: dict[str, list[bytes]] = {t: [] for t in topics}
-    types: dict[str, str] = {}
-    for channel, log_ns, data in _raw_messages(Path(path), topics, sink):
-        logs[channel.topic].append(log_ns)
-        datas[channel.topic].append(data)
-        types.setdefault(channel.topic, channel.msgtype)
+    seen: dict[str, _Channel] = {}
+    for batch in _raw_batches(Path(path), topics, sink, seen):
+        for channel, log_ns, data in batch:
+            logs[channel.topic].append(log_ns)
+            datas[channel.topic].append(data)
+    types = {t: c.msgtype for t, c in seen.items() if t in logs}
     out = {}
     for topic, expected in topics.items():
         if topic not in types:
@@ -1816,7 +1854,7 @@ def read_lpa_bag(path: str | Path, *, issues: list[str] | None = None):
     if x.size < 2:
         raise BagReadError(f'{path}: fewer than 2 usable profile samples')
     name = _custom_data(path).get('road_force_estimator.profile_name') or path.name
-    return RoadProfile(distance_m=x, elevation_m=elevation, name=name)
+    return RoadProfile(distance_m=x, elevation_m=elevation, name=name, notes=tuple(sink))
 
 
 # --------------------------------------------------------------------------------------------
@@ -1857,7 +1895,7 @@ class GroundTruth:
 @dataclass(frozen=True)
 class Fixes:
     """GNSS fixes: ``stamps_ns`` (k,), ``latitude_deg``, ``longitude_deg`` (WGS84),
-    ``altitude_m`` (NaN when unknown)."""
+    ``altitude_m`` (NaN allowed: NavSatFix's "unknown")."""
 
     stamps_ns: np.ndarray
     latitude_deg: np.ndarray
@@ -1940,9 +1978,10 @@ def _fix_arrays(fixes, start_stamp_ns: int):
             np.int64)
     lat = np.asarray(fixes.latitude_deg, dtype=float)
     lon = np.asarray(fixes.longitude_deg, dtype=float)
-    alt = np.asarray(getattr(fixes, 'altitude_m', np.full(lat.shape, np.nan)), dtype=float)
+    alt = np.asarray(getattr(fixes, 'altitude_m', np.zeros(lat.shape)), dtype=float)
     _check_finite('fix latitude', lat)
     _check_finite('fix longitude', lon)
+    _check_finite('fix altitude', alt)
     return stamps, lat, lon, np.broadcast_to(alt, lat.shape)
 
 
@@ -1976,8 +2015,9 @@ def write_drive_bag(path: str | Path, trajectory, q_meas: np.ndarray, roll_meas:
     roll_meas : array (n,)
         Measured roll angle (rad).
     fixes : object, optional
-        ``stamps_ns`` or ``time_s``, ``latitude_deg``, ``longitude_deg`` [, ``altitude_m``]
-        (e.g. ``gnss.GnssRoute``).
+        ``stamps_ns`` or ``time_s``, ``latitude_deg``, ``longitude_deg`` [, ``altitude_m``,
+        default 0] (e.g. ``gnss.GnssRoute``); written as NavSatFix with status FIX, frame
+        ``gnss``, covariance type unknown, as the plant_simulator node publishes them.
     speed_mps : float or array (n,), optional
         Speed (m/s); default the trajectory's ``speed_mps``, else d(distance)/dt.
     track_width_m : float
@@ -2163,6 +2203,34 @@ def _first_attr(obj, *names: str):
     raise AttributeError(f'estimates have none of the attributes {names}')
 
 
+def diagnostic_array(stamp_ns: int, statuses: Iterable[Mapping[str, Any]]):
+    """A diagnostic_msgs/DiagnosticArray (rosbags object) from plain dicts.
+
+    Each status: ``name`` (str), ``level`` (0 OK, 1 WARN, 2 ERROR, 3 STALE), ``message``
+    (str), optional ``hardware_id`` (str) and ``values`` (mapping, values shown with str()).
+    """
+    status_type = _msg('diagnostic_msgs/msg/DiagnosticStatus')
+    key_value = _msg('diagnostic_msgs/msg/KeyValue')
+    out = []
+    for st in statuses:
+        level = int(st.get('level', 0))
+        if level not in (0, 1, 2, 3):
+            raise ValueError(f'diagnostic level = {level!r}: one of 0 (OK), 1 (WARN), '
+                             '2 (ERROR), 3 (STALE)')
+        out.append(status_type(level=level, name=str(st['name']),
+                               message=str(st.get('message', '')),
+                               hardware_id=str(st.get('hardware_id', '')),
+                               values=[key_value(key=str(k), value=str(v))
+                                       for k, v in dict(st.get('values', {})).items()]))
+    return _msg(_DIAGNOSTICS)(header=_stamped_header(int(stamp_ns), ''), status=out)
+
+
+def _stamped_header(stamp_ns: int, frame_id: str):
+    sec, nanosec = ns_to_stamps(np.array([stamp_ns]))
+    return _msg('std_msgs/msg/Header')(stamp=_msg('builtin_interfaces/msg/Time')(
+        sec=int(sec[0]), nanosec=int(nanosec[0])), frame_id=frame_id)
+
+
 def write_estimate_bag(path: str | Path, estimates, *,
                        track_width_m: float = DEFAULT_TRACK_WIDTH_M,
                        diagnostics: Iterable[tuple[int, Any]] = (),
@@ -2186,8 +2254,8 @@ def write_estimate_bag(path: str | Path, estimates, *,
         value (nothing non-finite is published), which is counted in the result.
     track_width_m : float
         T (m) for the road points' y.
-    diagnostics : iterable of (stamp_ns, rosbags DiagnosticArray)
-        Optional.
+    diagnostics : iterable of (stamp_ns, DiagnosticArray or list of status dicts)
+        Optional; a list of dicts is converted by :func:`diagnostic_array`.
     custom_data : mapping, optional
         Extra ``custom_data``.
     overwrite : bool
@@ -2253,8 +2321,10 @@ def write_estimate_bag(path: str | Path, estimates, *,
         diagnostics = list(diagnostics)
         if diagnostics:
             bag.add_topic(TOPIC_DIAGNOSTICS, _DIAGNOSTICS, 'reliable')
+            msgs = [d[1] if hasattr(d[1], '__msgtype__') else diagnostic_array(d[0], d[1])
+                    for d in diagnostics]
             streams.append((TOPIC_DIAGNOSTICS, [int(d[0]) for d in diagnostics],
-                            [TYPESTORE.serialize_cdr(d[1], _DIAGNOSTICS) for d in diagnostics]))
+                            [TYPESTORE.serialize_cdr(m, _DIAGNOSTICS) for m in msgs]))
         bag.write_rows(streams)
     return {'written': int(m), 'invalid': int(np.count_nonzero(~valid)),
             'nonfinite': int(np.count_nonzero(valid & ~finite))}

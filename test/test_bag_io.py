@@ -266,7 +266,7 @@ class TestDriveBag:
         np.testing.assert_array_equal(d.truth.road_m, trajectory.road_m)
         np.testing.assert_array_equal(d.truth.distance_m, trajectory.distance_m)
         np.testing.assert_array_equal(d.fixes.latitude_deg, fixes.latitude_deg)
-        assert np.isnan(d.fixes.altitude_m).all()
+        assert (d.fixes.altitude_m == 0.0).all()
         assert d.rejected == {} and d.issues == () and d.rejected_total == 0
         assert d.custom_data['road_force_estimator.kind'] == 'drive'
 
@@ -431,6 +431,45 @@ class TestBrokenFiles:
         self.assert_prefix(d, full)
         assert len(d.issues) == 1 and 'corrupt record (op 0x33)' in d.issues[0], d.issues
 
+    @pytest.mark.parametrize('compression', ['zstd', 'lz4'])
+    def test_compressed_chunks_of_other_writers(self, tmp_path, compression):
+        """A bag folder holding only an .mcap written by the mcap library with compressed
+        chunks (as rosbag2's zstd presets do): read whole, then cut inside a chunk."""
+        from mcap.writer import CompressionType, Writer
+
+        folder = tmp_path / 'foreign'
+        folder.mkdir()
+        path = folder / 'foreign_0.mcap'
+        msgtype = 'geometry_msgs/msg/PointStamped'
+        point = T[msgtype]
+        with path.open('wb') as f:
+            writer = Writer(f, compression=CompressionType[compression.upper()],
+                            chunk_size=64 * 1024)
+            writer.start(profile='ros2', library='test')
+            sid = writer.register_schema(msgtype, 'ros2msg', TYPESTORE.generate_msgdef(
+                msgtype, ros_version=2)[0].encode())
+            cids = [writer.register_channel(t, 'cdr', sid, {'offered_qos_profiles': ''})
+                    for t in ('/lpa/left', '/lpa/right')]
+            for i in range(4000):
+                for side, cid in enumerate(cids):
+                    msg = point(header=header(BASE_NS + i, 'road'),
+                                point=T['geometry_msgs/msg/Point'](x=0.1 * i, y=1.0 - 2 * side,
+                                                                   z=1e-3 * i + side))
+                    writer.add_message(cid, BASE_NS + i, bytes(TYPESTORE.serialize_cdr(
+                        msg, msgtype)), BASE_NS + i)
+            writer.finish()
+        issues = []
+        p = bag_io.read_lpa_bag(folder, issues=issues)
+        assert len(p) == 4000 and p.elevation_m[-1].tolist() == [1e-3 * 3999, 1e-3 * 3999 + 1]
+        assert issues == ['no metadata.yaml: reading the .mcap files found in the folder']
+        data = path.read_bytes()
+        path.write_bytes(data[:len(data) // 2])
+        issues = []
+        p = bag_io.read_lpa_bag(folder, issues=issues)
+        assert 100 < len(p) < 4000
+        np.testing.assert_array_equal(p.distance_m, 0.1 * np.arange(len(p)))
+        assert any('ends inside the chunk' in line for line in issues), issues
+
     def test_missing_metadata_and_missing_files(self, drive, tmp_path):
         folder, mcap, full = drive
         (folder / 'metadata.yaml').unlink()
@@ -481,6 +520,33 @@ class TestWriter:
         (m,) = list(read_ros2_messages(str(mcap)))
         assert m.ros_msg.position == [0.01, -0.02, 0.003]
 
+    def test_types_outside_jazzy_are_read_from_the_bag_schema(self, tmp_path):
+        from mcap.writer import Writer
+        from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+
+        definition = 'float64 a\nstring b\nint32[] c\n'
+        store = get_typestore(Stores.EMPTY)
+        store.register(get_types_from_msg(definition, 'my_pkg/msg/Thing'))
+        thing = store.types['my_pkg/msg/Thing']
+        (tmp_path / 'b').mkdir()
+        with (tmp_path / 'b' / 'b_0.mcap').open('wb') as f:
+            writer = Writer(f)
+            writer.start(profile='ros2', library='test')
+            sid = writer.register_schema('my_pkg/msg/Thing', 'ros2msg', definition.encode())
+            cid = writer.register_channel('/thing', 'cdr', sid, {})
+            for i in range(3):
+                msg = thing(a=0.5 * i, b=f's{i}', c=np.arange(i, dtype=np.int32))
+                writer.add_message(cid, i, bytes(store.serialize_cdr(msg, 'my_pkg/msg/Thing')),
+                                   i)
+            writer.add_message(cid, 9, b'\x00\x01\x00\x00\x01', 9)      # broken
+            writer.finish()
+        issues = []
+        got = list(bag_io.iter_messages(tmp_path / 'b', issues=issues))
+        assert [(m.a, m.b, m.c.tolist()) for _, _, m in got] == [(0.0, 's0', []),
+                                                                  (0.5, 's1', [0]),
+                                                                  (1.0, 's2', [0, 1])]
+        assert any('1 messages could not be deserialized' in line for line in issues)
+
     def test_refusals(self, tmp_path):
         with BagWriter(tmp_path / 'b') as bag:
             bag.add_topic('/x', 'std_msgs/msg/Float64')
@@ -527,7 +593,10 @@ class TestEstimateBag:
             level=b'\x00'[0], name='observer', message='ok', hardware_id='', values=[])
         diag = T['diagnostic_msgs/msg/DiagnosticArray'](header=header(BASE_NS, ''),
                                                        status=[status])
-        result = bag_io.write_estimate_bag(tmp_path / 'e', e, diagnostics=[(BASE_NS, diag)])
+        plain = [{'name': 'observer', 'level': 1, 'message': 'rejects',
+                  'values': {'rejected': 3}}]
+        result = bag_io.write_estimate_bag(tmp_path / 'e', e, diagnostics=[
+            (BASE_NS, diag), (BASE_NS + 10**9, plain)])
         assert result == {'written': 48, 'invalid': 1, 'nonfinite': 1}
         keep = np.ones(n, bool)
         keep[[3, 7]] = False
@@ -552,4 +621,9 @@ class TestEstimateBag:
         np.testing.assert_array_equal(stamps, e.stamp_ns[keep])
         np.testing.assert_array_equal(cols['/wheel_load/left'].log_ns, e.stamp_ns[keep])
         diags = list(bag_io.iter_messages(tmp_path / 'e', ['/diagnostics']))
-        assert [m.status[0].name for _, _, m in diags] == ['observer']
+        assert [m.status[0].name for _, _, m in diags] == ['observer', 'observer']
+        last = diags[1][2]
+        assert (last.header.stamp.sec, last.status[0].level, last.status[0].values[0].value) \
+            == (BASE_NS // 10**9 + 1, 1, '3')
+        with pytest.raises(ValueError, match='diagnostic level'):
+            bag_io.diagnostic_array(0, [{'name': 'x', 'level': 7}])

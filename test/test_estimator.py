@@ -225,7 +225,8 @@ class TestRobustness:
 
     @pytest.mark.parametrize('bad', [
         dict(q=(math.nan, 0.0)), dict(q=(0.0, math.inf)), dict(phi=math.nan),
-        dict(v=-math.inf), dict(stamp=None), dict(stamp='soon')])
+        dict(v=-math.inf), dict(stamp=None), dict(stamp='soon'), dict(q=None), dict(q=(0.0,)),
+        dict(q=('a', 0.0))])
     def test_nonfinite_samples_are_rejected_and_the_estimate_held(self, bad):
         est = Estimator(VEHICLE, ObserverParameters())
         for k in range(50):
