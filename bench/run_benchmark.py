@@ -72,7 +72,8 @@ FIGURES = (
     ('iri_err_pct_mean', 'IRI error per 100 m segment (mean |error|), % of the true IRI',
      '{:.1f}'),
     ('ltr_rms', 'LTR RMS error', '{:.4f}'),
-    ('convergence_s', 'Convergence time (s): load error settles within 2x its RMS', '{:.2f}'),
+    ('convergence_s', 'Start-up convergence time (s): load error settles within 2x its RMS',
+     '{:.2f}'),
 )
 
 TIMING_SCENARIO = 'C20-1k-10um'

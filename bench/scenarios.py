@@ -260,9 +260,10 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         (% of the static load), ``load_rms_n``, ``load_peak_n``; ``profile_rms_pct_band``
         (0.5-30 m band, % of the band-passed true profile's RMS); ``iri_err_pct_mean`` and
         ``iri_err_pct_max`` (|IRI error| per 100 m segment of the scored stretch, % of the true
-        segment IRI, both wheels); ``ltr_rms``, ``ltr_peak``; ``convergence_s`` (time after
-        which the 100 ms moving RMS of the load error stays below max(2 x its scored RMS, 1 % of
-        the static load); inf if it never does).
+        segment IRI, both wheels); ``ltr_rms``, ``ltr_peak``; ``convergence_s`` (start-up:
+        time after which the 100 ms trailing RMS of the load error stays below max(2 x its
+        scored RMS, 1 % of the static load) until skip + 3 s, before any scripted event; inf
+        if it is still above then).
     """
     from road_force_estimator import iri as iri_mod
     from road_force_estimator import metrics
@@ -309,11 +310,12 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
     ls = metrics.ltr_stats(np.asarray(result.ltr, dtype=float), t['ltr'], mask=mask)
     out['ltr_rms'] = ls['rms_error']
     out['ltr_peak'] = ls['peak_error']
-    # convergence: 100 ms moving RMS of the load error (both wheels), until 0.5 s before the end
+    # convergence (start-up): 100 ms trailing RMS of the load error (both wheels) from the
+    # start to the end of the convergence window (skip + 3 s, before any scripted event)
     w = max(1, int(round(0.1 * drive.scenario.rate_hz)))
-    k1 = n - int(round(0.5 * drive.scenario.rate_hz))
+    k1 = min(n, int(round((drive.scenario.skip_s + 3.0) * drive.scenario.rate_hz)))
     e2 = np.mean(np.square(load - t['wheel_load_n']), axis=1)
-    mov = np.sqrt(np.convolve(e2, np.ones(w) / w, mode='full')[:n])   # trailing window
+    mov = np.sqrt(np.convolve(e2, np.ones(w) / w, mode='full')[:n])
     tol = max(2.0 * load_rms, 0.01 * float(np.mean(static)))
     out['convergence_s'] = metrics.convergence_time(drive.t_s[:k1] - drive.t_s[0], mov[:k1],
                                                     tol)

@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = load_tuned(args.output)
     doc.update({
         'command': 'python -m bench.tune',
-        'procedure': ' '.join(__doc__.split('Procedure', 1)[1].split()),
+        'procedure': ' '.join(__doc__.split('):', 1)[1].split()),
         'objective': 'vertical-load RMS error, % of the true dynamic-load RMS, after the skip',
         'tuning_drive': {k: v for k, v in asdict(TUNING).items() if k != 'noise_deflection_m'},
     })

@@ -41,7 +41,9 @@ from .parameters import ObserverParameters, VehicleParameters
 from .ros_parameters import ParameterError, ParameterGuard, specs_with_prefix
 
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
-CORE_COUNTERS = ('rejected_nonfinite', 'rejected_range', 'rejected_time', 'resets', 'gaps')
+# The core's counters, by the names the diagnostics give them.
+CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
+                 'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
 FLOW_COUNTS = ('received', 'published', 'lift_offs')  # the rest of a period's counts: rejections
 
 
@@ -86,7 +88,7 @@ class Observer(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                      reliable_qos(10))
         self.create_subscription(JointState, '/suspension/deflections',
-                                 self.deflections_callback, sensor_qos(100))
+                                 self.deflections_callback, sensor_qos(1000))
         self.create_subscription(TwistStamped, '/vehicle/twist', self.twist_callback,
                                  sensor_qos(10))
         self.create_timer(1.0, self.diagnostics_callback)
@@ -95,12 +97,16 @@ class Observer(Node):
         """(Re)build the estimator from ``(VehicleParameters, ObserverParameters)``."""
         old = getattr(self, 'estimator', None)
         if old is not None:
-            self.core_base.update({k: getattr(old.status, k) for k in CORE_COUNTERS})
+            self.core_base.update(self.core_counts(old))
             self.total['rebuilds'] += 1
             self.get_logger().info('parameters changed: estimator rebuilt (it restarts)')
         self.estimator = Estimator(*config)
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
+
+    def core_counts(self, estimator=None) -> Counter:
+        st = (estimator or self.estimator).status
+        return Counter({short: getattr(st, name) for name, short in CORE_COUNTERS.items()})
 
     def reject(self, reason: str, detail: str) -> None:
         self.period[reason] += 1
@@ -159,13 +165,12 @@ class Observer(Node):
         now = time.monotonic()
         elapsed, self.last_report = now - self.last_report, now
         st = self.estimator.status
-        core = self.core_base + Counter({k: getattr(st, k) for k in CORE_COUNTERS})
+        core = self.core_base + self.core_counts()
         fresh, self.core_reported = core - self.core_reported, core
         period, self.period = self.period, Counter()
         self.total.update(period)
         rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
-        rejected.update({k[len('rejected_'):]: v for k, v in fresh.items()
-                         if k.startswith('rejected_')})
+        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'time') if fresh[k]})
         received = period['received']
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
                   'published': period['published'], 'waiting_for_speed': len(self.waiting),
@@ -211,7 +216,8 @@ def main(args=None) -> int:
         node = Observer()
         executor = Executor()
         executor.add_node(node)
-        executor.spin()
+        while rclpy.ok():  # EventsExecutor.spin() of rclpy 7.1.6 busy-waits: spin_once instead
+            executor.spin_once(timeout_sec=0.1)
         return 0
     except ParameterError as exc:
         print(exc, file=sys.stderr)

@@ -269,10 +269,14 @@ def zero_phase_body_heave(accel_mps2, dt_s: float, cutoff_rad_s: float) -> np.nd
     if a.size < 2:
         return np.zeros_like(a)
     w = float(cutoff_rad_s)
-    den = [1.0, math.sqrt(2.0) * w, w * w]
-    fs = 1.0 / dt_s
-    bf, af = signal.bilinear([1.0], den, fs=fs)
-    bb, ab = signal.bilinear([1.0, 0.0, 0.0], den, fs=fs)
+    # Bilinear transform s = K (1 - 1/z) / (1 + 1/z), K = 2 / dt, written out.
+    gain = 2.0 / dt_s
+    kk, ak, b = gain * gain, math.sqrt(2.0) * w * gain, w * w
+    d0 = kk + ak + b
+    af = np.array([1.0, 2.0 * (b - kk) / d0, (kk - ak + b) / d0])
+    bf = np.array([1.0, 2.0, 1.0]) / d0
+    ab = af
+    bb = np.array([1.0, -2.0, 1.0]) * (kk / d0)
     y, _ = signal.lfilter(bf, af, a, zi=signal.lfilter_zi(bf, af) * a[0])
     r = y[::-1]
     z, _ = signal.lfilter(bb, ab, r, zi=signal.lfilter_zi(bb, ab) * r[0])

@@ -262,3 +262,18 @@ class TestCallPeer:
         t = np.array([0.0, 0.001, 0.003, 0.004, 0.005])
         with pytest.raises(ValueError, match='uniformly'):
             peers.lowpass_fd(t, np.zeros((5, 2)), np.zeros(5), 20.0, VehicleParameters())
+
+
+class TestTunedSettings:
+    def test_settings_follow_the_noise_level(self):
+        from bench import tune
+
+        doc = {'peers': {'lowpass-fd': {
+            '0': {'settings': {'cutoff_hz': 400.0}},
+            '1e-05': {'settings': {'cutoff_hz': 40.0}},
+            '5e-05': {'settings': {'cutoff_hz': 25.0}}}}}
+        assert tune.settings_for(doc, 'lowpass-fd', 0.0) == {'cutoff_hz': 400.0}
+        assert tune.settings_for(doc, 'lowpass-fd', 1e-5) == {'cutoff_hz': 40.0}
+        assert tune.settings_for(doc, 'lowpass-fd', 3e-5) == {'cutoff_hz': 25.0}
+        assert tune.settings_for(doc, 'lowpass-fd', 2e-6) == {'cutoff_hz': 40.0}
+        assert tune.settings_for(doc, 'kf-model', 1e-5) == peers.DEFAULT_TUNING['kf-model']
