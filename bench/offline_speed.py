@@ -37,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--noise', type=float, default=1e-5,
                    help='deflection noise std, m (roll: 10 rad/m times it)')
     p.add_argument('--seed', type=int, default=1, help='noise seed')
+    p.add_argument('--params-file', default=str(PARAMS),
+                   help='parameter file (default: config/road_force_estimator.yaml)')
     p.add_argument('--repeats', type=int, default=3, help='timed runs per case (median)')
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
     return p
@@ -56,8 +58,9 @@ def main(argv: list[str] | None = None) -> int:
     from road_force_estimator.offline import estimate_offline
 
     args = build_parser().parse_args(argv)
-    vehicle, observer = estimate_bag.load_parameters(str(PARAMS))
+    vehicle, observer = estimate_bag.load_parameters(args.params_file)
     out: dict = {'command': 'bench/offline_speed.py ' + ' '.join(argv or sys.argv[1:]),
+                 'observer': observer.to_parameters(),
                  'drive': {'road': args.road, 'speed_mps': args.speed, 'rate_hz': args.rate,
                            'duration_s': args.duration, 'noise_deflection_m': args.noise,
                            'noise_roll_rad': 10.0 * args.noise, 'seed': args.seed}}
@@ -128,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     dr = out['drive']
     print(f'Drive: {dr["road"]}, {dr["speed_mps"]:g} m/s, {dr["rate_hz"]:g} Hz, '
           f'{dr["duration_s"]:g} s ({n} samples), noise {1e6 * dr["noise_deflection_m"]:g} um / '
-          f'{1e3 * dr["noise_roll_rad"]:g} mrad, seed {dr["seed"]}.\n')
+          f'{1e3 * dr["noise_roll_rad"]:g} mrad, seed {dr["seed"]}; online = observer.'
+          f'discretization {observer.discretization!r}.\n')
     print('| mode | load error, % dyn RMS | % static | profile error, % band | LTR RMS error '
           '| IRI est. L/R (true) |')
     print('|---|---|---|---|---|---|')

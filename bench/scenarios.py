@@ -143,10 +143,18 @@ class Drive:
     truth: dict[str, np.ndarray] = field(default_factory=dict)
     #: wheel_load_n (n, 2), tire_force_dynamic_n (n, 2), road_m (n, 2), distance_m (n,),
     #: ltr (n,), q_m (n, 2), roll_rad (n,)
+    #: results kept while the drive is benchmarked (e.g. the package defaults' estimate, which
+    #: other columns compare against); not part of the drive's description
+    cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def skip(self) -> int:
         return int(round(self.scenario.skip_s * self.scenario.rate_hz))
+
+    @property
+    def stamps_ns(self) -> np.ndarray:
+        """(n,) int64 stamps (ns) of the samples, as a bag or the node would carry them."""
+        return np.round(self.t_s * 1e9).astype(np.int64)
 
 
 def observer_vehicle(plant: VehicleParameters, param_error: float) -> VehicleParameters:

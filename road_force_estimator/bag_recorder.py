@@ -31,7 +31,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .bag_io import BagWriteError, BagWriter
 from .messages import TOPIC_TYPES, reliable_qos, sensor_qos, topic_qos
-from .ros_parameters import ParameterError, ParameterGuard, local_spec
+from .ros_parameters import ParameterError, ParameterGuard, init_ros, local_spec
 
 QUEUE_DEPTH = 1000  # messages per topic held between two callbacks (1 s at 1 kHz)
 SPECS = (
@@ -54,7 +54,12 @@ class BagRecorder(Node):
     def __init__(self, **kwargs):
         super().__init__('bag_recorder', **kwargs)
         self.params = ParameterGuard(self, SPECS, dict, read_only=True)
-        topics = self.params.values['topics']
+        try:
+            topics = list(dict.fromkeys(self.resolve_topic_name(t) for t in
+                                        self.params.values['topics']))
+        except Exception as exc:  # rclpy's name validation errors
+            raise ParameterError(f'bag_recorder: refused topics = '
+                                 f'{list(self.params.values["topics"])}: {exc}') from None
         output = self.params.values['output'] or datetime.now().strftime(
             'rosbag2_%Y_%m_%d-%H_%M_%S')
         if os.path.exists(output):
@@ -79,8 +84,9 @@ class BagRecorder(Node):
         self.writer.add_topic(topic, msgtype, qos='sensor_data' if best_effort else 'reliable')
 
         def callback(data: bytes, topic=topic) -> None:
-            self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
-            self.counts[topic] += 1
+            if self.writer is not None:
+                self.writer.write_raw(topic, self.get_clock().now().nanoseconds, data)
+                self.counts[topic] += 1
 
         self.create_subscription(message_class(msgtype), topic, callback, qos, raw=True)
 
@@ -96,8 +102,11 @@ class BagRecorder(Node):
                 best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
                                   for i in infos)
                 qos = sensor_qos(QUEUE_DEPTH) if best_effort else reliable_qos(QUEUE_DEPTH)
-                self.record(topic, types[topic][0], qos)
                 self.waiting.remove(topic)
+                try:
+                    self.record(topic, types[topic][0], qos)
+                except (BagWriteError, ImportError, AttributeError, ValueError) as exc:
+                    self.get_logger().error(f'not recording {topic} ({types[topic][0]}): {exc}')
 
     def close(self) -> None:
         """Flush and close the bag (idempotent)."""
@@ -120,7 +129,12 @@ def drain(executor, node: BagRecorder, quiet_s: float = 0.2) -> None:
 def main(args=None) -> int:
     # Our own SIGINT/SIGTERM handling: stop spinning, then drain the queues and close the bag
     # while the context is still valid (rclpy's handlers would shut the context down first).
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        init_ros('bag_recorder', __doc__.splitlines()[0], SPECS, args,
+                 signal_handler_options=SignalHandlerOptions.NO)
+    except ParameterError as exc:
+        print(exc, file=sys.stderr)
+        return 1
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.append(True))

@@ -118,28 +118,55 @@ def _progress(total: int, enabled: bool, desc: str):
                 disable=(not enabled or total < PROGRESS_MIN_SAMPLES) or None)
 
 
+class _Stages:
+    """A one-line progress display of the stages of :func:`run` (stderr, TTY only)."""
+
+    NAMES = ('read', 'estimate', 'write bag', 'report')
+
+    def __init__(self, enabled: bool) -> None:
+        from tqdm import tqdm
+        self.bar = tqdm(total=len(self.NAMES), desc=PROG, file=sys.stderr, leave=False,
+                        bar_format='{desc} ({n}/{total} stages done)',
+                        disable=None if enabled else True)
+        self.started = False
+
+    def next(self, name: str) -> None:
+        if self.started:
+            self.bar.update(1)
+        self.started = True
+        self.bar.set_description_str(f'{PROG}: {name}')
+
+    def close(self) -> None:
+        self.bar.close()
+
+
 def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
                     progress: bool = False):
     """The observer node's numbers: :meth:`Estimator.update` per sample, as arrays.
 
-    Returns an :class:`~.estimator.EstimateArrays` equal to
-    :func:`~.estimator.estimate_batch`'s for the same input (rejected rows hold the previous
-    estimate, zeros before the first).
+    Every sample goes through ``update`` in order (as the node does per message); each estimate
+    returned is placed on the row of the sample whose stamp it carries (with zero latency: the
+    sample just given). Rows without an estimate (rejected) hold the previous one (zeros before
+    the first) and have ``valid`` False: with zero latency, the
+    :func:`~.estimator.estimate_batch` layout, and equal numbers.
+
+    Returns
+    -------
+    EstimateArrays
     """
+    from dataclasses import fields
+
     from road_force_estimator.estimator import Estimate, EstimateArrays, Estimator
 
+    wanted = {f.name for f in fields(EstimateArrays)}
     est = Estimator(vehicle, observer)
     update = est.update
-    n = len(stamps_ns)
-    out: list = []
-    append = out.append
-    valid = np.zeros(n, bool)
-    zero = Estimate(0, 0.0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                    (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0),
-                    0.0, 0.0, (False, False), False)
-    held = zero
+    stamps_in = np.asarray(stamps_ns)
+    n = len(stamps_in)
+    placed: list = [None] * n
+    index_of: dict[int, int] = {}
     block = 10_000
-    stamps = np.asarray(stamps_ns).tolist()
+    stamps = stamps_in.tolist()
     q = np.asarray(q_m, dtype=float).tolist()
     phi = np.asarray(roll_rad, dtype=float).tolist()
     v = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,)).tolist()
@@ -149,27 +176,41 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
             for i in range(start, stop):
                 e = update(stamps[i], q[i], phi[i], v[i])
                 if e is None:
-                    append(held)
+                    continue
+                j = i if e.stamp_ns == stamps[i] else index_of.get(e.stamp_ns)
+                if j is not None:
+                    placed[j] = e
+                if e.stamp_ns == stamps[i]:
+                    index_of.clear()
                 else:
-                    append(e)
-                    held = e
-                    valid[i] = True
+                    index_of[stamps[i]] = i
             bar.update(stop - start)
-    columns = list(zip(*out)) if out else [()] * len(Estimate._fields)
+    valid = np.array([e is not None for e in placed], dtype=bool)
+    have = [e for e in placed if e is not None]
+    last = np.maximum.accumulate(np.where(valid, np.arange(n), -1)) if n else np.zeros(0, int)
+    # Row r of the compact table is the r-th valid estimate; sample k takes the last one.
+    pick = np.cumsum(valid) - 1
     arrays: dict[str, np.ndarray] = {}
+    columns = list(zip(*have)) if have else [()] * len(Estimate._fields)
     for name, col in zip(Estimate._fields, columns):
-        if name == 'stamp_ns':
+        if name == 'stamp_ns' or name not in wanted:
             continue
-        dtype = bool if name in ('lift_off', 'converged') else float
-        arr = np.array(col, dtype=dtype)
-        if arr.size == 0:
-            arr = np.zeros((0, 2) if name in ('q_m', 'dq', 'ddq', 'wheel_heave_m',
-                                              'wheel_heave_rate', 'wheel_accel_mps2', 'road_m',
-                                              'tire_force_dynamic_n', 'wheel_load_n',
-                                              'lift_off') else (0,), dtype=dtype)
-        arrays[name] = arr
-    return EstimateArrays(stamp_ns=np.asarray(stamps_ns, dtype=np.int64).copy(), valid=valid,
+        compact = np.array(col)
+        if compact.dtype == object or compact.size == 0:
+            compact = np.zeros((0, 2) if name in _PAIR_FIELDS else (0,))
+        if compact.dtype.kind not in 'bf':
+            compact = compact.astype(float)
+        full = np.zeros((n,) + compact.shape[1:], dtype=compact.dtype)
+        if have:
+            rows = last >= 0
+            full[rows] = compact[pick[rows]]
+        arrays[name] = full
+    return EstimateArrays(stamp_ns=stamps_in.astype(np.int64).copy(), valid=valid,
                           status=est.status, **arrays)
+
+
+_PAIR_FIELDS = ('q_m', 'dq', 'ddq', 'wheel_heave_m', 'wheel_heave_rate', 'wheel_accel_mps2',
+                'road_m', 'tire_force_dynamic_n', 'wheel_load_n', 'lift_off')
 
 
 def _diagnostics(est, summary_counts: dict[str, int], mode: str):
@@ -225,7 +266,9 @@ def _text(value: Any) -> str:
 
 @dataclass
 class EstimateResult:
-    """What :func:`run` did: the summary of the report, the paths, the estimates."""
+    """What :func:`run` did: the summary of the report, the paths, the estimates, the bag's
+    messages that were written (``written``), warnings (breaks in the bag) and the drive read
+    (:class:`~.bag_io.Drive`)."""
 
     summary: dict[str, Any]
     bag: Path
@@ -233,6 +276,7 @@ class EstimateResult:
     estimates: Any = None
     written: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    drive: Any = None
 
 
 def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
@@ -246,8 +290,6 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     InputError
         Not a drive bag, no usable sample or speed, output exists without ``force``.
     """
-    from road_force_estimator import bag_io, report
-    from road_force_estimator.offline import estimate_offline
     from road_force_estimator.parameters import ObserverParameters, VehicleParameters
 
     vehicle = VehicleParameters() if vehicle is None else vehicle
@@ -263,6 +305,21 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
         for p in (bag_dir, report_dir):
             if p.exists():
                 raise InputError(f'{p} exists (use --force to replace it)')
+    stages = _Stages(progress)
+    try:
+        return _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode,
+                    segment_length_m, reference, reference_offset_m, figures, force, progress,
+                    stages)
+    finally:
+        stages.close()
+
+
+def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
+         reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
+    from road_force_estimator import bag_io, report
+    from road_force_estimator.offline import estimate_offline
+
+    stages.next('reading the bag')
     try:
         drive = bag_io.read_drive_bag(input_path)
     except bag_io.BagReadError as err:
@@ -273,6 +330,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
                          + (f' ({drive.issues[0]})' if drive.issues else ''))
     speed, early = drive_speed(drive)
     args = (drive.stamps_ns, drive.q_m, drive.roll_rad, speed, vehicle, observer)
+    stages.next(f'estimating ({mode})')
     if mode == 'online':
         est = estimate_online(*args, progress=progress)
     else:
@@ -290,6 +348,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,
               'road_force_estimator.writer_command': PROG}
+    stages.next('writing the bag')
     try:
         written = bag_io.write_estimate_bag(
             bag_dir, est, track_width_m=vehicle.track_width_m,
@@ -300,11 +359,12 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
         extra['estimates not written (non-finite)'] = written['nonfinite']
     if force and report_dir.exists():
         shutil.rmtree(report_dir)
+    stages.next('writing the report' + (' and figures' if figures else ''))
     summary = report.write_report(
         report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
         reference=reference, reference_offset_m=reference_offset_m,
         segment_length_m=segment_length_m, figures=figures, extra=extra)
-    return EstimateResult(summary, bag_dir, report_dir, est, written, warnings)
+    return EstimateResult(summary, bag_dir, report_dir, est, written, warnings, drive)
 
 
 def _headline(result: EstimateResult) -> list[str]:

@@ -142,12 +142,18 @@ class DriveOutcome:
 
 @dataclass
 class FleetResult:
-    """A fleet run: one outcome per drive (id order), the engine used, the wall time (s)."""
+    """A fleet run: one outcome per drive (id order), the engine used, the wall time (s).
+
+    ``timings`` (s): ``prepare`` (finding the drives, checking those already done),
+    ``engine_start`` (starting or reaching the cluster), ``processing`` (first task submitted
+    to last result back), ``write`` (tables, GeoJSON, map, summary).
+    """
 
     outcomes: list[DriveOutcome]
     engine: str
     seconds: float
     settings: dict
+    timings: dict[str, float] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
         return sum(1 for o in self.outcomes if o.status == status)
@@ -360,9 +366,10 @@ def process_drive(task: DriveTask) -> DriveOutcome:
                             input_path=task.input_path)
     except Exception as err:  # noqa: BLE001 - one bad drive never stops the fleet
         from road_force_estimator.bag_io import BagReadError, BagWriteError
-        known = (estimate_bag.InputError, BagReadError, BagWriteError, ValueError, OSError)
-        reason = _one_line(err) if isinstance(err, known) else \
-            f'{type(err).__name__}: {_one_line(err)}'
+        # estimate_bag's own reasons as they are; anything else with its type (a bug).
+        plain = type(err) in (estimate_bag.InputError, BagReadError, BagWriteError, ValueError)
+        plain = plain or isinstance(err, OSError)
+        reason = _one_line(err) if plain else f'{type(err).__name__}: {_one_line(err)}'
         return DriveOutcome(task.drive_id, 'failed', reason=reason,
                             seconds=time.perf_counter() - t0, input_path=task.input_path)
 
@@ -541,16 +548,24 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
         tasks.append(DriveTask(d.drive_id, str(d.path), str(out), vehicle, observer, settings,
                                digest))
 
+    timings = {'prepare': time.perf_counter() - t0, 'engine_start': 0.0, 'processing': 0.0}
     engine = 'none (every drive already done)'
     if tasks or scheduler:
         n_local = min(workers or default_workers(), max(len(tasks), 1))
+        t1 = time.perf_counter()
         with _client(scheduler, n_local) as (client, engine):
+            t2 = time.perf_counter()
+            timings['engine_start'] = t2 - t1
             if tasks:
                 _run_tasks(client, tasks, outcomes, total=len(drives), progress=progress)
+            timings['processing'] = time.perf_counter() - t2
         shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)
     ordered = [outcomes[d.drive_id] for d in drives]
-    result = FleetResult(ordered, engine, time.perf_counter() - t0, settings)
+    t3 = time.perf_counter()
+    result = FleetResult(ordered, engine, t3 - t0, settings, timings)
     write_outputs(out, result, params_file=params_file)
+    timings['write'] = time.perf_counter() - t3
+    result.seconds = time.perf_counter() - t0
     return result
 
 
@@ -674,7 +689,9 @@ def _summary_md(result: FleetResult, table: dict[str, np.ndarray], map_written: 
         f'- Mode: {s["mode"]}; segment length {seg:g} m ({seg / 1609.344:.4g} mi); report '
         f'figures: {"yes" if s["figures"] else "no"}; parameters: '
         f'{params_file or "package defaults"}.',
-        f'- Engine: {result.engine}; wall time {result.seconds:.1f} s.',
+        f'- Engine: {result.engine}; wall time {result.seconds:.1f} s (engine start '
+        f'{result.timings.get("engine_start", 0.0):.1f} s, processing '
+        f'{result.timings.get("processing", 0.0):.1f} s).',
         f'- IRI in m/km (= mm/m); in/mi = m/km x {K:g}.', '']
     if map_written:
         lines += ['## Map', '', 'Segments coloured by IRI (mean of left and right), on '

@@ -68,7 +68,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from collections import deque
+
 from road_force_estimator.differentiator import step_function
+from road_force_estimator.model_observer import ModelCore
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
 
 __all__ = [
@@ -154,6 +157,14 @@ class EstimatorStatus:
     typical_dt_s: float = 0.0       #: running average of the accepted steps (s)
     last_residual_nm: float = 0.0
     lift_off: tuple[bool, bool] = (False, False)
+    method: str = 'model'           #: 'model' or 'chain'
+    latency_samples: int = 0        #: lag N of the published estimates (samples)
+    pending: int = 0                #: accepted samples whose estimate is not out yet
+    noise_deflection_m: float = 0.0  #: deflection noise std in use (model; estimated or set)
+    noise_roll_rad: float = 0.0     #: roll noise std in use (model)
+    road_roughness_m3: float = 0.0  #: ISO 8608 Gd(n0) in use (model)
+    statistics_blocks: int = 0      #: blocks of data the noise/roughness estimates have seen
+    gain_designs: int = 0           #: gain designs (model; cache misses of the operating point)
 
     @property
     def rejected(self) -> int:
@@ -257,7 +268,9 @@ class Estimator:
         self.vehicle = vehicle
         self.observer = observer
         self.gap_threshold_s = float(gap_threshold_s)
-        self._step = step_function(observer.discretization)
+        # The chain's differentiator scheme; the model observer's own runs 'implicit'.
+        self._step = step_function('implicit' if observer.discretization == 'model'
+                                   else observer.discretization)
         lq, lr = observer.lipschitz_deflection_mps3, observer.lipschitz_roll_radps3
         self._lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0), math.sqrt(lr))
         v = vehicle
@@ -270,6 +283,11 @@ class Estimator:
                    + (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2, 0.01 * (fc1 + fc2),
                       2.0 * math.pi / observer.profile_cutoff_wavelength_m))
         self._settle = settling_time_s(lq, lr, 0.0)
+        self._ready: deque = deque()
+        self._model: ModelCore | None = None
+        if observer.discretization == 'model':
+            self._model = ModelCore(vehicle, observer)
+            self._ready = self._model.ready
         self._status = EstimatorStatus()
         self.reset()
 
@@ -294,6 +312,13 @@ class Estimator:
         self._w = (0.0, 0.0)
         self._decay = (-1.0, 0.0, 0.0)   # cached (dt, e_1, e_2) of the tire lag
         self._flat: tuple | None = None
+        self._ready.clear()
+        self._pending: deque = deque()   # chain with latency: estimates held back
+        self._lag = 0
+        self._lag_known = self.observer.latency_s == 0.0
+        self._flushed = False
+        if self._model is not None:
+            self._model.reset()
 
     @property
     def status(self) -> EstimatorStatus:
@@ -301,7 +326,7 @@ class Estimator:
         st = self._status
         st.accepted = self._accepted
         st.time_since_start_s = self._t_run
-        st.settling_time_s = max(self._settle, 20.0 * self._dt_typ)
+        st.settling_time_s = self.settling_time_s
         st.converged = self._conv
         st.last_stamp_ns = self._stamp if self._started else None
         st.last_dt_s = self._dt
@@ -309,11 +334,28 @@ class Estimator:
         if self._flat is not None:
             st.last_residual_nm = self._flat[26]
             st.lift_off = (self._flat[27], self._flat[28])
+        core = self._model
+        if core is None:
+            st.method = 'chain'
+            st.latency_samples = self._lag
+            st.pending = len(self._pending) + len(self._ready)
+        else:
+            st.method = 'model'
+            st.latency_samples = core.lag
+            st.pending = len(core._pending) + len(self._ready)
+            st.noise_deflection_m = core.noise_deflection_m
+            st.noise_roll_rad = core.noise_roll_rad
+            st.road_roughness_m3 = core.road_gd_m3
+            st.statistics_blocks = core.blocks
+            st.gain_designs = core.design_count
         return st
 
     @property
     def settling_time_s(self) -> float:
-        """Current settling time (s), see :func:`settling_time_s`."""
+        """Current settling time (s), see :func:`settling_time_s` (model:
+        :meth:`.ModelCore.settling_time_s`)."""
+        if self._model is not None:
+            return self._model.settling_time_s(self._dt_typ)
         return max(self._settle, 20.0 * self._dt_typ)
 
     def update(self, stamp_ns: int, q_m, roll_rad: float, speed_mps: float) -> Estimate | None:
@@ -335,20 +377,46 @@ class Estimator:
         except (TypeError, ValueError):
             self._status.rejected_nonfinite += 1   # malformed: not a pair
             return None
-        flat = self._process(stamp_ns, q1, q2, roll_rad, speed_mps)
-        if flat is None:
+        if not self._process(stamp_ns, q1, q2, roll_rad, speed_mps) or not self._ready:
             return None
-        (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2, dzu1, dzu2,
-         ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv) = flat
-        est = Estimate(self._stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi,
-                       zs, dzs, ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2), (u1, u2),
-                       (df1, df2), (fn1, fn2), ltr, res, (lo1, lo2), conv)
+        stamp, flat = self._ready.popleft()
+        est = _estimate(stamp, flat)
         self.last = est
         return est
 
+    def flush(self) -> list[Estimate]:
+        """The estimates still held back (``observer.latency`` > 0), at the end of the data.
+
+        Each is the best estimate of its sample from the data received (the fixed-lag
+        correction over the samples that did arrive). After a flush the next sample starts a
+        new run (counted in ``resets``), as after a gap. With no latency: an empty list.
+        """
+        self._finish()
+        out = [_estimate(stamp, flat) for stamp, flat in self._ready]
+        self._ready.clear()
+        if out:
+            self.last = out[-1]
+        return out
+
+    def _finish(self) -> None:
+        """Finalize every held-back estimate into the ready queue; end the run."""
+        if self._model is not None:
+            if self._model._running:
+                self._model.finish()
+                self._flushed = True
+            if self._ready:
+                self._flat = self._ready[-1][1]
+        else:
+            self._ready.extend(self._pending)
+            self._pending.clear()
+
     # -- the step shared by both paths -----------------------------------------------------
-    def _process(self, stamp_ns, q1, q2, phi, v) -> tuple | None:
-        """Validate one sample and advance; the flat output tuple or None (rejected)."""
+    def _process(self, stamp_ns, q1, q2, phi, v) -> bool:
+        """Validate one sample and advance; False if it was rejected.
+
+        Estimates that became final (with a latency: of earlier samples) are appended to
+        ``self._ready`` as ``(stamp_ns, flat)``.
+        """
         try:
             stamp = int(stamp_ns)
             q1 = float(q1)
@@ -367,24 +435,81 @@ class Estimator:
                 self._status.rejected_range += 1
             else:
                 self._status.rejected_nonfinite += 1
-            return None
+            return False
         if not self._started:
-            return self._advance(stamp, q1, q2, phi, v, 0.0, True)
+            return self._accept(stamp, q1, q2, phi, v, 0.0, True)
         dt_ns = stamp - self._stamp
         if dt_ns <= 0:
             self._status.rejected_time += 1
-            return None
+            return False
         dt = dt_ns * 1e-9
         if dt > self.gap_threshold_s and dt > GAP_PERIODS * self._dt_typ:
             self._status.gaps += 1
             self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True)
-        flat = self._advance(stamp, q1, q2, phi, v, dt, False)
-        if flat is None:
+            return self._accept(stamp, q1, q2, phi, v, dt, True)
+        if self._flushed:
+            self._flushed = False
+            self._status.resets += 1
+            return self._accept(stamp, q1, q2, phi, v, dt, True)
+        if not self._accept(stamp, q1, q2, phi, v, dt, False):
             self._status.numerical_resets += 1
             self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True)
-        return flat
+            return self._accept(stamp, q1, q2, phi, v, dt, True)
+        return True
+
+    def _accept(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
+                restart: bool) -> bool:
+        """Advance the method's core; False (state untouched) on a non-finite result."""
+        if self._model is not None:
+            return self._advance_model(stamp, q1, q2, phi, v, dt, restart)
+        flat = self._advance(stamp, q1, q2, phi, v, dt, restart)
+        if flat is None:
+            return False
+        pending = self._pending
+        if restart:
+            self._ready.extend(pending)
+            pending.clear()
+            self._lag_known = self.observer.latency_s == 0.0
+            self._lag = 0
+        elif not self._lag_known:
+            self._lag = int(round(self.observer.latency_s / dt))
+            self._lag_known = True
+        pending.append((stamp, flat))
+        if self._lag_known:
+            lag = self._lag
+            while len(pending) > lag:
+                self._ready.append(pending.popleft())
+        return True
+
+    def _advance_model(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
+                       restart: bool) -> bool:
+        """One step of the model observer (:class:`.ModelCore`), or a (re)start."""
+        core = self._model
+        x = self._x + 0.5 * (self._v + v) * dt if self._started else 0.0
+        if restart:
+            t_run = 0.0
+            dt_typ = 0.0
+            conv = False
+            core.restart(stamp, q1, q2, phi, (x, dt, v, False))
+        else:
+            t_run = self._t_run + dt
+            dt_typ = self._dt_typ
+            dt_typ = dt if dt_typ == 0.0 else dt_typ + 0.05 * (dt - dt_typ)
+            conv = core.converged(t_run)
+            if not core.step(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
+                return False
+        self._started = True
+        self._stamp = stamp
+        self._x = x
+        self._v = v
+        self._dt = dt
+        self._t_run = t_run
+        self._dt_typ = dt_typ
+        self._conv = conv
+        if self._ready:
+            self._flat = self._ready[-1][1]
+        self._accepted += 1
+        return True
 
     def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
                  restart: bool) -> tuple | None:
@@ -491,6 +616,15 @@ class Estimator:
         return flat
 
 
+def _estimate(stamp: int, flat: tuple) -> Estimate:
+    """An :class:`Estimate` from the flat output tuple."""
+    (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2, dzu1, dzu2,
+     ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv) = flat
+    return Estimate(stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi, zs, dzs,
+                    ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2), (u1, u2), (df1, df2),
+                    (fn1, fn2), ltr, res, (lo1, lo2), conv)
+
+
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                    observer: ObserverParameters | None = None, *,
                    gap_threshold_s: float = GAP_THRESHOLD_S) -> EstimateArrays:
@@ -511,7 +645,10 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     Returns
     -------
     EstimateArrays
-        Every field per sample, the ``valid`` mask and the final status counters.
+        Row k is the estimate *for* sample k, whatever the latency: the per-sample path's
+        outputs of :meth:`Estimator.update` followed by :meth:`Estimator.flush`, in order, are
+        the rows where ``valid``. Every field per sample, the ``valid`` mask and the final
+        status counters.
     """
     stamps = np.asarray(stamps_ns)
     q = np.asarray(q_m, dtype=float)
@@ -523,24 +660,31 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     speed = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
     est = Estimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     process = est._process
-    held = (0.0,) * (_N_FLAT - 3) + (False, False, False)
-    rows = []
-    append = rows.append
+    ready = est._ready
+    flats = []
+    take = flats.append
     valid_list = []
     flag = valid_list.append
     stamp_list = stamps.tolist()
     for t, (a, b), p, v in zip(stamp_list, q.tolist(), phi.tolist(), speed.tolist()):
-        flat = process(t, a, b, p, v)
-        if flat is None:
-            append(held)
-            flag(False)
-        else:
-            append(flat)
-            held = flat
-            flag(True)
+        flag(process(t, a, b, p, v))
+        while ready:
+            take(ready.popleft()[1])
+    est._finish()
+    while ready:
+        take(ready.popleft()[1])
     valid = np.array(valid_list, dtype=bool)
-    table = np.fromiter(itertools.chain.from_iterable(rows), dtype=float,
-                        count=n * _N_FLAT).reshape(n, _N_FLAT)
+    if len(flats) != int(valid.sum()):   # never: one estimate per accepted sample
+        raise RuntimeError(f'{len(flats)} estimates for {int(valid.sum())} accepted samples')
+    table = np.zeros((n, _N_FLAT))
+    if flats:
+        table[valid] = np.fromiter(itertools.chain.from_iterable(flats), dtype=float,
+                                   count=len(flats) * _N_FLAT).reshape(len(flats), _N_FLAT)
+        # rejected rows hold the previous row (zeros before the first accepted sample)
+        idx = np.where(valid, np.arange(n), -1)
+        np.maximum.accumulate(idx, out=idx)
+        held = idx >= 0
+        table[held] = table[idx[held]]
     if np.issubdtype(stamps.dtype, np.integer):
         stamp_out = stamps.astype(np.int64)
     else:
@@ -549,8 +693,8 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     for i, name in enumerate(_FLAT):
         cols.setdefault(name, []).append(i)
     out = {}
-    for name, idx in cols.items():
-        arr = table[:, idx[0]] if len(idx) == 1 else table[:, idx]
+    for name, idx_ in cols.items():
+        arr = table[:, idx_[0]] if len(idx_) == 1 else table[:, idx_]
         if name in ('lift_off', 'converged'):
             arr = arr != 0.0
         out[name] = np.ascontiguousarray(arr)

@@ -175,7 +175,7 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
                               linewidths=3.0)
         coll.set_array(values[finite])
         ax.add_collection(coll)
-        bar = fig.colorbar(coll, ax=ax)
+        bar = fig.colorbar(coll, ax=ax, shrink=0.8)
         bar.set_label('IRI, mean of left and right (m/km; x 63.36 = in/mi)')
     if (~finite).any():
         ax.add_collection(LineCollection([s for s, f in zip(segs, finite) if not f],

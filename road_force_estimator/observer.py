@@ -1,4 +1,4 @@
-"""``observer`` node: the estimator of :mod:`.estimator`, one estimate per measurement message.
+"""``observer`` node: the estimator (estimator.py), one estimate per measurement message.
 
 Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` (best effort,
 which matches reliable and best-effort publishers); per accepted deflection message publishes
@@ -38,12 +38,16 @@ from .messages import (
     SIDES, WHEEL_FRAMES, MessageRejected, diagnostic_status, float64_msg, read_deflections,
     read_twist, reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
 from .parameters import ObserverParameters, VehicleParameters
-from .ros_parameters import ParameterError, ParameterGuard, specs_with_prefix
+from .ros_parameters import ParameterError, ParameterGuard, init_ros, specs_with_prefix
 
+SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
 # The core's counters, by the names the diagnostics give them.
 CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
                  'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
+# Further EstimatorStatus fields reported as they are (those the core has).
+ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
+                    'noise_roll_rad', 'road_roughness_m3')
 FLOW_COUNTS = ('received', 'published', 'lift_offs')  # the rest of a period's counts: rejections
 
 
@@ -68,8 +72,7 @@ class Observer(Node):
 
     def __init__(self, **kwargs):
         super().__init__('observer', **kwargs)
-        self.params = ParameterGuard(self, specs_with_prefix('vehicle.', 'observer.'), build,
-                                     self.reconfigure)
+        self.params = ParameterGuard(self, SPECS, build, self.reconfigure)
         self.speed_mps = None
         self.waiting = deque()
         self.period, self.total = Counter(), Counter()   # node-side counters
@@ -97,6 +100,8 @@ class Observer(Node):
         """(Re)build the estimator from ``(VehicleParameters, ObserverParameters)``."""
         old = getattr(self, 'estimator', None)
         if old is not None:
+            for est in old.flush():  # estimates held back (observer.latency > 0): publish them
+                self.publish(est)
             self.core_base.update(self.core_counts(old))
             self.total['rebuilds'] += 1
             self.get_logger().info('parameters changed: estimator rebuilt (it restarts)')
@@ -138,14 +143,17 @@ class Observer(Node):
 
     def estimate(self, stamp_ns: int, q_m, roll_rad: float) -> None:
         est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
-        if est is None:  # rejected by the core (counted in its status)
-            return
+        if est is not None:  # None: rejected by the core (counted), or held back (latency)
+            self.publish(est)
+
+    def publish(self, est) -> None:
+        """The six output messages of one estimate, stamped with its sample's stamp."""
         (f1, f2), (u1, u2), s = est.wheel_load_n, est.road_m, self.half_track_m
         position = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m)
         velocity = (*est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
         if not math.isfinite(f1 + f2 + u1 + u2 + est.ltr + est.distance_m + sum(position)
                              + sum(velocity)):
-            self.reject('nonfinite_output', f'non-finite estimate at {stamp_ns} ns')
+            self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
         t = est.stamp_ns
         for pub, frame, load in zip(self.load_pubs, WHEEL_FRAMES, (f1, f2)):
@@ -180,8 +188,10 @@ class Observer(Node):
         message = ('no input' if not received else f'{sum(rejected.values())} rejected'
                    if rejected else f'{len(self.waiting)} waiting for a speed' if self.waiting
                    else 'ok')
-        if rejected:
+        if period.keys() - FLOW_COUNTS:  # rejected here (not in the core): say the last why
             values['last_rejection'] = self.last_rejection
+        if st.typical_dt_s > 0.0:  # the rate the stamps say, against the rate that came
+            values['stamp_rate_hz'] = 1.0 / st.typical_dt_s
         inputs = diagnostic_status('observer: input', self.get_name(),
                                    'ok' if message == 'ok' else 'warn', message, values)
         ex, self.extremes = self.extremes, dict.fromkeys(self.extremes, 0.0)
@@ -189,10 +199,12 @@ class Observer(Node):
         message = ('converging' if not st.converged else f'{lifts} lift-off samples' if lifts
                    else f'{resets} restarts' if resets else 'ok')
         values = {'converged': st.converged, 'time_since_start_s': st.time_since_start_s,
-                  'settling_time_s': st.settling_time_s, 'resets': resets,
+                  'settling_time_s': getattr(self.estimator, 'settling_time_s',
+                                             st.settling_time_s), 'resets': resets,
                   'gaps': fresh['gaps'], 'residual_nm': st.last_residual_nm,
                   'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
                   'lift_off_right': st.lift_off[1], **ex}
+        values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
         estimator = diagnostic_status('observer: estimator', self.get_name(),
                                       'ok' if message == 'ok' else 'warn', message, values)
         values = {f'finding.{i}': f for i, f in enumerate(self.findings)}
@@ -207,9 +219,9 @@ class Observer(Node):
 
 def main(args=None) -> int:
     try:
-        rclpy.init(args=args)
-    except Exception as exc:  # rcl refuses bad arguments or an unreadable params file
-        print(f'observer: {exc}', file=sys.stderr)
+        init_ros('observer', __doc__.splitlines()[0], SPECS, args)
+    except ParameterError as exc:
+        print(exc, file=sys.stderr)
         return 1
     node = None
     try:

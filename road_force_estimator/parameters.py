@@ -78,13 +78,27 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'Lipschitz constant L of the deflection differentiators (bound on |dddq|)', 1e-3, 1e9),
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
        'Lipschitz constant L of the roll differentiator (bound on |dddphi|)', 1e-6, 1e9),
-    _p('observer.discretization', 'string', 'implicit', '',
-       'differentiator scheme: "euler" is the paper\'s explicit scheme, the others ours',
-       choices=('euler', 'taylor', 'implicit')),
+    _p('observer.discretization', 'string', 'model', '',
+       'observer: "model" = model-based sliding-mode observer (Kalman and Levant injection, '
+       'the default); "euler" (the paper\'s explicit scheme), "taylor", "implicit" = the '
+       'differentiator chain with that scheme',
+       choices=('euler', 'taylor', 'implicit', 'model')),
     _p('observer.profile_cutoff_wavelength', 'double', 100.0, 'm',
        'long-wavelength cutoff of the body-heave integration (profile high-pass)', 5.0, 1e4),
     _p('observer.latency', 'double', 0.0, 's',
        'delay of the published estimate behind the newest input sample', 0.0, 1.0),
+    _p('observer.sliding_mode_gain', 'double', 1.0, '',
+       'weight of the sliding-mode (Levant) injection of the model observer; 0 = off '
+       '(linear Kalman injection only)', 0.0, 10.0),
+    _p('observer.noise.deflection', 'double', 0.0, 'm',
+       'deflection sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
+    _p('observer.noise.roll', 'double', 0.0, 'rad',
+       'roll sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
+    _p('observer.road_roughness', 'double', 0.0, 'm^3',
+       'ISO 8608 Gd(n0) of the road for the model observer; 0 = estimate online', 0.0, 1.0),
+    _p('observer.road_correlation_length', 'double', 0.8, 'm',
+       'correlation length of the road velocity under the tire (tire envelope) of the model '
+       'observer', 0.05, 20.0),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.duration', 'double', 60.0, 's',
@@ -230,6 +244,11 @@ class ObserverParameters(_FromParameters):
     discretization: str = _param('observer.discretization')
     profile_cutoff_wavelength_m: float = _param('observer.profile_cutoff_wavelength')
     latency_s: float = _param('observer.latency')
+    sliding_mode_gain: float = _param('observer.sliding_mode_gain')
+    noise_deflection_m: float = _param('observer.noise.deflection')
+    noise_roll_rad: float = _param('observer.noise.roll')
+    road_roughness_m3: float = _param('observer.road_roughness')
+    road_correlation_length_m: float = _param('observer.road_correlation_length')
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,8 @@ from .messages import (
 from .parameters import SimulatorParameters, VehicleParameters
 from .plant import Plant
 from .road import road_from_source
-from .ros_parameters import ParameterError, ParameterGuard, local_spec, specs_with_prefix
+from .ros_parameters import (
+    ParameterError, ParameterGuard, init_ros, local_spec, specs_with_prefix)
 from .sensors import SensorModel
 
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
@@ -64,7 +65,7 @@ class PlantSimulator(Node):
             self.road = road_from_source(sim.road, length_m=length)
             self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                                tire_envelope_m=sim.tire_envelope_length_m)
-        except (ValueError, OSError) as exc:
+        except Exception as exc:  # ValueError, OSError, bag_io.BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None
         self.measure = SensorModel.from_simulator(sim).sampler()
@@ -162,9 +163,9 @@ class PlantSimulator(Node):
 
 def main(args=None) -> int:
     try:
-        rclpy.init(args=args)
-    except Exception as exc:  # rcl refuses bad arguments or an unreadable params file
-        print(f'plant_simulator: {exc}', file=sys.stderr)
+        init_ros('plant_simulator', __doc__.splitlines()[0], SPECS, args)
+    except ParameterError as exc:
+        print(exc, file=sys.stderr)
         return 1
     node = None
     try:

@@ -94,7 +94,15 @@ class Aligned:
         self.stamps_ns = stamps
         self.t_s = (stamps - stamps[0]) * 1e-9 if stamps.size else np.zeros(0)
         self.x_m = np.asarray(est.distance_m, dtype=float)[self.rows]
-        self.converged = np.asarray(est.converged, dtype=bool)[self.rows]
+        self.reported_converged = np.asarray(est.converged, dtype=bool)[self.rows]
+        #: Rows judged: the estimator's ``converged``; if it never reported convergence, the
+        #: rows from its settling time on (:attr:`judged_from` says which).
+        self.converged = self.reported_converged
+        self.judged_from = 'converged'
+        if self.rows.size and not self.converged.any():
+            settle = float(getattr(getattr(est, 'status', None), 'settling_time_s', 0.0) or 0.0)
+            self.converged = self.t_s >= settle
+            self.judged_from = 'settling time'
         self.true_load_n = self.true_road_m = None
         truth = getattr(drive, 'truth', None)
         if truth is not None and self.rows.size:
@@ -372,7 +380,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     core = {k: int(v) for k, v in core.items() if v}
     if core:
         rejected['estimator'] = core
-    conv_rows = np.flatnonzero(al.converged)
+    conv_rows = np.flatnonzero(al.reported_converged)
     summary: dict[str, Any] = {
         'input': input_name,
         'mode': mode,
@@ -382,6 +390,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
             'estimated': int(st.accepted),
             'converged': int(conv_rows.size),
         },
+        'judged_from': al.judged_from,
         'rejected': rejected,
         'rejected_total': int(sum(sum(r.values()) for r in rejected.values())),
         'issues': list(getattr(drive, 'issues', ()) or ()),
@@ -570,6 +579,9 @@ def write_markdown(path: str | Path, summary: dict[str, Any], segments: dict[str
                 f'{_fmt(acc["profile_rms_pct_band"][0])} | '
                 f'{_fmt(acc["profile_rms_pct_band"][1])} | '
                 f'{_fmt(acc["profile_rms_pct_band_both"])} |']
+        if s.get('judged_from') == 'settling time':
+            lines += ['', 'The estimator never reported convergence: samples are judged from '
+                      f'its settling time ({_fmt(s["settling_time_s"], 3)} s) on.']
         lines += ['', f'Judged on {acc.get("samples_judged", 0)} converged samples (loads, LTR)'
                   + (f' and {acc["profile_samples_judged"]} profile samples against the '
                      f'{acc["profile_against"]}, 30 m in from each end' if

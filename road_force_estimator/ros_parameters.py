@@ -23,21 +23,25 @@ Array parameters (``[left, right]`` pairs) carry the element range in their desc
 """
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 import math
+import sys
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+import rclpy
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
 
 from .parameters import PARAMETERS, SPECS, ParameterSpec, validate_parameter
 
 __all__ = [
     'ParameterError', 'local_spec', 'specs_with_prefix', 'descriptor', 'check_value', 'declare',
-    'ParameterGuard',
+    'ParameterGuard', 'init_ros',
 ]
 
 # Parameter kinds of parameters.ParameterSpec, plus node-local ones ('string_list', 'bool').
@@ -64,6 +68,14 @@ def local_spec(name: str, kind: str, default: Any, unit: str, description: str,
     return ParameterSpec(name, kind, default, unit, description, low, high, tuple(choices))
 
 
+def _range_text(spec: ParameterSpec) -> str:
+    if spec.kind == 'string_list':
+        return 'a list of strings'
+    if spec.kind == 'bool':
+        return 'true or false'
+    return spec.range_text()
+
+
 def specs_with_prefix(*prefixes: str) -> tuple[ParameterSpec, ...]:
     """The shared parameters whose names start with one of ``prefixes`` (e.g. ``'vehicle.'``)."""
     return tuple(s for s in PARAMETERS if s.name.startswith(prefixes))
@@ -74,7 +86,7 @@ def descriptor(spec: ParameterSpec, *, read_only: bool = False) -> ParameterDesc
     unit = f' ({spec.unit})' if spec.unit else ''
     d = ParameterDescriptor(
         name=spec.name, type=_TYPES[spec.kind].value, read_only=read_only,
-        description=f'{spec.description}{unit}; valid: {spec.range_text()}')
+        description=f'{spec.description}{unit}; valid: {_range_text(spec)}')
     if spec.kind == 'double_pair':
         d.additional_constraints = f'[left, right], each in {spec.range_text()}'
     elif spec.choices:
@@ -266,7 +278,7 @@ class ParameterGuard:
                 continue
             try:
                 check_value(spec, p.value)
-                reason = f'{p.name} = {p.value!r}: expected a {spec.kind} ({spec.range_text()})'
+                reason = f'{p.name} = {p.value!r}: expected {_range_text(spec)}'
             except ValueError as exc:
                 reason = str(exc)
             self._type_errors[p.name] = reason
@@ -301,3 +313,35 @@ class ParameterGuard:
         self.values, self.config = pending.values, pending.config
         if self._apply is not None:
             self._apply(pending.config)
+
+
+def init_ros(prog: str, description: str, specs: Iterable[ParameterSpec],
+             args: Sequence[str] | None, **init_kwargs) -> None:
+    """Start a node's process: ``--help`` (listing its parameters), then ``rclpy.init``.
+
+    Arguments outside ``--ros-args`` other than ``--help`` are a usage error (``SystemExit(2)``,
+    as argparse makes it). ``args`` is what ``main(args)`` received: ``None`` for
+    ``sys.argv``, else a full argv (program name first), as ``rclpy.init(args=...)`` takes it;
+    ``init_kwargs`` go to ``rclpy.init``.
+
+    Raises
+    ------
+    ParameterError
+        rcl refuses the ROS arguments (e.g. a params file that is not valid YAML); one line.
+    """
+    argv = list(sys.argv if args is None else args)
+    lines = [f'  {s.name} ({_range_text(s)}): {s.description}' for s in specs]
+    parser = argparse.ArgumentParser(
+        prog=prog, description=description.replace('``', ''),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='ROS arguments: --ros-args [-p NAME:=VALUE]... [--params-file FILE]\n'
+               'parameters:\n' + '\n'.join(lines))
+    try:
+        plain = remove_ros_args(argv)
+    except Exception as exc:  # rcl refuses bad ROS arguments or an unreadable params file
+        raise ParameterError(f'{prog}: {exc}') from None
+    parser.parse_args(plain[1:])
+    try:
+        rclpy.init(args=argv, **init_kwargs)
+    except Exception as exc:  # rcl's RCLError
+        raise ParameterError(f'{prog}: {exc}') from None

@@ -14,7 +14,9 @@ measure it. The bag DIR (:func:`road_force_estimator.bag_io.write_drive_bag`) ho
 measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
 ``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.gnss.route`
-(a fix at the first sample of each GNSS period, as the plant_simulator node publishes them).
+(a fix at the first sample of each GNSS period, as the plant_simulator node publishes them;
+the route is integrated between fixes with the lateral acceleration at the fixes, so a step
+of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^2).
 Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
 ``custom_data``.
 

@@ -118,6 +118,14 @@ def test_every_message_published_during_its_life_is_in_the_bag(ros_context, tmp_
         '/custom/text': 'best_effort'}
 
 
+def test_bad_topic_names_are_refused(ros_context, tmp_path):
+    with pytest.raises(ParameterError, match=r"refused topics = \['/ok', 'bad name!'\]"):
+        BagRecorder(context=ros_context, parameter_overrides=[
+            Parameter('topics', value=['/ok', 'bad name!']),
+            Parameter('output', value=str(tmp_path / 'bag'))])
+    assert not (tmp_path / 'bag').exists()
+
+
 def test_an_existing_output_is_never_overwritten(ros_context, tmp_path):
     (tmp_path / 'bag').mkdir()
     (tmp_path / 'bag' / 'keep.txt').write_text('mine')

@@ -3,6 +3,7 @@
 Nodes spin in the test process (fresh rclpy context per test); main() runs in a subprocess.
 """
 import math
+import signal
 
 import numpy as np
 import pytest
@@ -145,6 +146,19 @@ def test_main_exits_cleanly_when_the_drive_ends():
                                    'simulator.duration:=0.3', '-p', 'realtime_factor:=3.0'))
     assert code == 0, err
     assert 'drive finished after 301 samples' in err
+
+
+def test_main_exits_cleanly_on_sigint_mid_drive(ros_context):
+    process = run_main('plant_simulator')  # 60 s by default
+    collector = Collector(ros_context, ['/vehicle/twist'])
+    executor = make_executor(ros_context, collector)
+    try:
+        assert spin_until(executor, lambda: collector.count('/vehicle/twist') > 10, 30.0)
+    finally:
+        close(executor, collector)
+    process.send_signal(signal.SIGINT)
+    code, _, err = finish(process, 30.0)
+    assert code == 0 and 'Traceback' not in err, err
 
 
 def test_main_refuses_a_bad_parameter_with_one_line(tmp_path):

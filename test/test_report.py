@@ -168,14 +168,17 @@ class TestFiles:
         assert data['accuracy']['load_rms_n'] == pytest.approx([100.0, 200.0])
         assert data['mode'] == 'offline' and data['input'] == 'drive_a'
 
-    def test_without_figures_and_with_inf(self, tmp_path):
+    def test_without_figures_and_never_converged(self, tmp_path):
         est, drive, _ = make_case(n=3000)
-        est.converged[:] = False                    # nothing converged: nothing judged
+        est.converged[:] = False        # never converged: judged from the settling time (0.2 s)
         summary = report.write_report(tmp_path / 'r', est, drive, VEHICLE, figures=False)
-        assert summary['figures'] == [] and summary['accuracy'] is None
+        assert summary['figures'] == [] and summary['judged_from'] == 'settling time'
+        assert summary['accuracy']['samples_judged'] == 3000 - 100
+        np.testing.assert_allclose(summary['accuracy']['load_rms_n'], [100.0, 200.0])
         assert not list((tmp_path / 'r').glob('*.png'))
         data = json.loads((tmp_path / 'r' / 'report.json').read_text())
         assert data['first_converged_s'] is None        # inf -> null in JSON
+        assert 'never reported convergence' in (tmp_path / 'r' / 'report.md').read_text()
 
     def test_a_drive_without_distance(self, tmp_path):
         est, drive, _ = make_case(n=400)
