@@ -357,11 +357,21 @@ def lowpass_differences(x: np.ndarray, dt_s: float, order: int, cutoff_hz: float
 
 def lowpass_fd(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
                order: int = 2, cutoff_hz: float = 30.0, differences: str = 'backward',
+               roll_cutoff_hz: float | None = None,
                profile_cutoff_wavelength_m: float = 100.0) -> PeerResult:
     """Causal Butterworth low-pass + one-sided differences (:func:`lowpass_differences`) +
-    :func:`reconstruct`."""
+    :func:`reconstruct`.
+
+    ``cutoff_hz`` for the deflections, ``roll_cutoff_hz`` for the roll channel (None: the
+    same): the roll sensor is another sensor with other dynamics, and its noise enters the
+    wheel accelerations through the half track (``s ddphi``), so a user filters it on its own.
+    """
     t_s, q_m, roll_rad, speed, dt_s = _inputs(t_s, q_m, roll_rad, speed_mps)
-    d = lowpass_differences(_stack(q_m, roll_rad), dt_s, order, cutoff_hz, differences)
+    dq = lowpass_differences(q_m, dt_s, order, cutoff_hz, differences)
+    dr = lowpass_differences(roll_rad[:, None], dt_s, order,
+                             cutoff_hz if roll_cutoff_hz is None else roll_cutoff_hz,
+                             differences)
+    d = np.concatenate([dq, dr], axis=2)
     return _reconstruct_channels(t_s, d, speed, vehicle, profile_cutoff_wavelength_m, 0)
 
 
@@ -387,10 +397,19 @@ def zero_phase_differences(x: np.ndarray, dt_s: float, order: int,
 
 def zero_phase_offline(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
                        order: int = 2, cutoff_hz: float = 30.0,
+                       roll_cutoff_hz: float | None = None,
                        profile_cutoff_wavelength_m: float = 100.0) -> PeerResult:
-    """Offline: :func:`zero_phase_differences` + :func:`reconstruct` (body heave zero-phase)."""
+    """Offline: :func:`zero_phase_differences` + :func:`reconstruct` (body heave zero-phase).
+
+    ``roll_cutoff_hz``: the roll channel's own cutoff (None: ``cutoff_hz``), as in
+    :func:`lowpass_fd`.
+    """
     t_s, q_m, roll_rad, speed, dt_s = _inputs(t_s, q_m, roll_rad, speed_mps)
-    d = zero_phase_differences(_stack(q_m, roll_rad), dt_s, order, cutoff_hz)
+    d = np.concatenate([
+        zero_phase_differences(q_m, dt_s, order, cutoff_hz),
+        zero_phase_differences(roll_rad[:, None], dt_s, order,
+                               cutoff_hz if roll_cutoff_hz is None else roll_cutoff_hz)],
+        axis=2)
     return _reconstruct_channels(t_s, d, speed, vehicle, profile_cutoff_wavelength_m, -1)
 
 
@@ -516,12 +535,14 @@ def _irw_model(states: int, psd: float, dt_s: float) -> tuple[np.ndarray, np.nda
 def kf_jerk(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
             jerk_psd: float = 1e3, states: int = 4, noise_deflection_m: float = 1e-5,
             noise_roll_rad: float = 1e-4, noise_floor_m: float = 1e-7,
+            roll_jerk_psd: float | None = None,
             profile_cutoff_wavelength_m: float = 100.0) -> PeerResult:
     """Causal Kalman filter per channel on an integrated random walk, then reconstruction.
 
     ``states = 4``: (f, df, ddf, dddf) with the jerk dddf a random walk (constant-jerk model),
     ``d dddf / dt`` white with two-sided spectral density ``jerk_psd`` (m^2/s^7 for the
-    deflections; the roll channel uses ``jerk_psd / s^2``). ``states = 3``: (f, df, ddf), the jerk
+    deflections; the roll channel uses ``roll_jerk_psd``, in rad^2/s^7, or ``jerk_psd / s^2``
+    when None). ``states = 3``: (f, df, ddf), the jerk
     white (``jerk_psd`` then in m^2/s^5). Measurement variance: the known sensor variance plus
     ``noise_floor_m^2`` (``(noise_floor_m / s)^2`` for roll), so that noise-free data stays
     well posed.
@@ -534,7 +555,8 @@ def kf_jerk(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
     x = _stack(q_m, roll_rad)
     d = np.empty((x.shape[0], 3, 3))
     for ch in range(3):
-        psd = jerk_psd if ch < 2 else jerk_psd / s ** 2
+        psd = (jerk_psd if ch < 2 else jerk_psd / s ** 2 if roll_jerk_psd is None
+               else roll_jerk_psd)
         a_d, q_d = _irw_model(states, psd, dt_s)
         c = np.zeros((1, states))
         c[0, 0] = 1.0

@@ -73,6 +73,13 @@ HEADLINE_SCENARIOS = ('C20-1k-10um', 'C20-1k-0um')
 GROUPS = ('zero latency', 'low latency', 'offline')
 
 
+def g3(v: float) -> str:
+    """About three significant digits for a percentage (0.123, 2.45, 17.5, 102)."""
+    a = abs(v)
+    return (f'{v:.0f}' if a >= 100 else f'{v:.1f}' if a >= 10 else f'{v:.2f}' if a >= 1
+            else f'{v:.3f}')
+
+
 class NotAvailable(Exception):
     """The package cannot run this column as it is now (shown as 'n/a' with the reason)."""
 
@@ -314,13 +321,12 @@ METHODS: dict[str, Method] = _methods()
 
 #: Figures reported: (key of :func:`bench.scenarios.score`, title, format, second key or None).
 FIGURES = (
-    ('load_rms_pct_dyn', 'Vertical-load RMS error, % of the true dynamic-load RMS', '{:.1f}',
-     None),
+    ('load_rms_pct_dyn', 'Vertical-load RMS error, % of the true dynamic-load RMS', g3, None),
     ('load_rms_pct_static', 'Vertical-load RMS error, % of the static load', '{:.2f}', None),
-    ('profile_rms_pct_band', 'Profile RMS error in the 0.5-30 m band, % of the band RMS',
-     '{:.1f}', None),
+    ('profile_rms_pct_band', 'Profile RMS error in the 0.5-30 m band, % of the band RMS', g3,
+     None),
     ('iri_err_pct_mean', 'IRI error per 100 m segment, |relative error| in %: mean / max over '
-     'the segments and both wheels', '{:.1f}', 'iri_err_pct_max'),
+     'the segments and both wheels', g3, 'iri_err_pct_max'),
     ('ltr_rms', 'LTR RMS error', '{:.4f}', None),
     ('convergence_s', 'Start-up convergence time (s): load error settles within 2x its RMS',
      '{:.2f}', None),
@@ -344,8 +350,12 @@ def run(scenarios, methods: list[Method], tuned: dict[str, Any], *, timing_repea
     timing: dict[str, float] = {}
     kept = None
     for sc in scenarios:
-        if duration_s is not None:
-            sc = replace(sc, duration_s=duration_s, skip_s=min(sc.skip_s, 0.25 * duration_s))
+        if duration_s is not None:   # quick checks: shorter drives, events kept inside them
+            d = duration_s
+            if sc.event is not None:
+                d = max(d, (sc.event[2] + sc.event[3] + 20.0) / sc.speed_mps)
+            sc = replace(sc, duration_s=d, skip_s=min(sc.skip_s, 0.25 * d),
+                         lateral_step_s=min(sc.lateral_step_s, 0.6 * d))
         t0 = time.perf_counter()
         drive = build_drive(sc)
         results[sc.name] = {}
@@ -380,8 +390,9 @@ def run(scenarios, methods: list[Method], tuned: dict[str, Any], *, timing_repea
 
 
 def _update_cost(drive: Drive, observer, *, samples: int, warmup: int,
-                 repeats: int) -> tuple[float, float]:
-    """(median, min) microseconds per :meth:`Estimator.update` over ``samples`` samples."""
+                 repeats: int) -> tuple[float, float, float]:
+    """Microseconds per :meth:`Estimator.update` over ``samples`` samples: the median and min
+    wall time (timeit, perf_counter) and the median process CPU time of ``repeats`` runs."""
     from road_force_estimator.estimator import Estimator
 
     n = len(drive.t_s)
@@ -392,6 +403,7 @@ def _update_cost(drive: Drive, observer, *, samples: int, warmup: int,
     phi = drive.roll_rad.tolist()
     v = drive.speed_mps.tolist()
     holder: dict[str, Any] = {}
+    cpu: list[float] = []
 
     def setup():
         est = Estimator(drive.vehicle_observer, observer)
@@ -401,12 +413,14 @@ def _update_cost(drive: Drive, observer, *, samples: int, warmup: int,
 
     def stmt():
         update = holder['update']
+        c0 = time.process_time()
         for k in range(warmup, stop):
             update(st[k], q[k], phi[k], v[k])
+        cpu.append(time.process_time() - c0)
 
     times = timeit.Timer(stmt, setup).repeat(repeat=repeats, number=1)
     per = 1e6 / (stop - warmup)
-    return statistics.median(times) * per, min(times) * per
+    return statistics.median(times) * per, min(times) * per, statistics.median(cpu) * per
 
 
 def core_cost(drive: Drive, *, samples: int = 5000, warmup: int = 1000,
@@ -430,9 +444,9 @@ def core_cost(drive: Drive, *, samples: int = 5000, warmup: int = 1000,
         row: dict[str, Any] = {'variant': label, 'default': change.get(
             'observer.discretization') == default}
         try:
-            med, best = _update_cost(drive, ours_observer(change), samples=samples,
-                                     warmup=warmup, repeats=repeats)
-            row.update(us_median=med, us_min=best)
+            med, best, cpu = _update_cost(drive, ours_observer(change), samples=samples,
+                                          warmup=warmup, repeats=repeats)
+            row.update(us_median=med, us_min=best, us_cpu=cpu)
         except NotAvailable as exc:
             row['error'] = str(exc)
         except Exception as exc:   # noqa: BLE001
@@ -491,6 +505,7 @@ def end_to_end_speed(*, duration_s: float = 30.0, repeats: int = 3) -> dict[str,
                 continue
             med = statistics.median(wall)
             out['modes'][mode] = {'median_s': med, 'samples_per_s': n / med,
+                                  'samples_per_cpu_s': n / statistics.median(cpu),
                                   'cpu_per_wall': statistics.median(cpu) / med}
     return out
 
@@ -574,9 +589,9 @@ def _compare(out, scenarios, ours: str, ref: str, factor: float, key: str = 'loa
     return rows, [r for r in rows if r[1] > factor * r[2]]
 
 
-def _worst(rows, factor: float = 1.0) -> str:
+def _worst(rows) -> str:
     sc, o, r = max(rows, key=lambda x: x[1] / max(x[2], 1e-12))
-    return f'worst {sc}: {o:.1f} % vs {r:.1f} % (ratio {o / max(r, 1e-12):.2f})'
+    return f'worst {sc}: {g3(o)} % vs {g3(r)} % (ratio {o / max(r, 1e-12):.2f})'
 
 
 def _verdict(ok: bool | None) -> str:
@@ -595,7 +610,7 @@ def targets(out, scenarios, speed_out: dict[str, Any] | None) -> list[str]:
                 f'{_verdict(ok)}: no worse on {len(rows) - len(bad)} of {len(rows)} scenarios'
                 f'; {_worst(rows)}')
         if bad:
-            text += '; worse on ' + ', '.join(f'{s} ({o:.1f} vs {r:.1f})' for s, o, r in bad)
+            text += '; worse on ' + ', '.join(f'{s} ({g3(o)} vs {g3(r)})' for s, o, r in bad)
         lp_rows = [(s.name, _fig(out, s.name, 'ours-online'), _fig(out, s.name, 'lowpass-fd'),
                     _fig(out, s.name, 'kf-model')) for s in scenarios if s.noise_deflection_m]
         allowed = [r for r in lp_rows if None not in r and r[3] <= 0.7 * r[2]]
@@ -618,7 +633,7 @@ def targets(out, scenarios, speed_out: dict[str, Any] | None) -> list[str]:
         if head is not None:
             text += f'; C20-1k-10um: {head:.2f} %'
         if bad:
-            text += '; above on ' + ', '.join(f'{s} ({o:.1f} vs {r:.1f})' for s, o, r in bad)
+            text += '; above on ' + ', '.join(f'{s} ({g3(o)} vs {g3(r)})' for s, o, r in bad)
         lines.append(text + '.')
     else:
         lines.append('**Low latency**: NOT MEASURED (' + _why_missing(out, 'ours-latency-10ms')
@@ -647,16 +662,16 @@ def targets(out, scenarios, speed_out: dict[str, Any] | None) -> list[str]:
         pw = max(prof, key=lambda p: p[1])
         text = (f'**Profile** (ours-online: band-passed profile error < 10 %, IRI per 100 m '
                 f'within 5 %): {_verdict(ok)}: profile < 10 % on {len(prof) - len(p_bad)} of '
-                f'{len(prof)} scenarios (worst {pw[0]}: {pw[1]:.1f} %)')
+                f'{len(prof)} scenarios (worst {pw[0]}: {g3(pw[1])} %)')
         if iri:
             iw = max(iri, key=lambda p: p[1])
             text += (f'; every segment within 5 % on {len(iri) - len(i_bad)} of {len(iri)} '
-                     f'(worst {iw[0]}: {iw[1]:.1f} %)')
+                     f'(worst {iw[0]}: {g3(iw[1])} %)')
         for m in ('ours-latency-10ms', 'ours-offline'):
             vals = [_fig(out, n, m, 'profile_rms_pct_band') for n in names]
             vals = [v for v in vals if v is not None]
             if vals:
-                text += f'; {m}: profile worst {max(vals):.1f} %'
+                text += f'; {m}: profile worst {g3(max(vals))} %'
         lines.append(text + '.')
     else:
         lines.append('**Profile**: NOT MEASURED (' + _why_missing(out, 'ours-online') + ').')
@@ -751,8 +766,8 @@ def losses(out, scenarios, methods: list[Method], *, limit: int = 6) -> list[str
             if not lost:
                 continue
             lost.sort(reverse=True)
-            fmt = '{:.4f}' if key == 'ltr_rms' else '{:.1f}'
-            shown = ', '.join(f'{sc} ({fmt.format(o)} vs {who} {fmt.format(b)})'
+            fmt = '{:.4f}'.format if key == 'ltr_rms' else g3
+            shown = ', '.join(f'{sc} ({fmt(o)} vs {who} {fmt(b)})'
                               for _, sc, o, b, who in lost[:limit])
             more = f' and {len(lost) - limit} more' if len(lost) > limit else ''
             parts.append(f'{what} on {len(lost)} of {len(scenarios)} scenarios: {shown}{more}')
@@ -768,11 +783,39 @@ def losses(out, scenarios, methods: list[Method], *, limit: int = 6) -> list[str
     return lines
 
 
+def ablation(out, scenarios) -> list[str]:
+    """What the sliding-mode term contributes: ours-online against ours-no-smo."""
+    rows = []
+    for s in scenarios:
+        vals = [_fig(out, s.name, m, k) for k in ('load_rms_pct_dyn', 'profile_rms_pct_band')
+                for m in ('ours-online', 'ours-no-smo')]
+        if vals[0] is not None and vals[1] is not None:
+            rows.append((s.name, *vals))
+    if not rows:
+        return [f'Not measured ({_why_missing(out, "ours-no-smo")}).']
+    same = [r for r in rows if g3(r[1]) == g3(r[2])
+            and (r[3] is None or r[4] is None or g3(r[3]) == g3(r[4]))]
+    gain = max(rows, key=lambda r: r[2] - r[1])
+    lines = [f'The defaults (ours-online) against the same observer with the sliding-mode '
+             f'injection off (ours-no-smo): equal to the digits shown on {len(same)} of '
+             f'{len(rows)} scenarios; the largest load-error reduction by the sliding-mode term '
+             f'is {gain[2] - gain[1]:+.3f} % points on {gain[0]} '
+             f'({g3(gain[2])} % without, {g3(gain[1])} % with).', '',
+             '| scenario | load, ours-online | load, ours-no-smo | profile, ours-online | '
+             'profile, ours-no-smo |', '|---|---:|---:|---:|---:|']
+    for name, lo, ln, po, pn in rows:
+        lines.append(f'| {name} | {g3(lo)} | {g3(ln)} | '
+                     f'{"-" if po is None else g3(po)} | {"-" if pn is None else g3(pn)} |')
+    return lines
+
+
 # ----------------------------------------------------------------------------------------------
 # Markdown
 
 
-def _cell(fig: dict[str, Any] | None, key: str, fmt: str, key2: str | None = None) -> str:
+def _cell(fig: dict[str, Any] | None, key: str, fmt, key2: str | None = None) -> str:
+    """A table cell; ``fmt`` a format string or a function of the value."""
+    fmt = fmt.format if isinstance(fmt, str) else fmt
     if fig is None:
         return '-'
     if 'na' in fig:
@@ -786,7 +829,7 @@ def _cell(fig: dict[str, Any] | None, key: str, fmt: str, key2: str | None = Non
             return '-'
         if isinstance(v, float) and math.isinf(v):
             return 'never'
-        return fmt.format(v)
+        return fmt(v)
 
     return one(key) + (' / ' + one(key2) if key2 else '')
 
@@ -820,8 +863,7 @@ def headline_table(out, methods: list[Method]) -> list[str]:
         cells = []
         for s in scs:
             f = out['results'][s].get(m.name)
-            cells += [_cell(f, 'load_rms_pct_dyn', '{:.1f}'),
-                      _cell(f, 'profile_rms_pct_band', '{:.1f}')]
+            cells += [_cell(f, 'load_rms_pct_dyn', g3), _cell(f, 'profile_rms_pct_band', g3)]
         name = f'**{m.name}**' if m.ours else m.name
         lines.append(f'| {name} | {m.latency} | ' + ' | '.join(cells) + ' |')
     return lines
@@ -834,15 +876,17 @@ def speed_lines(sp: dict[str, Any] | None, timing: dict[str, float],
         core = sp.get('core', [])
         if core:
             lines += [f'Core: `Estimator.update` per sample on `{TIMING_SCENARIO}` (timeit, '
-                      'median and min of 7 repeats of 5000 samples after 1000 of warm-up, '
-                      'one core):', '', '| variant | us/sample (median) | us/sample (min) |',
-                      '|---|---:|---:|']
+                      'wall time, median and min of 7 repeats of 5000 samples after 1000 of '
+                      'warm-up; and the median process CPU time, which other work on a shared '
+                      'machine disturbs less):', '',
+                      '| variant | us/sample, wall (median) | wall (min) | CPU (median) |',
+                      '|---|---:|---:|---:|']
             for r in core:
                 if 'error' in r:
-                    lines.append(f'| {r["variant"]} | fails: {r["error"][:120]} | |')
+                    lines.append(f'| {r["variant"]} | fails: {r["error"][:120]} | | |')
                 else:
                     lines.append(f'| {r["variant"]} | {r["us_median"]:.2f} | '
-                                 f'{r["us_min"]:.2f} |')
+                                 f'{r["us_min"]:.2f} | {r["us_cpu"]:.2f} |')
             lines.append('')
         e2e = sp.get('end_to_end', {})
         if 'error' in e2e:
@@ -853,13 +897,14 @@ def speed_lines(sp: dict[str, Any] | None, timing: dict[str, float],
                       f'and the report without figures), {e2e.get("samples")} samples '
                       f'({e2e.get("drive", "")}), median wall time of 3 runs '
                       f'({e2e.get("source")}):', '',
-                      '| mode | median (s) | samples/s | process CPU / wall |',
-                      '|---|---:|---:|---:|']
+                      '| mode | median wall (s) | samples/s (wall) | samples per CPU second '
+                      '| process CPU / wall |', '|---|---:|---:|---:|---:|']
             for mode, r in e2e.get('modes', {}).items():
                 if 'error' in r:
-                    lines.append(f'| {mode} | fails: {r["error"][:120]} | | |')
+                    lines.append(f'| {mode} | fails: {r["error"][:120]} | | | |')
                 else:
                     lines.append(f'| {mode} | {r["median_s"]:.3f} | {r["samples_per_s"]:,.0f} | '
+                                 f'{r.get("samples_per_cpu_s", math.nan):,.0f} | '
                                  f'{r["cpu_per_wall"]:.2f} |')
             lines.append('')
         node = sp.get('node')
@@ -913,6 +958,7 @@ def markdown(out: dict[str, Any], scenarios, methods: list[Method], tuned: dict[
                                                                           speed_out)] + ['']
     lines += ['## Where our estimator loses', ''] + [f'- {t}' for t in losses(
         out, scenarios, methods)] + ['']
+    lines += ['## Ablation: the sliding-mode term', ''] + ablation(out, scenarios) + ['']
     lines += ['## Methods', '', '| column | latency | what |', '|---|---|---|']
     lines += [f'| {m.name} | {m.latency} | {m.description.format(default=default)} |'
               for m in methods]
@@ -972,6 +1018,7 @@ def readme_section(out: dict[str, Any], scenarios, methods: list[Method], tuned:
     lines += ['Targets (issue 11):', ''] + [f'- {t}' for t in targets(out, scenarios,
                                                                        speed_out)] + ['']
     lines += ['Where we lose:', ''] + [f'- {t}' for t in losses(out, scenarios, methods)] + ['']
+    lines += ['Ablation: ' + ablation(out, scenarios)[0], '']
     lines += ['Speed:', ''] + speed_lines(speed_out, out.get('us_per_sample', {}), methods)
     lines += ['How the peers were tuned: ' + _tuning_paragraph(tuned), '']
     return '\n'.join(lines)

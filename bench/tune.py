@@ -13,7 +13,10 @@ Procedure (what ``python -m bench.tune`` does and records in ``bench/tuned_peers
    pattern search in log space from the best grid point of each discrete combination that came
    within 1.5 x of the best (multiply / divide each knob by a factor, accept improvements,
    shrink the factor to 1.1); a few knobs join only the pattern search (the Kalman road
-   model's leak and velocity correlation lengths).
+   model's leak and velocity correlation lengths). The signal-processing peers filter the
+   roll channel with its own knob (cutoff, or jerk density), tuned like the deflections' one:
+   the roll sensor is another sensor, and its noise reaches the wheel accelerations through
+   the half track.
 4. Second stage, for the profile only (it leaves the loads unchanged): the long-wavelength
    cutoff of each peer's body-heave / profile high-pass (``profile_cutoff_wavelength_m``; 0 =
    the Kalman filter's raw road state) is swept and refined the same way, minimising the
@@ -65,18 +68,21 @@ SEARCH: dict[str, dict[str, Any]] = {
     },
     'lowpass-fd': {
         'choices': {'order': [1, 2, 3, 4], 'differences': ['backward', 'backward2']},
-        'grid': {'cutoff_hz': _logspace(5.0, 320.0, 7)},
-        'bounds': {'cutoff_hz': (0.5, 450.0)},
+        'grid': {'cutoff_hz': _logspace(5.0, 320.0, 7),
+                 'roll_cutoff_hz': _logspace(2.0, 128.0, 7)},
+        'bounds': {'cutoff_hz': (0.5, 450.0), 'roll_cutoff_hz': (0.2, 450.0)},
     },
     'zero-phase-offline': {
         'choices': {'order': [1, 2, 3, 4]},
-        'grid': {'cutoff_hz': _logspace(5.0, 320.0, 7)},
-        'bounds': {'cutoff_hz': (0.5, 450.0)},
+        'grid': {'cutoff_hz': _logspace(5.0, 320.0, 7),
+                 'roll_cutoff_hz': _logspace(2.0, 128.0, 7)},
+        'bounds': {'cutoff_hz': (0.5, 450.0), 'roll_cutoff_hz': (0.2, 450.0)},
     },
     'kf-jerk': {
         'choices': {'states': [3, 4]},
-        'grid': {'jerk_psd': _logspace(1e-4, 1e12, 9)},
-        'bounds': {'jerk_psd': (1e-12, 1e20)},
+        'grid': {'jerk_psd': _logspace(1e-4, 1e12, 9),
+                 'roll_jerk_psd': _logspace(1e-6, 1e10, 9)},
+        'bounds': {'jerk_psd': (1e-12, 1e20), 'roll_jerk_psd': (1e-14, 1e18)},
     },
 }
 _KF_MODEL_SEARCH = {

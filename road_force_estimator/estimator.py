@@ -495,9 +495,9 @@ class Estimator:
             t_run = self._t_run + dt
             dt_typ = self._dt_typ
             dt_typ = dt if dt_typ == 0.0 else dt_typ + 0.05 * (dt - dt_typ)
-            conv = core.converged(t_run)
-            if not core.step(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
+            if not core.step(stamp, dt, q1, q2, phi, v, (x, dt, v, core.converged())):
                 return False
+            conv = core.converged()
         self._started = True
         self._stamp = stamp
         self._x = x

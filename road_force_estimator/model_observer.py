@@ -102,6 +102,7 @@ from collections import deque
 from dataclasses import dataclass, field
 import enum
 import math
+import warnings
 
 import numpy as np
 from scipy import linalg
@@ -122,6 +123,8 @@ __all__ = [
 ISO_N0 = 0.1
 #: Samples per block of the online noise and roughness statistics.
 BLOCK_SAMPLES = 256
+#: Samples of the very first block (a quick first estimate).
+FIRST_BLOCK_SAMPLES = 64
 #: Blocks whose median is the current noise / roughness estimate.
 HISTORY_BLOCKS = 8
 #: Order of the differences of the noise estimate.
@@ -149,6 +152,8 @@ _LOG_DT_RATIO = math.log(DT_LEVEL_RATIO)
 DT_QUANTUM = 1e-3
 #: A level changes once the estimate is this many levels away from it (hysteresis).
 LEVEL_HYSTERESIS = 0.75
+#: Shortest settling time (s) after a (re)start or a change of the noise levels.
+MIN_SETTLE_S = 0.1
 #: Speed floor of the model (m/s).
 SPEED_FLOOR_MPS = 1.0
 #: Sliding-mode injection: dead zone in expected standard deviations of the output error,
@@ -555,22 +560,26 @@ def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
     if not radius < 1.0:
         raise ValueError(f'Kalman filter not stable (spectral radius {radius:.6g})')
     settle = _settling_time(f_closed, model.h[[OUTPUTS.index('df1'), OUTPUTS.index('df2')]],
-                            dt_s)
+                            dt_s, pf)
     return Gains(key, dt_s, abs(speed_mps), sq, sp, road_gd_m3, lag, model, a, q, r, p, pf, s, k,
                  rts, lag_gains, out, np.sqrt(np.maximum(np.diag(post), 0.0)), settle, t_sm)
 
 
-def _settling_time(f_closed: np.ndarray, h_load: np.ndarray, dt_s: float, *,
-                   fraction: float = 0.05, horizon_s: float = 5.0) -> float:
-    """Time (s) after which a start-up error of the typical state magnitudes leaves at most
-    ``fraction`` of its initial effect on the tire forces (the error dynamics ``F^k``)."""
+def _settling_time(f_closed: np.ndarray, h_load: np.ndarray, dt_s: float,
+                   p_post: np.ndarray, *, fraction: float = 0.05,
+                   horizon_s: float = 5.0) -> float:
+    """Time (s) after which a start-up error of the typical state magnitudes (the error
+    dynamics ``F^k``) leaves on the tire forces at most ``fraction`` of its initial effect or
+    the filter's own steady-state error std (``H P+ H^T``), whichever is larger."""
     e = np.diag(_SCALE)
     ref = float(np.max(np.abs(h_load @ e)))
+    floor = float(np.sqrt(np.max(np.diag(h_load @ p_post @ h_load.T))))
+    tol = max(fraction * ref, floor)
     last_big = 0
     steps = int(horizon_s / dt_s)
     for k in range(1, steps + 1):
         e = f_closed @ e
-        if float(np.max(np.abs(h_load @ e))) > fraction * ref:
+        if float(np.max(np.abs(h_load @ e))) > tol:
             last_big = k
         elif k > 2 * last_big + 50:
             break
@@ -686,6 +695,8 @@ class ModelCore:
         self.noise_roll_rad = obs.noise_roll_rad or DEFAULT_NOISE_RAD
         self.road_gd_m3 = obs.road_roughness_m3 or DEFAULT_ROAD_GD_M3
         self._all_fixed = all(self.noise_fixed) and self.roughness_fixed
+        self._t = 0.0                      # time since the (re)start (s)
+        self._t_retuned = 0.0              # ... at the last change of the noise levels
         self.blocks = 0                    # statistics blocks seen
         self.design_count = 0              # gain designs (cache misses)
         self._hist = (deque(maxlen=HISTORY_BLOCKS), deque(maxlen=HISTORY_BLOCKS),
@@ -723,15 +734,17 @@ class ModelCore:
     def settling_time_s(self, dt_s: float) -> float:
         """Time after a (re)start after which the estimate counts as converged (s).
 
-        Five times the slowest closed-loop time constant of the current gains, at least 20
-        steps and 50 ms.
+        The time in which the current gains take a start-up error's effect on the tire forces
+        down to 5 % (:func:`_settling_time`), at least 20 steps and :data:`MIN_SETTLE_S`.
         """
         settle = self.gains.settle_s if self.gains is not None else 0.0
-        return max(settle, 20.0 * dt_s, 0.05)
+        return max(settle, 20.0 * dt_s, MIN_SETTLE_S)
 
-    def converged(self, t_run: float) -> bool:
-        """Whether ``t_run`` (s) after a (re)start the estimate counts as converged."""
-        return t_run >= self._settle and (self.blocks > 0 or self._all_fixed)
+    def converged(self) -> bool:
+        """Whether the estimate counts as converged: the noise and roughness are known and
+        the settling time has passed since the (re)start or the last change of their levels."""
+        return self._t - self._t_retuned >= self._settle and (self.blocks > 0
+                                                             or self._all_fixed)
 
     def _requantise_noise(self) -> None:
         lv = self._levels
@@ -743,6 +756,7 @@ class ModelCore:
         g = self.gains
         if g is None or g.key[2:5] != (lv['nq'], lv['nr'], lv['gd']):
             self._dirty = True
+            self._t_retuned = self._t
 
     def _design(self) -> Gains:
         """The gains of the current levels (cached)."""
@@ -765,7 +779,7 @@ class ModelCore:
         self._gamma = self.sm_gain / (1.0 + (g.noise_deflection_m / SM_NOISE_SCALE) ** 2)
         self._dead = tuple(SM_DEAD_ZONE * float(e) for e in g.post_error_std)
         self._ht = g.out[:, _R0:_R0 + 9].copy()     # H T: outputs of rho
-        self._settle = max(g.settle_s, 20.0 * g.dt_s, 0.05)
+        self._settle = max(g.settle_s, 20.0 * g.dt_s, MIN_SETTLE_S)
         self._dirty = False
         return g
 
@@ -808,7 +822,9 @@ class ModelCore:
             # stationary.
             keep = [j for j in range(NX) if j not in (State.PHI, State.M_R)]
             a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
-            p = linalg.solve_discrete_lyapunov(a, q, method='direct')
+            with warnings.catch_warnings():   # undamped models: no stationary variance
+                warnings.simplefilter('ignore')
+                p = linalg.solve_discrete_lyapunov(a, q, method='direct')
             d = a - np.eye(len(keep))
             var = d @ p @ d.T + q
             val = float(0.5 * (var[0, 0] + var[1, 1]))    # q_1, q_2 lead the kept states
@@ -867,6 +883,8 @@ class ModelCore:
         x[State.W2] = (fb2 + m2 * ddzs) / kt2
         x[State.M_R] = -s * (fb1 - fb2)
         self._x0 = x
+        self._t = 0.0
+        self._t_retuned = 0.0
         self._running = True
         self._stepped = False
         self._sm = [0.0] * 12
@@ -937,7 +955,8 @@ class ModelCore:
             while len(pending) > lag:
                 first = i - len(pending) + 1
                 self._finalize(pending.popleft(), first, first + lag)
-        if i + 1 == buf.shape[0]:
+        self._t += dt
+        if i + 1 == buf.shape[0] or (i == FIRST_BLOCK_SAMPLES and self.blocks == 0):
             self._compact()
         return True
 
@@ -964,23 +983,44 @@ class ModelCore:
         return out
 
     def _compact(self) -> None:
-        """Run the block statistics; move the last lag + 1 rows to the front."""
+        """Run the block statistics; move the last lag + 1 rows to the front.
+
+        After the first block of the observer's life the run so far is filtered again with
+        the gains of the estimated noise (the rows hold every measurement since the restart),
+        so that the switch from the assumed noise level leaves no transient.
+        """
         buf = self._buf
         i = self._i
         y = buf[self._block_start:i, _Y0:_Y0 + NY]
-        if self._run_y:
+        first_run_block = bool(self._run_y)
+        if first_run_block:
             y = np.vstack([np.array(self._run_y), y])
             self._run_y = []
             dts = self._dts
         else:
             dts = self._dts[1:]    # the first step led to the block's first sample
+        first_ever = self.blocks == 0
         self._statistics(y, dts)
+        if first_ever and first_run_block and self._dirty and len(dts) == i:
+            self._replay(dts)
         self._dts = []
         keep = self.lag + 1
         buf[:keep] = buf[i + 1 - keep:i + 1]
         buf[keep:, _R0:_R0 + 9] = 0.0    # rho stays 0 where the sliding mode does not write
         self._i = keep - 1
         self._block_start = keep - 1
+
+    def _replay(self, dts: list) -> None:
+        """Filter rows 0..i again with the current levels' gains (see :meth:`_compact`)."""
+        buf = self._buf
+        self._select(dts[-1])
+        g = self.gains
+        for j, dt in enumerate(dts):
+            nxt = buf[j + 1]
+            nxt[_X0:_Y0] = g.step_matrix(dt) @ buf[j]
+            nxt[_R0:_R0 + 9] = 0.0
+        self._t_retuned = 0.0
+        self._m_dt = -1.0
 
     def _finalize(self, item: tuple, first: int, last: int) -> None:
         """Estimate of the sample in row ``first`` from rows first..last (missing: zeros)."""

@@ -277,3 +277,48 @@ class TestTunedSettings:
         assert tune.settings_for(doc, 'lowpass-fd', 3e-5) == {'cutoff_hz': 25.0}
         assert tune.settings_for(doc, 'lowpass-fd', 2e-6) == {'cutoff_hz': 40.0}
         assert tune.settings_for(doc, 'kf-model', 1e-5) == peers.DEFAULT_TUNING['kf-model']
+
+
+class TestRollChannelKnobs:
+    """The roll channel's own knob changes what depends on roll and nothing else."""
+
+    @pytest.fixture(scope='class')
+    @staticmethod
+    def signals():
+        rng = np.random.default_rng(7)
+        n = 3000
+        t = np.arange(n) * DT
+        q = np.column_stack([1e-3 * np.sin(2 * np.pi * 1.3 * t), 1e-3 * np.cos(2 * np.pi * t)])
+        q += rng.normal(0.0, 1e-5, q.shape)
+        phi = 2e-3 * np.sin(2 * np.pi * 0.7 * t) + rng.normal(0.0, 1e-4, n)
+        return t, q, phi
+
+    @pytest.mark.parametrize('peer, knob, value', [
+        ('lowpass-fd', 'roll_cutoff_hz', 5.0),
+        ('zero-phase-offline', 'roll_cutoff_hz', 5.0),
+        ('kf-jerk', 'roll_jerk_psd', 1e-2),
+    ])
+    def test_body_acceleration_depends_on_the_deflections_only(self, signals, peer, knob,
+                                                               value):
+        t, q, phi = signals
+        base = dict(peers.DEFAULT_TUNING[peer])
+        a = peers.call_peer(peer, t, q, phi, SPEED, VehicleParameters(), base,
+                            noise_deflection_m=1e-5, noise_roll_rad=1e-4)
+        b = peers.call_peer(peer, t, q, phi, SPEED, VehicleParameters(), {**base, knob: value},
+                            noise_deflection_m=1e-5, noise_roll_rad=1e-4)
+        # dd z_s = (F_b1 + F_b2) / M uses q and dq only (MODEL.md step 1)
+        np.testing.assert_array_equal(a.extra['body_accel_mps2'], b.extra['body_accel_mps2'])
+        # the wheel loads use ddphi: a much smoother roll estimate changes them
+        assert np.max(np.abs(a.wheel_load_n - b.wheel_load_n)) > 1.0
+
+    def test_kf_jerk_default_roll_density_is_the_deflections_over_s_squared(self, signals):
+        t, q, phi = signals
+        vehicle = VehicleParameters(track_width_m=2.5)      # s^2 = 1.5625, not 1
+        base = dict(peers.DEFAULT_TUNING['kf-jerk'])
+        a = peers.call_peer('kf-jerk', t, q, phi, SPEED, vehicle, base,
+                            noise_deflection_m=1e-5, noise_roll_rad=1e-4)
+        b = peers.call_peer('kf-jerk', t, q, phi, SPEED, vehicle,
+                            {**base, 'roll_jerk_psd': base['jerk_psd']
+                             / vehicle.half_track_m ** 2},
+                            noise_deflection_m=1e-5, noise_roll_rad=1e-4)
+        np.testing.assert_allclose(a.wheel_load_n, b.wheel_load_n, rtol=0, atol=1e-9)

@@ -14,6 +14,7 @@ import sys
 from mcap.reader import make_reader
 import numpy as np
 import pytest
+from scipy import signal
 
 from road_force_estimator import bag_io
 from road_force_estimator.bag_io import TYPESTORE, BagWriter
@@ -136,13 +137,43 @@ class TestOnline:
 
 
 class TestReport:
-    def test_offline_is_more_accurate_than_online(self, estimated):
-        # Acceptance of issue 6 on a noisy drive, end to end: at least a factor 2 on both.
-        on = report_json(estimated['online'])['accuracy']
+    def test_offline_is_more_accurate_than_online(self, noisy_drive, estimated):
+        # Acceptance of issue 6 on a noisy drive, end to end, from the output bags against the
+        # truth in the drive bag, judged here (from 1 s on; the profile band-passed 0.5-30 m
+        # with scipy, 30 m in from each end): offline at least twice as accurate, on both.
+        truth = bag_io.read_drive_bag(noisy_drive).truth
+        fc = np.asarray(VehicleParameters().static_load_n)
+        errors = {}
+        for mode, folder in estimated.items():
+            load = {0: [], 1: []}
+            road = {0: [], 1: []}
+            for topic, _, msg in bag_io.iter_messages(folder / 'bag', topics=[
+                    '/wheel_load/left', '/wheel_load/right', '/road_profile/left',
+                    '/road_profile/right']):
+                side = 0 if topic.endswith('left') else 1
+                (load if 'load' in topic else road)[side].append(
+                    msg.wrench.force.z if 'load' in topic else msg.point.z)
+            load = np.column_stack([load[0], load[1]])
+            road = np.column_stack([road[0], road[1]])
+            k0 = 1000
+            err = load[k0:] - truth.wheel_load_n[k0:]
+            dyn = truth.wheel_load_n[k0:] - fc
+            load_pct = 100 * np.sqrt(np.mean(err ** 2) / np.mean(dyn ** 2))
+            sos = signal.butter(2, [1 / 30.0, 1 / 0.5], btype='bandpass', fs=1 / 0.02,
+                                output='sos')
+            bp_e = signal.sosfiltfilt(sos, road, axis=0)
+            bp_t = signal.sosfiltfilt(sos, truth.road_m, axis=0)
+            x = truth.distance_m
+            m = (x >= x[k0] + 30.0) & (x <= x[-1] - 30.0)
+            prof_pct = 100 * np.sqrt(np.mean((bp_e[m] - bp_t[m]) ** 2) / np.mean(bp_t[m] ** 2))
+            errors[mode] = (load_pct, prof_pct)
+        (load_on, prof_on), (load_off, prof_off) = errors['online'], errors['offline']
+        assert load_off <= 0.5 * load_on, errors
+        assert prof_off <= 0.5 * prof_on, errors
+        assert load_on < 40.0 and prof_on < 20.0 and load_off < 5.0 and prof_off < 3.0, errors
+        # The offline report judged the same way finds the same order of numbers.
         off = report_json(estimated['offline'])['accuracy']
-        assert off['load_rms_pct_dynamic_both'] <= 0.5 * on['load_rms_pct_dynamic_both']
-        assert off['profile_rms_pct_band_both'] <= 0.5 * on['profile_rms_pct_band_both']
-        assert on['load_rms_pct_dynamic_both'] < 40.0 and on['profile_rms_pct_band_both'] < 20.0
+        assert off['load_rms_pct_dynamic_both'] == pytest.approx(load_off, rel=0.2)
 
     def test_summary_and_segments(self, estimated):
         s = report_json(estimated['online'])
