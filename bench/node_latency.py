@@ -17,8 +17,10 @@ inside the estimator's range, and takes
   :meth:`Estimator.update` and its six publishes; median and 99th percentile;
 - CPU share: the observer process's user + system CPU time over the run's wall time (psutil),
   in % of one core;
-- sustained rate: the highest rate of ``--sweep`` at which every sample gets its output and the
-  99th-percentile latency stays below 20 ms (a backlog does not build up).
+- sustained rate: the highest rate of ``--sweep`` up to which every sample gets its output and
+  the median latency stays below 5 ms (no backlog builds up: beyond the rate the node sustains,
+  the queue and so the median grow through the run; the median, unlike the 99th percentile,
+  is not moved by the short stalls other processes cause on a shared machine).
 
 The machine is shared (other work may run): numbers vary by tens of percent between runs.
 """
@@ -44,7 +46,7 @@ from road_force_estimator.messages import (
     deflections_msg, reliable_qos, sensor_qos, stamp_to_ns, twist_msg)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-MAX_P99_S = 0.020
+MAX_MEDIAN_S = 0.005
 
 
 def serve_observer(executor_kind: str) -> int:
@@ -157,21 +159,22 @@ def main(argv=None) -> int:
               f"{main_run['median_ms']:.3f} ms, p99 {main_run['p99_ms']:.3f} ms, lost "
               f"{main_run['lost']} of {main_run['sent']}, observer CPU {100 * cpu:.1f} % "
               f"of one core")
-        sustained = None
+        sustained, failed = None, False
         results['sweep'] = []
         t0 = stamp0 + int((4 + args.seconds) * 1e9)
         for i, rate in enumerate(float(r) for r in args.sweep.split(',')):
             r = run(executor, driver, rate, args.sweep_seconds, t0 + i * 10**11)
             results['sweep'].append(r)
-            ok = r['lost'] == 0 and r['p99_ms'] < MAX_P99_S * 1e3
+            ok = r['lost'] == 0 and r['median_ms'] < MAX_MEDIAN_S * 1e3
             print(f"  sweep {rate:g} Hz (achieved {r['achieved_rate_hz']:.0f} Hz): lost "
                   f"{r['lost']}, median {r['median_ms']:.3f} ms, p99 {r['p99_ms']:.3f} ms"
                   f"{'' if ok else '  <- not sustained'}")
-            if not ok:
-                break
-            sustained = rate
+            failed = failed or not ok
+            if not failed:
+                sustained = rate
         results['sustained_rate_hz'] = sustained
-        print(f'highest sustained rate (no loss, p99 < {MAX_P99_S * 1e3:g} ms): {sustained} Hz')
+        print(f'highest sustained rate (no loss, median < {MAX_MEDIAN_S * 1e3:g} ms): '
+              f'{sustained} Hz')
     finally:
         child.send_signal(2)
         child.wait(10)

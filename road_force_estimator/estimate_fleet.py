@@ -857,7 +857,8 @@ def main(argv: list[str] | None = None) -> int:
     except FleetError as err:
         print(f'{PROG}: {err}', file=sys.stderr)
         return 2
-    print(f'{PROG}: {len(result.outcomes)} drives: {result.count("processed")} processed, '
+    n = len(result.outcomes)
+    print(f'{PROG}: {n} drive{"s" if n != 1 else ""}: {result.count("processed")} processed, '
           f'{result.count("skipped")} skipped, {result.count("failed")} failed '
           f'({result.seconds:.1f} s, {result.engine}); summary: '
           f'{Path(args.output) / "summary.md"}')

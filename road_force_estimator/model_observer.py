@@ -441,6 +441,20 @@ class Gains:
     settle_s: float          #: 5 x the slowest closed-loop time constant
     t_sm: np.ndarray         #: (12, 9) sliding-mode injection matrix T
     step_cache: dict = field(default_factory=dict)
+    a_cache: dict = field(default_factory=dict)
+
+    def transition(self, dt_s: float) -> np.ndarray:
+        """A(dt) = expm(A_c dt) (cached per 0.1 % of dt, as :meth:`step_matrix`)."""
+        key = round(math.log(dt_s / self.dt_s) / DT_QUANTUM)
+        if key == 0:
+            return self.a
+        a = self.a_cache.get(key)
+        if a is None:
+            if len(self.a_cache) >= MAX_STEP_MATRICES:
+                self.a_cache.clear()
+            a = linalg.expm(self.model.a * (self.dt_s * math.exp(key * DT_QUANTUM)))
+            self.a_cache[key] = a
+        return a
 
     def step_matrix(self, dt_s: float) -> np.ndarray:
         """M (15, 27) with ``[x+_{k+1}; nu_{k+1}] = M row_k`` for a step of dt (s).
@@ -454,8 +468,7 @@ class Gains:
         if m is None:
             if len(self.step_cache) >= MAX_STEP_MATRICES:
                 self.step_cache.clear()
-            dt_q = self.dt_s * math.exp(key * DT_QUANTUM)
-            a = self.a if key == 0 else linalg.expm(self.model.a * dt_q)
+            a = self.transition(dt_s)
             c = self.model.c
             ikc_a = (np.eye(NX) - self.k @ c) @ a
             m = np.zeros((NX + NY, _ROW))
@@ -534,7 +547,12 @@ def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
     ikc = np.eye(NX) - k @ c
     pf = ikc @ p @ ikc.T + k @ r @ k.T          # Joseph form, symmetric
     pf = 0.5 * (pf + pf.T)
-    rts = np.linalg.lstsq(p, a @ pf, rcond=None)[0].T
+    # RTS gain G = P+ A^T P^-1, solved in scaled coordinates (P is ill-conditioned on clean
+    # data: the measured states are known to the noise floor)
+    si = 1.0 / _SCALE
+    p_s = p * np.outer(si, si)
+    apf_s = (a @ pf) * np.outer(si, si)
+    rts = linalg.solve(p_s, apf_s, assume_a='pos').T * np.outer(_SCALE, si)
     sinv = np.linalg.inv(s)
     phi = a @ ikc
     lag = int(lag)
@@ -905,6 +923,7 @@ class ModelCore:
             self.lag = lag
             self.gains = None
         cap = self.lag + 1 + BLOCK_SAMPLES
+        self._first_block = max(FIRST_BLOCK_SAMPLES, self.lag + 1)
         if self._buf.shape[0] != cap:
             self._buf = np.zeros((cap, _ROW))
         else:
@@ -956,7 +975,7 @@ class ModelCore:
                 first = i - len(pending) + 1
                 self._finalize(pending.popleft(), first, first + lag)
         self._t += dt
-        if i + 1 == buf.shape[0] or (i == FIRST_BLOCK_SAMPLES and self.blocks == 0):
+        if i + 1 == buf.shape[0] or (self.blocks == 0 and i == self._first_block):
             self._compact()
         return True
 
@@ -1096,3 +1115,280 @@ class ModelCore:
         self._run_y = []
         self._running = False
         self._stepped = False
+
+
+# ----------------------------------------------------------------------------------------------
+# offline: forward filter and Rauch-Tung-Striebel smoother over the whole recording
+
+
+def _lti(f: np.ndarray, drive: np.ndarray, x_init: np.ndarray) -> np.ndarray:
+    """``x_k = F x_{k-1} + drive_k`` (k = 0..m-1, ``x_{-1} = x_init``); (m, nx).
+
+    In the eigenbasis of F each mode is a first-order recursion (``scipy.signal.lfilter``);
+    if F's eigenvectors are ill-conditioned, a plain loop.
+    """
+    from scipy import signal
+
+    m = drive.shape[0]
+    lam, vec = np.linalg.eig(f)
+    if np.linalg.cond(vec) < 1e6:
+        vinv = np.linalg.inv(vec)
+        z_drive = drive @ vinv.T                   # (m, nx) complex
+        z0 = vinv @ x_init
+        z = np.empty_like(z_drive)
+        for j in range(lam.size):
+            b, a = np.array([1.0 + 0j]), np.array([1.0, -lam[j]])
+            z[:, j], _ = signal.lfilter(b, a, z_drive[:, j], zi=np.array([lam[j] * z0[j]]))
+        return np.real(z @ vec.T)
+    out = np.empty((m, f.shape[0]))
+    x = np.asarray(x_init, dtype=float).copy()
+    ft = np.ascontiguousarray(f.T)
+    for k in range(m):
+        x = x @ ft + drive[k]
+        out[k] = x
+    return out
+
+
+def _acceptance(stamps, q, phi, v, gap_threshold_s: float):
+    """The estimator's rules (:meth:`.Estimator._process`) over arrays.
+
+    Returns (valid mask, restart mask (over all samples), stamps as int, counters dict).
+    """
+    from road_force_estimator.estimator import (GAP_PERIODS, MAX_DEFLECTION_M, MAX_ROLL_RAD,
+                                                MAX_SPEED_MPS)
+    n = len(stamps)
+    valid = np.zeros(n, bool)
+    restart = np.zeros(n, bool)
+    stamp_int = np.zeros(n, np.int64)
+    cnt = dict(rejected_nonfinite=0, rejected_range=0, rejected_time=0, gaps=0, resets=0)
+    last = None
+    dt_typ = 0.0
+    for k, (t, (a, b), p, s) in enumerate(zip(stamps, q.tolist(), phi.tolist(), v.tolist())):
+        try:
+            t = int(t)
+        except (TypeError, ValueError, OverflowError):
+            cnt['rejected_nonfinite'] += 1
+            continue
+        if not (-MAX_DEFLECTION_M <= a <= MAX_DEFLECTION_M
+                and -MAX_DEFLECTION_M <= b <= MAX_DEFLECTION_M
+                and -MAX_ROLL_RAD <= p <= MAX_ROLL_RAD and -MAX_SPEED_MPS <= s <= MAX_SPEED_MPS):
+            key = ('rejected_range' if math.isfinite(a + b + p + s) else 'rejected_nonfinite')
+            cnt[key] += 1
+            continue
+        if last is None:
+            restart[k] = True
+        else:
+            dt_ns = t - last
+            if dt_ns <= 0:
+                cnt['rejected_time'] += 1
+                continue
+            dt = dt_ns * 1e-9
+            if dt > gap_threshold_s and dt > GAP_PERIODS * dt_typ:
+                cnt['gaps'] += 1
+                cnt['resets'] += 1
+                restart[k] = True
+                dt_typ = 0.0
+            else:
+                dt_typ = dt if dt_typ == 0.0 else dt_typ + 0.05 * (dt - dt_typ)
+        valid[k] = True
+        stamp_int[k] = t
+        last = t
+    return valid, restart, stamp_int, cnt
+
+
+def _zero_phase_heave(accel: np.ndarray, dt_s: float, w_c: float) -> np.ndarray:
+    """Band-limited double integral of the body acceleration without phase error.
+
+    ``1 / (s^2 + sqrt(2) w s + w^2)`` forward, ``s^2 / (s^2 + sqrt(2) w s + w^2)`` backward
+    (bilinear): the double integrator times ``|H|^2 = W^4 / (W^4 + w^4)``, H the
+    second-order Butterworth high-pass at w (0.99 at 30 m for a 100 m cutoff).
+    """
+    from scipy import signal
+
+    if accel.size < 8:
+        return np.zeros_like(accel)
+    den = np.array([1.0, math.sqrt(2.0) * w_c, w_c * w_c])
+    bf, af = signal.bilinear([1.0], den, fs=1.0 / dt_s)
+    bh, ah = signal.bilinear([1.0, 0.0, 0.0], den, fs=1.0 / dt_s)
+    y = signal.lfilter(bf, af, accel, zi=signal.lfilter_zi(bf, af) * accel[0])[0]
+    r = y[::-1]
+    return signal.lfilter(bh, ah, r, zi=signal.lfilter_zi(bh, ah) * r[0])[0][::-1].copy()
+
+
+def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
+           observer: ObserverParameters | None = None, *, gap_threshold_s: float = 0.1):
+    """Offline estimate: the model observer's forward filter and its RTS smoother.
+
+    The same model, gains and outputs as the online observer (:class:`ModelCore`, linear
+    injection; the sliding-mode term, a correction of the causal estimate, has no place in a
+    smoother), over the whole recording: for each run (the estimator's rejections and gap
+    rule split the data), the noise and roughness are estimated from the whole run (unless set
+    in ``observer``), the steady-state Kalman filter runs forward and the Rauch-Tung-Striebel
+    smoother (Rauch, Tung, Striebel 1965) backward; the body heave is the zero-phase
+    band-limited double integral of the smoothed body acceleration.
+
+    Parameters
+    ----------
+    stamps_ns, q_m, roll_rad, speed_mps : as :func:`.estimator.estimate_batch`.
+    vehicle, observer : parameters (defaults when None); ``observer.latency`` is ignored.
+    gap_threshold_s : float
+        As :class:`.Estimator`.
+
+    Returns
+    -------
+    EstimateArrays
+        Row k = the smoothed estimate of sample k; rejected rows hold the previous row (valid
+        False); ``converged`` is False within the settling time of each run's start; the
+        status counts what the estimator would count (and carries the noise and roughness
+        used).
+    """
+    from road_force_estimator.estimator import (_FLAT, EstimateArrays, EstimatorStatus,
+                                                LIFT_OFF_FRACTION)
+
+    vehicle = VehicleParameters() if vehicle is None else vehicle
+    observer = ObserverParameters() if observer is None else observer
+    stamps = np.asarray(stamps_ns)
+    q = np.asarray(q_m, dtype=float)
+    phi = np.asarray(roll_rad, dtype=float)
+    n = stamps.shape[0] if stamps.ndim == 1 else -1
+    if stamps.ndim != 1 or q.shape != (n, 2) or phi.shape != (n,):
+        raise ValueError(f'stamps_ns {stamps.shape}, q_m {q.shape}, roll_rad {phi.shape}: '
+                         'expected (n,), (n, 2), (n,)')
+    speed = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
+    valid, restart, stamp_int, cnt = _acceptance(stamps.tolist(), q, phi, speed,
+                                                 gap_threshold_s)
+    core = ModelCore(vehicle, observer)
+    table = np.zeros((n, len(_FLAT)))
+    acc = np.flatnonzero(valid)
+    starts = np.flatnonzero(restart[acc]).tolist() + [acc.size]
+    # distance over all accepted samples, continued across gaps
+    t_all = stamp_int[acc] * 1e-9
+    v_all = speed[acc]
+    dist = np.zeros(acc.size)
+    if acc.size > 1:
+        dist[1:] = np.cumsum(0.5 * (v_all[1:] + v_all[:-1]) * np.diff(t_all))
+    status = EstimatorStatus(**cnt)
+    status.accepted = int(acc.size)
+    for r0, r1 in zip(starts[:-1], starts[1:]):
+        idx = acc[r0:r1]
+        rows = _smooth_run(core, t_all[r0:r1], q[idx], phi[idx], v_all[r0:r1], dist[r0:r1],
+                           LIFT_OFF_FRACTION)
+        table[idx] = rows
+    if acc.size:
+        idx = np.where(valid, np.arange(n), -1)
+        np.maximum.accumulate(idx, out=idx)
+        held = idx >= 0
+        table[held] = table[idx[held]]
+        status.last_stamp_ns = int(stamp_int[acc[-1]])
+        status.last_residual_nm = float(table[acc[-1], 26])
+        status.lift_off = (bool(table[acc[-1], 27]), bool(table[acc[-1], 28]))
+        status.converged = bool(table[acc[-1], 29])
+    status.method = 'model'
+    status.noise_deflection_m = core.noise_deflection_m
+    status.noise_roll_rad = core.noise_roll_rad
+    status.road_roughness_m3 = core.road_gd_m3
+    status.statistics_blocks = core.blocks
+    status.gain_designs = core.design_count
+    cols: dict[str, list[int]] = {}
+    for i, name in enumerate(_FLAT):
+        cols.setdefault(name, []).append(i)
+    out = {}
+    for name, ix in cols.items():
+        arr = table[:, ix[0]] if len(ix) == 1 else table[:, ix]
+        if name in ('lift_off', 'converged'):
+            arr = arr != 0.0
+        out[name] = np.ascontiguousarray(arr)
+    if np.issubdtype(stamps.dtype, np.integer):
+        stamp_out = stamps.astype(np.int64)
+    else:
+        stamp_out = stamp_int
+    return EstimateArrays(stamp_ns=stamp_out, valid=valid, status=status, **out)
+
+
+def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,
+                v: np.ndarray, dist: np.ndarray, lift_fraction: float) -> np.ndarray:
+    """The flat estimate rows (m, 30) of one run (see :func:`smooth`)."""
+    m = t.size
+    y = np.column_stack([q, phi])
+    core.restart(0, y[0, 0], y[0, 1], y[0, 2], (0.0, 0.0, 0.0, False))
+    core.ready.clear()
+    x0 = core._x0
+    core._running = False
+    h = core._h
+    if m == 1:
+        o = (h @ x0)[None, :]
+        g = None
+    else:
+        dts = np.diff(t)
+        dt = float(np.median(dts))
+        lv = core._levels
+        speed = float(np.median(np.abs(v)))
+        lv['v'] = _requantise(None, max(speed, SPEED_FLOOR_MPS), SPEED_LEVEL_RATIO)
+        lv['dt'] = int(round(math.log(dt) / _LOG_DT_RATIO))
+        if m > 8 * NOISE_DIFF_ORDER:
+            core._hist[0].clear()
+            core._hist[1].clear()
+            core._hist[2].clear()
+            core._statistics(y, dts.tolist())
+        core.lag = 0
+        g = core._design()
+        c = g.model.c
+        uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
+        if uniform:
+            a_run = g.step_matrix(dt)[:NX, _X0:_X0 + NX]       # (I - K C) A
+            drive = y[1:] @ g.k.T
+            xf = np.empty((m, NX))
+            xf[0] = x0
+            xf[1:] = _lti(a_run, drive, x0)
+            nu = y[1:] - xf[:-1] @ (c @ g.a).T               # innovations of samples 1..m-1
+            # adjoint: lam_k = Phi^T lam_{k+1} + C^T S^-1 nu_k, lam_m = 0 (k = m-1 .. 1)
+            phi_t = (g.a @ (np.eye(NX) - g.k @ c)).T
+            lam = _lti(phi_t, (nu @ (c.T @ np.linalg.inv(g.s)).T)[::-1], np.zeros(NX))[::-1]
+            xs = xf.copy()
+            xs[:-1] += lam @ (g.p_post @ g.a.T).T               # x_t|n = x+_t + P+ A^T lam_t+1
+        else:
+            # uneven steps: the transition of each step (cached), the run's gains
+            a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
+            xf = np.empty((m, NX))
+            nus = np.empty((m, NY))
+            xf[0] = x0
+            for k in range(1, m):
+                xp = a_steps[k - 1] @ xf[k - 1]
+                nus[k] = y[k] - c @ xp
+                xf[k] = xp + g.k @ nus[k]
+            cs = c.T @ np.linalg.inv(g.s)
+            ikc_t = (np.eye(NX) - g.k @ c).T
+            xs = xf.copy()
+            lam = np.zeros(NX)
+            for k in range(m - 1, 0, -1):
+                lam = cs @ nus[k] + (ikc_t @ (a_steps[k].T @ lam) if k < m - 1 else 0.0)
+                xs[k - 1] = xf[k - 1] + g.p_post @ (a_steps[k - 1].T @ lam)
+        o = xs @ h.T
+    cols = {name: o[:, i] for i, name in enumerate(OUTPUTS)}
+    s, ix, fc1, fc2, _, _, ltr_floor = core._post
+    v_abs = np.maximum(np.abs(v), SPEED_FLOOR_MPS)
+    if m >= 8:
+        dt = float(np.median(np.diff(t)))
+        w_c = 2.0 * math.pi * float(np.median(v_abs)) / core.observer.profile_cutoff_wavelength_m
+        zs = _zero_phase_heave(cols['ddzs'], dt, w_c)
+        dzs = np.gradient(zs, t, edge_order=2)
+    else:
+        zs = np.zeros(m)
+        dzs = np.zeros(m)
+    ph, dph = cols['phi'], cols['dphi']
+    ssin = s * np.sin(ph)
+    srate = s * np.cos(ph) * dph
+    zu1 = zs + ssin - cols['q1']
+    zu2 = zs - ssin - cols['q2']
+    fn1 = fc1 + cols['df1']
+    fn2 = fc2 + cols['df2']
+    den = np.maximum(fn1 + fn2, ltr_floor)
+    res = ix * cols['ddphi'] - s * np.cos(ph) * (cols['fb1'] - cols['fb2'])
+    settle = core.settling_time_s(float(np.median(np.diff(t))) if m > 1 else 0.0)
+    conv = (t - t[0]) >= settle
+    return np.column_stack([
+        dist, cols['q1'], cols['q2'], cols['dq1'], cols['dq2'], cols['ddq1'], cols['ddq2'], ph,
+        dph, cols['ddphi'], zs, dzs, cols['ddzs'], zu1, zu2, dzs + srate - cols['dq1'],
+        dzs - srate - cols['dq2'], cols['ddzu1'], cols['ddzu2'], zu1 + cols['w1'],
+        zu2 + cols['w2'], cols['df1'], cols['df2'], fn1, fn2, (fn2 - fn1) / den, res,
+        fn1 <= lift_fraction * fc1, fn2 <= lift_fraction * fc2, conv])
