@@ -776,15 +776,16 @@ class ModelCore:
             self._dirty = True
             self._t_retuned = self._t
 
-    def _design(self) -> Gains:
-        """The gains of the current levels (cached)."""
+    def _design(self, dt: float) -> Gains:
+        """The gains of the current levels (cached); a new design is made at the step dt
+        (s) that asked for it, so that a regular stream uses its exact transition."""
         lv = self._levels
         key = (lv['dt'], lv['v'], lv['nq'], lv['nr'], lv['gd'], self.lag)
         g = self._gains.get(key)
         if g is None:
             if len(self._gains) >= MAX_GAINS:
                 self._gains.clear()
-            g = design(self.vehicle, dt_s=DT_LEVEL_RATIO ** lv['dt'],
+            g = design(self.vehicle, dt_s=dt,
                        speed_mps=SPEED_LEVEL_RATIO ** lv['v'],
                        noise_deflection_m=NOISE_LEVEL_RATIO ** lv['nq'],
                        noise_roll_rad=NOISE_LEVEL_RATIO ** lv['nr'],
@@ -821,7 +822,7 @@ class ModelCore:
         lv['dt'] = int(round(math.log(dt) / _LOG_DT_RATIO))
         g = self.gains
         if self._dirty or g is None or g.key[0] != lv['dt']:
-            g = self._design()
+            g = self._design(dt)
         self._m = g.step_matrix(dt)
         self._m_dt = dt
 
@@ -1331,7 +1332,7 @@ def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,
             core._hist[2].clear()
             core._statistics(y, dts.tolist())
         core.lag = 0
-        g = core._design()
+        g = core._design(dt)
         c = g.model.c
         uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
         if uniform:
@@ -1340,12 +1341,13 @@ def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,
             xf = np.empty((m, NX))
             xf[0] = x0
             xf[1:] = _lti(a_run, drive, x0)
-            nu = y[1:] - xf[:-1] @ (c @ g.a).T               # innovations of samples 1..m-1
+            a_dt = g.transition(dt)
+            nu = y[1:] - xf[:-1] @ (c @ a_dt).T                # innovations of samples 1..m-1
             # adjoint: lam_k = Phi^T lam_{k+1} + C^T S^-1 nu_k, lam_m = 0 (k = m-1 .. 1)
-            phi_t = (g.a @ (np.eye(NX) - g.k @ c)).T
+            phi_t = (a_dt @ (np.eye(NX) - g.k @ c)).T
             lam = _lti(phi_t, (nu @ (c.T @ np.linalg.inv(g.s)).T)[::-1], np.zeros(NX))[::-1]
             xs = xf.copy()
-            xs[:-1] += lam @ (g.p_post @ g.a.T).T               # x_t|n = x+_t + P+ A^T lam_t+1
+            xs[:-1] += lam @ (g.p_post @ a_dt.T).T              # x_t|n = x+_t + P+ A^T lam_t+1
         else:
             # uneven steps: the transition of each step (cached), the run's gains
             a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
