@@ -135,10 +135,18 @@ def check(results: dict, scenarios) -> list[tuple[str, bool, str]]:
     """(target, met, detail) lines."""
     out = []
     noisy = {s.name for s in scenarios if s.noise_deflection_m > 0}
-    bad = [f'{n}: {_v(r, "ours-0"):.3g} vs {_v(r, "kf-model"):.3g}' for n, r in results.items()
-           if not _v(r, 'ours-0') <= _v(r, 'kf-model')]
+    bad = [f'{n}: {_v(r, "ours-0"):.4g} vs {_v(r, "kf-model"):.4g} '
+           f'(+{100 * (_v(r, "ours-0") / _v(r, "kf-model") - 1):.2f} %)'
+           for n, r in results.items() if not _v(r, 'ours-0') <= _v(r, 'kf-model')]
     out.append(('zero latency: ours-0 <= kf-model on every scenario', not bad,
                 '; '.join(bad) or 'all'))
+    worst = max(((_v(r, 'ours-0') / _v(r, 'kf-model') - 1, n) for n, r in results.items()),
+                default=(math.nan, '-'))
+    best = min(((_v(r, 'ours-0') / _v(r, 'kf-model') - 1, n) for n, r in results.items()),
+               default=(math.nan, '-'))
+    out.append(('zero latency: ours-0 / kf-model - 1 over the scenarios',
+                worst[0] <= 0.0, f'from {100 * best[0]:+.1f} % ({best[1]}) to '
+                f'{100 * worst[0]:+.2f} % ({worst[1]})'))
     bad = [f'{n}: {_v(r, "ours-lag10"):.3g} vs 1.1 x {_v(r, "kf-model-lag10ms"):.3g}'
            for n, r in results.items()
            if n in noisy and not _v(r, 'ours-lag10') <= 1.1 * _v(r, 'kf-model-lag10ms')]
@@ -200,18 +208,106 @@ def markdown(results: dict, checks, costs: dict, seconds: float) -> str:
     return '\n'.join(lines)
 
 
+# ----------------------------------------------------------------------------------------------
+# tuning the noise schedule of the model observer (the procedure of bench.tune, on its drive)
+
+TUNE_GRID = {'force_psd': [1e-4, 1e-2, 1.0, 1e2, 1e4],
+             'corr': [0.4, 0.8, 1.6, 3.2, 6.4, 12.8],
+             'gd_factor': [0.25, 1.0, 4.0, 16.0]}
+TUNE_BOUNDS = {'force_psd': (1e-8, 1e8), 'corr': (0.1, 50.0), 'gd_factor': (0.01, 1e4)}
+
+
+def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
+    """Tune ``model_observer``'s SCHEDULE_* values per noise level on the tuning drive.
+
+    The drive is :data:`bench.scenarios.TUNING` (road seed 1001, noise seed 1002: neither the
+    road nor the noise of a scored scenario), simulated once per noise level; the objective is
+    the zero-latency vertical-load RMS error of ``estimate_batch`` with the package defaults
+    (the noise and roughness estimated online, as always), the knobs held constant over the
+    noise range while they are tried; a grid (:data:`TUNE_GRID`) then a pattern search in log
+    space (factor 2, down to 1.1), as :mod:`bench.tune` does for the peers.
+    """
+    import road_force_estimator.model_observer as mo
+    from road_force_estimator.estimator import estimate_batch
+    from road_force_estimator.parameters import ObserverParameters
+
+    from bench.scenarios import TUNING
+
+    saved = (mo.SCHEDULE_FORCE_PSD, mo.SCHEDULE_CORRELATION_M, mo.SCHEDULE_GD_FACTOR)
+    out = {}
+    try:
+        for noise in noise_levels:
+            drive = build_drive(TUNING, noise_deflection_m=noise)
+            cache: dict = {}
+
+            def objective(s: dict) -> float:
+                key = tuple(sorted(s.items()))
+                if key not in cache:
+                    mo.SCHEDULE_FORCE_PSD = (s['force_psd'],) * 3
+                    mo.SCHEDULE_CORRELATION_M = (s['corr'],) * 3
+                    mo.SCHEDULE_GD_FACTOR = (s['gd_factor'],) * 3
+                    try:
+                        est = estimate_batch(drive.stamps_ns, drive.q_m, drive.roll_rad,
+                                             drive.speed_mps, drive.vehicle_observer,
+                                             ObserverParameters())
+                        cache[key] = score(drive, est)['load_rms_pct_dyn']
+                    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                        cache[key] = math.inf
+                return cache[key]
+
+            names = list(TUNE_GRID)
+            grid = [dict(zip(names, p)) for p in _product(*TUNE_GRID.values())]
+            best = min(grid, key=objective)
+            best_val = objective(best)
+            factor = 2.0
+            while factor >= 1.1:
+                improved = False
+                for name in names:
+                    for mult in (factor, 1.0 / factor):
+                        lo, hi = TUNE_BOUNDS[name]
+                        trial = dict(best, **{name: min(max(best[name] * mult, lo), hi)})
+                        val = objective(trial)
+                        if val < best_val:
+                            best, best_val, improved = trial, val, True
+                if not improved:
+                    factor = math.sqrt(factor)
+            out[noise] = {'settings': best, 'load_rms_pct_dyn': best_val,
+                          'evaluations': len(cache)}
+            log(f'targets: tuned at {noise * 1e6:g} um: {best} -> {best_val:.3f} % '
+                f'({len(cache)} runs)')
+    finally:
+        mo.SCHEDULE_FORCE_PSD, mo.SCHEDULE_CORRELATION_M, mo.SCHEDULE_GD_FACTOR = saved
+    return out
+
+
+def _product(*lists):
+    if not lists:
+        yield ()
+        return
+    for head in lists[0]:
+        for tail in _product(*lists[1:]):
+            yield (head,) + tail
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m bench.targets', description=__doc__.split('\n')[0])
     p.add_argument('--scenarios', nargs='+', help='scenario names (default: all)')
     p.add_argument('--output', type=Path, help='Markdown file')
     p.add_argument('--json', type=Path, help='raw figures')
     p.add_argument('--no-cost', action='store_true', help='skip the per-sample cost')
+    p.add_argument('--tune', action='store_true',
+                   help='tune the noise schedule of the model observer on the tuning drive and '
+                        'print it (nothing else)')
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     t0 = time.perf_counter()
+    if args.tune:
+        res = tune_schedule(log=lambda s: print(s, file=sys.stderr))
+        print(json.dumps({f'{k:g}': v for k, v in res.items()}, indent=1, default=float))
+        return 0
     try:
         scenarios = ([scenario_by_name(n) for n in args.scenarios] if args.scenarios
                      else list(SCENARIOS))

@@ -2,6 +2,23 @@
 
 One sample in, one estimate out (:meth:`Estimator.update`), and a batch path
 (:func:`estimate_batch`) that runs the very same step function and so gives identical numbers.
+Two methods (``observer.discretization``):
+
+- ``'model'`` (the default): the model-based sliding-mode observer of
+  :mod:`.model_observer` (Kalman injection on the roll-plane model with the road as states,
+  plus the Levant differentiator on the output error), its noise and road roughness estimated
+  online. It leaves about 0.5 % of the dynamic-load RMS as error without noise and 17 % at
+  10 um at zero latency (ISO C, 20 m/s, 1 kHz; ``bench/targets.py``), 3 % with 10 ms latency.
+- ``'euler'`` (the paper's scheme), ``'taylor'``, ``'implicit'``: the differentiator chain
+  below, with that scheme.
+
+Latency (``observer.latency`` = T > 0): :meth:`Estimator.update` returns, per accepted input,
+the estimate of the sample N = round(T / dt) samples back, stamped with that sample's stamp
+(None for the first N inputs); :meth:`Estimator.flush` returns the rest at the end of the data,
+so that every accepted input gets exactly one estimate, in order. The model method corrects
+them with its exact fixed-lag smoother; the chain only delays. :func:`estimate_batch` returns
+row k = the estimate of sample k whatever the latency (the flushed ones included).
+
 The chain is MODEL.md "Reconstruction", steps 1-9 (index 1/2 there = 0/1 here = left/right):
 
 0. Three Levant differentiators (:mod:`.differentiator`) give ``q_i, dq_i, ddq_i`` and
@@ -245,16 +262,18 @@ class Estimator:
     vehicle : VehicleParameters
         The axle's parameters (masses, stiffnesses, track, static loads).
     observer : ObserverParameters
-        L per channel (``lipschitz_deflection`` for both deflections, ``lipschitz_roll``),
-        the discretization and the profile cutoff wavelength. ``latency_s`` is not used here
-        (zero-latency estimator).
+        The method (``discretization``: ``'model'`` or a chain scheme), the latency, the
+        profile cutoff wavelength; for the chain L per channel (``lipschitz_deflection`` for
+        both deflections, ``lipschitz_roll``); for the model the sliding-mode gain and the
+        noise / roughness settings (0 = estimated online, see :mod:`.model_observer`).
     gap_threshold_s : float
         Shortest step that is a gap (s), default :data:`GAP_THRESHOLD_S`.
 
     Notes
     -----
-    :meth:`update` runs scalar math on the state (no numpy in the per-sample path) and
-    returns a new immutable :class:`Estimate` (or None for a rejected sample).
+    :meth:`update` returns a new immutable :class:`Estimate`, or None for a rejected sample
+    or while nothing is due yet (latency). The chain runs scalar math on its state; the model
+    observer one small matrix product per sample (plus one for the outputs with a latency).
     """
 
     def __init__(self, vehicle: VehicleParameters | None = None,
@@ -288,6 +307,7 @@ class Estimator:
         if observer.discretization == 'model':
             self._model = ModelCore(vehicle, observer)
             self._ready = self._model.ready
+            self._accept = self._advance_model     # no dispatch per sample
         self._status = EstimatorStatus()
         self.reset()
 
@@ -331,10 +351,12 @@ class Estimator:
         st.last_stamp_ns = self._stamp if self._started else None
         st.last_dt_s = self._dt
         st.typical_dt_s = self._dt_typ
+        core = self._model
+        if core is not None:
+            self._flat = core.last_flat
         if self._flat is not None:
             st.last_residual_nm = self._flat[26]
             st.lift_off = (self._flat[27], self._flat[28])
-        core = self._model
         if core is None:
             st.method = 'chain'
             st.latency_samples = self._lag
@@ -359,7 +381,12 @@ class Estimator:
         return max(self._settle, 20.0 * self._dt_typ)
 
     def update(self, stamp_ns: int, q_m, roll_rad: float, speed_mps: float) -> Estimate | None:
-        """Take one sample; return the estimate at ``stamp_ns``, or None if it was rejected.
+        """Take one sample; return the estimate due now, or None.
+
+        With no latency the estimate is that of this sample (at ``stamp_ns``); with
+        ``observer.latency`` > 0 that of the sample N steps back, with its stamp (None while
+        fewer than N samples have come). None also for a rejected sample (counted in
+        :attr:`status`).
 
         Parameters
         ----------
@@ -404,8 +431,6 @@ class Estimator:
             if self._model._running:
                 self._model.finish()
                 self._flushed = True
-            if self._ready:
-                self._flat = self._ready[-1][1]
         else:
             self._ready.extend(self._pending)
             self._pending.clear()
@@ -425,7 +450,7 @@ class Estimator:
             v = float(v)
         except (TypeError, ValueError, OverflowError):
             self._status.rejected_nonfinite += 1
-            return None
+            return False
         # One chain of comparisons passes every good sample (NaN compares false).
         if not (-MAX_DEFLECTION_M <= q1 <= MAX_DEFLECTION_M
                 and -MAX_DEFLECTION_M <= q2 <= MAX_DEFLECTION_M
@@ -495,9 +520,9 @@ class Estimator:
             t_run = self._t_run + dt
             dt_typ = self._dt_typ
             dt_typ = dt if dt_typ == 0.0 else dt_typ + 0.05 * (dt - dt_typ)
-            if not core.step(stamp, dt, q1, q2, phi, v, (x, dt, v, core.converged())):
-                return False
             conv = core.converged()
+            if not core.step(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
+                return False
         self._started = True
         self._stamp = stamp
         self._x = x
@@ -506,8 +531,6 @@ class Estimator:
         self._t_run = t_run
         self._dt_typ = dt_typ
         self._conv = conv
-        if self._ready:
-            self._flat = self._ready[-1][1]
         self._accepted += 1
         return True
 

@@ -96,9 +96,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'roll sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
     _p('observer.road_roughness', 'double', 0.0, 'm^3',
        'ISO 8608 Gd(n0) of the road for the model observer; 0 = estimate online', 0.0, 1.0),
-    _p('observer.road_correlation_length', 'double', 0.8, 'm',
+    _p('observer.road_correlation_length', 'double', 0.0, 'm',
        'correlation length of the road velocity under the tire (tire envelope) of the model '
-       'observer', 0.05, 20.0),
+       'observer; 0 = scheduled on the noise level', 0.0, 20.0),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.duration', 'double', 60.0, 's',
