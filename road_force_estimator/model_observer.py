@@ -474,7 +474,7 @@ def _mad_std(d: np.ndarray) -> float:
     return float(np.median(np.abs(d)) / 0.6744897501960817)
 
 
-def sm_lipschitz(vehicle: VehicleParameters, dt_s: float) -> tuple[float, float]:
+def sm_lipschitz(vehicle: VehicleParameters) -> tuple[float, float]:
     """L of the sliding-mode differentiator on the output error (m/s^3, rad/s^3).
 
     The output error's third derivative is what the model cannot predict of ``dddq``: the
@@ -482,7 +482,7 @@ def sm_lipschitz(vehicle: VehicleParameters, dt_s: float) -> tuple[float, float]
     (``kt / m`` x 1 m/s), and its roll counterpart over the half track.
     """
     v = vehicle
-    lq = max(kt / m for kt, m in zip(v.tire_stiffness_npm, v.unsprung_mass_kg)) * 1.0
+    lq = max(kt / m for kt, m in zip(v.tire_stiffness_npm, v.unsprung_mass_kg)) * 1.0  # m/s
     return lq, lq / v.half_track_m
 
 
@@ -778,7 +778,7 @@ class ModelCore:
                       0.01 * (fc1 + fc2))
         self._body = BodyHeaveFilter(observer.profile_cutoff_wavelength_m)
         self.sm_gain = float(observer.sliding_mode_gain)
-        lq, lr = sm_lipschitz(vehicle, 1e-3)
+        lq, lr = sm_lipschitz(vehicle)
         self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
                         math.sqrt(lr))
         self._h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h

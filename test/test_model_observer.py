@@ -231,8 +231,7 @@ class TestLatency:
         assert [o.stamp_ns for o in outs] == _stamps(drive.t_s[:n]).tolist()
         gains = est._model.gains
         y = np.column_stack([q[:n], phi[:n]])
-        x0 = est._model._x0 if False else None
-        core = mo.ModelCore(VEHICLE, obs)
+        core = mo.ModelCore(VEHICLE, obs)     # the restart state of the first sample
         core.restart(0, *y[0], (0.0, 0.0, SPEED, False))
         x0 = core._x0
         h_df = gains.model.h[[mo.OUTPUTS.index('df1'), mo.OUTPUTS.index('df2')]]
