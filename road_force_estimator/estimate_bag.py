@@ -16,7 +16,7 @@ Then it estimates:
     samples recorded before the first ``/vehicle/twist`` take the first speed (the node holds
     them until a speed arrives). The numbers equal :func:`~.estimator.estimate_batch`'s.
 ``offline``
-    :func:`road_force_estimator.offline.estimate_offline`: non-causal, the whole recording.
+    :func:`road_force_estimator.offline.estimate_recording`: non-causal, the whole recording.
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
@@ -174,17 +174,19 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
         for start in range(0, n, block):
             stop = min(n, start + block)
             for i in range(start, stop):
+                # Every sample's row is known by its stamp: with observer.latency > 0 the
+                # estimate of a sample comes back with a later input (or from flush()).
+                index_of.setdefault(stamps[i], i)   # a duplicate keeps the first row
                 e = update(stamps[i], q[i], phi[i], v[i])
-                if e is None:
-                    continue
-                j = i if e.stamp_ns == stamps[i] else index_of.get(e.stamp_ns)
-                if j is not None:
-                    placed[j] = e
-                if e.stamp_ns == stamps[i]:
-                    index_of.clear()
-                else:
-                    index_of[stamps[i]] = i
+                if e is not None:
+                    j = index_of.pop(e.stamp_ns, None)
+                    if j is not None:
+                        placed[j] = e
             bar.update(stop - start)
+    for e in est.flush():       # the estimates still held back at the end of the bag
+        j = index_of.pop(e.stamp_ns, None)
+        if j is not None:
+            placed[j] = e
     valid = np.array([e is not None for e in placed], dtype=bool)
     have = [e for e in placed if e is not None]
     last = np.maximum.accumulate(np.where(valid, np.arange(n), -1)) if n else np.zeros(0, int)
@@ -317,7 +319,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
     from road_force_estimator import bag_io, report
-    from road_force_estimator.offline import estimate_offline
+    from road_force_estimator.offline import estimate_recording
 
     stages.next('reading the bag')
     try:
@@ -334,7 +336,7 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
     if mode == 'online':
         est = estimate_online(*args, progress=progress)
     else:
-        est = estimate_offline(*args)
+        est = estimate_recording(*args)
     extra = {}
     if early:
         extra['samples before the first twist (given its speed)'] = early

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections import Counter, deque
 import math
+import signal
 import sys
 import time
 
@@ -29,7 +30,9 @@ try:  # rclpy >= 7.1.4: callbacks cost a fraction of the SingleThreadedExecutor'
     from rclpy.experimental import EventsExecutor as Executor
 except ImportError:  # pragma: no cover
     from rclpy.executors import SingleThreadedExecutor as Executor
+from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
@@ -108,6 +111,13 @@ class Observer(Node):
         self.estimator = Estimator(*config)
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
+
+    def finish(self) -> None:
+        """Publish the estimates still held back (``observer.latency`` > 0) before leaving."""
+        for est in self.estimator.flush():
+            self.publish(est)
+        for pub in (*self.load_pubs, *self.road_pubs, self.ltr_pub, self.states_pub):
+            pub.wait_for_all_acked(Duration(seconds=1.0))
 
     def core_counts(self, estimator=None) -> Counter:
         st = (estimator or self.estimator).status
@@ -218,18 +228,26 @@ class Observer(Node):
 
 
 def main(args=None) -> int:
+    # Our own SIGINT/SIGTERM handling: stop spinning, then publish what observer.latency still
+    # holds back while the context is valid (rclpy's handlers would shut it down first).
     try:
-        init_ros('observer', __doc__.splitlines()[0], SPECS, args)
+        init_ros('observer', __doc__.splitlines()[0], SPECS, args,
+                 signal_handler_options=SignalHandlerOptions.NO)
     except ParameterError as exc:
         print(exc, file=sys.stderr)
         return 1
+    stop = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.append(True))
     node = None
     try:
         node = Observer()
         executor = Executor()
         executor.add_node(node)
-        while rclpy.ok():  # EventsExecutor.spin() of rclpy 7.1.6 busy-waits: spin_once instead
+        while not stop and rclpy.ok():  # EventsExecutor.spin() of rclpy 7.1.6 busy-waits
             executor.spin_once(timeout_sec=0.1)
+        if rclpy.ok():
+            node.finish()
         return 0
     except ParameterError as exc:
         print(exc, file=sys.stderr)

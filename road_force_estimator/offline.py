@@ -78,7 +78,7 @@ from road_force_estimator.parameters import ObserverParameters, VehicleParameter
 __all__ = [
     'FILTER_ORDER', 'NOISE_CROSSING', 'MIN_CUTOFF_HZ', 'MAX_CUTOFF_FRACTION', 'MIN_RUN_SAMPLES',
     'RunInfo', 'OfflineEstimateArrays', 'noise_std', 'auto_cutoff_hz', 'zero_phase_derivatives',
-    'zero_phase_body_heave', 'edge_time_s', 'estimate_offline',
+    'zero_phase_body_heave', 'edge_time_s', 'estimate_offline', 'estimate_recording',
 ]
 
 #: Butterworth order of the channel low-pass (run forward and backward: twice the roll-off).
@@ -562,3 +562,24 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     return OfflineEstimateArrays(
         stamp_ns=stamp_out, valid=valid, converged=converged, lift_off=lift_off, status=status,
         noise_std=noise, cutoff_hz=cut, runs=runs, **cols)
+
+
+def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
+                       vehicle: VehicleParameters | None = None,
+                       observer: ObserverParameters | None = None, *,
+                       gap_threshold_s: float = GAP_THRESHOLD_S):
+    """The offline mode of ``estimate_bag``: the best non-causal estimate for ``observer``.
+
+    With ``observer.discretization == 'model'`` (the default) the model observer's own
+    forward filter and Rauch-Tung-Striebel smoother (:func:`.model_observer.smooth`): the
+    same model and noise estimates as the online observer, over the whole recording. With a
+    differentiator scheme (``euler``, ``taylor``, ``implicit``), the zero-phase chain of
+    :func:`estimate_offline`. Row k is the estimate for sample k in both.
+    """
+    observer = ObserverParameters() if observer is None else observer
+    if observer.discretization == 'model':
+        from road_force_estimator.model_observer import smooth
+        return smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                      gap_threshold_s=gap_threshold_s)
+    return estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                            gap_threshold_s=gap_threshold_s)

@@ -265,3 +265,15 @@ def test_main_exits_cleanly_on_sigint_and_refuses_bad_parameters(ros_context):
     code, _, err = finish(run_main('observer', '--ros-args', '-p', 'observer.latency:=2.0'))
     assert code == 1 and err.strip() == (
         'observer: refused observer.latency = 2.0 is out of range [0, 1] s')
+
+
+
+def test_finish_at_shutdown_publishes_what_latency_holds_back(make_rig):
+    observer, feeder, collector, executor = make_rig(observer__latency=0.005)
+    for k in range(30):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 25, 10.0)
+    observer.finish()   # what main() calls on SIGINT / SIGTERM, before the context goes
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 30, 10.0)
+    for topic in STAMPED:
+        assert collector.stamps(topic) == [T0_NS + k * 1_000_000 for k in range(30)], topic
