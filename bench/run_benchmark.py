@@ -16,8 +16,8 @@ Columns (:data:`METHODS`):
   (the differentiator chain, implicit scheme), ``ours-no-smo`` (the defaults with the
   sliding-mode injection off, when the parameter exists), ``ours-latency-5ms`` and
   ``ours-latency-10ms`` (``observer.latency`` = 5 / 10 ms; 'n/a' while it changes nothing),
-  ``ours-offline`` (:func:`road_force_estimator.offline.estimate_offline`, what
-  ``estimate_bag --mode offline`` runs) and ``ours-model-smoother``
+  ``ours-offline`` (what ``estimate_bag --mode offline`` runs, read from its source:
+  ``offline.estimate_recording`` or ``offline.estimate_offline``) and ``ours-model-smoother``
   (:func:`road_force_estimator.model_observer.smooth`, when it exists). A column that cannot
   run shows 'n/a' and the reason.
 
@@ -269,20 +269,33 @@ def _run_ours_latency(drive: Drive, tuned: dict[str, Any], lag_s: float = 0.01):
     return res
 
 
-def _offline_function():
-    """What ``estimate_bag --mode offline`` runs: ``offline.estimate_offline``."""
+def _offline_function() -> tuple[str, Callable]:
+    """``(name, function)`` that ``estimate_bag --mode offline`` runs.
+
+    Read from ``estimate_bag``'s source (the ``from road_force_estimator.offline import ...``
+    of its offline branch), so that a renamed entry point is followed; else the first of
+    ``offline.estimate_recording``, ``offline.estimate_offline`` that exists.
+    """
+    import importlib
+    import inspect
+    import re
+
+    try:
+        from road_force_estimator import offline
+    except ImportError as exc:
+        raise NotAvailable(f'no offline module ({exc})') from None
+    names = []
     try:
         from road_force_estimator import estimate_bag
-        fn = getattr(estimate_bag, 'estimate_offline', None)
-        if callable(fn):
-            return fn
-    except ImportError:
+        names = re.findall(r'from road_force_estimator\.offline import (\w+)',
+                           inspect.getsource(estimate_bag))
+    except (ImportError, OSError, TypeError):
         pass
-    try:
-        from road_force_estimator.offline import estimate_offline
-    except ImportError as exc:
-        raise NotAvailable(f'no offline estimator ({exc})') from None
-    return estimate_offline
+    for name in names + ['estimate_recording', 'estimate_offline']:
+        fn = getattr(importlib.import_module('road_force_estimator.offline'), name, None)
+        if callable(fn):
+            return f'offline.{name}', fn
+    raise NotAvailable(f'no offline entry point in {offline.__name__}')
 
 
 def _run_ours_smoother(drive: Drive, tuned: dict[str, Any]):
@@ -300,7 +313,7 @@ def _run_ours_smoother(drive: Drive, tuned: dict[str, Any]):
 
 
 def _run_ours_offline(drive: Drive, tuned: dict[str, Any]):
-    fn = _offline_function()
+    _, fn = _offline_function()
     stamps = drive.stamps_ns
     est = fn(stamps, drive.q_m, drive.roll_rad, drive.speed_mps, drive.vehicle_observer,
              ours_observer())
@@ -322,12 +335,11 @@ _OURS = (
            'the defaults with observer.latency = 0.01 s (each estimate 10 ms after its sample)',
            True),
     Method('ours-offline', _run_ours_offline, 'offline', 'offline',
-           'estimate_bag --mode offline: road_force_estimator.offline.estimate_offline, '
-           'defaults', True),
+           'estimate_bag --mode offline: road_force_estimator.{offline} with the defaults',
+           True),
     Method('ours-model-smoother', _run_ours_smoother, 'offline', 'offline',
-           "road_force_estimator.model_observer.smooth: the model observer's RTS smoother, "
-           'defaults (not what estimate_bag --mode offline runs unless estimate_offline calls '
-           'it)', True),
+           "road_force_estimator.model_observer.smooth called directly: the model observer's "
+           'RTS smoother with the defaults (for comparison with ours-offline)', True),
 )
 
 
@@ -678,8 +690,8 @@ def targets(out, scenarios, speed_out: dict[str, Any] | None) -> list[str]:
                          'zero-phase-offline and <= 1.3 x kf-model-rts on every scenario): '
                          f'{text}.')
         else:
-            lines[-1] += (' For information, by the same rule, the smoother of the model observer '
-                          f'(ours-model-smoother, not run by estimate_bag): {text}.')
+            lines[-1] += (' For information, by the same rule, the smoother of the model '
+                          f'observer called directly (ours-model-smoother): {text}.')
     # profile
     prof = [(n, _fig(out, n, 'ours-online', 'profile_rms_pct_band')) for n in names]
     prof = [p for p in prof if p[1] is not None]
@@ -894,6 +906,15 @@ def _tuning_paragraph(tuned: dict[str, Any]) -> str:
             'columns are never tuned: package defaults on every drive.')
 
 
+def _describe(m: Method) -> str:
+    """The column's description with the package's names at run time filled in."""
+    try:
+        offline = _offline_function()[0]
+    except NotAvailable:
+        offline = 'offline (no entry point)'
+    return m.description.format(default=default_method(), offline=offline)
+
+
 def headline_table(out, methods: list[Method]) -> list[str]:
     """Methods as rows: load and profile error on :data:`HEADLINE_SCENARIOS`."""
     scs = [s for s in HEADLINE_SCENARIOS if s in out['results']]
@@ -1003,7 +1024,7 @@ def markdown(out: dict[str, Any], scenarios, methods: list[Method], tuned: dict[
         out, scenarios, methods)] + ['']
     lines += ['## Ablation: the sliding-mode term', ''] + ablation(out, scenarios) + ['']
     lines += ['## Methods', '', '| column | latency | what |', '|---|---|---|']
-    lines += [f'| {m.name} | {m.latency} | {m.description.format(default=default)} |'
+    lines += [f'| {m.name} | {m.latency} | {_describe(m)} |'
               for m in methods]
     lines += ['', '### How the peers were tuned', '', _tuning_paragraph(tuned), '']
     lines += ['## Scenarios', '', 'Simulated by the package plant (tire envelope 0.25 m); '
@@ -1055,8 +1076,7 @@ def readme_section(out: dict[str, Any], scenarios, methods: list[Method], tuned:
              'dynamic-load RMS and band-passed (0.5-30 m) profile RMS error in % of the band '
              'RMS (lower is better; ours in bold):', '']
     lines += headline_table(out, methods) + ['']
-    default = default_method()
-    lines += ['Columns: ' + '; '.join(f'`{m.name}` {m.description.format(default=default)}'
+    lines += ['Columns: ' + '; '.join(f'`{m.name}` {_describe(m)}'
                                       for m in methods) + '.', '']
     lines += ['Targets (issue 11):', ''] + [f'- {t}' for t in targets(out, scenarios,
                                                                        speed_out)] + ['']

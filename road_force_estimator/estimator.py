@@ -48,8 +48,9 @@ The chain is MODEL.md "Reconstruction", steps 1-9 (index 1/2 there = 0/1 here = 
    ``u_i = z_ui + dF_i / kt_i`` exactly. Like any inertial profilometer's, the profile is
    band-passed (judge it in the 0.5-30 m band, :mod:`.metrics`).
 7. Distance ``x = integral of v dt`` (trapezoidal), continued across gaps.
-8. ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left), the denominator floored at
-   1 % of the static sum so that it stays finite if both loads vanish.
+8. ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left) of the loads clipped at zero
+   (a tire cannot pull), so ``|LTR| <= 1``; the denominator floored at 1 % of the static sum
+   (:mod:`.load_transfer`).
 9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2)`` (N m); it equals
    ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when ``F_n,i <=``
    :data:`LIFT_OFF_FRACTION` ``F_c,i``.
@@ -88,6 +89,7 @@ import numpy as np
 from collections import deque
 
 from road_force_estimator.differentiator import step_function
+from road_force_estimator.load_transfer import load_transfer_ratio
 from road_force_estimator.model_observer import ModelCore
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
 
@@ -574,8 +576,7 @@ class Estimator:
         df2 = m2 * ddzu2 + fb2
         fn1 = fc1 + df1
         fn2 = fc2 + df2
-        den = fn1 + fn2
-        ltr = (fn2 - fn1) / (den if den > ltr_floor else ltr_floor)
+        ltr = load_transfer_ratio(fn1, fn2, ltr_floor)
         res = ix * c2_ - s * cphi * (fb1 - fb2)
         # Step 4: body heave, a cascade of five Tustin lags 1/(s + w_c) on dd z_s;
         # z_s = sum_{k=2..5} (k-1) w^(k-2) y_k, dz_s = sum_{k<5} w^(k-1) y_k - 4 w^4 y_5.

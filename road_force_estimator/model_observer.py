@@ -126,6 +126,7 @@ import numpy as np
 from scipy import linalg
 
 from road_force_estimator.differentiator import implicit_step
+from road_force_estimator.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
 
 __all__ = [
@@ -1252,10 +1253,9 @@ class ModelCore:
         zu2 = zs - ssin - q2
         fn1 = fc1 + df1
         fn2 = fc2 + df2
-        den = fn1 + fn2
         flat = (x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
                 dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
-                fn1, fn2, (fn2 - fn1) / (den if den > ltr_floor else ltr_floor),
+                fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
                 ix * ddphi - s * cphi * (fb1 - fb2), fn1 <= lift1, fn2 <= lift2, conv)
         self.last_flat = flat
         self.ready.append((stamp, flat))
@@ -1546,7 +1546,6 @@ def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,
     zu2 = zs - ssin - cols['q2']
     fn1 = fc1 + cols['df1']
     fn2 = fc2 + cols['df2']
-    den = np.maximum(fn1 + fn2, ltr_floor)
     res = ix * cols['ddphi'] - s * np.cos(ph) * (cols['fb1'] - cols['fb2'])
     settle = core.settling_time_s(float(np.median(np.diff(t))) if m > 1 else 0.0)
     conv = (t - t[0]) >= settle
@@ -1554,5 +1553,6 @@ def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,
         dist, cols['q1'], cols['q2'], cols['dq1'], cols['dq2'], cols['ddq1'], cols['ddq2'], ph,
         dph, cols['ddphi'], zs, dzs, cols['ddzs'], zu1, zu2, dzs + srate - cols['dq1'],
         dzs - srate - cols['dq2'], cols['ddzu1'], cols['ddzu2'], zu1 + cols['w1'],
-        zu2 + cols['w2'], cols['df1'], cols['df2'], fn1, fn2, (fn2 - fn1) / den, res,
+        zu2 + cols['w2'], cols['df1'], cols['df2'], fn1, fn2,
+        load_transfer_ratios(fn1, fn2, ltr_floor), res,
         fn1 <= lift_fraction * fc1, fn2 <= lift_fraction * fc2, conv])

@@ -73,6 +73,7 @@ from road_force_estimator.estimator import (
     EstimateArrays,
     EstimatorStatus,
 )
+from road_force_estimator.load_transfer import load_transfer_ratios
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
 
 __all__ = [
@@ -517,14 +518,13 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
                         wi[j] = e[j - 1] * wi[j - 1] + (1.0 - e[j - 1]) * target[j - 1]
                 w[:, i] = wi
         # Steps 8-9: LTR (floored denominator), residual, lift-off.
-        den = np.maximum(fn.sum(axis=1), 0.01 * float(fc.sum()))
         cols['wheel_accel_mps2'][rows] = ddzu
         cols['tire_force_dynamic_n'][rows] = df
         cols['wheel_load_n'][rows] = fn
         cols['wheel_heave_m'][rows] = zu
         cols['wheel_heave_rate'][rows] = dzu
         cols['road_m'][rows] = zu + w
-        cols['ltr'][rows] = (fn[:, 1] - fn[:, 0]) / den
+        cols['ltr'][rows] = load_transfer_ratios(fn[:, 0], fn[:, 1], 0.01 * float(fc.sum()))
         cols['residual_nm'][rows] = veh.roll_inertia_kgm2 * ddph - s * cph * (fb[:, 0] - fb[:, 1])
         lift_off[rows] = fn <= LIFT_OFF_FRACTION * fc
         converged[rows] = (t >= edge) & (t <= t[-1] - edge)
