@@ -571,13 +571,49 @@ def node_latency(*, seconds: float = 10.0, timeout_s: float = 240.0) -> dict[str
             'executor': doc.get('executor')}
 
 
+#: Environment of the one-thread measurements: numpy's BLAS and OpenMP pools held to 1 thread.
+ONE_THREAD_ENV = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
+
+
+def core_cost_one_thread(*, timeout_s: float = 300.0) -> list[dict[str, Any]] | dict[str, str]:
+    """:func:`core_cost` on :data:`TIMING_SCENARIO` in a subprocess with one BLAS thread.
+
+    numpy's BLAS may run a small matrix product on several threads: the wall time then falls
+    below the CPU time spent. This is the "on one core" figure.
+    """
+    import os
+
+    env = {**os.environ, **ONE_THREAD_ENV}
+    try:
+        proc = subprocess.run([sys.executable, '-m', 'bench.run_benchmark', '--core-cost-json'],
+                              cwd=REPO, env=env, capture_output=True, text=True,
+                              timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return {'error': f'no answer in {timeout_s:g} s'}
+    if proc.returncode != 0:
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ['']
+        return {'error': f'exit {proc.returncode}: {tail[0][:300]}'}
+    return json.loads(proc.stdout)
+
+
 def speed(drive: Drive | None, *, node: bool = True, core_repeats: int = 7,
           log=None) -> dict[str, Any]:
-    """The speed section: core cost per scheme, end-to-end estimate_bag, node latency."""
+    """The speed section: core cost per scheme (as the process runs, and on one BLAS thread),
+    end-to-end estimate_bag, node latency."""
     out: dict[str, Any] = {}
     if drive is not None:
         t0 = time.perf_counter()
         out['core'] = core_cost(drive, repeats=core_repeats)
+        one = core_cost_one_thread()
+        if isinstance(one, dict):
+            for row in out['core']:
+                row['one_thread_error'] = one['error']
+        else:
+            by_variant = {r['variant']: r for r in one}
+            for row in out['core']:
+                r1 = by_variant.get(row['variant'], {})
+                if 'us_median' in r1:
+                    row['us_one_thread'] = r1['us_median']
         if log:
             log(f'speed: core cost, {time.perf_counter() - t0:.1f} s')
     t0 = time.perf_counter()
@@ -628,6 +664,15 @@ def _worst(rows) -> str:
     return f'worst {sc}: {g3(o)} % vs {g3(r)} % (ratio {o / max(r, 1e-12):.2f})'
 
 
+def _same_numbers(out, a: str, b: str) -> bool:
+    """Columns a and b have the same figures on every scenario (one runs the other)."""
+    rows = [(r.get(a), r.get(b)) for r in out['results'].values()]
+    keys = ('load_rms_pct_dyn', 'profile_rms_pct_band', 'ltr_rms')
+    return bool(rows) and all(
+        fa is not None and fb is not None and all(fa.get(k) == fb.get(k) for k in keys)
+        for fa, fb in rows)
+
+
 def _verdict(ok: bool | None) -> str:
     return {True: 'MET', False: 'NOT MET', None: 'NOT MEASURED'}[ok]
 
@@ -676,7 +721,7 @@ def targets(out, scenarios, speed_out: dict[str, Any] | None) -> list[str]:
     for i, m in enumerate(('ours-offline', 'ours-model-smoother')):
         rows_z, bad_z = _compare(out, scenarios, m, 'zero-phase-offline', 1.0)
         rows_r, bad_r = _compare(out, scenarios, m, 'kf-model-rts', 1.3)
-        if i and not (rows_z and rows_r):
+        if i and (not (rows_z and rows_r) or _same_numbers(out, 'ours-offline', m)):
             continue
         if rows_z and rows_r:
             ok = not bad_z and not bad_r and len(rows_z) == len(rows_r) == len(names)
@@ -735,17 +780,21 @@ def _speed_target(sp: dict[str, Any] | None) -> str:
     parts, oks = [], []
     core = [r for r in sp.get('core', []) if r.get('default')]
     if core and 'us_median' in core[0]:
-        us = core[0]['us_median']
+        r = core[0]
+        us = r.get('us_one_thread', max(r['us_median'], r.get('us_cpu', 0.0)))
         oks.append(us <= 10.0)
-        parts.append(f'core update {us:.1f} us/sample ({core[0]["variant"]}; target <= 10)')
+        parts.append(f'core update {us:.1f} us/sample on one core ({r["variant"]}, one BLAS '
+                     f'thread; {r["us_median"]:.1f} us wall with {r.get("us_cpu", math.nan):.1f} '
+                     'us of CPU as the process runs; target <= 10)')
     else:
         oks.append(None)
         parts.append('core update not measured' + (f' ({core[0]["error"]})' if core else ''))
     e2e = sp.get('end_to_end', {}).get('modes', {}).get('offline', {})
     if 'samples_per_s' in e2e:
-        oks.append(e2e['samples_per_s'] >= 5e5)
-        parts.append(f'offline estimate_bag {e2e["samples_per_s"]:,.0f} samples/s end to end '
-                     '(target >= 500,000)')
+        rate = min(e2e['samples_per_s'], e2e.get('samples_per_cpu_s', math.inf))
+        oks.append(rate >= 5e5)
+        parts.append(f'offline estimate_bag {rate:,.0f} samples/s end to end on one core (the '
+                     'lower of the wall and the CPU-time rates; target >= 500,000)')
     else:
         oks.append(None)
         err = e2e.get('error') or sp.get('end_to_end', {}).get('error', 'not measured')
@@ -802,6 +851,10 @@ def losses(out, scenarios, methods: list[Method], *, limit: int = 6) -> list[str
         rivals = [m.name for m in methods if not m.ours and _latency_rank(m.latency) <= rank]
         if not any(_fig(out, s.name, ours) is not None for s in scenarios):
             lines.append(f'{ours}: not measured ({_why_missing(out, ours)}).')
+            continue
+        if ours == 'ours-model-smoother' and _same_numbers(out, 'ours-offline', ours):
+            lines.append(f'**{ours}**: the same numbers as ours-offline (the offline mode of '
+                         'estimate_bag runs this smoother).')
             continue
         parts = []
         for key, what in _LOSS_FIGURES:
@@ -933,6 +986,10 @@ def headline_table(out, methods: list[Method]) -> list[str]:
     return lines
 
 
+def _env_text(env: dict[str, str]) -> str:
+    return ' '.join(f'{k}={v}' for k, v in env.items())
+
+
 def speed_lines(sp: dict[str, Any] | None, timing: dict[str, float],
                 methods: list[Method]) -> list[str]:
     lines: list[str] = []
@@ -941,16 +998,19 @@ def speed_lines(sp: dict[str, Any] | None, timing: dict[str, float],
         if core:
             lines += [f'Core: `Estimator.update` per sample on `{TIMING_SCENARIO}` (timeit, '
                       'wall time, median and min of 7 repeats of 5000 samples after 1000 of '
-                      'warm-up; and the median process CPU time, which other work on a shared '
-                      'machine disturbs less):', '',
-                      '| variant | us/sample, wall (median) | wall (min) | CPU (median) |',
-                      '|---|---:|---:|---:|']
+                      'warm-up; the median process CPU time, all threads; and the wall time in '
+                      f'a subprocess with {_env_text(ONE_THREAD_ENV)}, the one-core figure):',
+                      '',
+                      '| variant | us/sample, wall (median) | wall (min) | CPU (median) | '
+                      'one BLAS thread, wall (median) |', '|---|---:|---:|---:|---:|']
             for r in core:
                 if 'error' in r:
-                    lines.append(f'| {r["variant"]} | fails: {r["error"][:120]} | | |')
+                    lines.append(f'| {r["variant"]} | fails: {r["error"][:120]} | | | |')
                 else:
+                    one = (f'{r["us_one_thread"]:.2f}' if 'us_one_thread' in r
+                           else r.get('one_thread_error', '-')[:120])
                     lines.append(f'| {r["variant"]} | {r["us_median"]:.2f} | '
-                                 f'{r["us_min"]:.2f} | {r["us_cpu"]:.2f} |')
+                                 f'{r["us_min"]:.2f} | {r["us_cpu"]:.2f} | {one} |')
             lines.append('')
         e2e = sp.get('end_to_end', {})
         if 'error' in e2e:
@@ -1109,12 +1169,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help='batch runs per column on the timing scenario (median)')
     p.add_argument('--no-speed', action='store_true', help='skip the speed section')
     p.add_argument('--no-node', action='store_true', help='skip the observer-node latency')
+    p.add_argument('--core-cost-json', action='store_true', help=argparse.SUPPRESS)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     args = build_parser().parse_args(argv)
+    if args.core_cost_json:   # the one-thread core cost, for core_cost_one_thread()
+        drive = build_drive(scenario_by_name(TIMING_SCENARIO))
+        print(json.dumps(core_cost(drive)))
+        return 0
     try:
         scenarios = ([scenario_by_name(n) for n in args.scenarios] if args.scenarios
                      else list(SCENARIOS))
