@@ -88,6 +88,8 @@ import numpy as np
 
 from collections import deque
 
+from road_force_estimator import body_heave
+from road_force_estimator.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.differentiator import step_function
 from road_force_estimator.load_transfer import load_transfer_ratio
 from road_force_estimator.model_observer import ModelCore
@@ -103,13 +105,10 @@ __all__ = [
 GAP_THRESHOLD_S = 0.1
 #: Gap threshold in typical sample periods.
 GAP_PERIODS = 10.0
-#: Speed floor of the body-heave high-pass cutoff (m/s): w_c >= 2 pi v_floor / lambda_c.
-SPEED_FLOOR_MPS = 1.0
 #: Lift-off flag when the estimated load is at most this fraction of the static load.
 LIFT_OFF_FRACTION = 0.05
-#: Order n of the body-heave filter (n real poles at w_c; see the module notes). The step
-#: is written out for n = 5.
-BODY_FILTER_ORDER = 5
+#: Order n of the body-heave filter (n real poles at w_c; see the module notes).
+BODY_FILTER_ORDER = body_heave.ORDER
 #: Physical limits beyond which a sample is refused (m, rad, m/s).
 MAX_DEFLECTION_M = 1.0
 MAX_ROLL_RAD = 0.5 * math.pi
@@ -302,7 +301,7 @@ class Estimator:
                                            v.roll_inertia_kgm2, fc1, fc2)
                    + v.tire_stiffness_npm + v.tire_damping_nspm
                    + (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2, 0.01 * (fc1 + fc2),
-                      2.0 * math.pi / observer.profile_cutoff_wavelength_m))
+                      body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)))
         self._settle = settling_time_s(lq, lr, 0.0)
         self._ready: deque = deque()
         self._model: ModelCore | None = None
@@ -578,25 +577,9 @@ class Estimator:
         fn2 = fc2 + df2
         ltr = load_transfer_ratio(fn1, fn2, ltr_floor)
         res = ix * c2_ - s * cphi * (fb1 - fb2)
-        # Step 4: body heave, a cascade of five Tustin lags 1/(s + w_c) on dd z_s;
-        # z_s = sum_{k=2..5} (k-1) w^(k-2) y_k, dz_s = sum_{k<5} w^(k-1) y_k - 4 w^4 y_5.
-        if restart:
-            h = (ddzs, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        else:
-            a_old, y1, y2, y3, y4, y5, _, _ = self._h
-            av = v if v > 0.0 else -v
-            wc = wc_per_speed * (av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS)
-            hh = 0.5 * dt
-            inv = 1.0 / (1.0 + wc * hh)
-            g = (1.0 - wc * hh) * inv
-            hh *= inv
-            n1 = g * y1 + hh * (a_old + ddzs)
-            n2 = g * y2 + hh * (y1 + n1)
-            n3 = g * y3 + hh * (y2 + n2)
-            n4 = g * y4 + hh * (y3 + n3)
-            n5 = g * y5 + hh * (y4 + n4)
-            h = (ddzs, n1, n2, n3, n4, n5, n2 + wc * (2.0 * n3 + wc * (3.0 * n4 + wc * 4.0 * n5)),
-                 n1 + wc * (n2 + wc * (n3 + wc * (n4 - 4.0 * wc * n5))))
+        # Step 4: body heave, band-limited double integration (body_heave.py).
+        h = body_heave.start(ddzs) if restart else body_heave.step(self._h, ddzs, dt, v,
+                                                                    wc_per_speed)
         zs = h[6]
         dzs = h[7]
         # Step 5: wheel heaves and rates.

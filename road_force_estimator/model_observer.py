@@ -31,7 +31,7 @@ unobservable integrator and the Riccati equation is well posed down to tiny nois
 mode, body and road rising together, is seen only through the road model's mean reversion: it
 is the ``spectral radius ~ 1`` a design may show; no load depends on it). The profile is
 rebuilt as the estimator's chain does (MODEL.md step 4): ``z_s`` is the band-limited double
-integral of ``dd z_s`` (:class:`BodyHeaveFilter`), ``u_i = z_s +- s sin(phi) - q_i + w_i``.
+integral of ``dd z_s`` (:mod:`.body_heave`), ``u_i = z_s +- s sin(phi) - q_i + w_i``.
 
 Road model (the unknown input)
 ------------------------------
@@ -125,6 +125,7 @@ import warnings
 import numpy as np
 from scipy import linalg
 
+from road_force_estimator import body_heave
 from road_force_estimator.differentiator import implicit_step
 from road_force_estimator.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
@@ -135,7 +136,7 @@ __all__ = [
     'FORCE_PSD', 'ROLL_MOMENT_PSD', 'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3',
     'MIN_ROAD_GD_M3',
     'SM_DEAD_ZONE', 'SM_NOISE_SCALE', 'road_diffusion', 'ContinuousModel', 'continuous_model',
-    'van_loan', 'solve_dare', 'noise_std', 'Gains', 'design', 'sm_lipschitz', 'BodyHeaveFilter',
+    'van_loan', 'solve_dare', 'noise_std', 'Gains', 'design', 'sm_lipschitz',
     'ModelCore', 'smooth',
 ]
 
@@ -701,43 +702,6 @@ def _requantise(current: int | None, x: float, ratio: float) -> int:
     return current
 
 
-class BodyHeaveFilter:
-    """Band-limited double integration of the body acceleration (MODEL.md step 4).
-
-    ``z_s = H(s) dd z_s / s^2`` with ``H = 1 - G``, ``G = (5 w^4 s + w^5) / (s + w)^5``, five
-    Tustin lags at ``w = 2 pi max(|v|, v_floor) / lambda_c`` (see :mod:`.estimator`, step 4:
-    the same filter and arithmetic).
-    """
-
-    __slots__ = ('wc_per_speed', 'state')
-
-    def __init__(self, cutoff_wavelength_m: float) -> None:
-        self.wc_per_speed = 2.0 * math.pi / cutoff_wavelength_m
-        self.state = (0.0,) * 8
-
-    def restart(self, accel: float) -> tuple[float, float]:
-        self.state = (accel, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        return 0.0, 0.0
-
-    def step(self, accel: float, dt: float, v: float) -> tuple[float, float]:
-        a_old, y1, y2, y3, y4, y5, _, _ = self.state
-        av = v if v > 0.0 else -v
-        wc = self.wc_per_speed * (av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS)
-        hh = 0.5 * dt
-        inv = 1.0 / (1.0 + wc * hh)
-        g = (1.0 - wc * hh) * inv
-        hh *= inv
-        n1 = g * y1 + hh * (a_old + accel)
-        n2 = g * y2 + hh * (y1 + n1)
-        n3 = g * y3 + hh * (y2 + n2)
-        n4 = g * y4 + hh * (y3 + n3)
-        n5 = g * y5 + hh * (y4 + n4)
-        zs = n2 + wc * (2.0 * n3 + wc * (3.0 * n4 + wc * 4.0 * n5))
-        dzs = n1 + wc * (n2 + wc * (n3 + wc * (n4 - 4.0 * wc * n5)))
-        self.state = (accel, n1, n2, n3, n4, n5, zs, dzs)
-        return zs, dzs
-
-
 # ----------------------------------------------------------------------------------------------
 # the per-sample observer
 
@@ -777,7 +741,7 @@ class ModelCore:
         fc1, fc2 = v.static_load_n
         self._post = (s, v.roll_inertia_kgm2, fc1, fc2, 0.05 * fc1, 0.05 * fc2,
                       0.01 * (fc1 + fc2))
-        self._body = BodyHeaveFilter(observer.profile_cutoff_wavelength_m)
+        self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
         self.sm_gain = float(observer.sliding_mode_gain)
         lq, lr = sm_lipschitz(vehicle)
         self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
@@ -1220,31 +1184,18 @@ class ModelCore:
     def _emit(self, stamp: int, meta: tuple, o: list) -> None:
         """Post-processing of the linear outputs o (:data:`OUTPUTS`); appends to ready.
 
-        Body heave: :class:`BodyHeaveFilter` (inlined here), restarted with each run.
+        Body heave: :mod:`.body_heave`, restarted with each run.
         """
         (q1, q2, phi, dq1, dq2, dphi, ddq1, ddq2, ddphi, _, ddzs, _, _, ddzu1, ddzu2, w1, w2,
          df1, df2, fb1, fb2) = o
         x_dist, dt, v, conv = meta
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._post
         if self._body_started:
-            a_old, y1, y2, y3, y4, y5, _, _ = self._hstate
-            av = v if v > 0.0 else -v
-            wc = self._body.wc_per_speed * (av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS)
-            hh = 0.5 * dt
-            inv = 1.0 / (1.0 + wc * hh)
-            g = (1.0 - wc * hh) * inv
-            hh *= inv
-            n1 = g * y1 + hh * (a_old + ddzs)
-            n2 = g * y2 + hh * (y1 + n1)
-            n3 = g * y3 + hh * (y2 + n2)
-            n4 = g * y4 + hh * (y3 + n3)
-            n5 = g * y5 + hh * (y4 + n4)
-            zs = n2 + wc * (2.0 * n3 + wc * (3.0 * n4 + wc * 4.0 * n5))
-            dzs = n1 + wc * (n2 + wc * (n3 + wc * (n4 - 4.0 * wc * n5)))
-            self._hstate = (ddzs, n1, n2, n3, n4, n5, zs, dzs)
+            h = self._hstate = body_heave.step(self._hstate, ddzs, dt, v, self._wc_per_speed)
+            zs, dzs = h[6], h[7]
         else:
             zs = dzs = 0.0
-            self._hstate = (ddzs, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            self._hstate = body_heave.start(ddzs)
             self._body_started = True
         cphi = math.cos(phi)
         ssin = s * math.sin(phi)
