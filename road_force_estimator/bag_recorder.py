@@ -16,22 +16,15 @@ from __future__ import annotations
 from datetime import datetime
 import importlib
 import os
-import signal
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
-try:  # rclpy >= 7.1.4: callbacks cost a fraction of the SingleThreadedExecutor's (bench/)
-    from rclpy.experimental import EventsExecutor as Executor
-except ImportError:  # pragma: no cover
-    from rclpy.executors import SingleThreadedExecutor as Executor
 from rclpy.node import Node
 from rclpy.qos import ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 from .bag_io import BagWriteError, BagWriter
 from .messages import TOPIC_TYPES, reliable_qos, sensor_qos, topic_qos
-from .ros_parameters import ParameterError, ParameterGuard, init_ros, local_spec
+from .node_runner import run_node
+from .ros_parameters import ParameterError, ParameterGuard, local_spec
 
 QUEUE_DEPTH = 1000  # messages per topic held between two callbacks (1 s at 1 kHz)
 SPECS = (
@@ -127,37 +120,9 @@ def drain(executor, node: BagRecorder, quiet_s: float = 0.2) -> None:
 
 
 def main(args=None) -> int:
-    # Our own SIGINT/SIGTERM handling: stop spinning, then drain the queues and close the bag
-    # while the context is still valid (rclpy's handlers would shut the context down first).
-    try:
-        init_ros('bag_recorder', __doc__.splitlines()[0], SPECS, args,
-                 signal_handler_options=SignalHandlerOptions.NO)
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
-    node = None
-    try:
-        node = BagRecorder()
-        executor = Executor()
-        executor.add_node(node)
-        while not stop and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-        if rclpy.ok():
-            drain(executor, node)
-        return 0
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    # On SIGINT/SIGTERM: drain the queues and close the bag while the context is still valid.
+    return run_node('bag_recorder', __doc__.splitlines()[0], SPECS, args, BagRecorder,
+                    finish=drain, cleanup=BagRecorder.close)
 
 
 if __name__ == '__main__':

@@ -18,21 +18,13 @@ from __future__ import annotations
 
 from collections import Counter, deque
 import math
-import signal
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
-import rclpy
-from rclpy.executors import ExternalShutdownException
-try:  # rclpy >= 7.1.4: callbacks cost a fraction of the SingleThreadedExecutor's (bench/)
-    from rclpy.experimental import EventsExecutor as Executor
-except ImportError:  # pragma: no cover
-    from rclpy.executors import SingleThreadedExecutor as Executor
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
@@ -41,7 +33,8 @@ from .messages import (
     SIDES, WHEEL_FRAMES, MessageRejected, diagnostic_status, float64_msg, read_deflections,
     read_twist, reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
 from .parameters import ObserverParameters, VehicleParameters
-from .ros_parameters import ParameterError, ParameterGuard, init_ros, specs_with_prefix
+from .node_runner import run_node
+from .ros_parameters import ParameterGuard, specs_with_prefix
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
@@ -228,36 +221,8 @@ class Observer(Node):
 
 
 def main(args=None) -> int:
-    # Our own SIGINT/SIGTERM handling: stop spinning, then publish what observer.latency still
-    # holds back while the context is valid (rclpy's handlers would shut it down first).
-    try:
-        init_ros('observer', __doc__.splitlines()[0], SPECS, args,
-                 signal_handler_options=SignalHandlerOptions.NO)
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
-    node = None
-    try:
-        node = Observer()
-        executor = Executor()
-        executor.add_node(node)
-        while not stop and rclpy.ok():  # EventsExecutor.spin() of rclpy 7.1.6 busy-waits
-            executor.spin_once(timeout_sec=0.1)
-        if rclpy.ok():
-            node.finish()
-        return 0
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node('observer', __doc__.splitlines()[0], SPECS, args, Observer,
+                    finish=lambda executor, node: node.finish())
 
 
 if __name__ == '__main__':

@@ -19,13 +19,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
-import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
-try:  # rclpy >= 7.1.4: callbacks cost a fraction of the SingleThreadedExecutor's (bench/)
-    from rclpy.experimental import EventsExecutor as Executor
-except ImportError:  # pragma: no cover
-    from rclpy.executors import SingleThreadedExecutor as Executor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, NavSatFix
 
@@ -36,8 +30,9 @@ from .messages import (
 from .parameters import SimulatorParameters, VehicleParameters
 from .plant import Plant
 from .road import road_from_source
+from .node_runner import run_node
 from .ros_parameters import (
-    ParameterError, ParameterGuard, init_ros, local_spec, specs_with_prefix)
+    ParameterError, ParameterGuard, local_spec, specs_with_prefix)
 from .sensors import SensorModel
 
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
@@ -162,30 +157,13 @@ class PlantSimulator(Node):
 
 
 def main(args=None) -> int:
-    try:
-        init_ros('plant_simulator', __doc__.splitlines()[0], SPECS, args)
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    node = None
-    try:
-        node = PlantSimulator()
-        executor = Executor()
-        executor.add_node(node)
-        while rclpy.ok() and not node.finished:
-            executor.spin_once(timeout_sec=0.1)
-        for pub in node.reliable:  # let subscribers take the last samples before leaving
-            pub.wait_for_all_acked(Duration(seconds=2.0))
-        return 0
-    except ParameterError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node('plant_simulator', __doc__.splitlines()[0], SPECS, args, PlantSimulator,
+                    done=lambda node: node.finished, finish=_wait_for_subscribers)
+
+
+def _wait_for_subscribers(executor, node: PlantSimulator) -> None:
+    for pub in node.reliable:  # let subscribers take the last samples before leaving
+        pub.wait_for_all_acked(Duration(seconds=2.0))
 
 
 if __name__ == '__main__':
