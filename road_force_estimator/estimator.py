@@ -98,7 +98,7 @@ from road_force_estimator.parameters import ObserverParameters, VehicleParameter
 __all__ = [
     'Estimate', 'EstimateArrays', 'EstimatorStatus', 'Estimator', 'estimate_batch',
     'settling_time_s', 'GAP_THRESHOLD_S', 'SPEED_FLOOR_MPS', 'LIFT_OFF_FRACTION',
-    'PAIR_FIELDS', 'SCALAR_FIELDS',
+    'PAIR_FIELDS', 'SCALAR_FIELDS', 'batch_inputs', 'arrays_from_table',
 ]
 
 #: Shortest step that counts as a gap (s); the threshold is max(this, 10 typical periods).
@@ -154,6 +154,10 @@ _FLAT = ('distance_m', 'q_m', 'q_m', 'dq', 'dq', 'ddq', 'ddq', 'roll_rad', 'drol
          'road_m', 'road_m', 'tire_force_dynamic_n', 'tire_force_dynamic_n', 'wheel_load_n',
          'wheel_load_n', 'ltr', 'residual_nm', 'lift_off', 'lift_off', 'converged')
 _N_FLAT = len(_FLAT)
+#: Column indices of each field in a flat row.
+_FLAT_COLUMNS: dict[str, list[int]] = {}
+for _i, _name in enumerate(_FLAT):
+    _FLAT_COLUMNS.setdefault(_name, []).append(_i)
 
 
 @dataclass
@@ -657,14 +661,8 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
         the rows where ``valid``. Every field per sample, the ``valid`` mask and the final
         status counters.
     """
-    stamps = np.asarray(stamps_ns)
-    q = np.asarray(q_m, dtype=float)
-    phi = np.asarray(roll_rad, dtype=float)
-    n = stamps.shape[0] if stamps.ndim == 1 else -1
-    if stamps.ndim != 1 or q.shape != (n, 2) or phi.shape != (n,):
-        raise ValueError(f'stamps_ns {stamps.shape}, q_m {q.shape}, roll_rad {phi.shape}: '
-                         'expected (n,), (n, 2), (n,)')
-    speed = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
+    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+    n = stamps.shape[0]
     est = Estimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     process = est._process
     ready = est._ready
@@ -696,16 +694,37 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
         stamp_out = stamps.astype(np.int64)
     else:
         stamp_out = np.array([int(t) if _is_int(t) else 0 for t in stamp_list], dtype=np.int64)
-    cols: dict[str, list[int]] = {}
-    for i, name in enumerate(_FLAT):
-        cols.setdefault(name, []).append(i)
+    return arrays_from_table(table, stamp_out, valid, est.status)
+
+
+def batch_inputs(stamps_ns, q_m, roll_rad, speed_mps):
+    """The inputs of a batch path as arrays: stamps (n,), q (n, 2), phi (n,), speed (n,).
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not fit; the message gives them.
+    """
+    stamps = np.asarray(stamps_ns)
+    q = np.asarray(q_m, dtype=float)
+    phi = np.asarray(roll_rad, dtype=float)
+    n = stamps.shape[0] if stamps.ndim == 1 else -1
+    if stamps.ndim != 1 or q.shape != (n, 2) or phi.shape != (n,):
+        raise ValueError(f'stamps_ns {stamps.shape}, q_m {q.shape}, roll_rad {phi.shape}: '
+                         'expected (n,), (n, 2), (n,)')
+    return stamps, q, phi, np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
+
+
+def arrays_from_table(table: np.ndarray, stamp_ns: np.ndarray, valid: np.ndarray,
+                      status: EstimatorStatus) -> EstimateArrays:
+    """:class:`EstimateArrays` from rows of flat estimates (columns :data:`_FLAT`)."""
     out = {}
-    for name, idx_ in cols.items():
-        arr = table[:, idx_[0]] if len(idx_) == 1 else table[:, idx_]
+    for name, idx in _FLAT_COLUMNS.items():
+        arr = table[:, idx[0]] if len(idx) == 1 else table[:, idx]
         if name in ('lift_off', 'converged'):
             arr = arr != 0.0
         out[name] = np.ascontiguousarray(arr)
-    return EstimateArrays(stamp_ns=stamp_out, valid=valid, status=est.status, **out)
+    return EstimateArrays(stamp_ns=stamp_ns, valid=valid, status=status, **out)
 
 
 def _is_int(t) -> bool:

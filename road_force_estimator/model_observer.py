@@ -1356,23 +1356,17 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status counts what the estimator would count (and carries the noise and roughness
         used).
     """
-    from road_force_estimator.estimator import (_FLAT, EstimateArrays, EstimatorStatus,
-                                                LIFT_OFF_FRACTION)
+    from road_force_estimator.estimator import (
+        _N_FLAT, LIFT_OFF_FRACTION, EstimatorStatus, arrays_from_table, batch_inputs)
 
     vehicle = VehicleParameters() if vehicle is None else vehicle
     observer = ObserverParameters() if observer is None else observer
-    stamps = np.asarray(stamps_ns)
-    q = np.asarray(q_m, dtype=float)
-    phi = np.asarray(roll_rad, dtype=float)
-    n = stamps.shape[0] if stamps.ndim == 1 else -1
-    if stamps.ndim != 1 or q.shape != (n, 2) or phi.shape != (n,):
-        raise ValueError(f'stamps_ns {stamps.shape}, q_m {q.shape}, roll_rad {phi.shape}: '
-                         'expected (n,), (n, 2), (n,)')
-    speed = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
+    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+    n = stamps.shape[0]
     valid, restart, stamp_int, cnt = _acceptance(stamps.tolist(), q, phi, speed,
                                                  gap_threshold_s)
     core = ModelCore(vehicle, observer)
-    table = np.zeros((n, len(_FLAT)))
+    table = np.zeros((n, _N_FLAT))
     acc = np.flatnonzero(valid)
     starts = np.flatnonzero(restart[acc]).tolist() + [acc.size]
     # distance over all accepted samples, continued across gaps
@@ -1403,20 +1397,8 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     status.road_roughness_m3 = core.road_gd_m3
     status.statistics_blocks = core.blocks
     status.gain_designs = core.design_count
-    cols: dict[str, list[int]] = {}
-    for i, name in enumerate(_FLAT):
-        cols.setdefault(name, []).append(i)
-    out = {}
-    for name, ix in cols.items():
-        arr = table[:, ix[0]] if len(ix) == 1 else table[:, ix]
-        if name in ('lift_off', 'converged'):
-            arr = arr != 0.0
-        out[name] = np.ascontiguousarray(arr)
-    if np.issubdtype(stamps.dtype, np.integer):
-        stamp_out = stamps.astype(np.int64)
-    else:
-        stamp_out = stamp_int
-    return EstimateArrays(stamp_ns=stamp_out, valid=valid, status=status, **out)
+    stamp_out = stamps.astype(np.int64) if np.issubdtype(stamps.dtype, np.integer) else stamp_int
+    return arrays_from_table(table, stamp_out, valid, status)
 
 
 def _smooth_run(core: ModelCore, t: np.ndarray, q: np.ndarray, phi: np.ndarray,

@@ -72,6 +72,7 @@ from road_force_estimator.estimator import (
     SPEED_FLOOR_MPS,
     EstimateArrays,
     EstimatorStatus,
+    batch_inputs,
 )
 from road_force_estimator.load_transfer import load_transfer_ratios
 from road_force_estimator.parameters import ObserverParameters, VehicleParameters
@@ -417,17 +418,11 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     """
     vehicle = VehicleParameters() if vehicle is None else vehicle
     observer = ObserverParameters() if observer is None else observer
-    stamps = np.asarray(stamps_ns)
-    q = np.asarray(q_m, dtype=float)
-    phi = np.asarray(roll_rad, dtype=float)
-    n = stamps.shape[0] if stamps.ndim == 1 else -1
-    if stamps.ndim != 1 or q.shape != (n, 2) or phi.shape != (n,):
-        raise ValueError(f'stamps_ns {stamps.shape}, q_m {q.shape}, roll_rad {phi.shape}: '
-                         'expected (n,), (n, 2), (n,)')
+    stamps, q, phi, v = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+    n = stamps.shape[0]
     if not (isinstance(gap_threshold_s, (int, float)) and gap_threshold_s > 0.0
             and math.isfinite(gap_threshold_s)):
         raise ValueError(f'gap_threshold_s = {gap_threshold_s!r}: must be finite and > 0 s')
-    v = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
     status = EstimatorStatus()
     valid, stamp_i, acc, starts = _accept(stamps, q, phi, v, float(gap_threshold_s), status)
     bounds = list(zip(starts, starts[1:] + [acc.size]))
