@@ -89,8 +89,6 @@ def main(argv: list[str] | None = None) -> int:
                 'ltr_rms_error': a['ltr_rms_error'],
                 'iri_estimated': res.summary['iri_m_per_km']['estimated'],
                 'iri_true': res.summary['iri_m_per_km']['true']}
-            if mode == 'offline':
-                accuracy[mode]['cutoff_hz'] = res.summary['offline']['cutoff_hz']
         out['accuracy'] = accuracy
 
         speed = {}

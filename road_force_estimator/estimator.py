@@ -333,7 +333,7 @@ class Estimator:
         # Differentiators: (z0, z1, z2, last sample) for q_1, q_2, phi.
         self._d = (0.0,) * 12
         # Body-heave filter: (dd z_s input, y_1 .. y_5, z_s, dz_s); tire deflections w_i.
-        self._h = (0.0,) * 8
+        self._h = body_heave.start(0.0)
         self._w = (0.0, 0.0)
         self._decay = (-1.0, 0.0, 0.0)   # cached (dt, e_1, e_2) of the tire lag
         self._flat: tuple | None = None
@@ -584,8 +584,8 @@ class Estimator:
         # Step 4: body heave, band-limited double integration (body_heave.py).
         h = body_heave.start(ddzs) if restart else body_heave.step(self._h, ddzs, dt, v,
                                                                     wc_per_speed)
-        zs = h[6]
-        dzs = h[7]
+        zs = h[-2]
+        dzs = h[-1]
         # Step 5: wheel heaves and rates.
         ssin = s * sphi
         srate = s * cphi * c1_

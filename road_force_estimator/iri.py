@@ -193,11 +193,14 @@ def rectified_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
     beta = inv @ pr
     eta0 = inv @ np.array([s0, 0.0, s0, 0.0])
     out = np.array([1.0, 0.0, -1.0, 0.0]) @ vec      # Z1 - Z3 in modal coordinates
-    rel = np.zeros(slope.size, dtype=complex)
+    rel = np.zeros(slope.size)
     for j in range(4):
-        eta, _ = lfilter([beta[j]], [1.0, -lam[j]], slope.astype(complex),
-                         zi=[lam[j] * eta0[j]])
-        rel += out[j] * eta
+        # a real input gives conjugate modes conjugate responses (LAPACK returns exact
+        # conjugate pairs): one of each pair, twice its real part
+        if lam[j].imag < 0.0:
+            continue
+        eta, _ = lfilter([beta[j]], [1.0, -lam[j]], slope, zi=[lam[j] * eta0[j]])
+        rel += (2.0 if lam[j].imag > 0.0 else 1.0) * (out[j] * eta).real
     position = x[0] + dx * (np.arange(slope.size) + 0.5)
     return RectifiedSlope(position_m=position, slope=np.abs(rel.real), dx_m=dx, base_samples=k)
 

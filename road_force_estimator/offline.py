@@ -19,14 +19,12 @@ and replaces its two causal parts by zero-phase ones:
    one. The cut-off is clipped to [:data:`MIN_CUTOFF_HZ`, :data:`MAX_CUTOFF_FRACTION` x fs]
    (above that band no filter is applied); it can also be given explicitly.
 3. **Body heave, band-limited without phase.** ``z_s`` is ``dd z_s`` through
-   ``H(s) / s^2`` with ``H`` a second-order Butterworth high-pass at ``w_c = 2 pi v /
-   lambda_c`` (``lambda_c`` = ``observer.profile_cutoff_wavelength``, ``v`` the run's median
-   speed, floored at :data:`~.estimator.SPEED_FLOOR_MPS`): forward through the stable leaky
-   double integrator ``1 / (s^2 + sqrt(2) w_c s + w_c^2)`` (= ``H / s^2``), then backward
-   through ``H``. The phases cancel (what remains is exactly the double integrator's -180
-   degrees) and the gain is ``|H|^2 / omega^2``: at 30 m wavelength with ``lambda_c`` = 100 m,
-   ``|H|^2`` = 0.992 (the causal estimator's filter pays ~4.5 % of profile error in the band;
-   this one ~1 %). ``dz_s`` is its central difference.
+   ``|H|^2 / s^2`` with ``H`` a Butterworth high-pass (order
+   :data:`~.body_heave.ZERO_PHASE_ORDER`) at ``w_c = 2 pi v / lambda_c`` (``lambda_c`` =
+   ``observer.profile_cutoff_wavelength``, ``v`` the run's median speed, floored at
+   :data:`~.estimator.SPEED_FLOOR_MPS`), run forward and backward
+   (:func:`~.body_heave.zero_phase`): no phase error, and at 30 m wavelength with
+   ``lambda_c`` = 100 m ``|H|^2`` = 0.99994. ``dz_s`` is its central difference.
 
 Everything else (suspension and tire forces, wheel accelerations, loads, wheel heaves, the road
 with tire damping, distance, LTR, residual, lift-off) is the estimator's chain, vectorised.
@@ -250,10 +248,8 @@ def zero_phase_derivatives(x, dt_s: float, cutoff_hz: float, *,
 def zero_phase_body_heave(accel_mps2, dt_s: float, cutoff_rad_s: float) -> np.ndarray:
     """Band-limited double integral of the body acceleration, without phase error.
 
-    ``z = H_b(H_f(a))`` with ``H_f = 1 / (s^2 + sqrt(2) w s + w^2)`` run forward and
-    ``H_b = s^2 / (s^2 + sqrt(2) w s + w^2)`` run backward (both bilinear at the sample rate,
-    started in their steady state for the first / last value): the double integrator
-    ``1 / s^2`` times ``|H|^2``, ``H`` the second-order Butterworth high-pass at ``w``.
+    :func:`road_force_estimator.body_heave.zero_phase`: ``1 / s^2`` times ``|H|^2``, ``H``
+    the Butterworth high-pass (order :data:`~.body_heave.ZERO_PHASE_ORDER`) at ``w``.
 
     Parameters
     ----------
@@ -269,22 +265,8 @@ def zero_phase_body_heave(accel_mps2, dt_s: float, cutoff_rad_s: float) -> np.nd
     ndarray, shape (n,)
         z_s (m).
     """
-    a = np.asarray(accel_mps2, dtype=float)
-    if a.size < 2:
-        return np.zeros_like(a)
-    w = float(cutoff_rad_s)
-    # Bilinear transform s = K (1 - 1/z) / (1 + 1/z), K = 2 / dt, written out.
-    gain = 2.0 / dt_s
-    kk, ak, b = gain * gain, math.sqrt(2.0) * w * gain, w * w
-    d0 = kk + ak + b
-    af = np.array([1.0, 2.0 * (b - kk) / d0, (kk - ak + b) / d0])
-    bf = np.array([1.0, 2.0, 1.0]) / d0
-    ab = af
-    bb = np.array([1.0, -2.0, 1.0]) * (kk / d0)
-    y, _ = signal.lfilter(bf, af, a, zi=signal.lfilter_zi(bf, af) * a[0])
-    r = y[::-1]
-    z, _ = signal.lfilter(bb, ab, r, zi=signal.lfilter_zi(bb, ab) * r[0])
-    return z[::-1].copy()
+    from road_force_estimator import body_heave
+    return body_heave.zero_phase(accel_mps2, dt_s, cutoff_rad_s)
 
 
 def edge_time_s(cutoffs_hz, dt_s: float) -> float:

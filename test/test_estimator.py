@@ -198,7 +198,7 @@ class TestBodyHeaveFilter:
         wave = 2.0 * math.pi * SPEED / 10.0
         amp = 1e-3
         rows = []
-        for k in range(20001):
+        for k in range(40001):
             t = k * 1e-3
             q = -amp * math.sin(wave * t)
             out = est.update(k * 1_000_000, (q, q), 0.0, SPEED)
@@ -206,7 +206,8 @@ class TestBodyHeaveFilter:
         t, z = np.array(rows).T
         acc = 2.0 * vehicle.suspension_stiffness_npm[0] * amp / vehicle.sprung_mass_kg
         ref = -acc / wave ** 2 * np.sin(wave * t)
-        late = t > 15.0
+        # after the start-up transient of the filter's poles at w (~t^7 exp(-w t): 30 s)
+        late = t > 30.0
         assert np.abs(z[late] - ref[late]).max() <= 0.005 * acc / wave ** 2
 
     def test_speed_floor_keeps_standing_still_finite(self):

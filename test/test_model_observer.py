@@ -316,6 +316,57 @@ class TestOffline:
         np.testing.assert_allclose(off.distance_m, on.distance_m, rtol=1e-12)
         assert np.all(np.isfinite(off.wheel_load_n))
 
+    @pytest.mark.parametrize('m', [1, 7, 2 * mo._LTI_BLOCK - 1, 3 * mo._LTI_BLOCK,
+                                   70 * mo._LTI_BLOCK + 37])
+    def test_blocked_recursion_is_the_sample_loop(self, m):
+        # x_k = F x_(k-1) + d_k, in long double one sample at a time, on a stable F whose
+        # states differ in scale by 1e6 (the observer's is as ill-conditioned)
+        rng = np.random.default_rng(m)
+        nx = 9
+        a = rng.standard_normal((nx, nx))
+        a *= 0.9995 / np.max(np.abs(np.linalg.eigvals(a)))
+        scale = np.logspace(-3, 3, nx)
+        f = (a * scale[:, None]) / scale[None, :]
+        drive = rng.standard_normal((m, nx)) * scale
+        x0 = rng.standard_normal(nx) * scale
+        ref = np.empty((m, nx))
+        x = x0.astype(np.longdouble)
+        for k in range(m):
+            x = f.astype(np.longdouble) @ x + drive[k]
+            ref[k] = x
+        got = mo._lti(f, drive, x0)
+        span = np.max(np.abs(ref), axis=0)
+        assert np.max(np.abs(got - ref) / span) < 1e-11
+
+    def test_acceptance_rules_are_the_estimators_on_irregular_steps(self):
+        # many steps around the gap threshold and ten typical steps: the offline rules must
+        # accept, reject and restart exactly where the per-sample estimator does
+        rng = np.random.default_rng(5)
+        n = 3000
+        dt = np.where(rng.random(n) < 0.03, rng.uniform(0.05, 1.5, n),
+                      rng.uniform(0.002, 0.03, n))
+        st = np.cumsum(np.round(dt * 1e9).astype(np.int64)) + 1_700_000_000 * 10**9
+        st[[50, 51, 900]] = st[[49, 49, 800]]                  # duplicates, backwards
+        q = 1e-3 * rng.standard_normal((n, 2))
+        phi = 1e-3 * rng.standard_normal(n)
+        q[70, 1] = np.nan
+        phi[71] = 3.0
+        v = np.full(n, 12.0)
+        valid, restart, _, counts = mo._acceptance(st, q, phi, v, 0.1)
+        est = Estimator(VEHICLE, ObserverParameters(discretization='implicit'))
+        accepted, restarts = [], []
+        for k in range(n):
+            before = (est.status.accepted, est.status.resets)
+            est.update(int(st[k]), q[k], float(phi[k]), float(v[k]))
+            accepted.append(est.status.accepted > before[0])
+            restarts.append(est.status.resets > before[1])
+        np.testing.assert_array_equal(valid, accepted)
+        restarts[int(np.flatnonzero(valid)[0])] = True          # the first sample starts
+        np.testing.assert_array_equal(restart, restarts)
+        for name, value in counts.items():
+            assert getattr(est.status, name) == value, name
+        assert counts['gaps'] > 20 and counts['rejected_time'] == 3
+
 
 class TestEndToEnd:
     def test_without_noise(self, drive):

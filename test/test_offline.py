@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from road_force_estimator import offline
+from road_force_estimator import body_heave, offline
 from road_force_estimator.estimator import estimate_batch
 from road_force_estimator.offline import (
     OfflineEstimateArrays, auto_cutoff_hz, edge_time_s, estimate_offline, noise_std,
@@ -96,17 +96,20 @@ class TestBuildingBlocks:
         np.testing.assert_allclose(ddy[:, 1], -9.0, rtol=0, atol=1e-6)
 
     def test_body_heave_is_the_double_integral_with_butterworth_squared_gain(self):
-        # a = -A w^2 sin(w t) -> z = A |H(jw)|^2 sin(w t), |H|^2 = r^4 / (1 + r^4), r = w/wc,
-        # and no phase (to the bilinear transform's frequency warping, ~(w dt)^2 / 12).
+        # a = -A w^2 sin(w t) -> z = A |H(jw)|^2 sin(w t), |H|^2 = r^2n / (1 + r^2n), r = w/wc
+        # (Butterworth of order n), and no phase (to the bilinear transform's frequency
+        # warping, ~(w dt)^2 / 12).
+        n = body_heave.ZERO_PHASE_ORDER
         dt = 1e-3
-        t = np.arange(60000) * dt
+        t = np.arange(120000) * dt
         wc = 2 * np.pi * 20.0 / 100.0
         for wave_m in (30.0, 10.0):
             w = 2 * np.pi * 20.0 / wave_m
             z = zero_phase_body_heave(-0.01 * w * w * np.sin(w * t), dt, wc)
-            r4 = (w / wc) ** 4
-            mid = slice(15000, -15000)
-            np.testing.assert_allclose(z[mid], 0.01 * r4 / (1 + r4) * np.sin(w * t[mid]),
+            r2n = (w / wc) ** (2 * n)
+            # (edges: the start transients decay as exp(-sin(pi / 2n) wc t): 40 s)
+            mid = slice(40000, -40000)
+            np.testing.assert_allclose(z[mid], 0.01 * r2n / (1 + r2n) * np.sin(w * t[mid]),
                                        rtol=0, atol=1e-4 * 0.01)
 
     def test_body_heave_removes_an_acceleration_bias(self):
