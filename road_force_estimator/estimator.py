@@ -631,9 +631,13 @@ def _estimate(stamp: int, flat: tuple) -> Estimate:
     """An :class:`Estimate` from the flat output tuple."""
     (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2, dzu1, dzu2,
      ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv) = flat
-    return Estimate(stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi, zs, dzs,
-                    ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2), (u1, u2), (df1, df2),
-                    (fn1, fn2), ltr, res, (lo1, lo2), conv)
+    # tuple.__new__ directly: the namedtuple's generated __new__ is one Python frame more
+    return _new_tuple(Estimate, (stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi,
+                                 zs, dzs, ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2),
+                                 (u1, u2), (df1, df2), (fn1, fn2), ltr, res, (lo1, lo2), conv))
+
+
+_new_tuple = tuple.__new__
 
 
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
