@@ -23,6 +23,8 @@ Numbers go to stdout (Markdown) and, with ``--json``, to a file.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import os
 from pathlib import Path
@@ -46,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--ground-truth', action='store_true',
                    help='record the simulator truth topics too')
     p.add_argument('--mode', choices=('offline', 'online'), default='offline')
+    p.add_argument('--tmp', metavar='DIR',
+                   help='folder for the bags (default: the system temp folder; /dev/shm '
+                        'keeps the disk out of the figures)')
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
     p.add_argument('--worker', nargs=2, metavar=('BAG', 'TMP'), help=argparse.SUPPRESS)
     return p
@@ -87,11 +92,11 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
 
 
 def measure(*, duration_s: float = 600.0, rate_hz: float = 1000.0, repeats: int = 3,
-            ground_truth: bool = False, mode: str = 'offline') -> dict:
+            ground_truth: bool = False, mode: str = 'offline', tmp_dir: str | None = None) -> dict:
     """Simulate the drive, time ``estimate_bag`` (see the module notes); the numbers."""
     from road_force_estimator import simulate_bag
 
-    with tempfile.TemporaryDirectory(prefix='estimate_bag_speed_') as tmp:
+    with tempfile.TemporaryDirectory(prefix='estimate_bag_speed_', dir=tmp_dir) as tmp:
         tmp = Path(tmp)
         bag = tmp / 'drive'
         argv = ['--road', 'iso8608:C:seed=1', '--speed', '20', '--rate', f'{rate_hz:g}',
@@ -99,9 +104,11 @@ def measure(*, duration_s: float = 600.0, rate_hz: float = 1000.0, repeats: int 
                 '--noise-roll', '1e-4', '--seed', '1', '--output', str(bag), '--no-progress']
         if not ground_truth:
             argv.append('--no-ground-truth')
-        code = simulate_bag.main(argv)
+        sink = io.StringIO()
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            code = simulate_bag.main(argv)
         if code != 0:
-            raise RuntimeError(f'simulate_bag exit {code}')
+            raise RuntimeError(f'simulate_bag exit {code}: {sink.getvalue().strip()[-300:]}')
         size = sum(p.stat().st_size for p in bag.iterdir())
         pin = ['taskset', '-c', '0'] if shutil.which('taskset') else []
         env = {**os.environ, **ONE_THREAD_ENV}
@@ -127,6 +134,7 @@ def measure(*, duration_s: float = 600.0, rate_hz: float = 1000.0, repeats: int 
                   'duration_s': duration_s, 'ground_truth': ground_truth,
                   'messages_per_sample': 6 if ground_truth else 2, 'bag_bytes': size},
         'mode': mode, 'pinned': bool(pin), 'samples': n,
+        'folder': tmp_dir or tempfile.gettempdir(),
         'first_run': {**doc['runs'][0], 'samples_per_s': n / doc['runs'][0]['wall_s']},
         'median_run': {'wall_s': med, 'samples_per_s': n / med,
                        'cpu_s': statistics.median(r['cpu_s'] for r in later)},
@@ -144,8 +152,8 @@ def markdown(doc: dict, command: str) -> list[str]:
              f'Drive: ISO C, 20 m/s, {d["rate_hz"]:g} Hz, {d["duration_s"]:g} s = {n} samples, '
              f'{d["messages_per_sample"]} messages per sample'
              f'{" (ground truth recorded)" if d["ground_truth"] else ""}, '
-             f'{d["bag_bytes"] / 1e6:.0f} MB; one CPU (taskset: {doc["pinned"]}), one BLAS '
-             'thread.', '',
+             f'{d["bag_bytes"] / 1e6:.0f} MB, in {doc["folder"]}; one CPU (taskset: '
+             f'{doc["pinned"]}), one BLAS thread.', '',
              '| what | wall (s) | samples/s |', '|---|---|---|',
              f'| estimate_bag.run, median of {len(doc["runs"]) - 1} runs after the first | '
              f'{doc["median_run"]["wall_s"]:.3f} | {doc["median_run"]["samples_per_s"]:,.0f} |',
@@ -165,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(doc))
         return 0
     doc = measure(duration_s=args.duration, rate_hz=args.rate, repeats=args.repeats,
-                  ground_truth=args.ground_truth, mode=args.mode)
+                  ground_truth=args.ground_truth, mode=args.mode, tmp_dir=args.tmp)
     command = 'python -m bench.estimate_bag_speed ' + ' '.join(argv or sys.argv[1:])
     doc['command'] = command.strip()
     print('\n'.join(markdown(doc, doc['command'])))
