@@ -28,19 +28,21 @@ The chain is MODEL.md "Reconstruction", steps 1-9 (index 1/2 there = 0/1 here = 
 3. ``dF_i = m_i dd z_ui + F_bi``, ``F_n,i = F_c,i + dF_i``: no integration, drift-free. The
    loads are not clipped at 0, so that the total-load identity holds on the estimates
    (``F_n1 + F_n2 = F_c1 + F_c2 + M dd z_s + m_1 dd z_u1 + m_2 dd z_u2``).
-4. Body heave: ``z_s = H(s) dd z_s / s^2``, a band-limited double integration. ``H = 1 - G``
-   is the high-pass complementary to ``G = (5 w^4 s + w^5) / (s + w)^5`` (five real poles at
-   ``w = 2 pi max(|v|, v_floor) / lambda_c``, ``lambda_c`` = ``observer.
-   profile_cutoff_wavelength``, ``v_floor`` = :data:`SPEED_FLOOR_MPS`). ``H ~ 10 s^2 / w^2``
-   near 0, so a constant acceleration bias b leaves a bounded offset ``10 b / w^2`` instead of
-   ``b t^2 / 2``; above ``w``, ``1 - H`` falls as ``5 (w / Omega)^4``, so the 0.5-30 m band is
-   kept in amplitude and phase. The second-order high-pass MODEL.md suggests leaves ``1 - H ~
-   2 zeta w / Omega`` (a phase lead, first order in w): on ISO class C at 20 m/s with
-   ``lambda_c`` = 100 m it costs 37 % of band-passed profile error, against 4.2 % here (the
-   price: a gain of up to 1.9 around ``w``, outside the band, and a -3 dB point near
-   ``3.3 lambda_c``). Implemented as five cascaded Tustin lags ``1/(s + w)`` with outputs
-   ``y_1..y_5``: ``z_s = y_2 + 2 w y_3 + 3 w^2 y_4 + 4 w^3 y_5``, ``dz_s = y_1 + w y_2 +
-   w^2 y_3 + w^3 y_4 - 4 w^4 y_5``, with the real dt.
+4. Body heave: ``z_s = H(s) dd z_s / s^2``, a band-limited double integration
+   (:mod:`.body_heave`). ``H = 1 - G`` is the high-pass complementary to ``G = (8 w^7 s +
+   w^8) / (s + w)^8`` (eight real poles at ``w = 2 pi max(|v|, v_floor) / lambda_c``,
+   ``lambda_c`` = ``observer.profile_cutoff_wavelength``, ``v_floor`` =
+   :data:`SPEED_FLOOR_MPS`). ``H ~ 28 s^2 / w^2`` near 0, so a constant acceleration bias b
+   leaves a bounded offset ``28 b / w^2`` instead of ``b t^2 / 2``; above ``w``, ``1 - H``
+   falls as ``8 (w / Omega)^7``, so the 0.5-30 m band is kept in amplitude and phase. The
+   second-order high-pass MODEL.md suggests leaves ``1 - H ~ 2 zeta w / Omega`` (a phase lead,
+   first order in w): on ISO class C at 20 m/s with ``lambda_c`` = 100 m it costs 37 % of
+   band-passed profile error (five poles: 4.2 %; eight: 3.3 % for this chain, 0.85 % for the
+   model observer, ``bench.run_benchmark`` C20-1k-0um). The price: a gain of up to 2.5 around
+   ``0.52 w`` (waves of ~1.9 ``lambda_c``), outside the band, and a -3 dB point near ``5.9
+   lambda_c``. Implemented as eight cascaded Tustin lags ``1/(s + w)`` with outputs
+   ``y_1..y_8``: ``z_s = sum_{k>=2} (k-1) w^(k-2) y_k``, ``dz_s = sum_{k<8} w^(k-1) y_k -
+   7 w^7 y_8``, with the real dt.
 5. ``z_u1 = z_s + s sin(phi) - q_1``, ``z_u2 = z_s - s sin(phi) - q_2`` (and their rates).
 6. Road: ``kt_i (u_i - z_ui) + ct_i (du_i - dz_ui) = dF_i`` solved causally for ``u_i``: the
    tire deflection ``w_i = u_i - z_ui`` is ``dF_i / kt_i`` through the first-order lag
