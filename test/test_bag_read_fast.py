@@ -15,7 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 
-from road_force_estimator import bag_io
+from road_force_estimator import bag_io, mcap_file
 from road_force_estimator.bag_io import BagWriter, TYPESTORE
 
 T = TYPESTORE.types
@@ -72,7 +72,7 @@ def read_drive(path, *, indexed, monkeypatch):
 
 def scan_counts(mcap):
     """(chunks read through their index, chunks walked) of one .mcap file."""
-    scan = bag_io._McapScan(Path(mcap), lambda channel: True, indexed=True)
+    scan = mcap_file._McapScan(Path(mcap), lambda channel: True, indexed=True)
     for _ in scan.batches():
         pass
     return scan.indexed_chunks, scan.walked_chunks

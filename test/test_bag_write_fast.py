@@ -16,7 +16,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 import yaml
 
-from road_force_estimator import bag_io
+from road_force_estimator import bag_io, mcap_file
 from road_force_estimator.bag_io import BagWriter, TYPESTORE
 
 T = TYPESTORE.types
@@ -156,9 +156,9 @@ def assert_sequences(messages):
 def sizes(request, monkeypatch):
     """Chunk and block sizes (bytes): chunks and blocks end inside rows and records."""
     if request.param is None:
-        return bag_io._McapFile.CHUNK_BYTES
+        return mcap_file._McapFile.CHUNK_BYTES
     chunk, block = request.param
-    monkeypatch.setattr(bag_io._McapFile, 'CHUNK_BYTES', chunk)
+    monkeypatch.setattr(mcap_file._McapFile, 'CHUNK_BYTES', chunk)
     monkeypatch.setattr(BagWriter, 'BLOCK_BYTES', block)
     monkeypatch.setattr(BagWriter, 'BLOCK_MESSAGES', 7)
     return chunk
@@ -249,7 +249,7 @@ class TestEstimateBag:
         got = read_decoded(tmp_path / 'e')
         assert [(g[0], g[2], g[4].status[0].message) for g in got] == [
             (bag_io.TOPIC_DIAGNOSTICS, BASE_NS + 7, 'no rows')]
-        assert len(check_mcap(tmp_path / 'e', bag_io._McapFile.CHUNK_BYTES)) == 1
+        assert len(check_mcap(tmp_path / 'e', mcap_file._McapFile.CHUNK_BYTES)) == 1
         meta = yaml.safe_load((tmp_path / 'e' / 'metadata.yaml').read_text())
         counts = {t['topic_metadata']['name']: t['message_count']
                   for t in meta['rosbag2_bagfile_information']['topics_with_message_count']}
@@ -354,7 +354,7 @@ class TestWriteRows:
         assert all(g[2] == g[3] for g in got)
 
     def test_short_writes_lose_nothing(self, tmp_path, monkeypatch):
-        monkeypatch.setattr(bag_io._McapFile, 'CHUNK_BYTES', 5000)
+        monkeypatch.setattr(mcap_file._McapFile, 'CHUNK_BYTES', 5000)
         real = os.writev
 
         def short(fd, pieces):
@@ -362,7 +362,7 @@ class TestWriteRows:
             data = b''.join(bytes(p) for p in pieces)[:1000]
             return real(fd, [data])
 
-        monkeypatch.setattr(bag_io.os, 'writev', short)
+        monkeypatch.setattr(mcap_file.os, 'writev', short)
         stamps = BASE_NS + np.arange(400) * 1000
         with BagWriter(tmp_path / 'w') as bag:
             bag.add_topic('/a', 'std_msgs/msg/Float64')
@@ -380,7 +380,7 @@ class TestColumns:
         rng = np.random.default_rng(2)
         for la, lb in [(0, 0), (5, 0), (0, 9), (1, 1), (1000, 1 << 20), (77, 1048599)]:
             a, b = rng.bytes(la), rng.bytes(lb)
-            assert bag_io._crc32_combine(zlib.crc32(a), zlib.crc32(b), lb) == zlib.crc32(a + b)
+            assert mcap_file._crc32_combine(zlib.crc32(a), zlib.crc32(b), lb) == zlib.crc32(a + b)
 
     def test_lazy_parts_taken_rows_and_constants_equal_serialize_cdr(self):
         rng = np.random.default_rng(4)
