@@ -38,7 +38,7 @@ from road_force_estimator.segments import segment_bounds
 __all__ = [
     'GOLDEN_K1', 'GOLDEN_K2', 'GOLDEN_C', 'GOLDEN_MU', 'IRI_SPEED_MPS', 'BASE_LENGTH_M',
     'INIT_LENGTH_M', 'RectifiedSlope', 'golden_car_matrices', 'rectified_slope', 'iri',
-    'iri_segments', 'iri_table',
+    'iri_segments', 'interval_counts', 'iri_table',
 ]
 
 #: Golden quarter-car, normalised by the sprung mass (ASTM E1926).
@@ -288,6 +288,25 @@ def iri_segments(distance_m: np.ndarray, elevation_m: np.ndarray,
     count = np.bincount(seg[inside], minlength=k)
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(count > 0, 1000.0 * total / count, np.nan)
+
+
+def interval_counts(distance_m: np.ndarray, edges_m: np.ndarray, *,
+                    dx_m: float | None = None) -> np.ndarray:
+    """How many of :func:`rectified_slope`'s intervals (by their midpoints) fall in each
+    segment ``[edges[j], edges[j+1])`` (the last includes its end), as :func:`iri_segments`
+    counts them; (k,) int. With these, the IRI of the whole profile is the count-weighted mean
+    of the segment IRIs (when the segments cover it), without running the quarter-car again.
+    """
+    x = np.asarray(distance_m, dtype=float)
+    edges = np.asarray(edges_m, dtype=float)
+    grid, _, dx = _evenly_spaced(x, np.zeros(x.size), dx_m)
+    k_base = max(1, int(round(BASE_LENGTH_M / dx)))
+    position = grid[0] + dx * (np.arange(max(grid.size - k_base, 0)) + 0.5)
+    k = edges.size - 1
+    seg = np.searchsorted(edges, position, side='right') - 1
+    seg[position == edges[-1]] = k - 1
+    inside = (seg >= 0) & (seg < k)
+    return np.bincount(seg[inside], minlength=k)
 
 
 def iri_table(distance_m: np.ndarray, elevation_m: np.ndarray, *,

@@ -340,6 +340,25 @@ def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
         return None
 
 
+def _whole_from_segments(x: np.ndarray, z: np.ndarray, segments: dict) -> list[float] | None:
+    """Whole-drive IRI of the estimated profile from its per-segment IRI (one quarter-car run
+    instead of two): the mean over segments weighted by their slope intervals
+    (:func:`~.iri.interval_counts`); None when the segments do not give it."""
+    start, end = segments.get('start_m'), segments.get('end_m')
+    if start is None or len(start) == 0 or not np.isfinite(z).all():
+        return None
+    edges = np.concatenate([start, end[-1:]])
+    try:
+        counts = iri_mod.interval_counts(x, edges)
+    except ValueError:
+        return None
+    values = np.column_stack([segments['iri_left_m_per_km'], segments['iri_right_m_per_km']])
+    used = counts > 0
+    if counts.sum() == 0 or not np.isfinite(values[used]).all():
+        return None
+    return _floats(values[used].T @ counts[used] / counts.sum())
+
+
 def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
               observer: ObserverParameters | None = None, *, mode: str = 'online',
               input_name: str = '', reference=None, reference_offset_m: float | None = None,
@@ -416,14 +435,17 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
             summary.setdefault('offline', {})[key] = _floats(getattr(est, key))
     summary['accuracy'] = accuracy(est, al, vehicle)
     up = al.increasing()
+    segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
     iri_est = iri_true = None
     if np.count_nonzero(up) >= 2:
-        iri_est = _whole_iri(al.x_m[up], al.pick(est, 'road_m')[up])
+        road = al.pick(est, 'road_m')[up]
+        iri_est = _whole_from_segments(al.x_m[up], road, segments)
+        if iri_est is None:
+            iri_est = _whole_iri(al.x_m[up], road)
         truth = al.profile_truth
         if truth is not None:
             iri_true = _whole_iri(al.x_m[up], truth[up])
     summary['iri_m_per_km'] = {'estimated': iri_est, 'true': iri_true}
-    segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
     summary['segments'] = int(len(segments['start_m']))
     return summary, segments, al
 

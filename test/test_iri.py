@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from road_force_estimator.iri import iri, iri_segments, iri_table, rectified_slope
+from road_force_estimator.iri import (interval_counts, iri, iri_segments, iri_table,
+                                      rectified_slope)
 
 V = 80.0 / 3.6                     # m/s, the IRI speed
 K1, K2, C, MU = 653.0, 63.3, 6.0, 0.15
@@ -134,6 +135,21 @@ class TestProperties:
         assert whole == pytest.approx(iri(x, z), rel=1e-12)
         # A segment length given as the third argument (as segments.py may pass edges).
         np.testing.assert_array_equal(iri_segments(x, z, 100.0), table['iri_left_m_per_km'])
+
+    @pytest.mark.parametrize('uneven', [False, True])
+    def test_interval_counts_weight_segments_into_the_whole(self, uneven):
+        # the count of slope intervals per segment: the counts sum to the number of
+        # rectified slopes, and weight the segment IRIs into the whole-profile IRI
+        rng = np.random.default_rng(4)
+        x = np.arange(0.0, 730.0, 0.02)
+        if uneven:
+            x = np.sort(x + rng.uniform(-0.004, 0.004, x.size))
+        z = np.cumsum(rng.normal(0.0, 2e-4, x.size))
+        edges = np.array([x[0], 100.0, 250.0, 400.0, 555.5, x[-1]])
+        counts = interval_counts(x, edges)
+        assert counts.sum() == rectified_slope(x, z).slope.size
+        seg = iri_segments(x, z, edges)
+        assert np.sum(seg * counts) / counts.sum() == pytest.approx(iri(x, z), rel=1e-12)
 
     def test_standstill_repeats_are_collapsed(self, shared_data):
         x, z = load_profile_1(shared_data)
