@@ -142,77 +142,20 @@ class _Stages:
 
 def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
                     progress: bool = False):
-    """The observer node's numbers: :meth:`Estimator.update` per sample, as arrays.
-
-    Every sample goes through ``update`` in order (as the node does per message); each estimate
-    returned is placed on the row of the sample whose stamp it carries (with zero latency: the
-    sample just given). Rows without an estimate (rejected) hold the previous one (zeros before
-    the first) and have ``valid`` False: with zero latency, the
-    :func:`~.estimator.estimate_batch` layout, and equal numbers.
+    """The observer node's numbers: :func:`~.estimator.estimate_batch`, which runs
+    :meth:`Estimator.update`'s steps per sample, in order, then ``flush`` (bit-identical to
+    them: test_estimator); row k holds the estimate of sample k (with a latency it came with a
+    later input or from ``flush``), rejected rows hold the previous one with ``valid`` False.
 
     Returns
     -------
     EstimateArrays
     """
-    from dataclasses import fields
+    from road_force_estimator.estimator import estimate_batch
 
-    from road_force_estimator.estimator import Estimate, EstimateArrays, Estimator
-
-    wanted = {f.name for f in fields(EstimateArrays)}
-    est = Estimator(vehicle, observer)
-    update = est.update
-    stamps_in = np.asarray(stamps_ns)
-    n = len(stamps_in)
-    placed: list = [None] * n
-    index_of: dict[int, int] = {}
-    block = 10_000
-    stamps = stamps_in.tolist()
-    q = np.asarray(q_m, dtype=float).tolist()
-    phi = np.asarray(roll_rad, dtype=float).tolist()
-    v = np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,)).tolist()
-    with _progress(n, progress, f'{PROG}: online') as bar:
-        for start in range(0, n, block):
-            stop = min(n, start + block)
-            for i in range(start, stop):
-                # Every sample's row is known by its stamp: with observer.latency > 0 the
-                # estimate of a sample comes back with a later input (or from flush()).
-                index_of.setdefault(stamps[i], i)   # a duplicate keeps the first row
-                e = update(stamps[i], q[i], phi[i], v[i])
-                if e is not None:
-                    j = index_of.pop(e.stamp_ns, None)
-                    if j is not None:
-                        placed[j] = e
-            bar.update(stop - start)
-    for e in est.flush():       # the estimates still held back at the end of the bag
-        j = index_of.pop(e.stamp_ns, None)
-        if j is not None:
-            placed[j] = e
-    valid = np.array([e is not None for e in placed], dtype=bool)
-    have = [e for e in placed if e is not None]
-    last = np.maximum.accumulate(np.where(valid, np.arange(n), -1)) if n else np.zeros(0, int)
-    # Row r of the compact table is the r-th valid estimate; sample k takes the last one.
-    pick = np.cumsum(valid) - 1
-    arrays: dict[str, np.ndarray] = {}
-    columns = list(zip(*have)) if have else [()] * len(Estimate._fields)
-    for name, col in zip(Estimate._fields, columns):
-        if name == 'stamp_ns' or name not in wanted:
-            continue
-        compact = np.array(col)
-        if compact.dtype == object or compact.size == 0:
-            compact = np.zeros((0, 2) if name in _PAIR_FIELDS else (0,))
-        if compact.dtype.kind not in 'bf':
-            compact = compact.astype(float)
-        full = np.zeros((n,) + compact.shape[1:], dtype=compact.dtype)
-        if have:
-            rows = last >= 0
-            full[rows] = compact[pick[rows]]
-        arrays[name] = full
-    return EstimateArrays(stamp_ns=stamps_in.astype(np.int64).copy(), valid=valid,
-                          status=est.status, **arrays)
-
-
-_PAIR_FIELDS = ('q_m', 'dq', 'ddq', 'wheel_heave_m', 'wheel_heave_rate', 'wheel_accel_mps2',
-                'road_m', 'tire_force_dynamic_n', 'wheel_load_n', 'lift_off')
+    with _progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
+        return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                              progress=bar.update)
 
 
 def _diagnostics(est, summary_counts: dict[str, int], mode: str):

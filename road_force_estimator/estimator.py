@@ -84,7 +84,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 import itertools
 import math
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -642,9 +642,14 @@ def _estimate(stamp: int, flat: tuple) -> Estimate:
 _new_tuple = tuple.__new__
 
 
+#: Samples between two calls of the ``progress`` callback of :func:`estimate_batch`.
+PROGRESS_BLOCK = 10_000
+
+
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                    observer: ObserverParameters | None = None, *,
-                   gap_threshold_s: float = GAP_THRESHOLD_S) -> EstimateArrays:
+                   gap_threshold_s: float = GAP_THRESHOLD_S,
+                   progress: Callable[[int], object] | None = None) -> EstimateArrays:
     """Run the estimator over whole arrays; identical numbers to :meth:`Estimator.update`.
 
     Parameters
@@ -658,6 +663,9 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     speed_mps : array_like, shape (n,) or scalar
         Speed (m/s).
     vehicle, observer : parameters (defaults when None).
+    progress : callable, optional
+        Called with the number of samples done after every :data:`PROGRESS_BLOCK` of them
+        (e.g. a progress bar's ``update``).
 
     Returns
     -------
@@ -677,10 +685,15 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     valid_list = []
     flag = valid_list.append
     stamp_list = stamps.tolist()
-    for t, (a, b), p, v in zip(stamp_list, q.tolist(), phi.tolist(), speed.tolist()):
-        flag(process(t, a, b, p, v))
-        while ready:
-            take(ready.popleft()[1])
+    columns = (stamp_list, q.tolist(), phi.tolist(), speed.tolist())
+    block = PROGRESS_BLOCK if progress is not None else max(n, 1)
+    for start in range(0, n, block):
+        for t, (a, b), p, v in zip(*(c[start:start + block] for c in columns)):
+            flag(process(t, a, b, p, v))
+            while ready:
+                take(ready.popleft()[1])
+        if progress is not None:
+            progress(min(block, n - start))
     est._finish()
     while ready:
         take(ready.popleft()[1])

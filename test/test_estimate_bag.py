@@ -122,19 +122,34 @@ class TestOnline:
         assert keys['total.estimated'] == str(len(d.stamps_ns))
 
     @pytest.mark.parametrize('latency_s', [0.005, 0.01])
-    def test_latency_gives_one_estimate_per_sample_as_the_batch_path(self, noisy_drive,
-                                                                     latency_s):
-        # observer.latency > 0: estimates come back later (and from flush() at the end of
-        # the bag), each on the row of the sample whose stamp it carries; none is lost.
+    def test_latency_gives_one_estimate_per_sample_as_the_node(self, noisy_drive, latency_s):
+        # observer.latency > 0: the node's estimates come back later (and from flush() at the
+        # end), each carrying its sample's stamp; the online mode puts each on that sample's
+        # row, loses none, and counts its progress over every sample
         from road_force_estimator.estimate_bag import estimate_online
+        from road_force_estimator.estimator import Estimator
         d = bag_io.read_drive_bag(noisy_drive)
         vehicle, observer = VehicleParameters(), ObserverParameters(latency_s=latency_s)
+        done = []
         got = estimate_online(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle, observer)
-        ref = estimate_batch(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle, observer)
-        assert got.valid.all() and ref.valid.all()
-        np.testing.assert_array_equal(got.wheel_load_n, ref.wheel_load_n)
-        np.testing.assert_array_equal(got.road_m, ref.road_m)
-        np.testing.assert_array_equal(got.ltr, ref.ltr)
+        est = Estimator(vehicle, observer)
+        node = {}
+        for k, stamp in enumerate(d.stamps_ns.tolist()):
+            out = est.update(stamp, d.q_m[k], float(d.roll_rad[k]), float(d.speed_mps[k]))
+            if out is not None:
+                node[out.stamp_ns] = out
+        for out in est.flush():
+            node[out.stamp_ns] = out
+        assert got.valid.all() and len(node) == len(d.stamps_ns)
+        rows = [node[s] for s in d.stamps_ns.tolist()]
+        np.testing.assert_array_equal(got.wheel_load_n, [r.wheel_load_n for r in rows])
+        np.testing.assert_array_equal(got.road_m, [r.road_m for r in rows])
+        np.testing.assert_array_equal(got.ltr, [r.ltr for r in rows])
+        estimate_batch(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle, observer,
+                       progress=done.append)
+        from road_force_estimator.estimator import PROGRESS_BLOCK
+        assert sum(done) == len(d.stamps_ns)
+        assert len(done) == -(-len(d.stamps_ns) // PROGRESS_BLOCK)
 
     def test_simulate_then_estimate_twice_gives_identical_bags(self, noisy_drive, estimated,
                                                                tmp_path):
