@@ -1,5 +1,7 @@
 """Messages per second of bag writing and reading: rosbags' generic path against bag_io's
-column-at-a-time CDR (encode_columns / decode_columns) and record-by-record MCAP reader.
+column-at-a-time CDR (encode_columns / decode_columns) over road_force_estimator.mcap_file's
+container (chunks taken through their message index, or walked record by record when the index
+does not check out; bench/bag_read_speed.py times both).
 
     .venv/bin/python -m bench.bag_io_speed [--samples N]
 
