@@ -340,22 +340,24 @@ def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
         return None
 
 
-def _whole_from_segments(x: np.ndarray, z: np.ndarray, segments: dict) -> list[float] | None:
-    """Whole-drive IRI of the estimated profile from its per-segment IRI (one quarter-car run
-    instead of two): the mean over segments weighted by their slope intervals
-    (:func:`~.iri.interval_counts`); None when the segments do not give it."""
+def _whole_from_segments(x: np.ndarray, z: np.ndarray | None, segments: dict,
+                         prefix: str) -> list[float] | None:
+    """Whole-drive IRI of a profile (left, right) from its per-segment IRI (columns
+    ``{prefix}_left/right_m_per_km``; one quarter-car run instead of two): the mean over the
+    segments weighted by their slope intervals (:func:`~.iri.interval_counts`); computed
+    afresh (:func:`_whole_iri`) when the segments do not give it."""
     start, end = segments.get('start_m'), segments.get('end_m')
-    if start is None or len(start) == 0 or not np.isfinite(z).all():
-        return None
-    edges = np.concatenate([start, end[-1:]])
+    if z is None or start is None or len(start) == 0 or not np.isfinite(z).all():
+        return _whole_iri(x, z)
     try:
-        counts = iri_mod.interval_counts(x, edges)
+        counts = iri_mod.interval_counts(x, np.concatenate([start, end[-1:]]))
     except ValueError:
-        return None
-    values = np.column_stack([segments['iri_left_m_per_km'], segments['iri_right_m_per_km']])
+        return _whole_iri(x, z)
+    values = np.column_stack([segments[f'{prefix}_left_m_per_km'],
+                              segments[f'{prefix}_right_m_per_km']])
     used = counts > 0
     if counts.sum() == 0 or not np.isfinite(values[used]).all():
-        return None
+        return _whole_iri(x, z)
     return _floats(values[used].T @ counts[used] / counts.sum())
 
 
@@ -438,13 +440,11 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
     iri_est = iri_true = None
     if np.count_nonzero(up) >= 2:
-        road = al.pick(est, 'road_m')[up]
-        iri_est = _whole_from_segments(al.x_m[up], road, segments)
-        if iri_est is None:
-            iri_est = _whole_iri(al.x_m[up], road)
+        x = al.x_m[up]
+        iri_est = _whole_from_segments(x, al.pick(est, 'road_m')[up], segments, 'iri')
         truth = al.profile_truth
         if truth is not None:
-            iri_true = _whole_iri(al.x_m[up], truth[up])
+            iri_true = _whole_from_segments(x, truth[up], segments, 'true_iri')
     summary['iri_m_per_km'] = {'estimated': iri_est, 'true': iri_true}
     summary['segments'] = int(len(segments['start_m']))
     return summary, segments, al

@@ -7,6 +7,7 @@ from pathlib import Path
 import sys
 from types import SimpleNamespace
 
+from mcap_walk import top_level_records
 from mcap_ros2.reader import read_ros2_messages
 import numpy as np
 import pytest
@@ -356,15 +357,6 @@ class TestDriveBag:
         assert d.rejected_total == 11
         assert d.messages['/suspension/deflections'] == 12
         assert any('12 messages' in line for line in d.summary_lines())
-
-
-def top_level_records(data):
-    """(opcode, offset, length) of the records outside chunks, walked from the magic."""
-    pos = 8
-    while pos + 9 <= len(data):
-        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], 'little')
-        yield op, pos, length
-        pos += 9 + length
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import zlib
 
 from mcap.reader import make_reader
+from mcap_walk import top_level_records
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
@@ -106,15 +107,6 @@ def assert_same_drive(a, b, where='drive'):
         np.testing.assert_array_equal(a, b, err_msg=where)
     else:
         assert a == b, where
-
-
-def top_level_records(data):
-    """(opcode, offset, length) of the records outside chunks, walked from the magic."""
-    pos = 8
-    while pos + 9 <= len(data):
-        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], 'little')
-        yield op, pos, length
-        pos += 9 + length
 
 
 def chunk_layout(data, at):
