@@ -573,6 +573,14 @@ def write_csv_profile(path: str | Path, profile: RoadProfile) -> None:
             f.write(f'{x:.12g},{zl:.12g},{zr:.12g}\n')
 
 
+def _numbers(text: str, path, line_no: int) -> list[float]:
+    """The numbers of one line of a profile file (blank- or comma-separated)."""
+    try:
+        return [float(p) for p in text.replace(',', ' ').split()]
+    except ValueError:
+        raise ValueError(f'{path}, line {line_no}: not numbers: {text[:60]!r}') from None
+
+
 def read_text_profile(path: str | Path) -> RoadProfile:
     """Read a whitespace-separated text profile (the format of ``profile_1.txt``).
 
@@ -590,11 +598,7 @@ def read_text_profile(path: str | Path) -> RoadProfile:
         text = line.strip()
         if not text or text.startswith('#'):
             continue
-        parts = text.replace(',', ' ').split()
-        try:
-            row = [float(p) for p in parts]
-        except ValueError:
-            raise ValueError(f'{path}, line {i + 1}: not numbers: {text[:60]!r}') from None
+        row = _numbers(text, path, i + 1)
         if width is None:
             width = len(row)
             if width not in (2, 3):
@@ -680,11 +684,7 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
         text = lines[i].strip()
         if not text:
             continue
-        parts = text.replace(',', ' ').split()
-        try:
-            row = [float(p) for p in parts]
-        except ValueError:
-            raise ValueError(f'{path}, line {i + 1}: not numbers: {text[:60]!r}') from None
+        row = _numbers(text, path, i + 1)
         if len(row) != nchan:
             raise ValueError(f'{path}, line {i + 1}: expected {nchan} values, got {len(row)}')
         rows.append(row)

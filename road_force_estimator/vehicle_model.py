@@ -153,6 +153,18 @@ class VehicleModel:
     # Nonlinear model
     # ----------------------------------------------------------------------------------------
 
+    def _scalars(self) -> tuple[float, ...]:
+        """The parameters as plain floats for the per-sample closures: ``(s, 1/M, 1/I_x, M h,
+        k_1, k_2, c_1, c_2, kt_1, kt_2, ct_1, ct_2, 1/m_1, 1/m_2, F_c1, F_c2)``."""
+        k1, k2 = (float(x) for x in self._k)
+        c1, c2 = (float(x) for x in self._c)
+        kt1, kt2 = (float(x) for x in self._kt)
+        ct1, ct2 = (float(x) for x in self._ct)
+        inv_m1, inv_m2 = (1.0 / float(x) for x in self._mu)
+        fc1, fc2 = (float(x) for x in self._fc)
+        return (self._s, 1.0 / self._m, 1.0 / self._ix, self._m * self._h, k1, k2, c1, c2, kt1,
+                kt2, ct1, ct2, inv_m1, inv_m2, fc1, fc2)
+
     def make_accelerations(self) -> Callable[..., tuple[float, float, float, float]]:
         """A fast float-only function for integrators (the per-sample path).
 
@@ -162,15 +174,9 @@ class VehicleModel:
             ``f(z_s, phi, z_u1, z_u2, dz_s, dphi, dz_u1, dz_u2, u_1, u_2, du_1, du_2, a_y)``
             returning ``(dd z_s, dd phi, dd z_u1, dd z_u2)``; all plain floats, SI units.
         """
-        s = self._s
-        inv_m, inv_ix = 1.0 / self._m, 1.0 / self._ix
-        mh = self._m * self._h
-        k1, k2 = (float(x) for x in self._k)
-        c1, c2 = (float(x) for x in self._c)
-        kt1, kt2 = (float(x) for x in self._kt)
-        ct1, ct2 = (float(x) for x in self._ct)
-        inv_m1, inv_m2 = (1.0 / float(x) for x in self._mu)
-        floor1, floor2 = (-float(x) for x in self._fc)
+        (s, inv_m, inv_ix, mh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+         fc2) = self._scalars()
+        floor1, floor2 = -fc1, -fc2
         sin, cos = math.sin, math.cos
 
         def accelerations(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
@@ -203,15 +209,8 @@ class VehicleModel:
             dd z_s, dd phi, dd z_u1, dd z_u2)`` with the same arithmetic as
             :meth:`make_accelerations`.
         """
-        s = self._s
-        inv_m, inv_ix = 1.0 / self._m, 1.0 / self._ix
-        mh = self._m * self._h
-        k1, k2 = (float(x) for x in self._k)
-        c1, c2 = (float(x) for x in self._c)
-        kt1, kt2 = (float(x) for x in self._kt)
-        ct1, ct2 = (float(x) for x in self._ct)
-        inv_m1, inv_m2 = (1.0 / float(x) for x in self._mu)
-        fc1, fc2 = (float(x) for x in self._fc)
+        (s, inv_m, inv_ix, mh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+         fc2) = self._scalars()
         sin, cos = math.sin, math.cos
 
         def outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
