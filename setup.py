@@ -6,17 +6,18 @@ from setuptools import find_packages, setup
 
 PACKAGE = 'road_force_estimator'
 
-# Executables of ../shared/design/INTERFACES.md: console-script name = module name.
-EXECUTABLES = (
-    'plant_simulator',
-    'observer',
-    'bag_recorder',
-    'simulate_bag',
-    'estimate_bag',
-    'profile_to_bag',
-    'road_profile_iri',
-    'estimate_fleet',
-)
+# Executables of ../shared/design/INTERFACES.md: console-script name = module name, in the
+# subpackage of its concern (ros/: nodes, tools/: offline commands).
+EXECUTABLES = {
+    'plant_simulator': 'ros',
+    'observer': 'ros',
+    'bag_recorder': 'ros',
+    'simulate_bag': 'tools',
+    'estimate_bag': 'tools',
+    'profile_to_bag': 'tools',
+    'road_profile_iri': 'tools',
+    'estimate_fleet': 'tools',
+}
 
 
 def _tree(folder):
@@ -64,7 +65,7 @@ setup(
     python_requires='>=3.10,<3.14',
     entry_points={
         'console_scripts': [
-            f'{name} = {PACKAGE}.{name}:main' for name in EXECUTABLES
+            f'{name} = {PACKAGE}.{sub}.{name}:main' for name, sub in EXECUTABLES.items()
         ],
     },
 )

@@ -2,10 +2,10 @@
 
     python bags/make_sample_bags.py [--output FOLDER]
 
-Each bag is an ISO 8608 road synthesized by road_force_estimator.road.iso8608_profile
+Each bag is an ISO 8608 road synthesized by road_force_estimator.core.road.iso8608_profile
 (geometric-mean Gd(n0), default left/right coherence model), limited to the wavelengths an LPA
 records (0.5-50 m), sampled every 0.1 m over 1 km, and written by
-road_force_estimator.bag_io.write_lpa_bag (/lpa/left, /lpa/right; stamps at 20 m/s).
+road_force_estimator.bagio.bag_io.write_lpa_bag (/lpa/left, /lpa/right; stamps at 20 m/s).
 The output is byte-for-byte reproducible.
 """
 from __future__ import annotations
@@ -14,8 +14,8 @@ import argparse
 from pathlib import Path
 import sys
 
-from road_force_estimator.bag_io import write_lpa_bag
-from road_force_estimator.road import iso8608_profile
+from road_force_estimator.bagio.bag_io import write_lpa_bag
+from road_force_estimator.core.road import iso8608_profile
 
 #: (folder, ISO 8608 class, seed) of each bag.
 BAGS = (('lpa_iso8608_b', 'B', 21), ('lpa_iso8608_c', 'C', 22))

@@ -1,5 +1,5 @@
 """Messages per second of bag writing and reading: rosbags' generic path against bag_io's
-column-at-a-time CDR (encode_columns / decode_columns) over road_force_estimator.mcap_file's
+column-at-a-time CDR (encode_columns / decode_columns) over road_force_estimator.bagio.mcap_file's
 container (chunks taken through their message index, or walked record by record when the index
 does not check out; bench/bag_read_speed.py times both).
 
@@ -20,8 +20,8 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from road_force_estimator import bag_io
-from road_force_estimator.bag_io import TYPESTORE
+from road_force_estimator.bagio import bag_io
+from road_force_estimator.bagio.bag_io import TYPESTORE
 
 
 def fake_drive(n: int, rate_hz: float = 500.0, speed: float = 20.0):

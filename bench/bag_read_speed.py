@@ -20,7 +20,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from road_force_estimator import bag_io
+from road_force_estimator.bagio import bag_io
 
 
 def write_drive(path: Path, seconds: float, ground_truth: bool, rate_hz: float = 1000.0) -> int:

@@ -21,7 +21,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from road_force_estimator import bag_io
+from road_force_estimator.bagio import bag_io
 
 
 def fake_estimates(n: int, rate_hz: float, seed: int = 1):

@@ -9,7 +9,7 @@
    ``/vehicle/twist``, ``/fix``; ``--ground-truth`` adds the simulator's truth topics, six
    messages per sample instead of two).
 2. A child process pinned to one CPU (``taskset -c 0`` when there is one) with one BLAS
-   thread imports the package and runs :func:`road_force_estimator.estimate_bag.run` on it
+   thread imports the package and runs :func:`road_force_estimator.tools.estimate_bag.run` on it
    ``--repeats`` times (bag in; bag of estimates and report without figures out: everything
    the command does but parsing its arguments), then once more stage by stage (read the bag,
    estimate, write the bag, write the report). Samples per second = samples / wall time; the
@@ -59,8 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
 def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     """Runs in the pinned child: the timed runs and the stages."""
     t0, c0 = time.perf_counter(), time.process_time()
-    from road_force_estimator import bag_io, estimate_bag, report
-    from road_force_estimator.offline import estimate_recording
+    from road_force_estimator.bagio import bag_io
+    from road_force_estimator.tools import estimate_bag
+    from road_force_estimator.report import report
+    from road_force_estimator.estimation.offline import estimate_recording
     imports = (time.perf_counter() - t0, time.process_time() - c0)
     runs = []
     for i in range(1 + repeats):
@@ -94,7 +96,7 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
 def measure(*, duration_s: float = 600.0, rate_hz: float = 1000.0, repeats: int = 3,
             ground_truth: bool = False, mode: str = 'offline', tmp_dir: str | None = None) -> dict:
     """Simulate the drive, time ``estimate_bag`` (see the module notes); the numbers."""
-    from road_force_estimator import simulate_bag
+    from road_force_estimator.tools import simulate_bag
 
     with tempfile.TemporaryDirectory(prefix='estimate_bag_speed_', dir=tmp_dir) as tmp:
         tmp = Path(tmp)

@@ -30,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from road_force_estimator import estimate_fleet, simulate_bag
+from road_force_estimator.tools import estimate_fleet
+from road_force_estimator.tools import simulate_bag
 
 
 def make_drives(folder: Path, count: int, duration_s: float, rate_hz: float) -> list[Path]:

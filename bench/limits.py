@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _drive_with_plant(name: str):
     """The bench drive and the plant trajectory it was measured from."""
-    import road_force_estimator.plant as plant
+    import road_force_estimator.core.plant as plant
     from bench import scenarios as sc
 
     kept = {}
@@ -56,9 +56,9 @@ def _drive_with_plant(name: str):
 def design_grid(drive) -> list[tuple[str, float, int]]:
     """Zero-latency load error (%) and gain designs with the default and a finer grid."""
     from bench import scenarios as sc
-    from road_force_estimator import model_observer as mo
-    from road_force_estimator.estimator import estimate_batch
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.estimation import model_observer as mo
+    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.core.parameters import ObserverParameters
 
     saved = (mo.NOISE_LEVEL_RATIO, mo.ROUGHNESS_LEVEL_RATIO, mo.SPEED_LEVEL_RATIO)
     out = []
@@ -78,9 +78,9 @@ def design_grid(drive) -> list[tuple[str, float, int]]:
 def profile_parts(drive, trajectory) -> dict[str, float]:
     """Profile error (%) of the defaults, with the true z_s, with the true w; w error by band."""
     from bench import scenarios as sc
-    from road_force_estimator import metrics
-    from road_force_estimator.estimator import estimate_batch
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.core import metrics
+    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.core.parameters import ObserverParameters
 
     est = estimate_batch(drive.stamps_ns, drive.q_m, drive.roll_rad, drive.speed_mps,
                          drive.vehicle_observer, ObserverParameters())

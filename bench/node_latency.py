@@ -42,7 +42,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from road_force_estimator.messages import (
+from road_force_estimator.ros.messages import (
     deflections_msg, reliable_qos, sensor_qos, stamp_to_ns, twist_msg)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -52,11 +52,11 @@ MAX_MEDIAN_S = 0.005
 def serve_observer(executor_kind: str) -> int:
     """The observer node, spun like its main() does, with the chosen executor."""
     if executor_kind == 'events':
-        from road_force_estimator.observer import main
+        from road_force_estimator.ros.observer import main
         return main(['observer'])
     from rclpy.executors import SingleThreadedExecutor
 
-    from road_force_estimator.observer import Observer
+    from road_force_estimator.ros.observer import Observer
     rclpy.init()
     node = Observer()
     executor = SingleThreadedExecutor()

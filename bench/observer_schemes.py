@@ -1,7 +1,7 @@
 """Benchmark of the differentiator schemes inside the estimator (issue 4).
 
 Drive: ISO 8608 class C (road seed 1), 20 m/s, 1 kHz, tire envelope 0.25 m (the simulator's
-defaults), ``--duration`` seconds. Sensors: :class:`road_force_estimator.sensors.SensorModel`
+defaults), ``--duration`` seconds. Sensors: :class:`road_force_estimator.core.sensors.SensorModel`
 (seed 1), deflection noise 0, 10 and 100 um; roll noise "to match" = 10 rad/m times the
 deflection noise (0, 100, 1000 urad), the ratio of the simulator's defaults (1e-5 m, 1e-4 rad).
 
@@ -29,13 +29,13 @@ import time
 
 import numpy as np
 
-from road_force_estimator import metrics
-from road_force_estimator.differentiator import SCHEMES
-from road_force_estimator.estimator import Estimator, estimate_batch
-from road_force_estimator.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.plant import simulate
-from road_force_estimator.road import iso8608_profile
-from road_force_estimator.sensors import SensorModel
+from road_force_estimator.core import metrics
+from road_force_estimator.estimation.differentiator import SCHEMES
+from road_force_estimator.estimation.estimator import Estimator, estimate_batch
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.core.sensors import SensorModel
 
 NOISE_M = (0.0, 10e-6, 100e-6)
 ROLL_PER_DEFLECTION = 10.0   # rad/m

@@ -41,7 +41,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy import linalg, signal
 
-from road_force_estimator.parameters import VehicleParameters
+from road_force_estimator.core.parameters import VehicleParameters
 
 __all__ = [
     'PeerResult', 'reconstruct', 'paper_euler', 'lowpass_fd', 'kf_jerk', 'zero_phase_offline',
@@ -291,10 +291,10 @@ def paper_euler(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
                 profile_cutoff_wavelength_m: float = 100.0) -> PeerResult:
     """The package's own estimator with the paper's explicit-Euler differentiator.
 
-    No re-implementation: :func:`road_force_estimator.estimator.estimate_batch` is called once.
+    No re-implementation: :func:`estimation.estimator.estimate_batch` is called once.
     """
-    from road_force_estimator.estimator import estimate_batch
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.core.parameters import ObserverParameters
 
     t_s, q_m, roll_rad, speed, _ = _inputs(t_s, q_m, roll_rad, speed_mps)
     observer = ObserverParameters(lipschitz_deflection_mps3=lipschitz_deflection_mps3,

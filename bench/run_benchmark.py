@@ -18,13 +18,13 @@ Columns (:data:`METHODS`):
   ``ours-latency-10ms`` (``observer.latency`` = 5 / 10 ms; 'n/a' while it changes nothing),
   ``ours-offline`` (what ``estimate_bag --mode offline`` runs, read from its source:
   ``offline.estimate_recording`` or ``offline.estimate_offline``) and ``ours-model-smoother``
-  (:func:`road_force_estimator.model_observer.smooth`, when it exists). A column that cannot
+  (:func:`estimation.model_observer.smooth`, when it exists). A column that cannot
   run shows 'n/a' and the reason.
 
 Figures per scenario (:mod:`bench.scenarios`) and method: vertical-load RMS error (% of the
 true dynamic-load RMS, % of the static load), band-passed (0.5-30 m) profile error (% of the
-band's RMS; the same filter on estimate and truth, :mod:`road_force_estimator.metrics`), IRI
-error per 100 m segment (:mod:`road_force_estimator.iri` on estimate and truth: mean and max
+band's RMS; the same filter on estimate and truth, :mod:`road_force_estimator.core.metrics`), IRI
+error per 100 m segment (:mod:`road_force_estimator.core.iri` on estimate and truth: mean and max
 |relative error|), LTR RMS error, start-up convergence time.
 
 Speed (timeit, median of repeats): microseconds per sample of :meth:`Estimator.update` per
@@ -147,7 +147,7 @@ def peer_method(name: str) -> Method:
 
 def _observer_field(param: str) -> str | None:
     """Field of ObserverParameters that carries the dotted parameter ``param`` (or None)."""
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.core.parameters import ObserverParameters
 
     for f in fields(ObserverParameters):
         if f.metadata.get('param') == param:
@@ -157,7 +157,7 @@ def _observer_field(param: str) -> str | None:
 
 def _sliding_mode_param() -> str | None:
     """Dotted name of the sliding-mode weight of the default observer, if the package has one."""
-    from road_force_estimator.parameters import SPECS
+    from road_force_estimator.core.parameters import SPECS
 
     names = [n for n in SPECS if n.startswith('observer.') and 'sliding' in n]
     return names[0] if names else None
@@ -172,7 +172,7 @@ def ours_observer(changes: dict[str, Any] | None = None):
         A parameter the package does not have, or a value it does not accept (the message
         says which).
     """
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.core.parameters import ObserverParameters
 
     kwargs = {}
     for param, value in (changes or {}).items():
@@ -188,7 +188,7 @@ def ours_observer(changes: dict[str, Any] | None = None):
 
 def default_method() -> str:
     """The package's default ``observer.discretization`` (its default estimator)."""
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.core.parameters import ObserverParameters
 
     return str(getattr(ObserverParameters(), 'discretization', '?'))
 
@@ -221,7 +221,7 @@ def per_sample(est, stamps_ns: np.ndarray):
 
 
 def _batch(drive: Drive, observer):
-    from road_force_estimator.estimator import estimate_batch
+    from road_force_estimator.estimation.estimator import estimate_batch
 
     stamps = drive.stamps_ns
     est = estimate_batch(stamps, drive.q_m, drive.roll_rad, drive.speed_mps,
@@ -247,7 +247,7 @@ def _run_ours_chain(drive: Drive, tuned: dict[str, Any]):
 
 
 def _run_ours_no_smo(drive: Drive, tuned: dict[str, Any]):
-    from road_force_estimator.differentiator import SCHEMES
+    from road_force_estimator.estimation.differentiator import SCHEMES
 
     param = _sliding_mode_param()
     if param is None:
@@ -270,27 +270,26 @@ def _run_ours_latency(drive: Drive, tuned: dict[str, Any], lag_s: float = 0.01):
 def _offline_function() -> tuple[str, Callable]:
     """``(name, function)`` that ``estimate_bag --mode offline`` runs.
 
-    Read from ``estimate_bag``'s source (the ``from road_force_estimator.offline import ...``
-    of its offline branch), so that a renamed entry point is followed; else the first of
+    Read from ``estimate_bag``'s source (the ``from ...estimation.offline import ...`` of its
+    offline branch), so that a renamed entry point is followed; else the first of
     ``offline.estimate_recording``, ``offline.estimate_offline`` that exists.
     """
-    import importlib
     import inspect
     import re
 
     try:
-        from road_force_estimator import offline
+        from road_force_estimator.estimation import offline
     except ImportError as exc:
         raise NotAvailable(f'no offline module ({exc})') from None
     names = []
     try:
-        from road_force_estimator import estimate_bag
-        names = re.findall(r'from road_force_estimator\.offline import (\w+)',
+        from road_force_estimator.tools import estimate_bag
+        names = re.findall(r'from road_force_estimator\.estimation\.offline import (\w+)',
                            inspect.getsource(estimate_bag))
     except (ImportError, OSError, TypeError):
         pass
     for name in names + ['estimate_recording', 'estimate_offline']:
-        fn = getattr(importlib.import_module('road_force_estimator.offline'), name, None)
+        fn = getattr(offline, name, None)
         if callable(fn):
             return f'offline.{name}', fn
     raise NotAvailable(f'no offline entry point in {offline.__name__}')
@@ -298,12 +297,12 @@ def _offline_function() -> tuple[str, Callable]:
 
 def _run_ours_smoother(drive: Drive, tuned: dict[str, Any]):
     try:
-        from road_force_estimator import model_observer
+        from road_force_estimator.estimation import model_observer
     except ImportError as exc:
         raise NotAvailable(f'no model observer ({exc})') from None
     fn = getattr(model_observer, 'smooth', None)
     if not callable(fn):
-        raise NotAvailable('road_force_estimator.model_observer has no smooth()')
+        raise NotAvailable('road_force_estimator.estimation.model_observer has no smooth()')
     stamps = drive.stamps_ns
     est = fn(stamps, drive.q_m, drive.roll_rad, drive.speed_mps, drive.vehicle_observer,
              ours_observer())
@@ -336,7 +335,8 @@ _OURS = (
            'estimate_bag --mode offline: road_force_estimator.{offline} with the defaults',
            True),
     Method('ours-model-smoother', _run_ours_smoother, 'offline', 'offline',
-           "road_force_estimator.model_observer.smooth called directly: the model observer's "
+           "road_force_estimator.estimation.model_observer.smooth called directly: the model "
+           "observer's "
            'RTS smoother with the defaults (for comparison with ours-offline)', True),
 )
 
@@ -425,7 +425,7 @@ def _update_cost(drive: Drive, observer, *, samples: int, warmup: int,
                  repeats: int) -> tuple[float, float, float]:
     """Microseconds per :meth:`Estimator.update` over ``samples`` samples: the median and min
     wall time (timeit, perf_counter) and the median process CPU time of ``repeats`` runs."""
-    from road_force_estimator.estimator import Estimator
+    from road_force_estimator.estimation.estimator import Estimator
 
     n = len(drive.t_s)
     warmup = min(warmup, n // 4)
@@ -463,7 +463,7 @@ def core_cost(drive: Drive, *, samples: int = 5000, warmup: int = 1000,
     with ``observer.latency = 0.01`` when the package has it; after ``warmup`` samples, the
     median (and min) of ``repeats`` timeit runs of ``samples`` samples each.
     """
-    from road_force_estimator.parameters import SPECS
+    from road_force_estimator.core.parameters import SPECS
 
     default = default_method()
     variants = [(f'observer.discretization = {c}' + (' (default)' if c == default else ''),

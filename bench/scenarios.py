@@ -1,8 +1,8 @@
 """Benchmark scenarios: drives generated with the package's plant, and their scoring.
 
 Every scenario is a :class:`Scenario` (a frozen description); :func:`build_drive` simulates it
-with :func:`road_force_estimator.plant.simulate` and measures it with
-:class:`road_force_estimator.sensors.SensorModel`, returning a :class:`Drive` (measurements,
+with :func:`road_force_estimator.core.plant.simulate` and measures it with
+:class:`road_force_estimator.core.sensors.SensorModel`, returning a :class:`Drive` (measurements,
 the vehicle parameters the observer believes, and the ground truth). :func:`score` compares an
 estimate with the truth after the convergence skip.
 
@@ -29,7 +29,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy import signal
 
-from road_force_estimator.parameters import VehicleParameters
+from road_force_estimator.core.parameters import VehicleParameters
 
 __all__ = [
     'Scenario', 'Drive', 'SCENARIOS', 'TUNING', 'SHARED_DATA', 'ROLL_NOISE_PER_DEFLECTION',
@@ -176,7 +176,7 @@ def observer_vehicle(plant: VehicleParameters, param_error: float) -> VehiclePar
 
 
 def _road(scenario: Scenario, length_m: float):
-    from road_force_estimator import road as road_mod
+    from road_force_estimator.core import road as road_mod
 
     if scenario.road == 'profile_1':
         prof = road_mod.read_text_profile(SHARED_DATA / 'profile_1.txt')
@@ -199,8 +199,8 @@ def _road(scenario: Scenario, length_m: float):
 def build_drive(scenario: Scenario, *, noise_deflection_m: float | None = None,
                 vehicle: VehicleParameters | None = None) -> Drive:
     """Simulate and measure ``scenario`` (``noise_deflection_m`` overrides its noise)."""
-    from road_force_estimator.plant import simulate
-    from road_force_estimator.sensors import SensorModel
+    from road_force_estimator.core.plant import simulate
+    from road_force_estimator.core.sensors import SensorModel
 
     plant_vehicle = vehicle or VehicleParameters()
     noise = scenario.noise_deflection_m if noise_deflection_m is None else noise_deflection_m
@@ -243,7 +243,7 @@ def build_drive(scenario: Scenario, *, noise_deflection_m: float | None = None,
 
 
 # ----------------------------------------------------------------------------------------------
-# scoring, with road_force_estimator.metrics (band-pass, error statistics) and .iri
+# scoring, with road_force_estimator.core.metrics (band-pass, error statistics) and .iri
 
 
 def _combined(stats) -> tuple[float, float]:
@@ -273,8 +273,8 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         scored RMS, 1 % of the static load) until skip + 3 s, before any scripted event; inf
         if it is still above then).
     """
-    from road_force_estimator import iri as iri_mod
-    from road_force_estimator import metrics
+    from road_force_estimator.core import iri as iri_mod
+    from road_force_estimator.core import metrics
 
     t = drive.truth
     n = len(drive.t_s)

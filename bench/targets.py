@@ -7,7 +7,7 @@ For every scenario of :mod:`bench.scenarios` (or the ones named) it runs, on the
 - ours (the package defaults, never tuned per drive): ``ours-0`` (``estimate_batch``, latency
   0), ``ours-0-no-smo`` (the ablation: ``observer.sliding_mode_gain = 0``), ``ours-lag5`` and
   ``ours-lag10`` (``observer.latency`` = 5 / 10 ms, estimates placed on their samples' rows),
-  ``ours-offline`` (:func:`road_force_estimator.model_observer.smooth`), ``ours-chain`` (the
+  ``ours-offline`` (:func:`estimation.model_observer.smooth`), ``ours-chain`` (the
   differentiator chain, implicit scheme);
 - the peers of :mod:`bench.peers` with the settings tuned by :mod:`bench.tune`
   (``bench/tuned_peers.json``, the noise level nearest the scenario's): ``kf-model``,
@@ -57,9 +57,9 @@ def _on_samples(est, stamps: np.ndarray):
 
 
 def run_ours(name: str, drive) -> Any:
-    from road_force_estimator.estimator import estimate_batch
-    from road_force_estimator.model_observer import smooth
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation.model_observer import smooth
+    from road_force_estimator.core.parameters import ObserverParameters
 
     changes = {'ours-0': {}, 'ours-0-no-smo': {'sliding_mode_gain': 0.0},
                'ours-lag5': {'latency_s': 0.005}, 'ours-lag10': {'latency_s': 0.01},
@@ -86,8 +86,8 @@ def run_peer(name: str, drive, tuned: dict) -> Any:
 def update_cost(drive, changes: dict, *, samples: int = 2000, repeats: int = 9,
                 warmup: int = 3000) -> tuple[float, float]:
     """(median, min) microseconds per Estimator.update over repeats of ``samples`` samples."""
-    from road_force_estimator.estimator import Estimator
-    from road_force_estimator.parameters import ObserverParameters
+    from road_force_estimator.estimation.estimator import Estimator
+    from road_force_estimator.core.parameters import ObserverParameters
 
     st = drive.stamps_ns.tolist()
     q = drive.q_m.tolist()
@@ -227,9 +227,9 @@ def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
     noise range while they are tried; a grid (:data:`TUNE_GRID`) then a pattern search in log
     space (factor 2, down to 1.1), as :mod:`bench.tune` does for the peers.
     """
-    import road_force_estimator.model_observer as mo
-    from road_force_estimator.estimator import estimate_batch
-    from road_force_estimator.parameters import ObserverParameters
+    import road_force_estimator.estimation.model_observer as mo
+    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.core.parameters import ObserverParameters
 
     from bench.scenarios import TUNING
 

@@ -1,6 +1,7 @@
 """Test session set-up: an isolated ROS 2 domain on this host, before rclpy is imported."""
 import os
 import pathlib
+import sys
 
 import pytest
 
@@ -10,6 +11,9 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+# The shared test helpers (node_harness, ros_helpers, mcap_walk) live here, beside the
+# subfolders that mirror the package's subpackages.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 SHARED_DATA = REPO.parent / 'shared' / 'data'
 
 

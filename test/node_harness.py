@@ -8,8 +8,8 @@ import sys
 
 from rclpy.node import Node
 
-from road_force_estimator.bag_recorder import message_class
-from road_force_estimator.messages import TOPIC_TYPES, stamp_to_ns, topic_qos
+from road_force_estimator.ros.bag_recorder import message_class
+from road_force_estimator.ros.messages import TOPIC_TYPES, stamp_to_ns, topic_qos
 
 try:  # the executor the nodes' main() use
     from rclpy.experimental import EventsExecutor as Executor
@@ -51,10 +51,10 @@ def close(executor, *nodes) -> None:
 
 
 def run_main(module: str, *args: str, **popen) -> subprocess.Popen:
-    """Start ``python -m road_force_estimator.<module> *args`` (same ROS domain as the tests)."""
+    """Start ``python -m road_force_estimator.ros.<module> *args`` (same ROS domain as tests)."""
     env = dict(os.environ)
     env.setdefault('PYTHONUNBUFFERED', '1')
-    return subprocess.Popen([sys.executable, '-m', f'road_force_estimator.{module}', *args],
+    return subprocess.Popen([sys.executable, '-m', f'road_force_estimator.ros.{module}', *args],
                             cwd=popen.pop('cwd', REPO), env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, **popen)
 

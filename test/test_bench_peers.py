@@ -14,7 +14,7 @@ import pytest
 from scipy import linalg
 
 from bench import peers
-from road_force_estimator.parameters import VehicleParameters
+from road_force_estimator.core.parameters import VehicleParameters
 
 DT = 1e-3
 SPEED = 20.0
@@ -57,7 +57,7 @@ class TestVanLoan:
 class TestRollPlaneModel:
     def test_mechanics_match_the_package_vehicle_model(self):
         """The filter's physics block equals expm of vehicle_model's linearised matrices."""
-        from road_force_estimator.vehicle_model import VehicleModel
+        from road_force_estimator.core.vehicle_model import VehicleModel
 
         vehicle = VehicleParameters(tire_damping_nspm=(0.0, 0.0))
         model = peers.RollPlaneKalman(vehicle, DT, SPEED, road_model='position',
@@ -216,8 +216,8 @@ class TestDifferences:
 class TestReconstruction:
     def test_exact_derivatives_give_the_plant_loads(self):
         """Steps 1-3 with the plant's exact states reproduce the plant's true wheel loads."""
-        from road_force_estimator.plant import simulate
-        from road_force_estimator.road import iso8608_profile
+        from road_force_estimator.core.plant import simulate
+        from road_force_estimator.core.road import iso8608_profile
 
         vehicle = VehicleParameters()
         road = iso8608_profile('C', 80.0, seed=4)

@@ -1,0 +1,137 @@
+"""Per-segment figures of a drive, as road agencies use them (MODEL.md "Metrics").
+
+A drive is cut by travelled distance into segments of ``segment_length_m`` (default 100 m,
+the last one may be shorter; a remainder shorter than half a segment is merged into the one
+before). Per segment and wheel: IRI (m/km) of the estimated profile and, when known, of the
+true profile; the dynamic load coefficient DLC = std(F_n)/mean(F_n); the peak vertical load;
+the largest |LTR|; the number of lift-off events (a wheel whose load reaches zero; one event
+per contiguous run of lifted samples, counted in the segment where it starts); and, when the
+drive has GNSS fixes, the coordinates of the segment's ends interpolated by stamp.
+
+This module imports numpy only (core).
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from road_force_estimator.core.gnss import positions_at
+
+__all__ = ['SEGMENT_COLUMNS', 'segment_bounds', 'segment_table']
+
+#: Columns of the per-drive segment table, in order (INTERFACES.md, estimate_fleet; the
+#: ``true_iri_*`` columns are extra and NaN when the drive has no ground truth).
+SEGMENT_COLUMNS = (
+    'start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km',
+    'true_iri_left_m_per_km', 'true_iri_right_m_per_km',
+    'dlc_left', 'dlc_right', 'peak_load_left_n', 'peak_load_right_n', 'max_abs_ltr',
+    'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon',
+)
+
+
+def segment_bounds(start_m: float, end_m: float, segment_length_m: float) -> np.ndarray:
+    """Segment edges (m) from ``start_m`` to ``end_m``: shape (k + 1,).
+
+    Raises
+    ------
+    ValueError
+        ``segment_length_m`` not positive, or an empty span.
+    """
+    if not segment_length_m > 0.0:
+        raise ValueError(f'segment length = {segment_length_m!r} m: must be > 0')
+    if not end_m > start_m:
+        raise ValueError(f'no distance travelled ({start_m:g} m to {end_m:g} m)')
+    edges = np.arange(start_m, end_m, segment_length_m, dtype=float)
+    edges = np.append(edges, end_m)
+    if edges.size > 2 and edges[-1] - edges[-2] < 0.5 * segment_length_m:
+        edges = np.delete(edges, -2)
+    return edges
+
+
+def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndarray,
+                  lift_off: np.ndarray, *, profile_m: np.ndarray | None = None,
+                  true_profile_m: np.ndarray | None = None,
+                  profile_distance_m: np.ndarray | None = None,
+                  iri_segments: Callable[..., np.ndarray] | None = None,
+                  stamps_ns: np.ndarray | None = None,
+                  fix_stamps_ns: np.ndarray | None = None,
+                  fix_latitude_deg: np.ndarray | None = None,
+                  fix_longitude_deg: np.ndarray | None = None,
+                  segment_length_m: float = 100.0) -> dict[str, np.ndarray]:
+    """Per-segment table of one drive: ``{column: array (k,)}`` with :data:`SEGMENT_COLUMNS`.
+
+    Parameters
+    ----------
+    distance_m : array (n,)
+        Travelled distance of each estimate (m), non-decreasing.
+    wheel_load_n : array (n, 2)
+        Vertical loads [left, right] (N).
+    ltr : array (n,)
+        Load transfer ratio (F_n2 - F_n1) / (F_n1 + F_n2).
+    lift_off : array (n, 2) of bool
+        Wheel lifted off.
+    profile_m, true_profile_m : array (n, 2), optional
+        Estimated and true road profiles [left, right] (m) at ``profile_distance_m``
+        (default ``distance_m``); IRI columns are NaN without them.
+    iri_segments : callable, optional
+        ``iri_segments(distance_m, elevation_m (n,), edges_m) -> (k,)`` IRI (m/km) per segment
+        (``road_force_estimator.core.iri``); required with a profile.
+    stamps_ns, fix_stamps_ns, fix_latitude_deg, fix_longitude_deg : arrays, optional
+        Stamps of the estimates and the GNSS fixes; coordinates are NaN without fixes.
+    segment_length_m : float
+        Segment length (m), default 100.
+    """
+    x = np.asarray(distance_m, dtype=float)
+    load = np.asarray(wheel_load_n, dtype=float)
+    edges = segment_bounds(float(x[0]), float(x[-1]), segment_length_m)
+    k = edges.size - 1
+    # Sample i belongs to segment j when edges[j] <= x_i < edges[j+1] (last edge inclusive).
+    seg = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, k - 1)
+    counts = np.bincount(seg, minlength=k)
+    table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(), 'end_m': edges[1:].copy()}
+
+    for side, name in ((0, 'left'), (1, 'right')):
+        f = load[:, side]
+        total = np.bincount(seg, f, minlength=k)
+        square = np.bincount(seg, f * f, minlength=k)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            mean = total / counts
+            std = np.sqrt(np.maximum(square / counts - mean * mean, 0.0))
+            table[f'dlc_{name}'] = np.where(counts > 1, std / mean, np.nan)
+        peak = np.full(k, np.nan)
+        np.fmax.at(peak, seg, f)
+        table[f'peak_load_{name}_n'] = peak
+    max_ltr = np.full(k, np.nan)
+    np.fmax.at(max_ltr, seg, np.abs(np.asarray(ltr, dtype=float)))
+    table['max_abs_ltr'] = max_ltr
+
+    lifted = np.asarray(lift_off, dtype=bool).reshape(len(x), -1)
+    starts = lifted & ~np.vstack([np.zeros((1, lifted.shape[1]), bool), lifted[:-1]])
+    table['lift_offs'] = np.bincount(seg, starts.sum(axis=1), minlength=k).astype(np.int64)
+
+    px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
+    for prefix, prof in (('iri', profile_m), ('true_iri', true_profile_m)):
+        for side, name in ((0, 'left'), (1, 'right')):
+            column = f'{prefix}_{name}_m_per_km'
+            if prof is None:
+                table[column] = np.full(k, np.nan)
+            else:
+                if iri_segments is None:
+                    raise ValueError('a profile needs iri_segments to compute IRI')
+                table[column] = np.asarray(
+                    iri_segments(px, np.asarray(prof, dtype=float)[:, side], edges), dtype=float)
+
+    have_fixes = (stamps_ns is not None and fix_stamps_ns is not None
+                  and len(fix_stamps_ns) >= 2)
+    if have_fixes:
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        # Stamp at each edge: interpolate time over distance (distance is non-decreasing).
+        rel = (stamps - stamps[0]).astype(float)
+        edge_ns = stamps[0] + np.round(np.interp(edges, x, rel)).astype(np.int64)
+        lat, lon = positions_at(fix_stamps_ns, fix_latitude_deg, fix_longitude_deg, edge_ns)
+    else:
+        lat = lon = np.full(k + 1, np.nan)
+    table['start_lat'], table['start_lon'] = lat[:-1].copy(), lon[:-1].copy()
+    table['end_lat'], table['end_lon'] = lat[1:].copy(), lon[1:].copy()
+    return {name: table[name] for name in SEGMENT_COLUMNS}

@@ -1,0 +1,229 @@
+"""``observer`` node: the estimator (estimator.py), one estimate per measurement message.
+
+Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` (best effort,
+which matches reliable and best-effort publishers); per accepted deflection message publishes
+``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio`` and
+``/observer/states`` (reliable), stamped with the estimate's stamp (the input's), and
+``/diagnostics`` at 1 Hz (INTERFACES.md).
+
+Rejected and counted, never misread (the node keeps running and never publishes NaN): a
+JointState whose arrays differ in length from ``name`` or that lacks a joint, a non-finite value
+(:mod:`.messages`); a duplicate or backwards stamp, an impossible value, and gaps (a restart) in
+the core. Speed: samples that arrive before the first twist wait (up to
+:data:`MAX_WAITING` of them, the oldest dropped and counted beyond) and are estimated with the
+first speed received; after that the latest twist is used. Live parameter changes are vetted
+(:class:`.ros_parameters.ParameterGuard`); a good one rebuilds the estimator, which restarts.
+"""
+from __future__ import annotations
+
+from collections import Counter, deque
+import math
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
+from rclpy.duration import Duration
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from road_force_estimator.estimation.estimator import Estimator
+from road_force_estimator.ros.messages import (
+    SIDES, WHEEL_FRAMES, MessageRejected, diagnostic_status, float64_msg, read_deflections,
+    read_twist, reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.ros.node_runner import run_node
+from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
+
+SPECS = specs_with_prefix('vehicle.', 'observer.')
+MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
+# The core's counters, by the names the diagnostics give them.
+CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
+                 'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
+# Further EstimatorStatus fields reported as they are (those the core has).
+ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
+                    'noise_roll_rad', 'road_roughness_m3')
+FLOW_COUNTS = ('received', 'published', 'lift_offs')  # the rest of a period's counts: rejections
+
+
+def build(values):
+    return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
+
+
+def static_findings(vehicle: VehicleParameters, observer: ObserverParameters) -> list[str]:
+    """Configuration findings (robot_localization style: reported with every diagnostic)."""
+    found = []
+    if observer.discretization == 'euler':
+        found.append("observer.discretization = 'euler': the paper's explicit scheme, a "
+                     'reference; expect about a quarter of the dynamic-load RMS as error')
+    if observer.latency_s > 0.0:
+        found.append(f'observer.latency = {observer.latency_s:g} s: estimates are published '
+                     f'with the stamp of the sample they are for')
+    return found
+
+
+class Observer(Node):
+    """Thin wrapper: messages in, :meth:`.Estimator.update`, messages out."""
+
+    def __init__(self, **kwargs):
+        super().__init__('observer', **kwargs)
+        self.params = ParameterGuard(self, SPECS, build, self.reconfigure)
+        self.speed_mps = None
+        self.waiting = deque()
+        self.period, self.total = Counter(), Counter()   # node-side counters
+        self.core_base = Counter()                        # counters of retired estimators
+        self.core_reported = Counter()
+        self.last_rejection = ''
+        self.extremes = {'max_abs_ltr': 0.0, 'max_abs_residual_nm': 0.0}
+        self.last_report = time.monotonic()
+        self.reconfigure(self.params.config)
+        self.load_pubs = [self.create_publisher(WrenchStamped, f'/wheel_load/{s}',
+                                                reliable_qos()) for s in SIDES]
+        self.road_pubs = [self.create_publisher(PointStamped, f'/road_profile/{s}',
+                                                reliable_qos()) for s in SIDES]
+        self.ltr_pub = self.create_publisher(Float64, '/load_transfer_ratio', reliable_qos())
+        self.states_pub = self.create_publisher(JointState, '/observer/states', reliable_qos())
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                     reliable_qos(10))
+        self.create_subscription(JointState, '/suspension/deflections',
+                                 self.deflections_callback, sensor_qos(1000))
+        self.create_subscription(TwistStamped, '/vehicle/twist', self.twist_callback,
+                                 sensor_qos(10))
+        self.create_timer(1.0, self.diagnostics_callback)
+
+    def reconfigure(self, config) -> None:
+        """(Re)build the estimator from ``(VehicleParameters, ObserverParameters)``."""
+        old = getattr(self, 'estimator', None)
+        if old is not None:
+            for est in old.flush():  # estimates held back (observer.latency > 0): publish them
+                self.publish(est)
+            self.core_base.update(self.core_counts(old))
+            self.total['rebuilds'] += 1
+            self.get_logger().info('parameters changed: estimator rebuilt (it restarts)')
+        self.estimator = Estimator(*config)
+        self.findings = static_findings(*config)
+        self.half_track_m = config[0].half_track_m
+
+    def finish(self) -> None:
+        """Publish the estimates still held back (``observer.latency`` > 0) before leaving."""
+        for est in self.estimator.flush():
+            self.publish(est)
+        for pub in (*self.load_pubs, *self.road_pubs, self.ltr_pub, self.states_pub):
+            pub.wait_for_all_acked(Duration(seconds=1.0))
+
+    def core_counts(self, estimator=None) -> Counter:
+        st = (estimator or self.estimator).status
+        return Counter({short: getattr(st, name) for name, short in CORE_COUNTERS.items()})
+
+    def reject(self, reason: str, detail: str) -> None:
+        self.period[reason] += 1
+        self.last_rejection = detail
+
+    def twist_callback(self, msg: TwistStamped) -> None:
+        try:
+            _, self.speed_mps = read_twist(msg)
+        except MessageRejected as exc:
+            self.reject('twist_' + exc.reason, str(exc))
+            return
+        while self.waiting:
+            self.estimate(*self.waiting.popleft())
+
+    def deflections_callback(self, msg: JointState) -> None:
+        self.period['received'] += 1
+        try:
+            sample = read_deflections(msg)
+        except MessageRejected as exc:
+            self.reject(exc.reason, str(exc))
+            return
+        if self.speed_mps is not None:
+            self.estimate(*sample)
+            return
+        if len(self.waiting) == MAX_WAITING:
+            self.waiting.popleft()
+            self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
+        self.waiting.append(sample)
+
+    def estimate(self, stamp_ns: int, q_m, roll_rad: float) -> None:
+        est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
+        if est is not None:  # None: rejected by the core (counted), or held back (latency)
+            self.publish(est)
+
+    def publish(self, est) -> None:
+        """The six output messages of one estimate, stamped with its sample's stamp."""
+        (f1, f2), (u1, u2), s = est.wheel_load_n, est.road_m, self.half_track_m
+        position = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m)
+        velocity = (*est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
+        if not math.isfinite(f1 + f2 + u1 + u2 + est.ltr + est.distance_m + sum(position)
+                             + sum(velocity)):
+            self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
+            return
+        t = est.stamp_ns
+        for pub, frame, load in zip(self.load_pubs, WHEEL_FRAMES, (f1, f2)):
+            pub.publish(wrench_msg(t, frame, load))
+        for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
+            pub.publish(road_point_msg(t, est.distance_m, y, road))
+        self.ltr_pub.publish(float64_msg(est.ltr))
+        self.states_pub.publish(states_msg(t, position, velocity))
+        self.period['published'] += 1
+        self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
+        ex = self.extremes
+        ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(est.ltr))
+        ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
+
+    def diagnostics_callback(self) -> None:
+        """Static findings, then this period's counts (cleared after each report)."""
+        now = time.monotonic()
+        elapsed, self.last_report = now - self.last_report, now
+        st = self.estimator.status
+        core = self.core_base + self.core_counts()
+        fresh, self.core_reported = core - self.core_reported, core
+        period, self.period = self.period, Counter()
+        self.total.update(period)
+        rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
+        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'time') if fresh[k]})
+        received = period['received']
+        values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
+                  'published': period['published'], 'waiting_for_speed': len(self.waiting),
+                  'speed_mps': 'none' if self.speed_mps is None else self.speed_mps}
+        values.update({f'rejected.{k}': v for k, v in sorted(rejected.items())})
+        values.update({f'total.{k}': v for k, v in sorted((self.total + core).items())})
+        message = ('no input' if not received else f'{sum(rejected.values())} rejected'
+                   if rejected else f'{len(self.waiting)} waiting for a speed' if self.waiting
+                   else 'ok')
+        if period.keys() - FLOW_COUNTS:  # rejected here (not in the core): say the last why
+            values['last_rejection'] = self.last_rejection
+        if st.typical_dt_s > 0.0:  # the rate the stamps say, against the rate that came
+            values['stamp_rate_hz'] = 1.0 / st.typical_dt_s
+        inputs = diagnostic_status('observer: input', self.get_name(),
+                                   'ok' if message == 'ok' else 'warn', message, values)
+        ex, self.extremes = self.extremes, dict.fromkeys(self.extremes, 0.0)
+        lifts, resets = period['lift_offs'], fresh['resets']
+        message = ('converging' if not st.converged else f'{lifts} lift-off samples' if lifts
+                   else f'{resets} restarts' if resets else 'ok')
+        values = {'converged': st.converged, 'time_since_start_s': st.time_since_start_s,
+                  'settling_time_s': getattr(self.estimator, 'settling_time_s',
+                                             st.settling_time_s), 'resets': resets,
+                  'gaps': fresh['gaps'], 'residual_nm': st.last_residual_nm,
+                  'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
+                  'lift_off_right': st.lift_off[1], **ex}
+        values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
+        estimator = diagnostic_status('observer: estimator', self.get_name(),
+                                      'ok' if message == 'ok' else 'warn', message, values)
+        values = {f'finding.{i}': f for i, f in enumerate(self.findings)}
+        values['refused_parameter_sets'] = len(self.params.refusals)
+        config = diagnostic_status('observer: configuration', self.get_name(),
+                                   'warn' if self.findings else 'ok',
+                                   '; '.join(self.findings) or 'ok', values)
+        msg = DiagnosticArray(status=[inputs, estimator, config])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+
+
+def main(args=None) -> int:
+    return run_node('observer', __doc__.splitlines()[0], SPECS, args, Observer,
+                    finish=lambda executor, node: node.finish())
+
+
+if __name__ == '__main__':
+    sys.exit(main())

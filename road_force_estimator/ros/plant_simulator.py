@@ -1,0 +1,170 @@
+"""``plant_simulator`` node: the plant driven over a road, publishing measurements and truth.
+
+Publishes, at ``simulator.rate``, the measurements ``/suspension/deflections`` (sensor-data QoS)
+and ``/vehicle/twist``, the ground truth ``/ground_truth/wheel_load/left|right`` and
+``/ground_truth/road_profile/left|right`` (reliable), ``/fix`` at ``simulator.gnss.rate`` (a
+straight route) and ``/diagnostics`` at 1 Hz (INTERFACES.md). Sample k is stamped
+``start + k / rate`` exactly (integer ns; start = the node clock at the first sample), never a
+wall-clock read. A timer publishes every sample that is due, so the stream keeps real time
+(times ``realtime_factor``, a node-local parameter: > 1 runs faster, < 1 slower). At the end of
+the road or of ``simulator.duration`` it stops publishing and :attr:`finished` turns true; its
+``main`` then returns 0. Parameters are read once (read-only): restart to change the drive.
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+import math
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
+from rclpy.duration import Duration
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, NavSatFix
+
+from road_force_estimator.core.gnss import route
+from road_force_estimator.ros.messages import (
+    SIDES, WHEEL_FRAMES, deflections_msg, diagnostic_status, ns_to_stamp, reliable_qos,
+    road_point_msg, sensor_qos, twist_msg, wrench_msg)
+from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
+from road_force_estimator.core.plant import Plant
+from road_force_estimator.core.road import road_from_source
+from road_force_estimator.ros.node_runner import run_node
+from road_force_estimator.ros.ros_parameters import (
+    ParameterError, ParameterGuard, local_spec, specs_with_prefix)
+from road_force_estimator.core.sensors import SensorModel
+
+MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
+SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
+    'realtime_factor', 'double', 1.0, '',
+    'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0),)
+
+
+def build(values):
+    return (VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values),
+            values['realtime_factor'])
+
+
+class PlantSimulator(Node):
+    """The plant of :mod:`.plant` with the sensors of :mod:`.sensors`, on a timer."""
+
+    def __init__(self, **kwargs):
+        super().__init__('plant_simulator', **kwargs)
+        self.params = ParameterGuard(self, SPECS, build, read_only=True)
+        vehicle, self.sim, self.realtime_factor = self.params.config
+        sim = self.sim
+        try:
+            length = min(sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0,
+                         MAX_SYNTHETIC_LENGTH_M)
+            self.road = road_from_source(sim.road, length_m=length)
+            self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
+                               tire_envelope_m=sim.tire_envelope_length_m)
+        except Exception as exc:  # ValueError, OSError, bag_io.BagReadError: any road refused
+            raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
+                                 f'{exc}') from None
+        self.measure = SensorModel.from_simulator(sim).sampler()
+        self.half_track_m = vehicle.half_track_m
+        self.last_index = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
+                              self.plant.last_sample_index)
+        self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
+        self.deflections_pub = self.create_publisher(JointState, '/suspension/deflections',
+                                                     sensor_qos(100))
+        self.reliable = [self.create_publisher(TwistStamped, '/vehicle/twist', reliable_qos())]
+        self.reliable += [self.create_publisher(WrenchStamped, f'/ground_truth/wheel_load/{s}',
+                                                reliable_qos()) for s in SIDES]
+        self.reliable += [self.create_publisher(PointStamped, f'/ground_truth/road_profile/{s}',
+                                                reliable_qos()) for s in SIDES]
+        self.fix_pub = self.create_publisher(NavSatFix, '/fix', sensor_qos(10)) if (
+            sim.gnss_rate_hz > 0.0) else None
+        self.fix = (-1, 0.0, sim.gnss_start_latitude_deg, sim.gnss_start_longitude_deg,
+                    sim.gnss_heading_deg)  # (fix index, t_s, lat, lon, heading) of the last fix
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                     reliable_qos(10))
+        self.k = 0                     # next sample index
+        self.start_ns = self.start_wall = None
+        self.lag_s = 0.0
+        self.finished = False
+        period_s = max(1.0 / (sim.rate_hz * self.realtime_factor), 1e-3)
+        self.timer = self.create_timer(period_s, self.timer_callback)
+        self.diagnostics_timer = self.create_timer(1.0, self.diagnostics_callback)
+
+    def timer_callback(self) -> None:
+        """Publish every sample due by now (wall clock times ``realtime_factor``)."""
+        if self.start_ns is None:
+            self.start_ns = self.get_clock().now().nanoseconds
+            self.start_wall = time.monotonic()
+        elapsed = (time.monotonic() - self.start_wall) * self.realtime_factor
+        due = min(int(elapsed * self.sim.rate_hz) + 1, self.last_index + 1)
+        self.lag_s = max(0.0, elapsed - self.k / self.sim.rate_hz)
+        while self.k < due and not self.finished:
+            sample = self.plant.step()
+            if sample is None:
+                break
+            self.publish(sample, self.start_ns + round(self.k * self.period_ns))
+            self.k += 1
+        if self.k > self.last_index or self.plant.finished:
+            self.finish()
+
+    def publish(self, sample, stamp_ns: int) -> None:
+        q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
+        twist, load_l, load_r, road_l, road_r = self.reliable
+        twist.publish(twist_msg(stamp_ns, self.sim.speed_mps))
+        self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))
+        for pub, frame, load in zip((load_l, load_r), WHEEL_FRAMES, sample.wheel_load_n):
+            pub.publish(wrench_msg(stamp_ns, frame, load))
+        for pub, y, road in zip((road_l, road_r), (self.half_track_m, -self.half_track_m),
+                                sample.road_m):
+            pub.publish(road_point_msg(stamp_ns, sample.distance_m, y, road))
+        if self.fix_pub is not None and int(sample.t_s * self.sim.gnss_rate_hz) > self.fix[0]:
+            self.publish_fix(sample.t_s, stamp_ns)
+
+    def publish_fix(self, t_s: float, stamp_ns: int) -> None:
+        """``/fix`` on the straight route (WGS84), integrated from the previous fix."""
+        j, t0, lat, lon, heading = self.fix
+        if j >= 0:
+            r = route([t0, t_s], self.sim.speed_mps, start_latitude_deg=lat,
+                      start_longitude_deg=lon, heading_deg=heading)
+            lat, lon, heading = r.latitude_deg[-1], r.longitude_deg[-1], r.heading_deg[-1]
+        self.fix = (int(t_s * self.sim.gnss_rate_hz), t_s, float(lat), float(lon), heading)
+        msg = NavSatFix(latitude=float(lat), longitude=float(lon), altitude=0.0)
+        msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), 'gnss'
+        msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        self.fix_pub.publish(msg)
+
+    def finish(self) -> None:
+        if not self.finished:
+            self.finished = True
+            self.timer.cancel()
+            reason = self.plant.stop_reason or f'duration {self.sim.duration_s:g} s simulated'
+            self.get_logger().info(f'drive finished after {self.k} samples: {reason}')
+            self.diagnostics_callback()
+
+    def diagnostics_callback(self) -> None:
+        sim = self.sim
+        late = self.lag_s > 0.1 and not self.finished
+        values = {'samples': self.k, 'simulated_time_s': self.k / sim.rate_hz,
+                  'rate_hz': sim.rate_hz, 'realtime_factor': self.realtime_factor,
+                  'lag_s': self.lag_s, 'road': self.road.name or sim.road,
+                  'road_end_m': self.road.end_m, 'finished': self.finished}
+        message = ('finished' if self.finished else
+                   f'behind real time by {self.lag_s:.3f} s' if late else 'publishing')
+        msg = DiagnosticArray(status=[diagnostic_status(
+            'plant_simulator: drive', self.get_name(), 'warn' if late else 'ok', message,
+            values)])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+
+
+def main(args=None) -> int:
+    return run_node('plant_simulator', __doc__.splitlines()[0], SPECS, args, PlantSimulator,
+                    done=lambda node: node.finished, finish=_wait_for_subscribers)
+
+
+def _wait_for_subscribers(executor, node: PlantSimulator) -> None:
+    for pub in node.reliable:  # let subscribers take the last samples before leaving
+        pub.wait_for_all_acked(Duration(seconds=2.0))
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,374 @@
+"""`estimate_bag`: the estimator over a recorded drive bag, without DDS.
+
+    estimate_bag INPUT --params-file FILE --output DIR [--mode online|offline]
+                 [--segment-length M] [--reference-profile SOURCE [--reference-offset M]]
+                 [--no-figures] [--force] [--no-progress]
+
+Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
+present the ground truth and ``/fix``) with :func:`bagio.bag_io.read_drive_bag`,
+which rejects and counts what cannot be trusted (NaN, missing joint names, duplicate or
+backward stamps, undecodable messages) and reads a truncated or corrupt bag up to its break.
+Then it estimates:
+
+``online`` (default)
+    Exactly what the ``observer`` node publishes: every accepted sample goes through
+    :meth:`estimation.estimator.Estimator.update`, in order, with the latest speed;
+    samples recorded before the first ``/vehicle/twist`` take the first speed (the node holds
+    them until a speed arrives). The numbers equal :func:`~.estimator.estimate_batch`'s.
+``offline``
+    :func:`estimation.offline.estimate_recording`: non-causal, the whole recording.
+
+It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
+``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
+(:mod:`report.report`). Exit status: 0 on success (skipped messages are counted
+in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
+parameters), 2 for a bad command line; each with one line on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+import shutil
+import sys
+from typing import Any
+
+import numpy as np
+
+__all__ = ['PROG', 'MODES', 'EstimateResult', 'build_parser', 'load_parameters', 'drive_speed',
+           'estimate_online', 'run', 'main']
+
+PROG = 'estimate_bag'
+MODES = ('online', 'offline')
+#: Progress bars appear from this many samples on.
+PROGRESS_MIN_SAMPLES = 50_000
+
+
+class _UsageError(Exception):
+    """A bad command line (exit status 2)."""
+
+
+class InputError(Exception):
+    """Bad input (exit status 1)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage dump
+        raise _UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``estimate_bag``."""
+    p = _Parser(prog=PROG, description='Run the estimator over a recorded drive bag and write '
+                'the bag of estimates (DIR/bag) and a report (DIR/report).')
+    p.add_argument('input', metavar='INPUT', help='drive bag folder (rosbag2 MCAP)')
+    p.add_argument('--params-file', metavar='FILE',
+                   help='ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
+                        'observer.*; default: the package defaults')
+    p.add_argument('--output', '-o', required=True, metavar='DIR', help='output folder')
+    p.add_argument('--mode', choices=MODES, default='online',
+                   help='online: what the observer node publishes (default); offline: '
+                        'non-causal, the whole recording')
+    p.add_argument('--segment-length', type=float, default=100.0, metavar='M',
+                   help='report segment length, m (default 100)')
+    p.add_argument('--reference-profile', metavar='SOURCE',
+                   help='profile to compare the estimate with when the bag has no ground '
+                        'truth: LPA bag, CSV or ERD')
+    p.add_argument('--reference-offset', type=float, metavar='M',
+                   help='distance along the reference profile where the drive starts, m from '
+                        'its start (default: found by correlation within +-10 m)')
+    p.add_argument('--no-figures', action='store_true', help='report without figures')
+    p.add_argument('--force', action='store_true', help='replace DIR/bag and DIR/report')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    return p
+
+
+def load_parameters(path: str | None):
+    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None)."""
+    from road_force_estimator.core.parameters import (
+        ObserverParameters, VehicleParameters, load_params_file)
+    values = {} if path is None else load_params_file(path, node_names=('observer', PROG))
+    return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
+
+
+def drive_speed(drive) -> tuple[np.ndarray, int]:
+    """Speed per sample (m/s) and how many samples took the first twist's speed.
+
+    Samples before the first accepted ``/vehicle/twist`` get its speed (the observer node
+    holds them until a speed arrives and estimates them with it).
+
+    Raises
+    ------
+    InputError
+        No usable twist at all.
+    """
+    speed = np.array(drive.speed_mps, dtype=float)
+    if len(drive.twist_speed_mps) == 0:
+        raise InputError('no usable /vehicle/twist message: the speed is unknown')
+    early = ~np.isfinite(speed)
+    speed[early] = float(drive.twist_speed_mps[0])
+    return speed, int(np.count_nonzero(early))
+
+
+def _progress(total: int, enabled: bool, desc: str):
+    from tqdm import tqdm
+    return tqdm(total=total, desc=desc, unit='sample', unit_scale=True, file=sys.stderr,
+                mininterval=0.5, leave=False,
+                disable=(not enabled or total < PROGRESS_MIN_SAMPLES) or None)
+
+
+class _Stages:
+    """A one-line progress display of the stages of :func:`run` (stderr, TTY only)."""
+
+    NAMES = ('read', 'estimate', 'write bag', 'report')
+
+    def __init__(self, enabled: bool) -> None:
+        from tqdm import tqdm
+        self.bar = tqdm(total=len(self.NAMES), desc=PROG, file=sys.stderr, leave=False,
+                        bar_format='{desc} ({n}/{total} stages done)',
+                        disable=None if enabled else True)
+        self.started = False
+
+    def next(self, name: str) -> None:
+        if self.started:
+            self.bar.update(1)
+        self.started = True
+        self.bar.set_description_str(f'{PROG}: {name}')
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
+                    progress: bool = False):
+    """The observer node's numbers: :func:`~.estimator.estimate_batch`, which runs
+    :meth:`Estimator.update`'s steps per sample, in order, then ``flush`` (bit-identical to
+    them: test_estimator); row k holds the estimate of sample k (with a latency it came with a
+    later input or from ``flush``), rejected rows hold the previous one with ``valid`` False.
+
+    Returns
+    -------
+    EstimateArrays
+    """
+    from road_force_estimator.estimation.estimator import estimate_batch
+
+    with _progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
+        return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                              progress=bar.update)
+
+
+def _diagnostics(est, summary_counts: dict[str, int], mode: str):
+    """One DiagnosticArray per second of the drive (data time), the last with the totals."""
+    from road_force_estimator.bagio.bag_io import TYPESTORE
+
+    types = TYPESTORE.types
+    Time = types['builtin_interfaces/msg/Time']
+    Header = types['std_msgs/msg/Header']
+    KeyValue = types['diagnostic_msgs/msg/KeyValue']
+    Status = types['diagnostic_msgs/msg/DiagnosticStatus']
+    Array = types['diagnostic_msgs/msg/DiagnosticArray']
+    rows = np.flatnonzero(est.valid)
+    if rows.size == 0:
+        return []
+    stamps = np.asarray(est.stamp_ns, dtype=np.int64)[rows]
+    second = (stamps - stamps[0]) // 1_000_000_000
+    ends = np.flatnonzero(np.diff(second)) + 1
+    bounds = list(zip(np.concatenate([[0], ends]).tolist(),
+                      np.concatenate([ends, [rows.size]]).tolist()))
+    ltr = np.abs(np.asarray(est.ltr)[rows])
+    res = np.abs(np.asarray(est.residual_nm)[rows])
+    lifted = np.asarray(est.lift_off)[rows].any(axis=1)
+    conv = np.asarray(est.converged)[rows]
+    out = []
+    for j, (a, b) in enumerate(bounds):
+        stamp = int(stamps[b - 1])
+        values = {'samples': b - a, 'converged': bool(conv[b - 1]),
+                  'lift_off_samples': int(np.count_nonzero(lifted[a:b])),
+                  'max_abs_ltr': float(np.max(ltr[a:b])),
+                  'max_abs_residual_nm': float(np.max(res[a:b]))}
+        if j == len(bounds) - 1:
+            values.update({f'total.{k}': v for k, v in summary_counts.items()})
+        lifts = values['lift_off_samples']
+        message = ('converging' if not values['converged'] else
+                   f'{lifts} lift-off samples' if lifts else 'ok')
+        status = Status(level=0 if message == 'ok' else 1, name=f'{PROG}: estimator ({mode})',
+                        message=message, hardware_id=PROG,
+                        values=[KeyValue(key=k, value=_text(v)) for k, v in values.items()])
+        sec, nsec = divmod(stamp, 1_000_000_000)
+        out.append((stamp, Array(header=Header(stamp=Time(sec=sec, nanosec=nsec), frame_id=''),
+                                 status=[status])))
+    return out
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    return str(value)
+
+
+@dataclass
+class EstimateResult:
+    """What :func:`run` did: the summary of the report, the paths, the estimates, the bag's
+    messages that were written (``written``), warnings (breaks in the bag) and the drive read
+    (:class:`~.bag_io.Drive`)."""
+
+    summary: dict[str, Any]
+    bag: Path
+    report: Path
+    estimates: Any = None
+    written: dict[str, int] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    drive: Any = None
+
+
+def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
+        mode: str = 'online', segment_length_m: float = 100.0, reference=None,
+        reference_offset_m: float | None = None, figures: bool = True, force: bool = False,
+        progress: bool = False) -> EstimateResult:
+    """Estimate one drive bag and write ``output/bag`` and ``output/report``.
+
+    Raises
+    ------
+    InputError
+        Not a drive bag, no usable sample or speed, output exists without ``force``.
+    """
+    from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+
+    vehicle = VehicleParameters() if vehicle is None else vehicle
+    observer = ObserverParameters() if observer is None else observer
+    if mode not in MODES:
+        raise InputError(f'mode {mode!r}: must be one of {", ".join(MODES)}')
+    if not (segment_length_m > 0.0 and math.isfinite(segment_length_m)):
+        raise InputError(f'segment length {segment_length_m!r} m: must be > 0')
+    input_path = Path(input_path)
+    output = Path(output)
+    bag_dir, report_dir = output / 'bag', output / 'report'
+    if not force:
+        for p in (bag_dir, report_dir):
+            if p.exists():
+                raise InputError(f'{p} exists (use --force to replace it)')
+    stages = _Stages(progress)
+    try:
+        return _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode,
+                    segment_length_m, reference, reference_offset_m, figures, force, progress,
+                    stages)
+    finally:
+        stages.close()
+
+
+def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
+         reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
+    from road_force_estimator.bagio import bag_io
+    from road_force_estimator.report import report
+    from road_force_estimator.estimation.offline import estimate_recording
+
+    stages.next('reading the bag')
+    try:
+        drive = bag_io.read_drive_bag(input_path)
+    except bag_io.BagReadError as err:
+        raise InputError(str(err)) from None
+    warnings = [f'{input_path}: {issue}' for issue in drive.issues]
+    if len(drive.stamps_ns) == 0:
+        raise InputError(f'{input_path}: no usable /suspension/deflections message'
+                         + (f' ({drive.issues[0]})' if drive.issues else ''))
+    speed, early = drive_speed(drive)
+    args = (drive.stamps_ns, drive.q_m, drive.roll_rad, speed, vehicle, observer)
+    stages.next(f'estimating ({mode})')
+    if mode == 'online':
+        est = estimate_online(*args, progress=progress)
+    else:
+        est = estimate_recording(*args)
+    extra = {}
+    if early:
+        extra['samples before the first twist (given its speed)'] = early
+    st = est.status
+    counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
+              'rejected_by_reader': int(drive.rejected_total),
+              'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
+    output.mkdir(parents=True, exist_ok=True)
+    if force and bag_dir.exists():
+        shutil.rmtree(bag_dir)
+    custom = {'road_force_estimator.mode': mode,
+              'road_force_estimator.input': input_path.name,
+              'road_force_estimator.writer_command': PROG}
+    stages.next('writing the bag')
+    try:
+        written = bag_io.write_estimate_bag(
+            bag_dir, est, track_width_m=vehicle.track_width_m,
+            diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
+    except (bag_io.BagWriteError, OSError) as err:
+        raise InputError(f'cannot write {bag_dir}: {err}') from None
+    if written.get('nonfinite'):
+        extra['estimates not written (non-finite)'] = written['nonfinite']
+    if force and report_dir.exists():
+        shutil.rmtree(report_dir)
+    stages.next('writing the report' + (' and figures' if figures else ''))
+    summary = report.write_report(
+        report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
+        reference=reference, reference_offset_m=reference_offset_m,
+        segment_length_m=segment_length_m, figures=figures, extra=extra)
+    return EstimateResult(summary, bag_dir, report_dir, est, written, warnings, drive)
+
+
+def _headline(result: EstimateResult) -> list[str]:
+    s = result.summary
+    lines = [f'report: {result.report / "report.md"}', f'bag: {result.bag}',
+             f'samples estimated: {s["samples"]["estimated"]} ({s["mode"]}), rejected: '
+             f'{s["rejected_total"]}, restarts: {s["resets"]}']
+    acc = s.get('accuracy') or {}
+    if 'load_rms_pct_dynamic_both' in acc:
+        lines.append(f'wheel-load error: {acc["load_rms_pct_dynamic_both"]:.2f} % of the true '
+                     f'dynamic-load RMS ({np.mean(acc["load_rms_pct_static"]):.2f} % of the '
+                     'static load)')
+    if 'profile_rms_pct_band_both' in acc:
+        lines.append(f'profile error (0.5-30 m band): {acc["profile_rms_pct_band_both"]:.2f} %')
+    iri = s['iri_m_per_km']
+    if iri['estimated']:
+        text = f'IRI left/right: {iri["estimated"][0]:.2f}/{iri["estimated"][1]:.2f} m/km'
+        if iri['true']:
+            what = 'reference' if s.get('reference_profile') else 'true'
+            text += f' ({what} {iri["true"][0]:.2f}/{iri["true"][1]:.2f})'
+        lines.append(text)
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
+    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+
+    try:
+        args = build_parser().parse_args(argv)
+        if not (args.segment_length > 0.0 and math.isfinite(args.segment_length)):
+            raise _UsageError(f'--segment-length {args.segment_length!r}: must be > 0 m')
+        vehicle, observer = load_parameters(args.params_file)
+        reference = None
+        if args.reference_offset is not None and not args.reference_profile:
+            raise _UsageError('--reference-offset needs --reference-profile')
+        if args.reference_profile:
+            from road_force_estimator.core.road import road_from_source
+            reference = road_from_source(args.reference_profile)
+        result = run(args.input, args.output, vehicle=vehicle, observer=observer,
+                     mode=args.mode, segment_length_m=args.segment_length, reference=reference,
+                     reference_offset_m=args.reference_offset, figures=not args.no_figures,
+                     force=args.force,
+                     progress=not args.no_progress)
+    except SystemExit as done:          # --help
+        return int(done.code or 0)
+    except _UsageError as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+    except (InputError, ValueError, BagReadError, BagWriteError, OSError) as err:
+        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
+        return 1
+    for line in result.warnings:
+        print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
+    for line in _headline(result):
+        print(f'{PROG}: {line}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

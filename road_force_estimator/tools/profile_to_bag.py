@@ -1,0 +1,122 @@
+"""`profile_to_bag`: a road profile to an LPA bag, and an LPA bag back to CSV.
+
+    profile_to_bag INPUT --output DIR [--survey-speed V] [--track-width T] [--length M]
+    profile_to_bag BAG --output FILE.csv
+
+INPUT is a profile file (CSV ``distance_m,left_m,right_m`` or ``distance_m,elevation_m``, UMTRI
+ERD, or whitespace columns such as profile_1.txt) or a synthetic road spec
+(``iso8608:C:seed=1``, ``flat``; ``--length`` sets its length). It becomes the LPA bag DIR:
+``/lpa/left`` and ``/lpa/right`` (geometry_msgs/PointStamped, INTERFACES.md). When INPUT is a
+bag folder, the profile it holds is written to the CSV file given as ``--output`` instead,
+with every number printed exactly (shortest round-trip form), so CSV -> bag -> CSV loses
+nothing.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+
+__all__ = ['build_parser', 'main', 'write_exact_csv']
+
+PROG = 'profile_to_bag'
+
+
+class _UsageError(Exception):
+    """A bad command line (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage dump
+        raise _UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``profile_to_bag``."""
+    from road_force_estimator.bagio.bag_io import (
+        DEFAULT_SURVEY_SPEED_MPS,
+        DEFAULT_TRACK_WIDTH_M,
+    )
+    parser = _Parser(
+        prog=PROG,
+        description='Convert a road profile (CSV, ERD, text columns or a synthetic '
+                    'iso8608:<class>[:seed=N] road) into an LPA bag (rosbag2 MCAP folder with '
+                    '/lpa/left and /lpa/right), or an LPA bag back into a CSV profile.',
+        epilog='Direction: an INPUT that is a bag folder (it holds metadata.yaml or .mcap '
+               'files) is converted to the CSV file --output; anything else to the bag folder '
+               '--output. The CSV has the header distance_m,left_m,right_m and exact numbers.')
+    parser.add_argument('input', metavar='INPUT',
+                        help='profile file (.csv, .erd, .txt/.dat), road spec such as '
+                             'iso8608:C:seed=1, or an LPA bag folder')
+    parser.add_argument('--output', '-o', required=True, metavar='PATH',
+                        help='bag folder to create, or CSV file when INPUT is a bag')
+    parser.add_argument('--survey-speed', type=float, default=DEFAULT_SURVEY_SPEED_MPS,
+                        metavar='V', help='survey speed for the bag stamps, m/s (default '
+                                          f'{DEFAULT_SURVEY_SPEED_MPS:g})')
+    parser.add_argument('--track-width', type=float, default=DEFAULT_TRACK_WIDTH_M,
+                        metavar='T', help='lateral distance between the wheel paths, m: '
+                                          f'y = +-T/2 (default {DEFAULT_TRACK_WIDTH_M:g})')
+    parser.add_argument('--length', type=float, default=None, metavar='M',
+                        help='length of a synthetic road, m (default 1000)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace an existing output bag folder or CSV file')
+    return parser
+
+
+def _is_bag(path: Path) -> bool:
+    return path.is_dir() and ((path / 'metadata.yaml').is_file() or any(path.glob('*.mcap')))
+
+
+def write_exact_csv(path: str | Path, profile) -> None:
+    """Write ``distance_m,left_m,right_m`` with every float in its shortest exact form."""
+    with Path(path).open('w', newline='') as f:
+        f.write('distance_m,left_m,right_m\n')
+        for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
+            f.write(f'{x!r},{zl!r},{zr!r}\n')
+
+
+def _run(args: argparse.Namespace) -> list[str]:
+    from road_force_estimator.bagio import bag_io
+    from road_force_estimator.core.road import road_from_source
+
+    source = Path(args.input).expanduser()
+    output = Path(args.output).expanduser()
+    if _is_bag(source):
+        if output.exists() and not (args.force and output.is_file()):
+            raise ValueError(f'{output} exists (use --force to replace a file)')
+        notes: list[str] = []
+        profile = bag_io.read_lpa_bag(source, issues=notes)
+        write_exact_csv(output, profile)
+        return notes + [f'wrote {len(profile)} samples to {output}']
+    if args.length is not None and not args.length > 0.0:
+        raise _UsageError(f'--length {args.length!r}: must be > 0 m')
+    profile = road_from_source(args.input, length_m=args.length)
+    bag_io.write_lpa_bag(output, profile, survey_speed_mps=args.survey_speed,
+                         track_width_m=args.track_width, overwrite=args.force)
+    return list(getattr(profile, 'notes', ())) + [
+        f'wrote {len(profile)} samples ({profile.distance_m[0]:g} m to '
+        f'{profile.distance_m[-1]:g} m) to {output}']
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``profile_to_bag``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
+    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+
+    try:
+        args = build_parser().parse_args(argv)
+        lines = _run(args)
+    except SystemExit as done:          # --help
+        return int(done.code or 0)
+    except _UsageError as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+    except (ValueError, BagReadError, BagWriteError, OSError) as err:
+        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
+        return 1
+    for line in lines:
+        print(f'{PROG}: {line}', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

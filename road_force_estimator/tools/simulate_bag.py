@@ -1,0 +1,244 @@
+"""`simulate_bag`: the plant driven over a road, offline (no DDS), into a drive bag.
+
+    simulate_bag --road SOURCE --speed V --rate HZ [--duration S] [--params-file FILE]
+                 --output DIR [--seed N] [--noise-deflection M] [--noise-roll RAD]
+                 [--tire-envelope M] [--gnss-rate HZ] [--lateral-acceleration A[@T]]
+                 [--no-ground-truth] [--force] [--no-progress]
+
+SOURCE is a road spec (``iso8608:C:seed=1``, ``flat``) or a path to an LPA bag, CSV or ERD
+profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
+(:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
+runs at the rate for the duration, or to the end of the road; the sensors
+(:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
+measure it. The bag DIR (:func:`road_force_estimator.bagio.bag_io.write_drive_bag`) holds the
+measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
+``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
+``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
+(a fix at the first sample of each GNSS period, as the plant_simulator node publishes them;
+the route is integrated between fixes with the lateral acceleration at the fixes, so a step
+of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^2).
+Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
+``custom_data``.
+
+Values come from the defaults, then the parameter file, then the command line. Exit status 0
+on success, 1 for bad input (bad parameter, unreadable road, existing output), 2 for a bad
+command line; each with one line on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+
+__all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'main']
+
+PROG = 'simulate_bag'
+#: Progress bars appear from this many samples on.
+PROGRESS_MIN_SAMPLES = 50_000
+
+# Command-line option -> parameter name.
+_OPTIONS = {
+    'road': 'simulator.road', 'speed': 'simulator.speed', 'rate': 'simulator.rate',
+    'duration': 'simulator.duration', 'seed': 'simulator.seed',
+    'noise_deflection': 'simulator.noise.deflection', 'noise_roll': 'simulator.noise.roll',
+    'tire_envelope': 'simulator.tire_envelope_length', 'gnss_rate': 'simulator.gnss.rate',
+}
+
+
+class _UsageError(Exception):
+    """A bad command line (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage dump
+        raise _UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``simulate_bag``."""
+    p = _Parser(prog=PROG, description='Drive the plant over a road offline and write a bag '
+                'with measurements and ground truth.',
+                epilog='Values: defaults < --params-file < command-line options.')
+    p.add_argument('--road', metavar='SOURCE',
+                   help='road: iso8608:<A-H>[:seed=N], flat, or an LPA bag / CSV / ERD path')
+    p.add_argument('--speed', type=float, metavar='V', help='speed, m/s')
+    p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz')
+    p.add_argument('--duration', type=float, metavar='S',
+                   help='duration, s (the drive also stops at the end of the road)')
+    p.add_argument('--params-file', metavar='FILE',
+                   help='ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
+                        'simulator.*')
+    p.add_argument('--output', '-o', required=True, metavar='DIR', help='bag folder to create')
+    p.add_argument('--seed', type=int, metavar='N', help='seed of the sensor noise')
+    p.add_argument('--noise-deflection', type=float, metavar='M',
+                   help='deflection noise standard deviation, m')
+    p.add_argument('--noise-roll', type=float, metavar='RAD',
+                   help='roll noise standard deviation, rad')
+    p.add_argument('--tire-envelope', type=float, metavar='M',
+                   help='tire envelope length, m (0 = point contact)')
+    p.add_argument('--gnss-rate', type=float, metavar='HZ', help='rate of /fix, Hz (0 = none)')
+    p.add_argument('--lateral-acceleration', metavar='A[@T]',
+                   help='lateral acceleration a_y, m/s^2 (> 0 to the left), from time T s on '
+                        '(default 0 s); bends the GNSS route')
+    p.add_argument('--no-ground-truth', action='store_true',
+                   help='write the measurements only, as a real truck records them')
+    p.add_argument('--force', action='store_true', help='replace an existing bag folder')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    return p
+
+
+def parameters_from(args: argparse.Namespace):
+    """``(VehicleParameters, SimulatorParameters)``: defaults < params file < options."""
+    from road_force_estimator.core.parameters import (
+        SimulatorParameters, VehicleParameters, load_params_file, validate_parameter)
+    values = {}
+    if args.params_file:
+        values = load_params_file(args.params_file, node_names=('plant_simulator', PROG))
+    for option, name in _OPTIONS.items():
+        value = getattr(args, option)
+        if value is not None:
+            values[name] = validate_parameter(name, value)
+    return VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values)
+
+
+def _lateral(text: str | None):
+    """``A[@T]`` -> (a_y, t_on) or None."""
+    if text is None:
+        return None
+    value, _, start = text.partition('@')
+    try:
+        a_y, t_on = float(value), float(start) if start else 0.0
+    except ValueError:
+        raise _UsageError(f'--lateral-acceleration {text!r}: expected A or A@T (numbers)') \
+            from None
+    if not (math.isfinite(a_y) and math.isfinite(t_on) and abs(a_y) <= 20.0 and t_on >= 0.0):
+        raise _UsageError(f'--lateral-acceleration {text!r}: |A| <= 20 m/s^2 and T >= 0 s')
+    return a_y, t_on
+
+
+def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
+    """Run the plant and the sensors.
+
+    Parameters
+    ----------
+    vehicle : VehicleParameters
+    sim : SimulatorParameters
+    lateral : (a_y, t_on) or None
+        Lateral acceleration a_y (m/s^2) from ``t_on`` (s) on.
+    progress : bool
+        Show a progress bar (stderr) on long runs.
+
+    Returns
+    -------
+    trajectory, q_meas (n, 2), roll_meas (n,), fixes or None, road, stop_reason
+        ``trajectory`` has ``t_s``, ``distance_m``, ``q_m``, ``roll_rad``, ``wheel_load_n``,
+        ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps``.
+    """
+    from tqdm import tqdm
+
+    from road_force_estimator.core.gnss import route
+    from road_force_estimator.core.plant import Plant
+    from road_force_estimator.core.road import road_from_source
+    from road_force_estimator.core.sensors import SensorModel
+
+    length = sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0
+    road = road_from_source(sim.road, length_m=length)
+    accel = None
+    if lateral is not None:
+        a_y, t_on = lateral
+
+        def accel(t_s: float) -> float:
+            return a_y if t_s >= t_on else 0.0
+
+    plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
+                  lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m)
+    wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
+                 plant.last_sample_index) + 1
+    cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
+                            'lateral_accel_mps2')}
+    appenders = [(cols[k].append, k) for k in cols]
+    disable = (not progress or wanted < PROGRESS_MIN_SAMPLES) or None
+    with tqdm(total=wanted, desc=f'{PROG}: plant', unit='sample', unit_scale=True,
+              file=sys.stderr, mininterval=0.5, leave=False, disable=disable) as bar:
+        done = 0
+        while done < wanted:
+            sample = plant.step()
+            if sample is None:
+                break
+            for append, key in appenders:
+                append(getattr(sample, key))
+            done += 1
+            if done % 5000 == 0:
+                bar.update(5000)
+        bar.update(done % 5000)
+    if done == 0:
+        raise ValueError(f'road {sim.road!r}: too short for a single sample')
+    traj = SimpleNamespace(
+        t_s=np.array(cols['t_s']), distance_m=np.array(cols['distance_m']),
+        q_m=np.array(cols['q_m']), roll_rad=np.array(cols['roll_rad']),
+        wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
+        lateral_accel_mps2=np.array(cols['lateral_accel_mps2']), speed_mps=sim.speed_mps)
+    sensors = SensorModel.from_simulator(sim)
+    q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
+    fixes = None
+    if sim.gnss_rate_hz > 0.0:
+        period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
+        first = np.concatenate([[True], period[1:] > period[:-1]])
+        idx = np.flatnonzero(first)
+        fixes = route(traj.t_s[idx], sim.speed_mps,
+                      start_latitude_deg=sim.gnss_start_latitude_deg,
+                      start_longitude_deg=sim.gnss_start_longitude_deg,
+                      heading_deg=sim.gnss_heading_deg,
+                      lateral_accel_mps2=traj.lateral_accel_mps2[idx])
+    requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
+    reason = ''
+    if done < requested:
+        reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
+                  f'samples ({traj.t_s[-1]:g} s)')
+    return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``simulate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
+    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError, write_drive_bag
+
+    try:
+        args = build_parser().parse_args(argv)
+        lateral = _lateral(args.lateral_acceleration)
+        vehicle, sim = parameters_from(args)
+        traj, q_meas, roll_meas, fixes, road, reason = simulate(
+            vehicle, sim, lateral=lateral, progress=not args.no_progress)
+        used = {**vehicle.to_parameters(), **sim.to_parameters()}
+        custom = {'road_force_estimator.parameters': json.dumps(used, sort_keys=True),
+                  'road_force_estimator.road_name': road.name or sim.road,
+                  'road_force_estimator.writer_command': PROG}
+        if lateral is not None:
+            custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
+        count = write_drive_bag(Path(args.output), traj, q_meas, roll_meas, fixes=fixes,
+                                speed_mps=sim.speed_mps, track_width_m=vehicle.track_width_m,
+                                ground_truth=not args.no_ground_truth, custom_data=custom,
+                                overwrite=args.force)
+    except SystemExit as done:          # --help
+        return int(done.code or 0)
+    except _UsageError as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+    except (ValueError, BagReadError, BagWriteError, OSError) as err:
+        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
+        return 1
+    n = len(traj.t_s)
+    if reason:
+        print(f'{PROG}: {reason}', file=sys.stderr)
+    print(f'{PROG}: wrote {count} messages ({n} samples, {traj.t_s[-1]:g} s, '
+          f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at {sim.speed_mps:g} m/s) over '
+          f'{road.name or sim.road} to {args.output}', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,279 @@
+"""observer node: plant_simulator -> observer end to end, bad messages, parameters, main().
+
+Nodes spin in the test process (fresh rclpy context per test); main() runs in a subprocess.
+Load-error bound: the one the observer core states in test_estimator.py for its implicit chain
+(no noise, ISO 8608 class C at 20 m/s and 1 kHz, after 2 s: RMS error <= 8 % of the true
+dynamic-load RMS); the node runs the default observer (``observer.discretization``), which must
+meet it too.
+"""
+import math
+import signal
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import TwistStamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from node_harness import Collector, close, finish, make_executor, run_main
+from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.ros.messages import (
+    STATE_JOINTS, deflections_msg, ns_to_stamp, reliable_qos, sensor_qos, twist_msg)
+from road_force_estimator.ros.observer import Observer
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.ros.plant_simulator import PlantSimulator
+from road_force_estimator.ros.ros_parameters import ParameterError
+from ros_helpers import spin_until
+
+OUTPUTS = ['/wheel_load/left', '/wheel_load/right', '/road_profile/left', '/road_profile/right',
+           '/load_transfer_ratio', '/observer/states']
+STAMPED = [t for t in OUTPUTS if t != '/load_transfer_ratio']
+T0_NS = 1_700_000_000_000_000_000
+
+
+def test_plant_to_observer_one_output_per_input_and_load_error(ros_context):
+    collector = Collector(ros_context, ['/suspension/deflections', '/vehicle/twist',
+                                        '/ground_truth/wheel_load/left',
+                                        '/ground_truth/wheel_load/right', *OUTPUTS])
+    observer = Observer(context=ros_context)
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        Parameter('simulator.duration', value=4.0), Parameter('simulator.road',
+                                                              value='iso8608:C:seed=3'),
+        Parameter('simulator.noise.deflection', value=0.0),
+        Parameter('simulator.noise.roll', value=0.0), Parameter('realtime_factor', value=0.5)])
+    executor = make_executor(ros_context, collector, observer, plant)
+    try:
+        assert spin_until(executor, lambda: plant.finished, 60.0)
+        n = plant.k
+        assert n == 4001
+        assert spin_until(executor, lambda: all(
+            collector.count(t) >= n for t in ['/suspension/deflections', *OUTPUTS]), 30.0)
+        executor.spin_once(timeout_sec=0.1)  # nothing more may come
+    finally:
+        close(executor, plant, observer, collector)
+    received = observer.total['received'] + observer.period['received']
+    stamps = collector.stamps('/observer/states')
+    # One output per input on every output topic, in order, with the input's stamp.
+    for topic in STAMPED:
+        assert collector.stamps(topic) == stamps, topic
+    assert collector.count('/load_transfer_ratio') == len(stamps)
+    assert len(stamps) == received == n
+    by_stamp = dict(zip(collector.stamps('/suspension/deflections'),
+                        collector.messages['/suspension/deflections']))
+    inputs = [by_stamp[s] for s in stamps]
+    # The outputs are the core's estimates on these inputs (field mapping, order, signs).
+    q = np.array([m.position[:2] for m in inputs])
+    phi = np.array([m.position[2] for m in inputs])
+    ref = estimate_batch(np.array(stamps), q, phi, 20.0, VehicleParameters(),
+                         ObserverParameters())
+    got = {t: collector.messages[t] for t in OUTPUTS}
+    loads = np.array([[m.wrench.force.z for m in got[t]] for t in OUTPUTS[:2]]).T
+    np.testing.assert_allclose(loads, ref.wheel_load_n, rtol=1e-12)
+    np.testing.assert_allclose([[m.point.z for m in got[t]] for t in OUTPUTS[2:4]],
+                               ref.road_m.T, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose([m.point.x for m in got['/road_profile/left']], ref.distance_m)
+    assert {m.point.y for m in got['/road_profile/left']} == {1.0}
+    assert {m.point.y for m in got['/road_profile/right']} == {-1.0}
+    np.testing.assert_allclose([m.data for m in got['/load_transfer_ratio']], ref.ltr,
+                               rtol=1e-12, atol=1e-15)
+    states = got['/observer/states']
+    assert {tuple(m.name) for m in states} == {STATE_JOINTS}
+    np.testing.assert_allclose([m.position for m in states], np.column_stack(
+        [ref.q_m, ref.roll_rad, ref.body_heave_m, ref.wheel_heave_m]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose([m.velocity for m in states], np.column_stack(
+        [ref.dq, ref.droll, ref.body_heave_rate, ref.wheel_heave_rate]), rtol=1e-12,
+        atol=1e-15)
+    # Load error against the ground truth topics, after convergence (t >= 2 s).
+    truth = np.array([[m.wrench.force.z for m in collector.messages[t]] for t in (
+        '/ground_truth/wheel_load/left', '/ground_truth/wheel_load/right')]).T
+    after = (np.array(stamps) - stamps[0]) >= 2_000_000_000
+    err = loads[after] - truth[after]
+    dynamic_rms = truth[after].std(axis=0)
+    assert np.all(np.sqrt(np.mean(err ** 2, axis=0)) <= 0.08 * dynamic_rms), (
+        np.sqrt(np.mean(err ** 2, axis=0)) / dynamic_rms)
+
+
+class Feeder(Node):
+    """Publishes hand-made measurement messages to the observer."""
+
+    def __init__(self, context):
+        super().__init__('feeder', context=context)
+        self.deflections = self.create_publisher(JointState, '/suspension/deflections',
+                                                 sensor_qos(1000))
+        self.twist = self.create_publisher(TwistStamped, '/vehicle/twist', reliable_qos())
+
+    def sample(self, k, speed=None):
+        q = (1e-3 * math.sin(0.05 * k), -1e-3 * math.cos(0.05 * k))
+        if speed is not None:
+            self.twist.publish(twist_msg(T0_NS + k * 1_000_000, speed))
+        self.deflections.publish(deflections_msg(T0_NS + k * 1_000_000, q, 1e-4 * k))
+
+    def raw(self, stamp_ns, names, position):
+        msg = JointState(name=names, position=position)
+        msg.header.stamp = ns_to_stamp(stamp_ns)
+        self.deflections.publish(msg)
+
+
+@pytest.fixture
+def make_rig(ros_context):
+    """make_rig(**parameters): an observer, a feeder and a collector of the outputs and the
+    diagnostics, matched."""
+    made = []
+
+    def make(**params):
+        overrides = [Parameter(k.replace('__', '.'), value=v) for k, v in params.items()]
+        observer = Observer(context=ros_context, parameter_overrides=overrides)
+        feeder = Feeder(ros_context)
+        collector = Collector(ros_context, [*OUTPUTS, '/diagnostics'])
+        executor = make_executor(ros_context, observer, feeder, collector)
+        made.append((executor, observer, feeder, collector))
+        assert spin_until(executor, lambda: feeder.deflections.get_subscription_count() > 0
+                          and feeder.twist.get_subscription_count() > 0
+                          and observer.states_pub.get_subscription_count() > 0, 10.0)
+        return observer, feeder, collector, executor
+
+    yield make
+    for executor, *nodes in made:
+        close(executor, *nodes)
+
+
+@pytest.fixture
+def rig(make_rig):
+    return make_rig()
+
+
+def input_diagnostics(collector):
+    """Key-values of the newest 'observer: input' status."""
+    for msg in reversed(collector.messages['/diagnostics']):
+        for status in msg.status:
+            if status.name == 'observer: input':
+                return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
+def test_bad_messages_are_counted_and_the_node_keeps_going(rig):
+    observer, feeder, collector, executor = rig
+    for k in range(10):
+        feeder.sample(k, speed=20.0)
+    stamp = T0_NS + 10 * 1_000_000
+    feeder.raw(stamp, ['left_suspension', 'right_suspension', 'roll'], [0.0, math.nan, 0.0])
+    feeder.raw(stamp, ['a', 'b', 'c'], [0.0, 0.0, 0.0])
+    feeder.raw(stamp, ['left_suspension', 'roll'], [0.0, 0.0])
+    feeder.raw(stamp, ['left_suspension', 'right_suspension', 'roll'], [0.0, 0.0])
+    feeder.raw(T0_NS + 9 * 1_000_000, ['roll', 'left_suspension', 'right_suspension'],
+               [0.0, 0.0, 0.0])                                    # duplicate stamp
+    feeder.raw(T0_NS + 5 * 1_000_000, ['roll', 'left_suspension', 'right_suspension'],
+               [0.0, 0.0, 0.0])                                    # backwards
+    for k in range(10, 20):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') >= 20, 10.0)
+    want = {'total.nonfinite': '1', 'total.names': '2', 'total.length': '1',
+            'total.time': '2'}
+    assert spin_until(executor, lambda: all(
+        input_diagnostics(collector).get(k) == v for k, v in want.items()), 5.0), (
+        input_diagnostics(collector))
+    # Only the 20 good samples gave outputs, in order, never a NaN.
+    assert collector.stamps('/observer/states') == [T0_NS + k * 1_000_000 for k in range(20)]
+    for topic in STAMPED:
+        assert collector.count(topic) == 20
+    values = [m.wrench.force.z for t in OUTPUTS[:2] for m in collector.messages[t]]
+    values += [m.data for m in collector.messages['/load_transfer_ratio']]
+    values += [v for m in collector.messages['/observer/states'] for v in m.position]
+    assert np.all(np.isfinite(values))
+    # The names were mapped by name: a reordered JointState reads the same.
+    assert observer.estimator.status.accepted == 20
+
+
+def test_samples_before_the_first_speed_wait_for_it(rig):
+    observer, feeder, collector, executor = rig
+    for k in range(5):
+        feeder.sample(k)
+    assert spin_until(executor, lambda: len(observer.waiting) == 5, 10.0)
+    assert collector.count('/observer/states') == 0
+    feeder.twist.publish(twist_msg(T0_NS, 10.0))
+    assert spin_until(executor, lambda: collector.count('/road_profile/left') == 5, 10.0)
+    # Distance = v t at the speed that arrived (10 m/s, 1 ms apart).
+    np.testing.assert_allclose([m.point.x for m in collector.messages['/road_profile/left']],
+                               10.0 * np.arange(5) * 1e-3, atol=1e-12)
+
+
+def test_live_parameters_refused_or_rebuilding(rig):
+    observer, feeder, collector, executor = rig
+    for k in range(10):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 10, 10.0)
+    estimator = observer.estimator
+    for name, value, pattern in [
+            ('observer.lipschitz_deflection', -1.0, 'observer.lipschitz_deflection'),
+            ('observer.discretization', 'rk4', "observer.discretization = 'rk4'"),
+            ('vehicle.tire_stiffness', [1e6, 0.0], 'vehicle.tire_stiffness = [1000000.0, 0.0]')]:
+        result, = observer.set_parameters([Parameter(name, value=value)])
+        assert not result.successful and pattern in result.reason, result.reason
+    # The running estimate is untouched: same estimator, it goes on without a restart.
+    assert observer.estimator is estimator
+    for k in range(10, 20):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 20, 10.0)
+    assert estimator.status.accepted == 20 and estimator.status.time_since_start_s == (
+        pytest.approx(0.019))
+    result, = observer.set_parameters([Parameter('observer.discretization', value='euler')])
+    assert result.successful
+    assert observer.estimator is not estimator
+    assert observer.estimator.observer.discretization == 'euler'
+    assert observer.get_parameter('observer.discretization').value == 'euler'
+    assert any('euler' in f for f in observer.findings)
+
+
+def test_latency_stamps_each_estimate_with_its_sample_and_nothing_is_lost(make_rig):
+    observer, feeder, collector, executor = make_rig(observer__latency=0.005)
+    for k in range(30):
+        feeder.sample(k, speed=20.0)
+    # 5 ms at 1 kHz: the estimate of sample k comes with input k + 5, stamped as sample k.
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 25, 10.0)
+    executor.spin_once(timeout_sec=0.05)
+    assert collector.stamps('/observer/states') == [T0_NS + k * 1_000_000 for k in range(25)]
+    # A rebuild (good live set) first publishes the estimates still held back.
+    result, = observer.set_parameters([Parameter('observer.latency', value=0.0)])
+    assert result.successful
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 30, 10.0)
+    for topic in STAMPED:
+        assert collector.stamps(topic) == [T0_NS + k * 1_000_000 for k in range(30)], topic
+
+
+@pytest.mark.parametrize('name, value, pattern', [
+    ('observer.profile_cutoff_wavelength', 1.0, r'observer\.profile_cutoff_wavelength = 1\.0'),
+    ('vehicle.unsprung_mass', [450.0, -1.0], r'vehicle\.unsprung_mass = \[450\.0, -1\.0\]'),
+    ('observer.lipschitz_roll', 'high', r"observer\.lipschitz_roll = 'high'"),
+])
+def test_bad_start_up_parameter_is_refused_naming_it(ros_context, name, value, pattern):
+    with pytest.raises(ParameterError, match=pattern):
+        Observer(context=ros_context, parameter_overrides=[Parameter(name, value=value)])
+
+
+def test_main_exits_cleanly_on_sigint_and_refuses_bad_parameters(ros_context):
+    process = run_main('observer')
+    probe = Node('probe', context=ros_context)
+    executor = make_executor(ros_context, probe)
+    try:
+        seen = spin_until(executor, lambda: 'observer' in probe.get_node_names(), 30.0)
+    finally:
+        close(executor, probe)
+    process.send_signal(signal.SIGINT)
+    code, _, err = finish(process, 30.0)
+    assert seen and code == 0, err
+    code, _, err = finish(run_main('observer', '--ros-args', '-p', 'observer.latency:=2.0'))
+    assert code == 1 and err.strip() == (
+        'observer: refused observer.latency = 2.0 is out of range [0, 1] s')
+
+
+
+def test_finish_at_shutdown_publishes_what_latency_holds_back(make_rig):
+    observer, feeder, collector, executor = make_rig(observer__latency=0.005)
+    for k in range(30):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 25, 10.0)
+    observer.finish()   # what main() calls on SIGINT / SIGTERM, before the context goes
+    assert spin_until(executor, lambda: collector.count('/observer/states') == 30, 10.0)
+    for topic in STAMPED:
+        assert collector.stamps(topic) == [T0_NS + k * 1_000_000 for k in range(30)], topic
