@@ -1,0 +1,82 @@
+"""The contract of ``../shared/design/INTERFACES.md`` as data: topics, types, names, frames, QoS.
+
+The one place that spells it: the nodes (``ros/``), the bag formats (``bagio/``) and the
+tests read these names; none of them writes a topic name, joint name, frame or QoS kind of
+its own. Plain Python only (no ROS, no bag library), so every layer may import it.
+
+Sides are ordered (left, right) everywhere (MODEL.md: index 1 = left, 2 = right).
+"""
+from __future__ import annotations
+
+__all__ = [
+    'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
+    'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'ROAD', 'LTR', 'STATES',
+    'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH', 'TWIST_STAMPED', 'FLOAT64',
+    'NAVSATFIX', 'DIAGNOSTIC_ARRAY', 'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS',
+    'qos_kind',
+]
+
+SIDES = ('left', 'right')
+
+#: JointState names of /suspension/deflections: q_1, q_2 (m), phi (rad); mapped by name.
+DEFLECTION_JOINTS = ('left_suspension', 'right_suspension', 'roll')
+#: JointState names of /observer/states (positions and velocities).
+STATE_JOINTS = DEFLECTION_JOINTS + ('body_heave', 'left_wheel_heave', 'right_wheel_heave')
+
+BASE_FRAME = 'base_link'
+ROAD_FRAME = 'road'
+WHEEL_FRAMES = ('front_left_wheel', 'front_right_wheel')
+
+# Topics; per-side topics are (left, right).
+DEFLECTIONS = '/suspension/deflections'
+TWIST = '/vehicle/twist'
+TRUE_LOAD = ('/ground_truth/wheel_load/left', '/ground_truth/wheel_load/right')
+TRUE_ROAD = ('/ground_truth/road_profile/left', '/ground_truth/road_profile/right')
+FIX = '/fix'
+LOAD = ('/wheel_load/left', '/wheel_load/right')
+ROAD = ('/road_profile/left', '/road_profile/right')
+LTR = '/load_transfer_ratio'
+STATES = '/observer/states'
+DIAGNOSTICS = '/diagnostics'
+LPA = ('/lpa/left', '/lpa/right')
+
+# Message types, as rosbag2 and rosbags spell them.
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+POINT = 'geometry_msgs/msg/PointStamped'
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
+TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
+FLOAT64 = 'std_msgs/msg/Float64'
+NAVSATFIX = 'sensor_msgs/msg/NavSatFix'
+DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
+
+#: Every topic of INTERFACES.md and its message type.
+TOPIC_TYPES: dict[str, str] = {
+    DEFLECTIONS: JOINT_STATE,
+    TWIST: TWIST_STAMPED,
+    **{topic: WRENCH for topic in TRUE_LOAD},
+    **{topic: POINT for topic in TRUE_ROAD},
+    **{topic: WRENCH for topic in LOAD},
+    **{topic: POINT for topic in ROAD},
+    LTR: FLOAT64,
+    STATES: JOINT_STATE,
+    DIAGNOSTICS: DIAGNOSTIC_ARRAY,
+    FIX: NAVSATFIX,
+    **{topic: POINT for topic in LPA},
+}
+
+# QoS kinds: "Sensor streams use the sensor-data QoS (best effort, keep last); ground truth
+# and estimates are reliable."
+SENSOR_DATA = 'sensor_data'
+RELIABLE = 'reliable'
+#: The QoS kind of every topic: the sensor streams (what the truck's sensors publish) are
+#: sensor data, everything else reliable.
+TOPIC_QOS: dict[str, str] = {
+    topic: SENSOR_DATA if topic in (DEFLECTIONS, TWIST, FIX) else RELIABLE
+    for topic in TOPIC_TYPES
+}
+
+
+def qos_kind(topic: str) -> str:
+    """The QoS kind of ``topic``: :data:`SENSOR_DATA` or :data:`RELIABLE` (topics not listed
+    in INTERFACES.md are reliable)."""
+    return TOPIC_QOS.get(topic, RELIABLE)
