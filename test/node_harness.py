@@ -9,7 +9,8 @@ import sys
 from rclpy.node import Node
 
 from road_force_estimator.ros.bag_recorder import message_class
-from road_force_estimator.ros.messages import TOPIC_TYPES, stamp_to_ns, topic_qos
+from road_force_estimator.interfaces import TOPIC_TYPES
+from road_force_estimator.ros.messages import stamp_to_ns, topic_qos
 
 try:  # the executor the nodes' main() use
     from rclpy.experimental import EventsExecutor as Executor

@@ -22,7 +22,8 @@ from rclpy.node import Node
 from rclpy.qos import ReliabilityPolicy
 
 from road_force_estimator.bagio.bag_io import BagWriteError, BagWriter
-from road_force_estimator.ros.messages import TOPIC_TYPES, reliable_qos, sensor_qos, topic_qos
+from road_force_estimator.interfaces import TOPIC_TYPES
+from road_force_estimator.ros.messages import reliable_qos, sensor_qos, topic_qos
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterError, ParameterGuard, local_spec
 

@@ -1,15 +1,16 @@
-"""Messages of the nodes (INTERFACES.md "Topics"): names, frames, QoS and conversions.
+"""Messages of the nodes (INTERFACES.md "Topics"): QoS profiles and conversions.
 
 The nodes convert at this edge and nowhere else: ROS stamps to integer nanoseconds
 (``stamp_ns``), messages to plain floats and arrays for the core, core results to standard
 messages (std_msgs, sensor_msgs, geometry_msgs, diagnostic_msgs). A received JointState is
-mapped by joint NAME, never by position; one that cannot be read is refused with a
+mapped by joint NAME (:data:`road_force_estimator.interfaces.DEFLECTION_JOINTS`), never by
+position; one that cannot be read is refused with a
 :class:`MessageRejected` whose ``reason`` is a short key for the diagnostics counters.
 """
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from typing import Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -19,43 +20,16 @@ from rclpy.qos import (
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from road_force_estimator.estimation.diagnostics import Status
+from road_force_estimator.interfaces import (
+    BASE_FRAME, DEFLECTION_JOINTS, ROAD_FRAME, SENSOR_DATA, STATE_JOINTS, qos_kind)
+
 __all__ = [
-    'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES', 'SIDES',
-    'TOPIC_TYPES', 'SENSOR_TOPICS', 'sensor_qos', 'reliable_qos', 'topic_qos',
+    'sensor_qos', 'reliable_qos', 'topic_qos',
     'MessageRejected', 'stamp_to_ns', 'ns_to_stamp', 'deflections_msg', 'read_deflections',
     'twist_msg', 'read_twist', 'wrench_msg', 'road_point_msg', 'float64_msg', 'states_msg',
     'diagnostic_status',
 ]
-
-DEFLECTION_JOINTS = ('left_suspension', 'right_suspension', 'roll')
-STATE_JOINTS = DEFLECTION_JOINTS + ('body_heave', 'left_wheel_heave', 'right_wheel_heave')
-BASE_FRAME = 'base_link'
-ROAD_FRAME = 'road'
-WHEEL_FRAMES = ('front_left_wheel', 'front_right_wheel')
-SIDES = ('left', 'right')
-
-# Every topic of INTERFACES.md and its type (as rosbag2 and rosbags spell it).
-TOPIC_TYPES: dict[str, str] = {
-    '/suspension/deflections': 'sensor_msgs/msg/JointState',
-    '/vehicle/twist': 'geometry_msgs/msg/TwistStamped',
-    '/ground_truth/wheel_load/left': 'geometry_msgs/msg/WrenchStamped',
-    '/ground_truth/wheel_load/right': 'geometry_msgs/msg/WrenchStamped',
-    '/ground_truth/road_profile/left': 'geometry_msgs/msg/PointStamped',
-    '/ground_truth/road_profile/right': 'geometry_msgs/msg/PointStamped',
-    '/wheel_load/left': 'geometry_msgs/msg/WrenchStamped',
-    '/wheel_load/right': 'geometry_msgs/msg/WrenchStamped',
-    '/road_profile/left': 'geometry_msgs/msg/PointStamped',
-    '/road_profile/right': 'geometry_msgs/msg/PointStamped',
-    '/load_transfer_ratio': 'std_msgs/msg/Float64',
-    '/observer/states': 'sensor_msgs/msg/JointState',
-    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
-    '/fix': 'sensor_msgs/msg/NavSatFix',
-    '/lpa/left': 'geometry_msgs/msg/PointStamped',
-    '/lpa/right': 'geometry_msgs/msg/PointStamped',
-}
-# Sensor streams: best effort, keep last (the sensor-data QoS); everything else is reliable.
-SENSOR_TOPICS = frozenset({'/suspension/deflections', '/fix'})
-
 
 def sensor_qos(depth: int = 5) -> QoSProfile:
     """Sensor-data QoS (best effort, keep last ``depth``, volatile)."""
@@ -70,8 +44,9 @@ def reliable_qos(depth: int = 100) -> QoSProfile:
 
 
 def topic_qos(topic: str, depth: int = 100) -> QoSProfile:
-    """The QoS a topic of INTERFACES.md is published with (``depth`` deep)."""
-    return sensor_qos(depth) if topic in SENSOR_TOPICS else reliable_qos(depth)
+    """The QoS a topic of INTERFACES.md is published with (``depth`` deep): its kind in
+    :data:`road_force_estimator.interfaces.TOPIC_QOS`."""
+    return sensor_qos(depth) if qos_kind(topic) == SENSOR_DATA else reliable_qos(depth)
 
 
 class MessageRejected(ValueError):
@@ -180,19 +155,8 @@ def states_msg(stamp_ns: int, position: Sequence[float], velocity: Sequence[floa
     return msg
 
 
-_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-           'error': DiagnosticStatus.ERROR, 'stale': DiagnosticStatus.STALE}
-
-
-def diagnostic_status(name: str, hardware_id: str, level: str, message: str,
-                      values: Mapping[str, Any]) -> DiagnosticStatus:
-    """A ``DiagnosticStatus``; ``level`` is 'ok', 'warn', 'error' or 'stale'."""
-    return DiagnosticStatus(
-        level=_LEVELS[level], name=name, message=message, hardware_id=hardware_id,
-        values=[KeyValue(key=str(k), value=_text(v)) for k, v in values.items()])
-
-
-def _text(value: Any) -> str:
-    if isinstance(value, float):
-        return f'{value:.6g}'
-    return str(value)
+def diagnostic_status(st: Status) -> DiagnosticStatus:
+    """A ``diagnostic_msgs/DiagnosticStatus`` from the estimator's plain :class:`Status`."""
+    return DiagnosticStatus(level=bytes([st.level]), name=st.name, message=st.message,
+                            hardware_id=st.hardware_id,
+                            values=[KeyValue(key=k, value=v) for k, v in st.values])

@@ -28,11 +28,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from road_force_estimator import interfaces as api
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.estimation import diagnostics
 from road_force_estimator.estimation.estimator import Estimator
 from road_force_estimator.ros.messages import (
-    SIDES, WHEEL_FRAMES, MessageRejected, diagnostic_status, float64_msg, read_deflections,
-    read_twist, reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
-from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+    MessageRejected, diagnostic_status, float64_msg, read_deflections, read_twist,
+    reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
 
@@ -78,18 +80,17 @@ class Observer(Node):
         self.extremes = {'max_abs_ltr': 0.0, 'max_abs_residual_nm': 0.0}
         self.last_report = time.monotonic()
         self.reconfigure(self.params.config)
-        self.load_pubs = [self.create_publisher(WrenchStamped, f'/wheel_load/{s}',
-                                                reliable_qos()) for s in SIDES]
-        self.road_pubs = [self.create_publisher(PointStamped, f'/road_profile/{s}',
-                                                reliable_qos()) for s in SIDES]
-        self.ltr_pub = self.create_publisher(Float64, '/load_transfer_ratio', reliable_qos())
-        self.states_pub = self.create_publisher(JointState, '/observer/states', reliable_qos())
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+        self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+                          for topic in api.LOAD]
+        self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos())
+                          for topic in api.ROAD]
+        self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos())
+        self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
-        self.create_subscription(JointState, '/suspension/deflections',
-                                 self.deflections_callback, sensor_qos(1000))
-        self.create_subscription(TwistStamped, '/vehicle/twist', self.twist_callback,
-                                 sensor_qos(10))
+        self.create_subscription(JointState, api.DEFLECTIONS, self.deflections_callback,
+                                 sensor_qos(1000))
+        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10))
         self.create_timer(1.0, self.diagnostics_callback)
 
     def reconfigure(self, config) -> None:
@@ -159,7 +160,7 @@ class Observer(Node):
             self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
         t = est.stamp_ns
-        for pub, frame, load in zip(self.load_pubs, WHEEL_FRAMES, (f1, f2)):
+        for pub, frame, load in zip(self.load_pubs, api.WHEEL_FRAMES, (f1, f2)):
             pub.publish(wrench_msg(t, frame, load))
         for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
             pub.publish(road_point_msg(t, est.distance_m, y, road))
@@ -172,14 +173,23 @@ class Observer(Node):
         ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
 
     def diagnostics_callback(self) -> None:
-        """Static findings, then this period's counts (cleared after each report)."""
+        """Input, estimator and configuration statuses: this period's counts (cleared after
+        each report), then the totals."""
         now = time.monotonic()
         elapsed, self.last_report = now - self.last_report, now
-        st = self.estimator.status
         core = self.core_base + self.core_counts()
         fresh, self.core_reported = core - self.core_reported, core
         period, self.period = self.period, Counter()
         self.total.update(period)
+        msg = DiagnosticArray(status=[diagnostic_status(st) for st in (
+            self.input_status(period, fresh, core, elapsed),
+            self.estimator_status(period, fresh), self.configuration_status())])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+
+    def input_status(self, period: Counter, fresh: Counter, core: Counter,
+                     elapsed: float) -> diagnostics.Status:
+        st = self.estimator.status
         rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
         rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'time') if fresh[k]})
         received = period['received']
@@ -195,12 +205,12 @@ class Observer(Node):
             values['last_rejection'] = self.last_rejection
         if st.typical_dt_s > 0.0:  # the rate the stamps say, against the rate that came
             values['stamp_rate_hz'] = 1.0 / st.typical_dt_s
-        inputs = diagnostic_status('observer: input', self.get_name(),
-                                   'ok' if message == 'ok' else 'warn', message, values)
+        return diagnostics.status('observer: input', self.get_name(), message, values)
+
+    def estimator_status(self, period: Counter, fresh: Counter) -> diagnostics.Status:
+        st = self.estimator.status
         ex, self.extremes = self.extremes, dict.fromkeys(self.extremes, 0.0)
         lifts, resets = period['lift_offs'], fresh['resets']
-        message = ('converging' if not st.converged else f'{lifts} lift-off samples' if lifts
-                   else f'{resets} restarts' if resets else 'ok')
         values = {'converged': st.converged, 'time_since_start_s': st.time_since_start_s,
                   'settling_time_s': getattr(self.estimator, 'settling_time_s',
                                              st.settling_time_s), 'resets': resets,
@@ -208,16 +218,16 @@ class Observer(Node):
                   'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
                   'lift_off_right': st.lift_off[1], **ex}
         values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
-        estimator = diagnostic_status('observer: estimator', self.get_name(),
-                                      'ok' if message == 'ok' else 'warn', message, values)
+        return diagnostics.estimator_status('observer: estimator', self.get_name(), values,
+                                            converged=st.converged, lift_off_samples=lifts,
+                                            restarts=resets)
+
+    def configuration_status(self) -> diagnostics.Status:
         values = {f'finding.{i}': f for i, f in enumerate(self.findings)}
         values['refused_parameter_sets'] = len(self.params.refusals)
-        config = diagnostic_status('observer: configuration', self.get_name(),
-                                   'warn' if self.findings else 'ok',
-                                   '; '.join(self.findings) or 'ok', values)
-        msg = DiagnosticArray(status=[inputs, estimator, config])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diagnostics_pub.publish(msg)
+        return diagnostics.status('observer: configuration', self.get_name(),
+                                  '; '.join(self.findings) or 'ok', values,
+                                  level=diagnostics.WARN if self.findings else diagnostics.OK)
 
 
 def main(args=None) -> int:

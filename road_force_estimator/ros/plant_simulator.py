@@ -1,8 +1,9 @@
 """``plant_simulator`` node: the plant driven over a road, publishing measurements and truth.
 
-Publishes, at ``simulator.rate``, the measurements ``/suspension/deflections`` (sensor-data QoS)
-and ``/vehicle/twist``, the ground truth ``/ground_truth/wheel_load/left|right`` and
-``/ground_truth/road_profile/left|right`` (reliable), ``/fix`` at ``simulator.gnss.rate`` (a
+Publishes, at ``simulator.rate``, the measurements ``/suspension/deflections`` and
+``/vehicle/twist`` (sensor-data QoS, as INTERFACES.md has the sensor streams), the ground
+truth ``/ground_truth/wheel_load/left|right`` and ``/ground_truth/road_profile/left|right``
+(reliable), ``/fix`` at ``simulator.gnss.rate`` (a
 straight route) and ``/diagnostics`` at 1 Hz (INTERFACES.md). Sample k is stamped
 ``start + k / rate`` exactly (integer ns; start = the node clock at the first sample), never a
 wall-clock read. A timer publishes every sample that is due, so the stream keeps real time
@@ -23,10 +24,12 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, NavSatFix
 
+from road_force_estimator import interfaces as api
 from road_force_estimator.core.gnss import route
+from road_force_estimator.estimation import diagnostics
 from road_force_estimator.ros.messages import (
-    SIDES, WHEEL_FRAMES, deflections_msg, diagnostic_status, ns_to_stamp, reliable_qos,
-    road_point_msg, sensor_qos, twist_msg, wrench_msg)
+    deflections_msg, diagnostic_status, ns_to_stamp, reliable_qos, road_point_msg, sensor_qos,
+    twist_msg, wrench_msg)
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.core.road import road_from_source
@@ -68,18 +71,18 @@ class PlantSimulator(Node):
         self.last_index = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                               self.plant.last_sample_index)
         self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
-        self.deflections_pub = self.create_publisher(JointState, '/suspension/deflections',
+        self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,
                                                      sensor_qos(100))
-        self.reliable = [self.create_publisher(TwistStamped, '/vehicle/twist', reliable_qos())]
-        self.reliable += [self.create_publisher(WrenchStamped, f'/ground_truth/wheel_load/{s}',
-                                                reliable_qos()) for s in SIDES]
-        self.reliable += [self.create_publisher(PointStamped, f'/ground_truth/road_profile/{s}',
-                                                reliable_qos()) for s in SIDES]
-        self.fix_pub = self.create_publisher(NavSatFix, '/fix', sensor_qos(10)) if (
+        self.twist_pub = self.create_publisher(TwistStamped, api.TWIST, sensor_qos(100))
+        self.reliable = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+                         for topic in api.TRUE_LOAD]
+        self.reliable += [self.create_publisher(PointStamped, topic, reliable_qos())
+                          for topic in api.TRUE_ROAD]
+        self.fix_pub = self.create_publisher(NavSatFix, api.FIX, sensor_qos(10)) if (
             sim.gnss_rate_hz > 0.0) else None
         self.fix = (-1, 0.0, sim.gnss_start_latitude_deg, sim.gnss_start_longitude_deg,
                     sim.gnss_heading_deg)  # (fix index, t_s, lat, lon, heading) of the last fix
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
         self.k = 0                     # next sample index
         self.start_ns = self.start_wall = None
@@ -108,10 +111,10 @@ class PlantSimulator(Node):
 
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
-        twist, load_l, load_r, road_l, road_r = self.reliable
-        twist.publish(twist_msg(stamp_ns, self.sim.speed_mps))
+        load_l, load_r, road_l, road_r = self.reliable
+        self.twist_pub.publish(twist_msg(stamp_ns, self.sim.speed_mps))
         self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))
-        for pub, frame, load in zip((load_l, load_r), WHEEL_FRAMES, sample.wheel_load_n):
+        for pub, frame, load in zip((load_l, load_r), api.WHEEL_FRAMES, sample.wheel_load_n):
             pub.publish(wrench_msg(stamp_ns, frame, load))
         for pub, y, road in zip((road_l, road_r), (self.half_track_m, -self.half_track_m),
                                 sample.road_m):
@@ -149,9 +152,9 @@ class PlantSimulator(Node):
                   'road_end_m': self.road.end_m, 'finished': self.finished}
         message = ('finished' if self.finished else
                    f'behind real time by {self.lag_s:.3f} s' if late else 'publishing')
-        msg = DiagnosticArray(status=[diagnostic_status(
-            'plant_simulator: drive', self.get_name(), 'warn' if late else 'ok', message,
-            values)])
+        msg = DiagnosticArray(status=[diagnostic_status(diagnostics.status(
+            'plant_simulator: drive', self.get_name(), message, values,
+            level=diagnostics.WARN if late else diagnostics.OK))])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(msg)
 

@@ -159,54 +159,13 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
 
 
 def _diagnostics(est, summary_counts: dict[str, int], mode: str):
-    """One DiagnosticArray per second of the drive (data time), the last with the totals."""
-    from road_force_estimator.bagio.bag_io import TYPESTORE
+    """One estimator status per second of the drive (data time), the last with the totals."""
+    from road_force_estimator.estimation.diagnostics import batch_diagnostics
 
-    types = TYPESTORE.types
-    Time = types['builtin_interfaces/msg/Time']
-    Header = types['std_msgs/msg/Header']
-    KeyValue = types['diagnostic_msgs/msg/KeyValue']
-    Status = types['diagnostic_msgs/msg/DiagnosticStatus']
-    Array = types['diagnostic_msgs/msg/DiagnosticArray']
-    rows = np.flatnonzero(est.valid)
-    if rows.size == 0:
-        return []
-    stamps = np.asarray(est.stamp_ns, dtype=np.int64)[rows]
-    second = (stamps - stamps[0]) // 1_000_000_000
-    ends = np.flatnonzero(np.diff(second)) + 1
-    bounds = list(zip(np.concatenate([[0], ends]).tolist(),
-                      np.concatenate([ends, [rows.size]]).tolist()))
-    ltr = np.abs(np.asarray(est.ltr)[rows])
-    res = np.abs(np.asarray(est.residual_nm)[rows])
-    lifted = np.asarray(est.lift_off)[rows].any(axis=1)
-    conv = np.asarray(est.converged)[rows]
-    out = []
-    for j, (a, b) in enumerate(bounds):
-        stamp = int(stamps[b - 1])
-        values = {'samples': b - a, 'converged': bool(conv[b - 1]),
-                  'lift_off_samples': int(np.count_nonzero(lifted[a:b])),
-                  'max_abs_ltr': float(np.max(ltr[a:b])),
-                  'max_abs_residual_nm': float(np.max(res[a:b]))}
-        if j == len(bounds) - 1:
-            values.update({f'total.{k}': v for k, v in summary_counts.items()})
-        lifts = values['lift_off_samples']
-        message = ('converging' if not values['converged'] else
-                   f'{lifts} lift-off samples' if lifts else 'ok')
-        status = Status(level=0 if message == 'ok' else 1, name=f'{PROG}: estimator ({mode})',
-                        message=message, hardware_id=PROG,
-                        values=[KeyValue(key=k, value=_text(v)) for k, v in values.items()])
-        sec, nsec = divmod(stamp, 1_000_000_000)
-        out.append((stamp, Array(header=Header(stamp=Time(sec=sec, nanosec=nsec), frame_id=''),
-                                 status=[status])))
-    return out
-
-
-def _text(value: Any) -> str:
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, float):
-        return f'{value:.6g}'
-    return str(value)
+    per_second = batch_diagnostics(est.stamp_ns, est.valid, est.converged, est.lift_off, est.ltr,
+                                   est.residual_nm, summary_counts,
+                                   f'{PROG}: estimator ({mode})', PROG)
+    return [(stamp, [st.as_dict() for st in statuses]) for stamp, statuses in per_second]
 
 
 @dataclass

@@ -18,8 +18,9 @@ from sensor_msgs.msg import JointState
 
 from node_harness import Collector, close, finish, make_executor, run_main
 from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.interfaces import STATE_JOINTS
 from road_force_estimator.ros.messages import (
-    STATE_JOINTS, deflections_msg, ns_to_stamp, reliable_qos, sensor_qos, twist_msg)
+    deflections_msg, ns_to_stamp, reliable_qos, sensor_qos, twist_msg)
 from road_force_estimator.ros.observer import Observer
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.ros.plant_simulator import PlantSimulator

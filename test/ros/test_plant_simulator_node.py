@@ -10,7 +10,8 @@ import pytest
 from rclpy.parameter import Parameter
 
 from node_harness import Collector, close, finish, make_executor, run_main
-from road_force_estimator.ros.messages import DEFLECTION_JOINTS, stamp_to_ns
+from road_force_estimator.interfaces import DEFLECTION_JOINTS
+from road_force_estimator.ros.messages import stamp_to_ns
 from road_force_estimator.core.parameters import GRAVITY_MPS2
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.ros.plant_simulator import PlantSimulator
@@ -36,7 +37,7 @@ def drive(context, timeout_s=30.0, **params):
         assert spin_until(executor, lambda: all(collector.count(t) >= n for t in TOPICS[:6]),
                           10.0), {t: collector.count(t) for t in TOPICS}
         assert spin_until(executor, lambda: any(
-            s.values and dict((v.key, v.value) for v in s.values).get('finished') == 'True'
+            s.values and dict((v.key, v.value) for v in s.values).get('finished') == 'true'
             for m in collector.messages['/diagnostics'] for s in m.status), 10.0)
     finally:
         close(executor, plant, collector)
