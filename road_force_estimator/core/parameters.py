@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 import math
 from pathlib import Path
+import stat
 from typing import Any, Mapping
 
 import yaml
@@ -20,7 +21,8 @@ import yaml
 __all__ = [
     'ParameterSpec', 'PARAMETERS', 'SPECS', 'GRAVITY_MPS2',
     'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
-    'validate_parameter', 'load_params_file', 'defaults',
+    'validate_parameter', 'load_params_file', 'read_params_document', 'defaults',
+    'MAX_PARAMS_FILE_BYTES',
 ]
 
 GRAVITY_MPS2 = 9.80665
@@ -291,6 +293,62 @@ def _yaml_number(name: str, value: Any) -> Any:
     return value
 
 
+#: A parameter file larger than this is refused (the package's own file is ~5 KB).
+MAX_PARAMS_FILE_BYTES = 1 << 20
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
+    silently, which would hide an edit)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                raise ValueError(f'line {line}: key {key!r} given twice (first on line '
+                                 f'{seen[key]}): remove one')
+            seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def read_params_document(path: str | Path) -> Any:
+    """The YAML document of a parameter file, read safely.
+
+    Refused with a :class:`ValueError` naming the file (and the line where there is one): an
+    unreadable or non-regular file, one over :data:`MAX_PARAMS_FILE_BYTES`, invalid YAML, an
+    alias (``*name``: ROS 2 parameter files have none, and nested aliases expand
+    exponentially: the "billion laughs" bomb), or a key given twice in one mapping.
+    """
+    path = Path(path)
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f'parameter file {path} is not a regular file')
+        if info.st_size > MAX_PARAMS_FILE_BYTES:
+            raise ValueError(f'parameter file {path} is larger than '
+                             f'{MAX_PARAMS_FILE_BYTES} bytes: not a parameter file')
+        text = path.read_text()
+    except OSError as exc:
+        raise ValueError(f'cannot read parameter file {path}: {exc.strerror}') from None
+    except UnicodeDecodeError:
+        raise ValueError(f'parameter file {path} is not UTF-8 text') from None
+    try:
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):
+            if isinstance(event, yaml.AliasEvent):
+                raise ValueError(f'parameter file {path}, line {event.start_mark.line + 1}: '
+                                 f'YAML alias *{event.anchor} refused (parameter files '
+                                 'have no anchors or aliases)')
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as exc:
+        raise ValueError(f'parameter file {path} is not valid YAML: {exc}') from None
+    except ValueError as exc:
+        if str(exc).startswith('parameter file'):
+            raise
+        raise ValueError(f'parameter file {path}: {exc}') from None
+
+
 def load_params_file(path: str | Path, node_names: tuple[str, ...] = ()) -> dict[str, Any]:
     """Read a ROS 2 parameter file into ``{dotted name: validated value}``.
 
@@ -299,12 +357,7 @@ def load_params_file(path: str | Path, node_names: tuple[str, ...] = ()) -> dict
     :class:`ValueError` naming the file and the parameter.
     """
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ValueError(f'cannot read parameter file {path}: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f'parameter file {path} is not valid YAML: {exc}') from None
+    doc = read_params_document(path)
     if not isinstance(doc, Mapping):
         raise ValueError(f'parameter file {path}: expected "/**: ros__parameters:" at the top')
     wanted = {'/**', '**'} | {n for name in node_names for n in (name, '/' + name.lstrip('/'))}

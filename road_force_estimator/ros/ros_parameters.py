@@ -41,8 +41,8 @@ from road_force_estimator.core.parameters import (
     PARAMETERS, SPECS, ParameterSpec, validate_parameter)
 
 __all__ = [
-    'ParameterError', 'local_spec', 'specs_with_prefix', 'descriptor', 'check_value', 'declare',
-    'ParameterGuard', 'init_ros',
+    'ParameterError', 'NODE_LOCAL_NAMES', 'local_spec', 'specs_with_prefix', 'descriptor',
+    'check_value', 'declare', 'refuse_unknown_names', 'ParameterGuard', 'init_ros',
 ]
 
 # Parameter kinds of parameters.ParameterSpec, plus node-local ones ('string_list', 'bool').
@@ -58,6 +58,39 @@ _TYPES = {
 
 class ParameterError(ValueError):
     """A parameter value refused at start-up; the message names the parameter, value and range."""
+
+
+#: Node-local parameters (INTERFACES.md: not in the shared files), by node. A key of a
+#: parameter file that is neither one of these, nor in the shared table, nor a ROS one
+#: (``use_sim_time``, ``qos_overrides.*``) is a typo and refused at start.
+NODE_LOCAL_NAMES = {
+    'plant_simulator': ('realtime_factor', 'start_timeout', 'road_timeout'),
+    'bag_recorder': ('topics', 'output'),
+}
+_ROS_NAMES = ('use_sim_time', 'start_type_description_service')
+
+
+def _known_name(name: str, node_specs: Mapping[str, ParameterSpec]) -> bool:
+    return (name in node_specs or name in SPECS or name in _ROS_NAMES
+            or name.startswith('qos_overrides.')
+            or any(name in names for names in NODE_LOCAL_NAMES.values()))
+
+
+def refuse_unknown_names(node: Node, specs: Iterable[ParameterSpec]) -> None:
+    """Refuse a start-up value (``-p``, ``--params-file``, ``parameter_overrides``) whose name
+    is no parameter at all (a typo such as ``vehicle.sprung_mas``): rclpy alone ignores it.
+
+    Raises
+    ------
+    ParameterError
+        Naming the node and the unknown names.
+    """
+    node_specs = {s.name: s for s in specs}
+    overrides = getattr(node, '_parameter_overrides', None) or {}
+    unknown = sorted(n for n in overrides if not _known_name(n, node_specs))
+    if unknown:
+        raise ParameterError(f'{node.get_name()}: refused {", ".join(unknown)}: no such '
+                             'parameter (a typo?); the parameters are listed by --help')
 
 
 def local_spec(name: str, kind: str, default: Any, unit: str, description: str,
@@ -247,62 +280,89 @@ class ParameterGuard:
         self._specs = {s.name: s for s in specs}
         self._build = build
         self._apply = apply
+        refuse_unknown_names(node, self._specs.values())
+        self._read_only = read_only
         self.values = declare(node, self._specs.values(), read_only=read_only)
         try:
             self.config = build(self.values)
         except ValueError as exc:
             raise ParameterError(f'{node.get_name()}: refused {exc}') from None
         self.refusals: list[str] = []
-        self._type_errors: dict[str, str] = {}
+        self._type_errors: list[str] = []
         self._pending: _Pending | None = None
         node.add_pre_set_parameters_callback(self.pre_set_callback)
         node.add_on_set_parameters_callback(self.on_set_callback)
         node.add_post_set_parameters_callback(self.post_set_callback)
 
     def pre_set_callback(self, params: list[Parameter]) -> list[Parameter]:
-        """Coerce integers given for doubles; hold values of a wrong type for a named refusal.
+        """Coerce integers given for doubles; hold a set that will be refused for a named,
+        counted refusal.
 
-        rclpy's own refusal of a wrong type does not name the parameter nor the value; such a
-        parameter is replaced by its current value (which passes the descriptor) and refused by
-        :meth:`on_set_callback` with a message that does.
+        rclpy refuses an undeclared name ("undeclared parameter(s): []": it names none), a
+        wrong type and a value outside the descriptor's range itself, before any on-set
+        callback, so those refusals were neither counted nor all named. Such a parameter is
+        replaced by the current value of a declared one (which passes rclpy's checks) and
+        refused by :meth:`on_set_callback` with a message that names it. A read-only node's
+        sets are refused by rclpy (naming the parameter); they are counted here.
         """
-        self._type_errors = {}
+        self._type_errors = []
         out = []
         for p in params:
-            spec = self._specs.get(p.name)
-            if spec is None or p.type_ == _TYPES[spec.kind]:
-                out.append(p)
-                continue
-            value = _coerce(spec, p.value)
-            if _TYPES[spec.kind].check(value):
+            reason = self._early_refusal(p)
+            if reason is None:
+                spec = self._specs[p.name]
+                value = p.value if p.type_ == _TYPES[spec.kind] else _coerce(spec, p.value)
                 out.append(Parameter(p.name, _TYPES[spec.kind], value))
                 continue
+            if self._read_only:   # rclpy refuses it (read-only); count it here
+                self._refuse(reason)
+                out.append(p)
+            else:
+                self._type_errors.append(reason)
+                name = p.name if p.name in self._specs else next(iter(self._specs))
+                out.append(self._node.get_parameter(name))
+        return out
+
+    def _early_refusal(self, p: Parameter) -> str | None:
+        """Why rclpy would refuse ``p`` before the on-set callback (None: it would not)."""
+        spec = self._specs.get(p.name)
+        if spec is None:
+            return f'{p.name}: no such parameter of {self._node.get_name()}'
+        if self._read_only:
+            return f'{p.name} is read-only: restart {self._node.get_name()} to change it'
+        value = p.value if p.type_ == _TYPES[spec.kind] else _coerce(spec, p.value)
+        if not _TYPES[spec.kind].check(value):
             try:
                 check_value(spec, p.value)
-                reason = f'{p.name} = {p.value!r}: expected {_range_text(spec)}'
             except ValueError as exc:
-                reason = str(exc)
-            self._type_errors[p.name] = reason
-            out.append(self._node.get_parameter(p.name))
-        return out
+                return str(exc)
+            return f'{p.name} = {p.value!r}: expected {_range_text(spec)}'
+        try:
+            check_value(spec, value)
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def _refuse(self, reason: str) -> SetParametersResult:
+        self.refusals.append(reason)
+        self._node.get_logger().warning(f'parameter set refused: {reason}')
+        return SetParametersResult(successful=False, reason=reason)
 
     def on_set_callback(self, params: list[Parameter]) -> SetParametersResult:
         """Build a candidate configuration; refuse (naming the value) if it cannot be built."""
         self._pending = None
+        if self._type_errors:
+            reasons, self._type_errors = self._type_errors, []
+            return self._refuse('; '.join(reasons))
         candidate = dict(self.values)
         try:
             for p in params:
-                if p.name in self._type_errors:
-                    raise ValueError(self._type_errors.pop(p.name))
                 spec = self._specs.get(p.name)
                 if spec is not None:
                     candidate[p.name] = check_value(spec, p.value)
             config = self._build(candidate)
         except ValueError as exc:
-            reason = str(exc)
-            self.refusals.append(reason)
-            self._node.get_logger().warning(f'parameter set refused: {reason}')
-            return SetParametersResult(successful=False, reason=reason)
+            return self._refuse(str(exc))
         self._pending = _Pending(candidate, config)
         return SetParametersResult(successful=True)
 

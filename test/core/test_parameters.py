@@ -1,4 +1,5 @@
 """Parameter table, dataclasses and parameter files (INTERFACES.md "Parameters")."""
+import os
 import pathlib
 
 import pytest
@@ -82,3 +83,59 @@ def test_params_file_errors_name_the_file_and_parameter(tmp_path):
         load_params_file(node_only)
     with pytest.raises(ValueError, match='cannot read'):
         load_params_file(tmp_path / 'missing.yaml')
+
+
+def _params_file(tmp_path, text):
+    path = tmp_path / 'p.yaml'
+    path.write_text(text)
+    return path
+
+
+def test_yaml_alias_bomb_is_refused_at_once(tmp_path):
+    """A 1 KB "billion laughs" file: refused by its first alias, never expanded."""
+    lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x, x]']
+    lines += [f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 10) + ']' for i in range(1, 9)]
+    path = _params_file(tmp_path, '\n'.join(lines) + '\n/**:\n  ros__parameters: *a8\n')
+    assert path.stat().st_size < 1500
+    with pytest.raises(ValueError, match=r'line 2: YAML alias \*a0 refused'):
+        load_params_file(path)
+
+
+def test_duplicate_key_is_refused_naming_both_lines(tmp_path):
+    path = _params_file(tmp_path, '/**:\n  ros__parameters:\n    vehicle:\n'
+                                  '      sprung_mass: 5000.0\n      sprung_mass: 6000.0\n')
+    with pytest.raises(ValueError, match=r"line 5: key 'sprung_mass' given twice "
+                                         r'\(first on line 4\)'):
+        load_params_file(path)
+
+
+def test_a_params_file_must_be_a_regular_file(tmp_path):
+    fifo = tmp_path / 'fifo.yaml'
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match='not a regular file'):
+        load_params_file(fifo)
+    with pytest.raises(ValueError, match='not a regular file'):
+        load_params_file('/dev/zero')
+    with pytest.raises(ValueError, match='not a regular file'):
+        load_params_file(tmp_path)
+
+
+def test_offline_commands_refuse_an_alias_bomb_in_one_line(tmp_path):
+    """estimate_bag and simulate_bag refuse the file before reading anything else (exit 1)."""
+    import subprocess
+    import sys
+
+    lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x, x]']
+    lines += [f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 10) + ']' for i in range(1, 9)]
+    bomb = _params_file(tmp_path, '\n'.join(lines) + '\n/**:\n  ros__parameters: *a8\n')
+    bindir = pathlib.Path(sys.executable).parent
+    for argv in (['simulate_bag', '--road', 'iso8608:C:seed=1', '--speed', '20', '--rate',
+                  '100', '--duration', '1', '--params-file', str(bomb), '--output',
+                  str(tmp_path / 'drive')],
+                 ['estimate_bag', str(tmp_path / 'none'), '--params-file', str(bomb),
+                  '--output', str(tmp_path / 'est')]):
+        run = subprocess.run([str(bindir / argv[0]), *argv[1:]], capture_output=True,
+                             text=True, timeout=120)
+        assert run.returncode in (1, 2), (argv[0], run.stderr)
+        assert 'YAML alias' in run.stderr and 'Traceback' not in run.stderr, run.stderr
+        assert len(run.stderr.strip().splitlines()) == 1, run.stderr

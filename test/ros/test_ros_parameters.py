@@ -97,7 +97,7 @@ def test_live_set_is_vetted_and_a_refusal_leaves_the_running_config(ros_context)
         guard = ParameterGuard(node, OBSERVER_SPECS, build, applied.append)
         before = guard.config
         refused = [
-            ('vehicle.track_width', 5.0, r'vehicle\.track_width.*Min: 0\.5, Max: 4\.0.*5\.0'),
+            ('vehicle.track_width', 5.0, r'vehicle\.track_width = 5\.0 .*\[0\.5, 4\] m'),
             ('vehicle.track_width', 'x', r"vehicle\.track_width = 'x'.*\[0\.5, 4\] m"),
             ('vehicle.suspension_damping', [1.0, 2e7], r'suspension_damping = .*\[0, 1e\+07\]'),
             ('vehicle.unsprung_mass', 3.0, r'vehicle\.unsprung_mass = 3\.0.*\[left, right\]'),
@@ -118,7 +118,37 @@ def test_live_set_is_vetted_and_a_refusal_leaves_the_running_config(ros_context)
         assert result.successful
         assert applied == [guard.config]
         assert guard.config[1].discretization == 'euler' and guard.config[0] == before[0]
-        assert len(guard.refusals) >= 4
+        assert len(guard.refusals) == len(refused) + 1
+    finally:
+        node.destroy_node()
+
+
+def test_every_refused_live_set_is_counted_and_named(ros_context):
+    """Refusals rclpy makes itself (undeclared name, range, type) are counted and named too."""
+    node = make_node(ros_context)
+    try:
+        guard = ParameterGuard(node, OBSERVER_SPECS, build)
+        refused = [
+            ('vehicle.sprung_mas', 5000.0, r'vehicle\.sprung_mas: no such parameter'),
+            ('vehicle.track_width', 5.0, r'track_width = 5\.0'),
+            ('vehicle.track_width', -1.0, r'track_width = -1\.0'),
+            ('vehicle.track_width', 'x', r"track_width = 'x'"),
+            ('vehicle.track_width', True, r'track_width = True'),
+            ('observer.latency', 9.0, r'observer\.latency = 9\.0'),
+            ('vehicle.unsprung_mass', [1.0], r'unsprung_mass'),
+            ('vehicle.unsprung_mass', [-1.0, 2.0], r'unsprung_mass'),
+            ('observer.discretization', 'rk9', r"discretization = 'rk9'"),
+        ]
+        for k, (name, value, pattern) in enumerate(refused, 1):
+            result, = node.set_parameters_atomically([Parameter(name, value=value)]),
+            assert not result.successful, name
+            assert re.search(pattern, result.reason), result.reason
+            assert len(guard.refusals) == k, (name, guard.refusals)
+            assert re.search(pattern, guard.refusals[-1])
+        # A good set afterwards is not refused by a leftover of the refused ones.
+        result = node.set_parameters_atomically([Parameter('vehicle.track_width', value=2.2)])
+        assert result.successful and guard.config[0].track_width_m == 2.2
+        assert len(guard.refusals) == len(refused)
     finally:
         node.destroy_node()
 
@@ -130,6 +160,7 @@ def test_read_only_parameters_refuse_live_sets_naming_them(ros_context):
         result, = node.set_parameters([Parameter('simulator.rate', value=500.0)])
         assert not result.successful and 'simulator.rate' in result.reason
         assert guard.values['simulator.rate'] == 1000.0
+        assert len(guard.refusals) == 1 and 'simulator.rate is read-only' in guard.refusals[0]
     finally:
         node.destroy_node()
 
@@ -177,3 +208,43 @@ def test_bad_params_file_value_is_refused_naming_it(tmp_path):
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+@pytest.mark.parametrize('body, unknown', [
+    ('    vehicle:\n      sprung_mas: 5200.0\n', 'vehicle.sprung_mas'),
+    ('    observer.latencyy: 0.01\n', 'observer.latencyy'),
+])
+def test_a_typo_key_in_a_params_file_is_refused_at_start(tmp_path, body, unknown):
+    path = tmp_path / 'typo.yaml'
+    path.write_text('/**:\n  ros__parameters:\n' + body)
+    context = Context()
+    rclpy.init(context=context, args=['--ros-args', '--params-file', str(path)])
+    node = Node('observer', context=context)
+    try:
+        with pytest.raises(ParameterError, match=re.escape(unknown) + '.*no such parameter'):
+            ParameterGuard(node, OBSERVER_SPECS, build)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_shared_and_ros_keys_are_not_typos(ros_context):
+    """The shared file's other sections (simulator.*), node-local names of the nodes and
+    ROS's own keys start a node that does not use them."""
+    node = make_node(ros_context, [('simulator.rate', 500.0), ('realtime_factor', 2.0),
+                                   ('use_sim_time', True)])
+    try:
+        guard = ParameterGuard(node, OBSERVER_SPECS, build)
+        assert guard.config[1] == ObserverParameters()
+    finally:
+        node.destroy_node()
+
+
+def test_observer_process_refuses_a_typo_in_one_line(tmp_path):
+    from node_harness import finish, run_main
+
+    path = tmp_path / 'typo.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    vehicle:\n      sprung_mas: 5200.0\n')
+    code, _, err = finish(run_main('observer', '--ros-args', '--params-file', str(path)))
+    assert code == 1
+    assert 'vehicle.sprung_mas' in err and 'no such parameter' in err and 'Traceback' not in err
