@@ -46,7 +46,11 @@ CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
 # Further EstimatorStatus fields reported as they are (those the core has).
 ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
                     'noise_roll_rad', 'road_roughness_m3')
-FLOW_COUNTS = ('received', 'published', 'lift_offs')  # the rest of a period's counts: rejections
+# The rest of a period's counts are rejections. 'missed': inputs that never arrived, inferred
+# from the stamps (a step of k typical periods means k - 1 samples lost on the way, e.g. by
+# DDS when the node falls behind a burst): they are not rejections but make the input WARN.
+FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
+MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
 
 
 def build(values):
@@ -79,6 +83,8 @@ class Observer(Node):
         self.last_rejection = ''
         self.extremes = {'max_abs_ltr': 0.0, 'max_abs_residual_nm': 0.0}
         self.last_report = time.monotonic()
+        self.last_stamp_ns = None
+        self.shortest_step_ns = [math.inf, math.inf]   # (last period, this period)
         self.reconfigure(self.params.config)
         self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
                           for topic in api.LOAD]
@@ -145,8 +151,23 @@ class Observer(Node):
             self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
         self.waiting.append(sample)
 
+    def count_missed(self, stamp_ns: int) -> None:
+        """Count the samples the stamps say were sent but never arrived, between two samples
+        the core accepted: a step of k sample periods (the shortest step of this and the last
+        diagnostics period) means k - 1 lost."""
+        last, self.last_stamp_ns = self.last_stamp_ns, stamp_ns
+        if last is None:
+            return
+        step, period = stamp_ns - last, min(self.shortest_step_ns)
+        self.shortest_step_ns[1] = min(self.shortest_step_ns[1], step)
+        if period < math.inf and 1 < (periods := round(step / period)) <= MISSED_MAX_PERIODS:
+            self.period['missed'] += periods - 1
+
     def estimate(self, stamp_ns: int, q_m, roll_rad: float) -> None:
+        accepted = self.estimator.status.accepted
         est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
+        if self.estimator.status.accepted > accepted:
+            self.count_missed(stamp_ns)
         if est is not None:  # None: rejected by the core (counted), or held back (latency)
             self.publish(est)
 
@@ -181,6 +202,7 @@ class Observer(Node):
         fresh, self.core_reported = core - self.core_reported, core
         period, self.period = self.period, Counter()
         self.total.update(period)
+        self.shortest_step_ns = [self.shortest_step_ns[1], math.inf]
         msg = DiagnosticArray(status=[diagnostic_status(st) for st in (
             self.input_status(period, fresh, core, elapsed),
             self.estimator_status(period, fresh), self.configuration_status())])
@@ -192,15 +214,17 @@ class Observer(Node):
         st = self.estimator.status
         rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
         rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'time') if fresh[k]})
-        received = period['received']
+        received, missed = period['received'], period['missed']
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
-                  'published': period['published'], 'waiting_for_speed': len(self.waiting),
+                  'published': period['published'], 'missed': missed,
+                  'waiting_for_speed': len(self.waiting),
                   'speed_mps': 'none' if self.speed_mps is None else self.speed_mps}
         values.update({f'rejected.{k}': v for k, v in sorted(rejected.items())})
         values.update({f'total.{k}': v for k, v in sorted((self.total + core).items())})
         message = ('no input' if not received else f'{sum(rejected.values())} rejected'
                    if rejected else f'{len(self.waiting)} waiting for a speed' if self.waiting
-                   else 'ok')
+                   else f'falling behind: {missed} of {received + missed} inputs missed'
+                   if missed else 'ok')
         if period.keys() - FLOW_COUNTS:  # rejected here (not in the core): say the last why
             values['last_rejection'] = self.last_rejection
         if st.typical_dt_s > 0.0:  # the rate the stamps say, against the rate that came

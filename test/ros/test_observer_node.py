@@ -11,6 +11,7 @@ import signal
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TwistStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -278,3 +279,24 @@ def test_finish_at_shutdown_publishes_what_latency_holds_back(make_rig):
     assert spin_until(executor, lambda: collector.count('/observer/states') == 30, 10.0)
     for topic in STAMPED:
         assert collector.stamps(topic) == [T0_NS + k * 1_000_000 for k in range(30)], topic
+
+
+def test_inputs_lost_on_the_way_are_counted_and_warned(rig):
+    """Samples that never arrive (their stamps skipped, as when DDS drops a burst the node
+    cannot take) are counted from the stamps, and the input status warns."""
+    observer, feeder, collector, executor = rig
+    for k in range(100):
+        feeder.sample(k, speed=20.0)
+    sent = list(range(100)) + list(range(101, 121, 2))   # every other sample lost: 10
+    for k in sent[100:]:
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: collector.count('/observer/states') == len(sent), 10.0)
+
+    def warned():
+        statuses = [st for msg in collector.messages['/diagnostics'] for st in msg.status
+                    if st.name == 'observer: input']
+        return (any(st.level == DiagnosticStatus.WARN and st.message.startswith(
+            'falling behind') for st in statuses)
+            and input_diagnostics(collector).get('total.missed') == '10')
+
+    assert spin_until(executor, warned, 5.0), input_diagnostics(collector)
