@@ -29,149 +29,177 @@ ROS_LIBRARIES = {'rclpy', 'builtin_interfaces', 'std_msgs', 'sensor_msgs', 'geom
                  'diagnostic_msgs', 'rosgraph_msgs', 'rcl_interfaces', 'rosidl_runtime_py'}
 
 
-def _module_name(path: pathlib.Path) -> str:
-    parts = path.relative_to(ROOT.parent).with_suffix('').parts
-    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+class Package:
+    """The modules of a package folder and the imports each makes."""
+
+    def __init__(self, root: pathlib.Path):
+        self.root = root
+        self.name = root.name
+        self.modules = {self._module_name(p): p for p in sorted(root.rglob('*.py'))}
+
+    def _module_name(self, path: pathlib.Path) -> str:
+        parts = path.relative_to(self.root.parent).with_suffix('').parts
+        return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+    def _resolve(self, module: str, node: ast.ImportFrom) -> str:
+        """The absolute name of a ``from ... import`` source (relative imports resolved)."""
+        if not node.level:
+            return node.module or ''
+        is_package = self.modules[module].name == '__init__.py'
+        parts = module.split('.')
+        base = parts[: len(parts) - node.level + is_package]
+        return '.'.join(base + ([node.module] if node.module else []))
+
+    def tree(self, module: str) -> ast.Module:
+        return ast.parse(self.modules[module].read_text(), filename=str(self.modules[module]))
+
+    def imports(self, module: str) -> list[tuple[str, list[str], int]]:
+        """``(imported module, names taken from it, line)`` for every import in ``module``."""
+        found = []
+        for node in ast.walk(self.tree(module)):
+            if isinstance(node, ast.Import):
+                found += [(alias.name, [], node.lineno) for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                source = self._resolve(module, node)
+                names = [alias.name for alias in node.names]
+                # ``from pkg.sub import mod`` imports the module pkg.sub.mod
+                subs = [n for n in names if f'{source}.{n}' in self.modules]
+                found += [(f'{source}.{n}', [], node.lineno) for n in subs]
+                found.append((source, [n for n in names if n not in subs], node.lineno))
+        return found
+
+    def internal(self, name: str) -> str | None:
+        """The package module that ``name`` refers to (its longest known prefix), or None."""
+        parts = name.split('.')
+        for end in range(len(parts), 0, -1):
+            candidate = '.'.join(parts[:end])
+            if candidate in self.modules:
+                return candidate
+        return None
+
+    def concern(self, module: str) -> str:
+        parts = module.split('.')
+        return parts[1] if len(parts) > 1 else ''
+
+    def graph(self) -> dict[str, set[str]]:
+        """Module -> the package modules it imports (a package's ``__init__`` re-exports
+        only, so the package root itself is no edge)."""
+        graph = {}
+        for module in self.modules:
+            targets = {self.internal(name) for name, _, _ in self.imports(module)}
+            graph[module] = {t for t in targets if t and t not in (module, self.name)}
+        return graph
+
+    def cycle(self) -> list[str] | None:
+        """One import cycle, or None."""
+        graph, state, stack = self.graph(), {}, []
+
+        def visit(node: str) -> list[str] | None:
+            state[node] = 1
+            stack.append(node)
+            for target in sorted(graph[node]):
+                if state.get(target) == 1:
+                    return stack[stack.index(target):] + [target]
+                if target not in state and (found := visit(target)):
+                    return found
+            stack.pop()
+            state[node] = 2
+            return None
+
+        for module in sorted(graph):
+            if module not in state and (found := visit(module)):
+                return found
+        return None
+
+    def layering_errors(self, module: str) -> list[str]:
+        """Imports of ``module`` that go the wrong way or reach a library it may not."""
+        concern = self.concern(module)
+        if not concern:
+            return []
+        allowed = ALLOWED.get(concern, set()) | {concern, ''}
+        bad = []
+        for name, _, line in self.imports(module):
+            target, root = self.internal(name), name.split('.')[0]
+            if target and target != self.name and self.concern(target) not in allowed:
+                bad.append(f'line {line}: {name} ({self.concern(target)}/ is not below '
+                           f'{concern}/)')
+            if root in BAG_LIBRARIES and concern != 'bagio':
+                bad.append(f'line {line}: {name} (only bagio/ reads or writes bags)')
+            if root in ROS_LIBRARIES and concern != 'ros':
+                bad.append(f'line {line}: {name} (only ros/ imports the ROS client libraries)')
+        return bad
+
+    def private_uses(self, module: str) -> list[str]:
+        """Private (``_name``) names of other package modules that ``module`` uses."""
+        bad, aliases = [], {}
+        for name, names, line in self.imports(module):
+            target = self.internal(name)
+            if target and target != module:
+                bad += [f'line {line}: {n} from {target}' for n in names
+                        if n.startswith('_') and not n.startswith('__')]
+        tree = self.tree(module)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                source = self._resolve(module, node)
+                aliases.update({a.asname or a.name: f'{source}.{a.name}' for a in node.names
+                                if f'{source}.{a.name}' in self.modules})
+            elif isinstance(node, ast.Import):
+                aliases.update({a.asname: a.name for a in node.names
+                                if a.name in self.modules and a.asname})
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in aliases and node.attr.startswith('_')
+                    and not node.attr.startswith('__')):
+                bad.append(f'line {node.lineno}: {node.value.id}.{node.attr}')
+        return bad
 
 
-MODULES = {_module_name(p): p for p in sorted(ROOT.rglob('*.py'))}
+PKG = Package(ROOT)
 
 
-def _resolve(module: str, node: ast.ImportFrom) -> str:
-    """The absolute name of a ``from ... import`` source (relative imports resolved)."""
-    if not node.level:
-        return node.module or ''
-    is_package = MODULES[module].name == '__init__.py'
-    base = module.split('.')[: len(module.split('.')) - node.level + is_package]
-    return '.'.join(base + ([node.module] if node.module else []))
-
-
-def _imports(module: str) -> list[tuple[str, list[str], int]]:
-    """``(imported module, names taken from it, line)`` for every import in ``module``."""
-    tree = ast.parse(MODULES[module].read_text(), filename=str(MODULES[module]))
-    found = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            found += [(alias.name, [], node.lineno) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            source = _resolve(module, node)
-            names = [alias.name for alias in node.names]
-            # ``from pkg.sub import mod`` imports the module pkg.sub.mod
-            submodules = [f'{source}.{n}' for n in names if f'{source}.{n}' in MODULES]
-            found += [(name, [], node.lineno) for name in submodules]
-            rest = [n for n in names if f'{source}.{n}' not in MODULES]
-            found.append((source, rest, node.lineno))
-    return found
-
-
-def _internal(name: str) -> str | None:
-    """The package module that ``name`` refers to (its longest known prefix), or None."""
-    parts = name.split('.')
-    for end in range(len(parts), 0, -1):
-        candidate = '.'.join(parts[:end])
-        if candidate in MODULES:
-            return candidate
-    return None
-
-
-def _concern(module: str) -> str:
-    parts = module.split('.')
-    return parts[1] if len(parts) > 1 else ''
-
-
-def _graph() -> dict[str, set[str]]:
-    graph = {}
-    for module in MODULES:
-        targets = set()
-        for name, _, _ in _imports(module):
-            target = _internal(name)
-            # a package's own __init__ is not an edge of its modules (it only re-exports)
-            if target and target != module and target != PACKAGE:
-                targets.add(target)
-        graph[module] = targets
-    return graph
-
-
-def test_every_subpackage_is_known():
-    concerns = {_concern(m) for m in MODULES} - {''}
+def test_every_subpackage_has_a_rule():
+    concerns = {PKG.concern(m) for m in PKG.modules} - {''}
     assert concerns <= set(ALLOWED), f'subpackages without a rule: {concerns - set(ALLOWED)}'
 
 
 def test_no_import_cycles():
-    graph = _graph()
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(node: str) -> list[str] | None:
-        state[node] = 1
-        stack.append(node)
-        for target in sorted(graph[node]):
-            if state.get(target) == 1:
-                return stack[stack.index(target):] + [target]
-            if target not in state:
-                cycle = visit(target)
-                if cycle:
-                    return cycle
-        stack.pop()
-        state[node] = 2
-        return None
-
-    for module in sorted(graph):
-        if module not in state:
-            cycle = visit(module)
-            assert cycle is None, 'import cycle: ' + ' -> '.join(cycle)
+    cycle = PKG.cycle()
+    assert cycle is None, 'import cycle: ' + ' -> '.join(cycle)
 
 
-@pytest.mark.parametrize('module', sorted(MODULES))
+@pytest.mark.parametrize('module', sorted(PKG.modules))
 def test_imports_go_one_way(module):
-    concern = _concern(module)
-    if not concern:
-        return
-    allowed = ALLOWED.get(concern, set()) | {concern}
-    bad = []
-    for name, _, line in _imports(module):
-        target = _internal(name)
-        root = name.split('.')[0]
-        if target and target != PACKAGE and _concern(target) not in allowed | {''}:
-            bad.append(f'line {line}: {name} ({_concern(target)}/ is not below {concern}/)')
-        if root in BAG_LIBRARIES and concern != 'bagio':
-            bad.append(f'line {line}: {name} (only bagio/ reads or writes bags)')
-        if root in ROS_LIBRARIES and concern != 'ros':
-            bad.append(f'line {line}: {name} (only ros/ imports the ROS client libraries)')
+    bad = PKG.layering_errors(module)
     assert not bad, f'{module}: ' + '; '.join(bad)
 
 
-@pytest.mark.parametrize('module', sorted(MODULES))
+@pytest.mark.parametrize('module', sorted(PKG.modules))
 def test_no_private_names_of_other_modules(module):
-    tree = ast.parse(MODULES[module].read_text())
-    aliases = {}
-    bad = []
-    for name, names, line in _imports(module):
-        target = _internal(name)
-        if not target or target == module:
-            continue
-        bad += [f'line {line}: {n} from {target}' for n in names
-                if n.startswith('_') and not n.startswith('__')]
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            source = _resolve(module, node)
-            for alias in node.names:
-                if f'{source}.{alias.name}' in MODULES:
-                    aliases[alias.asname or alias.name] = f'{source}.{alias.name}'
-        elif isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name in MODULES and alias.asname:
-                    aliases[alias.asname] = alias.name
-    for node in ast.walk(tree):
-        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-                and node.value.id in aliases and node.attr.startswith('_')
-                and not node.attr.startswith('__')):
-            bad.append(f'line {node.lineno}: {node.value.id}.{node.attr}')
+    bad = PKG.private_uses(module)
     assert not bad, f'{module} uses private names of other modules: ' + '; '.join(bad)
 
 
-def test_the_checks_see_a_forbidden_import(tmp_path):
-    """The resolver itself: relative, absolute and submodule imports are all seen."""
-    module = f'{PACKAGE}.core.plant'
-    names = {name for name, _, _ in _imports(module)}
-    assert f'{PACKAGE}.core.vehicle_model' in {_internal(n) for n in names}
+def test_the_checks_see_each_kind_of_violation(tmp_path):
+    """A made-up package with one violation of each rule: every rule finds its own."""
+    root = tmp_path / 'pkg'
+    files = {
+        '__init__.py': '',
+        'core/__init__.py': '',
+        'core/a.py': 'def f():\n    from pkg.estimation import b\n',     # lazy, upward
+        'estimation/__init__.py': '',
+        'estimation/b.py': 'from ..core import a\nfrom pkg.core.a import _hidden\n'
+                           'import rosbags\n',
+        'ros/__init__.py': '',
+        'ros/c.py': 'import rclpy\nfrom pkg.core import a as mod\nx = mod._secret\n',
+    }
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    pkg = Package(root)
+    assert pkg.cycle() in (['pkg.core.a', 'pkg.estimation.b', 'pkg.core.a'],
+                           ['pkg.estimation.b', 'pkg.core.a', 'pkg.estimation.b'])
+    assert any('estimation/ is not below core/' in e for e in pkg.layering_errors('pkg.core.a'))
+    assert any('only bagio/' in e for e in pkg.layering_errors('pkg.estimation.b'))
+    assert pkg.layering_errors('pkg.ros.c') == []
+    assert pkg.private_uses('pkg.estimation.b') == ['line 2: _hidden from pkg.core.a']
+    assert pkg.private_uses('pkg.ros.c') == ['line 3: mod._secret']
