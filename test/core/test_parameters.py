@@ -139,3 +139,14 @@ def test_offline_commands_refuse_an_alias_bomb_in_one_line(tmp_path):
         assert run.returncode in (1, 2), (argv[0], run.stderr)
         assert 'YAML alias' in run.stderr and 'Traceback' not in run.stderr, run.stderr
         assert len(run.stderr.strip().splitlines()) == 1, run.stderr
+
+
+@pytest.mark.parametrize('preset, latency_s', [('rollover_warning', 0.0),
+                                               ('load_monitoring', 0.01),
+                                               ('road_survey', 0.01)])
+def test_presets_load_and_change_only_what_they_say(preset, latency_s):
+    values = load_params_file(REPO / 'config' / f'{preset}.yaml')
+    assert values['observer.latency'] == latency_s
+    observer = ObserverParameters.from_parameters(values)
+    assert observer.latency_s == latency_s
+    assert VehicleParameters.from_parameters(values) == VehicleParameters()
