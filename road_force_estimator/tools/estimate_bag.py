@@ -20,7 +20,7 @@ Then it estimates:
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
-(:mod:`report.report`). Exit status: 0 on success (skipped messages are counted
+(:mod:`road_force_estimator.report`). Exit status: 0 on success (skipped messages are counted
 in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
 parameters), 2 for a bad command line; each with one line on stderr.
 """
@@ -248,7 +248,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
     from road_force_estimator.bagio import bag_io
-    from road_force_estimator.report import report
+    from road_force_estimator.report import write_report
     from road_force_estimator.estimation.offline import estimate_recording
 
     stages.next('reading the bag')
@@ -292,7 +292,7 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
     if force and report_dir.exists():
         shutil.rmtree(report_dir)
     stages.next('writing the report' + (' and figures' if figures else ''))
-    summary = report.write_report(
+    summary = write_report(
         report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
         reference=reference, reference_offset_m=reference_offset_m,
         segment_length_m=segment_length_m, figures=figures, extra=extra)
