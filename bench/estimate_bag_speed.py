@@ -61,7 +61,7 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     from road_force_estimator.bagio import bag_io
     from road_force_estimator.tools import estimate_bag
-    from road_force_estimator.report import report
+    from road_force_estimator.report import write_report
     from road_force_estimator.estimation.offline import estimate_recording
     imports = (time.perf_counter() - t0, time.process_time() - c0)
     runs = []
@@ -87,8 +87,8 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     bag_io.write_estimate_bag(tmp / 'stage_bag', est, track_width_m=vehicle.track_width_m)
     stages['write the bag of estimates'] = time.perf_counter() - w0
     w0 = time.perf_counter()
-    report.write_report(tmp / 'stage_report', est, drive, vehicle, observer, mode=mode,
-                        input_name=bag.name, figures=False)
+    write_report(tmp / 'stage_report', est, drive, vehicle, observer, mode=mode,
+                 input_name=bag.name, figures=False)
     stages['write the report'] = time.perf_counter() - w0
     return {'samples': n, 'imports_s': imports, 'runs': runs, 'stages_s': stages}
 

@@ -61,7 +61,7 @@ def engine_costs(workers: int, repeats: int) -> dict[str, float]:
     starts, trips, batch = [], [], []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        with estimate_fleet._client(None, workers) as (client, _):
+        with estimate_fleet.dask_client(None, workers) as (client, _):
             starts.append(time.perf_counter() - t0)
             client.submit(_noop, 0, pure=False).result()         # warm the connection
             rt = []

@@ -20,7 +20,7 @@ Then it estimates:
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
-(:mod:`report.report`). Exit status: 0 on success (skipped messages are counted
+(:mod:`road_force_estimator.report`). Exit status: 0 on success (skipped messages are counted
 in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
 parameters), 2 for a bad command line; each with one line on stderr.
 """
@@ -36,42 +36,31 @@ from typing import Any
 
 import numpy as np
 
+from road_force_estimator.tools import cli
+from road_force_estimator.tools.cli import MODES
+
 __all__ = ['PROG', 'MODES', 'EstimateResult', 'build_parser', 'load_parameters', 'drive_speed',
            'estimate_online', 'run', 'main']
 
 PROG = 'estimate_bag'
-MODES = ('online', 'offline')
 #: Progress bars appear from this many samples on.
 PROGRESS_MIN_SAMPLES = 50_000
-
-
-class _UsageError(Exception):
-    """A bad command line (exit status 2)."""
 
 
 class InputError(Exception):
     """Bad input (exit status 1)."""
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise _UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``estimate_bag``."""
-    p = _Parser(prog=PROG, description='Run the estimator over a recorded drive bag and write '
+    p = cli.Parser(prog=PROG, description='Run the estimator over a recorded drive bag and write '
                 'the bag of estimates (DIR/bag) and a report (DIR/report).')
     p.add_argument('input', metavar='INPUT', help='drive bag folder (rosbag2 MCAP)')
-    p.add_argument('--params-file', metavar='FILE',
-                   help='ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
-                        'observer.*; default: the package defaults')
-    p.add_argument('--output', '-o', required=True, metavar='DIR', help='output folder')
-    p.add_argument('--mode', choices=MODES, default='online',
-                   help='online: what the observer node publishes (default); offline: '
-                        'non-causal, the whole recording')
-    p.add_argument('--segment-length', type=float, default=100.0, metavar='M',
-                   help='report segment length, m (default 100)')
+    cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
+                           'observer.*; default: the package defaults')
+    cli.add_output(p, 'output folder')
+    cli.add_mode(p)
+    cli.add_segment_length(p, 'report segment length, m (default 100)')
     p.add_argument('--reference-profile', metavar='SOURCE',
                    help='profile to compare the estimate with when the bag has no ground '
                         'truth: LPA bag, CSV or ERD')
@@ -79,17 +68,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help='distance along the reference profile where the drive starts, m from '
                         'its start (default: found by correlation within +-10 m)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
-    p.add_argument('--force', action='store_true', help='replace DIR/bag and DIR/report')
-    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    cli.add_force(p, 'replace DIR/bag and DIR/report')
+    cli.add_no_progress(p)
     return p
 
 
 def load_parameters(path: str | None):
     """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None)."""
-    from road_force_estimator.core.parameters import (
-        ObserverParameters, VehicleParameters, load_params_file)
-    values = {} if path is None else load_params_file(path, node_names=('observer', PROG))
-    return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
+    return cli.load_estimator_parameters(path, ('observer', PROG))
 
 
 def drive_speed(drive) -> tuple[np.ndarray, int]:
@@ -221,7 +207,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
     from road_force_estimator.bagio import bag_io
-    from road_force_estimator.report import report
+    from road_force_estimator.report import write_report
     from road_force_estimator.estimation.offline import estimate_recording
 
     stages.next('reading the bag')
@@ -265,7 +251,7 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
     if force and report_dir.exists():
         shutil.rmtree(report_dir)
     stages.next('writing the report' + (' and figures' if figures else ''))
-    summary = report.write_report(
+    summary = write_report(
         report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
         reference=reference, reference_offset_m=reference_offset_m,
         segment_length_m=segment_length_m, figures=figures, extra=extra)
@@ -298,30 +284,24 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
     from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
 
-    try:
-        args = build_parser().parse_args(argv)
-        if not (args.segment_length > 0.0 and math.isfinite(args.segment_length)):
-            raise _UsageError(f'--segment-length {args.segment_length!r}: must be > 0 m')
-        vehicle, observer = load_parameters(args.params_file)
-        reference = None
-        if args.reference_offset is not None and not args.reference_profile:
-            raise _UsageError('--reference-offset needs --reference-profile')
-        if args.reference_profile:
-            from road_force_estimator.core.road import road_from_source
-            reference = road_from_source(args.reference_profile)
-        result = run(args.input, args.output, vehicle=vehicle, observer=observer,
-                     mode=args.mode, segment_length_m=args.segment_length, reference=reference,
-                     reference_offset_m=args.reference_offset, figures=not args.no_figures,
-                     force=args.force,
-                     progress=not args.no_progress)
-    except SystemExit as done:          # --help
-        return int(done.code or 0)
-    except _UsageError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
-    except (InputError, ValueError, BagReadError, BagWriteError, OSError) as err:
-        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
-        return 1
+    return cli.run_main(PROG, build_parser(), _main, argv,
+                        {(InputError, ValueError, BagReadError, BagWriteError, OSError): 1})
+
+
+def _main(args: argparse.Namespace) -> int:
+    cli.check_positive('--segment-length', args.segment_length)
+    vehicle, observer = load_parameters(args.params_file)
+    reference = None
+    if args.reference_offset is not None and not args.reference_profile:
+        raise cli.UsageError('--reference-offset needs --reference-profile')
+    if args.reference_profile:
+        from road_force_estimator.core.road import road_from_source
+        reference = road_from_source(args.reference_profile)
+    result = run(args.input, args.output, vehicle=vehicle, observer=observer,
+                 mode=args.mode, segment_length_m=args.segment_length, reference=reference,
+                 reference_offset_m=args.reference_offset, figures=not args.no_figures,
+                 force=args.force,
+                 progress=not args.no_progress)
     for line in result.warnings:
         print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
     for line in _headline(result):

@@ -17,18 +17,11 @@ import argparse
 from pathlib import Path
 import sys
 
+from road_force_estimator.tools import cli
+
 __all__ = ['build_parser', 'main', 'write_exact_csv']
 
 PROG = 'profile_to_bag'
-
-
-class _UsageError(Exception):
-    """A bad command line (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise _UsageError(message)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
         DEFAULT_SURVEY_SPEED_MPS,
         DEFAULT_TRACK_WIDTH_M,
     )
-    parser = _Parser(
+    parser = cli.Parser(
         prog=PROG,
         description='Convert a road profile (CSV, ERD, text columns or a synthetic '
                     'iso8608:<class>[:seed=N] road) into an LPA bag (rosbag2 MCAP folder with '
@@ -48,8 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('input', metavar='INPUT',
                         help='profile file (.csv, .erd, .txt/.dat), road spec such as '
                              'iso8608:C:seed=1, or an LPA bag folder')
-    parser.add_argument('--output', '-o', required=True, metavar='PATH',
-                        help='bag folder to create, or CSV file when INPUT is a bag')
+    cli.add_output(parser, 'bag folder to create, or CSV file when INPUT is a bag',
+                   metavar='PATH')
     parser.add_argument('--survey-speed', type=float, default=DEFAULT_SURVEY_SPEED_MPS,
                         metavar='V', help='survey speed for the bag stamps, m/s (default '
                                           f'{DEFAULT_SURVEY_SPEED_MPS:g})')
@@ -58,8 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
                                           f'y = +-T/2 (default {DEFAULT_TRACK_WIDTH_M:g})')
     parser.add_argument('--length', type=float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
-    parser.add_argument('--force', action='store_true',
-                        help='replace an existing output bag folder or CSV file')
+    cli.add_force(parser, 'replace an existing output bag folder or CSV file')
     return parser
 
 
@@ -88,8 +80,7 @@ def _run(args: argparse.Namespace) -> list[str]:
         profile = bag_io.read_lpa_bag(source, issues=notes)
         write_exact_csv(output, profile)
         return notes + [f'wrote {len(profile)} samples to {output}']
-    if args.length is not None and not args.length > 0.0:
-        raise _UsageError(f'--length {args.length!r}: must be > 0 m')
+    cli.check_positive('--length', args.length, finite=False)
     profile = road_from_source(args.input, length_m=args.length)
     bag_io.write_lpa_bag(output, profile, survey_speed_mps=args.survey_speed,
                          track_width_m=args.track_width, overwrite=args.force)
@@ -102,18 +93,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``profile_to_bag``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
     from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
 
-    try:
-        args = build_parser().parse_args(argv)
-        lines = _run(args)
-    except SystemExit as done:          # --help
-        return int(done.code or 0)
-    except _UsageError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
-    except (ValueError, BagReadError, BagWriteError, OSError) as err:
-        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
-        return 1
-    for line in lines:
+    return cli.run_main(PROG, build_parser(), _main, argv,
+                        {(ValueError, BagReadError, BagWriteError, OSError): 1})
+
+
+def _main(args: argparse.Namespace) -> int:
+    for line in _run(args):
         print(f'{PROG}: {line}', file=sys.stderr)
     return 0
 

@@ -15,24 +15,17 @@ import argparse
 import math
 import sys
 
+from road_force_estimator.tools import cli
+
 __all__ = ['build_parser', 'main']
 
 PROG = 'road_profile_iri'
 COLUMNS = ('start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km')
 
 
-class _UsageError(Exception):
-    """A bad command line (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise _UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``road_profile_iri``."""
-    parser = _Parser(
+    parser = cli.Parser(
         prog=PROG,
         description='International Roughness Index (ASTM E1926 golden quarter-car at 80 km/h, '
                     '250 mm slope average, 11 m initialisation) per segment of a road profile, '
@@ -43,8 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('profile', metavar='PROFILE',
                         help='profile file (.csv, .erd, .txt/.dat), LPA bag folder, or road '
                              'spec such as iso8608:C:seed=1')
-    parser.add_argument('--segment-length', type=float, default=100.0, metavar='M',
-                        help='segment length, m (default 100)')
+    cli.add_segment_length(parser, 'segment length, m (default 100)')
     parser.add_argument('--length', type=float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
     return parser
@@ -58,26 +50,19 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``road_profile_iri``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
     from road_force_estimator.bagio.bag_io import BagReadError
 
-    try:
-        args = build_parser().parse_args(argv)
-        if not (args.segment_length > 0.0 and math.isfinite(args.segment_length)):
-            raise _UsageError(f'--segment-length {args.segment_length!r}: must be > 0 m')
-        if args.length is not None and not args.length > 0.0:
-            raise _UsageError(f'--length {args.length!r}: must be > 0 m')
-        from road_force_estimator.core.iri import iri_table
-        from road_force_estimator.core.road import road_from_source
+    return cli.run_main(PROG, build_parser(), _main, argv,
+                        {(ValueError, BagReadError, OSError): 1})
 
-        profile = road_from_source(args.profile, length_m=args.length)
-        table = iri_table(profile.distance_m, profile.elevation_m,
-                          segment_length_m=args.segment_length)
-    except SystemExit as done:          # --help
-        return int(done.code or 0)
-    except _UsageError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
-    except (ValueError, BagReadError, OSError) as err:
-        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
-        return 1
+
+def _main(args: argparse.Namespace) -> int:
+    cli.check_positive('--segment-length', args.segment_length)
+    cli.check_positive('--length', args.length, finite=False)
+    from road_force_estimator.core.iri import iri_table
+    from road_force_estimator.core.road import road_from_source
+
+    profile = road_from_source(args.profile, length_m=args.length)
+    table = iri_table(profile.distance_m, profile.elevation_m,
+                      segment_length_m=args.segment_length)
     for note in getattr(profile, 'notes', ()):
         print(f'{PROG}: note: {note}', file=sys.stderr)
     lines = [','.join(COLUMNS)]

@@ -35,6 +35,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from road_force_estimator.tools import cli
+
 __all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'main']
 
 PROG = 'simulate_bag'
@@ -50,18 +52,9 @@ _OPTIONS = {
 }
 
 
-class _UsageError(Exception):
-    """A bad command line (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise _UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``simulate_bag``."""
-    p = _Parser(prog=PROG, description='Drive the plant over a road offline and write a bag '
+    p = cli.Parser(prog=PROG, description='Drive the plant over a road offline and write a bag '
                 'with measurements and ground truth.',
                 epilog='Values: defaults < --params-file < command-line options.')
     p.add_argument('--road', metavar='SOURCE',
@@ -70,10 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz')
     p.add_argument('--duration', type=float, metavar='S',
                    help='duration, s (the drive also stops at the end of the road)')
-    p.add_argument('--params-file', metavar='FILE',
-                   help='ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
-                        'simulator.*')
-    p.add_argument('--output', '-o', required=True, metavar='DIR', help='bag folder to create')
+    cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
+                           'simulator.*')
+    cli.add_output(p, 'bag folder to create')
     p.add_argument('--seed', type=int, metavar='N', help='seed of the sensor noise')
     p.add_argument('--noise-deflection', type=float, metavar='M',
                    help='deflection noise standard deviation, m')
@@ -87,8 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
                         '(default 0 s); bends the GNSS route')
     p.add_argument('--no-ground-truth', action='store_true',
                    help='write the measurements only, as a real truck records them')
-    p.add_argument('--force', action='store_true', help='replace an existing bag folder')
-    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    cli.add_force(p, 'replace an existing bag folder')
+    cli.add_no_progress(p)
     return p
 
 
@@ -114,10 +106,10 @@ def _lateral(text: str | None):
     try:
         a_y, t_on = float(value), float(start) if start else 0.0
     except ValueError:
-        raise _UsageError(f'--lateral-acceleration {text!r}: expected A or A@T (numbers)') \
+        raise cli.UsageError(f'--lateral-acceleration {text!r}: expected A or A@T (numbers)') \
             from None
     if not (math.isfinite(a_y) and math.isfinite(t_on) and abs(a_y) <= 20.0 and t_on >= 0.0):
-        raise _UsageError(f'--lateral-acceleration {text!r}: |A| <= 20 m/s^2 and T >= 0 s')
+        raise cli.UsageError(f'--lateral-acceleration {text!r}: |A| <= 20 m/s^2 and T >= 0 s')
     return a_y, t_on
 
 
@@ -205,32 +197,29 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``simulate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError, write_drive_bag
+    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
 
-    try:
-        args = build_parser().parse_args(argv)
-        lateral = _lateral(args.lateral_acceleration)
-        vehicle, sim = parameters_from(args)
-        traj, q_meas, roll_meas, fixes, road, reason = simulate(
-            vehicle, sim, lateral=lateral, progress=not args.no_progress)
-        used = {**vehicle.to_parameters(), **sim.to_parameters()}
-        custom = {'road_force_estimator.parameters': json.dumps(used, sort_keys=True),
-                  'road_force_estimator.road_name': road.name or sim.road,
-                  'road_force_estimator.writer_command': PROG}
-        if lateral is not None:
-            custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
-        count = write_drive_bag(Path(args.output), traj, q_meas, roll_meas, fixes=fixes,
-                                speed_mps=sim.speed_mps, track_width_m=vehicle.track_width_m,
-                                ground_truth=not args.no_ground_truth, custom_data=custom,
-                                overwrite=args.force)
-    except SystemExit as done:          # --help
-        return int(done.code or 0)
-    except _UsageError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
-    except (ValueError, BagReadError, BagWriteError, OSError) as err:
-        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
-        return 1
+    return cli.run_main(PROG, build_parser(), _main, argv,
+                        {(ValueError, BagReadError, BagWriteError, OSError): 1})
+
+
+def _main(args: argparse.Namespace) -> int:
+    from road_force_estimator.bagio.bag_io import write_drive_bag
+
+    lateral = _lateral(args.lateral_acceleration)
+    vehicle, sim = parameters_from(args)
+    traj, q_meas, roll_meas, fixes, road, reason = simulate(
+        vehicle, sim, lateral=lateral, progress=not args.no_progress)
+    used = {**vehicle.to_parameters(), **sim.to_parameters()}
+    custom = {'road_force_estimator.parameters': json.dumps(used, sort_keys=True),
+              'road_force_estimator.road_name': road.name or sim.road,
+              'road_force_estimator.writer_command': PROG}
+    if lateral is not None:
+        custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
+    count = write_drive_bag(Path(args.output), traj, q_meas, roll_meas, fixes=fixes,
+                            speed_mps=sim.speed_mps, track_width_m=vehicle.track_width_m,
+                            ground_truth=not args.no_ground_truth, custom_data=custom,
+                            overwrite=args.force)
     n = len(traj.t_s)
     if reason:
         print(f'{PROG}: {reason}', file=sys.stderr)

@@ -1,0 +1,316 @@
+"""The figures of a drive's report, like the seed paper's figures 5-10 (matplotlib, Agg).
+
+:data:`FIGURES`, drawn by :func:`write_figures`: the differentiator states and rates (q, dq,
+ddq, phi, dphi, ddphi) with the measurements, the body acceleration and heave, the wheel
+heaves, the band-passed profile against the truth (or a reference LPA profile), the loads and
+LTR against the truth, and an overview of the whole drive with the per-segment IRI. The detail
+figures show a window of ``window_s`` (the profile one ``profile_window_m``) from a third of
+the converged stretch.
+
+matplotlib (Agg backend) is imported here only, and only when figures are drawn.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from road_force_estimator.report.alignment import Aligned, bandpass
+
+__all__ = ['FIGURES', 'DEFAULT_WINDOW_S', 'DEFAULT_PROFILE_WINDOW_M', 'MAX_OVERVIEW_POINTS',
+           'write_figures']
+
+#: Figure files of a report, in the order of the Markdown.
+FIGURES = ('states.png', 'body.png', 'wheels.png', 'profile.png', 'loads.png', 'overview.png')
+#: Time window of the detail figures (s) and distance window of the profile figure (m).
+DEFAULT_WINDOW_S = 2.0
+DEFAULT_PROFILE_WINDOW_M = 100.0
+#: Most points drawn per curve in the whole-drive figure.
+MAX_OVERVIEW_POINTS = 20000
+
+_SIDES = ('left', 'right')
+_COLORS = ('tab:blue', 'tab:red')
+
+
+def _window(al: Aligned, length_s: float) -> np.ndarray:
+    """Row mask of a detail window: ``length_s`` from a third of the converged stretch."""
+    t = al.t_s
+    if t.size == 0:
+        return np.zeros(0, bool)
+    conv = np.flatnonzero(al.converged)
+    lo, hi = (t[conv[0]], t[conv[-1]]) if conv.size else (t[0], t[-1])
+    start = lo + max(0.0, (hi - lo - length_s)) / 3.0
+    mask = (t >= start) & (t <= start + length_s)
+    return mask if np.count_nonzero(mask) >= 2 else np.ones(t.size, bool)
+
+
+def _legend(ax, **kwargs) -> None:
+    """A legend, when the axes have labelled artists."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(**kwargs)
+
+
+def _decimate(n: int) -> slice:
+    return slice(None, None, max(1, int(math.ceil(n / MAX_OVERVIEW_POINTS))))
+
+
+@dataclass
+class _Canvas:
+    """What every figure needs: pyplot, the output folder and title, the estimates, the
+    alignment, the detail window ``w`` and its times ``t`` (s); the file names written."""
+
+    plt: Any
+    folder: Path
+    title: str
+    est: Any
+    al: Aligned
+    w: np.ndarray
+    t: np.ndarray
+    written: list[str] = field(default_factory=list)
+
+    def pick(self, name: str) -> np.ndarray:
+        """Field ``name`` of the estimates in the detail window."""
+        return self.al.pick(self.est, name)[self.w]
+
+    def finish(self, fig, name: str, heading: str) -> None:
+        fig.suptitle(f'{heading}{" - " + self.title if self.title else ""}', fontsize=11)
+        fig.tight_layout()
+        fig.savefig(self.folder / name, dpi=110)
+        self.plt.close(fig)
+        self.written.append(name)
+
+
+@dataclass
+class _Profiles:
+    """The estimated profile and its truth (or reference) on the rows of increasing distance
+    ``up``: distances ``x`` (m), the estimate ``road`` (m), both band-passed (None when they
+    cannot be) and the name of what the estimate is compared with."""
+
+    up: np.ndarray
+    x: np.ndarray
+    road: np.ndarray
+    bp_est: np.ndarray | None
+    bp_true: np.ndarray | None
+    against: str
+
+
+def _profiles(est, al: Aligned) -> _Profiles:
+    up = al.increasing()
+    x = al.x_m[up]
+    road = al.pick(est, 'road_m')[up]
+    truth = al.profile_truth
+    truth_up = truth[up] if truth is not None else None
+    if truth_up is not None and not np.isfinite(truth_up).all():
+        ok = np.isfinite(truth_up).all(axis=1)
+        truth_up = (np.column_stack([np.interp(x, x[ok], truth_up[ok, i]) for i in (0, 1)])
+                    if ok.sum() >= 2 else None)
+    bp_est = bandpass(x, road)
+    bp_true = bandpass(x, truth_up) if truth_up is not None else None
+    against = 'truth' if al.true_road_m is not None else (al.reference_name or 'reference')
+    return _Profiles(up, x, road, bp_est, bp_true, against)
+
+
+def write_figures(folder: str | Path, est, al: Aligned, drive=None, *,
+                  segments: dict[str, np.ndarray] | None = None, title: str = '',
+                  window_s: float = DEFAULT_WINDOW_S,
+                  profile_window_m: float = DEFAULT_PROFILE_WINDOW_M) -> list[str]:
+    """Draw the figures of :data:`FIGURES` into ``folder``; the file names written."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    folder = Path(folder)
+    if al.rows.size < 2:
+        return []
+    w = _window(al, window_s)
+    c = _Canvas(plt, folder, title, est, al, w, al.t_s[w])
+    _states_figure(c, drive)
+    _body_figure(c)
+    _wheels_figure(c)
+    profiles = _profiles(est, al)
+    _profile_figure(c, profiles, profile_window_m)
+    _loads_figure(c)
+    _overview_figure(c, profiles, segments)
+    return c.written
+
+
+def _states_figure(c: _Canvas, drive) -> None:
+    """Figure 5 of the paper: the differentiator states and rates."""
+    est, al, t = c.est, c.al, c.t
+    meas_q = meas_phi = None
+    if drive is not None and hasattr(drive, 'q_m') and len(drive.q_m) == len(est.stamp_ns):
+        meas_q = np.asarray(drive.q_m)[al.rows][c.w]
+        meas_phi = np.asarray(drive.roll_rad)[al.rows][c.w]
+    fig, ax = c.plt.subplots(3, 2, figsize=(11, 8), sharex=True)
+    rows = (('q_m', 'dq', 'ddq'), ('roll_rad', 'droll', 'ddroll'))
+    labels = (('q (mm)', 'dq (mm/s)', 'ddq (m/s$^2$)'),
+              ('phi (mrad)', 'dphi (mrad/s)', 'ddphi (rad/s$^2$)'))
+    scales = ((1e3, 1e3, 1.0), (1e3, 1e3, 1.0))
+    for col in (0, 1):
+        for r in range(3):
+            a = ax[r, col]
+            y = c.pick(rows[col][r]) * scales[col][r]
+            if col == 0:
+                for side in (0, 1):
+                    if r == 0 and meas_q is not None:
+                        a.plot(t, 1e3 * meas_q[:, side], color=_COLORS[side], lw=0.5,
+                               alpha=0.35, label=f'measured {_SIDES[side]}')
+                    a.plot(t, y[:, side], color=_COLORS[side], lw=1.0,
+                           label=f'estimated {_SIDES[side]}')
+            else:
+                if r == 0 and meas_phi is not None:
+                    a.plot(t, 1e3 * meas_phi, color='0.5', lw=0.5, alpha=0.5, label='measured')
+                a.plot(t, y, color='k', lw=1.0, label='estimated')
+            a.set_ylabel(labels[col][r])
+            a.grid(True, alpha=0.3)
+            if r == 0:
+                _legend(a, fontsize=7, loc='upper right')
+        ax[2, col].set_xlabel('time (s)')
+    ax[0, 0].set_title('suspension deflections', fontsize=10)
+    ax[0, 1].set_title('roll angle', fontsize=10)
+    c.finish(fig, 'states.png', 'States and rates')
+
+
+def _body_figure(c: _Canvas) -> None:
+    """Figures 6 and 7: body acceleration and body heave."""
+    t = c.t
+    fig, ax = c.plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    ax[0].plot(t, c.pick('body_accel_mps2'), color='k', lw=1.0)
+    ax[0].set_ylabel('dd z_s (m/s$^2$)')
+    ax[0].set_title('body heave acceleration', fontsize=10)
+    ax[1].plot(t, 1e3 * c.pick('body_heave_m'), color='k', lw=1.0)
+    ax[1].set_ylabel('z_s (mm)')
+    ax[1].set_title('body heave (band-limited)', fontsize=10)
+    ax[1].set_xlabel('time (s)')
+    for a in ax:
+        a.grid(True, alpha=0.3)
+    c.finish(fig, 'body.png', 'Body acceleration and heave')
+
+
+def _wheels_figure(c: _Canvas) -> None:
+    """Figure 8: wheel heaves."""
+    t = c.t
+    fig, ax = c.plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    zu = 1e3 * c.pick('wheel_heave_m')
+    acc_u = c.pick('wheel_accel_mps2')
+    for side in (0, 1):
+        ax[0].plot(t, zu[:, side], color=_COLORS[side], lw=1.0, label=_SIDES[side])
+        ax[1].plot(t, acc_u[:, side], color=_COLORS[side], lw=0.8, label=_SIDES[side])
+    ax[0].set_ylabel('z_u (mm)')
+    ax[0].set_title('wheel heaves (band-limited)', fontsize=10)
+    ax[1].set_ylabel('dd z_u (m/s$^2$)')
+    ax[1].set_title('wheel accelerations', fontsize=10)
+    ax[1].set_xlabel('time (s)')
+    for a in ax:
+        a.grid(True, alpha=0.3)
+        _legend(a, fontsize=7, loc='upper right')
+    c.finish(fig, 'wheels.png', 'Wheel heaves')
+
+
+def _profile_figure(c: _Canvas, p: _Profiles, profile_window_m: float) -> None:
+    """Figure 9: the band-passed profile against the truth or the reference."""
+    x, road, up = p.x, p.road, p.up
+    fig, ax = c.plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    conv_x = x[c.al.converged[up]] if c.al.converged[up].any() else x
+    x0 = conv_x[0] + max(0.0, conv_x[-1] - conv_x[0] - profile_window_m) / 3.0
+    pw = (x >= x0) & (x <= x0 + profile_window_m)
+    for side in (0, 1):
+        a = ax[side]
+        if p.bp_est is not None:
+            if p.bp_true is not None:
+                a.plot(x[pw], 1e3 * p.bp_true[pw, side], color='0.4', lw=1.6, label=p.against)
+            a.plot(x[pw], 1e3 * p.bp_est[pw, side], color=_COLORS[side], lw=1.0,
+                   label='estimated')
+            a.set_ylabel('elevation, 0.5-30 m band (mm)', fontsize=8)
+        else:
+            a.plot(x[pw], 1e3 * road[pw, side], color=_COLORS[side], lw=1.0, label='estimated')
+            a.set_ylabel('elevation (mm)')
+        a.set_title(f'{_SIDES[side]} wheel path', fontsize=10)
+        a.grid(True, alpha=0.3)
+        _legend(a, fontsize=7, loc='upper right')
+    ax[1].set_xlabel('distance (m)')
+    c.finish(fig, 'profile.png', 'Road profile')
+
+
+def _loads_figure(c: _Canvas) -> None:
+    """Figure 10: wheel loads and LTR against the truth."""
+    t, al = c.t, c.al
+    fig, ax = c.plt.subplots(3, 1, figsize=(11, 8), sharex=True)
+    load = c.pick('wheel_load_n') / 1e3
+    true = al.true_load_n[c.w] / 1e3 if al.true_load_n is not None else None
+    for side in (0, 1):
+        a = ax[side]
+        if true is not None:
+            a.plot(t, true[:, side], color='0.4', lw=1.6, label='truth')
+        a.plot(t, load[:, side], color=_COLORS[side], lw=1.0, label='estimated')
+        a.set_ylabel(f'F_n {_SIDES[side]} (kN)')
+        _legend(a, fontsize=7, loc='upper right')
+    ltr = c.pick('ltr')
+    if true is not None:
+        ax[2].plot(t, (true[:, 1] - true[:, 0]) / (true[:, 0] + true[:, 1]), color='0.4',
+                   lw=1.6, label='truth')
+    ax[2].plot(t, ltr, color='k', lw=1.0, label='estimated')
+    ax[2].set_ylabel('LTR')
+    _legend(ax[2], fontsize=7, loc='upper right')
+    ax[2].set_xlabel('time (s)')
+    for a in ax:
+        a.grid(True, alpha=0.3)
+    c.finish(fig, 'loads.png', 'Vertical wheel loads and load transfer ratio')
+
+
+def _overview_figure(c: _Canvas, p: _Profiles, segments: dict[str, np.ndarray] | None) -> None:
+    """The whole drive: LTR over time, the band-passed left profile, the IRI per segment."""
+    al = c.al
+    fig, ax = c.plt.subplots(3, 1, figsize=(11, 9))
+    d = _decimate(al.rows.size)
+    tt = al.t_s[d]
+    if al.true_load_n is not None:
+        tl = al.true_load_n[d]
+        ax[0].plot(tt, (tl[:, 1] - tl[:, 0]) / (tl[:, 0] + tl[:, 1]), color='0.4', lw=0.6,
+                   label='truth')
+    ax[0].plot(tt, al.pick(c.est, 'ltr')[d], color='k', lw=0.4, label='estimated')
+    ax[0].set_ylabel('LTR')
+    ax[0].set_xlabel('time (s)')
+    ax[0].set_title('load transfer ratio over the drive (|LTR| = 1: a wheel lifts off)',
+                    fontsize=10)
+    _legend(ax[0], fontsize=7, loc='upper right')
+    x = p.x
+    dx = _decimate(x.size)
+    if p.bp_est is not None:
+        if p.bp_true is not None:
+            ax[1].plot(x[dx], 1e3 * p.bp_true[dx, 0], color='0.4', lw=0.6,
+                       label=f'{p.against} left')
+        ax[1].plot(x[dx], 1e3 * p.bp_est[dx, 0], color=_COLORS[0], lw=0.5,
+                   label='estimated left')
+        ax[1].set_ylabel('left, 0.5-30 m band (mm)', fontsize=8)
+    ax[1].set_xlabel('distance (m)')
+    ax[1].set_title('road profile over the drive', fontsize=10)
+    _legend(ax[1], fontsize=7, loc='upper right')
+    if segments is not None and len(segments['start_m']):
+        _iri_bars(ax[2], segments, p.against)
+    for a in ax:
+        a.grid(True, alpha=0.3)
+    c.finish(fig, 'overview.png', 'The whole drive')
+
+
+def _iri_bars(ax, segments: dict[str, np.ndarray], against: str) -> None:
+    """IRI per segment (m/km): estimated and true (or reference), left and right."""
+    mid = 0.5 * (segments['start_m'] + segments['end_m'])
+    width = 0.2 * float(np.min(segments['end_m'] - segments['start_m']))
+    offsets = ((-1.5, 'iri_left_m_per_km', _COLORS[0], 'estimated left'),
+               (-0.5, 'iri_right_m_per_km', _COLORS[1], 'estimated right'),
+               (0.5, 'true_iri_left_m_per_km', '0.3', f'{against} left'),
+               (1.5, 'true_iri_right_m_per_km', '0.6', f'{against} right'))
+    for off, key, color, label in offsets:
+        if np.isfinite(segments[key]).any():
+            ax.bar(mid + off * width, segments[key], width=width, color=color, label=label)
+    top = np.nanmax([np.nanmax(segments[k]) if np.isfinite(segments[k]).any() else 0.0
+                     for _, k, _, _ in offsets])
+    ax.set_ylim(0.0, 1.4 * top if top > 0.0 else 1.0)
+    ax.set_ylabel('IRI (m/km)')
+    ax.set_xlabel('segment centre (m)')
+    ax.set_title('IRI per segment', fontsize=10)
+    _legend(ax, fontsize=7, loc='upper right', ncol=2)

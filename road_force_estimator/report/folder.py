@@ -1,0 +1,97 @@
+"""The report folder of an estimated drive: what :func:`write_report` writes
+(``estimate_bag`` writes ``DIR/report/``).
+
+``report.md``
+    Summary (samples processed, rejected by topic and reason, breaks in the bag, restarts,
+    convergence), accuracy against the ground truth when the bag has it (wheel-load error RMS
+    as a % of the true dynamic-load RMS and of the static load, band-passed profile error %,
+    LTR error), the IRI of the whole drive, the per-segment table and the figures
+    (:mod:`.markdown`).
+``segments.csv``
+    One row per segment (default 100 m):
+    :data:`road_force_estimator.core.segments.SEGMENT_COLUMNS` (IRI left/right of the
+    estimated and, when known, the true profile; DLC; peak loads; max |LTR|; lift-off events;
+    coordinates when the drive has ``/fix``).
+``report.json``
+    The summary's numbers, for programs (:func:`~.summary.summarize`).
+``states.png``, ``body.png``, ``wheels.png``, ``profile.png``, ``loads.png``, ``overview.png``
+    :data:`~.figures.FIGURES` (:mod:`.figures`).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.segments import SEGMENT_COLUMNS
+from road_force_estimator.report.figures import write_figures
+from road_force_estimator.report.markdown import write_markdown
+from road_force_estimator.report.summary import DEFAULT_SEGMENT_LENGTH_M, summarize
+
+__all__ = ['write_segments_csv', 'write_report']
+
+
+def _cell(value) -> str:
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value)).lower()
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    v = float(value)
+    return 'nan' if math.isnan(v) else repr(v)
+
+
+def write_segments_csv(path: str | Path, segments: dict[str, np.ndarray]) -> None:
+    """``segments.csv``: a header of :data:`SEGMENT_COLUMNS`, one row per segment (exact
+    numbers, ``nan`` where unknown)."""
+    with Path(path).open('w', newline='') as f:
+        w = csv.writer(f, lineterminator='\n')
+        w.writerow(SEGMENT_COLUMNS)
+        n = len(segments['start_m'])
+        for i in range(n):
+            w.writerow([_cell(segments[c][i]) for c in SEGMENT_COLUMNS])
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters | None = None,
+                 observer: ObserverParameters | None = None, *, mode: str = 'online',
+                 input_name: str = '', reference=None, reference_offset_m: float | None = None,
+                 segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M, figures: bool = True,
+                 extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write the report folder (see the module notes); returns the summary.
+
+    Parameters are those of :func:`~.summary.summarize`, plus ``folder`` (created if needed) and
+    ``figures`` (False: numbers and tables only).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    summary, segments, al = summarize(
+        est, drive, vehicle, observer, mode=mode, input_name=input_name, reference=reference,
+        reference_offset_m=reference_offset_m, segment_length_m=segment_length_m, extra=extra)
+    names: list[str] = []
+    if figures:
+        names = write_figures(folder, est, al, drive, segments=segments,
+                              title=f'{input_name} ({mode})' if input_name else mode)
+    summary['figures'] = names
+    write_segments_csv(folder / 'segments.csv', segments)
+    write_markdown(folder / 'report.md', summary, segments, names)
+    (folder / 'report.json').write_text(json.dumps(_json_safe(summary), indent=2) + '\n')
+    return summary

@@ -1,0 +1,296 @@
+"""The numbers of a drive's report: accuracy against the truth, the per-segment table, the
+whole-drive IRI and the summary dict (what ``report.json`` holds).
+
+Accuracy is judged as in MODEL.md "Metrics" and the benchmark: on the samples the estimator
+calls converged (and where the truth exists), loads and LTR directly, the profile through the
+same zero-phase 0.5-30 m band-pass on estimate and truth
+(:mod:`road_force_estimator.core.metrics`), from 30 m after the first judged sample to 30 m
+before the end (the band-pass's edge transients).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from road_force_estimator.core import iri as iri_mod
+from road_force_estimator.core import metrics
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.segments import SEGMENT_COLUMNS, segment_table
+from road_force_estimator.report.alignment import Aligned, align
+
+__all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'accuracy', 'drive_segments',
+           'summarize']
+
+#: Default segment length (m).
+DEFAULT_SEGMENT_LENGTH_M = 100.0
+#: Window of the moving RMS that decides the measured convergence time (s).
+CONVERGENCE_WINDOW_S = 0.1
+
+
+def _pooled(rms: np.ndarray, ref: np.ndarray) -> float:
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return float(100.0 * math.sqrt(np.mean(np.square(rms))) /
+                     math.sqrt(np.mean(np.square(ref))))
+
+
+def _floats(a) -> list[float]:
+    return [float(v) for v in np.ravel(a)]
+
+
+def accuracy(est, al: Aligned, vehicle: VehicleParameters) -> dict[str, Any] | None:
+    """Errors against the truth (None without truth or without a converged sample).
+
+    Returns
+    -------
+    dict
+        ``samples_judged``; loads: ``load_rms_n``, ``load_peak_n``, ``load_rms_pct_dynamic``,
+        ``load_rms_pct_static`` (per wheel) and ``load_rms_pct_dynamic_both`` (pooled);
+        ``convergence_s`` (measured: the 100 ms moving RMS of the load error stays below
+        max(2 x its judged RMS, 1 % of the static load) from then on); LTR: ``ltr_rms_error``,
+        ``ltr_peak_error``, ``max_abs_ltr``, ``max_abs_ltr_true``; profile (when a truth or
+        reference profile exists and the drive is long enough): ``profile_samples_judged``,
+        ``profile_rms_m``, ``profile_rms_pct_band`` (per wheel), ``profile_rms_pct_band_both``,
+        ``profile_against``.
+    """
+    out: dict[str, Any] = {}
+    static = np.asarray(vehicle.static_load_n, dtype=float)
+    if al.true_load_n is not None:
+        load = al.pick(est, 'wheel_load_n')
+        mask = al.converged & np.isfinite(al.true_load_n).all(axis=1)
+        if np.count_nonzero(mask) >= 2:
+            st = metrics.load_errors(load, np.nan_to_num(al.true_load_n), static, mask=mask)
+            true = al.true_load_n
+            ltr_true = (true[:, 1] - true[:, 0]) / (true[:, 0] + true[:, 1])
+            lt = metrics.ltr_stats(al.pick(est, 'ltr'), np.nan_to_num(ltr_true), mask=mask)
+            out.update(
+                samples_judged=int(np.count_nonzero(mask)),
+                load_rms_n=_floats(st.rms), load_peak_n=_floats(st.peak),
+                load_rms_pct_dynamic=_floats(st.rms_pct),
+                load_rms_pct_static=_floats(st.rms_pct_static),
+                load_rms_pct_dynamic_both=_pooled(st.rms, st.reference_rms),
+                true_dynamic_rms_n=_floats(st.reference_rms),
+                ltr_rms_error=lt['rms_error'], ltr_peak_error=lt['peak_error'],
+                max_abs_ltr=lt['max_abs'], max_abs_ltr_true=lt['max_abs_truth'],
+                convergence_s=_convergence(al, load, static, float(np.sqrt(np.mean(
+                    np.square(st.rms))))))
+    truth = al.profile_truth
+    if truth is not None:
+        road = al.pick(est, 'road_m')
+        up = al.increasing() & np.isfinite(truth).all(axis=1)
+        x = al.x_m[up]
+        judged = al.converged[up]
+        if np.any(judged):
+            first = x[np.argmax(judged)]
+            edge = metrics.BAND_LONG_M
+            pmask = judged & (x >= first + edge) & (x <= x[-1] - edge)
+            if np.count_nonzero(pmask) > 10:
+                try:
+                    pe = metrics.profile_errors(x, road[up], truth[up], mask=pmask)
+                except ValueError:
+                    pe = None
+                if pe is not None:
+                    out.update(profile_samples_judged=int(np.count_nonzero(pmask)),
+                               profile_rms_m=_floats(pe.rms),
+                               profile_rms_pct_band=_floats(pe.rms_pct),
+                               profile_rms_pct_band_both=_pooled(pe.rms, pe.reference_rms),
+                               profile_against=('ground truth' if al.true_road_m is not None
+                                                else al.reference_name))
+    return out or None
+
+
+def _convergence(al: Aligned, load: np.ndarray, static: np.ndarray, judged_rms: float) -> float:
+    """Measured convergence time (s) of the load error (see :func:`accuracy`)."""
+    ok = np.isfinite(al.true_load_n).all(axis=1)
+    if not ok.any() or not al.converged.any():
+        return math.inf
+    last = int(np.flatnonzero(al.converged)[-1])
+    sel = np.flatnonzero(ok[:last + 1])
+    if sel.size < 2:
+        return math.inf
+    err2 = np.mean(np.square(load[sel] - al.true_load_n[sel]), axis=1)
+    dt = float(np.median(np.diff(al.t_s[sel])))
+    w = max(1, int(round(CONVERGENCE_WINDOW_S / dt))) if dt > 0 else 1
+    c = np.concatenate([[0.0], np.cumsum(err2)])
+    lo = np.maximum(np.arange(sel.size) - w + 1, 0)
+    mrms = np.sqrt((c[1:] - c[lo]) / (np.arange(sel.size) - lo + 1))
+    tol = max(2.0 * judged_rms, 0.01 * float(np.mean(static)))
+    return metrics.convergence_time(al.t_s[sel], mrms, tol)
+
+
+def _iri_hook(distance_m, elevation_m, edges_m) -> np.ndarray:
+    """:func:`road_force_estimator.core.iri.iri_segments`, NaN where the profile is too short."""
+    try:
+        return iri_mod.iri_segments(distance_m, elevation_m, edges_m)
+    except ValueError:
+        return np.full(len(edges_m) - 1, np.nan)
+
+
+def drive_segments(est, al: Aligned, drive=None, *,
+                   segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M) -> dict[str, np.ndarray]:
+    """Per-segment table (:func:`road_force_estimator.core.segments.segment_table`) of a drive.
+
+    IRI of the estimated profile and of the truth (or the reference) profile; coordinates from
+    the drive's fixes. Empty columns when the drive covers less than one sample of distance.
+    """
+    up = al.increasing()
+    empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
+    if np.count_nonzero(up) < 2:
+        return empty
+    rows = al.rows[up]
+    truth = al.profile_truth
+    true_profile = None
+    if truth is not None:
+        t = truth[up]
+        if np.isfinite(t).all():
+            true_profile = t
+        elif np.isfinite(t).any(axis=1).sum() >= 2:
+            ok = np.isfinite(t).all(axis=1)
+            x = al.x_m[up]
+            true_profile = np.column_stack([np.interp(x, x[ok], t[ok, i]) for i in (0, 1)])
+    fixes = getattr(drive, 'fixes', None)
+    try:
+        return segment_table(
+            al.x_m[up], np.asarray(est.wheel_load_n)[rows], np.asarray(est.ltr)[rows],
+            np.asarray(est.lift_off)[rows], profile_m=np.asarray(est.road_m)[rows],
+            true_profile_m=true_profile, iri_segments=_iri_hook,
+            stamps_ns=np.asarray(est.stamp_ns)[rows],
+            fix_stamps_ns=None if fixes is None else fixes.stamps_ns,
+            fix_latitude_deg=None if fixes is None else fixes.latitude_deg,
+            fix_longitude_deg=None if fixes is None else fixes.longitude_deg,
+            segment_length_m=segment_length_m)
+    except ValueError:
+        return empty
+
+
+def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
+    if z is None or not np.isfinite(z).all():
+        return None
+    try:
+        return _floats(iri_mod.iri(x, z))
+    except ValueError:
+        return None
+
+
+def _whole_from_segments(x: np.ndarray, z: np.ndarray | None, segments: dict,
+                         prefix: str) -> list[float] | None:
+    """Whole-drive IRI of a profile (left, right) from its per-segment IRI (columns
+    ``{prefix}_left/right_m_per_km``; one quarter-car run instead of two): the mean over the
+    segments weighted by their slope intervals (:func:`~.iri.interval_counts`); computed
+    afresh (:func:`_whole_iri`) when the segments do not give it."""
+    start, end = segments.get('start_m'), segments.get('end_m')
+    if z is None or start is None or len(start) == 0 or not np.isfinite(z).all():
+        return _whole_iri(x, z)
+    try:
+        counts = iri_mod.interval_counts(x, np.concatenate([start, end[-1:]]))
+    except ValueError:
+        return _whole_iri(x, z)
+    values = np.column_stack([segments[f'{prefix}_left_m_per_km'],
+                              segments[f'{prefix}_right_m_per_km']])
+    used = counts > 0
+    if counts.sum() == 0 or not np.isfinite(values[used]).all():
+        return _whole_iri(x, z)
+    return _floats(values[used].T @ counts[used] / counts.sum())
+
+
+def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
+              observer: ObserverParameters | None = None, *, mode: str = 'online',
+              input_name: str = '', reference=None, reference_offset_m: float | None = None,
+              segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M,
+              extra: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict, Aligned]:
+    """The report's numbers: ``(summary, segments, aligned)``.
+
+    Parameters
+    ----------
+    est : EstimateArrays (or the offline mode's)
+    drive : bag_io.Drive, optional
+        What was read: messages, rejections, breaks, truth, fixes.
+    vehicle, observer : parameters used.
+    mode : 'online' or 'offline'.
+    input_name : str
+        Shown in the report.
+    reference : RoadProfile, optional
+        A reference profile (e.g. the LPA survey of the road driven), used when the drive has
+        no ground truth.
+    reference_offset_m : float, optional
+        Distance along the reference where the drive starts (m from the reference's start);
+        default: the offset within +-:data:`~.alignment.REFERENCE_SEARCH_M` that best
+        correlates the band-passed profiles.
+    segment_length_m : float
+        Segment length (m).
+    extra : dict, optional
+        More counts to show (e.g. samples whose speed was taken from the first twist).
+    """
+    vehicle = VehicleParameters() if vehicle is None else vehicle
+    observer = ObserverParameters() if observer is None else observer
+    al = align(est, drive, reference, reference_offset_m)
+    st = est.status
+    rejected = _rejections(drive, st)
+    conv_rows = np.flatnonzero(al.reported_converged)
+    summary: dict[str, Any] = {
+        'input': input_name,
+        'mode': mode,
+        'messages': dict(sorted((getattr(drive, 'messages', None) or {}).items())),
+        'samples': {
+            'input': int(len(est.stamp_ns)),
+            'estimated': int(st.accepted),
+            'converged': int(conv_rows.size),
+        },
+        'judged_from': al.judged_from,
+        'rejected': rejected,
+        'rejected_total': int(sum(sum(r.values()) for r in rejected.values())),
+        'issues': list(getattr(drive, 'issues', ()) or ()),
+        'resets': int(st.resets),
+        'gaps': int(st.gaps),
+        'duration_s': float(al.t_s[-1]) if al.t_s.size else 0.0,
+        'distance_m': float(al.x_m[-1] - al.x_m[0]) if al.x_m.size else 0.0,
+        'settling_time_s': float(st.settling_time_s),
+        'first_converged_s': float(al.t_s[conv_rows[0]]) if conv_rows.size else math.inf,
+        'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
+        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0,
+        'fixes': int(len(drive.fixes.stamps_ns)) if getattr(drive, 'fixes', None) else 0,
+        'has_ground_truth': al.true_load_n is not None,
+        'reference_profile': al.reference_name or None,
+        'reference_offset_m': al.reference_offset_m,
+        'segment_length_m': float(segment_length_m),
+        'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
+    }
+    if extra:
+        summary['notes'] = dict(extra)
+    for key in ('noise_std', 'cutoff_hz'):
+        if hasattr(est, key):
+            summary.setdefault('offline', {})[key] = _floats(getattr(est, key))
+    summary['accuracy'] = accuracy(est, al, vehicle)
+    segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
+    summary['iri_m_per_km'] = _drive_iri(est, al, segments)
+    summary['segments'] = int(len(segments['start_m']))
+    return summary, segments, al
+
+
+def _rejections(drive, st) -> dict[str, dict[str, int]]:
+    """Rejected samples by topic and reason: the reader's (``drive.rejected``), then the
+    estimator's (``'estimator'``), zero counts left out."""
+    rejected: dict[str, dict[str, int]] = {}
+    for topic, reasons in sorted((getattr(drive, 'rejected', None) or {}).items()):
+        rejected[topic] = {r: int(c) for r, c in sorted(reasons.items()) if c}
+    core = {'nonfinite': st.rejected_nonfinite, 'out_of_range': st.rejected_range,
+            'duplicate_or_backwards_stamp': st.rejected_time}
+    core = {k: int(v) for k, v in core.items() if v}
+    if core:
+        rejected['estimator'] = core
+    return rejected
+
+
+def _drive_iri(est, al: Aligned, segments: dict) -> dict[str, list[float] | None]:
+    """Whole-drive IRI (m/km, left and right) of the estimated and the true (or reference)
+    profile, None where unknown."""
+    up = al.increasing()
+    iri_est = iri_true = None
+    if np.count_nonzero(up) >= 2:
+        x = al.x_m[up]
+        iri_est = _whole_from_segments(x, al.pick(est, 'road_m')[up], segments, 'iri')
+        truth = al.profile_truth
+        if truth is not None:
+            iri_true = _whole_from_segments(x, truth[up], segments, 'true_iri')
+    return {'estimated': iri_est, 'true': iri_true}

@@ -1,0 +1,130 @@
+"""What the offline commands share: the usage-error parser, the exit-status wrapper, options.
+
+Every command is ``build_parser()`` plus ``main(argv=None) -> int``; ``main`` hands its body to
+:func:`run_main`, which turns what the body raises into one line on stderr and an exit status:
+
+- :class:`UsageError` (a bad command line, also argparse's own errors through
+  :class:`Parser`): ``<prog>: error: <message>``, status 2;
+- the exception types the command lists (bad input): ``<prog>: <first line>``, the status it
+  gives them (1 for most commands);
+- ``SystemExit`` (``--help``): its code.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Callable, Mapping, Sequence
+
+__all__ = [
+    'MODES', 'UsageError', 'Parser', 'run_main', 'one_line', 'check_positive',
+    'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'add_force',
+    'add_no_progress', 'load_estimator_parameters',
+]
+
+#: Estimation modes of estimate_bag and estimate_fleet.
+MODES = ('online', 'offline')
+
+
+class UsageError(Exception):
+    """A bad command line (exit status 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors raise :class:`UsageError` (one line, no usage dump)."""
+
+    def error(self, message: str):
+        raise UsageError(message)
+
+
+def one_line(err: BaseException) -> str:
+    """The first line of an exception's message, else its type's name."""
+    text = str(err).strip().splitlines()
+    return text[0] if text else type(err).__name__
+
+
+def run_main(prog: str, parser: argparse.ArgumentParser,
+             body: Callable[[argparse.Namespace], int], argv: Sequence[str] | None,
+             errors: Mapping[tuple[type[BaseException], ...], int]) -> int:
+    """Parse ``argv`` with ``parser``, run ``body(args)``; the exit status.
+
+    Parameters
+    ----------
+    prog : str
+        The command's name, first on every error line.
+    parser : ArgumentParser
+        The command's :class:`Parser` (``build_parser()``).
+    body : callable
+        ``body(args) -> int``: the command's work and its normal output.
+    argv : sequence of str, optional
+        The arguments (default ``sys.argv[1:]``).
+    errors : mapping
+        Exception types -> exit status; such an error prints ``<prog>: <first line>``.
+    """
+    try:
+        return body(parser.parse_args(argv))
+    except SystemExit as done:          # --help
+        return int(done.code or 0)
+    except UsageError as err:
+        print(f'{prog}: error: {err}', file=sys.stderr)
+        return 2
+    except tuple(t for types in errors for t in types) as err:
+        status = next(s for types, s in errors.items() if isinstance(err, types))
+        print(f'{prog}: {err}'.splitlines()[0], file=sys.stderr)
+        return status
+
+
+def check_positive(option: str, value: float | None, *, finite: bool = True) -> None:
+    """Raise :class:`UsageError` ``<option> <value>: must be > 0 m`` unless ``value`` (m) is
+    None or > 0 (and finite when ``finite``)."""
+    if value is None:
+        return
+    if not (value > 0.0 and (math.isfinite(value) or not finite)):
+        raise UsageError(f'{option} {value!r}: must be > 0 m')
+
+
+def add_output(parser: argparse.ArgumentParser, help: str, *, metavar: str = 'DIR') -> None:
+    """``--output/-o PATH`` (required)."""
+    parser.add_argument('--output', '-o', required=True, metavar=metavar, help=help)
+
+
+def add_params_file(parser: argparse.ArgumentParser, help: str, *,
+                    required: bool = False) -> None:
+    """``--params-file FILE``: a ROS 2 parameter file."""
+    parser.add_argument('--params-file', required=required, metavar='FILE', help=help)
+
+
+def add_mode(parser: argparse.ArgumentParser) -> None:
+    """``--mode online|offline`` (default online)."""
+    parser.add_argument('--mode', choices=MODES, default='online',
+                        help='online: what the observer node publishes (default); offline: '
+                             'non-causal, the whole recording')
+
+
+def add_segment_length(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--segment-length M`` (m, default 100)."""
+    parser.add_argument('--segment-length', type=float, default=100.0, metavar='M', help=help)
+
+
+def add_force(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--force``: replace or recompute what exists."""
+    parser.add_argument('--force', action='store_true', help=help)
+
+
+def add_no_progress(parser: argparse.ArgumentParser) -> None:
+    """``--no-progress``."""
+    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+
+
+def load_estimator_parameters(path: str | None, node_names: Sequence[str]):
+    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None).
+
+    Raises
+    ------
+    ValueError, OSError
+        A bad or unreadable file.
+    """
+    from road_force_estimator.core.parameters import (
+        ObserverParameters, VehicleParameters, load_params_file)
+    values = {} if path is None else load_params_file(path, node_names=tuple(node_names))
+    return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)

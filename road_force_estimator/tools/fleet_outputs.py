@@ -1,0 +1,267 @@
+"""estimate_fleet's outputs: the fleet table (CSV, Parquet), the GeoJSON, the map, the
+failures and ``summary.md``.
+
+``segments.parquet`` and ``segments.csv`` hold :data:`~.fleet_drives.FLEET_COLUMNS`, one row
+per segment of every drive done, drives in id order (coordinates NaN without ``/fix``);
+``segments.geojson`` one LineString per segment (:mod:`road_force_estimator.report.fleet_map`);
+``segments_map.png`` the segments coloured by IRI, when any has coordinates; ``failures.csv``
+``drive,reason``. Every file is written to a temporary name and renamed into place.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+import io
+import json
+import math
+import os
+from pathlib import Path
+from typing import Sequence
+import uuid
+
+import numpy as np
+
+from road_force_estimator.tools.fleet_drives import FLEET_COLUMNS, INT_COLUMNS, DriveOutcome
+
+__all__ = ['ROUGHEST', 'FleetResult', 'fleet_table', 'summary_markdown', 'write_outputs']
+
+#: Number of roughest segments listed in summary.md.
+ROUGHEST = 10
+
+
+@dataclass
+class FleetResult:
+    """A fleet run: one outcome per drive (id order), the engine used, the wall time (s).
+
+    ``timings`` (s): ``prepare`` (finding the drives, checking those already done),
+    ``engine_start`` (starting or reaching the cluster), ``processing`` (first task submitted
+    to last result back), ``write`` (tables, GeoJSON, map, summary).
+    """
+
+    outcomes: list[DriveOutcome]
+    engine: str
+    seconds: float
+    settings: dict
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def count(self, status: str) -> int:
+        return sum(1 for o in self.outcomes if o.status == status)
+
+    @property
+    def exit_code(self) -> int:
+        return 1 if self.count('failed') else 0
+
+
+def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
+    done = [o for o in outcomes if o.status != 'failed' and o.table is not None]
+    table: dict[str, np.ndarray] = {'drive': np.array(
+        [o.drive_id for o in done for _ in range(len(o.table['start_m']))], dtype=object)}
+    for name in FLEET_COLUMNS[1:]:
+        dtype = np.int64 if name in INT_COLUMNS else float
+        parts = [np.asarray(o.table[name], dtype=dtype) for o in done]
+        table[name] = np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
+    return table
+
+
+def _cell(value) -> str:
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, str):
+        return value
+    v = float(value)
+    return 'nan' if math.isnan(v) else repr(v)
+
+
+def _atomic_write(path: Path, data: bytes | str) -> None:
+    tmp = path.with_name(f'.{path.name}.{uuid.uuid4().hex[:8]}.tmp')
+    if isinstance(data, str):
+        tmp.write_text(data, encoding='utf-8')
+    else:
+        tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def _csv_text(header: Sequence[str], rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator='\n')
+    w.writerow(header)
+    for row in rows:
+        w.writerow([_cell(v) for v in row])
+    return buf.getvalue()
+
+
+def _write_parquet(path: Path, table: dict[str, np.ndarray], settings: dict) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    fields = [pa.field('drive', pa.string())] + [
+        pa.field(c, pa.int64() if c in INT_COLUMNS else pa.float64())
+        for c in FLEET_COLUMNS[1:]]
+    meta = {b'road_force_estimator.settings': json.dumps(settings, sort_keys=True).encode()}
+    schema = pa.schema(fields, metadata=meta)
+    arrays = [pa.array(table['drive'].tolist(), type=pa.string())] + [
+        pa.array(table[c], type=f.type) for c, f in zip(FLEET_COLUMNS[1:], fields[1:])]
+    tmp = path.with_name(f'.{path.name}.{uuid.uuid4().hex[:8]}.tmp')
+    pq.write_table(pa.Table.from_arrays(arrays, schema=schema), tmp)
+    os.replace(tmp, path)
+
+
+def _mean_iri(o: DriveOutcome, side: str) -> float:
+    t = o.table
+    v = np.asarray(t[f'iri_{side}_m_per_km'], dtype=float)
+    w = np.asarray(t['end_m'], dtype=float) - np.asarray(t['start_m'], dtype=float)
+    ok = np.isfinite(v) & (w > 0)
+    return float(np.sum(v[ok] * w[ok]) / np.sum(w[ok])) if ok.any() else math.nan
+
+
+def _f(value: float, fmt: str = '.2f') -> str:
+    return 'n/a' if value is None or not math.isfinite(value) else format(value, fmt)
+
+
+def _md(text: str) -> str:
+    return str(text).replace('|', '\\|').replace('\n', ' ')
+
+
+def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_written: bool,
+                     params_file: str | None) -> str:
+    """``summary.md``: the run, the map, one row per drive, the roughest segments, the failures
+    and the warnings."""
+    lines = _summary_head(result, table, params_file)
+    if map_written:
+        lines += ['## Map', '', 'Segments coloured by IRI (mean of left and right), on '
+                  'longitude/latitude (WGS84):', '',
+                  '[![segments coloured by IRI](segments_map.png)](segments_map.png)', '']
+    else:
+        lines += ['## Map', '', 'No segment has coordinates (no drive with `/fix`): no map.', '']
+    lines += _drives_section(result.outcomes)
+    lines += _roughest_section(table)
+    failed = [o for o in result.outcomes if o.status == 'failed']
+    if failed:
+        lines += ['## Failures', '', '| drive | reason |', '|---|---|']
+        lines += [f'| {_md(o.drive_id)} | {_md(o.reason)} |' for o in failed]
+        lines.append('')
+    warned = [o for o in result.outcomes if o.warnings]
+    if warned:
+        lines += ['## Warnings (processed up to the break)', '']
+        lines += [f'- {_md(o.drive_id)}: {_md(w)}' for o in warned for w in o.warnings]
+        lines.append('')
+    return '\n'.join(lines)
+
+
+def _summary_head(result: FleetResult, table: dict[str, np.ndarray],
+                  params_file: str | None) -> list[str]:
+    from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
+
+    s = result.settings
+    n = len(result.outcomes)
+    seg = s['segment_length_m']
+    return [
+        '# Fleet summary (`estimate_fleet`)', '',
+        f'- Drives: {n}; processed {result.count("processed")}, skipped (already done) '
+        f'{result.count("skipped")}, failed {result.count("failed")}'
+        + (' (see `failures.csv`)' if result.count('failed') else '') + '.',
+        f'- Segments in the tables: {len(table["start_m"])} (`segments.csv`, '
+        '`segments.parquet`, `segments.geojson`).',
+        f'- Mode: {s["mode"]}; segment length {seg:g} m ({seg / 1609.344:.4g} mi); report '
+        f'figures: {"yes" if s["figures"] else "no"}; parameters: '
+        f'{params_file or "package defaults"}.',
+        f'- Engine: {result.engine}; wall time {result.seconds:.1f} s (engine start '
+        f'{result.timings.get("engine_start", 0.0):.1f} s, processing '
+        f'{result.timings.get("processing", 0.0):.1f} s).',
+        f'- IRI in m/km (= mm/m); in/mi = m/km x {K:g}.', '']
+
+
+def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+    lines = ['## Drives', '',
+             '| drive | status | segments | distance (km) | IRI left m/km (in/mi) | '
+             'IRI right m/km (in/mi) | peak load (kN) | max abs LTR | lift-offs | GNSS | '
+             'time (s) |',
+             '|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|']
+    for o in outcomes:
+        if o.status == 'failed' or o.table is None:
+            lines.append(f'| {_md(o.drive_id)} | failed | | | | | | | | | '
+                         f'{o.seconds:.1f} |')
+        else:
+            lines.append(_drive_row(o))
+    lines.append('')
+    lines.append('IRI per drive: length-weighted mean of its segments. Time: the processing of '
+                 'the drive (for a skipped drive, in the run that made it).')
+    lines.append('')
+    return lines
+
+
+def _drive_row(o: DriveOutcome) -> str:
+    from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
+
+    t = o.table
+    k = len(t['start_m'])
+    dist = (float(t['end_m'][-1] - t['start_m'][0]) / 1000.0) if k else 0.0
+    il, ir = _mean_iri(o, 'left'), _mean_iri(o, 'right')
+    peak = np.fmax(t['peak_load_left_n'], t['peak_load_right_n']) if k else np.zeros(0)
+    peak_kn = float(np.nanmax(peak)) / 1000.0 if k and np.isfinite(peak).any() else math.nan
+    ltr = float(np.nanmax(t['max_abs_ltr'])) if k and np.isfinite(t['max_abs_ltr']).any() \
+        else math.nan
+    gnss = 'yes' if k and np.isfinite(t['start_lat']).any() else 'no'
+    return (
+        f'| {_md(o.drive_id)} | {o.status} | {k} | {dist:.3f} | {_f(il)} ({_f(il * K, ".0f")})'
+        f' | {_f(ir)} ({_f(ir * K, ".0f")}) | {_f(peak_kn, ".1f")} | {_f(ltr, ".3f")} | '
+        f'{int(np.sum(t["lift_offs"])) if k else 0} | {gnss} | {o.seconds:.1f} |')
+
+
+def _roughest_section(table: dict[str, np.ndarray]) -> list[str]:
+    from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
+
+    mean = 0.5 * (table['iri_left_m_per_km'] + table['iri_right_m_per_km'])
+    order = [int(j) for j in np.argsort(-np.where(np.isfinite(mean), mean, -np.inf))
+             if np.isfinite(mean[j])][:ROUGHEST]
+    if not order:
+        return []
+    lines = [f'## Roughest segments (top {len(order)} by mean IRI)', '',
+             '| drive | start (m) | end (m) | IRI left m/km (in/mi) | '
+             'IRI right m/km (in/mi) | start lat, lon | end lat, lon |',
+             '|---|---:|---:|---:|---:|---|---|']
+    for j in order:
+        def pos(a, b):
+            la, lo = table[a][j], table[b][j]
+            return f'{la:.6f}, {lo:.6f}' if np.isfinite(la) and np.isfinite(lo) else 'n/a'
+        il, ir = table['iri_left_m_per_km'][j], table['iri_right_m_per_km'][j]
+        lines.append(
+            f'| {_md(table["drive"][j])} | {table["start_m"][j]:.1f} | '
+            f'{table["end_m"][j]:.1f} | {_f(il)} ({_f(il * K, ".0f")}) | {_f(ir)} '
+            f'({_f(ir * K, ".0f")}) | {pos("start_lat", "start_lon")} | '
+            f'{pos("end_lat", "end_lon")} |')
+    lines.append('')
+    return lines
+
+
+def write_outputs(output: str | Path, result: FleetResult, *,
+                  params_file: str | None = None) -> dict[str, np.ndarray]:
+    """Write the fleet tables, GeoJSON, map, failures and summary into ``output``; returns the
+    fleet table (:data:`FLEET_COLUMNS`)."""
+    from road_force_estimator.report import plot_segments_map, segments_geojson
+
+    out = Path(output)
+    table = fleet_table(result.outcomes)
+    rows = zip(*(table[c].tolist() for c in FLEET_COLUMNS))
+    _atomic_write(out / 'segments.csv', _csv_text(FLEET_COLUMNS, rows))
+    _write_parquet(out / 'segments.parquet', table, result.settings)
+    lines = [line for o in result.outcomes if o.status != 'failed' and o.table is not None
+             for line in (o.lines or [None] * len(o.table['start_m']))]
+    doc = segments_geojson(table, lines, FLEET_COLUMNS)
+    _atomic_write(out / 'segments.geojson',
+                  json.dumps(doc, allow_nan=False, separators=(',', ':')) + '\n')
+    failed = [(o.drive_id, o.reason) for o in result.outcomes if o.status == 'failed']
+    _atomic_write(out / 'failures.csv', _csv_text(('drive', 'reason'), failed))
+    png = out / 'segments_map.png'
+    mean = 0.5 * (table['iri_left_m_per_km'] + table['iri_right_m_per_km'])
+    tmp_png = out / f'.segments_map.{uuid.uuid4().hex[:8]}.png'
+    if plot_segments_map(tmp_png, lines, mean,
+                         title=f'IRI per {result.settings["segment_length_m"]:g} m segment, '
+                               f'{len({d for d in table["drive"]})} drives'):
+        os.replace(tmp_png, png)
+        map_written = True
+    else:
+        map_written = False
+        png.unlink(missing_ok=True)
+    _atomic_write(out / 'summary.md', summary_markdown(result, table, map_written, params_file))
+    return table
