@@ -12,6 +12,7 @@ EXECUTABLES = {
     'plant_simulator': 'ros',
     'observer': 'ros',
     'bag_recorder': 'ros',
+    'bag_player': 'ros',
     'simulate_bag': 'tools',
     'estimate_bag': 'tools',
     'profile_to_bag': 'tools',

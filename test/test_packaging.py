@@ -10,7 +10,8 @@ import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = 'road_force_estimator'
-EXECUTABLES = ['plant_simulator', 'observer', 'bag_recorder', 'simulate_bag', 'estimate_bag',
+EXECUTABLES = ['plant_simulator', 'observer', 'bag_recorder', 'bag_player', 'simulate_bag',
+               'estimate_bag',
                'profile_to_bag', 'road_profile_iri', 'estimate_fleet']
 
 

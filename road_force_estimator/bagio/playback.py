@@ -1,0 +1,277 @@
+"""Playback side of a rosbag2 MCAP bag: serialized messages in log-time order, recorded QoS.
+
+Any writer's bag (ours, ``rosbags``', the ``mcap`` library's, ``ros2 bag record``'s) is read
+through the ``mcap`` library, which decompresses zstd and lz4 chunks. Reading streams: one
+chunk at a time is decompressed and its messages merged into the log-time order (a bounded
+window: chunks as recorders write them, in time order), so a bag of any length plays in
+bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays up to the break:
+:attr:`Playback.broken` then says where and how many messages were played.
+
+QoS: each topic's ``offered_qos_profiles`` from ``metadata.yaml`` (rosbag2 writes a list, older
+versions a YAML string), else from the MCAP channel's metadata; a topic without any (as
+``rosbags`` writes them) gets the QoS kind of :func:`road_force_estimator.interfaces.qos_kind`
+(reliable for topics INTERFACES.md does not list).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import heapq
+from pathlib import Path
+from typing import Iterator, Sequence
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+import yaml
+
+from road_force_estimator.interfaces import SENSOR_DATA, qos_kind
+
+__all__ = ['PlaybackError', 'TopicQoS', 'PlayedTopic', 'Playback', 'open_playback']
+
+#: Depth of a topic's queue when the bag records none (a keep-all recording has none either).
+DEFAULT_DEPTH = 100
+
+
+class PlaybackError(ValueError):
+    """A bag that cannot be played at all (missing, not MCAP, no messages); one line."""
+
+
+@dataclass(frozen=True)
+class TopicQoS:
+    """The QoS to publish a topic with: ``reliability`` 'reliable' or 'best_effort',
+    ``durability`` 'volatile' or 'transient_local', ``depth`` (messages, keep last)."""
+
+    reliability: str = 'reliable'
+    durability: str = 'volatile'
+    depth: int = DEFAULT_DEPTH
+    recorded: bool = False  #: taken from the bag (False: from interfaces.qos_kind)
+
+    @classmethod
+    def of_kind(cls, kind: str) -> TopicQoS:
+        """The QoS of a kind of :mod:`road_force_estimator.interfaces`."""
+        return cls('best_effort' if kind == SENSOR_DATA else 'reliable')
+
+
+@dataclass(frozen=True)
+class PlayedTopic:
+    """A topic of the bag: name, type ('pkg/msg/Name'), encoding, QoS, message count."""
+
+    name: str
+    type: str
+    encoding: str
+    qos: TopicQoS
+    count: int = -1  #: from metadata.yaml (-1: unknown)
+
+
+def _qos_from_profiles(profiles) -> TopicQoS | None:
+    """The first of rosbag2's ``offered_qos_profiles`` (list, or YAML text of a list)."""
+    if isinstance(profiles, str):
+        try:
+            profiles = yaml.safe_load(profiles) if profiles.strip() else None
+        except yaml.YAMLError:
+            return None
+    if not profiles or not isinstance(profiles, list) or not isinstance(profiles[0], dict):
+        return None
+    first = profiles[0]
+    rel = str(first.get('reliability', 'reliable')).lower()
+    dur = str(first.get('durability', 'volatile')).lower()
+    depth = first.get('depth', DEFAULT_DEPTH)
+    if rel in ('2', 'best_effort'):
+        rel = 'best_effort'
+    elif rel in ('1', 'reliable', '0', 'system_default'):
+        rel = 'reliable'
+    else:
+        return None
+    dur = 'transient_local' if dur in ('1', 'transient_local') else 'volatile'
+    depth = int(depth) if isinstance(depth, int) and depth > 0 else DEFAULT_DEPTH
+    return TopicQoS(rel, dur, depth, recorded=True)
+
+
+def _normal_type(name: str) -> str:
+    parts = name.split('/')
+    return f'{parts[0]}/msg/{parts[1]}' if len(parts) == 2 else name
+
+
+class Playback:
+    """A bag opened for playback (:func:`open_playback`).
+
+    Attributes
+    ----------
+    path : Path
+    files : list of Path
+        The MCAP files, in the order metadata.yaml lists them.
+    topics : dict of str to PlayedTopic
+        Known from metadata.yaml before reading; topics found only in the MCAP channels are
+        added while :meth:`messages` reads.
+    broken : str
+        Empty, or what stopped the last :meth:`messages` early (a cut or damaged file).
+    """
+
+    def __init__(self, path: Path, files: list[Path], topics: dict[str, PlayedTopic]):
+        self.path = path
+        self.files = files
+        self.topics = topics
+        self.broken = ''
+
+    def messages(self, topics: Sequence[str] | None = None, start_offset_ns: int = 0
+                 ) -> Iterator[tuple[int, str, str, bytes]]:
+        """``(log_time_ns, topic, type, serialized CDR bytes)`` in log-time order.
+
+        Parameters
+        ----------
+        topics : sequence of str, optional
+            Only these topics (default: all).
+        start_offset_ns : int
+            Skip the messages logged before the bag's first message plus this (ns).
+        """
+        self.broken = ''
+        wanted = None if topics is None else set(topics)
+        first = None
+        for t, topic, msgtype, data in self._ordered():
+            if first is None:
+                first = t
+            if t - first < start_offset_ns or (wanted is not None and topic not in wanted):
+                continue
+            yield t, topic, msgtype, data
+
+    def _ordered(self) -> Iterator[tuple[int, str, str, bytes]]:
+        for path in self.files:
+            yield from self._file_messages(path)
+            if self.broken:
+                return
+
+    def _file_messages(self, path: Path):
+        """One file's messages in log-time order: through the chunk index when the file is
+        whole (chunks may overlap in time), else by a linear read (:meth:`_linear`)."""
+        with path.open('rb') as f:
+            reader = SeekingReader(f, validate_crcs=True)
+            try:
+                summary = reader.get_summary()
+            except Exception:  # cut: no footer or summary
+                summary = None
+            if summary is None or not summary.chunk_indexes:
+                yield from self._linear(path)
+                return
+            messages = reader.iter_messages(log_time_order=True)
+            while True:
+                try:
+                    schema, channel, message = next(messages)
+                except StopIteration:
+                    return
+                except Exception as exc:  # a damaged chunk: play what came before
+                    self.broken = (f'{path.name} is damaged ({type(exc).__name__}: {exc}): '
+                                   f'played up to the break')
+                    return
+                if channel.topic not in self.topics:
+                    self._channel(channel, {channel.schema_id: schema.name if schema else ''})
+                yield message.log_time, channel.topic, self.topics[channel.topic].type, \
+                    message.data
+
+    def _linear(self, path: Path):
+        """A file without index read from the start, chunk by chunk, merged into log-time
+        order (a chunk's messages wait until the next chunk starts later than they are)."""
+        heap: list = []
+        seq = 0
+        channels: dict[int, tuple[str, str]] = {}
+        schemas: dict[int, str] = {}
+
+        def release(upto: int):
+            while heap and heap[0][0] <= upto:
+                t, _, topic, msgtype, data = heapq.heappop(heap)
+                yield t, topic, msgtype, data
+
+        with path.open('rb') as f:
+            records = StreamReader(f, emit_chunks=True, validate_crcs=True).records
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    break
+                except Exception as exc:  # a cut or damaged file: play what came before
+                    self.broken = (f'{path.name} is cut or damaged near byte {f.tell()} '
+                                   f'({type(exc).__name__}{": " if str(exc) else ""}{exc}): '
+                                   f'played up to the break')
+                    break
+                if isinstance(record, Chunk):
+                    inner = None
+                    try:
+                        inner = breakup_chunk(record, validate_crc=True)
+                    except Exception as exc:
+                        self.broken = (f'{path.name}: a chunk near byte {f.tell()} cannot be '
+                                       f'read ({exc}): played up to the break')
+                    if inner is None:
+                        break
+                    yield from release(record.message_start_time)
+                else:
+                    inner = [record]
+                    if isinstance(record, Message):
+                        yield from release(record.log_time)
+                for rec in inner:
+                    if isinstance(rec, Schema):
+                        schemas[rec.id] = rec.name
+                    elif isinstance(rec, Channel):
+                        channels[rec.id] = self._channel(rec, schemas)
+                    elif isinstance(rec, Message) and rec.channel_id in channels:
+                        topic, msgtype = channels[rec.channel_id]
+                        heapq.heappush(heap, (rec.log_time, seq, topic, msgtype, rec.data))
+                        seq += 1
+        yield from release(float('inf'))
+
+    def _channel(self, channel: Channel, schemas: dict[int, str]) -> tuple[str, str]:
+        known = self.topics.get(channel.topic)
+        if known is None:
+            msgtype = _normal_type(schemas.get(channel.schema_id, ''))
+            qos = _qos_from_profiles(channel.metadata.get('offered_qos_profiles', ''))
+            known = PlayedTopic(channel.topic, msgtype, channel.message_encoding,
+                                qos or TopicQoS.of_kind(qos_kind(channel.topic)))
+            self.topics[channel.topic] = known
+        return known.name, known.type
+
+
+def open_playback(path: str | Path) -> Playback:
+    """Open a bag folder (with or without ``metadata.yaml``) or one ``.mcap`` file.
+
+    Raises
+    ------
+    PlaybackError
+        No such folder or file, no MCAP file in it, a file that is not MCAP, or a
+        metadata.yaml that cannot be read.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise PlaybackError(f'{path}: no such bag folder or file')
+    topics: dict[str, PlayedTopic] = {}
+    if path.is_file():
+        files = [path]
+    else:
+        meta_path = path / 'metadata.yaml'
+        files = sorted(path.glob('*.mcap'))
+        if meta_path.is_file():
+            try:
+                info = yaml.safe_load(meta_path.read_text())['rosbag2_bagfile_information']
+                names = info.get('relative_file_paths') or []
+                entries = info.get('topics_with_message_count') or []
+            except (yaml.YAMLError, KeyError, TypeError, AttributeError, OSError) as exc:
+                raise PlaybackError(f'{meta_path}: not a rosbag2 metadata file ({exc})'.splitlines(
+                    )[0]) from None
+            if names:
+                files = [path / n for n in names if (path / n).is_file()]
+            for entry in entries:
+                meta = entry.get('topic_metadata', {})
+                name = meta.get('name')
+                if not name:
+                    continue
+                qos = _qos_from_profiles(meta.get('offered_qos_profiles'))
+                topics[name] = PlayedTopic(
+                    name, _normal_type(str(meta.get('type', ''))),
+                    str(meta.get('serialization_format', 'cdr')),
+                    qos or TopicQoS.of_kind(qos_kind(name)),
+                    int(entry.get('message_count', -1)))
+        if not files:
+            raise PlaybackError(f'{path}: no .mcap file in the bag folder')
+    for file in files:
+        with file.open('rb') as f:
+            if f.read(8) != b'\x89MCAP0\r\n':
+                raise PlaybackError(f'{file}: not an MCAP file (rosbag2 MCAP storage only)')
+    return Playback(path, files, topics)
+

@@ -1,0 +1,302 @@
+"""``bag_player`` node: plays a rosbag2 MCAP bag into ROS 2 at its recorded timing.
+
+    bag_player BAG [--rate R] [--loop] [--start-offset S] [--topics T...]
+               [--remap FROM:=TO...] [--clock [HZ]] [--delay S] [--wait S]
+               [--ros-args ...]
+
+What ``ros2 bag play`` does on a full ROS install, for a machine with rclpy alone (INTERFACES.md,
+"Executables"). Any writer's bag (ours, ``rosbags``', the ``mcap`` library's with zstd or lz4
+chunks) is read by :mod:`road_force_estimator.bagio.playback`, streaming. Each message is
+published as its serialized bytes (no deserialize-serialize round trip) at its scheduled wall
+time, ``start + (log_time - first log_time) / rate`` (a sleep until that time, never a fixed
+period), each topic with the QoS recorded in the bag (INTERFACES.md's kind when the bag has
+none; the queue at least :data:`MIN_DEPTH` deep, so that a burst is not dropped on our side).
+A type that cannot be imported is skipped with one warning naming the topic.
+
+Before it starts it waits, at most ``--wait`` seconds (default 10; 0 = not at all), until each
+played topic has a subscriber, then ``--delay``. ``--clock [HZ]`` publishes ``/clock``
+(rosgraph_msgs/Clock, the bag's time; HZ default 100) so that nodes with ``use_sim_time``
+follow the bag. At the end of the bag (of the last loop) it waits for the subscribers'
+acknowledgements and exits 0; SIGINT/SIGTERM stop it cleanly (exit 0). A bag cut short plays
+up to the break and says so. Bad input (no such bag, not MCAP, ``--rate 0``): one line on
+stderr, exit 1 (2 for a bad command line).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import sys
+import threading
+import time
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from road_force_estimator.bagio.playback import PlaybackError, open_playback
+from road_force_estimator.ros.node_runner import run_node
+
+PROG = 'bag_player'
+#: Queue depth of every played topic at least (messages), whatever the bag recorded.
+MIN_DEPTH = 1000
+#: After every played topic has a subscriber: time for the subscribers' side of the
+#: discovery to complete before the first message (s).
+SETTLE_S = 0.3
+CLOCK_TOPIC = '/clock'
+
+
+class UsageError(Exception):
+    """A bad command line (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage dump
+        raise UsageError(message)
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'{text} must be a number > 0')
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f'{text} must be a number >= 0')
+    return value
+
+
+def _remap(text: str) -> tuple[str, str]:
+    old, sep, new = text.partition(':=')
+    if not sep or not old.startswith('/') or not new.startswith('/'):
+        raise argparse.ArgumentTypeError(f'{text!r} is not FROM:=TO (two absolute topic names)')
+    return old, new
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``bag_player`` (the part before ``--ros-args``)."""
+    p = _Parser(prog=PROG, description=__doc__.splitlines()[0].replace('``', ''))
+    p.add_argument('bag', metavar='BAG', help='bag folder (metadata.yaml and .mcap files) or '
+                                             'one .mcap file')
+    p.add_argument('--rate', type=_positive, default=1.0, metavar='R',
+                   help='playback speed: bag seconds per wall-clock second (default 1)')
+    p.add_argument('--loop', action='store_true', help='play again from the start, forever')
+    p.add_argument('--start-offset', type=_non_negative, default=0.0, metavar='S',
+                   help='start S seconds after the first message of the bag')
+    p.add_argument('--topics', nargs='+', metavar='T', help='play only these topics')
+    p.add_argument('--remap', nargs='+', type=_remap, default=[], metavar='FROM:=TO',
+                   help='publish topic FROM of the bag on TO')
+    p.add_argument('--clock', nargs='?', type=_positive, const=100.0, default=None,
+                   metavar='HZ', help='publish /clock at HZ (default 100) with the bag time')
+    p.add_argument('--delay', type=_non_negative, default=0.0, metavar='S',
+                   help='wait S seconds before playing')
+    p.add_argument('--wait', type=_non_negative, default=10.0, metavar='S',
+                   help='wait at most S seconds for a subscriber on each topic (default 10)')
+    return p
+
+
+def message_class(msgtype: str):
+    """The Python class of ``'pkg/msg/Name'``."""
+    package, _, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+def qos_profile(qos) -> QoSProfile:
+    """rclpy's profile of a :class:`bagio.playback.TopicQoS`."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=max(qos.depth, MIN_DEPTH),
+        reliability=(ReliabilityPolicy.BEST_EFFORT if qos.reliability == 'best_effort'
+                     else ReliabilityPolicy.RELIABLE),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if qos.durability == 'transient_local'
+                    else DurabilityPolicy.VOLATILE))
+
+
+class BagPlayer(Node):
+    """Publishes a :class:`bagio.playback.Playback` from a thread of its own.
+
+    :attr:`done` turns true at the end (or on :meth:`stop`); :attr:`published` counts the
+    messages published per output topic; :attr:`lateness_s` holds, per message, how late it
+    was published against its schedule (s), for bench/bag_player_timing.py.
+    """
+
+    def __init__(self, playback, options, **kwargs):
+        super().__init__(PROG, **kwargs)
+        self.playback = playback
+        self.options = options
+        self.remap = dict(options.remap)
+        self.stopping = threading.Event()
+        self.done = False
+        self.published: dict[str, int] = {}
+        self.lateness_s: list[float] = []
+        self.clock_ticks = 0
+        self.pubs: dict[str, object] = {}
+        self.skipped: set[str] = set()
+        self.clock_pub = None
+        if options.clock is not None:
+            from rosgraph_msgs.msg import Clock
+            self.clock_msg = Clock
+            self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(
+                depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        wanted = options.topics or list(playback.topics)
+        missing = [t for t in wanted if t not in playback.topics]
+        if missing and playback.topics and options.topics:
+            self.get_logger().warning(f'not in the bag: {", ".join(missing)}')
+        for name in wanted:
+            if name in playback.topics:
+                self.publisher_for(name)
+        self.thread = threading.Thread(target=self.run, name='bag_player', daemon=True)
+        self.thread.start()
+
+    def publisher_for(self, topic: str):
+        """The publisher of a bag topic (created on first use), None for a skipped one."""
+        if topic in self.pubs or topic in self.skipped:
+            return self.pubs.get(topic)
+        info = self.playback.topics[topic]
+        try:
+            if info.encoding != 'cdr':
+                raise ValueError(f'{info.encoding!r} messages (CDR only)')
+            cls = message_class(info.type)
+        except (ImportError, AttributeError, ValueError) as exc:
+            self.skipped.add(topic)
+            self.get_logger().warning(f'skipping {topic}: cannot publish type '
+                                      f'{info.type or "(none)"!r} ({exc})')
+            return None
+        out = self.remap.get(topic, topic)
+        self.pubs[topic] = self.create_publisher(cls, out, qos_profile(info.qos))
+        self.published.setdefault(out, 0)
+        return self.pubs[topic]
+
+    # ----------------------------------------------------------------------------------------
+
+    def run(self) -> None:
+        try:
+            if self.wait_for_subscribers() and self.sleep(self.options.delay):
+                self.play_all()
+        except Exception as exc:  # never a traceback from the playing thread
+            self.get_logger().error(f'playback stopped: {type(exc).__name__}: {exc}')
+        finally:
+            self.done = True
+
+    def sleep(self, seconds: float) -> bool:
+        """Sleep unless stopped; False when stopped."""
+        return not self.stopping.wait(seconds) if seconds > 0 else not self.stopping.is_set()
+
+    def wait_for_subscribers(self) -> bool:
+        pubs = dict(self.pubs)
+        if not pubs or self.options.wait <= 0:
+            return not self.stopping.is_set()
+        names = ', '.join(self.remap.get(t, t) for t in pubs)
+        self.get_logger().info(f'waiting up to {self.options.wait:g} s for subscribers on '
+                               f'{names}')
+        deadline = time.monotonic() + self.options.wait
+        while True:
+            lonely = [self.remap.get(t, t) for t, p in pubs.items()
+                      if p.get_subscription_count() == 0]
+            if not lonely:
+                return self.sleep(SETTLE_S)
+            if time.monotonic() >= deadline:
+                self.get_logger().warning(f'no subscriber after {self.options.wait:g} s on '
+                                          f'{", ".join(lonely)}: playing anyway')
+                return not self.stopping.is_set()
+            if not self.sleep(0.02):
+                return False
+
+    def play_all(self) -> None:
+        opts = self.options
+        loops = 0
+        while not self.stopping.is_set():
+            count = self.play_once()
+            loops += 1
+            broken = self.playback.broken
+            if broken:
+                self.get_logger().warning(broken)
+            if count == 0:
+                self.get_logger().warning(f'{self.playback.path}: no message to play')
+                return
+            if not opts.loop or broken:
+                break
+        total = sum(self.published.values())
+        self.get_logger().info(f'played {total} messages from {self.playback.path}'
+                               + (f' ({loops} loops)' if loops > 1 else ''))
+        for pub in self.pubs.values():
+            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+                pub.wait_for_all_acked(Duration(seconds=2.0))
+
+    def play_once(self) -> int:
+        """One pass over the bag on its schedule; the number of messages published."""
+        opts = self.options
+        start_wall = first_ns = None
+        period_s = 1.0 / opts.clock if opts.clock else math.inf
+        next_clock = math.inf
+        count = 0
+        for t_ns, topic, _, data in self.playback.messages(
+                opts.topics, start_offset_ns=round(opts.start_offset * 1e9)):
+            if topic not in self.playback.topics:
+                continue
+            pub = self.publisher_for(topic)
+            if pub is None:
+                continue
+            if start_wall is None:
+                start_wall, first_ns = time.monotonic(), t_ns
+                next_clock = start_wall if self.clock_pub else math.inf
+            due = start_wall + (t_ns - first_ns) * 1e-9 / opts.rate
+            while next_clock <= due:  # /clock ticks due before this message
+                if not self.wait_until(next_clock):
+                    return count
+                self.publish_clock(first_ns + (next_clock - start_wall) * opts.rate * 1e9)
+                next_clock += period_s
+            if not self.wait_until(due):
+                return count
+            pub.publish(data)
+            self.lateness_s.append(time.monotonic() - due)
+            out = self.remap.get(topic, topic)
+            self.published[out] += 1
+            count += 1
+        return count
+
+    def wait_until(self, wall: float) -> bool:
+        """Sleep until the monotonic time ``wall``; False when stopped."""
+        left = wall - time.monotonic()
+        if left > 0.0:
+            return not self.stopping.wait(left)
+        return not self.stopping.is_set()
+
+    def publish_clock(self, bag_ns: float) -> None:
+        sec, nanosec = divmod(int(bag_ns), 1_000_000_000)
+        msg = self.clock_msg()
+        msg.clock.sec, msg.clock.nanosec = sec, nanosec
+        self.clock_pub.publish(msg)
+        self.clock_ticks += 1
+
+    def stop(self) -> None:
+        """Stop playing and wait for the thread (idempotent)."""
+        self.stopping.set()
+        if self.thread.is_alive():
+            self.thread.join(timeout=5.0)
+
+
+def main(args=None) -> int:
+    argv = list(sys.argv if args is None else args)
+    split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
+    try:
+        options = build_parser().parse_args(argv[1:split])
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    except UsageError as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return 2
+    try:
+        playback = open_playback(options.bag)
+    except PlaybackError as exc:
+        print(f'{PROG}: {exc}', file=sys.stderr)
+        return 1
+    return run_node(PROG, __doc__.splitlines()[0], (), [argv[0], *argv[split:]],
+                    lambda: BagPlayer(playback, options), done=lambda node: node.done,
+                    cleanup=BagPlayer.stop)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

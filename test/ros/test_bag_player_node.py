@@ -1,0 +1,211 @@
+"""bag_player node: order, count, --topics / --start-offset / --remap / --loop, bytes as in the
+bag, --clock, the wait for subscribers, bad input and signals (not timing: bench/).
+
+The player and the collectors spin in the test process (fresh rclpy context per test); main()
+runs in a subprocess.
+"""
+from __future__ import annotations
+
+import signal
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+import pytest
+
+from bag_writers import (
+    BASE_NS, FLOAT, POINT, STORE, expected, write_mcap, write_ours, write_rosbags)
+from node_harness import close, finish, make_executor, run_main
+from road_force_estimator.ros.bag_player import BagPlayer, build_parser, message_class
+from road_force_estimator.bagio.playback import open_playback
+from ros_helpers import spin_until
+
+
+TYPES = {'/lpa/left': POINT, '/lpa/right': POINT, '/ratio': FLOAT}
+
+
+class RawCollector(Node):
+    """Subscribes raw (serialized bytes) to ``topics`` ({name: type}); keeps all (best
+    effort, which matches reliable and best-effort publishers)."""
+
+    def __init__(self, context, topics: dict[str, str], name: str = 'raw_collector'):
+        super().__init__(name, context=context)
+        self.messages: dict[str, list[bytes]] = {}
+        for topic, msgtype in topics.items():
+            self.messages[topic] = []
+            self.create_subscription(message_class(msgtype), topic, self.messages[topic].append,
+                                     QoSProfile(
+                depth=10000, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+
+    def total(self) -> int:
+        return sum(len(v) for v in self.messages.values())
+
+
+def play(context, bag, *args, topics=TYPES, until=None, timeout_s=30.0):
+    """Play ``bag`` with the options ``args`` into a raw collector; (player, collector)."""
+    options = build_parser().parse_args([str(bag), *args])
+    collector = RawCollector(context, topics)
+    player = BagPlayer(open_playback(bag), options, context=context)
+    executor = make_executor(context, collector, player)
+    try:
+        assert spin_until(executor, lambda: player.done if until is None else until(
+            player, collector), timeout_s)
+        assert spin_until(executor, lambda: collector.total() >= sum(
+            player.published.get(t, 0) for t in topics), 10.0)
+        executor.spin_once(timeout_sec=0.05)
+    finally:
+        player.stop()
+        close(executor, player, collector)
+    return player, collector
+
+
+def by_topic(items, start_ns=0):
+    out = {}
+    for t, topic, data in items:
+        if t - BASE_NS >= start_ns:
+            out.setdefault(topic, []).append(data)
+    return out
+
+
+@pytest.mark.parametrize('writer', [write_ours, write_rosbags,
+                                    lambda f, m: write_mcap(f, m, 'zstd'),
+                                    lambda f, m: write_mcap(f, m, 'lz4')],
+                         ids=['ours', 'rosbags', 'mcap_zstd', 'mcap_lz4'])
+def test_every_message_arrives_in_order_as_the_bytes_in_the_bag(ros_context, tmp_path, writer):
+    items = expected()
+    writer(tmp_path / 'bag', items)
+    player, col = play(ros_context, tmp_path / 'bag', '--rate', '5')
+    assert col.messages == by_topic(items)
+    assert player.published == {t: len(v) for t, v in by_topic(items).items()}
+    assert len(player.lateness_s) == len(items)
+
+
+def test_topics_start_offset_and_remap(ros_context, tmp_path):
+    items = expected()
+    write_ours(tmp_path / 'bag', items)
+    player, col = play(ros_context, tmp_path / 'bag', '--rate', '5', '--topics', '/lpa/left',
+                       '/ratio', '--start-offset', '0.2', '--remap', '/lpa/left:=/lpa/other',
+                       topics={'/lpa/other': POINT, '/lpa/left': POINT, '/lpa/right': POINT,
+                               '/ratio': FLOAT})
+    want = by_topic(items, start_ns=200 * 10**6)
+    assert col.messages == {'/lpa/other': want['/lpa/left'], '/lpa/left': [], '/lpa/right': [],
+                            '/ratio': want['/ratio']}
+    assert player.published == {'/lpa/other': 300, '/ratio': 30}
+
+
+def test_loop_plays_the_bag_again_until_stopped(ros_context, tmp_path):
+    items = expected(50)
+    write_ours(tmp_path / 'bag', items)
+    player, col = play(ros_context, tmp_path / 'bag', '--rate', '10', '--loop',
+                       until=lambda p, c: len(c.messages['/ratio']) >= 12)
+    assert not player.thread.is_alive()
+    one = by_topic(items)
+    for topic, got in col.messages.items():
+        loops = len(got) // len(one[topic])
+        assert loops >= 2 and got[:loops * len(one[topic])] == one[topic] * loops, topic
+
+
+def test_clock_publishes_the_bag_time(ros_context, tmp_path):
+    items = expected(300)
+    write_ours(tmp_path / 'bag', items)
+    options = build_parser().parse_args([str(tmp_path / 'bag'), '--clock', '--rate', '2'])
+    assert options.clock == 100.0
+    clocks = []
+    listener = Node('clock_listener', context=ros_context)
+    listener.create_subscription(Clock, '/clock', clocks.append, QoSProfile(
+        depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
+    collector = RawCollector(ros_context, TYPES)
+    player = BagPlayer(open_playback(tmp_path / 'bag'), options, context=ros_context)
+    executor = make_executor(ros_context, listener, collector, player)
+    try:
+        assert spin_until(executor, lambda: player.done, 30.0)
+        assert spin_until(executor, lambda: len(clocks) >= player.clock_ticks - 1, 5.0)
+    finally:
+        player.stop()
+        close(executor, player, collector, listener)
+    # 0.3 s of bag at 100 Hz of bag time... played at rate 2: 0.15 s of wall time, 100 Hz.
+    assert 10 <= player.clock_ticks <= 17
+    stamps = [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks]
+    assert stamps == sorted(stamps) and stamps[0] == BASE_NS
+    assert all(BASE_NS <= s <= BASE_NS + 300 * 10**6 for s in stamps)
+
+
+def test_an_unknown_type_is_skipped_with_one_warning(ros_context, tmp_path):
+    from mcap.writer import Writer
+    folder = tmp_path / 'bag'
+    folder.mkdir()
+    with (folder / 'bag_0.mcap').open('wb') as f:
+        writer = Writer(f)
+        writer.start(profile='ros2', library='test')
+        thing = writer.register_schema('my_pkg/msg/Thing', 'ros2msg', b'float64 a\n')
+        point = writer.register_schema(POINT, 'ros2msg', STORE.generate_msgdef(
+            POINT, ros_version=2)[0].encode())
+        cids = [writer.register_channel('/thing', 'cdr', thing, {}),
+                writer.register_channel('/lpa/left', 'cdr', point, {})]
+        for t, topic, data in expected(20):
+            if topic == '/lpa/left':
+                writer.add_message(cids[0], t, b'\x00\x01\x00\x00' + bytes(8), t)
+                writer.add_message(cids[1], t, data, t)
+        writer.finish()
+    code, _, err = finish(run_main('bag_player', str(folder), '--wait', '0', '--rate', '10'))
+    assert code == 0, err
+    assert err.count("skipping /thing: cannot publish type 'my_pkg/msg/Thing'") == 1, err
+    assert 'played 20 messages' in err and 'Traceback' not in err
+
+
+def test_main_plays_waits_for_a_subscriber_and_exits_0(ros_context, tmp_path):
+    items = expected(100)
+    write_rosbags(tmp_path / 'bag', items)
+    process = run_main('bag_player', str(tmp_path / 'bag'), '--topics', '/lpa/left',
+                       '--wait', '20')
+    col = RawCollector(ros_context, {'/lpa/left': POINT})
+    executor = make_executor(ros_context, col)
+    try:
+        assert spin_until(executor, lambda: len(col.messages['/lpa/left']) == 100, 60.0)
+    finally:
+        close(executor, col)
+    code, _, err = finish(process, 30.0)
+    assert code == 0, err
+    assert 'waiting up to 20 s for subscribers on /lpa/left' in err
+    assert 'played 100 messages' in err and 'Traceback' not in err
+    assert col.messages['/lpa/left'] == by_topic(items)['/lpa/left']
+
+
+def test_main_stops_cleanly_on_sigint(ros_context, tmp_path):
+    write_ours(tmp_path / 'bag', expected(2000))  # 2 s of bag
+    process = run_main('bag_player', str(tmp_path / 'bag'), '--topics', '/ratio', '--loop',
+                       '--wait', '20')
+    col = RawCollector(ros_context, {'/ratio': FLOAT})
+    executor = make_executor(ros_context, col)
+    try:
+        assert spin_until(executor, lambda: len(col.messages['/ratio']) > 5, 60.0)
+    finally:
+        close(executor, col)
+    process.send_signal(signal.SIGINT)
+    code, _, err = finish(process, 30.0)
+    assert code == 0 and 'Traceback' not in err, err
+
+
+def test_a_cut_bag_plays_up_to_the_break_and_says_so(tmp_path):
+    items = expected(2000)
+    write_mcap(tmp_path / 'bag', items, 'lz4')
+    (path,) = (tmp_path / 'bag').glob('*.mcap')
+    path.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+    code, _, err = finish(run_main('bag_player', str(tmp_path / 'bag'), '--wait', '0',
+                                   '--rate', '20'))
+    assert code == 0, err
+    assert 'is cut or damaged' in err and 'played up to the break' in err
+    assert 'Traceback' not in err
+
+
+@pytest.mark.parametrize('args, code, line', [
+    (['{tmp}/missing'], 1, 'bag_player: {tmp}/missing: no such bag folder or file'),
+    (['{tmp}', '--rate', '0'], 2, 'bag_player: error: argument --rate: 0 must be a number > 0'),
+    (['{tmp}', '--remap', 'a=b'], 2,
+     "bag_player: error: argument --remap: 'a=b' is not FROM:=TO (two absolute topic names)"),
+    (['{tmp}'], 1, 'bag_player: {tmp}: no .mcap file in the bag folder'),
+])
+def test_bad_input_gives_one_line(tmp_path, args, code, line):
+    args = [a.format(tmp=tmp_path) for a in args]
+    got, out, err = finish(run_main('bag_player', *args))
+    assert (got, err.strip().splitlines()) == (code, [line.format(tmp=tmp_path)])
