@@ -103,6 +103,13 @@ class RectifiedSlope:
     base_samples: int
 
 
+#: A resampled profile is refused when it would have more points than this many times the
+#: samples given (and more than :data:`MIN_RESAMPLE_BOUND`): a jump in the distance (a corrupt
+#: stamp or odometer reading) would otherwise allocate without bound.
+MAX_RESAMPLE_FACTOR = 100
+MIN_RESAMPLE_BOUND = 10_000_000
+
+
 def _evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
                    dx_m: float | None) -> tuple[np.ndarray, np.ndarray, float]:
     """Profile on an even grid: unchanged when it already is, else linearly resampled."""
@@ -134,6 +141,11 @@ def _evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
     if not (dx_m > 0.0 and np.isfinite(dx_m)):
         raise ValueError(f'dx_m = {dx_m!r} m: must be > 0')
     n = int(np.floor(span / dx_m + 1e-9)) + 1
+    if n > max(MAX_RESAMPLE_FACTOR * x.size, MIN_RESAMPLE_BOUND):
+        i = int(np.argmax(steps))
+        raise ValueError(f'profile of {x.size} samples would need {n} points on a {dx_m:g} m '
+                         f'grid: its largest distance step is {steps[i]:.6g} m (samples {i} to '
+                         f'{i + 1}, from {x[i]:.6g} m); a corrupt distance or stamp?')
     grid = x[0] + dx_m * np.arange(n)
     if z.ndim == 1:
         return grid, np.interp(grid, x, z), float(dx_m)

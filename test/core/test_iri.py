@@ -168,3 +168,12 @@ class TestBadInput:
             iri(x[::-1], np.zeros(x.size))
         with pytest.raises(ValueError, match='edges_m'):
             iri_segments(x, np.zeros(x.size), [10.0, 5.0])
+
+
+def test_a_distance_jump_is_refused_before_resampling():
+    """One corrupt distance (e.g. from a far-future stamp) must not allocate terabytes."""
+    x = np.arange(0.0, 100.0, 0.02)
+    x_bad = np.concatenate([x, [1e9]])
+    z = np.zeros_like(x_bad)
+    with pytest.raises(ValueError, match=r'largest distance step is 1e\+09 m \(samples 4999'):
+        iri(x_bad, z)
