@@ -5,7 +5,7 @@
                  [--no-figures] [--force] [--no-progress]
 
 Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
-present the ground truth and ``/fix``) with :func:`bagio.bag_io.read_drive_bag`,
+present the ground truth and ``/fix``) with :func:`road_force_estimator.bagio.read_drive_bag`,
 which rejects and counts what cannot be trusted (NaN, missing joint names, duplicate or
 backward stamps, undecodable messages) and reads a truncated or corrupt bag up to its break.
 Then it estimates:
@@ -18,7 +18,7 @@ Then it estimates:
 ``offline``
     :func:`estimation.offline.estimate_recording`: non-causal, the whole recording.
 
-It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
+It writes ``DIR/bag`` (the observer's topics, :func:`~bagio.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
 (:mod:`report.report`). Exit status: 0 on success (skipped messages are counted
 in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
@@ -159,15 +159,8 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
 
 
 def _diagnostics(est, summary_counts: dict[str, int], mode: str):
-    """One DiagnosticArray per second of the drive (data time), the last with the totals."""
-    from road_force_estimator.bagio.bag_io import TYPESTORE
-
-    types = TYPESTORE.types
-    Time = types['builtin_interfaces/msg/Time']
-    Header = types['std_msgs/msg/Header']
-    KeyValue = types['diagnostic_msgs/msg/KeyValue']
-    Status = types['diagnostic_msgs/msg/DiagnosticStatus']
-    Array = types['diagnostic_msgs/msg/DiagnosticArray']
+    """One /diagnostics message (status dicts, :func:`bagio.diagnostic_array`) per second of the
+    drive (data time), the last with the totals."""
     rows = np.flatnonzero(est.valid)
     if rows.size == 0:
         return []
@@ -192,12 +185,10 @@ def _diagnostics(est, summary_counts: dict[str, int], mode: str):
         lifts = values['lift_off_samples']
         message = ('converging' if not values['converged'] else
                    f'{lifts} lift-off samples' if lifts else 'ok')
-        status = Status(level=0 if message == 'ok' else 1, name=f'{PROG}: estimator ({mode})',
-                        message=message, hardware_id=PROG,
-                        values=[KeyValue(key=k, value=_text(v)) for k, v in values.items()])
-        sec, nsec = divmod(stamp, 1_000_000_000)
-        out.append((stamp, Array(header=Header(stamp=Time(sec=sec, nanosec=nsec), frame_id=''),
-                                 status=[status])))
+        status = {'level': 0 if message == 'ok' else 1, 'name': f'{PROG}: estimator ({mode})',
+                  'message': message, 'hardware_id': PROG,
+                  'values': {k: _text(v) for k, v in values.items()}}
+        out.append((stamp, [status]))
     return out
 
 
@@ -213,7 +204,7 @@ def _text(value: Any) -> str:
 class EstimateResult:
     """What :func:`run` did: the summary of the report, the paths, the estimates, the bag's
     messages that were written (``written``), warnings (breaks in the bag) and the drive read
-    (:class:`~.bag_io.Drive`)."""
+    (:class:`~road_force_estimator.bagio.Drive`)."""
 
     summary: dict[str, Any]
     bag: Path
@@ -261,14 +252,14 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
 
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
-    from road_force_estimator.bagio import bag_io
+    from road_force_estimator import bagio
     from road_force_estimator.report import report
     from road_force_estimator.estimation.offline import estimate_recording
 
     stages.next('reading the bag')
     try:
-        drive = bag_io.read_drive_bag(input_path)
-    except bag_io.BagReadError as err:
+        drive = bagio.read_drive_bag(input_path)
+    except bagio.BagReadError as err:
         raise InputError(str(err)) from None
     warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     if len(drive.stamps_ns) == 0:
@@ -296,10 +287,10 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
               'road_force_estimator.writer_command': PROG}
     stages.next('writing the bag')
     try:
-        written = bag_io.write_estimate_bag(
+        written = bagio.write_estimate_bag(
             bag_dir, est, track_width_m=vehicle.track_width_m,
             diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
-    except (bag_io.BagWriteError, OSError) as err:
+    except (bagio.BagWriteError, OSError) as err:
         raise InputError(f'cannot write {bag_dir}: {err}') from None
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
@@ -337,7 +328,7 @@ def _headline(result: EstimateResult) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+    from road_force_estimator.bagio import BagReadError, BagWriteError
 
     try:
         args = build_parser().parse_args(argv)
@@ -348,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.reference_offset is not None and not args.reference_profile:
             raise _UsageError('--reference-offset needs --reference-profile')
         if args.reference_profile:
-            from road_force_estimator.core.road import road_from_source
+            from road_force_estimator.bagio import road_from_source
             reference = road_from_source(args.reference_profile)
         result = run(args.input, args.output, vehicle=vehicle, observer=observer,
                      mode=args.mode, segment_length_m=args.segment_length, reference=reference,

@@ -56,7 +56,7 @@ def _number(value: float) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``road_profile_iri``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
-    from road_force_estimator.bagio.bag_io import BagReadError
+    from road_force_estimator.bagio import BagReadError
 
     try:
         args = build_parser().parse_args(argv)
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.length is not None and not args.length > 0.0:
             raise _UsageError(f'--length {args.length!r}: must be > 0 m')
         from road_force_estimator.core.iri import iri_table
-        from road_force_estimator.core.road import road_from_source
+        from road_force_estimator.bagio import road_from_source
 
         profile = road_from_source(args.profile, length_m=args.length)
         table = iri_table(profile.distance_m, profile.elevation_m,

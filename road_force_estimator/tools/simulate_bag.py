@@ -6,11 +6,11 @@
                  [--no-ground-truth] [--force] [--no-progress]
 
 SOURCE is a road spec (``iso8608:C:seed=1``, ``flat``) or a path to an LPA bag, CSV or ERD
-profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
+profile (:func:`road_force_estimator.bagio.road_from_source`). The plant
 (:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
 runs at the rate for the duration, or to the end of the road; the sensors
 (:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
-measure it. The bag DIR (:func:`road_force_estimator.bagio.bag_io.write_drive_bag`) holds the
+measure it. The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`) holds the
 measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
 ``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
@@ -143,7 +143,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
     from road_force_estimator.core.gnss import route
     from road_force_estimator.core.plant import Plant
-    from road_force_estimator.core.road import road_from_source
+    from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
 
     length = sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0
@@ -205,7 +205,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``simulate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError, write_drive_bag
+    from road_force_estimator.bagio import BagReadError, BagWriteError, write_drive_bag
 
     try:
         args = build_parser().parse_args(argv)

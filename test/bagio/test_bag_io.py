@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.bagio.bag_io import (
+from road_force_estimator import bagio, interfaces
+from road_force_estimator.bagio import (
     BagReadError,
     BagWriteError,
     BagWriter,
@@ -23,7 +23,7 @@ from road_force_estimator.bagio.bag_io import (
 from road_force_estimator.core.road import RoadProfile
 
 T = TYPESTORE.types
-BASE_NS = bag_io.DEFAULT_START_STAMP_NS
+BASE_NS = bagio.DEFAULT_START_STAMP_NS
 
 
 def header(stamp_ns, frame):
@@ -78,38 +78,40 @@ class TestCdr:
         n = 40
         stamps = rng.integers(0, 2**31 * 10**9, n)
         cases = [
-            ('geometry_msgs/msg/PointStamped', bag_io._template(
+            ('geometry_msgs/msg/PointStamped', bagio.message_template(
                 'geometry_msgs/msg/PointStamped', 'road'), ['point.x', 'point.y', 'point.z']),
-            ('geometry_msgs/msg/WrenchStamped', bag_io._template(
+            ('geometry_msgs/msg/WrenchStamped', bagio.message_template(
                 'geometry_msgs/msg/WrenchStamped', 'front_right_wheel'),
              ['wrench.force.z', 'wrench.torque.x']),
-            ('geometry_msgs/msg/TwistStamped', bag_io._template(
+            ('geometry_msgs/msg/TwistStamped', bagio.message_template(
                 'geometry_msgs/msg/TwistStamped', 'base_link'), ['twist.linear.x']),
-            ('sensor_msgs/msg/NavSatFix', bag_io._template('sensor_msgs/msg/NavSatFix', 'gnss'),
+            ('sensor_msgs/msg/NavSatFix',
+             bagio.message_template('sensor_msgs/msg/NavSatFix', 'gnss'),
              ['latitude', 'longitude', 'altitude']),
         ]
         for msgtype, template, paths in cases:
-            cols = bag_io._stamp_columns(stamps)
+            cols = bagio.stamp_columns(stamps)
             cols.update({p: rng.normal(size=n) for p in paths})
-            rows = bag_io.encode_columns(msgtype, template, n, cols)
+            rows = bagio.encode_columns(msgtype, template, n, cols)
             for i in range(n):
                 msg = TYPESTORE.deserialize_cdr(rows[i].tobytes(), msgtype)
                 assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == stamps[i]
                 assert bytes(TYPESTORE.serialize_cdr(msg, msgtype)) == rows[i].tobytes()
-        for names, velocity in ((bag_io.DEFLECTION_NAMES, False), (bag_io.STATE_NAMES, True)):
+        for names, velocity in ((interfaces.DEFLECTION_JOINTS, False),
+                                (interfaces.STATE_JOINTS, True)):
             k = len(names)
-            cols = bag_io._stamp_columns(stamps)
+            cols = bagio.stamp_columns(stamps)
             cols['position'] = rng.normal(size=(n, k))
             if velocity:
                 cols['velocity'] = rng.normal(size=(n, k))
-            rows = bag_io.encode_columns('sensor_msgs/msg/JointState', bag_io._template(
+            rows = bagio.encode_columns('sensor_msgs/msg/JointState', bagio.message_template(
                 'sensor_msgs/msg/JointState', 'base_link', names, velocity), n, cols)
             for i in range(n):
                 ref = joint_state(int(stamps[i]), names, cols['position'][i],
                                   cols['velocity'][i] if velocity else ())
                 assert bytes(TYPESTORE.serialize_cdr(ref, 'sensor_msgs/msg/JointState')) \
                     == rows[i].tobytes()
-        rows = bag_io.encode_columns('std_msgs/msg/Float64', bag_io._template(
+        rows = bagio.encode_columns('std_msgs/msg/Float64', bagio.message_template(
             'std_msgs/msg/Float64'), 3, {'data': [1.5, -2.0, 0.25]})
         assert rows[1].tobytes() == bytes(TYPESTORE.serialize_cdr(
             T['std_msgs/msg/Float64'](data=-2.0), 'std_msgs/msg/Float64'))
@@ -120,7 +122,7 @@ class TestCdr:
         from sensor_msgs.msg import JointState
 
         datas, want = [], []
-        for i, names in enumerate([list(bag_io.DEFLECTION_NAMES),
+        for i, names in enumerate([list(interfaces.DEFLECTION_JOINTS),
                                    ['roll', 'left_suspension', 'right_suspension', 'steer']]):
             for j in range(5):
                 msg = JointState()
@@ -130,7 +132,7 @@ class TestCdr:
                 msg.position = [0.1 * j + k for k in range(len(names))]
                 datas.append(serialize_message(msg))
                 want.append((names, msg.position.tolist()))
-        groups, bad = bag_io.decode_columns('sensor_msgs/msg/JointState', datas)
+        groups, bad = bagio.decode_columns('sensor_msgs/msg/JointState', datas)
         assert bad.size == 0 and sum(g.index.size for g in groups) == len(datas)
         for g in groups:
             for row, i in enumerate(g.index):
@@ -139,7 +141,7 @@ class TestCdr:
         point = PointStamped()
         point.header.frame_id = 'road'
         point.point.x, point.point.y, point.point.z = 1.25, -1.0, 3e-3
-        groups, bad = bag_io.decode_columns('geometry_msgs/msg/PointStamped',
+        groups, bad = bagio.decode_columns('geometry_msgs/msg/PointStamped',
                                             [serialize_message(point)])
         cols = groups[0].columns
         assert (cols['point.x'][0], cols['point.y'][0], cols['point.z'][0]) == (1.25, -1.0,
@@ -150,14 +152,14 @@ class TestCdr:
         big = bytes(TYPESTORE.serialize_cdr(twist(6, 13.5), 'geometry_msgs/msg/TwistStamped',
                                             little_endian=False))
         assert big[1] == 0
-        groups, bad = bag_io.decode_columns('geometry_msgs/msg/TwistStamped',
+        groups, bad = bagio.decode_columns('geometry_msgs/msg/TwistStamped',
                                             [good, good[:30], b'', big, b'\x00\x01\x00\x00'])
         assert bad.tolist() == [1, 2, 4]
         speeds = {int(i): v for g in groups
                   for i, v in zip(g.index, g.columns['twist.linear.x'])}
         assert speeds == {0: 12.5, 3: 13.5}
         with pytest.raises(ValueError, match='little-endian'):
-            bag_io.cdr_layout('geometry_msgs/msg/TwistStamped', big)
+            bagio.cdr_layout('geometry_msgs/msg/TwistStamped', big)
 
 
 # --------------------------------------------------------------------------------------------
@@ -171,15 +173,15 @@ class TestLpaBag:
 
     def test_round_trip_is_exact(self, tmp_path):
         p = self.profile()
-        bag_io.write_lpa_bag(tmp_path / 'lpa', p, survey_speed_mps=10.0, track_width_m=1.8)
+        bagio.write_lpa_bag(tmp_path / 'lpa', p, survey_speed_mps=10.0, track_width_m=1.8)
         issues = []
-        q = bag_io.read_lpa_bag(tmp_path / 'lpa', issues=issues)
+        q = bagio.read_lpa_bag(tmp_path / 'lpa', issues=issues)
         assert issues == []
         np.testing.assert_array_equal(q.distance_m, p.distance_m)
         np.testing.assert_array_equal(q.elevation_m, p.elevation_m)
         assert q.name == 'test road'
         # Stamps at the survey speed, y = +-T/2, frame road (read with the generic reader).
-        msgs = list(bag_io.iter_messages(tmp_path / 'lpa', ['/lpa/right']))
+        msgs = list(bagio.iter_messages(tmp_path / 'lpa', ['/lpa/right']))
         assert len(msgs) == 3001
         topic, log_ns, msg = msgs[20]
         assert log_ns == BASE_NS + 100_000_000          # 1 m at 10 m/s
@@ -187,7 +189,7 @@ class TestLpaBag:
         assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == log_ns
 
     def test_metadata_is_what_jazzy_rosbag2_reads(self, tmp_path):
-        bag_io.write_lpa_bag(tmp_path / 'lpa', self.profile())
+        bagio.write_lpa_bag(tmp_path / 'lpa', self.profile())
         meta = yaml.safe_load((tmp_path / 'lpa' / 'metadata.yaml').read_text())
         info = meta['rosbag2_bagfile_information']
         assert info['version'] == 9 and info['storage_identifier'] == 'mcap'
@@ -229,7 +231,7 @@ class TestLpaBag:
                     header=header(BASE_NS + i, 'road'),
                     point=T['geometry_msgs/msg/Point'](x=x, y=1.0, z=z)))
         issues = []
-        p = bag_io.read_lpa_bag(tmp_path / 'b', issues=issues)
+        p = bagio.read_lpa_bag(tmp_path / 'b', issues=issues)
         assert p.distance_m.tolist() == [0.0, 1.0, 3.0]
         assert p.elevation_m.tolist() == [[1.0, 1.0], [2.0, 2.0], [4.0, 4.0]]
         text = ' | '.join(issues)
@@ -237,11 +239,11 @@ class TestLpaBag:
         assert '1 samples dropped (duplicate_stamp)' in text          # x = 1.0 again
         assert '1 samples dropped (backwards_stamp)' in text          # x = 0.5
         with pytest.raises(BagReadError, match='not an LPA bag'):
-            bag_io.read_lpa_bag(self.drive_bag(tmp_path))
+            bagio.read_lpa_bag(self.drive_bag(tmp_path))
 
     def drive_bag(self, tmp_path):
         trajectory, q, roll = make_trajectory(n=10)
-        bag_io.write_drive_bag(tmp_path / 'drive', trajectory, q, roll)
+        bagio.write_drive_bag(tmp_path / 'drive', trajectory, q, roll)
         return tmp_path / 'drive'
 
 
@@ -253,10 +255,10 @@ class TestDriveBag:
         fixes = SimpleNamespace(time_s=np.arange(0.0, 2.0, 0.1),
                                 latitude_deg=48.1 + 1e-5 * np.arange(20),
                                 longitude_deg=17.1 + 2e-5 * np.arange(20))
-        count = bag_io.write_drive_bag(tmp_path / 'd', trajectory, q, roll, fixes=fixes,
+        count = bagio.write_drive_bag(tmp_path / 'd', trajectory, q, roll, fixes=fixes,
                                        track_width_m=2.2)
         assert count == 6 * 400 + 20
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         stamps = BASE_NS + np.round(trajectory.t_s * 1e9).astype(np.int64)
         np.testing.assert_array_equal(d.stamps_ns, stamps)
         np.testing.assert_array_equal(d.q_m, q)
@@ -277,7 +279,7 @@ class TestDriveBag:
         for m in read_ros2_messages(str(mcap_file)):
             seen.setdefault(m.channel.topic, []).append(m)
         js = seen['/suspension/deflections']
-        assert [x.ros_msg.name for x in js[:1]] == [list(bag_io.DEFLECTION_NAMES)]
+        assert [x.ros_msg.name for x in js[:1]] == [list(interfaces.DEFLECTION_JOINTS)]
         assert js[0].schema.encoding == 'ros2msg' and js[0].channel.message_encoding == 'cdr'
         np.testing.assert_array_equal([x.ros_msg.position for x in js],
                                       np.column_stack([q, roll]))
@@ -309,13 +311,13 @@ class TestDriveBag:
                 if k in (2, 4):
                     bag.write('/vehicle/twist', 10 * k, twist(10 * k, float(k)))
                 bag.write('/suspension/deflections', 10 * k,
-                          joint_state(10 * k, bag_io.DEFLECTION_NAMES, [0.0, 0.0, 0.0]))
-        d = bag_io.read_drive_bag(tmp_path / 'b')
+                          joint_state(10 * k, interfaces.DEFLECTION_JOINTS, [0.0, 0.0, 0.0]))
+        d = bagio.read_drive_bag(tmp_path / 'b')
         np.testing.assert_array_equal(d.speed_mps, [np.nan, np.nan, 2.0, 2.0, 4.0, 4.0])
         assert d.truth is None and d.fixes is None
 
     def test_bad_messages_are_rejected_by_name_and_counted(self, tmp_path):
-        names = list(bag_io.DEFLECTION_NAMES)
+        names = list(interfaces.DEFLECTION_JOINTS)
         deflections = [   # (stamp, names, position, velocity) in file order
             (1, names, [0.01, 0.02, 0.001], []),
             (2, ['roll', 'right_suspension', 'left_suspension'], [0.003, 0.04, 0.03], []),
@@ -341,7 +343,7 @@ class TestDriveBag:
             for s, n, p, v in deflections:
                 bag.write('/suspension/deflections', s, joint_state(s, n, p, v))
             bag.write('/ground_truth/wheel_load/left', 3, T['std_msgs/msg/Float64'](data=1.0))
-        d = bag_io.read_drive_bag(tmp_path / 'b')
+        d = bagio.read_drive_bag(tmp_path / 'b')
         assert d.stamps_ns.tolist() == [1, 2, 3, 6, 9]
         np.testing.assert_array_equal(d.q_m, [[0.01, 0.02], [0.03, 0.04], [0.05, 0.06],
                                               [0.11, 0.12], [0.13, 0.14]])
@@ -365,9 +367,9 @@ class TestBrokenFiles:
     @pytest.fixture
     def drive(self, tmp_path):
         trajectory, q, roll = make_trajectory(n=3000)
-        bag_io.write_drive_bag(tmp_path / 'd', trajectory, q, roll)
+        bagio.write_drive_bag(tmp_path / 'd', trajectory, q, roll)
         (mcap,) = (tmp_path / 'd').glob('*.mcap')
-        return tmp_path / 'd', mcap, bag_io.read_drive_bag(tmp_path / 'd')
+        return tmp_path / 'd', mcap, bagio.read_drive_bag(tmp_path / 'd')
 
     def assert_prefix(self, d, full):
         m = d.stamps_ns.size
@@ -381,17 +383,17 @@ class TestBrokenFiles:
         assert len(data) > 2**20          # more than one chunk
         for cut in (0.3, 0.6, 0.9):                  # inside the first or second chunk
             mcap.write_bytes(data[:int(cut * len(data))])
-            d = bag_io.read_drive_bag(folder)
+            d = bagio.read_drive_bag(folder)
             self.assert_prefix(d, full)
             assert len(d.issues) == 1 and 'ends inside the chunk' in d.issues[0], d.issues
         mcap.write_bytes(data[:int(0.99 * len(data))])   # inside the index: every message
-        d = bag_io.read_drive_bag(folder)
+        d = bagio.read_drive_bag(folder)
         np.testing.assert_array_equal(d.q_m, full.q_m)
         assert len(d.issues) == 1 and 'bytes missing' in d.issues[0], d.issues
         # Cut exactly at a record boundary inside the data: no end-of-data record.
         mcap.write_bytes(data[:8 + 9 + int.from_bytes(data[9:17], 'little')])
         with pytest.raises(BagReadError, match='no /suspension/deflections'):
-            bag_io.read_drive_bag(folder)
+            bagio.read_drive_bag(folder)
 
     def assert_subset(self, d, full):
         keep = np.isin(full.stamps_ns, d.stamps_ns)
@@ -408,7 +410,7 @@ class TestBrokenFiles:
         at = (chunks[0] + chunks[1]) // 2             # inside the first chunk's messages
         data[at:at + 300] = b'\xff' * 300
         mcap.write_bytes(bytes(data))
-        d = bag_io.read_drive_bag(folder)
+        d = bagio.read_drive_bag(folder)
         keep = self.assert_subset(d, full)
         assert 0 < keep.sum() < keep.size and keep[-1]   # a gap, then the rest of the drive
         assert len(d.issues) == 1 and 'CRC' in d.issues[0], d.issues
@@ -419,7 +421,7 @@ class TestBrokenFiles:
         second = [at for op, at, _ in top_level_records(bytes(data)) if op == 0x06][1]
         data[second] = 0x33                            # not an MCAP opcode
         mcap.write_bytes(bytes(data))
-        d = bag_io.read_drive_bag(folder)
+        d = bagio.read_drive_bag(folder)
         self.assert_prefix(d, full)
         assert len(d.issues) == 1 and 'corrupt record (op 0x33)' in d.issues[0], d.issues
 
@@ -451,13 +453,13 @@ class TestBrokenFiles:
                         msg, msgtype)), BASE_NS + i)
             writer.finish()
         issues = []
-        p = bag_io.read_lpa_bag(folder, issues=issues)
+        p = bagio.read_lpa_bag(folder, issues=issues)
         assert len(p) == 4000 and p.elevation_m[-1].tolist() == [1e-3 * 3999, 1e-3 * 3999 + 1]
         assert issues == ['no metadata.yaml: reading the .mcap files found in the folder']
         data = path.read_bytes()
         path.write_bytes(data[:len(data) // 2])
         issues = []
-        p = bag_io.read_lpa_bag(folder, issues=issues)
+        p = bagio.read_lpa_bag(folder, issues=issues)
         assert 100 < len(p) < 4000
         np.testing.assert_array_equal(p.distance_m, 0.1 * np.arange(len(p)))
         assert any('ends inside the chunk' in line for line in issues), issues
@@ -465,18 +467,18 @@ class TestBrokenFiles:
     def test_missing_metadata_and_missing_files(self, drive, tmp_path):
         folder, mcap, full = drive
         (folder / 'metadata.yaml').unlink()
-        d = bag_io.read_drive_bag(folder)
+        d = bagio.read_drive_bag(folder)
         np.testing.assert_array_equal(d.q_m, full.q_m)
         assert any('no metadata.yaml' in line for line in d.issues)
         mcap.unlink()
         with pytest.raises(BagReadError, match='not an MCAP bag'):
-            bag_io.read_drive_bag(folder)
+            bagio.read_drive_bag(folder)
         with pytest.raises(BagReadError, match='no such bag'):
-            bag_io.read_drive_bag(tmp_path / 'nowhere')
+            bagio.read_drive_bag(tmp_path / 'nowhere')
         (tmp_path / 'empty').mkdir()
         (tmp_path / 'empty' / 'x.mcap').write_bytes(b'')
         issues = []
-        assert list(bag_io.iter_messages(tmp_path / 'empty', issues=issues)) == []
+        assert list(bagio.iter_messages(tmp_path / 'empty', issues=issues)) == []
         assert any('not an MCAP file' in line for line in issues), issues
 
 
@@ -490,17 +492,17 @@ class TestWriter:
         msg = JointState()
         msg.header.stamp.sec = 3
         msg.header.frame_id = 'base_link'
-        msg.name = list(bag_io.DEFLECTION_NAMES)
+        msg.name = list(interfaces.DEFLECTION_JOINTS)
         msg.position = [0.01, -0.02, 0.003]
         with BagWriter(tmp_path / 'b') as bag:
             bag.add_topic('/suspension/deflections', 'sensor_msgs/JointState', 'sensor_data')
             bag.write_raw('/suspension/deflections', 3 * 10**9 + 5, serialize_message(msg))
-        ((topic, log_ns, got),) = list(bag_io.iter_messages(tmp_path / 'b'))
+        ((topic, log_ns, got),) = list(bagio.iter_messages(tmp_path / 'b'))
         assert (topic, log_ns) == ('/suspension/deflections', 3 * 10**9 + 5)
         assert got.name == msg.name and got.position.tolist() == [0.01, -0.02, 0.003]
-        d = bag_io.read_drive_bag(tmp_path / 'b')
+        d = bagio.read_drive_bag(tmp_path / 'b')
         assert d.stamps_ns.tolist() == [3 * 10**9] and d.q_m.tolist() == [[0.01, -0.02]]
-        info = bag_io.bag_info(tmp_path / 'b')
+        info = bagio.bag_info(tmp_path / 'b')
         assert info.counts == {'/suspension/deflections': 1}
         # rmw leaves spare bytes after an empty sequence; rosbags refuses them, so they are
         # dropped on writing and rosbags' strict reader reads the recorded message.
@@ -533,7 +535,7 @@ class TestWriter:
             writer.add_message(cid, 9, b'\x00\x01\x00\x00\x01', 9)      # broken
             writer.finish()
         issues = []
-        got = list(bag_io.iter_messages(tmp_path / 'b', issues=issues))
+        got = list(bagio.iter_messages(tmp_path / 'b', issues=issues))
         assert [(m.a, m.b, m.c.tolist()) for _, _, m in got] == [(0.0, 's0', []),
                                                                   (0.5, 's1', [0]),
                                                                   (1.0, 's2', [0, 1])]
@@ -557,12 +559,12 @@ class TestWriter:
         with BagWriter(tmp_path / 'b', overwrite=True) as bag:
             bag.add_topic('/x', 'std_msgs/msg/Float64', {'reliability': 'best_effort',
                                                          'depth': 1})
-        assert bag_io.bag_info(tmp_path / 'b').topics == {'/x': 'std_msgs/msg/Float64'}
+        assert bagio.bag_info(tmp_path / 'b').topics == {'/x': 'std_msgs/msg/Float64'}
         (tmp_path / 'b' / 'notes.txt').write_text('mine')
         with pytest.raises(BagWriteError, match='more than a bag'):
             BagWriter(tmp_path / 'b', overwrite=True).open()
         with pytest.raises(BagWriteError, match='ROS time'):
-            bag_io.ns_to_stamps(np.array([2**31 * 10**9]))
+            bagio.ns_to_stamps(np.array([2**31 * 10**9]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -587,18 +589,18 @@ class TestEstimateBag:
                                                        status=[status])
         plain = [{'name': 'observer', 'level': 1, 'message': 'rejects',
                   'values': {'rejected': 3}}]
-        result = bag_io.write_estimate_bag(tmp_path / 'e', e, diagnostics=[
+        result = bagio.write_estimate_bag(tmp_path / 'e', e, diagnostics=[
             (BASE_NS, diag), (BASE_NS + 10**9, plain)])
         assert result == {'written': 48, 'invalid': 1, 'nonfinite': 1}
         keep = np.ones(n, bool)
         keep[[3, 7]] = False
-        cols = bag_io.read_topic_columns(tmp_path / 'e', {
+        cols = bagio.read_topic_columns(tmp_path / 'e', {
             '/observer/states': 'sensor_msgs/msg/JointState',
             '/wheel_load/left': 'geometry_msgs/msg/WrenchStamped',
             '/road_profile/right': 'geometry_msgs/msg/PointStamped',
             '/load_transfer_ratio': 'std_msgs/msg/Float64'})
         (g,) = cols['/observer/states'].groups
-        assert g.layout.strings['name'] == bag_io.STATE_NAMES
+        assert g.layout.strings['name'] == interfaces.STATE_JOINTS
         np.testing.assert_array_equal(g.columns['position'][:, 3], e.body_heave_m[keep])
         np.testing.assert_array_equal(g.columns['velocity'][:, 4:], e.wheel_heave_rate[keep])
         np.testing.assert_array_equal(g.columns['velocity'][:, 2], e.droll[keep])
@@ -612,10 +614,10 @@ class TestEstimateBag:
         assert ok.all()
         np.testing.assert_array_equal(stamps, e.stamp_ns[keep])
         np.testing.assert_array_equal(cols['/wheel_load/left'].log_ns, e.stamp_ns[keep])
-        diags = list(bag_io.iter_messages(tmp_path / 'e', ['/diagnostics']))
+        diags = list(bagio.iter_messages(tmp_path / 'e', ['/diagnostics']))
         assert [m.status[0].name for _, _, m in diags] == ['observer', 'observer']
         last = diags[1][2]
         assert (last.header.stamp.sec, last.status[0].level, last.status[0].values[0].value) \
             == (BASE_NS // 10**9 + 1, 1, '3')
         with pytest.raises(ValueError, match='diagnostic level'):
-            bag_io.diagnostic_array(0, [{'name': 'x', 'level': 7}])
+            bagio.diagnostic_array(0, [{'name': 'x', 'level': 7}])
