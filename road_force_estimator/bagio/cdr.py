@@ -526,6 +526,7 @@ class ColumnDecoder:
             self.add_rows(rows.reshape(idx.size, size), idx + start)
 
     def result(self) -> tuple[list[DecodedGroup], np.ndarray]:
+        """``(groups, undecodable positions)`` as :func:`decode_columns` returns them."""
         groups = [parts.group() for size in sorted(self.layouts)
                   for parts in self.layouts[size] if parts.index]
         return groups + self.singles, np.asarray(sorted(self.bad), dtype=np.int64)

@@ -22,6 +22,7 @@ class Rejects:
         self.counts: dict[str, dict[str, int]] = {}
 
     def add(self, topic: str, reason: str, count: int) -> None:
+        """Count ``count`` more messages of ``topic`` rejected for ``reason``."""
         if count:
             per = self.counts.setdefault(topic, {})
             per[reason] = per.get(reason, 0) + int(count)
@@ -87,6 +88,7 @@ def read_points(cols: TopicColumns, rejects: Rejects):
 
 
 def read_scalar(cols: TopicColumns, path: str, rejects: Rejects):
+    """(stamps, values) of the accepted messages' number field ``path``, file order."""
     stamps, ok = basic_checks(cols, rejects)
     values, _ = cols.column(path)
     finite = np.isfinite(values)

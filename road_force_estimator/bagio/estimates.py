@@ -101,6 +101,7 @@ class _EstimateColumns:
 
     @classmethod
     def of(cls, e) -> _EstimateColumns:
+        """The columns of ``e`` (an :class:`EstimateArrays` or alike), checked for shape."""
         stamps = np.asarray(e.stamp_ns, dtype=np.int64).reshape(-1)
         n = stamps.size
 

@@ -110,6 +110,7 @@ class McapFile:
         self.crc = 0
         self.offset = 0
         self._put(MAGIC)
+        # The header's library string names the writer as it was then (bags stay byte-identical).
         self._put(_mcap_record(0x01, _mcap_string('ros2') + _mcap_string(
             'road_force_estimator bag_io (rosbags typestore ros2_jazzy)')))
         self.schemas: list[bytes] = []
@@ -130,6 +131,7 @@ class McapFile:
         self.offset += len(data)
 
     def add_schema(self, name: str, encoding: str, text: str) -> int:
+        """Write a schema record; its id."""
         sid = len(self.schemas) + 1
         record = _mcap_record(0x03, struct.pack('<H', sid) + _mcap_string(name)
                               + _mcap_string(encoding) + _mcap_string(text))
@@ -139,6 +141,7 @@ class McapFile:
 
     def add_channel(self, sid: int, topic: str, encoding: str,
                     metadata: Mapping[str, str]) -> int:
+        """Write a channel record of schema ``sid``; its id."""
         cid = len(self.channels) + 1
         record = _mcap_record(0x04, struct.pack('<HH', cid, sid) + _mcap_string(topic)
                               + _mcap_string(encoding) + _mcap_map(metadata))
@@ -239,6 +242,7 @@ class McapFile:
             self.flush_chunk()
 
     def flush_chunk(self) -> None:
+        """Write the pending messages as a chunk (if any)."""
         if self.pending:
             self._emit_chunk([self.pending], len(self.pending))
 

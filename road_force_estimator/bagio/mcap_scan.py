@@ -97,6 +97,7 @@ class Block:
 
     @property
     def count(self) -> int:
+        """Messages in the block."""
         return int(self.log_ns.size)
 
 

@@ -247,6 +247,7 @@ class TopicColumns:
 
     @property
     def count(self) -> int:
+        """Messages of the topic."""
         return int(self.log_ns.size)
 
     def column(self, path: str, width: int | None = None,

@@ -154,7 +154,8 @@ class BagWriter:
         self._overwrite = overwrite
         self._file: McapFile | None = None
         # A map, never null (yaml-cpp in rosbag2 refuses a null custom_data), with a tag
-        # that tells where the bag came from.
+        # that tells where the bag came from ('bag_io', the writer's name when the tag was
+        # set: kept, so that the bags stay byte for byte what they were).
         self._custom: dict[str, str] = {'road_force_estimator.writer': 'bag_io'}
         for key, value in (custom_data or {}).items():
             self.set_custom_data(key, value)
