@@ -5,7 +5,7 @@
 Each bag is an ISO 8608 road synthesized by road_force_estimator.core.road.iso8608_profile
 (geometric-mean Gd(n0), default left/right coherence model), limited to the wavelengths an LPA
 records (0.5-50 m), sampled every 0.1 m over 1 km, and written by
-road_force_estimator.bagio.bag_io.write_lpa_bag (/lpa/left, /lpa/right; stamps at 20 m/s).
+road_force_estimator.bagio.write_lpa_bag (/lpa/left, /lpa/right; stamps at 20 m/s).
 The output is byte-for-byte reproducible.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 import sys
 
-from road_force_estimator.bagio.bag_io import write_lpa_bag
+from road_force_estimator.bagio import write_lpa_bag
 from road_force_estimator.core.road import iso8608_profile
 
 #: (folder, ISO 8608 class, seed) of each bag.

@@ -1,4 +1,4 @@
-"""Messages per second of bag writing and reading: rosbags' generic path against bag_io's
+"""Messages per second of bag writing and reading: rosbags' generic path against bagio's
 column-at-a-time CDR (encode_columns / decode_columns) over road_force_estimator.bagio.mcap_file's
 container (chunks taken through their message index, or walked record by record when the index
 does not check out; bench/bag_read_speed.py times both).
@@ -20,8 +20,8 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.bagio.bag_io import TYPESTORE
+from road_force_estimator import bagio, interfaces
+from road_force_estimator.bagio import TYPESTORE
 
 
 def fake_drive(n: int, rate_hz: float = 500.0, speed: float = 20.0):
@@ -39,13 +39,13 @@ def generic_write(path: Path, trajectory, q, roll) -> int:
     time_ = types['builtin_interfaces/msg/Time']
     header = types['std_msgs/msg/Header']
     v3 = types['geometry_msgs/msg/Vector3']
-    stamps = bag_io.DEFAULT_START_STAMP_NS + np.round(trajectory.t_s * 1e9).astype(np.int64)
+    stamps = bagio.DEFAULT_START_STAMP_NS + np.round(trajectory.t_s * 1e9).astype(np.int64)
     count = 0
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = {}
-        for topic in (bag_io.TOPIC_TWIST, bag_io.TOPIC_DEFLECTIONS) + bag_io.TOPIC_TRUE_LOAD \
-                + bag_io.TOPIC_TRUE_ROAD:
-            conns[topic] = writer.add_connection(topic, bag_io.MSGTYPES[topic],
+        for topic in (interfaces.TWIST, interfaces.DEFLECTIONS) + interfaces.TRUE_LOAD \
+                + interfaces.TRUE_ROAD:
+            conns[topic] = writer.add_connection(topic, interfaces.TOPIC_TYPES[topic],
                                                  typestore=TYPESTORE)
         for i, s in enumerate(stamps.tolist()):
             h = header(stamp=time_(sec=s // 10**9, nanosec=s % 10**9), frame_id='base_link')
@@ -53,10 +53,10 @@ def generic_write(path: Path, trajectory, q, roll) -> int:
                 header=h, twist=types['geometry_msgs/msg/Twist'](
                     linear=v3(x=20.0, y=0.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0)))
             js = types['sensor_msgs/msg/JointState'](
-                header=h, name=list(bag_io.DEFLECTION_NAMES),
+                header=h, name=list(interfaces.DEFLECTION_JOINTS),
                 position=np.array([q[i, 0], q[i, 1], roll[i]]), velocity=np.zeros(0),
                 effort=np.zeros(0))
-            msgs = [(bag_io.TOPIC_TWIST, tw), (bag_io.TOPIC_DEFLECTIONS, js)]
+            msgs = [(interfaces.TWIST, tw), (interfaces.DEFLECTIONS, js)]
             for side in (0, 1):
                 wrench = types['geometry_msgs/msg/WrenchStamped'](
                     header=h, wrench=types['geometry_msgs/msg/Wrench'](
@@ -65,11 +65,11 @@ def generic_write(path: Path, trajectory, q, roll) -> int:
                 point = types['geometry_msgs/msg/PointStamped'](
                     header=h, point=types['geometry_msgs/msg/Point'](
                         x=trajectory.distance_m[i], y=1.0, z=trajectory.road_m[i, side]))
-                msgs += [(bag_io.TOPIC_TRUE_LOAD[side], wrench),
-                         (bag_io.TOPIC_TRUE_ROAD[side], point)]
+                msgs += [(interfaces.TRUE_LOAD[side], wrench),
+                         (interfaces.TRUE_ROAD[side], point)]
             for topic, msg in msgs:
                 writer.write(conns[topic], s,
-                             TYPESTORE.serialize_cdr(msg, bag_io.MSGTYPES[topic]))
+                             TYPESTORE.serialize_cdr(msg, interfaces.TOPIC_TYPES[topic]))
                 count += 1
     return count
 
@@ -100,13 +100,13 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(tmp)
         timed('write: rosbags objects + serialize_cdr', lambda: generic_write(
             tmp / 'generic', trajectory, q, roll))
-        timed('write: bag_io.write_drive_bag (columns)', lambda: bag_io.write_drive_bag(
+        timed('write: bagio.write_drive_bag (columns)', lambda: bagio.write_drive_bag(
             tmp / 'columns', trajectory, q, roll))
         timed('read: rosbags AnyReader + deserialize', lambda: generic_read(tmp / 'columns'))
-        timed('read: bag_io.iter_messages (objects)', lambda: sum(
-            1 for _ in bag_io.iter_messages(tmp / 'columns')))
-        timed('read: bag_io.read_drive_bag (columns)', lambda: sum(
-            bag_io.read_drive_bag(tmp / 'columns').messages.values()))
+        timed('read: bagio.iter_messages (objects)', lambda: sum(
+            1 for _ in bagio.iter_messages(tmp / 'columns')))
+        timed('read: bagio.read_drive_bag (columns)', lambda: sum(
+            bagio.read_drive_bag(tmp / 'columns').messages.values()))
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Samples per second of bag_io.read_drive_bag: a 1 kHz drive without ground truth (2
+"""Samples per second of bagio.read_drive_bag: a 1 kHz drive without ground truth (2
 messages per sample) and one with it (6 per sample), 10 Hz GNSS fixes in both, written by
 write_drive_bag into a temporary folder and read back whole (bag decode and checks included).
 
@@ -20,7 +20,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from road_force_estimator.bagio import bag_io
+from road_force_estimator import bagio
+from road_force_estimator.bagio import reader as bag_reader
 
 
 def write_drive(path: Path, seconds: float, ground_truth: bool, rate_hz: float = 1000.0) -> int:
@@ -35,7 +36,7 @@ def write_drive(path: Path, seconds: float, ground_truth: bool, rate_hz: float =
     tf = t[::int(rate_hz // 10)]
     fixes = SimpleNamespace(time_s=tf, latitude_deg=48.1 + 1e-6 * np.arange(tf.size),
                             longitude_deg=np.full(tf.size, 17.1))
-    bag_io.write_drive_bag(path, trajectory, rng.normal(0.0, 0.01, (n, 2)),
+    bagio.write_drive_bag(path, trajectory, rng.normal(0.0, 0.01, (n, 2)),
                            rng.normal(0.0, 0.002, n), fixes=fixes, ground_truth=ground_truth)
     return n
 
@@ -46,7 +47,7 @@ def timed_read(path: Path, repeats: int = 3) -> tuple[float, float, int]:
     samples = 0
     for _ in range(repeats):
         w0, c0 = time.perf_counter(), time.process_time()
-        drive = bag_io.read_drive_bag(path)
+        drive = bagio.read_drive_bag(path)
         cpus.append(time.process_time() - c0)
         walls.append(time.perf_counter() - w0)
         samples = drive.stamps_ns.size
@@ -70,11 +71,11 @@ def main(argv: list[str] | None = None) -> int:
                     f'{size / 1e6:.0f} MB'
             paths = [('index', True)] + ([('walk', False)] if args.walk else [])
             for name, indexed in paths:
-                bag_io._USE_MESSAGE_INDEX = indexed
+                bag_reader.USE_MESSAGE_INDEX = indexed
                 try:
                     wall, cpu, n = timed_read(path)
                 finally:
-                    bag_io._USE_MESSAGE_INDEX = True
+                    bag_reader.USE_MESSAGE_INDEX = True
                 print(f'read_drive_bag ({name}) {label}: {n} samples, wall {wall:.3f} s '
                       f'{n / wall:>12,.0f}/s, cpu {cpu:.3f} s {n / cpu:>12,.0f}/s')
     return 0

@@ -21,20 +21,20 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from road_force_estimator.bagio import bag_io
+from road_force_estimator import bagio
 
 
 def fake_estimates(n: int, rate_hz: float, seed: int = 1):
     """Estimate arrays of an n-row drive (1 % invalid rows) and one diagnostic per second."""
     rng = np.random.default_rng(seed)
-    stamps = bag_io.DEFAULT_START_STAMP_NS + np.round(np.arange(n) / rate_hz * 1e9).astype(
+    stamps = bagio.DEFAULT_START_STAMP_NS + np.round(np.arange(n) / rate_hz * 1e9).astype(
         np.int64)
 
     def pair(scale: float) -> np.ndarray:
         return rng.normal(0.0, scale, (n, 2))
 
     est = SimpleNamespace(
-        stamps_ns=stamps, wheel_load_n=25000.0 + pair(800.0), distance_m=np.arange(n) * 0.02,
+        stamp_ns=stamps, wheel_load_n=25000.0 + pair(800.0), distance_m=np.arange(n) * 0.02,
         road_m=pair(0.004), ltr=rng.normal(0.0, 0.05, n), q_m=pair(0.01),
         roll_rad=rng.normal(0.0, 0.002, n), body_heave_m=rng.normal(0.0, 0.01, n),
         wheel_heave_m=pair(0.003), dq=pair(0.1), droll=rng.normal(0.0, 0.02, n),
@@ -96,10 +96,10 @@ def main(argv: list[str] | None = None) -> int:
         folder = Path(tmp) / 'bag'
 
         def estimate() -> None:
-            bag_io.write_estimate_bag(folder, est, diagnostics=diagnostics)
+            bagio.write_estimate_bag(folder, est, diagnostics=diagnostics)
 
         def drive() -> None:
-            bag_io.write_drive_bag(folder, trajectory, q, roll, fixes=fixes)
+            bagio.write_drive_bag(folder, trajectory, q, roll, fixes=fixes)
 
         wall, cpu = timed(estimate, args.repeats, folder)
         report('write_estimate_bag', n, folder, wall, cpu)

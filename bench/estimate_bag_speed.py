@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     """Runs in the pinned child: the timed runs and the stages."""
     t0, c0 = time.perf_counter(), time.process_time()
-    from road_force_estimator.bagio import bag_io
+    from road_force_estimator import bagio
     from road_force_estimator.tools import estimate_bag
     from road_force_estimator.report import write_report
     from road_force_estimator.estimation.offline import estimate_recording
@@ -75,7 +75,7 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     vehicle, observer = estimate_bag.load_parameters(None)
     stages = {}
     w0 = time.perf_counter()
-    drive = bag_io.read_drive_bag(bag)
+    drive = bagio.read_drive_bag(bag)
     stages['read the bag'] = time.perf_counter() - w0
     speed, _ = estimate_bag.drive_speed(drive)
     w0 = time.perf_counter()
@@ -84,7 +84,7 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
            else estimate_bag.estimate_online(*args))
     stages['estimate'] = time.perf_counter() - w0
     w0 = time.perf_counter()
-    bag_io.write_estimate_bag(tmp / 'stage_bag', est, track_width_m=vehicle.track_width_m)
+    bagio.write_estimate_bag(tmp / 'stage_bag', est, track_width_m=vehicle.track_width_m)
     stages['write the bag of estimates'] = time.perf_counter() - w0
     w0 = time.perf_counter()
     write_report(tmp / 'stage_report', est, drive, vehicle, observer, mode=mode,

@@ -54,7 +54,7 @@ def _timed(func, repeats: int) -> tuple[float, list[float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from road_force_estimator.bagio import bag_io
+    from road_force_estimator import bagio
     from road_force_estimator.tools import estimate_bag
     from road_force_estimator.tools import simulate_bag
     from road_force_estimator.estimation.offline import estimate_offline
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
             '--seed', str(args.seed), '--output', str(drive), '--no-progress'])
         if code != 0:
             return code
-        n = len(bag_io.read_drive_bag(drive).stamps_ns)
+        n = len(bagio.read_drive_bag(drive).stamps_ns)
         out['samples'] = n
 
         accuracy = {}
@@ -104,12 +104,12 @@ def main(argv: list[str] | None = None) -> int:
                 med, times = _timed(once, args.repeats)
                 speed[f'{mode}, figures {"included" if figures else "excluded"}'] = {
                     'median_s': med, 'samples_per_s': n / med, 'runs_s': times}
-        d = bag_io.read_drive_bag(drive)
+        d = bagio.read_drive_bag(drive)
         speed_stage = {}
         est = None
 
         def read():
-            bag_io.read_drive_bag(drive)
+            bagio.read_drive_bag(drive)
 
         def estimate():
             nonlocal est
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
 
         def write():
             count[0] += 1
-            bag_io.write_estimate_bag(tmp / f'w_{count[0]}', est)
+            bagio.write_estimate_bag(tmp / f'w_{count[0]}', est)
 
         for name, func in (('read drive bag', read), ('estimate (offline core)', estimate),
                            ('write estimate bag', write)):

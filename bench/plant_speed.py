@@ -20,7 +20,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 from road_force_estimator.core.parameters import VehicleParameters  # noqa: E402
 from road_force_estimator.core.plant import Plant, simulate  # noqa: E402
-from road_force_estimator.core.road import road_from_source  # noqa: E402
+from road_force_estimator.bagio import road_from_source  # noqa: E402
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -177,9 +177,10 @@ def observer_vehicle(plant: VehicleParameters, param_error: float) -> VehiclePar
 
 def _road(scenario: Scenario, length_m: float):
     from road_force_estimator.core import road as road_mod
+    from road_force_estimator.core.road_files import read_text_profile
 
     if scenario.road == 'profile_1':
-        prof = road_mod.read_text_profile(SHARED_DATA / 'profile_1.txt')
+        prof = read_text_profile(SHARED_DATA / 'profile_1.txt')
         # absolute elevation with the grade: remove mean and grade, then a gentle high-pass
         # (2nd-order Butterworth at 100 m wavelength, zero phase) as the README asks
         x = prof.distance_m - prof.start_m

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from rosbags.typesys import Stores, get_typestore
 
-from road_force_estimator.bagio.bag_io import BagWriter
+from road_force_estimator.bagio import BagWriter
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 POINT = 'geometry_msgs/msg/PointStamped'

@@ -1,4 +1,4 @@
-"""MCAP walking helpers shared by the bag tests (the MCAP specification, not bag_io's code)."""
+"""MCAP walking helpers shared by the bag tests (the MCAP specification, not bagio's code)."""
 from __future__ import annotations
 
 

@@ -204,7 +204,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     Parameters
     ----------
     est : EstimateArrays (or the offline mode's)
-    drive : bag_io.Drive, optional
+    drive : bagio.Drive, optional
         What was read: messages, rejections, breaks, truth, fixes.
     vehicle, observer : parameters used.
     mode : 'online' or 'offline'.

@@ -3,7 +3,8 @@
 Parameters (node-local): ``topics`` (default: every topic of INTERFACES.md) and ``output`` (the
 bag folder; default ``rosbag2_<date>-<time>`` as ``ros2 bag record`` names it; an existing
 folder is refused, never overwritten). Messages are taken raw (CDR bytes, no deserialization)
-and written through :class:`.bag_io.BagWriter` with their receive time (node clock, ns).
+and written through :class:`road_force_estimator.bagio.BagWriter` with their receive time
+(node clock, ns).
 
 QoS: the topics of INTERFACES.md with the QoS their publishers use (sensor-data best effort for
 the sensor streams, reliable for the others; deep queues so that bursts are not lost); a topic
@@ -21,7 +22,7 @@ import sys
 from rclpy.node import Node
 from rclpy.qos import ReliabilityPolicy
 
-from road_force_estimator.bagio.bag_io import BagWriteError, BagWriter
+from road_force_estimator.bagio import BagWriteError, BagWriter
 from road_force_estimator.interfaces import TOPIC_TYPES
 from road_force_estimator.ros.messages import reliable_qos, sensor_qos, topic_qos
 from road_force_estimator.ros.node_runner import run_node

@@ -32,7 +32,7 @@ from road_force_estimator.ros.messages import (
     twist_msg, wrench_msg)
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
-from road_force_estimator.core.road import road_from_source
+from road_force_estimator.bagio import road_from_source
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
     ParameterError, ParameterGuard, local_spec, specs_with_prefix)
@@ -63,7 +63,7 @@ class PlantSimulator(Node):
             self.road = road_from_source(sim.road, length_m=length)
             self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                                tire_envelope_m=sim.tire_envelope_length_m)
-        except Exception as exc:  # ValueError, OSError, bag_io.BagReadError: any road refused
+        except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None
         self.measure = SensorModel.from_simulator(sim).sampler()

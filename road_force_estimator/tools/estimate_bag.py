@@ -5,7 +5,7 @@
                  [--no-figures] [--force] [--no-progress]
 
 Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
-present the ground truth and ``/fix``) with :func:`bagio.bag_io.read_drive_bag`,
+present the ground truth and ``/fix``) with :func:`bagio.bagio.read_drive_bag`,
 which rejects and counts what cannot be trusted (NaN, missing joint names, duplicate or
 backward stamps, undecodable messages) and reads a truncated or corrupt bag up to its break.
 Then it estimates:
@@ -18,7 +18,7 @@ Then it estimates:
 ``offline``
     :func:`estimation.offline.estimate_recording`: non-causal, the whole recording.
 
-It writes ``DIR/bag`` (the observer's topics, :func:`~.bag_io.write_estimate_bag`, with a
+It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
 (:mod:`road_force_estimator.report`). Exit status: 0 on success (skipped messages are counted
 in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
@@ -158,7 +158,7 @@ def _diagnostics(est, summary_counts: dict[str, int], mode: str):
 class EstimateResult:
     """What :func:`run` did: the summary of the report, the paths, the estimates, the bag's
     messages that were written (``written``), warnings (breaks in the bag) and the drive read
-    (:class:`~.bag_io.Drive`)."""
+    (:class:`~.bagio.Drive`)."""
 
     summary: dict[str, Any]
     bag: Path
@@ -206,14 +206,14 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
 
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
-    from road_force_estimator.bagio import bag_io
+    from road_force_estimator import bagio
     from road_force_estimator.report import write_report
     from road_force_estimator.estimation.offline import estimate_recording
 
     stages.next('reading the bag')
     try:
-        drive = bag_io.read_drive_bag(input_path)
-    except bag_io.BagReadError as err:
+        drive = bagio.read_drive_bag(input_path)
+    except bagio.BagReadError as err:
         raise InputError(str(err)) from None
     warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     if len(drive.stamps_ns) == 0:
@@ -241,10 +241,10 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
               'road_force_estimator.writer_command': PROG}
     stages.next('writing the bag')
     try:
-        written = bag_io.write_estimate_bag(
+        written = bagio.write_estimate_bag(
             bag_dir, est, track_width_m=vehicle.track_width_m,
             diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
-    except (bag_io.BagWriteError, OSError) as err:
+    except (bagio.BagWriteError, OSError) as err:
         raise InputError(f'cannot write {bag_dir}: {err}') from None
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
@@ -282,7 +282,7 @@ def _headline(result: EstimateResult) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+    from road_force_estimator.bagio import BagReadError, BagWriteError
 
     return cli.run_main(PROG, build_parser(), _main, argv,
                         {(InputError, ValueError, BagReadError, BagWriteError, OSError): 1})
@@ -295,7 +295,7 @@ def _main(args: argparse.Namespace) -> int:
     if args.reference_offset is not None and not args.reference_profile:
         raise cli.UsageError('--reference-offset needs --reference-profile')
     if args.reference_profile:
-        from road_force_estimator.core.road import road_from_source
+        from road_force_estimator.bagio import road_from_source
         reference = road_from_source(args.reference_profile)
     result = run(args.input, args.output, vehicle=vehicle, observer=observer,
                  mode=args.mode, segment_length_m=args.segment_length, reference=reference,

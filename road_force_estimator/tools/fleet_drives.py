@@ -242,7 +242,7 @@ def _install(tmp: Path, final: Path, tmp_root: Path) -> None:
 def _fixes_of(result, input_path: str):
     drive = getattr(result, 'drive', None)
     if drive is None:
-        from road_force_estimator.bagio.bag_io import read_drive_bag
+        from road_force_estimator.bagio import read_drive_bag
         drive = read_drive_bag(input_path)
     return drive.fixes
 
@@ -293,7 +293,7 @@ def process_drive(task: DriveTask) -> DriveOutcome:
                             lines=lines, warnings=list(result.warnings),
                             input_path=task.input_path)
     except Exception as err:  # noqa: BLE001 - one bad drive never stops the fleet
-        from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+        from road_force_estimator.bagio import BagReadError, BagWriteError
         # estimate_bag's own reasons as they are; anything else with its type (a bug).
         plain = type(err) in (estimate_bag.InputError, BagReadError, BagWriteError, ValueError)
         plain = plain or isinstance(err, OSError)

@@ -26,7 +26,7 @@ PROG = 'profile_to_bag'
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``profile_to_bag``."""
-    from road_force_estimator.bagio.bag_io import (
+    from road_force_estimator.bagio import (
         DEFAULT_SURVEY_SPEED_MPS,
         DEFAULT_TRACK_WIDTH_M,
     )
@@ -68,8 +68,8 @@ def write_exact_csv(path: str | Path, profile) -> None:
 
 
 def _run(args: argparse.Namespace) -> list[str]:
-    from road_force_estimator.bagio import bag_io
-    from road_force_estimator.core.road import road_from_source
+    from road_force_estimator import bagio
+    from road_force_estimator.bagio import road_from_source
 
     source = Path(args.input).expanduser()
     output = Path(args.output).expanduser()
@@ -77,12 +77,12 @@ def _run(args: argparse.Namespace) -> list[str]:
         if output.exists() and not (args.force and output.is_file()):
             raise ValueError(f'{output} exists (use --force to replace a file)')
         notes: list[str] = []
-        profile = bag_io.read_lpa_bag(source, issues=notes)
+        profile = bagio.read_lpa_bag(source, issues=notes)
         write_exact_csv(output, profile)
         return notes + [f'wrote {len(profile)} samples to {output}']
     cli.check_positive('--length', args.length, finite=False)
     profile = road_from_source(args.input, length_m=args.length)
-    bag_io.write_lpa_bag(output, profile, survey_speed_mps=args.survey_speed,
+    bagio.write_lpa_bag(output, profile, survey_speed_mps=args.survey_speed,
                          track_width_m=args.track_width, overwrite=args.force)
     return list(getattr(profile, 'notes', ())) + [
         f'wrote {len(profile)} samples ({profile.distance_m[0]:g} m to '
@@ -91,7 +91,7 @@ def _run(args: argparse.Namespace) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``profile_to_bag``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+    from road_force_estimator.bagio import BagReadError, BagWriteError
 
     return cli.run_main(PROG, build_parser(), _main, argv,
                         {(ValueError, BagReadError, BagWriteError, OSError): 1})

@@ -48,7 +48,7 @@ def _number(value: float) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``road_profile_iri``; returns the exit status (0 ok, 1 bad input, 2 usage)."""
-    from road_force_estimator.bagio.bag_io import BagReadError
+    from road_force_estimator.bagio import BagReadError
 
     return cli.run_main(PROG, build_parser(), _main, argv,
                         {(ValueError, BagReadError, OSError): 1})
@@ -58,7 +58,7 @@ def _main(args: argparse.Namespace) -> int:
     cli.check_positive('--segment-length', args.segment_length)
     cli.check_positive('--length', args.length, finite=False)
     from road_force_estimator.core.iri import iri_table
-    from road_force_estimator.core.road import road_from_source
+    from road_force_estimator.bagio import road_from_source
 
     profile = road_from_source(args.profile, length_m=args.length)
     table = iri_table(profile.distance_m, profile.elevation_m,

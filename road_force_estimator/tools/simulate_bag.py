@@ -10,7 +10,7 @@ profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
 (:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
 runs at the rate for the duration, or to the end of the road; the sensors
 (:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
-measure it. The bag DIR (:func:`road_force_estimator.bagio.bag_io.write_drive_bag`) holds the
+measure it. The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`) holds the
 measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
 ``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
@@ -135,7 +135,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
     from road_force_estimator.core.gnss import route
     from road_force_estimator.core.plant import Plant
-    from road_force_estimator.core.road import road_from_source
+    from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
 
     length = sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0
@@ -197,14 +197,14 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``simulate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    from road_force_estimator.bagio.bag_io import BagReadError, BagWriteError
+    from road_force_estimator.bagio import BagReadError, BagWriteError
 
     return cli.run_main(PROG, build_parser(), _main, argv,
                         {(ValueError, BagReadError, BagWriteError, OSError): 1})
 
 
 def _main(args: argparse.Namespace) -> int:
-    from road_force_estimator.bagio.bag_io import write_drive_bag
+    from road_force_estimator.bagio import write_drive_bag
 
     lateral = _lateral(args.lateral_acceleration)
     vehicle, sim = parameters_from(args)

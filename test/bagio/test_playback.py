@@ -10,7 +10,7 @@ import pytest
 
 from bag_writers import (
     BASE_NS, FLOAT, POINT, WRITERS, expected, write_mcap, write_ours, write_rosbags)
-from road_force_estimator.bagio.bag_io import write_lpa_bag
+from road_force_estimator.bagio import write_lpa_bag
 from road_force_estimator.bagio.playback import PlaybackError, TopicQoS, open_playback
 from road_force_estimator.core.road import flat_profile
 

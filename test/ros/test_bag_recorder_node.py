@@ -18,7 +18,7 @@ from std_msgs.msg import Float64, String
 import yaml
 
 from node_harness import close, finish, make_executor, run_main
-from road_force_estimator.bagio.bag_io import iter_messages
+from road_force_estimator.bagio import iter_messages
 from road_force_estimator.ros.bag_recorder import BagRecorder
 from road_force_estimator.ros.messages import (
     deflections_msg, reliable_qos, sensor_qos, stamp_to_ns, wrench_msg)

@@ -2,7 +2,7 @@
 observer node's numbers); offline more accurate; bad bags processed and counted, never fatal.
 
 References: estimation.estimator.estimate_batch on the same input read back with
-bag_io (the estimator is tested against the plant in test_estimator.py), the ground truth in the
+bagio (the estimator is tested against the plant in test_estimator.py), the ground truth in the
 drive bag, and hand-built bags whose defects are known by construction.
 """
 import json
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.bagio.bag_io import TYPESTORE, BagWriter
+from road_force_estimator import bagio, interfaces
+from road_force_estimator.bagio import TYPESTORE, BagWriter
 from road_force_estimator.tools.estimate_bag import build_parser, main
 from road_force_estimator.estimation.estimator import estimate_batch
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
@@ -81,7 +81,7 @@ def test_parser():
 
 class TestOnline:
     def test_output_bag_equals_estimate_batch(self, noisy_drive, estimated):
-        d = bag_io.read_drive_bag(noisy_drive)
+        d = bagio.read_drive_bag(noisy_drive)
         vehicle = VehicleParameters()
         ref = estimate_batch(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle,
                              ObserverParameters())
@@ -91,7 +91,7 @@ class TestOnline:
                                '/road_profile/right', '/load_transfer_ratio',
                                '/observer/states')}
         stamps = {t: [] for t in got}
-        for topic, log_ns, msg in bag_io.iter_messages(bag, topics=list(got)):
+        for topic, log_ns, msg in bagio.iter_messages(bag, topics=list(got)):
             got[topic].append(msg)
             stamps[topic].append(log_ns)
         for topic in got:
@@ -108,7 +108,7 @@ class TestOnline:
             assert header == d.stamps_ns.tolist()
         np.testing.assert_array_equal([m.data for m in got['/load_transfer_ratio']], ref.ltr)
         states = got['/observer/states']
-        assert list(states[0].name) == list(bag_io.STATE_NAMES)
+        assert list(states[0].name) == list(interfaces.STATE_JOINTS)
         pos = np.array([m.position for m in states])
         vel = np.array([m.velocity for m in states])
         np.testing.assert_array_equal(pos, np.column_stack(
@@ -116,7 +116,7 @@ class TestOnline:
         np.testing.assert_array_equal(vel, np.column_stack(
             [ref.dq, ref.droll, ref.body_heave_rate, ref.wheel_heave_rate]))
         # /diagnostics: about one per second of the drive, the last with the totals.
-        diags = [msg for _, _, msg in bag_io.iter_messages(bag, topics=['/diagnostics'])]
+        diags = [msg for _, _, msg in bagio.iter_messages(bag, topics=['/diagnostics'])]
         assert 8 <= len(diags) <= 10
         keys = {kv.key: kv.value for kv in diags[-1].status[0].values}
         assert keys['total.estimated'] == str(len(d.stamps_ns))
@@ -128,7 +128,7 @@ class TestOnline:
         # row, loses none, and counts its progress over every sample
         from road_force_estimator.tools.estimate_bag import estimate_online
         from road_force_estimator.estimation.estimator import Estimator
-        d = bag_io.read_drive_bag(noisy_drive)
+        d = bagio.read_drive_bag(noisy_drive)
         vehicle, observer = VehicleParameters(), ObserverParameters(latency_s=latency_s)
         done = []
         got = estimate_online(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle, observer)
@@ -171,13 +171,13 @@ class TestReport:
         # Acceptance of issue 6 on a noisy drive, end to end, from the output bags against the
         # truth in the drive bag, judged here (from 1 s on; the profile band-passed 0.5-30 m
         # with scipy, 30 m in from each end): offline at least twice as accurate, on both.
-        truth = bag_io.read_drive_bag(noisy_drive).truth
+        truth = bagio.read_drive_bag(noisy_drive).truth
         fc = np.asarray(VehicleParameters().static_load_n)
         errors = {}
         for mode, folder in estimated.items():
             load = {0: [], 1: []}
             road = {0: [], 1: []}
-            for topic, _, msg in bag_io.iter_messages(folder / 'bag', topics=[
+            for topic, _, msg in bagio.iter_messages(folder / 'bag', topics=[
                     '/wheel_load/left', '/wheel_load/right', '/road_profile/left',
                     '/road_profile/right']):
                 side = 0 if topic.endswith('left') else 1
@@ -226,7 +226,7 @@ def joint_state(stamp_ns: int, q, roll):
     return T['sensor_msgs/msg/JointState'](
         header=T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
             sec=sec, nanosec=nsec), frame_id='base_link'),
-        name=list(bag_io.DEFLECTION_NAMES), position=np.array([q[0], q[1], roll]),
+        name=list(interfaces.DEFLECTION_JOINTS), position=np.array([q[0], q[1], roll]),
         velocity=np.zeros(0), effort=np.zeros(0))
 
 
@@ -309,8 +309,8 @@ class TestBadBags:
         for name in s['figures']:
             assert (tmp_path / 'o' / 'report' / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
         # The estimates written equal those of the same samples in the whole bag.
-        full = bag_io.read_drive_bag(folder)
-        part = bag_io.read_drive_bag(cut)
+        full = bagio.read_drive_bag(folder)
+        part = bagio.read_drive_bag(cut)
         m = len(part.stamps_ns)
         np.testing.assert_array_equal(part.stamps_ns, full.stamps_ns[:m])
 

@@ -7,10 +7,10 @@ import sys
 import numpy as np
 import pytest
 
-from road_force_estimator.bagio import bag_io
+from road_force_estimator import bagio
 from road_force_estimator.tools.profile_to_bag import build_parser, main, write_exact_csv
-from road_force_estimator.core.road import (
-    RoadProfile,
+from road_force_estimator.core.road import RoadProfile
+from road_force_estimator.core.road_files import (
     read_csv_profile,
     read_erd_profile,
     read_text_profile,
@@ -34,7 +34,7 @@ def test_csv_to_bag_to_csv_is_exact(tmp_path):
     write_exact_csv(csv, random_profile())
     source = read_csv_profile(csv)
     assert main([str(csv), '--output', str(tmp_path / 'bag')]) == 0
-    assert_same(bag_io.read_lpa_bag(tmp_path / 'bag'), source)
+    assert_same(bagio.read_lpa_bag(tmp_path / 'bag'), source)
     assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'back.csv')]) == 0
     assert_same(read_csv_profile(tmp_path / 'back.csv'), source)
     assert (tmp_path / 'back.csv').read_text() == csv.read_text()
@@ -46,19 +46,19 @@ def test_erd_to_bag_is_exact(tmp_path):
     source = read_erd_profile(erd)
     assert main([str(erd), '-o', str(tmp_path / 'bag'), '--survey-speed', '5',
                  '--track-width', '1.9']) == 0
-    assert_same(bag_io.read_lpa_bag(tmp_path / 'bag'), source)
-    msgs = list(bag_io.iter_messages(tmp_path / 'bag', ['/lpa/left']))
+    assert_same(bagio.read_lpa_bag(tmp_path / 'bag'), source)
+    msgs = list(bagio.iter_messages(tmp_path / 'bag', ['/lpa/left']))
     assert {m.point.y for _, _, m in msgs} == {0.95}
     assert msgs[10][1] - msgs[0][1] == round(10 * 0.1 / 5.0 * 1e9)   # stamps at 5 m/s
 
 
 def test_text_profile_one_track_and_synthetic(tmp_path, shared_data):
     assert main([str(shared_data / 'profile_1.txt'), '-o', str(tmp_path / 'p1')]) == 0
-    p1 = bag_io.read_lpa_bag(tmp_path / 'p1')
+    p1 = bagio.read_lpa_bag(tmp_path / 'p1')
     assert_same(p1, read_text_profile(shared_data / 'profile_1.txt'))
     np.testing.assert_array_equal(p1.elevation_m[:, 0], p1.elevation_m[:, 1])
     assert main(['iso8608:C:seed=2', '--length', '200', '-o', str(tmp_path / 'c')]) == 0
-    c = bag_io.read_lpa_bag(tmp_path / 'c')
+    c = bagio.read_lpa_bag(tmp_path / 'c')
     assert c.length_m == pytest.approx(200.0)
     assert not np.array_equal(c.elevation_m[:, 0], c.elevation_m[:, 1])
 
@@ -86,7 +86,7 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path, capsys):
     assert main(['--help']) == 0
     args = build_parser().parse_args(['in.csv', '--output', 'out'])
     assert (args.input, args.output, args.survey_speed, args.track_width) == (
-        'in.csv', 'out', bag_io.DEFAULT_SURVEY_SPEED_MPS, bag_io.DEFAULT_TRACK_WIDTH_M)
+        'in.csv', 'out', bagio.DEFAULT_SURVEY_SPEED_MPS, bagio.DEFAULT_TRACK_WIDTH_M)
 
 
 def test_installed_executable(tmp_path, shared_data):

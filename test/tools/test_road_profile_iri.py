@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.core.road import read_text_profile
+from road_force_estimator import bagio
+from road_force_estimator.core.road_files import read_text_profile
 from road_force_estimator.tools.road_profile_iri import build_parser, main
 
 HEADER = ['start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km']
@@ -40,7 +40,7 @@ def test_profile_1_whole_and_per_segment(shared_data, capsys):
 
 def test_lpa_bag_gives_the_same_table_as_its_source(shared_data, tmp_path, capsys):
     profile = read_text_profile(shared_data / 'profile_1.txt')
-    bag_io.write_lpa_bag(tmp_path / 'lpa', profile)
+    bagio.write_lpa_bag(tmp_path / 'lpa', profile)
     _, from_file, _ = run([str(shared_data / 'profile_1.txt'), '--segment-length', '50'],
                           capsys)
     _, from_bag, _ = run([str(tmp_path / 'lpa'), '--segment-length', '50'], capsys)

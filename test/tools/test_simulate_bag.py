@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from road_force_estimator.bagio import bag_io
+from road_force_estimator import bagio
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
@@ -49,7 +49,7 @@ class TestDriveBag:
                             '--noise-roll', 3e-4, '--output', tmp_path / 'd'], capsys)
         assert code == 0, err
         assert err.count('\n') == 1 and 'wrote' in err
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         # The same drive, run here directly: road of the length the command asks for.
         vehicle = VehicleParameters()
         road = iso8608_profile('C', 15 * 3 + 2 * 0.25 + 1.0, seed=4)
@@ -75,7 +75,7 @@ class TestDriveBag:
                             '--duration', 2, '--gnss-rate', 5, '--output', tmp_path / 'd'],
                            capsys)
         assert code == 0, err
-        f = bag_io.read_drive_bag(tmp_path / 'd').fixes
+        f = bagio.read_drive_bag(tmp_path / 'd').fixes
         assert len(f.stamps_ns) == 2 * 5 + 1           # a fix at the start of each period
         assert np.all(np.diff(f.stamps_ns) == 200_000_000)
         # Default route: from (48.1486, 17.1077) heading north at 20 m/s.
@@ -91,7 +91,7 @@ class TestDriveBag:
                             '--noise-deflection', 0, '--noise-roll', 0,
                             '--output', tmp_path / 'd'], capsys)
         assert code == 0, err
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         lon = d.fixes.longitude_deg
         t = (d.fixes.stamps_ns - d.fixes.stamps_ns[0]) * 1e-9
         assert np.all(lon[t < 0.95] == 17.1077)             # straight before the step
@@ -109,7 +109,7 @@ class TestDriveBag:
         code, _, err = run(['--params-file', params, '--speed', 12, '--output',
                             tmp_path / 'd'], capsys)
         assert code == 0, err
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         assert np.all(d.speed_mps == 12.0)                  # command line wins
         assert len(d.stamps_ns) == 251                      # rate and duration from the file
         assert d.fixes is None                              # gnss.rate 0: no /fix
@@ -119,7 +119,7 @@ class TestDriveBag:
         code, _, err = run(['--road', BAGS / 'lpa_iso8608_b', '--speed', 20, '--rate', 500,
                             '--duration', 2, '--output', tmp_path / 'd'], capsys)
         assert code == 0, err
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         # The bag holds the profile it was made from (bags/README.md): the truth is that road,
         # enveloped over 0.25 m, under the tire.
         road = iso8608_profile('B', 1000.0, seed=21, dx_m=0.1, band_cpm=(0.02, 2.0))
@@ -129,7 +129,7 @@ class TestDriveBag:
                             '--duration', 1, '--no-ground-truth', '--output', tmp_path / 'm'],
                            capsys)
         assert code == 0, err
-        m = bag_io.read_drive_bag(tmp_path / 'm')
+        m = bagio.read_drive_bag(tmp_path / 'm')
         assert m.truth is None and len(m.stamps_ns) == 501
 
     def test_a_road_shorter_than_the_drive_cuts_it(self, tmp_path, capsys):
@@ -137,7 +137,7 @@ class TestDriveBag:
                             '--duration', 5, '--output', tmp_path / 'd'], capsys)
         assert code == 0
         assert 'road ends' in err
-        d = bag_io.read_drive_bag(tmp_path / 'd')
+        d = bagio.read_drive_bag(tmp_path / 'd')
         assert 100 < len(d.stamps_ns) < 160 and d.truth.distance_m[-1] <= 30.0
 
     def test_two_runs_give_identical_bags(self, tmp_path, capsys):
@@ -187,7 +187,7 @@ def test_bundled_bags_are_reproducible(tmp_path):
     for folder, _, _ in module.BAGS:
         (bundled,) = (BAGS / folder).glob('*.mcap')
         assert (tmp_path / folder / bundled.name).read_bytes() == bundled.read_bytes()
-        profile = bag_io.read_lpa_bag(BAGS / folder)
+        profile = bagio.read_lpa_bag(BAGS / folder)
         assert profile.length_m >= 1000.0
     total = sum(p.stat().st_size for p in BAGS.rglob('*') if p.is_file())
     assert total < 5e6
@@ -199,7 +199,7 @@ def test_installed_executable(tmp_path):
                          '--duration', '1', '--output', str(tmp_path / 'd')],
                         capture_output=True, text=True, timeout=120)
     assert ok.returncode == 0, ok.stderr
-    assert len(bag_io.read_drive_bag(tmp_path / 'd').stamps_ns) == 101
+    assert len(bagio.read_drive_bag(tmp_path / 'd').stamps_ns) == 101
     bad = subprocess.run([str(EXE), '--road', 'flat', '--rate', '0', '--output',
                           str(tmp_path / 'e')], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 1 and bad.stderr.count('\n') == 1 and 'simulator.rate' in bad.stderr

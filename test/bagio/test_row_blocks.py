@@ -1,4 +1,4 @@
-"""Bag writing in blocks (bag_io.BagWriter.write_rows, write_estimate_bag, write_drive_bag):
+"""Bag writing in blocks (bagio.BagWriter.write_rows, write_estimate_bag, write_drive_bag):
 every message, its order, log and publish times and sequence number, checked by the mcap and
 mcap-ros2-support readers, rosbags' AnyReader and an MCAP walk written here (chunk CRCs,
 message and chunk indexes, statistics, data and summary CRCs, where chunks end), with small
@@ -16,12 +16,11 @@ import pytest
 from rosbags.highlevel import AnyReader
 import yaml
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.bagio import mcap_file
-from road_force_estimator.bagio.bag_io import BagWriter, TYPESTORE
+from road_force_estimator import bagio, interfaces
+from road_force_estimator.bagio import BagWriter, TYPESTORE, cdr, mcap_file
 
 T = TYPESTORE.types
-BASE_NS = bag_io.DEFAULT_START_STAMP_NS
+BASE_NS = bagio.DEFAULT_START_STAMP_NS
 MAGIC = b'\x89MCAP0\r\n'
 
 
@@ -157,9 +156,9 @@ def assert_sequences(messages):
 def sizes(request, monkeypatch):
     """Chunk and block sizes (bytes): chunks and blocks end inside rows and records."""
     if request.param is None:
-        return mcap_file._McapFile.CHUNK_BYTES
+        return mcap_file.McapFile.CHUNK_BYTES
     chunk, block = request.param
-    monkeypatch.setattr(mcap_file._McapFile, 'CHUNK_BYTES', chunk)
+    monkeypatch.setattr(mcap_file.McapFile, 'CHUNK_BYTES', chunk)
     monkeypatch.setattr(BagWriter, 'BLOCK_BYTES', block)
     monkeypatch.setattr(BagWriter, 'BLOCK_MESSAGES', 7)
     return chunk
@@ -171,7 +170,7 @@ def estimates(n, seed):
     rng = np.random.default_rng(seed)
     stamps = BASE_NS + np.cumsum(rng.integers(1, 3, n)) * 1_000_000
     e = SimpleNamespace(
-        stamps_ns=stamps, wheel_load_n=rng.normal(25000.0, 900.0, (n, 2)),
+        stamp_ns=stamps, wheel_load_n=rng.normal(25000.0, 900.0, (n, 2)),
         distance_m=np.arange(n) * 0.02, road_m=rng.normal(0.0, 0.01, (n, 2)),
         ltr=rng.normal(0.0, 0.1, n), q_m=rng.normal(0.0, 0.01, (n, 2)),
         roll_rad=rng.normal(0.0, 0.01, n), body_heave_m=rng.normal(0.0, 0.01, n),
@@ -189,25 +188,25 @@ class TestEstimateBag:
         e = estimates(n, 3)
         ok = e.valid & np.isfinite(e.ltr) & np.isfinite(e.wheel_heave_rate[:, 1])
         rows = np.flatnonzero(ok)
-        s = e.stamps_ns
+        s = e.stamp_ns
         invalid = int(np.flatnonzero(~ok)[0])
         diag_stamps = [BASE_NS - 5, s[rows[0]], s[rows[0]] + 1, s[rows[3]], s[rows[3]],
                        s[invalid], s[rows[40]] + 999, s[rows[-1]], s[rows[-1]] + 10**9]
         diagnostics = [(int(t), [{'name': f'd{i}', 'level': i % 4, 'message': 'x' * (3 * i),
                                   'values': {'k': 'v' * i}}])
                        for i, t in enumerate(diag_stamps)]
-        result = bag_io.write_estimate_bag(tmp_path / 'e', e, diagnostics=diagnostics,
+        result = bagio.write_estimate_bag(tmp_path / 'e', e, diagnostics=diagnostics,
                                            track_width_m=1.6)
         assert result == {'written': rows.size, 'invalid': int(np.count_nonzero(~e.valid)),
                           'nonfinite': int(np.count_nonzero(e.valid & ~ok))}
 
         # What must be there, in write order: by stamp, then the topics' order, then
         # position in the stream.
-        topics = [*bag_io.TOPIC_LOAD, *bag_io.TOPIC_ROAD, bag_io.TOPIC_LTR,
-                  bag_io.TOPIC_STATES]
+        topics = [*interfaces.LOAD, *interfaces.ROAD, interfaces.LTR,
+                  interfaces.STATES]
         expected = [(int(s[i]), j, i, topic) for i in rows.tolist()
                     for j, topic in enumerate(topics)]
-        expected += [(t, len(topics), i, bag_io.TOPIC_DIAGNOSTICS)
+        expected += [(t, len(topics), i, interfaces.DIAGNOSTICS)
                      for i, (t, _) in enumerate(diagnostics)]
         expected.sort()
 
@@ -216,47 +215,47 @@ class TestEstimateBag:
         got = read_decoded(tmp_path / 'e')
         assert [(g[0], g[2], g[3]) for g in got] == [(x[3], x[0], x[0]) for x in expected]
         for (_, _, i, topic), (_, _, _, _, msg) in zip(expected, got):
-            if topic == bag_io.TOPIC_DIAGNOSTICS:
+            if topic == interfaces.DIAGNOSTICS:
                 assert msg.status[0].name == f'd{i}' and msg.status[0].message == 'x' * (3 * i)
                 continue
-            if topic != bag_io.TOPIC_LTR:
+            if topic != interfaces.LTR:
                 assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == s[i]
-            if topic in bag_io.TOPIC_LOAD:
-                side = bag_io.TOPIC_LOAD.index(topic)
+            if topic in interfaces.LOAD:
+                side = interfaces.LOAD.index(topic)
                 assert msg.wrench.force.z == e.wheel_load_n[i, side]
-                assert msg.header.frame_id == bag_io.WHEEL_FRAMES[side]
-            elif topic in bag_io.TOPIC_ROAD:
-                side = bag_io.TOPIC_ROAD.index(topic)
+                assert msg.header.frame_id == interfaces.WHEEL_FRAMES[side]
+            elif topic in interfaces.ROAD:
+                side = interfaces.ROAD.index(topic)
                 assert (msg.point.x, msg.point.y, msg.point.z) == (
                     e.distance_m[i], 0.8 if side == 0 else -0.8, e.road_m[i, side])
-            elif topic == bag_io.TOPIC_LTR:
+            elif topic == interfaces.LTR:
                 assert msg.data == e.ltr[i]
             else:
-                assert list(msg.name) == list(bag_io.STATE_NAMES)
+                assert list(msg.name) == list(interfaces.STATE_JOINTS)
                 assert list(msg.position) == [*e.q_m[i], e.roll_rad[i], e.body_heave_m[i],
                                               *e.wheel_heave_m[i]]
                 assert list(msg.velocity) == [*e.dq[i], e.droll[i], e.body_heave_rate[i],
                                               *e.wheel_heave_rate[i]]
         counts = rosbags_counts(tmp_path / 'e')
         assert counts == {**{t: rows.size for t in topics},
-                          bag_io.TOPIC_DIAGNOSTICS: len(diagnostics)}
+                          interfaces.DIAGNOSTICS: len(diagnostics)}
 
     def test_no_row_to_write_keeps_the_diagnostics(self, tmp_path):
         e = estimates(6, 4)
         e.valid[:] = False
         diagnostics = [(BASE_NS + 7, [{'name': 'only', 'level': 1, 'message': 'no rows'}])]
-        result = bag_io.write_estimate_bag(tmp_path / 'e', e, diagnostics=diagnostics)
+        result = bagio.write_estimate_bag(tmp_path / 'e', e, diagnostics=diagnostics)
         assert result == {'written': 0, 'invalid': 6, 'nonfinite': 0}
         got = read_decoded(tmp_path / 'e')
         assert [(g[0], g[2], g[4].status[0].message) for g in got] == [
-            (bag_io.TOPIC_DIAGNOSTICS, BASE_NS + 7, 'no rows')]
-        assert len(check_mcap(tmp_path / 'e', mcap_file._McapFile.CHUNK_BYTES)) == 1
+            (interfaces.DIAGNOSTICS, BASE_NS + 7, 'no rows')]
+        assert len(check_mcap(tmp_path / 'e', mcap_file.McapFile.CHUNK_BYTES)) == 1
         meta = yaml.safe_load((tmp_path / 'e' / 'metadata.yaml').read_text())
         counts = {t['topic_metadata']['name']: t['message_count']
                   for t in meta['rosbag2_bagfile_information']['topics_with_message_count']}
-        assert counts == {**{t: 0 for t in (*bag_io.TOPIC_LOAD, *bag_io.TOPIC_ROAD,
-                                            bag_io.TOPIC_LTR, bag_io.TOPIC_STATES)},
-                          bag_io.TOPIC_DIAGNOSTICS: 1}
+        assert counts == {**{t: 0 for t in (*interfaces.LOAD, *interfaces.ROAD,
+                                            interfaces.LTR, interfaces.STATES)},
+                          interfaces.DIAGNOSTICS: 1}
 
 
 class TestDriveBag:
@@ -271,28 +270,28 @@ class TestDriveBag:
         fix_t = np.array([-0.5, 0.0, 0.0005, 0.010, 0.010, 0.0731, 0.149, 0.149, 0.2])
         fixes = SimpleNamespace(time_s=fix_t, latitude_deg=48.0 + np.arange(fix_t.size),
                                 longitude_deg=np.full(fix_t.size, 11.0))
-        count = bag_io.write_drive_bag(tmp_path / 'd', trajectory, q, roll, fixes=fixes)
+        count = bagio.write_drive_bag(tmp_path / 'd', trajectory, q, roll, fixes=fixes)
         assert count == 6 * n + fix_t.size
 
         stamps = BASE_NS + np.round(t * 1e9).astype(np.int64)
         fix_stamps = BASE_NS + np.round(fix_t * 1e9).astype(np.int64)
-        topics = [bag_io.TOPIC_TWIST, bag_io.TOPIC_DEFLECTIONS, *bag_io.TOPIC_TRUE_LOAD,
-                  *bag_io.TOPIC_TRUE_ROAD]
+        topics = [interfaces.TWIST, interfaces.DEFLECTIONS, *interfaces.TRUE_LOAD,
+                  *interfaces.TRUE_ROAD]
         expected = sorted([(int(stamps[i]), j, i, topic) for i in range(n)
                            for j, topic in enumerate(topics)]
-                          + [(int(fix_stamps[i]), 6, i, bag_io.TOPIC_FIX)
+                          + [(int(fix_stamps[i]), 6, i, interfaces.FIX)
                              for i in range(fix_t.size)])
         walked = check_mcap(tmp_path / 'd', sizes)
         assert_sequences(walked)
         got = read_decoded(tmp_path / 'd')
         assert [(g[0], g[2], g[3]) for g in got] == [(x[3], x[0], x[0]) for x in expected]
         for (_, _, i, topic), (_, _, _, _, msg) in zip(expected, got):
-            if topic == bag_io.TOPIC_FIX:
+            if topic == interfaces.FIX:
                 assert msg.latitude == 48.0 + i and msg.header.frame_id == 'gnss'
-            elif topic == bag_io.TOPIC_DEFLECTIONS:
+            elif topic == interfaces.DEFLECTIONS:
                 assert list(msg.position) == [q[i, 0], q[i, 1], roll[i]]
-            elif topic in bag_io.TOPIC_TRUE_ROAD:
-                side = bag_io.TOPIC_TRUE_ROAD.index(topic)
+            elif topic in interfaces.TRUE_ROAD:
+                side = interfaces.TRUE_ROAD.index(topic)
                 assert (msg.point.x, msg.point.z) == (trajectory.distance_m[i],
                                                       trajectory.road_m[i, side])
         assert sum(rosbags_counts(tmp_path / 'd').values()) == count
@@ -301,8 +300,9 @@ class TestDriveBag:
 # --------------------------------------------------------------------------------------------
 
 def float64_rows(values):
-    return bag_io.encode_columns('std_msgs/msg/Float64', bag_io._template('std_msgs/msg/Float64'),
-                                 len(values), {'data': np.asarray(values, dtype=float)})
+    return bagio.encode_columns('std_msgs/msg/Float64',
+                                bagio.message_template('std_msgs/msg/Float64'), len(values),
+                                {'data': np.asarray(values, dtype=float)})
 
 
 def string_datas(texts):
@@ -355,7 +355,7 @@ class TestWriteRows:
         assert all(g[2] == g[3] for g in got)
 
     def test_short_writes_lose_nothing(self, tmp_path, monkeypatch):
-        monkeypatch.setattr(mcap_file._McapFile, 'CHUNK_BYTES', 5000)
+        monkeypatch.setattr(mcap_file.McapFile, 'CHUNK_BYTES', 5000)
         real = os.writev
 
         def short(fd, pieces):
@@ -381,7 +381,7 @@ class TestColumns:
         rng = np.random.default_rng(2)
         for la, lb in [(0, 0), (5, 0), (0, 9), (1, 1), (1000, 1 << 20), (77, 1048599)]:
             a, b = rng.bytes(la), rng.bytes(lb)
-            assert mcap_file._crc32_combine(zlib.crc32(a), zlib.crc32(b), lb) == zlib.crc32(a + b)
+            assert mcap_file.crc32_combine(zlib.crc32(a), zlib.crc32(b), lb) == zlib.crc32(a + b)
 
     def test_lazy_parts_taken_rows_and_constants_equal_serialize_cdr(self):
         rng = np.random.default_rng(4)
@@ -390,12 +390,12 @@ class TestColumns:
         q, roll, heave = rng.normal(size=(n_source, 2)), rng.normal(size=n_source), \
             rng.normal(size=(n_source, 3))
         stamps = BASE_NS + 10**7 * take
-        cols = dict(bag_io._stamp_columns(stamps),
-                    position=bag_io._Lazy([q, roll, heave[:, ::2]], take),
+        cols = dict(bagio.stamp_columns(stamps),
+                    position=cdr.LazyColumns([q, roll, heave[:, ::2]], take),
                     velocity=np.broadcast_to(np.arange(5.0), (take.size, 5)))
         names = ('a', 'bb', 'ccc', 'dddd', 'e')
         msgtype = 'sensor_msgs/msg/JointState'
-        rows = bag_io._ColumnRows(msgtype, bag_io._template(msgtype, 'base_link', names, True),
+        rows = cdr.ColumnRows(msgtype, bagio.message_template(msgtype, 'base_link', names, True),
                                   take.size, cols).array()
         for k, i in enumerate(take.tolist()):
             s = int(stamps[k])
@@ -405,9 +405,9 @@ class TestColumns:
                 name=list(names), position=np.array([*q[i], roll[i], heave[i, 0], heave[i, 2]]),
                 velocity=np.arange(5.0), effort=np.zeros(0))
             assert rows[k].tobytes() == bytes(TYPESTORE.serialize_cdr(ref, msgtype))
-        empty = bag_io.encode_columns('std_msgs/msg/Float64', bag_io._template(
+        empty = bagio.encode_columns('std_msgs/msg/Float64', bagio.message_template(
             'std_msgs/msg/Float64'), 0, {'data': np.zeros(0)})
         assert empty.shape == (0, 12)
         with pytest.raises(ValueError, match='position'):
-            bag_io._ColumnRows(msgtype, bag_io._template(msgtype, 'base_link', names, True), 5,
-                               {'position': bag_io._Lazy([q[:5], roll[:5]])})
+            cdr.ColumnRows(msgtype, bagio.message_template(msgtype, 'base_link', names, True), 5,
+                               {'position': cdr.LazyColumns([q[:5], roll[:5]])})

@@ -1,5 +1,6 @@
-"""Reading chunks through their message indexes (bag_io's fast path): the same columns as the
-record-by-record walk (the reference path, forced with ``_USE_MESSAGE_INDEX = False``) and as
+"""Reading chunks through their message indexes (bagio.reader's fast path): the same columns as
+the record-by-record walk (the reference path, forced with ``reader.USE_MESSAGE_INDEX = False``)
+and as
 the ``mcap`` library's own reader, on bags of this module's writer and of the ``mcap`` writer
 (compressed chunks, schemas and channels inside chunks, several channels on one topic,
 messages of varying size), and a fallback to the walk for every chunk whose index is missing,
@@ -16,15 +17,15 @@ from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 
-from road_force_estimator.bagio import bag_io
-from road_force_estimator.bagio import mcap_file
-from road_force_estimator.bagio.bag_io import BagWriter, TYPESTORE
+from road_force_estimator import bagio, interfaces
+from road_force_estimator.bagio import BagWriter, TYPESTORE, mcap_scan
+from road_force_estimator.bagio import reader as bag_reader
 
 T = TYPESTORE.types
-BASE_NS = bag_io.DEFAULT_START_STAMP_NS
-ALL_TOPICS = {t: bag_io.MSGTYPES[t] for t in (
-    (bag_io.TOPIC_DEFLECTIONS, bag_io.TOPIC_TWIST, bag_io.TOPIC_FIX)
-    + bag_io.TOPIC_TRUE_LOAD + bag_io.TOPIC_TRUE_ROAD)}
+BASE_NS = bagio.DEFAULT_START_STAMP_NS
+ALL_TOPICS = {t: interfaces.TOPIC_TYPES[t] for t in (
+    (interfaces.DEFLECTIONS, interfaces.TWIST, interfaces.FIX)
+    + interfaces.TRUE_LOAD + interfaces.TRUE_ROAD)}
 
 
 def header(stamp_ns, frame):
@@ -54,27 +55,27 @@ def write_drive(folder, n=12000, seed=3):
                                  road_m=rng.normal(0.0, 0.004, (n, 2)))
     fixes = SimpleNamespace(time_s=t[::100], latitude_deg=48.1 + 1e-6 * np.arange(t[::100].size),
                             longitude_deg=np.full(t[::100].size, 17.1))
-    bag_io.write_drive_bag(folder, trajectory, rng.normal(0.0, 0.01, (n, 2)),
+    bagio.write_drive_bag(folder, trajectory, rng.normal(0.0, 0.01, (n, 2)),
                            rng.normal(0.0, 0.002, n), fixes=fixes)
     (mcap,) = Path(folder).glob('*.mcap')
     return mcap
 
 
 def read_columns(path, topics, *, indexed, monkeypatch):
-    monkeypatch.setattr(bag_io, '_USE_MESSAGE_INDEX', indexed)
+    monkeypatch.setattr(bag_reader, 'USE_MESSAGE_INDEX', indexed)
     issues = []
-    cols = bag_io.read_topic_columns(path, topics, issues=issues)
+    cols = bagio.read_topic_columns(path, topics, issues=issues)
     return cols, issues
 
 
 def read_drive(path, *, indexed, monkeypatch):
-    monkeypatch.setattr(bag_io, '_USE_MESSAGE_INDEX', indexed)
-    return bag_io.read_drive_bag(path)
+    monkeypatch.setattr(bag_reader, 'USE_MESSAGE_INDEX', indexed)
+    return bagio.read_drive_bag(path)
 
 
 def scan_counts(mcap):
     """(chunks read through their index, chunks walked) of one .mcap file."""
-    scan = mcap_file._McapScan(Path(mcap), lambda channel: True, indexed=True)
+    scan = mcap_scan.McapScan(Path(mcap), lambda channel: True, indexed=True)
     for _ in scan.batches():
         pass
     return scan.indexed_chunks, scan.walked_chunks
@@ -158,10 +159,10 @@ class TestOwnBags:
     def test_fields_selects_the_numbers_decoded(self, drive):
         folder, _ = drive
         want = ['header.stamp.sec', 'twist.linear.x']
-        topics = {bag_io.TOPIC_TWIST: bag_io.MSGTYPES[bag_io.TOPIC_TWIST]}
-        some = bag_io.read_topic_columns(folder, topics, fields={bag_io.TOPIC_TWIST: want})
-        full = bag_io.read_topic_columns(folder, topics)
-        (g,), (h,) = some[bag_io.TOPIC_TWIST].groups, full[bag_io.TOPIC_TWIST].groups
+        topics = {interfaces.TWIST: interfaces.TOPIC_TYPES[interfaces.TWIST]}
+        some = bagio.read_topic_columns(folder, topics, fields={interfaces.TWIST: want})
+        full = bagio.read_topic_columns(folder, topics)
+        (g,), (h,) = some[interfaces.TWIST].groups, full[interfaces.TWIST].groups
         assert sorted(g.columns) == sorted(want) and len(h.columns) == 8
         for path in want:
             np.testing.assert_array_equal(g.columns[path], h.columns[path])
@@ -169,18 +170,18 @@ class TestOwnBags:
     def test_bad_messages_are_read_the_same(self, tmp_path, monkeypatch):
         """Undecodable, big-endian, other names and lengths, NaN, repeated stamps, in every
         chunk: the same columns and rejections through the index as by the walk."""
-        names = list(bag_io.DEFLECTION_NAMES)
+        names = list(interfaces.DEFLECTION_JOINTS)
         rng = np.random.default_rng(5)
         with BagWriter(tmp_path / 'b') as bag:
-            bag.add_topic(bag_io.TOPIC_DEFLECTIONS, 'sensor_msgs/msg/JointState')
-            bag.add_topic(bag_io.TOPIC_TWIST, 'geometry_msgs/msg/TwistStamped')
-            bag.add_topic(bag_io.TOPIC_TRUE_LOAD[0], 'std_msgs/msg/Float64')   # wrong type
+            bag.add_topic(interfaces.DEFLECTIONS, 'sensor_msgs/msg/JointState')
+            bag.add_topic(interfaces.TWIST, 'geometry_msgs/msg/TwistStamped')
+            bag.add_topic(interfaces.TRUE_LOAD[0], 'std_msgs/msg/Float64')   # wrong type
             v3 = T['geometry_msgs/msg/Vector3']
             for i in range(6000):
                 s = BASE_NS + 1000 * i - (2500 if i % 501 == 0 and i else 0)   # backwards
                 kind = i % 97           # 1 to 7: a bad or odd message, 62 of each
                 if kind in (1, 7):      # undecodable: cut, empty
-                    bag.write_raw(bag_io.TOPIC_DEFLECTIONS, s,
+                    bag.write_raw(interfaces.DEFLECTIONS, s,
                                   b'\x00\x01\x00\x00\x07' if kind == 1 else b'')
                     continue
                 msg = joint_state(s, names if kind != 2 else names[::-1],
@@ -189,18 +190,18 @@ class TestOwnBags:
                 if kind == 5:
                     msg = joint_state(s, names[:2], [0.1, 0.2])
                 if kind == 6:
-                    bag.write_raw(bag_io.TOPIC_DEFLECTIONS, s, bytes(TYPESTORE.serialize_cdr(
+                    bag.write_raw(interfaces.DEFLECTIONS, s, bytes(TYPESTORE.serialize_cdr(
                         msg, 'sensor_msgs/msg/JointState', little_endian=False)))
                 else:
-                    bag.write(bag_io.TOPIC_DEFLECTIONS, s, msg)
+                    bag.write(interfaces.DEFLECTIONS, s, msg)
                 if i % 3 == 0:
                     tw = T['geometry_msgs/msg/TwistStamped'](
                         header=header(s, 'base_link'), twist=T['geometry_msgs/msg/Twist'](
                             linear=v3(x=float(i), y=0.0, z=0.0), angular=v3(x=0.0, y=0.0,
                                                                             z=0.0)))
-                    bag.write(bag_io.TOPIC_TWIST, s, tw)
+                    bag.write(interfaces.TWIST, s, tw)
                 if i % 1000 == 0:
-                    bag.write(bag_io.TOPIC_TRUE_LOAD[0], s, T['std_msgs/msg/Float64'](data=1.0))
+                    bag.write(interfaces.TRUE_LOAD[0], s, T['std_msgs/msg/Float64'](data=1.0))
         (mcap,) = (tmp_path / 'b').glob('*.mcap')
         indexed, walked = scan_counts(mcap)
         assert indexed >= 2 and walked == 0
@@ -211,12 +212,12 @@ class TestOwnBags:
         a = read_drive(tmp_path / 'b', indexed=True, monkeypatch=monkeypatch)
         b = read_drive(tmp_path / 'b', indexed=False, monkeypatch=monkeypatch)
         assert_same_drive(a, b)
-        assert a.rejected[bag_io.TOPIC_DEFLECTIONS] == {
+        assert a.rejected[interfaces.DEFLECTIONS] == {
             'undecodable': 124, 'nonfinite': 62, 'length_mismatch': 62, 'missing_name': 62,
             'backwards_stamp': 11}
-        assert a.rejected[bag_io.TOPIC_TRUE_LOAD[0]] == {'wrong_type (std_msgs/msg/Float64)': 6}
+        assert a.rejected[interfaces.TRUE_LOAD[0]] == {'wrong_type (std_msgs/msg/Float64)': 6}
         # Big-endian messages are converted (kind 6), reversed names mapped (kind 2).
-        big = fast[bag_io.TOPIC_DEFLECTIONS]
+        big = fast[interfaces.DEFLECTIONS]
         assert sum(g.index.size == 1 for g in big.groups) == 62
 
     @staticmethod
@@ -268,8 +269,8 @@ class TestOwnBags:
         assert_same_drive(fast, walk)
         assert fast.issues == ()
         if how == 'not_a_message':           # the walk skips the private record
-            assert fast.messages[bag_io.TOPIC_DEFLECTIONS] == \
-                good.messages[bag_io.TOPIC_DEFLECTIONS] - 1
+            assert fast.messages[interfaces.DEFLECTIONS] == \
+                good.messages[interfaces.DEFLECTIONS] - 1
         else:
             assert_same_drive(fast, good)
 

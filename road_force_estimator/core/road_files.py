@@ -1,0 +1,365 @@
+"""Road profile files: CSV, UMTRI ERD and text columns; and a profile from a source string.
+
+Formats (INTERFACES.md, MODEL.md "Road profiles"): CSV with a ``distance_m,left_m,right_m`` or
+``distance_m,elevation_m`` header, ERD text files (as ProVAL and RoadRuf write them), and the
+2-column text format of ``../shared/data/profile_1.txt``. Rows with a non-finite value or a
+distance that does not increase are dropped and counted in the profile's ``notes``.
+:func:`road_from_source` adds the synthetic roads of :mod:`.road`; LPA bags are read by
+:func:`road_force_estimator.bagio.road_from_source`.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from road_force_estimator.core.road import RoadProfile, synthetic_profile
+
+__all__ = [
+    'read_csv_profile', 'write_csv_profile', 'read_erd_profile', 'write_erd_profile',
+    'read_text_profile', 'road_from_source',
+]
+
+_LENGTH_UNITS_M = {
+    'm': 1.0, 'meter': 1.0, 'meters': 1.0, 'metre': 1.0, 'metres': 1.0,
+    'cm': 0.01, 'mm': 0.001, 'km': 1000.0,
+    'in': 0.0254, 'inch': 0.0254, 'inches': 0.0254,
+    'ft': 0.3048, 'feet': 0.3048, 'foot': 0.3048,
+    'mi': 1609.344, 'mile': 1609.344, 'miles': 1609.344,
+    'mil': 2.54e-5, 'mils': 2.54e-5,
+}
+
+
+def _clean(distance: np.ndarray, elevation: np.ndarray, name: str,
+           notes: list[str] | None = None) -> RoadProfile:
+    """Drop non-finite rows and rows whose distance does not increase; count them in notes."""
+    notes = list(notes or [])
+    distance = np.asarray(distance, dtype=np.float64)
+    elevation = np.asarray(elevation, dtype=np.float64)
+    if elevation.ndim == 1:
+        elevation = np.column_stack((elevation, elevation))
+    finite = np.isfinite(distance) & np.all(np.isfinite(elevation), axis=1)
+    if not np.all(finite):
+        notes.append(f'{int(np.sum(~finite))} rows with a non-finite value dropped')
+        distance, elevation = distance[finite], elevation[finite]
+    if distance.size:
+        # Keep a row only if its distance exceeds every distance kept before it.
+        running = np.maximum.accumulate(distance)
+        keep = np.ones(distance.size, dtype=bool)
+        keep[1:] = distance[1:] > running[:-1]
+        if not np.all(keep):
+            notes.append(f'{int(np.sum(~keep))} rows with a duplicate or decreasing distance '
+                         f'dropped')
+            distance, elevation = distance[keep], elevation[keep]
+    if distance.size < 2:
+        raise ValueError(f'{name}: fewer than 2 usable profile points')
+    return RoadProfile(distance, elevation, name=name, notes=tuple(notes))
+
+
+def read_csv_profile(path: str | Path) -> RoadProfile:
+    """Read a CSV profile (INTERFACES.md): header ``distance_m,left_m,right_m`` or
+    ``distance_m,elevation_m`` (one track, used for both wheels); metres.
+
+    Columns are found by name (any order, extra columns ignored). Rows with a non-finite value
+    or a distance that does not increase are dropped and counted in ``notes``; a row that is
+    not numbers raises :class:`ValueError` naming the file and line.
+    """
+    path = Path(path)
+    try:
+        with path.open(newline='') as f:
+            rows = list(csv.reader(f))
+    except OSError as exc:
+        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+    rows = [r for r in rows if r and any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError(f'{path}: empty CSV profile')
+    header = [c.strip() for c in rows[0]]
+    try:
+        cols = [header.index('distance_m')]
+        if 'left_m' in header and 'right_m' in header:
+            cols += [header.index('left_m'), header.index('right_m')]
+        else:
+            cols.append(header.index('elevation_m'))
+    except ValueError:
+        raise ValueError(f'{path}: header {",".join(header)!r} must be '
+                         f'"distance_m,left_m,right_m" or "distance_m,elevation_m"') from None
+    data = np.empty((len(rows) - 1, len(cols)))
+    for i, row in enumerate(rows[1:]):
+        try:
+            data[i] = [float(row[c]) for c in cols]
+        except (ValueError, IndexError):
+            raise ValueError(f'{path}, line {i + 2}: expected {len(header)} numbers, got '
+                             f'{",".join(row)!r}') from None
+    elevation = data[:, 1:] if len(cols) == 3 else data[:, 1]
+    return _clean(data[:, 0], elevation, name=str(path))
+
+
+def write_csv_profile(path: str | Path, profile: RoadProfile) -> None:
+    """Write ``distance_m,left_m,right_m`` CSV (metres, 12 significant digits)."""
+    with Path(path).open('w', newline='') as f:
+        f.write('distance_m,left_m,right_m\n')
+        for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
+            f.write(f'{x:.12g},{zl:.12g},{zr:.12g}\n')
+
+
+def _numbers(text: str, path, line_no: int) -> list[float]:
+    """The numbers of one line of a profile file (blank- or comma-separated)."""
+    try:
+        return [float(p) for p in text.replace(',', ' ').split()]
+    except ValueError:
+        raise ValueError(f'{path}, line {line_no}: not numbers: {text[:60]!r}') from None
+
+
+def read_text_profile(path: str | Path) -> RoadProfile:
+    """Read a whitespace-separated text profile (the format of ``profile_1.txt``).
+
+    Two columns (distance m, elevation m: one track, used for both wheels) or three
+    (distance, left, right). Blank lines and lines starting with '#' are skipped.
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+    values = []
+    width = None
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if not text or text.startswith('#'):
+            continue
+        row = _numbers(text, path, i + 1)
+        if width is None:
+            width = len(row)
+            if width not in (2, 3):
+                raise ValueError(f'{path}, line {i + 1}: expected 2 or 3 columns, got {width}')
+        elif len(row) != width:
+            raise ValueError(f'{path}, line {i + 1}: expected {width} columns, got {len(row)}')
+        values.append(row)
+    if not values:
+        raise ValueError(f'{path}: no profile points')
+    data = np.array(values)
+    elevation = data[:, 1:] if width == 3 else data[:, 1]
+    return _clean(data[:, 0], elevation, name=str(path))
+
+
+def _unit_factor(unit: str, what: str, path: Path) -> float:
+    key = unit.strip().lower().rstrip('.')
+    if key not in _LENGTH_UNITS_M:
+        raise ValueError(f'{path}: {what} unit {unit.strip()!r} is not a length unit '
+                         f'(m, mm, in, ft, ...)')
+    return _LENGTH_UNITS_M[key]
+
+
+def read_erd_profile(path: str | Path) -> RoadProfile:
+    """Read a UMTRI ERD profile file (text data, as ProVAL and RoadRuf write them).
+
+    Format (MODEL.md "Road profiles"): line 1 ``ERDFILEV2.00``; line 2 seven comma-separated
+    numbers ``NCHAN, NSAMP, ?, ?, KEY, STEP, ?`` (KEY = 5: text data; STEP: sample interval in
+    XUNITS); then keyword lines (an 8-character keyword, then its value) up to ``END``; then
+    one whitespace-separated row of NCHAN elevations per sample. ``UNITSNAM`` holds one
+    8-character unit field per channel (m, mm, in, ft, ...), ``XUNITS`` the distance unit,
+    ``SHORTNAM`` the channel names. The fields marked '?' are ignored.
+
+    Distance of sample i is ``x0 + i * STEP`` with x0 from an ``XSTART`` keyword (written by
+    :func:`write_erd_profile`, ignored by other tools) or 0. One channel is used for both
+    wheels; with more, channels named left/right (``L``, ``LWP``, ``Left`` ...; ``R`` ...) are
+    taken, else the first two (said so in ``notes``). Real profiler files are already high-pass
+    filtered: their mean and grade are not the road's.
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(errors='replace').splitlines()
+    except OSError as exc:
+        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+    nchan, nsamp, step = _erd_header(lines, path)
+    keys, raw_keys, end = _erd_keywords(lines, path)
+    x_factor = _unit_factor(keys.get('XUNITS', 'm') or 'm', 'XUNITS', path)
+    units = _fixed_fields(raw_keys.get('UNITSNAM', ''), nchan)
+    if not any(units):
+        units = ['m'] * nchan
+    names = _fixed_fields(raw_keys.get('SHORTNAM', ''), nchan)
+    notes: list[str] = []
+    data = _erd_rows(lines, end, nchan, path)
+    if nsamp > 0 and data.shape[0] < nsamp:
+        notes.append(f'truncated: {data.shape[0]} of {nsamp} samples')
+    elif nsamp > 0 and data.shape[0] > nsamp:
+        notes.append(f'{data.shape[0] - nsamp} rows beyond NSAMP = {nsamp} ignored')
+        data = data[:nsamp]
+    cols = _pick_tracks(names, nchan, notes)
+    factors = [_unit_factor(units[c] or units[0] or 'm', f'channel {c + 1}', path)
+               for c in cols]
+    elevation = data[:, cols] * np.array(factors)
+    try:
+        x0 = float(keys.get('XSTART', '0') or 0.0)
+    except ValueError:
+        raise ValueError(f'{path}: XSTART {keys["XSTART"]!r} is not a number') from None
+    distance = (x0 + step * np.arange(data.shape[0])) * x_factor
+    title = keys.get('TITLE', '')
+    name = f'{path}' + (f' ({title})' if title else '')
+    return _clean(distance, elevation if elevation.shape[1] == 2 else elevation[:, 0], name,
+                  notes)
+
+
+def _erd_header(lines: list[str], path: Path) -> tuple[int, int, float]:
+    """``(NCHAN, NSAMP, STEP)`` from an ERD file's first two lines (text data only)."""
+    if not lines or not lines[0].strip().upper().startswith('ERDFILE'):
+        raise ValueError(f'{path}: not an ERD file (line 1 must be ERDFILEV2.00)')
+    if len(lines) < 3:
+        raise ValueError(f'{path}: truncated ERD header')
+    fields_ = [p.strip() for p in lines[1].split(',') if p.strip()]
+    try:
+        nchan, nsamp = int(float(fields_[0])), int(float(fields_[1]))
+        key, step = int(float(fields_[4])), float(fields_[5])
+    except (ValueError, IndexError):
+        raise ValueError(f'{path}, line 2: expected "NCHAN, NSAMP, ?, ?, KEY, STEP, ?", got '
+                         f'{lines[1].strip()!r}') from None
+    if key != 5:
+        raise ValueError(f'{path}: ERD KEY = {key}: only text data (KEY = 5) is supported')
+    if nchan < 1 or not (math.isfinite(step) and step > 0.0):
+        raise ValueError(f'{path}, line 2: NCHAN = {nchan} must be >= 1 and STEP = {step!r} '
+                         f'> 0')
+    return nchan, nsamp, step
+
+
+def _erd_keywords(lines: list[str], path: Path) -> tuple[dict[str, str], dict[str, str], int]:
+    """The keyword lines from line 3 up to ``END``: ``(stripped values, raw values, index of
+    the END line)``, keyed by the upper-case 8-character keyword."""
+    keys: dict[str, str] = {}
+    raw_keys: dict[str, str] = {}
+    for i in range(2, len(lines)):
+        line = lines[i]
+        if line.strip().upper() == 'END':
+            return keys, raw_keys, i
+        if not line.strip():
+            continue
+        keyword = line[:8].strip().upper()
+        keys[keyword] = line[8:].strip()
+        raw_keys[keyword] = line[8:].rstrip('\n')
+    raise ValueError(f'{path}: ERD header has no END line')
+
+
+def _erd_rows(lines: list[str], end: int, nchan: int, path: Path) -> np.ndarray:
+    """The data rows after the END line, (m, NCHAN) in the file's units."""
+    rows = []
+    for i in range(end + 1, len(lines)):
+        text = lines[i].strip()
+        if not text:
+            continue
+        row = _numbers(text, path, i + 1)
+        if len(row) != nchan:
+            raise ValueError(f'{path}, line {i + 1}: expected {nchan} values, got {len(row)}')
+        rows.append(row)
+    return np.array(rows, dtype=np.float64).reshape(-1, nchan)
+
+
+def _fixed_fields(text: str, count: int) -> list[str]:
+    """Split an ERD value into ``count`` 8-character fields (or whitespace words)."""
+    chunks = [text[8 * i:8 * i + 8].strip() for i in range(count)]
+    if all(chunks):
+        return chunks
+    words = text.split()
+    return words if len(words) == count else chunks
+
+
+def _pick_tracks(names: list[str], nchan: int, notes: list[str]) -> list[int]:
+    if nchan == 1:
+        return [0]
+    left = right = None
+    for i, name in enumerate(names):
+        key = name.strip().lower()
+        if left is None and (key.startswith('l') or 'left' in key):
+            left = i
+        elif right is None and (key.startswith('r') or 'right' in key):
+            right = i
+    if left is not None and right is not None:
+        return [left, right]
+    if nchan > 2:
+        notes.append(f'{nchan} channels without left/right names: channels 1 and 2 used')
+    return [0, 1]
+
+
+def write_erd_profile(path: str | Path, profile: RoadProfile, units: str = 'm') -> None:
+    """Write a text ERD file (two channels, left and right) in ``units`` (m, mm, in, ft...).
+
+    The distance unit is metres (``XUNITS m``); the profile must be evenly spaced (relative
+    tolerance 1e-6). The start distance goes in an ``XSTART`` keyword.
+    """
+    path = Path(path)
+    factor = _unit_factor(units, 'units', path)
+    x = profile.distance_m
+    steps = np.diff(x)
+    step = float(np.mean(steps))
+    if np.max(np.abs(steps - step)) > 1e-6 * step:
+        raise ValueError(f'{path}: an ERD file needs an evenly spaced profile (spacing '
+                         f'{np.min(steps):g} .. {np.max(steps):g} m)')
+    unit_field = f'{units:<8.8}'
+    z = profile.elevation_m / factor
+    with path.open('w') as f:
+        f.write('ERDFILEV2.00\n')
+        f.write(f'{2:7d},{x.size:7d},{1:7d},{1:7d},{5:7d},{step:13.6e},{1:7d},\n')
+        f.write(f'TITLE   {profile.name or "road profile"}\n')
+        f.write(f'SHORTNAM{"Left":<8}{"Right":<8}\n')
+        f.write(f'UNITSNAM{unit_field}{unit_field}\n')
+        f.write('XLABEL  Distance\n')
+        f.write('XUNITS  m\n')
+        f.write(f'XSTART  {float(x[0])!r}\n')
+        f.write('END\n')
+        for zl, zr in z.tolist():
+            f.write(f'{zl:.10g} {zr:.10g}\n')
+
+
+# --------------------------------------------------------------------------------------------
+# Sources
+# --------------------------------------------------------------------------------------------
+
+
+def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfile:
+    """A road profile from a source string (``simulator.road``).
+
+    Parameters
+    ----------
+    source : str
+        ``iso8608:<A-H>[:option=value...]`` with options ``seed`` (int, default 1), ``length``
+        (m), ``dx`` (m, default 0.05), ``coherence`` (default, identical, independent or a
+        number), ``start`` (m); or ``flat[:length=..][:dx=..]``; or a path: ``.csv``,
+        ``.erd``, ``.txt`` / ``.dat`` (whitespace columns). A bag folder (holding
+        ``metadata.yaml``) is refused: :func:`road_force_estimator.bagio.road_from_source`
+        reads LPA bags and every source of this function.
+    length_m : float, optional
+        Length of a synthetic road when the source gives none (default 1000 m); ignored for
+        files and bags.
+
+    Raises
+    ------
+    ValueError
+        Unknown source kind, bad option, unreadable file.
+    """
+    text = str(source).strip()
+    head = text.split(':', 1)[0].lower()
+    if head in ('iso8608', 'flat'):
+        return synthetic_profile(text, length_m)
+    path = Path(text).expanduser()
+    if path.is_dir():
+        if not (path / 'metadata.yaml').is_file():
+            raise ValueError(f'road source {text!r}: a folder must be a bag (no metadata.yaml)')
+        raise ValueError(f'road source {text!r} is a bag folder: read it with '
+                         'road_force_estimator.bagio.road_from_source')
+    if not path.exists():
+        raise ValueError(f'road source {text!r}: no such file, and not "iso8608:<class>" or '
+                         f'"flat"')
+    suffix = path.suffix.lower()
+    if suffix == '.csv':
+        return read_csv_profile(path)
+    if suffix == '.erd':
+        return read_erd_profile(path)
+    if suffix in ('.txt', '.dat', '.prn', ''):
+        with path.open(errors='replace') as f:
+            first = f.readline()
+        if first.strip().upper().startswith('ERDFILE'):
+            return read_erd_profile(path)
+        return read_text_profile(path)
+    raise ValueError(f'road source {text!r}: unknown file type {suffix!r} (.csv, .erd, .txt, '
+                     f'.dat or a bag folder)')
+
