@@ -566,6 +566,3 @@ def _convert_endianness(msgtype: str, data: bytes, typestore) -> bytes | None:
         return bytes(typestore.serialize_cdr(msg, msgtype))
     except Exception:  # noqa: BLE001 - any failure means: not a message of this type
         return None
-
-
-# --------------------------------------------------------------------------------------------

@@ -151,6 +151,3 @@ def read_joint_state(cols: TopicColumns, names: Sequence[str], rejects: Rejects,
     if velocity:
         return stamps[keep], pos[keep], vel[keep]
     return stamps[keep], pos[keep]
-
-
-# --------------------------------------------------------------------------------------------

@@ -136,7 +136,3 @@ def read_lpa_bag(path: str | Path, *, issues: list[str] | None = None):
         raise BagReadError(f'{path}: fewer than 2 usable profile samples')
     name = bag_custom_data(path).get('road_force_estimator.profile_name') or path.name
     return RoadProfile(distance_m=x, elevation_m=elevation, name=name, notes=tuple(sink))
-
-
-# --------------------------------------------------------------------------------------------
-# Drive bags: measurements and ground truth

@@ -367,6 +367,3 @@ def read_topic_columns(path: str | Path, topics: Mapping[str, str], *,
         for topic, log in logs.items():
             reader(topic).add_messages(log, datas[topic])
     return {topic: reader(topic).columns(topic) for topic in topics if topic in seen}
-
-
-# --------------------------------------------------------------------------------------------
