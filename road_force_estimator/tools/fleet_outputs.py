@@ -63,15 +63,6 @@ def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
     return table
 
 
-def _cell(value) -> str:
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, str):
-        return value
-    v = float(value)
-    return 'nan' if math.isnan(v) else repr(v)
-
-
 def _atomic_write(path: Path, data: bytes | str) -> None:
     tmp = path.with_name(f'.{path.name}.{uuid.uuid4().hex[:8]}.tmp')
     if isinstance(data, str):
@@ -82,11 +73,13 @@ def _atomic_write(path: Path, data: bytes | str) -> None:
 
 
 def _csv_text(header: Sequence[str], rows) -> str:
+    from road_force_estimator.report import csv_cell
+
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
     for row in rows:
-        w.writerow([_cell(v) for v in row])
+        w.writerow([csv_cell(v) for v in row])
     return buf.getvalue()
 
 
