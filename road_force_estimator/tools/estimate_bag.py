@@ -321,6 +321,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: options, parameters, reference, :func:`run`, the headline."""
     cli.check_positive('--segment-length', args.segment_length)
     vehicle, observer = load_parameters(args.params_file)
     reference = None

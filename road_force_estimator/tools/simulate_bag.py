@@ -198,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: :func:`simulate`, the bag, the one-line result."""
     from road_force_estimator.bagio.bag_io import write_drive_bag
 
     lateral = _lateral(args.lateral_acceleration)
