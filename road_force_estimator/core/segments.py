@@ -83,14 +83,26 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
         Segment length (m), default 100.
     """
     x = np.asarray(distance_m, dtype=float)
-    load = np.asarray(wheel_load_n, dtype=float)
     edges = segment_bounds(float(x[0]), float(x[-1]), segment_length_m)
     k = edges.size - 1
     # Sample i belongs to segment j when edges[j] <= x_i < edges[j+1] (last edge inclusive).
     seg = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, k - 1)
-    counts = np.bincount(seg, minlength=k)
     table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(), 'end_m': edges[1:].copy()}
+    table.update(_load_columns(seg, k, wheel_load_n, ltr, lift_off))
+    px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
+    table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
+    table.update(_coordinate_columns(x, edges, stamps_ns, fix_stamps_ns, fix_latitude_deg,
+                                     fix_longitude_deg))
+    return {name: table[name] for name in SEGMENT_COLUMNS}
 
+
+def _load_columns(seg: np.ndarray, k: int, wheel_load_n, ltr, lift_off
+                  ) -> dict[str, np.ndarray]:
+    """DLC, peak load per wheel, max |LTR| and lift-off events of the ``k`` segments
+    (``seg``: the segment of each sample)."""
+    load = np.asarray(wheel_load_n, dtype=float)
+    counts = np.bincount(seg, minlength=k)
+    table: dict[str, np.ndarray] = {}
     for side, name in ((0, 'left'), (1, 'right')):
         f = load[:, side]
         total = np.bincount(seg, f, minlength=k)
@@ -106,11 +118,17 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     np.fmax.at(max_ltr, seg, np.abs(np.asarray(ltr, dtype=float)))
     table['max_abs_ltr'] = max_ltr
 
-    lifted = np.asarray(lift_off, dtype=bool).reshape(len(x), -1)
+    lifted = np.asarray(lift_off, dtype=bool).reshape(len(seg), -1)
     starts = lifted & ~np.vstack([np.zeros((1, lifted.shape[1]), bool), lifted[:-1]])
     table['lift_offs'] = np.bincount(seg, starts.sum(axis=1), minlength=k).astype(np.int64)
+    return table
 
-    px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
+
+def _iri_columns(px: np.ndarray, edges: np.ndarray, profile_m, true_profile_m,
+                 iri_segments) -> dict[str, np.ndarray]:
+    """IRI per segment and wheel of the estimated and the true profile (NaN without one)."""
+    k = edges.size - 1
+    table: dict[str, np.ndarray] = {}
     for prefix, prof in (('iri', profile_m), ('true_iri', true_profile_m)):
         for side, name in ((0, 'left'), (1, 'right')):
             column = f'{prefix}_{name}_m_per_km'
@@ -121,7 +139,13 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
                     raise ValueError('a profile needs iri_segments to compute IRI')
                 table[column] = np.asarray(
                     iri_segments(px, np.asarray(prof, dtype=float)[:, side], edges), dtype=float)
+    return table
 
+
+def _coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_ns,
+                        fix_latitude_deg, fix_longitude_deg) -> dict[str, np.ndarray]:
+    """Latitude and longitude (deg) of each segment's ends, NaN without fixes."""
+    k = edges.size - 1
     have_fixes = (stamps_ns is not None and fix_stamps_ns is not None
                   and len(fix_stamps_ns) >= 2)
     if have_fixes:
@@ -132,6 +156,5 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
         lat, lon = positions_at(fix_stamps_ns, fix_latitude_deg, fix_longitude_deg, edge_ns)
     else:
         lat = lon = np.full(k + 1, np.nan)
-    table['start_lat'], table['start_lon'] = lat[:-1].copy(), lon[:-1].copy()
-    table['end_lat'], table['end_lon'] = lat[1:].copy(), lon[1:].copy()
-    return {name: table[name] for name in SEGMENT_COLUMNS}
+    return {'start_lat': lat[:-1].copy(), 'start_lon': lon[:-1].copy(),
+            'end_lat': lat[1:].copy(), 'end_lon': lon[1:].copy()}

@@ -10,14 +10,14 @@ from road_force_estimator.report.alignment import REFERENCE_SEARCH_M, Aligned, a
 from road_force_estimator.report.figures import FIGURES, write_figures
 from road_force_estimator.report.fleet_map import (
     IN_PER_MI_PER_M_PER_KM, plot_segments_map, segment_lines, segments_geojson, write_geojson)
-from road_force_estimator.report.folder import write_report, write_segments_csv
+from road_force_estimator.report.folder import csv_cell, write_report, write_segments_csv
 from road_force_estimator.report.markdown import write_markdown
 from road_force_estimator.report.summary import (
     DEFAULT_SEGMENT_LENGTH_M, accuracy, drive_segments, summarize)
 
 __all__ = [
     'FIGURES', 'DEFAULT_SEGMENT_LENGTH_M', 'REFERENCE_SEARCH_M', 'IN_PER_MI_PER_M_PER_KM',
-    'Aligned', 'align', 'accuracy', 'drive_segments', 'summarize', 'write_segments_csv',
-    'write_markdown', 'write_figures', 'write_report', 'segment_lines', 'segments_geojson',
-    'write_geojson', 'plot_segments_map',
+    'Aligned', 'align', 'accuracy', 'drive_segments', 'summarize', 'csv_cell',
+    'write_segments_csv', 'write_markdown', 'write_figures', 'write_report', 'segment_lines',
+    'segments_geojson', 'write_geojson', 'plot_segments_map',
 ]

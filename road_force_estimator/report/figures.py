@@ -76,6 +76,7 @@ class _Canvas:
         return self.al.pick(self.est, name)[self.w]
 
     def finish(self, fig, name: str, heading: str) -> None:
+        """Title, lay out, save ``name`` (110 dpi) and close the figure."""
         fig.suptitle(f'{heading}{" - " + self.title if self.title else ""}', fontsize=11)
         fig.tight_layout()
         fig.savefig(self.folder / name, dpi=110)
@@ -98,6 +99,7 @@ class _Profiles:
 
 
 def _profiles(est, al: Aligned) -> _Profiles:
+    """The profiles of figure 9 and the overview (truth gaps interpolated over distance)."""
     up = al.increasing()
     x = al.x_m[up]
     road = al.pick(est, 'road_m')[up]

@@ -33,14 +33,18 @@ from road_force_estimator.report.figures import write_figures
 from road_force_estimator.report.markdown import write_markdown
 from road_force_estimator.report.summary import DEFAULT_SEGMENT_LENGTH_M, summarize
 
-__all__ = ['write_segments_csv', 'write_report']
+__all__ = ['csv_cell', 'write_segments_csv', 'write_report']
 
 
-def _cell(value) -> str:
+def csv_cell(value) -> str:
+    """A table cell as CSV text: ``true``/``false``, integers as such, text as it is, floats
+    in their shortest exact form (``repr``: they read back bit for bit), ``nan`` if unknown."""
     if isinstance(value, (bool, np.bool_)):
         return str(bool(value)).lower()
     if isinstance(value, (int, np.integer)):
         return str(int(value))
+    if isinstance(value, str):
+        return value
     v = float(value)
     return 'nan' if math.isnan(v) else repr(v)
 
@@ -53,7 +57,7 @@ def write_segments_csv(path: str | Path, segments: dict[str, np.ndarray]) -> Non
         w.writerow(SEGMENT_COLUMNS)
         n = len(segments['start_m'])
         for i in range(n):
-            w.writerow([_cell(segments[c][i]) for c in SEGMENT_COLUMNS])
+            w.writerow([csv_cell(segments[c][i]) for c in SEGMENT_COLUMNS])
 
 
 def _json_safe(obj):

@@ -19,11 +19,13 @@ from typing import Callable, Mapping, Sequence
 __all__ = [
     'MODES', 'UsageError', 'Parser', 'run_main', 'one_line', 'check_positive',
     'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'add_force',
-    'add_no_progress', 'load_estimator_parameters',
+    'add_no_progress', 'load_estimator_parameters', 'PROGRESS_MIN_SAMPLES', 'sample_progress',
 ]
 
 #: Estimation modes of estimate_bag and estimate_fleet.
 MODES = ('online', 'offline')
+#: Progress bars over samples appear from this many samples on.
+PROGRESS_MIN_SAMPLES = 50_000
 
 
 class UsageError(Exception):
@@ -128,3 +130,12 @@ def load_estimator_parameters(path: str | None, node_names: Sequence[str]):
         ObserverParameters, VehicleParameters, load_params_file)
     values = {} if path is None else load_params_file(path, node_names=tuple(node_names))
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
+
+
+def sample_progress(total: int, enabled: bool, desc: str):
+    """A tqdm progress bar over ``total`` samples on stderr (disabled when not ``enabled`` or
+    under :data:`PROGRESS_MIN_SAMPLES` samples; tqdm's own choice off a terminal)."""
+    from tqdm import tqdm
+    return tqdm(total=total, desc=desc, unit='sample', unit_scale=True, file=sys.stderr,
+                mininterval=0.5, leave=False,
+                disable=(not enabled or total < PROGRESS_MIN_SAMPLES) or None)

@@ -43,8 +43,6 @@ __all__ = ['PROG', 'MODES', 'EstimateResult', 'build_parser', 'load_parameters',
            'estimate_online', 'run', 'main']
 
 PROG = 'estimate_bag'
-#: Progress bars appear from this many samples on.
-PROGRESS_MIN_SAMPLES = 50_000
 
 
 class InputError(Exception):
@@ -97,13 +95,6 @@ def drive_speed(drive) -> tuple[np.ndarray, int]:
     return speed, int(np.count_nonzero(early))
 
 
-def _progress(total: int, enabled: bool, desc: str):
-    from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit='sample', unit_scale=True, file=sys.stderr,
-                mininterval=0.5, leave=False,
-                disable=(not enabled or total < PROGRESS_MIN_SAMPLES) or None)
-
-
 class _Stages:
     """A one-line progress display of the stages of :func:`run` (stderr, TTY only)."""
 
@@ -139,7 +130,7 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
     """
     from road_force_estimator.estimation.estimator import estimate_batch
 
-    with _progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
+    with cli.sample_progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
         return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
                               progress=bar.update)
 
@@ -289,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: options, parameters, reference, :func:`run`, the headline."""
     cli.check_positive('--segment-length', args.segment_length)
     vehicle, observer = load_parameters(args.params_file)
     reference = None

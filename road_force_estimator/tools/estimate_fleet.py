@@ -229,6 +229,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: the parameters, :func:`run_fleet`, the one-line result."""
     from road_force_estimator.tools.estimate_bag import load_parameters
 
     try:

@@ -53,6 +53,8 @@ class FleetResult:
 
 
 def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
+    """The fleet table (:data:`~.fleet_drives.FLEET_COLUMNS`): the segments of every drive
+    done, in the order of ``outcomes``."""
     done = [o for o in outcomes if o.status != 'failed' and o.table is not None]
     table: dict[str, np.ndarray] = {'drive': np.array(
         [o.drive_id for o in done for _ in range(len(o.table['start_m']))], dtype=object)}
@@ -61,15 +63,6 @@ def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
         parts = [np.asarray(o.table[name], dtype=dtype) for o in done]
         table[name] = np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
     return table
-
-
-def _cell(value) -> str:
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, str):
-        return value
-    v = float(value)
-    return 'nan' if math.isnan(v) else repr(v)
 
 
 def _atomic_write(path: Path, data: bytes | str) -> None:
@@ -82,15 +75,18 @@ def _atomic_write(path: Path, data: bytes | str) -> None:
 
 
 def _csv_text(header: Sequence[str], rows) -> str:
+    from road_force_estimator.report import csv_cell
+
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
     for row in rows:
-        w.writerow([_cell(v) for v in row])
+        w.writerow([csv_cell(v) for v in row])
     return buf.getvalue()
 
 
 def _write_parquet(path: Path, table: dict[str, np.ndarray], settings: dict) -> None:
+    """``segments.parquet``: the fleet table, the settings in the schema's metadata."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -107,6 +103,7 @@ def _write_parquet(path: Path, table: dict[str, np.ndarray], settings: dict) -> 
 
 
 def _mean_iri(o: DriveOutcome, side: str) -> float:
+    """Length-weighted mean IRI (m/km) of a drive's segments, NaN without one."""
     t = o.table
     v = np.asarray(t[f'iri_{side}_m_per_km'], dtype=float)
     w = np.asarray(t['end_m'], dtype=float) - np.asarray(t['start_m'], dtype=float)
@@ -150,6 +147,7 @@ def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_writ
 
 def _summary_head(result: FleetResult, table: dict[str, np.ndarray],
                   params_file: str | None) -> list[str]:
+    """The title and the run: drives, segments, settings, engine and times."""
     from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
 
     s = result.settings
@@ -172,6 +170,7 @@ def _summary_head(result: FleetResult, table: dict[str, np.ndarray],
 
 
 def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+    """One row per drive: status, segments, distance, mean IRI, peak load, LTR, lift-offs."""
     lines = ['## Drives', '',
              '| drive | status | segments | distance (km) | IRI left m/km (in/mi) | '
              'IRI right m/km (in/mi) | peak load (kN) | max abs LTR | lift-offs | GNSS | '
@@ -191,6 +190,7 @@ def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
 
 
 def _drive_row(o: DriveOutcome) -> str:
+    """The row of a drive done (processed or skipped)."""
     from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
 
     t = o.table
@@ -209,6 +209,7 @@ def _drive_row(o: DriveOutcome) -> str:
 
 
 def _roughest_section(table: dict[str, np.ndarray]) -> list[str]:
+    """The :data:`ROUGHEST` segments by mean IRI (none without a finite IRI)."""
     from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
 
     mean = 0.5 * (table['iri_left_m_per_km'] + table['iri_right_m_per_km'])

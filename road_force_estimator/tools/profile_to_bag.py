@@ -98,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work (:func:`_run`) and its notes on stderr."""
     for line in _run(args):
         print(f'{PROG}: {line}', file=sys.stderr)
     return 0

@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: the profile, its IRI table as CSV on stdout."""
     cli.check_positive('--segment-length', args.segment_length)
     cli.check_positive('--length', args.length, finite=False)
     from road_force_estimator.core.iri import iri_table

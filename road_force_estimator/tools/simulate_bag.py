@@ -40,8 +40,6 @@ from road_force_estimator.tools import cli
 __all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'main']
 
 PROG = 'simulate_bag'
-#: Progress bars appear from this many samples on.
-PROGRESS_MIN_SAMPLES = 50_000
 
 # Command-line option -> parameter name.
 _OPTIONS = {
@@ -131,8 +129,6 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         ``trajectory`` has ``t_s``, ``distance_m``, ``q_m``, ``roll_rad``, ``wheel_load_n``,
         ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps``.
     """
-    from tqdm import tqdm
-
     from road_force_estimator.core.gnss import route
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
@@ -154,9 +150,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
                             'lateral_accel_mps2')}
     appenders = [(cols[k].append, k) for k in cols]
-    disable = (not progress or wanted < PROGRESS_MIN_SAMPLES) or None
-    with tqdm(total=wanted, desc=f'{PROG}: plant', unit='sample', unit_scale=True,
-              file=sys.stderr, mininterval=0.5, leave=False, disable=disable) as bar:
+    with cli.sample_progress(wanted, progress, f'{PROG}: plant') as bar:
         done = 0
         while done < wanted:
             sample = plant.step()
@@ -204,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    """The command's work: :func:`simulate`, the bag, the one-line result."""
     from road_force_estimator.bagio import write_drive_bag
 
     lateral = _lateral(args.lateral_acceleration)

@@ -18,8 +18,7 @@ import pytest
 from road_force_estimator.tools import estimate_bag
 from road_force_estimator.tools import estimate_fleet
 from road_force_estimator.tools import simulate_bag
-from road_force_estimator.tools.estimate_fleet import FLEET_COLUMNS, FleetError, find_drives
-from road_force_estimator.report.fleet_map import segment_lines, segments_geojson
+from road_force_estimator.tools.estimate_fleet import FLEET_COLUMNS
 
 PY = sys.executable
 DASK = str(Path(sys.executable).parent / 'dask')
@@ -454,85 +453,3 @@ def test_bad_params_file_is_refused(drives, tmp_path, capsys):
                               str(tmp_path / 'out')])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and 'vehicle.sprung_mass' in err[0]
-
-
-def test_find_drives_ids_nesting_and_output_exclusion(tmp_path):
-    def bag(path):
-        path.mkdir(parents=True)
-        (path / 'metadata.yaml').write_text('x: 1\n')
-        (path / 'inner').mkdir()
-        (path / 'inner' / 'metadata.yaml').write_text('x: 1\n')   # inside a bag: not a drive
-    bag(tmp_path / 'in' / 'truck1' / 'mon')
-    bag(tmp_path / 'in' / 'truck2' / 'tue')
-    bag(tmp_path / 'in' / 'out' / 'drives' / 'old' / 'bag')         # the output folder
-    bag(tmp_path / 'single')
-    found = find_drives([tmp_path / 'in', tmp_path / 'single'], exclude=[tmp_path / 'in' / 'out'])
-    assert [d.drive_id for d in found] == ['single', 'truck1/mon', 'truck2/tue']
-    assert found[0].path == (tmp_path / 'single').resolve()
-    with pytest.raises(FleetError, match='twice'):
-        find_drives([tmp_path / 'single', tmp_path / 'single'])
-    (tmp_path / 'empty').mkdir()
-    with pytest.raises(FleetError, match='no bag folder'):
-        find_drives([tmp_path / 'empty'])
-    bag(tmp_path / 'in2' / 'a')
-    bag(tmp_path / 'in3' / 'a' / 'b')          # id 'a/b' below id 'a': outputs would nest
-    with pytest.raises(FleetError, match='nest'):
-        find_drives([tmp_path / 'in2', tmp_path / 'in3'])
-
-
-def test_input_hash_and_key_see_every_change(tmp_path):
-    bag = tmp_path / 'bag'
-    bag.mkdir()
-    (bag / 'metadata.yaml').write_text('a: 1\n')
-    (bag / 'bag_0.mcap').write_bytes(bytes(range(256)) * 10)
-    h0 = estimate_fleet.input_sha256(bag)
-    assert estimate_fleet.input_sha256(bag) == h0
-    data = bytearray((bag / 'bag_0.mcap').read_bytes())
-    data[1000] ^= 1
-    (bag / 'bag_0.mcap').write_bytes(bytes(data))
-    assert estimate_fleet.input_sha256(bag) != h0
-    s = {'mode': 'online', 'segment_length_m': 100.0, 'figures': True,
-         'parameters': {'vehicle.sprung_mass': 5000.0}}
-    k = estimate_fleet.drive_key(h0, s)
-    assert estimate_fleet.drive_key(h0, dict(s)) == k
-    for change in ({'mode': 'offline'}, {'segment_length_m': 160.9344}, {'figures': False},
-                   {'parameters': {'vehicle.sprung_mass': 5001.0}}):
-        assert estimate_fleet.drive_key(h0, {**s, **change}) != k
-
-
-def test_segment_lines_pick_the_fixes_inside_each_segment():
-    # 10 m/s for 10 s, estimates at 100 Hz, fixes at 1 Hz along a meridian (made-up positions).
-    stamps = np.arange(0, 1001) * 10_000_000
-    x = 10.0 * stamps * 1e-9
-    fix_ns = np.arange(0, 11) * 1_000_000_000
-    lat = 50.0 + 0.001 * np.arange(11)
-    lon = np.full(11, 8.0)
-    edges = np.array([0.0, 25.0, 60.0, 100.0])
-    start_lat = np.interp(edges[:-1], 10.0 * fix_ns * 1e-9, lat)
-    end_lat = np.interp(edges[1:], 10.0 * fix_ns * 1e-9, lat)
-    lines = segment_lines(edges[:-1], edges[1:], start_lat, np.full(3, 8.0), end_lat,
-                          np.full(3, 8.0), stamps_ns=stamps, distance_m=x,
-                          fix_stamps_ns=fix_ns, fix_latitude_deg=lat, fix_longitude_deg=lon)
-    # Segment 0 (0-25 m = 0-2.5 s): start, fixes at 1 s and 2 s, end.
-    assert [p[1] for p in lines[0]] == pytest.approx([50.0, 50.001, 50.002, 50.0025])
-    assert [p[1] for p in lines[1]] == pytest.approx([50.0025, 50.003, 50.004, 50.005, 50.006])
-    assert [p[1] for p in lines[2]] == pytest.approx([50.006, 50.007, 50.008, 50.009, 50.010])
-    assert all(p[0] == 8.0 for line in lines for p in line)
-    nan = np.full(3, np.nan)
-    none = segment_lines(edges[:-1], edges[1:], nan, nan, nan, nan, stamps_ns=None,
-                         distance_m=None, fix_stamps_ns=None, fix_latitude_deg=None,
-                         fix_longitude_deg=None)
-    assert none == [None, None, None]
-
-
-def test_geojson_without_coordinates_has_null_geometry_and_null_nan():
-    table = {'drive': ['a', 'a'], 'start_m': [0.0, 100.0], 'iri_left_m_per_km': [1.5, np.nan],
-             'lift_offs': [np.int64(2), np.int64(0)]}
-    doc = segments_geojson(table, [[[8.0, 50.0], [8.0, 50.001]], None])
-    text = json.dumps(doc, allow_nan=False)
-    back = json.loads(text)
-    assert back['features'][0]['geometry'] == {'type': 'LineString',
-                                               'coordinates': [[8.0, 50.0], [8.0, 50.001]]}
-    assert back['features'][1]['geometry'] is None
-    assert back['features'][1]['properties'] == {'drive': 'a', 'start_m': 100.0,
-                                                 'iri_left_m_per_km': None, 'lift_offs': 0}

@@ -1,0 +1,46 @@
+"""report.fleet_map: segment polylines from the fixes inside each segment (made-up positions
+along a meridian) and the GeoJSON of segments without coordinates."""
+import json
+
+import numpy as np
+import pytest
+
+from road_force_estimator.report import segment_lines, segments_geojson
+
+
+def test_segment_lines_pick_the_fixes_inside_each_segment():
+    # 10 m/s for 10 s, estimates at 100 Hz, fixes at 1 Hz along a meridian (made-up positions).
+    stamps = np.arange(0, 1001) * 10_000_000
+    x = 10.0 * stamps * 1e-9
+    fix_ns = np.arange(0, 11) * 1_000_000_000
+    lat = 50.0 + 0.001 * np.arange(11)
+    lon = np.full(11, 8.0)
+    edges = np.array([0.0, 25.0, 60.0, 100.0])
+    start_lat = np.interp(edges[:-1], 10.0 * fix_ns * 1e-9, lat)
+    end_lat = np.interp(edges[1:], 10.0 * fix_ns * 1e-9, lat)
+    lines = segment_lines(edges[:-1], edges[1:], start_lat, np.full(3, 8.0), end_lat,
+                          np.full(3, 8.0), stamps_ns=stamps, distance_m=x,
+                          fix_stamps_ns=fix_ns, fix_latitude_deg=lat, fix_longitude_deg=lon)
+    # Segment 0 (0-25 m = 0-2.5 s): start, fixes at 1 s and 2 s, end.
+    assert [p[1] for p in lines[0]] == pytest.approx([50.0, 50.001, 50.002, 50.0025])
+    assert [p[1] for p in lines[1]] == pytest.approx([50.0025, 50.003, 50.004, 50.005, 50.006])
+    assert [p[1] for p in lines[2]] == pytest.approx([50.006, 50.007, 50.008, 50.009, 50.010])
+    assert all(p[0] == 8.0 for line in lines for p in line)
+    nan = np.full(3, np.nan)
+    none = segment_lines(edges[:-1], edges[1:], nan, nan, nan, nan, stamps_ns=None,
+                         distance_m=None, fix_stamps_ns=None, fix_latitude_deg=None,
+                         fix_longitude_deg=None)
+    assert none == [None, None, None]
+
+
+def test_geojson_without_coordinates_has_null_geometry_and_null_nan():
+    table = {'drive': ['a', 'a'], 'start_m': [0.0, 100.0], 'iri_left_m_per_km': [1.5, np.nan],
+             'lift_offs': [np.int64(2), np.int64(0)]}
+    doc = segments_geojson(table, [[[8.0, 50.0], [8.0, 50.001]], None])
+    text = json.dumps(doc, allow_nan=False)
+    back = json.loads(text)
+    assert back['features'][0]['geometry'] == {'type': 'LineString',
+                                               'coordinates': [[8.0, 50.0], [8.0, 50.001]]}
+    assert back['features'][1]['geometry'] is None
+    assert back['features'][1]['properties'] == {'drive': 'a', 'start_m': 100.0,
+                                                 'iri_left_m_per_km': None, 'lift_offs': 0}

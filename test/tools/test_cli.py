@@ -1,0 +1,105 @@
+"""tools.cli: the exit-status wrapper (usage error 2, listed errors their status, --help 0,
+anything else raised), the positive-length check and the shared options."""
+import pytest
+
+from road_force_estimator.tools import cli
+
+
+class InputTrouble(Exception):
+    pass
+
+
+def parser():
+    p = cli.Parser(prog='demo')
+    p.add_argument('value', type=float)
+    cli.add_output(p, 'where')
+    cli.add_mode(p)
+    cli.add_segment_length(p, 'segments')
+    cli.add_force(p, 'replace')
+    cli.add_no_progress(p)
+    return p
+
+
+def run(argv, body, capsys):
+    rc = cli.run_main('demo', parser(), body, argv, {(InputTrouble, OSError): 1})
+    return rc, capsys.readouterr()
+
+
+class TestRunMain:
+    def test_the_body_status_and_the_parsed_options(self, capsys):
+        seen = {}
+
+        def body(args):
+            seen.update(vars(args))
+            return 7
+
+        rc, out = run(['1.5', '-o', 'x', '--force'], body, capsys)
+        assert rc == 7 and out.err == ''
+        assert seen == {'value': 1.5, 'output': 'x', 'mode': 'online', 'segment_length': 100.0,
+                        'force': True, 'no_progress': False}
+
+    def test_a_bad_command_line_is_one_line_and_status_2(self, capsys):
+        rc, out = run(['nan?', '-o', 'x'], lambda args: 0, capsys)
+        assert rc == 2
+        assert out.err.startswith('demo: error: ') and out.err.count('\n') == 1
+        rc, out = run(['1', '-o', 'x', '--mode', 'sideways'], lambda args: 0, capsys)
+        assert rc == 2 and "invalid choice: 'sideways'" in out.err
+
+    def test_a_usage_error_raised_by_the_body(self, capsys):
+        def body(args):
+            cli.check_positive('--segment-length', args.segment_length)
+            return 0
+
+        rc, out = run(['1', '-o', 'x', '--segment-length', 'inf'], body, capsys)
+        assert (rc, out.err) == (2, 'demo: error: --segment-length inf: must be > 0 m\n')
+
+    def test_listed_errors_print_their_first_line(self, capsys):
+        def body(args):
+            raise InputTrouble('first line\nsecond line')
+
+        rc, out = run(['1', '-o', 'x'], body, capsys)
+        assert (rc, out.err) == (1, 'demo: first line\n')
+        rc, out = run(['1', '-o', 'x'], lambda args: (_ for _ in ()).throw(
+            FileNotFoundError(2, 'No such file', 'f.yaml')), capsys)
+        assert rc == 1 and out.err == "demo: [Errno 2] No such file: 'f.yaml'\n"
+
+    def test_the_status_of_the_first_matching_group(self, capsys):
+        def body(args):
+            raise KeyError('k')
+
+        rc = cli.run_main('demo', parser(), body, ['1', '-o', 'x'],
+                          {(ValueError,): 1, (LookupError,): 2})
+        assert rc == 2 and capsys.readouterr().err == "demo: 'k'\n"
+
+    def test_help_exits_0_and_other_errors_propagate(self, capsys):
+        rc, out = run(['--help'], lambda args: 1, capsys)
+        assert rc == 0 and 'usage: demo' in out.out
+        with pytest.raises(ZeroDivisionError):
+            run(['1', '-o', 'x'], lambda args: 1 / 0, capsys)
+
+
+class TestChecks:
+    def test_check_positive(self):
+        cli.check_positive('--length', None)
+        cli.check_positive('--length', 0.1)
+        cli.check_positive('--length', float('inf'), finite=False)
+        for bad in (0.0, -1.0, float('nan'), float('inf')):
+            with pytest.raises(cli.UsageError, match=r'^--length .*: must be > 0 m$'):
+                cli.check_positive('--length', bad)
+        with pytest.raises(cli.UsageError, match='nan'):
+            cli.check_positive('--length', float('nan'), finite=False)
+
+    def test_one_line(self):
+        assert cli.one_line(ValueError('  a\nb')) == 'a'
+        assert cli.one_line(ValueError()) == 'ValueError'
+
+    def test_estimator_parameters_default_and_from_a_file(self, tmp_path):
+        from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+        vehicle, observer = cli.load_estimator_parameters(None, ('observer',))
+        assert vehicle == VehicleParameters() and observer == ObserverParameters()
+        f = tmp_path / 'p.yaml'
+        f.write_text('/**:\n  ros__parameters:\n    observer.lipschitz_deflection: 2500.0\n')
+        _, observer = cli.load_estimator_parameters(str(f), ('observer',))
+        assert observer.lipschitz_deflection_mps3 == 2500.0
+        with pytest.raises(ValueError, match='missing.yaml'):
+            cli.load_estimator_parameters(str(tmp_path / 'missing.yaml'), ('observer',))
