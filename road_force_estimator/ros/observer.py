@@ -28,7 +28,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from road_force_estimator.estimation.estimator import Estimator
+from road_force_estimator.estimation import Estimator
 from road_force_estimator.ros.messages import (
     SIDES, WHEEL_FRAMES, MessageRejected, diagnostic_status, float64_msg, read_deflections,
     read_twist, reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)

@@ -151,7 +151,7 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
     -------
     EstimateArrays
     """
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import estimate_batch
 
     with _progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
         return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
@@ -263,7 +263,7 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
     from road_force_estimator.bagio import bag_io
     from road_force_estimator.report import report
-    from road_force_estimator.estimation.offline import estimate_recording
+    from road_force_estimator.estimation import estimate_recording
 
     stages.next('reading the bag')
     try:

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from road_force_estimator.core import metrics
-from road_force_estimator.estimation.estimator import (
-    BODY_FILTER_ORDER, GAP_THRESHOLD_S, PAIR_FIELDS, SCALAR_FIELDS, Estimate, Estimator,
-    estimate_batch)
+from road_force_estimator.estimation import (
+    GAP_THRESHOLD_S, PAIR_FIELDS, SCALAR_FIELDS, Estimate, Estimator, estimate_batch)
+from road_force_estimator.estimation.body_heave import ORDER as BODY_FILTER_ORDER
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import add_event, flat_profile, iso8608_profile

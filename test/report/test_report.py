@@ -15,7 +15,7 @@ import pytest
 
 from road_force_estimator.report import report
 from road_force_estimator.bagio.bag_io import Fixes, GroundTruth
-from road_force_estimator.estimation.estimator import EstimateArrays, EstimatorStatus
+from road_force_estimator.estimation import EstimateArrays, EstimatorStatus
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile, iso8608_profile
 from road_force_estimator.core.segments import SEGMENT_COLUMNS
