@@ -7,7 +7,7 @@ For every scenario of :mod:`bench.scenarios` (or the ones named) it runs, on the
 - ours (the package defaults, never tuned per drive): ``ours-0`` (``estimate_batch``, latency
   0), ``ours-0-no-smo`` (the ablation: ``observer.sliding_mode_gain = 0``), ``ours-lag5`` and
   ``ours-lag10`` (``observer.latency`` = 5 / 10 ms, estimates placed on their samples' rows),
-  ``ours-offline`` (:func:`estimation.model_observer.smooth`), ``ours-chain`` (the
+  ``ours-offline`` (:func:`estimation.smooth`), ``ours-chain`` (the
   differentiator chain, implicit scheme);
 - the peers of :mod:`bench.peers` with the settings tuned by :mod:`bench.tune`
   (``bench/tuned_peers.json``, the noise level nearest the scenario's): ``kf-model``,
@@ -217,7 +217,7 @@ TUNE_BOUNDS = {'force_psd': (1e-8, 1e8), 'corr': (0.1, 50.0), 'gd_factor': (0.01
 
 
 def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
-    """Tune ``model_observer``'s SCHEDULE_* values per noise level on the tuning drive.
+    """Tune ``estimation.model``'s SCHEDULE_* values per noise level on the tuning drive.
 
     The drive is :data:`bench.scenarios.TUNING` (road seed 1001, noise seed 1002: neither the
     road nor the noise of a scored scenario), simulated once per noise level; the objective is

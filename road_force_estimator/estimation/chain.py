@@ -24,11 +24,16 @@ import math
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation import body_heave
 from road_force_estimator.estimation.differentiator import step_function
+from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
 
 __all__ = ['ChainCore', 'settling_time_s']
 
 _ACCEL_SCALE = (100.0, 10.0)
+# The slots of the finiteness check (plain ints: the per-sample path indexes them).
+_X, _FN1, _FN2, _LTR, _RES, _ZS, _DZS, _DZU1 = (int(c) for c in (
+    Column.DISTANCE, Column.FN1, Column.FN2, Column.LTR, Column.RESIDUAL, Column.ZS,
+    Column.DZS, Column.DZU1))
 
 
 def settling_time_s(lipschitz_deflection: float, lipschitz_roll: float, dt_s: float) -> float:
@@ -196,8 +201,8 @@ class ChainCore:
         row = self._rows.row(x, a0, b0, a1, b1, a2, b2, c0, c1_, c2_, h[-2], h[-1], ddzs,
                              ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv)
         # Every output depends on one of these; nothing non-finite leaves.
-        if not math.isfinite(row[0] + row[23] + row[24] + row[25] + row[26] + row[10]
-                             + row[11] + w1 + w2 + row[15]):
+        if not math.isfinite(row[_X] + row[_FN1] + row[_FN2] + row[_LTR] + row[_RES]
+                             + row[_ZS] + row[_DZS] + w1 + w2 + row[_DZU1]):
             return None
         self._d = (a0, a1, a2, q1, b0, b1, b2, q2, c0, c1_, c2_, phi)
         self._h = h

@@ -105,7 +105,7 @@ class Gains:
         """M (15, 27) with ``[x+_{k+1}; nu_{k+1}] = M row_k`` for a step of dt (s); with no
         lag (36, 27): then also the linear outputs ``H x+_{k+1}``.
 
-        ``row_k = [rho_k, x+_k, nu_k, y_{k+1}]`` (see :class:`ModelCore`); with
+        ``row_k = [rho_k, x+_k, nu_k, y_{k+1}]`` (see :class:`.ModelCore`); with
         ``x_k = x+_k + T rho_k``: ``x+_{k+1} = (I - K C) A(dt) x_k + K y_{k+1}`` and
         ``nu_{k+1} = y_{k+1} - C A(dt) x_k``. Cached per 0.1 % of dt.
         """

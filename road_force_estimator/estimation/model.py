@@ -13,7 +13,7 @@ injection (the steady-state Kalman gain), and runs the Levant differentiator
 injection leaves: its estimates of that error and of its rate and acceleration are an
 equivalent output injection (an unknown tire force and roll moment), weighted by the measured
 noise level. Loads, road and LTR come from the states; the same observer gives a fixed-lag
-(``observer.latency``) and an offline (:func:`smooth`) estimate.
+(``observer.latency``) and an offline (:func:`.smoother.smooth`) estimate.
 
 State (SI; :class:`State`; index 1/2 of MODEL.md = left/right)::
 
@@ -52,7 +52,7 @@ Gains: derived from the data, never tuned per drive
 ---------------------------------------------------
 The model is discretized exactly at the sample step (matrix exponential, Van Loan for the
 process noise); the gain is the steady-state Kalman gain of the discrete algebraic Riccati
-equation (structured doubling, :func:`solve_dare`; where double precision cannot give a
+equation (structured doubling, :func:`.riccati.solve_dare`; where double precision cannot give a
 stabilising solution the noise is raised threefold until it can). Gains depend on the
 operating point ``(dt, v, sigma_q, sigma_phi, Gd)``; each is tracked on a logarithmic grid
 with hysteresis, which only decides *when* to design again: a design (a few ms) uses the
@@ -61,21 +61,21 @@ estimates of that moment and is cached, never per sample.
 - ``dt``: each step's own transition matrix (cached per 0.1 % of dt) with the gain of its
   10 % level (a regular stream: one design at its exact step; irregular streams a few).
 - ``v``: the speed input (10 % levels, floored at :data:`SPEED_FLOOR_MPS`).
-- Sensor noise ``sigma``: ``observer.noise.deflection`` / ``observer.noise.roll`` when > 0,
-  else estimated online per block of :data:`BLOCK_SAMPLES` samples (the very first block:
-  :data:`FIRST_BLOCK_SAMPLES`) from the median absolute sixth (divided) difference of each
-  channel (:func:`noise_std`): white noise has ``Var(Delta^6 y) = 924 sigma^2`` while a
-  road-excited signal's sixth difference at the rates of interest is far below (measured:
-  ~2 um of apparent noise at 200 Hz on ISO class C without noise, ~1 nm at 1 kHz), and the
-  median makes it blind to events (pothole, step). The estimate is the median of the last
-  :data:`HISTORY_BLOCKS` blocks, the larger of the two deflections'; a floor of
-  :data:`NOISE_FLOOR_M` (roll: that over s) keeps noise-free data well posed. After the very
+- Sensor noise ``sigma``: ``observer.noise.deflection`` / ``observer.noise.roll`` when > 0, else
+  estimated online per block of :data:`.model_core.BLOCK_SAMPLES` samples (the very first block:
+  :data:`.model_core.FIRST_BLOCK_SAMPLES`) from the median absolute sixth (divided) difference of
+  each channel (:func:`.noise.noise_std`): white noise has ``Var(Delta^6 y) = 924 sigma^2`` while a
+  road-excited signal's sixth difference at the rates of interest is far below (measured: ~2 um of
+  apparent noise at 200 Hz on ISO class C without noise, ~1 nm at 1 kHz), and the median makes it
+  blind to events (pothole, step). The estimate is the median of the last
+  :data:`.schedule.HISTORY_BLOCKS` blocks, the larger of the two deflections'; a floor of
+  :data:`.gains.NOISE_FLOOR_M` (roll: that over s) keeps noise-free data well posed. After the very
   first block the run so far is filtered again with the new gains (no switching transient).
 - Road roughness ``Gd(n0)``: ``observer.road_roughness`` when > 0, else estimated per block
   by moment matching: the robust (MAD) variance of the first difference of the deflections,
   minus the noise's ``2 sigma^2``, divided by the variance the model predicts per unit ``Gd``
   at that speed and step (stationary discrete Lyapunov solution, road velocity correlation
-  :data:`ROUGHNESS_CORRELATION_M`); median of the last :data:`ROUGHNESS_HISTORY_BLOCKS`
+  :data:`ROUGHNESS_CORRELATION_M`); median of the last :data:`.schedule.ROUGHNESS_HISTORY_BLOCKS`
   blocks, floored at :data:`MIN_ROAD_GD_M3`. (The innovations cannot tell the roughness at
   high rates: the one-step prediction error is far below the sensor noise.)
 - What the data cannot tell, the schedule on the noise level (:func:`scheduled`) sets: the
@@ -106,7 +106,7 @@ __all__ = [
 
 #: Reference spatial frequency of ISO 8608 (cycles/m).
 ISO_N0 = 0.1
-#: Defaults of :func:`continuous_model` / :func:`design` (the observer uses the schedule):
+#: Defaults of :func:`continuous_model` / :func:`.gains.design` (the observer uses the schedule):
 #: generalised force noise density on each equation of motion (N^2 s; roll: times s^2) and
 #: random-walk density of the unknown roll moment ((N m)^2 / s).
 FORCE_PSD = 1.0

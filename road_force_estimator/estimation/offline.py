@@ -22,17 +22,19 @@ and replaces its two causal parts by zero-phase ones:
    ``|H|^2 / s^2`` with ``H`` a Butterworth high-pass (order
    :data:`~.body_heave.ZERO_PHASE_ORDER`) at ``w_c = 2 pi v / lambda_c`` (``lambda_c`` =
    ``observer.profile_cutoff_wavelength``, ``v`` the run's median speed, floored at
-   :data:`~.estimator.SPEED_FLOOR_MPS`), run forward and backward
+   :data:`~.body_heave.SPEED_FLOOR_MPS`), run forward and backward
    (:func:`~.body_heave.zero_phase`): no phase error, and at 30 m wavelength with
    ``lambda_c`` = 100 m ``|H|^2`` = 0.99994. ``dz_s`` is its central difference.
 
-Everything else (suspension and tire forces, wheel accelerations, loads, wheel heaves, the road
-with tire damping, distance, LTR, residual, lift-off) is the estimator's chain, vectorised.
+Everything else is the estimator's chain, vectorised: suspension and tire forces, wheel
+accelerations and the tire deflection with tire damping here, then the reconstruction of
+:mod:`.reconstruction` (wheel heaves, road, distance, loads, LTR, residual, lift-off).
 
-Robustness is the estimator's: the same rejections (non-finite, impossible values, duplicate or
-backward stamps; counted in :class:`~.estimator.EstimatorStatus`), the same gap rule (a step
-longer than ``max(gap_threshold_s, 10 typical steps)`` starts a new run; each run is estimated
-on its own and ``resets`` / ``gaps`` count the restarts), distance continued across gaps.
+Robustness is the estimator's (:func:`.acceptance.accept_arrays`): the same rejections
+(non-finite, impossible values, duplicate or backward stamps; counted in
+:class:`~.outputs.EstimatorStatus`), the same gap rule (a step longer than
+``max(gap_threshold_s, 10 typical steps)`` starts a new run; each run is estimated on its own
+and ``resets`` / ``gaps`` count the restarts), distance continued across gaps.
 Unevenly sampled runs are resampled on their median step, estimated, and interpolated back.
 ``converged`` is False within :func:`edge_time_s` of each run's start and end, where the
 zero-phase filters lack data on one side.
@@ -114,7 +116,7 @@ class RunInfo:
 
 @dataclass
 class OfflineEstimateArrays(EstimateArrays):
-    """:class:`~.estimator.EstimateArrays` plus what the offline mode chose.
+    """:class:`~.outputs.EstimateArrays` plus what the offline mode chose.
 
     ``noise_std`` (q_1 (m), q_2 (m), phi (rad)): sensor noise estimated from the data;
     ``cutoff_hz`` the low-pass cut-offs (q_1, q_2, phi) in Hz (``inf`` = none); ``runs`` one
