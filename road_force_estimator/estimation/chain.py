@@ -25,7 +25,7 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation import body_heave
 from road_force_estimator.estimation.differentiator import step_function
 from road_force_estimator.estimation.outputs import Column
-from road_force_estimator.estimation.reconstruction import Reconstruction
+from road_force_estimator.estimation.reconstruction import Reconstruction, tire_decay
 
 __all__ = ['ChainCore', 'settling_time_s']
 
@@ -191,8 +191,7 @@ class ChainCore:
         else:
             cache = self._decay
             if cache[0] != dt:
-                cache = (dt, math.exp(-dt * kt1 / ct1) if ct1 > 0.0 else 0.0,
-                         math.exp(-dt * kt2 / ct2) if ct2 > 0.0 else 0.0)
+                cache = (dt, tire_decay(dt, kt1, ct1), tire_decay(dt, kt2, ct2))
                 self._decay = cache
             e1 = cache[1]
             e2 = cache[2]

@@ -95,6 +95,9 @@ import math
 import numpy as np
 
 from road_force_estimator.core.parameters import VehicleParameters
+# The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
+# part of the estimate.
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 
 __all__ = [
     'State', 'NX', 'NY', 'OUTPUTS', 'NO', 'ISO_N0', 'SPEED_FLOOR_MPS', 'FORCE_PSD',
@@ -144,8 +147,6 @@ DEFAULT_ROAD_GD_M3 = 256e-6
 #: Floor of the estimated roughness (m^3): a quarter of ISO class A's Gd(n0), so that a
 #: glass-smooth stretch does not make the observer too slow for the next bump.
 MIN_ROAD_GD_M3 = 4e-6
-#: Speed floor of the model (m/s).
-SPEED_FLOOR_MPS = 1.0
 
 
 class State(enum.IntEnum):

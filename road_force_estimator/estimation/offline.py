@@ -69,7 +69,8 @@ from road_force_estimator.estimation.acceptance import (
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
-from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
+from road_force_estimator.estimation.reconstruction import (
+    Reconstruction, distance_m, tire_deflections)
 from road_force_estimator.estimation.smoother import smooth
 
 __all__ = [
@@ -319,27 +320,6 @@ def _estimate_run(t, q, phi, v, vehicle: VehicleParameters, observer: ObserverPa
     return out
 
 
-def _tire_deflection(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
-    """Step 6: ``w = u - z_u`` from ``ct dw + kt w = dF`` (exact, dF held), per side."""
-    w = df / kt
-    m = t.size
-    for i in (0, 1):
-        if ct[i] > 0.0 and m > 1:
-            steps = np.diff(t)
-            e = np.exp(-steps * kt[i] / ct[i])
-            wi = np.empty(m)
-            wi[0] = df[0, i] / kt[i]
-            target = df[1:, i] / kt[i]
-            if np.allclose(e, e[0]):
-                wi[1:], _ = signal.lfilter([1.0 - e[0]], [1.0, -e[0]], target,
-                                           zi=[e[0] * wi[0]])
-            else:
-                for j in range(1, m):
-                    wi[j] = e[j - 1] * wi[j - 1] + (1.0 - e[j - 1]) * target[j - 1]
-            w[:, i] = wi
-    return w
-
-
 def _run_columns(r: dict, t: np.ndarray, vehicle: VehicleParameters, rec: Reconstruction,
                  out: list) -> None:
     """Steps 1-3 and 6 of one run from its smoothed channels ``r`` (:func:`_estimate_run`),
@@ -358,7 +338,7 @@ def _run_columns(r: dict, t: np.ndarray, vehicle: VehicleParameters, rec: Recons
     rot = s * (np.cos(ph) * ddph - np.sin(ph) * dph * dph)
     ddzu = r['body_accel_mps2'][:, None] + np.column_stack([rot, -rot]) - ddq
     df = mu * ddzu + fb
-    w = _tire_deflection(df, t, kt, ct)
+    w = tire_deflections(df, t, kt, ct)
 
     def pair(a):
         return a[:, 0], a[:, 1]

@@ -7,7 +7,10 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
 (:meth:`Reconstruction.columns`):
 
 5. ``z_u1 = z_s + s sin(phi) - q_1``, ``z_u2 = z_s - s sin(phi) - q_2``, their rates
-   ``dz_s +- s cos(phi) dphi - dq_i``; the road ``u_i = z_ui + w_i``.
+   ``dz_s +- s cos(phi) dphi - dq_i``.
+6. The road ``u_i = z_ui + w_i``; the chains' tire deflection from ``kt_i w_i + ct_i dw_i =
+   dF_i``: ``dF_i / kt_i`` through the first-order lag ``ct_i / kt_i`` (:func:`tire_decay`,
+   :func:`tire_deflections`; the model observer has ``w_i`` as a state).
 7. Distance ``x = integral of v dt`` (trapezoidal, :func:`distance_m`), continued across gaps.
 8. ``F_n,i = F_c,i + dF_i`` (not clipped at 0, so that the total-load identity holds on the
    estimates); ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left) of the loads
@@ -27,7 +30,8 @@ from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.estimation.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.estimation.outputs import Column
 
-__all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distance_m']
+__all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distance_m',
+           'tire_decay', 'tire_deflections']
 
 #: Lift-off flag when the estimated load is at most this fraction of the static load.
 LIFT_OFF_FRACTION = 0.05
@@ -42,6 +46,36 @@ def distance_m(steps_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
     if speed_mps.size > 1:
         out[1:] = np.cumsum(0.5 * (speed_mps[1:] + speed_mps[:-1]) * steps_s)
     return out
+
+
+def tire_decay(dt: float, kt: float, ct: float) -> float:
+    """Step 6 per sample: the factor ``exp(-dt kt / ct)`` of the tire lag over a step dt (s)
+    (0 without tire damping): ``w_k = e w_(k-1) + (1 - e) dF_k / kt``."""
+    return math.exp(-dt * kt / ct) if ct > 0.0 else 0.0
+
+
+def tire_deflections(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
+    """Step 6 over arrays: ``w = u - z_u`` (m, (m, 2)) from ``ct dw + kt w = dF`` (exact, dF
+    held), from the dynamic tire forces df (N, (m, 2)) at the times t (s); the first sample
+    at its steady state ``dF / kt``."""
+    from scipy.signal import lfilter
+
+    w = df / kt
+    m = t.size
+    for i in (0, 1):
+        if ct[i] > 0.0 and m > 1:
+            steps = np.diff(t)
+            e = np.exp(-steps * kt[i] / ct[i])
+            wi = np.empty(m)
+            wi[0] = df[0, i] / kt[i]
+            target = df[1:, i] / kt[i]
+            if np.allclose(e, e[0]):
+                wi[1:], _ = lfilter([1.0 - e[0]], [1.0, -e[0]], target, zi=[e[0] * wi[0]])
+            else:
+                for j in range(1, m):
+                    wi[j] = e[j - 1] * wi[j - 1] + (1.0 - e[j - 1]) * target[j - 1]
+            w[:, i] = wi
+    return w
 
 
 class Reconstruction:

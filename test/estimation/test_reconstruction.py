@@ -7,7 +7,8 @@ import numpy as np
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.estimation.outputs import Column, field_columns
 from road_force_estimator.estimation.reconstruction import (
-    LIFT_OFF_FRACTION, LTR_FLOOR_FRACTION, Reconstruction, distance_m)
+    LIFT_OFF_FRACTION, LTR_FLOOR_FRACTION, Reconstruction, distance_m, tire_decay,
+    tire_deflections)
 
 VEHICLE = VehicleParameters()
 
@@ -94,3 +95,19 @@ def test_distance_is_the_trapezoidal_sum():
     v = np.array([10.0, 12.0, 12.0, 8.0])
     np.testing.assert_allclose(distance_m(steps, v), [0.0, 1.1, 3.5, 4.5], rtol=1e-15)
     assert distance_m(np.zeros(0), np.array([3.0])).tolist() == [0.0]
+
+
+def test_tire_lag_per_sample_and_over_arrays():
+    rng = np.random.default_rng(4)
+    kt = np.array(VEHICLE.tire_stiffness_npm)
+    ct = np.array([1500.0, 0.0])
+    for t in (np.arange(300) * 1e-3, np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 300))):
+        df = 1e4 * rng.standard_normal((300, 2))
+        w = tire_deflections(df, t, kt, ct)
+        ref = [df[0, 0] / kt[0]]
+        for k in range(1, 300):
+            e = tire_decay(t[k] - t[k - 1], kt[0], ct[0])
+            ref.append(e * ref[-1] + (1.0 - e) * df[k, 0] / kt[0])
+        np.testing.assert_allclose(w[:, 0], ref, rtol=1e-9, atol=1e-15)
+        np.testing.assert_array_equal(w[:, 1], df[:, 1] / kt[1])   # no damping: dF / kt
+    assert tire_decay(1e-3, 1e6, 0.0) == 0.0
