@@ -22,7 +22,7 @@ from collections import deque
 import math
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import body_heave
+import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.differentiator import step_function
 from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction, tire_decay

@@ -40,7 +40,7 @@ import math
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import body_heave
+import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.differentiator import implicit_step
 from road_force_estimator.estimation.gains import (
     ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)

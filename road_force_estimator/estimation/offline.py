@@ -63,7 +63,7 @@ import numpy as np
 from scipy import signal
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import body_heave
+import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, check_gap_threshold, output_stamps)
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import body_heave
+import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
