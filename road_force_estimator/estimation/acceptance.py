@@ -77,8 +77,10 @@ class SampleGate:
         self.dt_typ = 0.0
 
     def check(self, stamp_ns, q1, q2, phi, v):
-        """``(stamp, q1, q2, phi, v, dt, gap)`` of a good sample (``dt`` 0 s for the first;
-        ``gap``: it starts a new run), or None for a rejected one (counted)."""
+        """``(stamp, q1, q2, phi, v, dt, restart, dt_typ)`` of a good sample, or None for a
+        rejected one (counted). ``dt`` is 0 s for the first; ``restart``: it starts a new run
+        (the first, or after a gap); ``dt_typ`` the typical step (s) once it is used (0 at
+        a restart)."""
         st = self.status
         try:
             stamp = int(stamp_ns)
@@ -100,7 +102,7 @@ class SampleGate:
                 st.rejected_nonfinite += 1
             return None
         if not self.started:
-            return stamp, q1, q2, phi, v, 0.0, True
+            return stamp, q1, q2, phi, v, 0.0, True, 0.0
         dt_ns = stamp - self.stamp
         if dt_ns <= 0:
             st.rejected_time += 1
@@ -109,15 +111,10 @@ class SampleGate:
         if dt > self.gap_threshold_s and dt > GAP_PERIODS * self.dt_typ:
             st.gaps += 1
             st.resets += 1
-            return stamp, q1, q2, phi, v, dt, True
-        return stamp, q1, q2, phi, v, dt, False
-
-    def typical_step(self, dt: float, restart: bool) -> float:
-        """The typical step (s) after a step of dt (s) (a restart: 0, none yet)."""
-        if restart:
-            return 0.0
-        dt_typ = self.dt_typ
-        return dt if dt_typ == 0.0 else dt_typ + TYPICAL_STEP_WEIGHT * (dt - dt_typ)
+            return stamp, q1, q2, phi, v, dt, True, 0.0
+        typ = self.dt_typ
+        return (stamp, q1, q2, phi, v, dt, False,
+                dt if typ == 0.0 else typ + TYPICAL_STEP_WEIGHT * (dt - typ))
 
     def commit(self, stamp: int, dt_typ: float) -> None:
         """Record an accepted sample and the typical step after it."""

@@ -198,26 +198,26 @@ class Estimator:
         sample = self._gate.check(stamp_ns, q1, q2, phi, v)
         if sample is None:
             return False
-        stamp, q1, q2, phi, v, dt, restart = sample
+        stamp, q1, q2, phi, v, dt, restart, dt_typ = sample
         if restart:
-            return self._advance(stamp, q1, q2, phi, v, dt, True)
+            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
         if self._flushed:
             self._flushed = False
             self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True)
-        if not self._advance(stamp, q1, q2, phi, v, dt, False):
+            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
+        if not self._advance(stamp, q1, q2, phi, v, dt, False, dt_typ):
             self._status.numerical_resets += 1
             self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True)
+            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
         return True
 
     def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
-                 restart: bool) -> bool:
-        """One step of the core (or a (re)start); False (state untouched) if non-finite."""
+                 restart: bool, dt_typ: float) -> bool:
+        """One step of the core (or a (re)start); False (state untouched) if non-finite.
+        ``dt_typ``: the typical step (s) once this sample is used."""
         gate = self._gate
         x = self._x + 0.5 * (self._v + v) * dt if gate.started else 0.0
         t_run = 0.0 if restart else self._t_run + dt
-        dt_typ = gate.typical_step(dt, restart)
         if not self.core.step(stamp, q1, q2, phi, v, dt, restart, x, t_run, dt_typ):
             return False
         gate.commit(stamp, dt_typ)

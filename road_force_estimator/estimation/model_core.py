@@ -186,7 +186,9 @@ class ModelCore:
     def converged(self) -> bool:
         """Whether the estimate counts as converged: the noise and roughness are known and
         the settling time has passed since the (re)start or the last change of their levels."""
-        return self._t - self._t_retuned >= self._settle and self.schedule.estimated
+        sched = self.schedule
+        return self._t - self._t_retuned >= self._settle and (sched.blocks > 0
+                                                             or sched.all_fixed)
 
     def _design(self, dt: float) -> Gains:
         """The gains of the current levels (:meth:`.GainSchedule.design`) and what the
