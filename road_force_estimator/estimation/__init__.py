@@ -8,7 +8,7 @@ zero-phase chain :func:`estimate_offline`. Results: :class:`Estimate`, :class:`E
 """
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, batch_inputs
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
-from road_force_estimator.estimation.cores import CORES
+from road_force_estimator.estimation.cores import CORES, Core
 from road_force_estimator.estimation.differentiator import SCHEMES
 from road_force_estimator.estimation.estimator import PROGRESS_BLOCK, Estimator, estimate_batch
 from road_force_estimator.estimation.offline import (
@@ -22,7 +22,7 @@ from road_force_estimator.estimation.smoother import smooth
 __all__ = [
     'Estimator', 'estimate_batch', 'estimate_recording', 'estimate_offline', 'smooth',
     'Estimate', 'EstimateArrays', 'OfflineEstimateArrays', 'RunInfo', 'EstimatorStatus',
-    'Column', 'FIELD_COLUMNS', 'PAIR_FIELDS', 'SCALAR_FIELDS', 'CORES', 'SCHEMES',
+    'Column', 'FIELD_COLUMNS', 'PAIR_FIELDS', 'SCALAR_FIELDS', 'CORES', 'Core', 'SCHEMES',
     'GAP_THRESHOLD_S', 'SPEED_FLOOR_MPS', 'LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION',
     'PROGRESS_BLOCK', 'batch_inputs',
 ]

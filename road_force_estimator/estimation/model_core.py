@@ -123,7 +123,6 @@ class ModelCore:
         self.lag = 0
         self._gamma = 0.0
         self._m_dt = -1.0
-        sched.stale = True
         self._settle = math.inf
         self._hstate = body_heave.start(0.0)
         self._buf = np.zeros((0, _ROW))
@@ -146,14 +145,17 @@ class ModelCore:
 
     @property
     def noise_deflection_m(self) -> float:
+        """Deflection noise std in use (m), estimated or set."""
         return self.schedule.noise_deflection_m
 
     @property
     def noise_roll_rad(self) -> float:
+        """Roll noise std in use (rad)."""
         return self.schedule.noise_roll_rad
 
     @property
     def road_gd_m3(self) -> float:
+        """ISO 8608 ``Gd(n0)`` in use (m^3)."""
         return self.schedule.road_gd_m3
 
     @property

@@ -2,7 +2,7 @@
 import pytest
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import CORES, SCHEMES, Estimator
+from road_force_estimator.estimation import CORES, SCHEMES, Core, Estimator
 from road_force_estimator.estimation.chain import ChainCore, settling_time_s
 from road_force_estimator.estimation.model_core import ModelCore
 
@@ -20,6 +20,8 @@ def test_estimator_uses_the_registered_core(method):
     assert isinstance(core, CORES[method])
     for name in ('reset', 'step', 'finish', 'fill_status', 'settling_time_s'):
         assert callable(getattr(core, name))
+    for name in Core.__annotations__:
+        assert hasattr(core, name), name
     assert est.update(0, (0.01, 0.0), 0.0, 10.0) is not None
     assert est.update(1_000_000, (0.01, 0.0), 0.0, 10.0) is not None
     assert not core.ready          # both estimates taken
