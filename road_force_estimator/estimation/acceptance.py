@@ -76,6 +76,15 @@ class SampleGate:
         self.stamp = 0
         self.dt_typ = 0.0
 
+    def check_pair(self, q_m):
+        """``(q1, q2)`` of a deflection pair, or None (counted as malformed) if it is none."""
+        try:
+            q1, q2 = q_m
+        except (TypeError, ValueError):
+            self.status.rejected_nonfinite += 1
+            return None
+        return q1, q2
+
     def check(self, stamp_ns, q1, q2, phi, v):
         """``(stamp, q1, q2, phi, v, dt, restart, dt_typ)`` of a good sample, or None for a
         rejected one (counted). ``dt`` is 0 s for the first; ``restart``: it starts a new run

@@ -156,12 +156,10 @@ class Estimator:
         speed_mps : float
             Vehicle speed (m/s).
         """
-        try:
-            q1, q2 = q_m
-        except (TypeError, ValueError):
-            self._status.rejected_nonfinite += 1   # malformed: not a pair
+        pair = self._gate.check_pair(q_m)
+        if pair is None or not self._process(stamp_ns, pair[0], pair[1], roll_rad, speed_mps):
             return None
-        if not self._process(stamp_ns, q1, q2, roll_rad, speed_mps) or not self._ready:
+        if not self._ready:
             return None
         stamp, row = self._ready.popleft()
         est = estimate_from_row(stamp, row)
