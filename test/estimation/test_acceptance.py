@@ -1,12 +1,13 @@
-"""The rejection and gap rules (estimation/acceptance.py): over arrays exactly as per sample.
-"""
+"""The rejection and gap rules (estimation/acceptance.py): one sample at a time, and over
+arrays exactly as per sample."""
+import math
 
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters
-from model_observer_data import (VEHICLE)
-from road_force_estimator.estimation import Estimator
-from road_force_estimator.estimation.acceptance import accept_arrays
+from road_force_estimator.estimation import Estimator, EstimatorStatus
+from model_observer_data import VEHICLE
+from road_force_estimator.estimation.acceptance import SampleGate, accept_arrays
 
 
 class TestAcceptance:
@@ -39,3 +40,24 @@ class TestAcceptance:
             assert getattr(est.status, name) == value, name
         assert counts['gaps'] > 20 and counts['rejected_time'] == 3
 
+
+
+class TestSampleGate:
+    def test_rules_one_sample_at_a_time(self):
+        status = EstimatorStatus()
+        gate = SampleGate(0.1, status)
+        assert gate.check_pair((1.0, 2.0, 3.0)) is None and status.rejected_nonfinite == 1
+        assert gate.check(0, 0.0, 0.0, 0.0, 10.0) == (0, 0.0, 0.0, 0.0, 10.0, 0.0, True, 0.0)
+        gate.commit(0, 0.0)
+        sample = gate.check(1_000_000, 0.0, 0.0, 0.0, 10.0)
+        assert sample[5:] == (1e-3, False, 1e-3)           # the first step taken as it is
+        gate.commit(1_000_000, sample[7])
+        assert gate.check(2_000_000, 0.0, 0.0, 0.0, 10.0)[7] == 1e-3
+        assert gate.check(1_000_000, 0.0, 0.0, 0.0, 10.0) is None     # not later
+        assert gate.check(2_000_000, 1.5, 0.0, 0.0, 10.0) is None     # |q| > 1 m
+        assert gate.check(2_000_000, math.nan, 0.0, 0.0, 10.0) is None
+        counts = (status.rejected_time, status.rejected_range, status.rejected_nonfinite)
+        assert counts == (1, 1, 2)
+        # a step of 0.2 s > max(0.1 s, 10 x 1 ms): a gap, the typical step restarts
+        assert gate.check(201_000_000, 0.0, 0.0, 0.0, 10.0)[6:] == (True, 0.0)
+        assert status.gaps == status.resets == 1

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from model_observer_data import (SPEED, VEHICLE)
+from model_observer_data import SPEED, VEHICLE
 from road_force_estimator.estimation.gains import design
 
 

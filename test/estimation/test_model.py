@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from road_force_estimator.core.vehicle_model import VehicleModel
-from model_observer_data import (ASYM, SPEED, VEHICLE)
+from model_observer_data import ASYM, SPEED, VEHICLE
 from road_force_estimator.estimation.model import OUTPUTS, continuous_model
 
 

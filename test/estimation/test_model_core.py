@@ -19,8 +19,7 @@ from scipy import signal
 from road_force_estimator.core import metrics
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.core.vehicle_model import VehicleModel
-from model_observer_data import (ASYM, FIXED, SPEED, VEHICLE, load_pct, rts_reference,
-                                 to_stamps)
+from model_observer_data import ASYM, FIXED, SPEED, VEHICLE, load_pct, rts_reference, to_stamps
 from road_force_estimator.estimation import (PAIR_FIELDS, SCALAR_FIELDS, Estimator, estimate_batch,
                                             smooth)
 from road_force_estimator.estimation.model import OUTPUTS, rest_state

@@ -5,7 +5,7 @@ scipy's ``solve_discrete_are``.
 import numpy as np
 from scipy import integrate, linalg
 
-from model_observer_data import (SPEED, VEHICLE)
+from model_observer_data import SPEED, VEHICLE
 from road_force_estimator.estimation.gains import design
 from road_force_estimator.estimation.model import continuous_model
 from road_force_estimator.estimation.riccati import van_loan

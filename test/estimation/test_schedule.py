@@ -4,7 +4,7 @@
 import pytest
 
 from road_force_estimator.core.parameters import ObserverParameters
-from model_observer_data import (SPEED, VEHICLE, to_stamps)
+from model_observer_data import SPEED, VEHICLE, to_stamps
 from road_force_estimator.estimation import estimate_batch
 
 

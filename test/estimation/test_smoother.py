@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from road_force_estimator.core.parameters import ObserverParameters
-from model_observer_data import (FIXED, SPEED, VEHICLE, rts_reference,
-                                 to_stamps)
+from model_observer_data import FIXED, SPEED, VEHICLE, rts_reference, to_stamps
 from road_force_estimator.estimation import estimate_batch, smooth
 from road_force_estimator.estimation.gains import design
 from road_force_estimator.estimation.model import OUTPUTS, rest_state, scheduled
