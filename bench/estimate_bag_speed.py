@@ -62,7 +62,7 @@ def _worker(bag: Path, tmp: Path, mode: str, repeats: int) -> dict:
     from road_force_estimator import bagio
     from road_force_estimator.tools import estimate_bag
     from road_force_estimator.report import write_report
-    from road_force_estimator.estimation.offline import estimate_recording
+    from road_force_estimator.estimation import estimate_recording
     imports = (time.perf_counter() - t0, time.process_time() - c0)
     runs = []
     for i in range(1 + repeats):

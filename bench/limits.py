@@ -56,8 +56,8 @@ def _drive_with_plant(name: str):
 def design_grid(drive) -> list[tuple[str, float, int]]:
     """Zero-latency load error (%) and gain designs with the default and a finer grid."""
     from bench import scenarios as sc
-    from road_force_estimator.estimation import model_observer as mo
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import schedule as mo
+    from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 
     saved = (mo.NOISE_LEVEL_RATIO, mo.ROUGHNESS_LEVEL_RATIO, mo.SPEED_LEVEL_RATIO)
@@ -79,7 +79,7 @@ def profile_parts(drive, trajectory) -> dict[str, float]:
     """Profile error (%) of the defaults, with the true z_s, with the true w; w error by band."""
     from bench import scenarios as sc
     from road_force_estimator.core import metrics
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 
     est = estimate_batch(drive.stamps_ns, drive.q_m, drive.roll_rad, drive.speed_mps,

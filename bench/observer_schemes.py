@@ -30,8 +30,7 @@ import time
 import numpy as np
 
 from road_force_estimator.core import metrics
-from road_force_estimator.estimation.differentiator import SCHEMES
-from road_force_estimator.estimation.estimator import Estimator, estimate_batch
+from road_force_estimator.estimation import SCHEMES, Estimator, estimate_batch
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     from road_force_estimator import bagio
     from road_force_estimator.tools import estimate_bag
     from road_force_estimator.tools import simulate_bag
-    from road_force_estimator.estimation.offline import estimate_offline
+    from road_force_estimator.estimation import estimate_offline
 
     args = build_parser().parse_args(argv)
     vehicle, observer = estimate_bag.load_parameters(args.params_file)

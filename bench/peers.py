@@ -293,7 +293,7 @@ def paper_euler(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
 
     No re-implementation: :func:`estimation.estimator.estimate_batch` is called once.
     """
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 
     t_s, q_m, roll_rad, speed, _ = _inputs(t_s, q_m, roll_rad, speed_mps)

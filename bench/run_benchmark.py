@@ -16,9 +16,9 @@ Columns (:data:`METHODS`):
   (the differentiator chain, implicit scheme), ``ours-no-smo`` (the defaults with the
   sliding-mode injection off, when the parameter exists), ``ours-latency-5ms`` and
   ``ours-latency-10ms`` (``observer.latency`` = 5 / 10 ms; 'n/a' while it changes nothing),
-  ``ours-offline`` (what ``estimate_bag --mode offline`` runs, read from its source:
-  ``offline.estimate_recording`` or ``offline.estimate_offline``) and ``ours-model-smoother``
-  (:func:`estimation.model_observer.smooth`, when it exists). A column that cannot
+  ``ours-offline`` (what ``estimate_bag --mode offline`` runs:
+  :func:`estimation.estimate_recording`) and ``ours-model-smoother``
+  (:func:`estimation.smooth`). A column that cannot
   run shows 'n/a' and the reason.
 
 Figures per scenario (:mod:`bench.scenarios`) and method: vertical-load RMS error (% of the
@@ -221,7 +221,7 @@ def per_sample(est, stamps_ns: np.ndarray):
 
 
 def _batch(drive: Drive, observer):
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import estimate_batch
 
     stamps = drive.stamps_ns
     est = estimate_batch(stamps, drive.q_m, drive.roll_rad, drive.speed_mps,
@@ -247,7 +247,7 @@ def _run_ours_chain(drive: Drive, tuned: dict[str, Any]):
 
 
 def _run_ours_no_smo(drive: Drive, tuned: dict[str, Any]):
-    from road_force_estimator.estimation.differentiator import SCHEMES
+    from road_force_estimator.estimation import SCHEMES
 
     param = _sliding_mode_param()
     if param is None:
@@ -268,41 +268,13 @@ def _run_ours_latency(drive: Drive, tuned: dict[str, Any], lag_s: float = 0.01):
 
 
 def _offline_function() -> tuple[str, Callable]:
-    """``(name, function)`` that ``estimate_bag --mode offline`` runs.
-
-    Read from ``estimate_bag``'s source (the ``from ...estimation.offline import ...`` of its
-    offline branch), so that a renamed entry point is followed; else the first of
-    ``offline.estimate_recording``, ``offline.estimate_offline`` that exists.
-    """
-    import inspect
-    import re
-
-    try:
-        from road_force_estimator.estimation import offline
-    except ImportError as exc:
-        raise NotAvailable(f'no offline module ({exc})') from None
-    names = []
-    try:
-        from road_force_estimator.tools import estimate_bag
-        names = re.findall(r'from road_force_estimator\.estimation\.offline import (\w+)',
-                           inspect.getsource(estimate_bag))
-    except (ImportError, OSError, TypeError):
-        pass
-    for name in names + ['estimate_recording', 'estimate_offline']:
-        fn = getattr(offline, name, None)
-        if callable(fn):
-            return f'offline.{name}', fn
-    raise NotAvailable(f'no offline entry point in {offline.__name__}')
+    """``(name, function)`` that ``estimate_bag --mode offline`` runs."""
+    from road_force_estimator.estimation import estimate_recording
+    return 'estimation.estimate_recording', estimate_recording
 
 
 def _run_ours_smoother(drive: Drive, tuned: dict[str, Any]):
-    try:
-        from road_force_estimator.estimation import model_observer
-    except ImportError as exc:
-        raise NotAvailable(f'no model observer ({exc})') from None
-    fn = getattr(model_observer, 'smooth', None)
-    if not callable(fn):
-        raise NotAvailable('road_force_estimator.estimation.model_observer has no smooth()')
+    from road_force_estimator.estimation import smooth as fn
     stamps = drive.stamps_ns
     est = fn(stamps, drive.q_m, drive.roll_rad, drive.speed_mps, drive.vehicle_observer,
              ours_observer())
@@ -335,7 +307,7 @@ _OURS = (
            'estimate_bag --mode offline: road_force_estimator.{offline} with the defaults',
            True),
     Method('ours-model-smoother', _run_ours_smoother, 'offline', 'offline',
-           "road_force_estimator.estimation.model_observer.smooth called directly: the model "
+           "road_force_estimator.estimation.smooth called directly: the model "
            "observer's "
            'RTS smoother with the defaults (for comparison with ours-offline)', True),
 )
@@ -425,7 +397,7 @@ def _update_cost(drive: Drive, observer, *, samples: int, warmup: int,
                  repeats: int) -> tuple[float, float, float]:
     """Microseconds per :meth:`Estimator.update` over ``samples`` samples: the median and min
     wall time (timeit, perf_counter) and the median process CPU time of ``repeats`` runs."""
-    from road_force_estimator.estimation.estimator import Estimator
+    from road_force_estimator.estimation import Estimator
 
     n = len(drive.t_s)
     warmup = min(warmup, n // 4)

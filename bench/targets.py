@@ -7,7 +7,7 @@ For every scenario of :mod:`bench.scenarios` (or the ones named) it runs, on the
 - ours (the package defaults, never tuned per drive): ``ours-0`` (``estimate_batch``, latency
   0), ``ours-0-no-smo`` (the ablation: ``observer.sliding_mode_gain = 0``), ``ours-lag5`` and
   ``ours-lag10`` (``observer.latency`` = 5 / 10 ms, estimates placed on their samples' rows),
-  ``ours-offline`` (:func:`estimation.model_observer.smooth`), ``ours-chain`` (the
+  ``ours-offline`` (:func:`estimation.smooth`), ``ours-chain`` (the
   differentiator chain, implicit scheme);
 - the peers of :mod:`bench.peers` with the settings tuned by :mod:`bench.tune`
   (``bench/tuned_peers.json``, the noise level nearest the scenario's): ``kf-model``,
@@ -57,8 +57,7 @@ def _on_samples(est, stamps: np.ndarray):
 
 
 def run_ours(name: str, drive) -> Any:
-    from road_force_estimator.estimation.estimator import estimate_batch
-    from road_force_estimator.estimation.model_observer import smooth
+    from road_force_estimator.estimation import estimate_batch, smooth
     from road_force_estimator.core.parameters import ObserverParameters
 
     changes = {'ours-0': {}, 'ours-0-no-smo': {'sliding_mode_gain': 0.0},
@@ -86,7 +85,7 @@ def run_peer(name: str, drive, tuned: dict) -> Any:
 def update_cost(drive, changes: dict, *, samples: int = 2000, repeats: int = 9,
                 warmup: int = 3000) -> tuple[float, float]:
     """(median, min) microseconds per Estimator.update over repeats of ``samples`` samples."""
-    from road_force_estimator.estimation.estimator import Estimator
+    from road_force_estimator.estimation import Estimator
     from road_force_estimator.core.parameters import ObserverParameters
 
     st = drive.stamps_ns.tolist()
@@ -218,7 +217,7 @@ TUNE_BOUNDS = {'force_psd': (1e-8, 1e8), 'corr': (0.1, 50.0), 'gd_factor': (0.01
 
 
 def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
-    """Tune ``model_observer``'s SCHEDULE_* values per noise level on the tuning drive.
+    """Tune ``estimation.model``'s SCHEDULE_* values per noise level on the tuning drive.
 
     The drive is :data:`bench.scenarios.TUNING` (road seed 1001, noise seed 1002: neither the
     road nor the noise of a scored scenario), simulated once per noise level; the objective is
@@ -227,8 +226,8 @@ def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
     noise range while they are tried; a grid (:data:`TUNE_GRID`) then a pattern search in log
     space (factor 2, down to 1.1), as :mod:`bench.tune` does for the peers.
     """
-    import road_force_estimator.estimation.model_observer as mo
-    from road_force_estimator.estimation.estimator import estimate_batch
+    import road_force_estimator.estimation.model as mo
+    from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 
     from bench.scenarios import TUNING

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from road_force_estimator.bagio import Fixes, GroundTruth
-from road_force_estimator.estimation.estimator import EstimateArrays, EstimatorStatus
+from road_force_estimator.estimation import EstimateArrays, EstimatorStatus
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import iso8608_profile
 

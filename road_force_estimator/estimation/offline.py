@@ -22,17 +22,19 @@ and replaces its two causal parts by zero-phase ones:
    ``|H|^2 / s^2`` with ``H`` a Butterworth high-pass (order
    :data:`~.body_heave.ZERO_PHASE_ORDER`) at ``w_c = 2 pi v / lambda_c`` (``lambda_c`` =
    ``observer.profile_cutoff_wavelength``, ``v`` the run's median speed, floored at
-   :data:`~.estimator.SPEED_FLOOR_MPS`), run forward and backward
+   :data:`~.body_heave.SPEED_FLOOR_MPS`), run forward and backward
    (:func:`~.body_heave.zero_phase`): no phase error, and at 30 m wavelength with
    ``lambda_c`` = 100 m ``|H|^2`` = 0.99994. ``dz_s`` is its central difference.
 
-Everything else (suspension and tire forces, wheel accelerations, loads, wheel heaves, the road
-with tire damping, distance, LTR, residual, lift-off) is the estimator's chain, vectorised.
+Everything else is the estimator's chain, vectorised: suspension and tire forces, wheel
+accelerations and the tire deflection with tire damping here, then the reconstruction of
+:mod:`.reconstruction` (wheel heaves, road, distance, loads, LTR, residual, lift-off).
 
-Robustness is the estimator's: the same rejections (non-finite, impossible values, duplicate or
-backward stamps; counted in :class:`~.estimator.EstimatorStatus`), the same gap rule (a step
-longer than ``max(gap_threshold_s, 10 typical steps)`` starts a new run; each run is estimated
-on its own and ``resets`` / ``gaps`` count the restarts), distance continued across gaps.
+Robustness is the estimator's (:func:`.acceptance.accept_arrays`): the same rejections
+(non-finite, impossible values, duplicate or backward stamps; counted in
+:class:`~.outputs.EstimatorStatus`), the same gap rule (a step longer than
+``max(gap_threshold_s, 10 typical steps)`` starts a new run; each run is estimated on its own
+and ``resets`` / ``gaps`` count the restarts), distance continued across gaps.
 Unevenly sampled runs are resampled on their median step, estimated, and interpolated back.
 ``converged`` is False within :func:`edge_time_s` of each run's start and end, where the
 zero-phase filters lack data on one side.
@@ -60,20 +62,16 @@ import math
 import numpy as np
 from scipy import signal
 
-from road_force_estimator.estimation.estimator import (
-    GAP_PERIODS,
-    GAP_THRESHOLD_S,
-    LIFT_OFF_FRACTION,
-    MAX_DEFLECTION_M,
-    MAX_ROLL_RAD,
-    MAX_SPEED_MPS,
-    SPEED_FLOOR_MPS,
-    EstimateArrays,
-    EstimatorStatus,
-    batch_inputs,
-)
-from road_force_estimator.estimation.load_transfer import load_transfer_ratios
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+import road_force_estimator.estimation.body_heave as body_heave
+from road_force_estimator.estimation.acceptance import (
+    GAP_THRESHOLD_S, accept_arrays, batch_inputs, check_gap_threshold, output_stamps)
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.outputs import (
+    Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
+from road_force_estimator.estimation.reconstruction import (
+    Reconstruction, distance_m, tire_deflections)
+from road_force_estimator.estimation.smoother import smooth
 
 __all__ = [
     'FILTER_ORDER', 'NOISE_CROSSING', 'MIN_CUTOFF_HZ', 'MAX_CUTOFF_FRACTION', 'MIN_RUN_SAMPLES',
@@ -119,7 +117,7 @@ class RunInfo:
 
 @dataclass
 class OfflineEstimateArrays(EstimateArrays):
-    """:class:`~.estimator.EstimateArrays` plus what the offline mode chose.
+    """:class:`~.outputs.EstimateArrays` plus what the offline mode chose.
 
     ``noise_std`` (q_1 (m), q_2 (m), phi (rad)): sensor noise estimated from the data;
     ``cutoff_hz`` the low-pass cut-offs (q_1, q_2, phi) in Hz (``inf`` = none); ``runs`` one
@@ -265,7 +263,6 @@ def zero_phase_body_heave(accel_mps2, dt_s: float, cutoff_rad_s: float) -> np.nd
     ndarray, shape (n,)
         z_s (m).
     """
-    from road_force_estimator.estimation import body_heave
     return body_heave.zero_phase(accel_mps2, dt_s, cutoff_rad_s)
 
 
@@ -283,52 +280,9 @@ def edge_time_s(cutoffs_hz, dt_s: float) -> float:
 # ----------------------------------------------------------------------------------------------
 # the estimate
 
-def _accept(stamps, q, phi, v, gap_threshold_s, status: EstimatorStatus):
-    """The estimator's rejections and gap rule, vectorised; (valid mask, run starts)."""
-    n = stamps.size
-    finite = np.isfinite(q).all(axis=1) & np.isfinite(phi) & np.isfinite(v)
-    if stamps.dtype.kind == 'f':
-        finite &= np.isfinite(stamps)
-        stamp_i = np.where(np.isfinite(stamps), stamps, 0).astype(np.int64)
-    else:
-        stamp_i = stamps.astype(np.int64)
-    inside = (finite & (np.abs(q) <= MAX_DEFLECTION_M).all(axis=1)
-              & (np.abs(phi) <= MAX_ROLL_RAD) & (np.abs(v) <= MAX_SPEED_MPS))
-    status.rejected_nonfinite += int(np.count_nonzero(~finite))
-    status.rejected_range += int(np.count_nonzero(finite & ~inside))
-    idx = np.flatnonzero(inside)
-    valid = np.zeros(n, bool)
-    if idx.size:
-        s = stamp_i[idx]
-        before = np.concatenate([[np.iinfo(np.int64).min], np.maximum.accumulate(s)[:-1]])
-        keep = s > before
-        status.rejected_time += int(np.count_nonzero(~keep))
-        valid[idx[keep]] = True
-    acc = np.flatnonzero(valid)
-    starts = [0] if acc.size else []
-    if acc.size > 1:
-        dt = np.diff(stamp_i[acc]) * 1e-9
-        # Typical step: the estimator's running average, restarted at each gap; only the
-        # steps longer than the threshold can be gaps, so it is computed only before those.
-        run0 = 0
-        for j in np.flatnonzero(dt > gap_threshold_s).tolist():
-            seg = dt[run0:j]
-            if seg.size:
-                typ, _ = signal.lfilter([0.05], [1.0, -0.95], seg, zi=[0.95 * seg[0]])
-                typical = float(typ[-1])
-            else:
-                typical = 0.0
-            if dt[j] > GAP_PERIODS * typical:
-                starts.append(j + 1)
-                run0 = j + 1
-    status.gaps += len(starts) - 1 if starts else 0
-    status.resets += len(starts) - 1 if starts else 0
-    return valid, stamp_i, acc, starts
-
-
 def _estimate_run(t, q, phi, v, vehicle: VehicleParameters, observer: ObserverParameters,
                   cutoffs) -> dict[str, np.ndarray]:
-    """The chain over one even-or-not run; arrays per sample (times ``t`` in s)."""
+    """Steps 0-4 over one even-or-not run; arrays per sample (times ``t`` in s)."""
     n = t.size
     steps = np.diff(t)
     dt = float(np.median(steps)) if n > 1 else 1e-3
@@ -366,6 +320,55 @@ def _estimate_run(t, q, phi, v, vehicle: VehicleParameters, observer: ObserverPa
     return out
 
 
+def _run_columns(r: dict, t: np.ndarray, vehicle: VehicleParameters, rec: Reconstruction,
+                 out: list) -> None:
+    """Steps 1-3 and 6 of one run from its smoothed channels ``r`` (:func:`_estimate_run`),
+    then the reconstruction (steps 5, 8, 9) into the columns ``out``."""
+    veh = vehicle
+    s = veh.half_track_m
+    k = np.asarray(veh.suspension_stiffness_npm)
+    c = np.asarray(veh.suspension_damping_nspm)
+    mu = np.asarray(veh.unsprung_mass_kg)
+    kt = np.asarray(veh.tire_stiffness_npm)
+    ct = np.asarray(veh.tire_damping_nspm)
+    qq, dq, ddq = r['q_m'], r['dq'], r['ddq']
+    ph, dph, ddph = r['roll_rad'], r['droll'], r['ddroll']
+    # Steps 1-3 (MODEL.md): forces, accelerations, tire forces.
+    fb = -(k * qq + c * dq)
+    rot = s * (np.cos(ph) * ddph - np.sin(ph) * dph * dph)
+    ddzu = r['body_accel_mps2'][:, None] + np.column_stack([rot, -rot]) - ddq
+    df = mu * ddzu + fb
+    w = tire_deflections(df, t, kt, ct)
+
+    def pair(a):
+        return a[:, 0], a[:, 1]
+    rec.columns(out, pair(qq), pair(dq), pair(ddq), ph, dph, ddph, r['body_accel_mps2'],
+                pair(ddzu), pair(w), pair(df), pair(fb),
+                (r['body_heave_m'], r['body_heave_rate']))
+
+
+def _channel_settings(q, phi, stamp_i, acc, bounds, cutoff_hz):
+    """Noise (q_1, q_2, phi) and the low-pass cut-offs (Hz), from the longest run (the
+    sensors are the same throughout) or ``cutoff_hz``."""
+    noise = (math.nan, math.nan, math.nan)
+    cut = (math.inf, math.inf, math.inf)
+    if bounds:
+        a, b = max(bounds, key=lambda ab: ab[1] - ab[0])
+        rows = acc[a:b]
+        dt_long = float(np.median(np.diff(stamp_i[rows]))) * 1e-9 if rows.size > 1 else 1e-3
+        channels = (q[rows, 0], q[rows, 1], phi[rows])
+        noise = tuple(noise_std(x) for x in channels)
+        if cutoff_hz is None:
+            cut = tuple(auto_cutoff_hz(x, 1.0 / dt_long, sigma=s)
+                        for x, s in zip(channels, noise))
+        else:
+            given = np.broadcast_to(np.asarray(cutoff_hz, dtype=float), (3,))
+            if np.any(np.isnan(given)) or np.any(given <= 0.0):
+                raise ValueError(f'cutoff_hz = {cutoff_hz!r}: each must be > 0 Hz (inf = none)')
+            cut = tuple(float(c) for c in given)
+    return noise, cut
+
+
 def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                      observer: ObserverParameters | None = None, *,
                      cutoff_hz=None, gap_threshold_s: float = GAP_THRESHOLD_S
@@ -394,7 +397,7 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     Returns
     -------
     OfflineEstimateArrays
-        The fields of :class:`~.estimator.EstimateArrays` (row k = the estimate for sample k;
+        The fields of :class:`~.EstimateArrays` (row k = the estimate for sample k;
         rejected rows hold the previous estimate, zeros before the first), the status counters,
         and the noise estimates, cut-offs and runs.
     """
@@ -402,124 +405,45 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     observer = ObserverParameters() if observer is None else observer
     stamps, q, phi, v = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
     n = stamps.shape[0]
-    if not (isinstance(gap_threshold_s, (int, float)) and gap_threshold_s > 0.0
-            and math.isfinite(gap_threshold_s)):
-        raise ValueError(f'gap_threshold_s = {gap_threshold_s!r}: must be finite and > 0 s')
-    status = EstimatorStatus()
-    valid, stamp_i, acc, starts = _accept(stamps, q, phi, v, float(gap_threshold_s), status)
+    gap_threshold_s = check_gap_threshold(gap_threshold_s)
+    valid, restart, stamp_i, cnt = accept_arrays(stamps, q, phi, v, gap_threshold_s)
+    status = EstimatorStatus(**cnt)
+    acc = np.flatnonzero(valid)
+    starts = np.flatnonzero(restart[acc]).tolist()
     bounds = list(zip(starts, starts[1:] + [acc.size]))
-
-    cols = {name: np.zeros(n) for name in (
-        'distance_m', 'roll_rad', 'droll', 'ddroll', 'body_heave_m', 'body_heave_rate',
-        'body_accel_mps2', 'ltr', 'residual_nm')}
-    cols.update({name: np.zeros((n, 2)) for name in (
-        'q_m', 'dq', 'ddq', 'wheel_heave_m', 'wheel_heave_rate', 'wheel_accel_mps2', 'road_m',
-        'tire_force_dynamic_n', 'wheel_load_n')})
-    converged = np.zeros(n, bool)
-    lift_off = np.zeros((n, 2), bool)
-
-    # Noise and cut-offs from the longest run (the sensors are the same throughout).
-    noise = (math.nan, math.nan, math.nan)
-    cut = (math.inf, math.inf, math.inf)
-    if bounds:
-        a, b = max(bounds, key=lambda ab: ab[1] - ab[0])
-        rows = acc[a:b]
-        dt_long = float(np.median(np.diff(stamp_i[rows]))) * 1e-9 if rows.size > 1 else 1e-3
-        channels = (q[rows, 0], q[rows, 1], phi[rows])
-        noise = tuple(noise_std(x) for x in channels)
-        if cutoff_hz is None:
-            cut = tuple(auto_cutoff_hz(x, 1.0 / dt_long, sigma=s)
-                        for x, s in zip(channels, noise))
-        else:
-            given = np.broadcast_to(np.asarray(cutoff_hz, dtype=float), (3,))
-            if np.any(np.isnan(given)) or np.any(given <= 0.0):
-                raise ValueError(f'cutoff_hz = {cutoff_hz!r}: each must be > 0 Hz (inf = none)')
-            cut = tuple(float(c) for c in given)
-
-    # Distance: trapezoidal integral of the speed over every accepted sample (continued across
-    # gaps), as the estimator does.
-    if acc.size:
-        ta = stamp_i[acc]
-        va = v[acc]
-        inc = 0.5 * (va[1:] + va[:-1]) * (np.diff(ta) * 1e-9)
-        cols['distance_m'][acc] = np.concatenate([[0.0], np.cumsum(inc)])
-
-    veh = vehicle
-    s = veh.half_track_m
-    k = np.asarray(veh.suspension_stiffness_npm)
-    c = np.asarray(veh.suspension_damping_nspm)
-    mu = np.asarray(veh.unsprung_mass_kg)
-    kt = np.asarray(veh.tire_stiffness_npm)
-    ct = np.asarray(veh.tire_damping_nspm)
-    fc = np.asarray(veh.static_load_n)
+    fields, columns = field_columns(n)
+    noise, cut = _channel_settings(q, phi, stamp_i, acc, bounds, cutoff_hz)
+    # Distance over every accepted sample (continued across gaps), as the estimator's.
+    columns[Column.DISTANCE][acc] = distance_m(np.diff(stamp_i[acc]) * 1e-9, v[acc])
+    rec = Reconstruction(vehicle)
     runs: list[RunInfo] = []
     edge = math.inf
     for a, b in bounds:
         rows = acc[a:b]
         t = (stamp_i[rows] - stamp_i[rows[0]]) * 1e-9
         r = _estimate_run(t, q[rows], phi[rows], v[rows], vehicle, observer, cut)
-        dt = r['dt']
-        edge = edge_time_s(cut, dt)
-        for name in ('q_m', 'dq', 'ddq', 'roll_rad', 'droll', 'ddroll', 'body_heave_m',
-                     'body_heave_rate', 'body_accel_mps2'):
-            cols[name][rows] = r[name]
-        qq, dq, ddq = r['q_m'], r['dq'], r['ddq']
-        ph, dph, ddph = r['roll_rad'], r['droll'], r['ddroll']
-        zs, dzs, ddzs = r['body_heave_m'], r['body_heave_rate'], r['body_accel_mps2']
-        # Steps 1-3 (MODEL.md): forces, accelerations, loads.
-        fb = -(k * qq + c * dq)
-        cph, sph = np.cos(ph), np.sin(ph)
-        rot = s * (cph * ddph - sph * dph * dph)
-        ddzu = ddzs[:, None] + np.column_stack([rot, -rot]) - ddq
-        df = mu * ddzu + fb
-        fn = fc + df
-        # Step 5: wheel heaves and rates.
-        lever = np.column_stack([s * sph, -s * sph])
-        lever_rate = np.column_stack([s * cph * dph, -s * cph * dph])
-        zu = zs[:, None] + lever - qq
-        dzu = dzs[:, None] + lever_rate - dq
-        # Step 6: tire deflection w = u - z_u from ct dw + kt w = dF (exact, dF held).
-        w = df / kt
-        for i in (0, 1):
-            if ct[i] > 0.0 and rows.size > 1:
-                steps = np.diff(t)
-                e = np.exp(-steps * kt[i] / ct[i])
-                wi = np.empty(rows.size)
-                wi[0] = df[0, i] / kt[i]
-                target = df[1:, i] / kt[i]
-                if np.allclose(e, e[0]):
-                    wi[1:], _ = signal.lfilter([1.0 - e[0]], [1.0, -e[0]], target,
-                                               zi=[e[0] * wi[0]])
-                else:
-                    for j in range(1, rows.size):
-                        wi[j] = e[j - 1] * wi[j - 1] + (1.0 - e[j - 1]) * target[j - 1]
-                w[:, i] = wi
-        # Steps 8-9: LTR (floored denominator), residual, lift-off.
-        cols['wheel_accel_mps2'][rows] = ddzu
-        cols['tire_force_dynamic_n'][rows] = df
-        cols['wheel_load_n'][rows] = fn
-        cols['wheel_heave_m'][rows] = zu
-        cols['wheel_heave_rate'][rows] = dzu
-        cols['road_m'][rows] = zu + w
-        cols['ltr'][rows] = load_transfer_ratios(fn[:, 0], fn[:, 1], 0.01 * float(fc.sum()))
-        cols['residual_nm'][rows] = veh.roll_inertia_kgm2 * ddph - s * cph * (fb[:, 0] - fb[:, 1])
-        lift_off[rows] = fn <= LIFT_OFF_FRACTION * fc
-        converged[rows] = (t >= edge) & (t <= t[-1] - edge)
-        runs.append(RunInfo(int(rows[0]), int(rows[-1]), int(rows.size), dt, cut, r['speed'],
-                            r['resampled']))
-
+        edge = edge_time_s(cut, r['dt'])
+        part = field_columns(rows.size)[1]
+        _run_columns(r, t, vehicle, rec, part)
+        part[Column.CONVERGED][:] = (t >= edge) & (t <= t[-1] - edge)
+        for j, col in enumerate(columns):
+            if j != Column.DISTANCE:
+                col[rows] = part[j]
+        runs.append(RunInfo(int(rows[0]), int(rows[-1]), int(rows.size), r['dt'], cut,
+                            r['speed'], r['resampled']))
     # Rejected rows hold the previous estimate (zeros before the first), as estimate_batch.
     if n and not valid.all():
-        last = np.maximum.accumulate(np.where(valid, np.arange(n), -1))
-        held = ~valid & (last >= 0)
-        none = last < 0
-        for name, arr in cols.items():
-            arr[held] = arr[last[held]]
-            arr[none] = 0.0
-        converged[held] = converged[last[held]]
-        converged[none] = False
-        lift_off[held] = lift_off[last[held]]
-        lift_off[none] = False
+        held, src = hold_rejected(valid)
+        for arr in fields.values():
+            arr[held] = arr[src]
+    _fill_status(status, fields, stamp_i, acc, starts, runs, edge)
+    return OfflineEstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                                 noise_std=noise, cutoff_hz=cut, runs=runs, **fields)
+
+
+def _fill_status(status: EstimatorStatus, fields: dict, stamp_i, acc, starts, runs,
+                 edge: float) -> None:
+    """The status of the last accepted sample, as the estimator's."""
     status.accepted = int(acc.size)
     if acc.size:
         j = int(acc[-1])
@@ -528,17 +452,10 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         status.time_since_start_s = (stamp_i[j] - stamp_i[a0]) * 1e-9
         status.last_dt_s = (stamp_i[j] - stamp_i[acc[-2]]) * 1e-9 if acc.size > 1 else 0.0
         status.typical_dt_s = runs[-1].dt_s
-        status.converged = bool(converged[j])
-        status.last_residual_nm = float(cols['residual_nm'][j])
-        status.lift_off = (bool(lift_off[j, 0]), bool(lift_off[j, 1]))
+        status.converged = bool(fields['converged'][j])
+        status.last_residual_nm = float(fields['residual_nm'][j])
+        status.lift_off = (bool(fields['lift_off'][j, 0]), bool(fields['lift_off'][j, 1]))
     status.settling_time_s = edge if math.isfinite(edge) else 0.0
-    if stamps.dtype.kind in 'iu':
-        stamp_out = stamps.astype(np.int64)
-    else:
-        stamp_out = stamp_i
-    return OfflineEstimateArrays(
-        stamp_ns=stamp_out, valid=valid, converged=converged, lift_off=lift_off, status=status,
-        noise_std=noise, cutoff_hz=cut, runs=runs, **cols)
 
 
 def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
@@ -548,14 +465,13 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     """The offline mode of ``estimate_bag``: the best non-causal estimate for ``observer``.
 
     With ``observer.discretization == 'model'`` (the default) the model observer's own
-    forward filter and Rauch-Tung-Striebel smoother (:func:`.model_observer.smooth`): the
+    forward filter and Rauch-Tung-Striebel smoother (:func:`.smoother.smooth`): the
     same model and noise estimates as the online observer, over the whole recording. With a
     differentiator scheme (``euler``, ``taylor``, ``implicit``), the zero-phase chain of
     :func:`estimate_offline`. Row k is the estimate for sample k in both.
     """
     observer = ObserverParameters() if observer is None else observer
     if observer.discretization == 'model':
-        from road_force_estimator.estimation.model_observer import smooth
         return smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
                       gap_threshold_s=gap_threshold_s)
     return estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,

@@ -30,8 +30,7 @@ from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import diagnostics
-from road_force_estimator.estimation.estimator import Estimator
+from road_force_estimator.estimation import Estimator, diagnostics
 from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, float64_msg, read_deflections, read_twist,
     reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)

@@ -128,7 +128,7 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
     -------
     EstimateArrays
     """
-    from road_force_estimator.estimation.estimator import estimate_batch
+    from road_force_estimator.estimation import estimate_batch
 
     with cli.sample_progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
         return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
@@ -199,7 +199,7 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
          reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
     from road_force_estimator import bagio
     from road_force_estimator.report import write_report
-    from road_force_estimator.estimation.offline import estimate_recording
+    from road_force_estimator.estimation import estimate_recording
 
     stages.next('reading the bag')
     try:

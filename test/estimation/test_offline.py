@@ -21,7 +21,7 @@ from scipy import signal
 
 from road_force_estimator.estimation import body_heave
 from road_force_estimator.estimation import offline
-from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.estimation.offline import (
     OfflineEstimateArrays, auto_cutoff_hz, edge_time_s, estimate_offline, noise_std,
     zero_phase_body_heave, zero_phase_derivatives)

@@ -18,7 +18,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from node_harness import Collector, close, finish, make_executor, run_main
-from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.interfaces import STATE_JOINTS
 from road_force_estimator.ros.messages import (
     deflections_msg, ns_to_stamp, reliable_qos, sensor_qos, twist_msg)

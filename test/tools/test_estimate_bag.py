@@ -19,7 +19,7 @@ from scipy import signal
 from road_force_estimator import bagio, interfaces
 from road_force_estimator.bagio import TYPESTORE, BagWriter
 from road_force_estimator.tools.estimate_bag import build_parser, main
-from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
@@ -127,7 +127,7 @@ class TestOnline:
         # end), each carrying its sample's stamp; the online mode puts each on that sample's
         # row, loses none, and counts its progress over every sample
         from road_force_estimator.tools.estimate_bag import estimate_online
-        from road_force_estimator.estimation.estimator import Estimator
+        from road_force_estimator.estimation import Estimator
         d = bagio.read_drive_bag(noisy_drive)
         vehicle, observer = VehicleParameters(), ObserverParameters(latency_s=latency_s)
         done = []
@@ -147,7 +147,7 @@ class TestOnline:
         np.testing.assert_array_equal(got.ltr, [r.ltr for r in rows])
         estimate_batch(d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps, vehicle, observer,
                        progress=done.append)
-        from road_force_estimator.estimation.estimator import PROGRESS_BLOCK
+        from road_force_estimator.estimation import PROGRESS_BLOCK
         assert sum(done) == len(d.stamps_ns)
         assert len(done) == -(-len(d.stamps_ns) // PROGRESS_BLOCK)
 

@@ -1,0 +1,299 @@
+"""Model-based sliding-mode observer of the roll-plane model (``observer.discretization =
+'model'``, the default).
+
+The model (this module) and what is built on it: the gains (:mod:`.gains`, with
+:mod:`.riccati` and :mod:`.noise`), the operating point they are designed at
+(:mod:`.schedule`), the online observer (:mod:`.model_core`) and the offline smoother
+(:mod:`.smoother`).
+
+The observer runs the linearised roll-plane model of MODEL.md (:mod:`.vehicle_model`) with the
+unknown inputs (road, roll moment) as augmented states, corrects it with a linear output
+injection (the steady-state Kalman gain), and runs the Levant differentiator
+(:mod:`.differentiator`, implicit scheme) per message on the output error that the linear
+injection leaves: its estimates of that error and of its rate and acceleration are an
+equivalent output injection (an unknown tire force and roll moment), weighted by the measured
+noise level. Loads, road and LTR come from the states; the same observer gives a fixed-lag
+(``observer.latency``) and an offline (:func:`.smoother.smooth`) estimate.
+
+State (SI; :class:`State`; index 1/2 of MODEL.md = left/right)::
+
+    x = [q_1, q_2, phi, dq_1, dq_2, dphi, dz_s, w_1, w_2, du_1, du_2, M_r]
+
+``q_i`` the suspension extensions and ``phi`` the roll (the measured outputs, so ``C = [I 0]``),
+``dz_s`` the body heave rate, ``w_i = u_i - z_ui`` the tire deflections, ``du_i`` the road
+velocities under the tires and ``M_r`` an unknown roll moment (N m; ``M h a_y`` of an
+unmeasured lateral acceleration, a cross wind ...). Equations (linear, phi small)::
+
+    F_bi = -(k_i q_i + c_i dq_i)             dz_ui = dz_s +- s dphi - dq_i
+    dd z_s = (F_b1 + F_b2) / M               dd phi = (s (F_b1 - F_b2) + M_r) / I_x
+    dw_i = du_i - dz_ui                      dF_i = kt_i w_i + ct_i dw_i
+    dd z_ui = (dF_i - F_bi) / m_i            dd q_i = dd z_s +- s dd phi - dd z_ui
+    d du_i = -w_v du_i + xi_i                d M_r = eta
+
+The body heave ``z_s`` and the road level ``u_i`` are not states: nothing measured tells their
+absolute level (gravity and grades move body, wheels and road together), so the state has no
+unobservable integrator and the Riccati equation is well posed down to tiny noise levels (one
+mode, body and road rising together, is seen only through the road model's mean reversion: it
+is the ``spectral radius ~ 1`` a design may show; no load depends on it). The profile is
+rebuilt as the estimator's chain does (MODEL.md step 4): ``z_s`` is the band-limited double
+integral of ``dd z_s`` (:mod:`.body_heave`), ``u_i = z_s +- s sin(phi) - q_i + w_i``.
+
+Road model (the unknown input)
+------------------------------
+An ISO 8608 road has the displacement PSD ``Gd(n0) (n/n0)^-2``: its slope is white, with the
+diffusion constant ``D = 2 pi^2 Gd(n0) n0^2`` (m^2/m), so in time at speed v the road velocity
+is white with two-sided density ``D v``. The tire envelopes the road over its contact patch
+(~0.25 m), which makes the velocity it feels continuous and correlated over about that
+length: ``du_i`` is an Ornstein-Uhlenbeck process, white (density ``D v``) below
+``w_v = 2 pi v / lambda_v`` and rolled off above. A generalised force noise on each equation
+of motion stands for what the linear model misses (nonlinearity, parameter errors, the
+envelope's exact shape), and ``M_r`` is a random walk (density scheduled on the noise level).
+Gains: derived from the data, never tuned per drive
+---------------------------------------------------
+The model is discretized exactly at the sample step (matrix exponential, Van Loan for the
+process noise); the gain is the steady-state Kalman gain of the discrete algebraic Riccati
+equation (structured doubling, :func:`.riccati.solve_dare`; where double precision cannot give a
+stabilising solution the noise is raised threefold until it can). Gains depend on the
+operating point ``(dt, v, sigma_q, sigma_phi, Gd)``; each is tracked on a logarithmic grid
+with hysteresis, which only decides *when* to design again: a design (a few ms) uses the
+estimates of that moment and is cached, never per sample.
+
+- ``dt``: each step's own transition matrix (cached per 0.1 % of dt) with the gain of its
+  10 % level (a regular stream: one design at its exact step; irregular streams a few).
+- ``v``: the speed input (10 % levels, floored at :data:`SPEED_FLOOR_MPS`).
+- Sensor noise ``sigma``: ``observer.noise.deflection`` / ``observer.noise.roll`` when > 0, else
+  estimated online per block of :data:`.model_core.BLOCK_SAMPLES` samples (the very first block:
+  :data:`.model_core.FIRST_BLOCK_SAMPLES`) from the median absolute sixth (divided) difference of
+  each channel (:func:`.noise.noise_std`): white noise has ``Var(Delta^6 y) = 924 sigma^2`` while a
+  road-excited signal's sixth difference at the rates of interest is far below (measured: ~2 um of
+  apparent noise at 200 Hz on ISO class C without noise, ~1 nm at 1 kHz), and the median makes it
+  blind to events (pothole, step). The estimate is the median of the last
+  :data:`.schedule.HISTORY_BLOCKS` blocks, the larger of the two deflections'; a floor of
+  :data:`.gains.NOISE_FLOOR_M` (roll: that over s) keeps noise-free data well posed. After the very
+  first block the run so far is filtered again with the new gains (no switching transient).
+- Road roughness ``Gd(n0)``: ``observer.road_roughness`` when > 0, else estimated per block
+  by moment matching: the robust (MAD) variance of the first difference of the deflections,
+  minus the noise's ``2 sigma^2``, divided by the variance the model predicts per unit ``Gd``
+  at that speed and step (stationary discrete Lyapunov solution, road velocity correlation
+  :data:`ROUGHNESS_CORRELATION_M`); median of the last :data:`.schedule.ROUGHNESS_HISTORY_BLOCKS`
+  blocks, floored at :data:`MIN_ROAD_GD_M3`. (The innovations cannot tell the roughness at
+  high rates: the one-step prediction error is far below the sensor noise.)
+- What the data cannot tell, the schedule on the noise level (:func:`scheduled`) sets: the
+  force-noise density, the road velocity's correlation length (``observer.
+  road_correlation_length`` when > 0) and the factor between the estimated roughness and the
+  one the filter assumes, tuned once on the benchmark's separate tuning drive at 0, 10 and
+  50 um (``python -m bench.targets --tune``) and interpolated in between (log-log). Without
+  noise the tuned road model is a near random walk of the road velocity (what a 1 ms
+  prediction needs); with noise, the envelope's ~0.8 m correlation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import enum
+import math
+
+import numpy as np
+
+from road_force_estimator.core.parameters import VehicleParameters
+# The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
+# part of the estimate.
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+
+__all__ = [
+    'State', 'NX', 'NY', 'OUTPUTS', 'NO', 'ISO_N0', 'SPEED_FLOOR_MPS', 'FORCE_PSD',
+    'ROLL_MOMENT_PSD', 'SCHEDULE_NOISE_M', 'SCHEDULE_FORCE_PSD', 'SCHEDULE_CORRELATION_M',
+    'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD', 'ROUGHNESS_CORRELATION_M',
+    'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
+    'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
+]
+
+#: Reference spatial frequency of ISO 8608 (cycles/m).
+ISO_N0 = 0.1
+#: Defaults of :func:`continuous_model` / :func:`.gains.design` (the observer uses the schedule):
+#: generalised force noise density on each equation of motion (N^2 s; roll: times s^2) and
+#: random-walk density of the unknown roll moment ((N m)^2 / s).
+FORCE_PSD = 1.0
+ROLL_MOMENT_PSD = 1e7
+#: Settings scheduled on the deflection-noise level (m): at the levels of
+#: SCHEDULE_NOISE_M the generalised force-noise density (N^2 s), the road velocity's
+#: correlation length (m) and the factor on the estimated roughness that the filter assumes;
+#: log-log interpolation in between, held beyond the ends (see :func:`scheduled`).
+#: Tuned on bench.scenarios.TUNING (ISO C, 20 m/s, 1 kHz, road seed 1001, noise seed 1002;
+#: no scored drive) at 0, 10 and 50 um: ``python -m bench.targets --tune`` (the procedure of
+#: bench.tune: grid, then pattern search, zero-latency load error as the objective; the best
+#: of two runs per level: 0.511 %, 17.08 %, 29.54 % on that drive; the optimum is flat: the
+#: other run's values, e.g. 200 / 1.35 m / 3.4 at 10 um, give the same to 0.2 %). Without
+#: noise the tuned road velocity is a near random walk (force noise and bound-limited
+#: roughness factor: what a 1 ms prediction needs); with noise the envelope's correlation.
+SCHEDULE_NOISE_M = (1e-9, 1e-5, 5e-5)
+SCHEDULE_FORCE_PSD = (1e-8, 238.0, 800.0)
+SCHEDULE_CORRELATION_M = (5.38, 0.8, 0.566)
+SCHEDULE_GD_FACTOR = (1e4, 1.41, 1.41)
+#: Random-walk density of the unknown roll moment ((N m)^2 / s), not tuned (the tuning drive
+#: is straight): on clean data large enough to follow a lateral-acceleration step at once
+#: (3 m/s^2 step, ISO C, no noise: load error 2.2 % with 1e6, 0.54 % with 1e7, 0.39 % with
+#: 1e9), with noise the 1e7 that still follows ~1 m/s^2 per second of lateral acceleration
+#: change (M h x 1 m/s^3 over ~1 s) and leaves the straight-drive figures unchanged (10 um:
+#: 16.807 % against 16.804 % with 1e6; 1e9 would cost 2.7 %).
+SCHEDULE_ROLL_MOMENT_PSD = (1e9, 1e7, 1e7)
+#: Correlation length (m) of the road model whose variance the roughness estimate matches:
+#: a moving average of 0.25 m (the tire envelope) over a Brownian road has the variance of
+#: an Ornstein-Uhlenbeck velocity with this length (pi x 0.25 m).
+ROUGHNESS_CORRELATION_M = 0.8
+#: Noise and roughness assumed until the first block of data has been seen.
+DEFAULT_NOISE_M = 1e-5
+DEFAULT_NOISE_RAD = 1e-4
+DEFAULT_ROAD_GD_M3 = 256e-6
+#: Floor of the estimated roughness (m^3): a quarter of ISO class A's Gd(n0), so that a
+#: glass-smooth stretch does not make the observer too slow for the next bump.
+MIN_ROAD_GD_M3 = 4e-6
+
+
+class State(enum.IntEnum):
+    """Slots of the observer's state (see the module notes)."""
+
+    Q1 = 0
+    Q2 = 1
+    PHI = 2
+    DQ1 = 3
+    DQ2 = 4
+    DPHI = 5
+    DZ_S = 6
+    W1 = 7
+    W2 = 8
+    DU1 = 9
+    DU2 = 10
+    M_R = 11
+
+
+NX = len(State)
+NY = 3
+#: Linear outputs ``H x`` (rows), in this order.
+OUTPUTS = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'dzs', 'ddzs',
+           'dzu1', 'dzu2', 'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
+NO = len(OUTPUTS)
+
+
+def scheduled(noise_deflection_m: float, *, roll_moment: bool = False):
+    """(force PSD (N^2 s), road correlation length (m), roughness factor) at a deflection
+    noise level (m): log-log interpolation of the SCHEDULE_* tables, held beyond the ends;
+    with ``roll_moment``: the roll-moment density ((N m)^2 / s) too, as a fourth value."""
+    x = math.log(max(noise_deflection_m, SCHEDULE_NOISE_M[0]))
+    xs = [math.log(v) for v in SCHEDULE_NOISE_M]
+    tables = [SCHEDULE_FORCE_PSD, SCHEDULE_CORRELATION_M, SCHEDULE_GD_FACTOR]
+    if roll_moment:
+        tables.append(SCHEDULE_ROLL_MOMENT_PSD)
+    out = []
+    for table in tables:
+        ys = [math.log(v) for v in table]
+        out.append(math.exp(float(np.interp(x, xs, ys))))
+    return tuple(out)
+
+
+def road_diffusion(gd_n0_m3: float) -> float:
+    """Diffusion constant D (m^2/m) of a Brownian road with ISO 8608 ``Gd(n0)`` (m^3).
+
+    ``Var[u(x + dx) - u(x)] = D dx`` gives the one-sided PSD ``D / (2 pi^2 n^2)``, hence
+    ``D = 2 pi^2 Gd(n0) n0^2``.
+    """
+    return 2.0 * math.pi ** 2 * gd_n0_m3 * ISO_N0 ** 2
+
+
+@dataclass(frozen=True)
+class ContinuousModel:
+    """``dx = A x dt + G dW`` (``E[dW dW^T] = Q dt``), ``y = C x``, linear outputs ``H x``."""
+
+    a: np.ndarray     #: (12, 12)
+    g: np.ndarray     #: (12, 7): force noise (heave, roll, wheel 1, wheel 2), road 1, 2, moment
+    q: np.ndarray     #: (7, 7) densities
+    c: np.ndarray     #: (3, 12)
+    h: np.ndarray     #: (21, 12), rows :data:`OUTPUTS`
+    road_g: np.ndarray  #: (12, 2) road-noise input columns (unit density), for moment matching
+
+
+def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: float, *,
+                     correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
+                     roll_moment_psd: float = ROLL_MOMENT_PSD) -> ContinuousModel:
+    """The augmented roll-plane model of the module notes at one speed and roughness.
+
+    Parameters
+    ----------
+    vehicle : VehicleParameters
+    speed_mps : float
+        Speed (m/s); its magnitude is used, floored at :data:`SPEED_FLOOR_MPS`.
+    road_gd_m3 : float
+        ISO 8608 ``Gd(n0)`` (m^3) of the road.
+    correlation_length_m : float
+        ``lambda_v`` (m): the road velocity's correlation length.
+    force_psd, roll_moment_psd : float
+        Process-noise densities (N^2 s, (N m)^2 / s).
+    """
+    v = vehicle
+    mass, ix, s = v.sprung_mass_kg, v.roll_inertia_kgm2, v.half_track_m
+    m, k, c = v.unsprung_mass_kg, v.suspension_stiffness_npm, v.suspension_damping_nspm
+    kt, ct = v.tire_stiffness_npm, v.tire_damping_nspm
+    speed = max(abs(float(speed_mps)), SPEED_FLOOR_MPS)
+    w_v = 2.0 * math.pi * speed / correlation_length_m
+    sig = (1.0, -1.0)
+
+    def derivative(x):
+        # The equations of the module notes, on the columns of x (exactly linear).
+        q, dq = (x[State.Q1], x[State.Q2]), (x[State.DQ1], x[State.DQ2])
+        fb = [-(k[i] * q[i] + c[i] * dq[i]) for i in range(2)]
+        ddzs = (fb[0] + fb[1]) / mass
+        ddphi = (s * (fb[0] - fb[1]) + x[State.M_R]) / ix
+        dzu = [x[State.DZ_S] + sig[i] * s * x[State.DPHI] - dq[i] for i in range(2)]
+        w, du = (x[State.W1], x[State.W2]), (x[State.DU1], x[State.DU2])
+        dw = [du[i] - dzu[i] for i in range(2)]
+        df = [kt[i] * w[i] + ct[i] * dw[i] for i in range(2)]
+        ddzu = [(df[i] - fb[i]) / m[i] for i in range(2)]
+        ddq = [ddzs + sig[i] * s * ddphi - ddzu[i] for i in range(2)]
+        dx = np.zeros_like(x)
+        dx[State.Q1], dx[State.Q2], dx[State.PHI] = dq[0], dq[1], x[State.DPHI]
+        dx[State.DQ1], dx[State.DQ2], dx[State.DPHI] = ddq[0], ddq[1], ddphi
+        dx[State.DZ_S] = ddzs
+        dx[State.W1], dx[State.W2] = dw[0], dw[1]
+        dx[State.DU1], dx[State.DU2] = -w_v * du[0], -w_v * du[1]
+        out = np.array([q[0], q[1], x[State.PHI], dq[0], dq[1], x[State.DPHI], ddq[0], ddq[1],
+                        ddphi, x[State.DZ_S], ddzs, dzu[0], dzu[1], ddzu[0], ddzu[1], w[0],
+                        w[1], df[0], df[1], fb[0], fb[1]])
+        return dx, out
+
+    a, h = derivative(np.eye(NX))
+    g = np.zeros((NX, 7))
+    # generalised forces: heave f_s (dd z_s += f_s / M), roll moment f_p, wheel forces f_ui
+    g[State.DZ_S, 0] = g[State.DQ1, 0] = g[State.DQ2, 0] = 1.0 / mass
+    g[State.DPHI, 1] = 1.0 / ix
+    g[State.DQ1, 1], g[State.DQ2, 1] = s / ix, -s / ix
+    g[State.DQ1, 2] = -1.0 / m[0]
+    g[State.DQ2, 3] = -1.0 / m[1]
+    g[State.DU1, 4] = g[State.DU2, 5] = 1.0
+    g[State.M_R, 6] = 1.0
+    diffusion = road_diffusion(road_gd_m3) * speed
+    qc = np.diag([force_psd, force_psd * s * s, force_psd, force_psd,
+                  diffusion * w_v ** 2, diffusion * w_v ** 2, roll_moment_psd])
+    cm = np.zeros((NY, NX))
+    cm[0, State.Q1] = cm[1, State.Q2] = cm[2, State.PHI] = 1.0
+    road_g = g[:, 4:6] * (math.sqrt(speed) * w_v)   # road input of unit diffusion D = 1 m^2/m
+    return ContinuousModel(a, g, qc, cm, h, road_g)
+
+
+def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> np.ndarray:
+    """The state at rest that reproduces a sample (m, m, rad): no acceleration.
+
+    ``q`` and ``phi`` as measured, every rate 0, the tire deflections that give the wheels
+    the body's acceleration (so ``dd q = 0``) and the roll moment that holds the roll still.
+    """
+    v = vehicle
+    s = v.half_track_m
+    k1, k2 = v.suspension_stiffness_npm
+    m1, m2 = v.unsprung_mass_kg
+    kt1, kt2 = v.tire_stiffness_npm
+    fb1, fb2 = -k1 * q1, -k2 * q2
+    ddzs = (fb1 + fb2) / v.sprung_mass_kg
+    x = np.zeros(NX)
+    x[State.Q1], x[State.Q2], x[State.PHI] = q1, q2, phi
+    x[State.W1] = (fb1 + m1 * ddzs) / kt1
+    x[State.W2] = (fb2 + m2 * ddzs) / kt2
+    x[State.M_R] = -s * (fb1 - fb2)
+    return x

@@ -1,0 +1,157 @@
+"""MODEL.md "Reconstruction", steps 5-9: from the estimated motions to the output row.
+
+Every estimator estimates the motions (``q_i, phi`` and their rates and accelerations, the
+body heave ``z_s``, the wheel accelerations, the tire deflections ``w_i = u_i - z_ui``, the
+dynamic tire forces ``dF_i`` and the suspension forces ``F_bi``) its own way; the rest is this
+module's, per sample (:meth:`Reconstruction.row`) and over arrays
+(:meth:`Reconstruction.columns`):
+
+5. ``z_u1 = z_s + s sin(phi) - q_1``, ``z_u2 = z_s - s sin(phi) - q_2``, their rates
+   ``dz_s +- s cos(phi) dphi - dq_i``.
+6. The road ``u_i = z_ui + w_i``; the chains' tire deflection from ``kt_i w_i + ct_i dw_i =
+   dF_i``: ``dF_i / kt_i`` through the first-order lag ``ct_i / kt_i`` (:func:`tire_decay`,
+   :func:`tire_deflections`; the model observer has ``w_i`` as a state).
+7. Distance ``x = integral of v dt`` (trapezoidal, :func:`distance_m`), continued across gaps.
+8. ``F_n,i = F_c,i + dF_i`` (not clipped at 0, so that the total-load identity holds on the
+   estimates); ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left) of the loads
+   clipped at zero (a tire cannot pull), so ``|LTR| <= 1``; the denominator floored at
+   :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`).
+9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2)`` (N m); it equals
+   ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when
+   ``F_n,i <=`` :data:`LIFT_OFF_FRACTION` ``F_c,i``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.estimation.load_transfer import load_transfer_ratio, load_transfer_ratios
+from road_force_estimator.estimation.outputs import Column
+
+__all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distance_m',
+           'tire_decay', 'tire_deflections']
+
+#: Lift-off flag when the estimated load is at most this fraction of the static load.
+LIFT_OFF_FRACTION = 0.05
+#: Floor of the LTR denominator, as a fraction of the static axle load.
+LTR_FLOOR_FRACTION = 0.01
+
+
+def distance_m(steps_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+    """Step 7 over arrays: the distance (m) at each sample from the steps (s) between them
+    and the speeds (m/s); 0 at the first (the per-sample path's sum, term by term)."""
+    out = np.zeros(speed_mps.size)
+    if speed_mps.size > 1:
+        out[1:] = np.cumsum(0.5 * (speed_mps[1:] + speed_mps[:-1]) * steps_s)
+    return out
+
+
+def tire_decay(dt: float, kt: float, ct: float) -> float:
+    """Step 6 per sample: the factor ``exp(-dt kt / ct)`` of the tire lag over a step dt (s)
+    (0 without tire damping): ``w_k = e w_(k-1) + (1 - e) dF_k / kt``."""
+    return math.exp(-dt * kt / ct) if ct > 0.0 else 0.0
+
+
+def tire_deflections(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
+    """Step 6 over arrays: ``w = u - z_u`` (m, (m, 2)) from ``ct dw + kt w = dF`` (exact, dF
+    held), from the dynamic tire forces df (N, (m, 2)) at the times t (s); the first sample
+    at its steady state ``dF / kt``."""
+    from scipy.signal import lfilter
+
+    w = df / kt
+    m = t.size
+    for i in (0, 1):
+        if ct[i] > 0.0 and m > 1:
+            steps = np.diff(t)
+            e = np.exp(-steps * kt[i] / ct[i])
+            wi = np.empty(m)
+            wi[0] = df[0, i] / kt[i]
+            target = df[1:, i] / kt[i]
+            if np.allclose(e, e[0]):
+                wi[1:], _ = lfilter([1.0 - e[0]], [1.0, -e[0]], target, zi=[e[0] * wi[0]])
+            else:
+                for j in range(1, m):
+                    wi[j] = e[j - 1] * wi[j - 1] + (1.0 - e[j - 1]) * target[j - 1]
+            w[:, i] = wi
+    return w
+
+
+class Reconstruction:
+    """Steps 5, 8 and 9 of MODEL.md for one vehicle (see the module notes)."""
+
+    def __init__(self, vehicle: VehicleParameters) -> None:
+        fc1, fc2 = vehicle.static_load_n
+        self.s = vehicle.half_track_m
+        self.ix = vehicle.roll_inertia_kgm2
+        self.static_n = (fc1, fc2)
+        self.lift_off_n = (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
+        self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
+        self._c = (self.s, self.ix, fc1, fc2) + self.lift_off_n + (self.ltr_floor_n,)
+
+    def row(self, x: float, q1: float, q2: float, dq1: float, dq2: float, ddq1: float,
+            ddq2: float, phi: float, dphi: float, ddphi: float, zs: float, dzs: float,
+            ddzs: float, ddzu1: float, ddzu2: float, w1: float, w2: float, df1: float,
+            df2: float, fb1: float, fb2: float, conv: bool) -> tuple:
+        """The output row (slots :class:`.Column`) of one sample (SI, see the module notes)."""
+        s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
+        cphi = math.cos(phi)
+        ssin = s * math.sin(phi)
+        srate = s * cphi * dphi
+        zu1 = zs + ssin - q1
+        zu2 = zs - ssin - q2
+        fn1 = fc1 + df1
+        fn2 = fc2 + df2
+        return (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
+                dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
+                fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
+                ix * ddphi - s * cphi * (fb1 - fb2), fn1 <= lift1, fn2 <= lift2, conv)
+
+    def columns(self, out: list, q: tuple, dq: tuple, ddq: tuple, phi, dphi, ddphi, ddzs,
+                ddzu: tuple, w: tuple, df: tuple, fb: tuple, heave: tuple | None) -> None:
+        """:meth:`row` over arrays: fill the columns ``out`` (slots :class:`.Column`, each
+        (m,)) but the distance and ``converged``.
+
+        Pairs are ``(left, right)`` arrays. ``heave`` = ``(z_s, dz_s)`` arrays, or None for
+        a smoother that has the body heave only after the whole run: then the wheel heaves
+        and the road are written without it and :meth:`add_heave` adds it later.
+        """
+        s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
+        (q1, q2), (dq1, dq2), (df1, df2), (w1, w2) = q, dq, df, w
+        cph = np.cos(phi)
+        ssin = s * np.sin(phi)
+        srate = s * cph * dphi
+        fn1 = fc1 + df1
+        fn2 = fc2 + df2
+        if heave is None:   # (the operations in the order the smoother's numbers were made)
+            zu1, zu2 = ssin - q1, -ssin - q2
+            dzu1, dzu2 = srate - dq1, -srate - dq2
+            u1, u2 = ssin - q1 + w1, w2 - ssin - q2
+        else:
+            zs, dzs = heave
+            out[Column.ZS][:] = zs
+            out[Column.DZS][:] = dzs
+            zu1, zu2 = zs + ssin - q1, zs - ssin - q2
+            dzu1, dzu2 = dzs + srate - dq1, dzs - srate - dq2
+            u1, u2 = zu1 + w1, zu2 + w2
+        C = Column
+        for j, col in ((C.Q1, q1), (C.Q2, q2), (C.DQ1, dq1), (C.DQ2, dq2), (C.DDQ1, ddq[0]),
+                       (C.DDQ2, ddq[1]), (C.PHI, phi), (C.DPHI, dphi), (C.DDPHI, ddphi),
+                       (C.DDZS, ddzs), (C.ZU1, zu1), (C.ZU2, zu2), (C.DZU1, dzu1),
+                       (C.DZU2, dzu2), (C.DDZU1, ddzu[0]), (C.DDZU2, ddzu[1]), (C.U1, u1),
+                       (C.U2, u2), (C.DF1, df1), (C.DF2, df2), (C.FN1, fn1), (C.FN2, fn2),
+                       (C.LTR, load_transfer_ratios(fn1, fn2, ltr_floor)),
+                       (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1])),
+                       (C.LIFT_OFF1, fn1 <= lift1), (C.LIFT_OFF2, fn2 <= lift2)):
+            out[j][:] = col
+
+    @staticmethod
+    def add_heave(out: list, zs: np.ndarray, dzs: np.ndarray) -> None:
+        """Add the body heave to columns :meth:`columns` wrote without it."""
+        C = Column
+        out[C.ZS][:] = zs
+        out[C.DZS][:] = dzs
+        for j, add in ((C.ZU1, zs), (C.ZU2, zs), (C.DZU1, dzs), (C.DZU2, dzs), (C.U1, zs),
+                       (C.U2, zs)):
+            out[j] += add

@@ -1,0 +1,113 @@
+"""MODEL.md steps 5-9 (estimation/reconstruction.py): per sample and over arrays the same
+numbers; one lift-off threshold and one LTR floor."""
+import math
+
+import numpy as np
+
+from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.estimation.outputs import Column, field_columns
+from road_force_estimator.estimation.reconstruction import (
+    LIFT_OFF_FRACTION, LTR_FLOOR_FRACTION, Reconstruction, distance_m, tire_decay,
+    tire_deflections)
+
+VEHICLE = VehicleParameters()
+
+
+def _motions(rng, m):
+    scale = {'q': 0.02, 'dq': 0.2, 'ddq': 5.0, 'phi': 0.02, 'dphi': 0.1, 'ddphi': 2.0,
+             'zs': 0.01, 'dzs': 0.1, 'ddzs': 3.0, 'ddzu': 30.0, 'w': 0.01, 'df': 3e4,
+             'fb': 2e4}
+    return {k: rng.standard_normal((m, 2) if k in ('q', 'dq', 'ddq', 'ddzu', 'w', 'df', 'fb')
+                                   else m) * s for k, s in scale.items()}
+
+
+def _rows(rec, mo, conv):
+    out = []
+    for k in range(mo['phi'].size):
+        g = {name: a[k].tolist() for name, a in mo.items()}
+        out.append(rec.row(1.5, *g['q'], *g['dq'], *g['ddq'], g['phi'], g['dphi'], g['ddphi'],
+                           g['zs'], g['dzs'], g['ddzs'], *g['ddzu'], *g['w'], *g['df'],
+                           *g['fb'], conv))
+    return np.array(out, dtype=float)
+
+
+def _columns(rec, mo, heave):
+    fields, cols = field_columns(mo['phi'].size)
+
+    def pair(a):
+        return a[:, 0], a[:, 1]
+    rec.columns(cols, pair(mo['q']), pair(mo['dq']), pair(mo['ddq']), mo['phi'], mo['dphi'],
+                mo['ddphi'], mo['ddzs'], pair(mo['ddzu']), pair(mo['w']), pair(mo['df']),
+                pair(mo['fb']), (mo['zs'], mo['dzs']) if heave else None)
+    if not heave:
+        rec.add_heave(cols, mo['zs'], mo['dzs'])
+    return np.column_stack([np.asarray(c, dtype=float) for c in cols])
+
+
+def test_arrays_are_the_per_sample_rows():
+    rec = Reconstruction(VEHICLE)
+    mo = _motions(np.random.default_rng(1), 200)
+    rows = _rows(rec, mo, True)
+    table = _columns(rec, mo, heave=True)
+    skip = [Column.DISTANCE, Column.CONVERGED]
+    np.testing.assert_array_equal(np.delete(table, skip, axis=1), np.delete(rows, skip, axis=1))
+    # the smoother's order (body heave added after the run): the same to rounding
+    later = _columns(rec, mo, heave=False)
+    np.testing.assert_allclose(np.delete(later, skip, axis=1), np.delete(rows, skip, axis=1),
+                               rtol=1e-12, atol=1e-15)
+
+
+def test_identities_of_the_row():
+    rec = Reconstruction(VEHICLE)
+    mo = _motions(np.random.default_rng(2), 50)
+    rows = _rows(rec, mo, False)
+    s = VEHICLE.half_track_m
+    fc = np.array(VEHICLE.static_load_n)
+    np.testing.assert_array_equal(rows[:, [Column.FN1, Column.FN2]], fc + mo['df'])
+    zu1 = mo['zs'] + s * np.sin(mo['phi']) - mo['q'][:, 0]
+    np.testing.assert_allclose(rows[:, Column.ZU1], zu1, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rows[:, Column.U1] - rows[:, Column.ZU1], mo['w'][:, 0],
+                               rtol=1e-9, atol=1e-15)
+    res = (VEHICLE.roll_inertia_kgm2 * mo['ddphi']
+           - s * np.cos(mo['phi']) * (mo['fb'][:, 0] - mo['fb'][:, 1]))
+    np.testing.assert_allclose(rows[:, Column.RESIDUAL], res, rtol=1e-12)
+
+
+def test_one_lift_off_threshold_and_one_ltr_floor():
+    rec = Reconstruction(VEHICLE)
+    fc1, fc2 = VEHICLE.static_load_n
+    assert rec.lift_off_n == (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
+    assert rec.ltr_floor_n == LTR_FLOOR_FRACTION * (fc1 + fc2)
+    zero = (0.0,) * 2
+    # left load 1 N below the threshold (lifts), right 1 N above it (does not)
+    row = rec.row(0.0, *zero, *zero, *zero, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *zero, *zero,
+                  LIFT_OFF_FRACTION * fc1 - fc1 - 1.0, LIFT_OFF_FRACTION * fc2 - fc2 + 1.0,
+                  *zero, True)
+    assert row[Column.LIFT_OFF1] and not row[Column.LIFT_OFF2]
+    # both wheels off: the floored denominator keeps the LTR finite (0)
+    row = rec.row(0.0, *zero, *zero, *zero, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *zero, *zero,
+                  -2.0 * fc1, -2.0 * fc2, *zero, True)
+    assert row[Column.LTR] == 0.0 and math.isfinite(row[Column.LTR])
+
+
+def test_distance_is_the_trapezoidal_sum():
+    steps = np.array([0.1, 0.2, 0.1])
+    v = np.array([10.0, 12.0, 12.0, 8.0])
+    np.testing.assert_allclose(distance_m(steps, v), [0.0, 1.1, 3.5, 4.5], rtol=1e-15)
+    assert distance_m(np.zeros(0), np.array([3.0])).tolist() == [0.0]
+
+
+def test_tire_lag_per_sample_and_over_arrays():
+    rng = np.random.default_rng(4)
+    kt = np.array(VEHICLE.tire_stiffness_npm)
+    ct = np.array([1500.0, 0.0])
+    for t in (np.arange(300) * 1e-3, np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 300))):
+        df = 1e4 * rng.standard_normal((300, 2))
+        w = tire_deflections(df, t, kt, ct)
+        ref = [df[0, 0] / kt[0]]
+        for k in range(1, 300):
+            e = tire_decay(t[k] - t[k - 1], kt[0], ct[0])
+            ref.append(e * ref[-1] + (1.0 - e) * df[k, 0] / kt[0])
+        np.testing.assert_allclose(w[:, 0], ref, rtol=1e-9, atol=1e-15)
+        np.testing.assert_array_equal(w[:, 1], df[:, 1] / kt[1])   # no damping: dF / kt
+    assert tire_decay(1e-3, 1e6, 0.0) == 0.0

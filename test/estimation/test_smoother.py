@@ -1,0 +1,75 @@
+"""The model observer offline (estimation/smoother.py): the RTS smoother against the textbook
+one, the estimator's rejections and gaps, the blocked recursion.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters
+from model_observer_data import FIXED, SPEED, VEHICLE, rts_reference, to_stamps
+from road_force_estimator.estimation import estimate_batch, smooth
+from road_force_estimator.estimation.gains import design
+from road_force_estimator.estimation.model import OUTPUTS, rest_state, scheduled
+from road_force_estimator.estimation.schedule import SPEED_LEVEL_RATIO
+from road_force_estimator.estimation.smoother import LTI_BLOCK, lti
+
+
+class TestOffline:
+    def test_smooth_is_the_rts_smoother(self, drive, noisy):
+        q, phi = noisy
+        n = 2000
+        obs = ObserverParameters(**FIXED)
+        est = smooth(to_stamps(drive.t_s[:n]), q[:n], phi[:n], SPEED, VEHICLE, obs)
+        # the design the observer makes: the set noise and roughness (times the scheduled
+        # factor), the speed on its 10 % grid, the step of the data
+        force_psd, corr, factor, moment_psd = scheduled(1e-5, roll_moment=True)
+        speed = SPEED_LEVEL_RATIO ** round(math.log(SPEED) / math.log(SPEED_LEVEL_RATIO))
+        gains = design(VEHICLE, dt_s=1e-3, speed_mps=speed, noise_deflection_m=1e-5,
+                          noise_roll_rad=1e-4, road_gd_m3=factor * 256e-6,
+                          correlation_length_m=corr, force_psd=force_psd,
+                          roll_moment_psd=moment_psd)
+        x0 = rest_state(VEHICLE, q[0, 0], q[0, 1], phi[0])
+        xs = rts_reference(gains, np.column_stack([q[:n], phi[:n]]), x0)
+        h_df = gains.model.h[[OUTPUTS.index('df1'), OUTPUTS.index('df2')]]
+        # (two algorithms on an ill-conditioned covariance: agreement to ~1e-6 of the force)
+        np.testing.assert_allclose(est.tire_force_dynamic_n, xs @ h_df.T, rtol=1e-5,
+                                   atol=1e-2)
+
+    def test_rejections_and_gaps_as_the_estimator(self, drive, noisy):
+        q, phi = noisy
+        n = 2000
+        st = to_stamps(drive.t_s[:n])
+        qq = q[:n].copy()
+        qq[10] = np.inf
+        st[1000:] += 500_000_000
+        st[20] = st[19]
+        off = smooth(st, qq, phi[:n], SPEED, VEHICLE, ObserverParameters())
+        on = estimate_batch(st, qq, phi[:n], SPEED, VEHICLE, ObserverParameters())
+        np.testing.assert_array_equal(off.valid, on.valid)
+        for name in ('rejected_nonfinite', 'rejected_time', 'gaps', 'resets', 'accepted'):
+            assert getattr(off.status, name) == getattr(on.status, name), name
+        np.testing.assert_allclose(off.distance_m, on.distance_m, rtol=1e-12)
+        assert np.all(np.isfinite(off.wheel_load_n))
+
+    @pytest.mark.parametrize('m', [1, 7, 2 * LTI_BLOCK - 1, 3 * LTI_BLOCK,
+                                   70 * LTI_BLOCK + 37])
+    def test_blocked_recursion_is_the_sample_loop(self, m):
+        # x_k = F x_(k-1) + d_k, in long double one sample at a time, on a stable F whose
+        # states differ in scale by 1e6 (the observer's is as ill-conditioned)
+        rng = np.random.default_rng(m)
+        nx = 9
+        a = rng.standard_normal((nx, nx))
+        a *= 0.9995 / np.max(np.abs(np.linalg.eigvals(a)))
+        scale = np.logspace(-3, 3, nx)
+        f = (a * scale[:, None]) / scale[None, :]
+        drive = rng.standard_normal((m, nx)) * scale
+        x0 = rng.standard_normal(nx) * scale
+        ref = np.empty((m, nx))
+        x = x0.astype(np.longdouble)
+        for k in range(m):
+            x = f.astype(np.longdouble) @ x + drive[k]
+            ref[k] = x
+        got = lti(f, drive, x0)
+        span = np.max(np.abs(ref), axis=0)
+        assert np.max(np.abs(got - ref) / span) < 1e-11
