@@ -9,6 +9,11 @@ wall-clock read. A timer publishes every sample that is due, so the stream keeps
 (times ``realtime_factor``, a node-local parameter: > 1 runs faster, < 1 slower). At the end of
 the road or of ``simulator.duration`` it stops publishing and :attr:`finished` turns true; its
 ``main`` then returns 0. Parameters are read once (read-only): restart to change the drive.
+
+Start-up order: the drive (sample 0) starts once ``/suspension/deflections`` has a subscriber
+(and the other topics theirs, or :data:`START_GRACE_S` later), or after the node-local
+``start_timeout`` (s) with a warning, so that a recorder started beside it has every sample.
+``/fix`` carries status FIX, service GPS.
 """
 from __future__ import annotations
 
@@ -21,7 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
-from sensor_msgs.msg import JointState, NavSatFix
+from sensor_msgs.msg import JointState, NavSatFix, NavSatStatus
 
 from road_force_estimator.core.gnss import route
 from road_force_estimator.ros.messages import (
@@ -38,12 +43,21 @@ from road_force_estimator.core.sensors import SensorModel
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
 SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
     'realtime_factor', 'double', 1.0, '',
-    'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0),)
+    'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0), local_spec(
+    'start_timeout', 'double', 5.0, 's',
+    'the drive starts once /suspension/deflections has a subscriber, or after this', 0.0,
+    3600.0), local_spec(
+    'road_timeout', 'double', 2.0, 's',
+    'simulator.road = topic: the drive ends when no profile point came for this long after '
+    'the tires reached the last one', 0.01, 3600.0))
+#: Once the measurement topic has a subscriber: the longest wait for the other topics'
+#: subscribers of the same recorder or node (s).
+START_GRACE_S = 0.5
 
 
 def build(values):
     return (VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values),
-            values['realtime_factor'])
+            values['realtime_factor'], values['start_timeout'], values['road_timeout'])
 
 
 class PlantSimulator(Node):
@@ -52,7 +66,8 @@ class PlantSimulator(Node):
     def __init__(self, **kwargs):
         super().__init__('plant_simulator', **kwargs)
         self.params = ParameterGuard(self, SPECS, build, read_only=True)
-        vehicle, self.sim, self.realtime_factor = self.params.config
+        vehicle, self.sim, self.realtime_factor, self.start_timeout_s, self.road_timeout_s = \
+            self.params.config
         sim = self.sim
         try:
             length = min(sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0,
@@ -83,6 +98,8 @@ class PlantSimulator(Node):
                                                      reliable_qos(10))
         self.k = 0                     # next sample index
         self.start_ns = self.start_wall = None
+        self.created_wall = time.monotonic()
+        self.subscribed_wall = None    # when /suspension/deflections got a subscriber
         self.lag_s = 0.0
         self.finished = False
         period_s = max(1.0 / (sim.rate_hz * self.realtime_factor), 1e-3)
@@ -92,6 +109,8 @@ class PlantSimulator(Node):
     def timer_callback(self) -> None:
         """Publish every sample due by now (wall clock times ``realtime_factor``)."""
         if self.start_ns is None:
+            if not self.ready_to_start():
+                return
             self.start_ns = self.get_clock().now().nanoseconds
             self.start_wall = time.monotonic()
         elapsed = (time.monotonic() - self.start_wall) * self.realtime_factor
@@ -105,6 +124,22 @@ class PlantSimulator(Node):
             self.k += 1
         if self.k > self.last_index or self.plant.finished:
             self.finish()
+
+    def ready_to_start(self) -> bool:
+        """True once the measurement topic has a subscriber (and the other publishers theirs,
+        or :data:`START_GRACE_S` passed), or ``start_timeout`` passed (with a warning)."""
+        now = time.monotonic()
+        if self.subscribed_wall is None and self.deflections_pub.get_subscription_count():
+            self.subscribed_wall = now
+        if self.subscribed_wall is not None:
+            return (now - self.subscribed_wall >= START_GRACE_S
+                    or all(p.get_subscription_count() for p in self.reliable))
+        if now - self.created_wall >= self.start_timeout_s:
+            self.get_logger().warning(
+                f'no subscriber on /suspension/deflections after {self.start_timeout_s:g} s '
+                f'(start_timeout): starting the drive anyway')
+            return True
+        return False
 
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
@@ -130,6 +165,7 @@ class PlantSimulator(Node):
         msg = NavSatFix(latitude=float(lat), longitude=float(lon), altitude=0.0)
         msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), 'gnss'
         msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
         self.fix_pub.publish(msg)
 
     def finish(self) -> None:
