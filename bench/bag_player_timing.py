@@ -16,7 +16,8 @@ Run from the repository root::
   ``bag_player DRIVE --topics /suspension/deflections /vehicle/twist --rate R`` (its own
   process) into an ``observer`` (its own process, restarted for each rate); this process counts
   the ``/observer/states`` that come back. The highest R of ``--rates`` with one output per
-  input (and all the rates below it lossless too) is reported.
+  input (and all the rates below it lossless too) is reported, and whether the observer
+  process died on the way (with its last line).
 
 The machine is shared (other work may run): figures vary between runs.
 """
@@ -123,9 +124,10 @@ def lossless_rates(drive: pathlib.Path, rates: list[float]) -> dict:
             from rclpy.experimental import EventsExecutor
             executor = EventsExecutor(context=context)
             executor.add_node(node)
+            log = tempfile.TemporaryFile('w+')
             observer = subprocess.Popen(
                 [sys.executable, '-m', 'road_force_estimator.ros.observer'], cwd=REPO, env=env,
-                stderr=subprocess.DEVNULL)
+                stderr=log)
             t0 = time.monotonic()
             player = subprocess.Popen(
                 [sys.executable, '-m', 'road_force_estimator.ros.bag_player', str(drive),
@@ -138,13 +140,20 @@ def lossless_rates(drive: pathlib.Path, rates: list[float]) -> dict:
                 executor.spin_once(timeout_sec=0.05)
                 if len(states) != last:
                     last, quiet = len(states), time.monotonic()
+            crashed = observer.poll() is not None  # it must still run: it ends on a signal
             observer.terminate()
             observer.wait(30)
+            log.seek(0)
+            lines = [line for line in log.read().splitlines() if line.strip()]
+            log.close()
             executor.shutdown()
             node.destroy_node()
             results[rate] = {'inputs': n_inputs, 'outputs': len(set(states)),
-                             'wall_s': time.monotonic() - t0}
-            print(f'rate {rate:g}: {len(set(states))} of {n_inputs} outputs', file=sys.stderr)
+                             'wall_s': time.monotonic() - t0, 'observer_died': crashed,
+                             'observer_last_line': lines[-1] if crashed and lines else ''}
+            print(f'rate {rate:g}: {len(set(states))} of {n_inputs} outputs'
+                  + (f'; the observer died: {lines[-1] if lines else "?"}' if crashed else ''),
+                  file=sys.stderr)
     finally:
         rclpy.try_shutdown(context=context)
     best = 0.0
