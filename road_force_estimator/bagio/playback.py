@@ -1,10 +1,12 @@
 """Playback side of a rosbag2 MCAP bag: serialized messages in log-time order, recorded QoS.
 
 Any writer's bag (ours, ``rosbags``', the ``mcap`` library's, ``ros2 bag record``'s) is read
-through the ``mcap`` library, which decompresses zstd and lz4 chunks. Reading streams: one
-chunk at a time is decompressed and its messages merged into the log-time order (a bounded
-window: chunks as recorders write them, in time order), so a bag of any length plays in
-bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays up to the break:
+through the ``mcap`` library, which reads the records and decompresses zstd and lz4 chunks
+(the messages of a chunk are then taken from its bytes here, without an object per message).
+Reading streams: one chunk at a time is decompressed and its messages merged into the
+log-time order (a bounded window: chunks as recorders write them, in time order; a file whose
+chunks overlap in time is read through its chunk index, which merges them), so a bag of any
+length plays in bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays up to the break:
 :attr:`Playback.broken` then says where and how many messages were played.
 
 QoS: each topic's ``offered_qos_profiles`` from ``metadata.yaml`` (rosbag2 writes a list, older
