@@ -6,8 +6,8 @@ through the ``mcap`` library, which reads the records and decompresses zstd and 
 Reading streams: one chunk at a time is decompressed and its messages merged into the
 log-time order (a bounded window: chunks as recorders write them, in time order; a file whose
 chunks overlap in time is read through its chunk index, which merges them), so a bag of any
-length plays in bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays up to the break:
-:attr:`Playback.broken` then says where and how many messages were played.
+length plays in bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays
+up to the break: :attr:`Playback.broken` then says where.
 
 QoS: each topic's ``offered_qos_profiles`` from ``metadata.yaml`` (rosbag2 writes a list, older
 versions a YAML string), else from the MCAP channel's metadata; a topic without any (as
