@@ -39,6 +39,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.xml')),
     ] + _tree('bags'),
     # The ROS 2 Python packages (rclpy, the message packages) are deliberately absent:
     # on a Jazzy machine they come from apt; scripts/setup installs the PyPI wheels.

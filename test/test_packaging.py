@@ -80,4 +80,6 @@ def test_colcon_build_installs_executables_where_ros2_run_finds_them(colcon_inst
     share = prefix / 'share' / PACKAGE
     assert (share / 'package.xml').is_file()
     assert (share / 'config' / 'road_force_estimator.yaml').is_file()
+    for name in ('simulation.launch.xml', 'replay.launch.xml'):
+        assert (share / 'launch' / name).is_file(), name
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()

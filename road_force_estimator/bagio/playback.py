@@ -1,11 +1,13 @@
 """Playback side of a rosbag2 MCAP bag: serialized messages in log-time order, recorded QoS.
 
 Any writer's bag (ours, ``rosbags``', the ``mcap`` library's, ``ros2 bag record``'s) is read
-through the ``mcap`` library, which decompresses zstd and lz4 chunks. Reading streams: one
-chunk at a time is decompressed and its messages merged into the log-time order (a bounded
-window: chunks as recorders write them, in time order), so a bag of any length plays in
-bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays up to the break:
-:attr:`Playback.broken` then says where and how many messages were played.
+through the ``mcap`` library, which reads the records and decompresses zstd and lz4 chunks
+(the messages of a chunk are then taken from its bytes here, without an object per message).
+Reading streams: one chunk at a time is decompressed and its messages merged into the
+log-time order (a bounded window: chunks as recorders write them, in time order; a file whose
+chunks overlap in time is read through its chunk index, which merges them), so a bag of any
+length plays in bounded memory. A bag cut short (a recorder killed, a copy interrupted) plays
+up to the break: :attr:`Playback.broken` then says where.
 
 QoS: each topic's ``offered_qos_profiles`` from ``metadata.yaml`` (rosbag2 writes a list, older
 versions a YAML string), else from the MCAP channel's metadata; a topic without any (as
@@ -16,18 +18,24 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import heapq
+import io
 from pathlib import Path
+import struct
 from typing import Iterator, Sequence
 
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import StreamReader, get_chunk_data_stream
 import yaml
 
 from road_force_estimator.interfaces import SENSOR_DATA, qos_kind
 
 __all__ = ['PlaybackError', 'TopicQoS', 'PlayedTopic', 'Playback', 'open_playback']
 
+_RECORD_HEAD = struct.Struct('<BQ')      # opcode, length
+_MESSAGE_HEAD = struct.Struct('<HIQ')    # channel id, sequence, log time (then publish time)
 #: Depth of a topic's queue when the bag records none (a keep-all recording has none either).
 DEFAULT_DEPTH = 100
 
@@ -87,6 +95,32 @@ def _qos_from_profiles(profiles) -> TopicQoS | None:
     return TopicQoS(rel, dur, depth, recorded=True)
 
 
+def _chunk_messages(chunk: Chunk, schemas: dict[int, str], channel) -> list:
+    """``(channel id, log time, data)`` of a chunk's messages (its schemas and channels
+    registered on the way), CRC checked: the records parsed here, without an object per
+    message, as a chunk of a 1 kHz drive holds tens of thousands."""
+    stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+    buf = stream.read(length) if length else b''
+    out = []
+    pos, end = 0, len(buf)
+    message, head = Opcode.MESSAGE, _RECORD_HEAD.unpack_from
+    while pos + 9 <= end:
+        op, size = head(buf, pos)
+        body = pos + 9
+        pos = body + size
+        if pos > end:
+            raise ValueError(f'record of {size} bytes overruns the chunk')
+        if op == message:
+            cid, _, log_time = _MESSAGE_HEAD.unpack_from(buf, body)
+            out.append((cid, log_time, buf[body + 22:pos]))
+        elif op == Opcode.SCHEMA:
+            rec = Schema.read(ReadDataStream(io.BytesIO(buf[body:pos])))
+            schemas[rec.id] = rec.name
+        elif op == Opcode.CHANNEL:
+            channel(Channel.read(ReadDataStream(io.BytesIO(buf[body:pos]))))
+    return out
+
+
 def _normal_type(name: str) -> str:
     parts = name.split('/')
     return f'{parts[0]}/msg/{parts[1]}' if len(parts) == 2 else name
@@ -122,37 +156,41 @@ class Playback:
         topics : sequence of str, optional
             Only these topics (default: all).
         start_offset_ns : int
-            Skip the messages logged before the bag's first message plus this (ns).
+            Skip the messages logged before the bag's first message (of any topic) plus this
+            (ns).
         """
         self.broken = ''
+        self._first_ns = None
         wanted = None if topics is None else set(topics)
-        first = None
-        for t, topic, msgtype, data in self._ordered():
-            if first is None:
-                first = t
-            if t - first < start_offset_ns or (wanted is not None and topic not in wanted):
-                continue
-            yield t, topic, msgtype, data
-
-    def _ordered(self) -> Iterator[tuple[int, str, str, bytes]]:
         for path in self.files:
-            yield from self._file_messages(path)
+            for t, topic, msgtype, data in self._file_messages(path, wanted):
+                if t - self._first_ns >= start_offset_ns:
+                    yield t, topic, msgtype, data
             if self.broken:
                 return
 
-    def _file_messages(self, path: Path):
-        """One file's messages in log-time order: through the chunk index when the file is
-        whole (chunks may overlap in time), else by a linear read (:meth:`_linear`)."""
+    def _seen(self, t_ns: int) -> None:
+        if self._first_ns is None or t_ns < self._first_ns:
+            self._first_ns = t_ns
+
+    def _file_messages(self, path: Path, wanted):
+        """One file's messages in log-time order: read linearly, chunk by chunk
+        (:meth:`_linear`), unless the chunk index shows chunks that start earlier than the
+        chunk before them (then through the index, which merges overlapping chunks)."""
         with path.open('rb') as f:
             reader = SeekingReader(f, validate_crcs=True)
             try:
                 summary = reader.get_summary()
             except Exception:  # cut: no footer or summary
                 summary = None
-            if summary is None or not summary.chunk_indexes:
-                yield from self._linear(path)
+            index = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset) if (
+                summary is not None) else []
+            starts = [c.message_start_time for c in index]
+            if starts == sorted(starts):
+                yield from self._linear(path, wanted)
                 return
-            messages = reader.iter_messages(log_time_order=True)
+            self._seen(min(starts))
+            messages = reader.iter_messages(topics=wanted, log_time_order=True)
             while True:
                 try:
                     schema, channel, message = next(messages)
@@ -167,18 +205,23 @@ class Playback:
                 yield message.log_time, channel.topic, self.topics[channel.topic].type, \
                     message.data
 
-    def _linear(self, path: Path):
-        """A file without index read from the start, chunk by chunk, merged into log-time
-        order (a chunk's messages wait until the next chunk starts later than they are)."""
+    def _linear(self, path: Path, wanted):
+        """A file read from the start, chunk by chunk, merged into log-time order (a chunk's
+        messages wait until a later chunk starts after them); a cut or damaged file ends the
+        read where the damage begins, with :attr:`broken` saying so."""
         heap: list = []
         seq = 0
-        channels: dict[int, tuple[str, str]] = {}
+        channels: dict[int, tuple[str, str] | None] = {}
         schemas: dict[int, str] = {}
 
         def release(upto: int):
             while heap and heap[0][0] <= upto:
                 t, _, topic, msgtype, data = heapq.heappop(heap)
                 yield t, topic, msgtype, data
+
+        def channel(rec: Channel) -> None:
+            name, msgtype = self._channel(rec, schemas)
+            channels[rec.id] = (name, msgtype) if wanted is None or name in wanted else None
 
         with path.open('rb') as f:
             records = StreamReader(f, emit_chunks=True, validate_crcs=True).records
@@ -193,27 +236,28 @@ class Playback:
                                    f'played up to the break')
                     break
                 if isinstance(record, Chunk):
-                    inner = None
                     try:
-                        inner = breakup_chunk(record, validate_crc=True)
+                        inner = _chunk_messages(record, schemas, channel)
                     except Exception as exc:
                         self.broken = (f'{path.name}: a chunk near byte {f.tell()} cannot be '
                                        f'read ({exc}): played up to the break')
-                    if inner is None:
                         break
+                    self._seen(record.message_start_time)
                     yield from release(record.message_start_time)
+                elif isinstance(record, Message):
+                    self._seen(record.log_time)
+                    yield from release(record.log_time)
+                    inner = [(record.channel_id, record.log_time, record.data)]
                 else:
-                    inner = [record]
-                    if isinstance(record, Message):
-                        yield from release(record.log_time)
-                for rec in inner:
-                    if isinstance(rec, Schema):
-                        schemas[rec.id] = rec.name
-                    elif isinstance(rec, Channel):
-                        channels[rec.id] = self._channel(rec, schemas)
-                    elif isinstance(rec, Message) and rec.channel_id in channels:
-                        topic, msgtype = channels[rec.channel_id]
-                        heapq.heappush(heap, (rec.log_time, seq, topic, msgtype, rec.data))
+                    if isinstance(record, Schema):
+                        schemas[record.id] = record.name
+                    elif isinstance(record, Channel):
+                        channel(record)
+                    continue
+                for cid, t, data in inner:
+                    target = channels.get(cid)
+                    if target is not None:
+                        heapq.heappush(heap, (t, seq, *target, data))
                         seq += 1
         yield from release(float('inf'))
 

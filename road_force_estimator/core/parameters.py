@@ -106,7 +106,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('simulator.duration', 'double', 60.0, 's',
        'simulated time; the drive also stops at the end of the road profile', 0.0, 1e6),
     _p('simulator.road', 'string', 'iso8608:C:seed=1', '',
-       'road source: "iso8608:<A-H>[:seed=N]" or a path to an LPA bag, CSV or ERD profile'),
+       'road source: "iso8608:<A-H>[:seed=N]", a path to an LPA bag, CSV or ERD profile, or '
+       '"topic" (the profile as it arrives on /lpa/left and /lpa/right)'),
     _p('simulator.noise.deflection', 'double', 1e-5, 'm',
        'standard deviation of the deflection sensor noise', 0.0, 0.1),
     _p('simulator.noise.roll', 'double', 1e-4, 'rad',

@@ -213,6 +213,7 @@ class Plant:
         self.vehicle = vehicle
         #: The road the tires follow (enveloped when ``tire_envelope_m`` > 0).
         self.road = road.enveloped(tire_envelope_m)
+        self.tire_envelope_m = float(tire_envelope_m)
         self.speed_mps = speed_mps
         self.rate_hz = rate_hz
         fastest = self.model.max_pole_magnitude()
@@ -294,6 +295,30 @@ class Plant:
         """The next sample, or None at the end of the road (:attr:`stop_reason` says so)."""
         row = self._next_row()
         return None if row is None else PlantSample._from_row(row)
+
+    def extend_road(self, road: RoadProfile) -> None:
+        """Drive on over ``road``, the current road and more (a profile that arrives as it is
+        measured: :mod:`.road_stream`).
+
+        The samples already returned keep their numbers; the next ones are prepared on the
+        longer road (the enveloped profile of a prefix is that of the whole road up to
+        ``L/2`` before the prefix's end, where the tires can be). :attr:`last_sample_index`
+        grows with it and a drive that had stopped at the end of the road goes on.
+
+        Raises
+        ------
+        ValueError
+            ``road`` does not start where the current one starts, or is shorter.
+        """
+        new = road.enveloped(self.tire_envelope_m)
+        if new.start_m != self.road.start_m or new.end_m < self.road.end_m:
+            raise ValueError(f'extend_road: [{new.start_m:g}, {new.end_m:g}] m does not extend '
+                             f'[{self.road.start_m:g}, {self.road.end_m:g}] m')
+        self.road = new
+        self._slopes = new.segment_slopes()
+        self._last_sample = self._find_last_sample()
+        self._chunk_last = min(self._chunk_last, max(self._k, 0))  # prepare again from here
+        self.stop_reason = ''
 
     # ----------------------------------------------------------------------------------------
 

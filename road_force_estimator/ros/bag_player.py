@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import queue
 import sys
 import threading
 import time
@@ -40,10 +41,49 @@ from road_force_estimator.ros.node_runner import run_node
 PROG = 'bag_player'
 #: Queue depth of every played topic at least (messages), whatever the bag recorded.
 MIN_DEPTH = 1000
+#: Messages read ahead of the schedule by the reading thread (bounds the memory).
+READ_AHEAD = 20000
 #: After every played topic has a subscriber: time for the subscribers' side of the
 #: discovery to complete before the first message (s).
 SETTLE_S = 0.3
 CLOCK_TOPIC = '/clock'
+
+
+def read_ahead(messages, stopping: threading.Event, size: int = READ_AHEAD):
+    """``messages`` (an iterator) read by a thread of its own, ``size`` items ahead.
+
+    Reading and decompressing a chunk takes tens of milliseconds: done here, it never delays
+    the publications, which wait only for their scheduled time.
+    """
+    buffer: queue.Queue = queue.Queue(maxsize=size)
+    end = object()
+
+    def put(item) -> bool:
+        while not stopping.is_set():
+            try:
+                buffer.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def fill() -> None:
+        try:
+            for item in messages:
+                if not put(item):
+                    return
+        except Exception as exc:  # raised again in the consumer
+            put(exc)
+        put(end)
+
+    threading.Thread(target=fill, name='bag_reader', daemon=True).start()
+    while True:
+        item = buffer.get()
+        if item is end:
+            return
+        if isinstance(item, Exception):
+            raise item
+        yield item
 
 
 class UsageError(Exception):
@@ -118,8 +158,9 @@ class BagPlayer(Node):
     """Publishes a :class:`bagio.playback.Playback` from a thread of its own.
 
     :attr:`done` turns true at the end (or on :meth:`stop`); :attr:`published` counts the
-    messages published per output topic; :attr:`lateness_s` holds, per message, how late it
-    was published against its schedule (s), for bench/bag_player_timing.py.
+    messages published per output topic; :attr:`lateness_s` (and :attr:`clock_lateness_s`)
+    hold, per message (per /clock tick), how late it was published against its schedule (s),
+    and :attr:`schedule` the schedule's origin, for bench/bag_player_timing.py.
     """
 
     def __init__(self, playback, options, **kwargs):
@@ -131,6 +172,8 @@ class BagPlayer(Node):
         self.done = False
         self.published: dict[str, int] = {}
         self.lateness_s: list[float] = []
+        self.clock_lateness_s: list[float] = []
+        self.schedule: tuple[float, int] | None = None  # (monotonic start, first log time ns)
         self.clock_ticks = 0
         self.pubs: dict[str, object] = {}
         self.skipped: set[str] = set()
@@ -232,8 +275,9 @@ class BagPlayer(Node):
         period_s = 1.0 / opts.clock if opts.clock else math.inf
         next_clock = math.inf
         count = 0
-        for t_ns, topic, _, data in self.playback.messages(
-                opts.topics, start_offset_ns=round(opts.start_offset * 1e9)):
+        messages = self.playback.messages(opts.topics,
+                                          start_offset_ns=round(opts.start_offset * 1e9))
+        for t_ns, topic, _, data in read_ahead(messages, self.stopping):
             if topic not in self.playback.topics:
                 continue
             pub = self.publisher_for(topic)
@@ -241,12 +285,14 @@ class BagPlayer(Node):
                 continue
             if start_wall is None:
                 start_wall, first_ns = time.monotonic(), t_ns
+                self.schedule = (start_wall, first_ns)
                 next_clock = start_wall if self.clock_pub else math.inf
             due = start_wall + (t_ns - first_ns) * 1e-9 / opts.rate
             while next_clock <= due:  # /clock ticks due before this message
                 if not self.wait_until(next_clock):
                     return count
                 self.publish_clock(first_ns + (next_clock - start_wall) * opts.rate * 1e9)
+                self.clock_lateness_s.append(time.monotonic() - next_clock)
                 next_clock += period_s
             if not self.wait_until(due):
                 return count

@@ -97,6 +97,8 @@ class Observer(Node):
                                  sensor_qos(1000))
         self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10))
         self.create_timer(1.0, self.diagnostics_callback)
+        self.input_seen = False  # logged once: waiting, then the rate input arrives at
+        self.get_logger().info('waiting for /suspension/deflections and /vehicle/twist')
 
     def reconfigure(self, config) -> None:
         """(Re)build the estimator from ``(VehicleParameters, ObserverParameters)``."""
@@ -192,6 +194,17 @@ class Observer(Node):
         ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(est.ltr))
         ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
 
+    def log_input(self, values: dict, rejected: Counter) -> None:
+        """One line when input first arrives (its rate), then only when inputs are rejected."""
+        if values['received'] and not self.input_seen:
+            self.input_seen = True
+            self.get_logger().info(f"input arriving on /suspension/deflections at "
+                                   f"{values['rate_hz']:.0f} Hz")
+        if rejected:
+            reasons = ', '.join(f'{k} {v}' for k, v in sorted(rejected.items()))
+            last = f' (last: {self.last_rejection})' if self.last_rejection else ''
+            self.get_logger().warning(f'rejected inputs: {reasons}{last}')
+
     def diagnostics_callback(self) -> None:
         """Input, estimator and configuration statuses: this period's counts (cleared after
         each report), then the totals."""
@@ -228,6 +241,7 @@ class Observer(Node):
             values['last_rejection'] = self.last_rejection
         if st.typical_dt_s > 0.0:  # the rate the stamps say, against the rate that came
             values['stamp_rate_hz'] = 1.0 / st.typical_dt_s
+        self.log_input(values, rejected)
         return diagnostics.status('observer: input', self.get_name(), message, values)
 
     def estimator_status(self, period: Counter, fresh: Counter) -> diagnostics.Status:

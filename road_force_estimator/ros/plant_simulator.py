@@ -10,6 +10,11 @@ wall-clock read. A timer publishes every sample that is due, so the stream keeps
 (times ``realtime_factor``, a node-local parameter: > 1 runs faster, < 1 slower). At the end of
 the road or of ``simulator.duration`` it stops publishing and :attr:`finished` turns true; its
 ``main`` then returns 0. Parameters are read once (read-only): restart to change the drive.
+
+Start-up order: the drive (sample 0) starts once ``/suspension/deflections`` has a subscriber
+(and the other topics theirs, or :data:`START_GRACE_S` later), or after the node-local
+``start_timeout`` (s) with a warning, so that a recorder started beside it has every sample.
+``/fix`` carries status FIX, service GPS.
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
-from sensor_msgs.msg import JointState, NavSatFix
+from sensor_msgs.msg import JointState, NavSatFix, NavSatStatus
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.gnss import route
@@ -33,6 +38,7 @@ from road_force_estimator.ros.messages import (
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.bagio import road_from_source
+from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
     ParameterError, ParameterGuard, local_spec, specs_with_prefix)
@@ -41,12 +47,21 @@ from road_force_estimator.core.sensors import SensorModel
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
 SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
     'realtime_factor', 'double', 1.0, '',
-    'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0),)
+    'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0), local_spec(
+    'start_timeout', 'double', 5.0, 's',
+    'the drive starts once /suspension/deflections has a subscriber, or after this', 0.0,
+    3600.0), local_spec(
+    'road_timeout', 'double', 2.0, 's',
+    'simulator.road = topic: the drive ends when no profile point came for this long after '
+    'the tires reached the last one', 0.01, 3600.0))
+#: Once the measurement topic has a subscriber: the longest wait for the other topics'
+#: subscribers of the same recorder or node (s).
+START_GRACE_S = 0.5
 
 
 def build(values):
     return (VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values),
-            values['realtime_factor'])
+            values['realtime_factor'], values['start_timeout'], values['road_timeout'])
 
 
 class PlantSimulator(Node):
@@ -55,21 +70,19 @@ class PlantSimulator(Node):
     def __init__(self, **kwargs):
         super().__init__('plant_simulator', **kwargs)
         self.params = ParameterGuard(self, SPECS, build, read_only=True)
-        vehicle, self.sim, self.realtime_factor = self.params.config
+        vehicle, self.sim, self.realtime_factor, self.start_timeout_s, self.road_timeout_s = \
+            self.params.config
         sim = self.sim
-        try:
-            length = min(sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0,
-                         MAX_SYNTHETIC_LENGTH_M)
-            self.road = road_from_source(sim.road, length_m=length)
-            self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                               tire_envelope_m=sim.tire_envelope_length_m)
-        except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
-            raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
-                                 f'{exc}') from None
+        self.live = self.road = self.plant = None
+        self.last_index = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9))
+        if sim.road.strip().lower() == TOPIC_ROAD:  # the road arrives on /lpa/*: live_road
+            self.live = LiveRoad(self, vehicle, sim, self.road_timeout_s)
+        else:
+            self.build_plant(vehicle, sim)
+            self.last_index = min(self.last_index, self.plant.last_sample_index)
+        self.wait_since = None         # when the drive began waiting for the live road
         self.measure = SensorModel.from_simulator(sim).sampler()
         self.half_track_m = vehicle.half_track_m
-        self.last_index = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
-                              self.plant.last_sample_index)
         self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
         self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,
                                                      sensor_qos(100))
@@ -86,21 +99,47 @@ class PlantSimulator(Node):
                                                      reliable_qos(10))
         self.k = 0                     # next sample index
         self.start_ns = self.start_wall = None
+        self.created_wall = time.monotonic()
+        self.subscribed_wall = None    # when /suspension/deflections got a subscriber
         self.lag_s = 0.0
         self.finished = False
         period_s = max(1.0 / (sim.rate_hz * self.realtime_factor), 1e-3)
         self.timer = self.create_timer(period_s, self.timer_callback)
         self.diagnostics_timer = self.create_timer(1.0, self.diagnostics_callback)
 
+    def build_plant(self, vehicle, sim) -> None:
+        """The road of ``simulator.road`` and the plant on it (refused: ParameterError)."""
+        try:
+            length = min(sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0,
+                         MAX_SYNTHETIC_LENGTH_M)
+            self.road = road_from_source(sim.road, length_m=length)
+            self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
+                               tire_envelope_m=sim.tire_envelope_length_m)
+        except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
+            raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
+                                 f'{exc}') from None
+
     def timer_callback(self) -> None:
         """Publish every sample due by now (wall clock times ``realtime_factor``)."""
         if self.start_ns is None:
+            if self.plant is None:  # live road: the start of the profile has not come yet
+                self.plant = self.live.plant()
+                if self.plant is None:
+                    if self.live.ended:
+                        self.finish()
+                    return
+            if not self.ready_to_start():
+                return
             self.start_ns = self.get_clock().now().nanoseconds
             self.start_wall = time.monotonic()
+        if self.live is not None and not self.follow_live_road():
+            return
         elapsed = (time.monotonic() - self.start_wall) * self.realtime_factor
         due = min(int(elapsed * self.sim.rate_hz) + 1, self.last_index + 1)
         self.lag_s = max(0.0, elapsed - self.k / self.sim.rate_hz)
         while self.k < due and not self.finished:
+            if self.live is not None and self.k > 0 and not self.live.ahead(self.plant):
+                break  # the road ahead has not arrived yet
             sample = self.plant.step()
             if sample is None:
                 break
@@ -108,6 +147,36 @@ class PlantSimulator(Node):
             self.k += 1
         if self.k > self.last_index or self.plant.finished:
             self.finish()
+
+    def follow_live_road(self) -> bool:
+        """Live road: False while the road ahead has not arrived (the drive's clock waits
+        too) or once the profile ended (the drive finishes)."""
+        if self.k == 0 or self.live.ahead(self.plant):
+            if self.wait_since is not None:
+                self.start_wall += time.monotonic() - self.wait_since
+                self.wait_since = None
+            return True
+        if self.wait_since is None:
+            self.wait_since = time.monotonic()
+        if self.live.ended:
+            self.finish()
+        return False
+
+    def ready_to_start(self) -> bool:
+        """True once the measurement topic has a subscriber (and the other publishers theirs,
+        or :data:`START_GRACE_S` passed), or ``start_timeout`` passed (with a warning)."""
+        now = time.monotonic()
+        if self.subscribed_wall is None and self.deflections_pub.get_subscription_count():
+            self.subscribed_wall = now
+        if self.subscribed_wall is not None:
+            return (now - self.subscribed_wall >= START_GRACE_S
+                    or all(p.get_subscription_count() for p in self.reliable))
+        if now - self.created_wall >= self.start_timeout_s:
+            self.get_logger().warning(
+                f'no subscriber on /suspension/deflections after {self.start_timeout_s:g} s '
+                f'(start_timeout): starting the drive anyway')
+            return True
+        return False
 
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
@@ -133,13 +202,16 @@ class PlantSimulator(Node):
         msg = NavSatFix(latitude=float(lat), longitude=float(lon), altitude=0.0)
         msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), 'gnss'
         msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
         self.fix_pub.publish(msg)
 
     def finish(self) -> None:
         if not self.finished:
             self.finished = True
             self.timer.cancel()
-            reason = self.plant.stop_reason or f'duration {self.sim.duration_s:g} s simulated'
+            reason = ((self.live.ended if self.live is not None else '')
+                      or (self.plant.stop_reason if self.plant is not None else '')
+                      or f'duration {self.sim.duration_s:g} s simulated')
             self.get_logger().info(f'drive finished after {self.k} samples: {reason}')
             self.diagnostics_callback()
 
@@ -148,8 +220,10 @@ class PlantSimulator(Node):
         late = self.lag_s > 0.1 and not self.finished
         values = {'samples': self.k, 'simulated_time_s': self.k / sim.rate_hz,
                   'rate_hz': sim.rate_hz, 'realtime_factor': self.realtime_factor,
-                  'lag_s': self.lag_s, 'road': self.road.name or sim.road,
-                  'road_end_m': self.road.end_m, 'finished': self.finished}
+                  'lag_s': self.lag_s, 'road': (self.road.name if self.road else '') or sim.road,
+                  'road_end_m': self.road.end_m if self.road else (
+                      self.live.stream.end_m if self.live else math.nan),
+                  'finished': self.finished}
         message = ('finished' if self.finished else
                    f'behind real time by {self.lag_s:.3f} s' if late else 'publishing')
         msg = DiagnosticArray(status=[diagnostic_status(diagnostics.status(

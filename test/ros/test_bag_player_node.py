@@ -85,6 +85,7 @@ def test_topics_start_offset_and_remap(ros_context, tmp_path):
     write_ours(tmp_path / 'bag', items)
     player, col = play(ros_context, tmp_path / 'bag', '--rate', '5', '--topics', '/lpa/left',
                        '/ratio', '--start-offset', '0.2', '--remap', '/lpa/left:=/lpa/other',
+                       '--delay', '0.1',
                        topics={'/lpa/other': POINT, '/lpa/left': POINT, '/lpa/right': POINT,
                                '/ratio': FLOAT})
     want = by_topic(items, start_ns=200 * 10**6)

@@ -300,3 +300,18 @@ def test_inputs_lost_on_the_way_are_counted_and_warned(rig):
             and input_diagnostics(collector).get('total.missed') == '10')
 
     assert spin_until(executor, warned, 5.0), input_diagnostics(collector)
+
+
+def test_the_log_says_waiting_then_the_input_rate_then_only_rejections(make_rig, capfd):
+    observer, feeder, collector, executor = make_rig()
+    for k in range(10):
+        feeder.sample(k, speed=20.0)
+    assert spin_until(executor, lambda: observer.input_seen
+                      and collector.count('/observer/states') == 10, 10.0)
+    feeder.raw(T0_NS + 10 * 1_000_000, ['a', 'b', 'c'], [0.0, 0.0, 0.0])
+    assert spin_until(executor, lambda: observer.total['names'] == 1, 10.0)  # reported
+    lines = [line for line in capfd.readouterr().err.splitlines() if '[observer]' in line]
+    assert len(lines) == 3, lines
+    assert 'waiting for /suspension/deflections and /vehicle/twist' in lines[0]
+    assert 'input arriving on /suspension/deflections at' in lines[1]
+    assert 'rejected inputs: names 1 (last: JointState names' in lines[2]

@@ -94,6 +94,8 @@ def test_fix_follows_the_straight_route(ros_context):
     np.testing.assert_allclose([f.latitude for f in fixes],
                                lat0 + np.degrees(20.0 * t / m), rtol=0, atol=1e-9)
     assert {f.longitude for f in fixes} == {17.1077}
+    # A fix, from GPS (an unset status reads as -2, "unknown", in Jazzy).
+    assert {(f.status.status, f.status.service) for f in fixes} == {(0, 1)}
 
 
 def test_flat_road_gives_static_loads_and_the_noise_asked_for(ros_context):
@@ -172,3 +174,72 @@ def test_main_refuses_a_bad_parameter_with_one_line(tmp_path):
     bad.write_text('/**:\n  ros__parameters:\n    simulator:\n      rate: [1\n')
     code, _, err = finish(run_main('plant_simulator', '--ros-args', '--params-file', str(bad)))
     assert code == 1 and 'Traceback' not in err and 'params file' in err
+
+
+def test_the_drive_waits_for_a_subscriber_on_the_measurements(ros_context):
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        Parameter('simulator.duration', value=0.2), Parameter('start_timeout', value=60.0)])
+    executor = make_executor(ros_context, plant)
+    collector = None
+    try:
+        # Nobody listens: nothing is simulated nor published (a bounded look, not a sleep).
+        assert not spin_until(executor, lambda: plant.k > 0, 1.0)
+        collector = Collector(ros_context, TOPICS)
+        executor.add_node(collector)
+        assert spin_until(executor, lambda: plant.finished, 30.0)
+        assert spin_until(executor, lambda: all(collector.count(t) >= plant.k
+                                                for t in TOPICS[:6]), 10.0)
+    finally:
+        close(executor, plant, *([collector] if collector else []))
+    # Every sample from the first one on reached the subscriber.
+    stamps = collector.stamps('/suspension/deflections')
+    assert len(stamps) == plant.k == 201
+    assert stamps[0] == plant.start_ns
+
+
+def test_main_starts_after_start_timeout_without_a_subscriber():
+    code, _, err = finish(run_main('plant_simulator', '--ros-args', '-p',
+                                   'simulator.duration:=0.1', '-p', 'start_timeout:=0.5'))
+    assert code == 0, err
+    assert ('no subscriber on /suspension/deflections after 0.5 s (start_timeout): starting '
+            'the drive anyway') in err
+    assert 'drive finished after 101 samples' in err
+
+
+def test_a_drive_recorded_from_the_nodes_has_every_sample_and_coordinates(ros_context,
+                                                                          tmp_path):
+    """plant_simulator + bag_recorder (started together): the bag holds every sample from
+    the first on and every fix, and estimate_bag gives coordinates on every segment."""
+    from road_force_estimator.bagio import read_drive_bag
+    from road_force_estimator.ros.bag_recorder import BagRecorder, drain
+    from road_force_estimator.tools.estimate_bag import main as estimate_bag
+
+    bag = tmp_path / 'drive'
+    recorder = BagRecorder(context=ros_context, parameter_overrides=[
+        Parameter('output', value=str(bag))])
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        Parameter('simulator.duration', value=4.0), Parameter('simulator.speed', value=25.0),
+        Parameter('simulator.road', value='iso8608:C:seed=3')])
+    executor = make_executor(ros_context, recorder, plant)
+    try:
+        assert spin_until(executor, lambda: plant.finished, 60.0)
+        assert spin_until(executor, lambda: recorder.counts['/suspension/deflections']
+                          >= plant.k, 20.0)
+        drain(executor, recorder)
+    finally:
+        recorder.close()
+        close(executor, plant, recorder)
+    drive = read_drive_bag(bag)
+    assert len(drive.stamps_ns) == plant.k == 4001
+    assert drive.stamps_ns[0] == plant.start_ns
+    assert len(drive.fixes.stamps_ns) == 41 and not drive.rejected.get('/fix')
+    code = estimate_bag([str(bag), '--output', str(tmp_path / 'est'), '--no-figures',
+                         '--no-progress', '--segment-length', '20'])
+    assert code == 0
+    rows = (tmp_path / 'est' / 'report' / 'segments.csv').read_text().splitlines()
+    header = rows[0].split(',')
+    assert len(rows) - 1 == 5
+    for row in rows[1:]:
+        values = dict(zip(header, row.split(',')))
+        assert all(math.isfinite(float(values[k])) for k in ('start_lat', 'start_lon',
+                                                             'end_lat', 'end_lon')), row
