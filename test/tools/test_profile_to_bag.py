@@ -35,7 +35,7 @@ def test_csv_to_bag_to_csv_is_exact(tmp_path):
     source = read_csv_profile(csv)
     assert main([str(csv), '--output', str(tmp_path / 'bag')]) == 0
     assert_same(bagio.read_lpa_bag(tmp_path / 'bag'), source)
-    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'back.csv')]) == 0
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'back.csv'), '--exact']) == 0
     assert_same(read_csv_profile(tmp_path / 'back.csv'), source)
     assert (tmp_path / 'back.csv').read_text() == csv.read_text()
 
