@@ -12,14 +12,15 @@ from road_force_estimator.report.drive_info import raw_road, run_description
 from road_force_estimator.report.figures import FIGURES, write_figures
 from road_force_estimator.report.fleet_map import (
     IN_PER_MI_PER_M_PER_KM, plot_segments_map, segment_lines, segments_geojson, write_geojson)
-from road_force_estimator.report.folder import csv_cell, write_report, write_segments_csv
+from road_force_estimator.report.folder import (
+    SEGMENT_DECIMALS, csv_cell, write_report, write_segments_csv)
 from road_force_estimator.report.markdown import write_markdown
 from road_force_estimator.report.summary import (
     DEFAULT_SEGMENT_LENGTH_M, accuracy, drive_segments, summarize)
 
 __all__ = [
     'FIGURES', 'DEFAULT_SEGMENT_LENGTH_M', 'REFERENCE_SEARCH_M', 'IN_PER_MI_PER_M_PER_KM',
-    'Aligned', 'align', 'accuracy', 'drive_segments', 'summarize', 'csv_cell',
+    'Aligned', 'align', 'accuracy', 'drive_segments', 'summarize', 'csv_cell', 'SEGMENT_DECIMALS',
     'write_segments_csv', 'write_markdown', 'write_figures', 'write_report', 'segment_lines',
     'segments_geojson', 'write_geojson', 'plot_segments_map', 'raw_road', 'run_description',
 ]

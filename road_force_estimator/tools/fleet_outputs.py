@@ -75,13 +75,16 @@ def _atomic_write(path: Path, data: bytes | str) -> None:
 
 
 def _csv_text(header: Sequence[str], rows) -> str:
-    from road_force_estimator.report import csv_cell
+    """CSV text; the segment columns rounded as in a drive's ``segments.csv``
+    (:data:`road_force_estimator.report.SEGMENT_DECIMALS`)."""
+    from road_force_estimator.report import SEGMENT_DECIMALS, csv_cell
 
+    decimals = [SEGMENT_DECIMALS.get(name) for name in header]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
     for row in rows:
-        w.writerow([csv_cell(v) for v in row])
+        w.writerow([csv_cell(v, d) for v, d in zip(row, decimals)])
     return buf.getvalue()
 
 
