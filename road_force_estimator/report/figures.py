@@ -338,15 +338,19 @@ def _overview_figure(c: _Canvas, p: _Profiles, segments: dict[str, np.ndarray] |
     ax[0].set_xlabel('time (s)')
     ax[0].set_title('load transfer ratio over the drive, min-max per pixel column '
                     '(|LTR| = 1: a wheel lifts off)', fontsize=10)
+    from road_force_estimator.core.units import units as unit_system
+
+    u = unit_system(c.units)
+    xs = p.x * u.length_per_m
     for side in (0, 1):
         a = ax[1 + side]
         if p.bp_est is not None:
-            _band(a, p.x, 1e3 * p.bp_est[:, side], _COLORS[side], f'estimated {_SIDES[side]}')
+            _band(a, xs, 1e3 * p.bp_est[:, side], _COLORS[side], f'estimated {_SIDES[side]}')
             if p.bp_true is not None:
-                _band(a, p.x, 1e3 * p.bp_true[:, side], 'k', f'{p.against} {_SIDES[side]}',
+                _band(a, xs, 1e3 * p.bp_true[:, side], 'k', f'{p.against} {_SIDES[side]}',
                       truth=True)
             a.set_ylabel('0.5-30 m band (mm)', fontsize=8)
-        a.set_xlabel('distance (m)')
+        a.set_xlabel(f'distance ({u.length_unit})')
         a.set_title(f'road profile over the drive, {_SIDES[side]} wheel path (min-max per '
                     'pixel column)', fontsize=10)
     if segments is not None and len(segments['start_m']):
