@@ -284,9 +284,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'distance_m': float(al.x_m[-1] - al.x_m[0]) if al.x_m.size else 0.0,
         'settling_time_s': float(st.settling_time_s),
         'first_converged_s': float(al.t_s[conv_rows[0]]) if conv_rows.size else math.inf,
-        'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
-        'negative_load_samples': _negative_loads(est, al),
-        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0,
+        **_load_counts(est, al),
         'fixes': int(len(drive.fixes.stamps_ns)) if getattr(drive, 'fixes', None) else 0,
         'has_ground_truth': al.true_load_n is not None,
         'reference_profile': al.reference_name or None,
@@ -296,21 +294,40 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'run': drive_info.run_description(drive, est, vehicle, observer, mode, run_info),
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
-    if extra:
-        summary['notes'] = dict(extra)
-    for key in ('noise_std', 'cutoff_hz'):
-        if hasattr(est, key):
-            summary.setdefault('offline', {})[key] = _floats(getattr(est, key))
+    summary.update(_notes(est, extra))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
+    summary.update(_segment_counts(segments))
     summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
-    summary['segments'] = int(len(segments['start_m']))
-    summary['segments_without_data'] = int(np.count_nonzero(
-        ~np.isfinite(segments['peak_load_left_n'])))
-    summary['segments_without_iri'] = int(np.count_nonzero(
-        ~np.isfinite(segments['iri_left_m_per_km'])))
     summary['convergence'] = _convergence_summary(summary)
     return summary, segments, al
+
+
+def _notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
+    """``notes`` (the caller's extra counts) and ``offline`` (the noise and cut-offs the
+    offline mode estimated), when there are any."""
+    out: dict[str, Any] = {'notes': dict(extra)} if extra else {}
+    for key in ('noise_std', 'cutoff_hz'):
+        if hasattr(est, key):
+            out.setdefault('offline', {})[key] = _floats(getattr(est, key))
+    return out
+
+
+def _segment_counts(segments: dict[str, np.ndarray]) -> dict[str, int]:
+    """Segments; those without data (no sample: a gap) and those without IRI."""
+    return {'segments': int(len(segments['start_m'])),
+            'segments_without_data': int(np.count_nonzero(
+                ~np.isfinite(segments['peak_load_left_n']))),
+            'segments_without_iri': int(np.count_nonzero(
+                ~np.isfinite(segments['iri_left_m_per_km'])))}
+
+
+def _load_counts(est, al: Aligned) -> dict[str, Any]:
+    """Samples with a wheel lifted off, with a load estimate below zero; the largest |LTR|."""
+    return {
+        'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
+        'negative_load_samples': _negative_loads(est, al),
+        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0}
 
 
 def _negative_loads(est, al: Aligned) -> int:

@@ -101,3 +101,27 @@ class TestFiles:
         md = (tmp_path / 'r' / 'report.md').read_text()
         assert 'judged on 0 converged samples' not in md.lower()
         assert 'Loads and LTR are not judged: the bag has no ground truth of the loads' in md
+
+    def test_a_5_s_gap_gives_segments_without_data_never_zero(self, tmp_path):
+        """5 s without accepted samples at 20 m/s (100-200 m): that segment says "no data",
+        has NaN in segments.csv, and the whole-drive IRI is the mean of the other segments
+        weighted by their samples, not an average with a zero."""
+        est, drive, _ = make_case()
+        t = (est.stamp_ns - est.stamp_ns[0]) * 1e-9
+        est.valid[(t >= 5.0) & (t < 10.0)] = False
+        summary = report.write_report(tmp_path / 'r', est, drive, VEHICLE, figures=False)
+        with (tmp_path / 'r' / 'segments.csv').open() as f:
+            rows = list(csv.DictReader(f))
+        assert [r['start_m'] for r in rows][:3] == ['0.000', '100.000', '200.000']
+        gap = rows[1]
+        assert gap['iri_left_m_per_km'] == 'nan' and gap['peak_load_left_n'] == 'nan'
+        assert gap['dlc_left'] == 'nan' and gap['lift_offs'] == '0'
+        assert all(r['iri_left_m_per_km'] != 'nan' for j, r in enumerate(rows) if j != 1)
+        assert summary['segments_without_data'] == 1
+        md = (tmp_path / 'r' / 'report.md').read_text()
+        assert '| 100.0 | 200.0 | no data (gap) |' in md
+        assert '| segments without data (gap; no IRI) | 1 |' in md
+        whole = summary['iri_m_per_km']['estimated'][0]
+        others = [float(r['iri_left_m_per_km']) for j, r in enumerate(rows) if j != 1]
+        assert min(others) - 1e-3 <= whole <= max(others) + 1e-3
+        assert whole > 0.9 * min(others)              # never pulled down by a zero
