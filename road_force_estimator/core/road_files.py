@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from road_force_estimator.core.road import RoadProfile, synthetic_profile
+from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
 
 __all__ = [
     'read_csv_profile', 'write_csv_profile', 'read_erd_profile', 'write_erd_profile',
@@ -254,7 +255,7 @@ def erd_stored_iri(path: str | Path) -> dict | None:
         return None
     x_unit = (keys.get('XUNITS', 'm') or 'm').strip().lower().rstrip('.')
     us = x_unit in ('ft', 'feet', 'foot', 'in', 'inch', 'inches', 'mi', 'mile', 'miles')
-    per = 63.36 if us else 1.0
+    per = IN_PER_MI_PER_M_PER_KM if us else 1.0
     out = {'left': values['left'], 'right': values['right'], 'unit': 'in/mi' if us else 'm/km'}
     for side in ('left', 'right'):
         v = values[side]

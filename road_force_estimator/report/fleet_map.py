@@ -24,11 +24,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
+
+# IN_PER_MI_PER_M_PER_KM (1 m/km = 63.36 in/mi) is core.units', offered here as before.
 __all__ = ['IN_PER_MI_PER_M_PER_KM', 'COORDINATE_DECIMALS', 'segment_lines',
            'segments_geojson', 'write_geojson', 'plot_segments_map']
 
-#: 1 m/km = 1 mm/m = 63.36 in/mi (63 360 inches in a mile, / 1000).
-IN_PER_MI_PER_M_PER_KM = 63.36
 #: Decimals kept in GeoJSON coordinates: 1e-8 deg is about 1 mm.
 COORDINATE_DECIMALS = 8
 

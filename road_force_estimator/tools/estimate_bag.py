@@ -304,6 +304,8 @@ def _main(args: argparse.Namespace) -> int:
     if args.reference_profile:
         from road_force_estimator.bagio import road_from_source
         reference = road_from_source(args.reference_profile)
+        for note in getattr(reference, 'notes', ()):      # e.g. an ERD file's feet converted
+            print(f'{PROG}: note: {args.reference_profile}: {note}', file=sys.stderr)
     result = run(args.input, args.output, vehicle=vehicle, observer=observer,
                  mode=args.mode, segment_length_m=segment_length_m, reference=reference,
                  reference_offset_m=args.reference_offset, figures=not args.no_figures,
