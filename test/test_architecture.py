@@ -65,7 +65,9 @@ class Package:
                 # ``from pkg.sub import mod`` imports the module pkg.sub.mod
                 subs = [n for n in names if f'{source}.{n}' in self.modules]
                 found += [(f'{source}.{n}', [], node.lineno) for n in subs]
-                found.append((source, [n for n in names if n not in subs], node.lineno))
+                rest = [n for n in names if n not in subs]
+                if rest or not subs:  # only modules taken: no dependency on the package
+                    found.append((source, rest, node.lineno))
         return found
 
     def internal(self, name: str) -> str | None:

@@ -79,8 +79,7 @@ def _prepare_folder(path: Path, overwrite: bool) -> None:
     if not path.exists():
         return
     if not overwrite:
-        raise BagWriteError(f'{path} exists already (replace it with --force or '
-                            'overwrite=True)')
+        raise BagWriteError(f'{path} exists already (use --force to replace it)')
     if not path.is_dir():
         raise BagWriteError(f'{path} exists and is not a folder: not overwriting it')
     entries = list(path.iterdir())

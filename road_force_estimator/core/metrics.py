@@ -195,8 +195,10 @@ def ltr_stats(estimate, truth=None, *, mask=None) -> dict:
     return out
 
 
-def convergence_time(t_s, error, tolerance) -> float:
-    """First time after which ``|error| <= tolerance`` holds for every later sample (s).
+def convergence_time(t_s, error, tolerance, window_s: float | None = None) -> float:
+    """Convergence time t_0 (MODEL.md "Metrics"): the first time after which ``|error| <=
+    tolerance`` holds for ``window_s`` (s), or, when ``window_s`` is None, for every later
+    sample.
 
     Parameters
     ----------
@@ -204,12 +206,15 @@ def convergence_time(t_s, error, tolerance) -> float:
     error : array_like, shape (n,) or (n, k)
         All columns must be inside for a sample to count as inside.
     tolerance : float or array_like (k,)
+    window_s : float, optional
+        How long the error must stay inside (s); the window must end inside the record.
 
     Returns
     -------
     float
-        ``t_s[j]`` of the first sample j from which on all are inside; ``t_s[0]`` if always
-        inside; ``math.inf`` if the last sample is outside.
+        ``t_s[j]`` of the first sample j from which the error stays inside (over the window,
+        or to the end); ``t_s[0]`` if it is inside from the start; ``math.inf`` if no sample
+        qualifies (without a window: the last sample is outside).
     """
     t = np.asarray(t_s, dtype=float)
     err = np.abs(np.asarray(error, dtype=float))
@@ -218,10 +223,21 @@ def convergence_time(t_s, error, tolerance) -> float:
         inside = inside.all(axis=1)
     if inside.shape != t.shape:
         raise ValueError(f't_s {t.shape} and error {err.shape} do not match')
-    if t.size == 0 or not inside[-1]:
+    if t.size == 0:
         return math.inf
-    outside = np.nonzero(~inside)[0]
-    return float(t[0] if outside.size == 0 else t[outside[-1] + 1])
+    if window_s is None:
+        if not inside[-1]:
+            return math.inf
+        outside = np.nonzero(~inside)[0]
+        return float(t[0] if outside.size == 0 else t[outside[-1] + 1])
+    # next_out[j]: the first sample at or after j that is outside (n if none).
+    n = t.size
+    idx = np.where(~inside, np.arange(n), n)
+    next_out = np.minimum.accumulate(idx[::-1])[::-1]
+    end_t = np.append(t, np.inf)[next_out]           # when the error first leaves again
+    ok = inside & (end_t > t + window_s) & (t + window_s <= t[-1])
+    hit = np.flatnonzero(ok)
+    return float(t[hit[0]]) if hit.size else math.inf
 
 
 def dlc(load_n, *, mask=None) -> np.ndarray:

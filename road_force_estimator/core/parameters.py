@@ -21,8 +21,8 @@ import yaml
 __all__ = [
     'ParameterSpec', 'PARAMETERS', 'SPECS', 'GRAVITY_MPS2',
     'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
-    'validate_parameter', 'load_params_file', 'read_params_document', 'defaults',
-    'MAX_PARAMS_FILE_BYTES',
+    'validate_parameter', 'parse_override', 'load_params_file', 'read_params_document',
+    'defaults', 'MAX_PARAMS_FILE_BYTES',
 ]
 
 GRAVITY_MPS2 = 9.80665
@@ -348,6 +348,29 @@ def read_params_document(path: str | Path) -> Any:
         if str(exc).startswith('parameter file'):
             raise
         raise ValueError(f'parameter file {path}: {exc}') from None
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``NAME:=VALUE`` (``-p``, as ``--ros-args -p``) -> ``(name, validated value)``; VALUE is
+    read as YAML (``20``, ``1e-5``, ``[1, 2]``, ``ekf``).
+
+    Raises
+    ------
+    ValueError
+        No ``:=``, an unknown name, or a bad value (as :func:`load_params_file` says it).
+    """
+    name, sep, value_text = text.partition(':=')
+    name = name.strip()
+    if not sep or not name:
+        raise ValueError(f'-p {text!r}: expected NAME:=VALUE')
+    try:
+        value = yaml.safe_load(value_text) if value_text.strip() else ''
+    except yaml.YAMLError:
+        value = value_text
+    try:
+        return name, validate_parameter(name, _yaml_number(name, value))
+    except ValueError as exc:
+        raise ValueError(f'-p {text}: {exc}') from None
 
 
 def load_params_file(path: str | Path, node_names: tuple[str, ...] = ()) -> dict[str, Any]:

@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from road_force_estimator.core.road import RoadProfile, synthetic_profile
+from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
 
 __all__ = [
     'read_csv_profile', 'write_csv_profile', 'read_erd_profile', 'write_erd_profile',
-    'read_text_profile', 'road_from_source',
+    'read_text_profile', 'road_from_source', 'erd_stored_iri', 'ERD_IRI_KEYS',
 ]
 
 _LENGTH_UNITS_M = {
@@ -190,6 +191,8 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
     cols = _pick_tracks(names, nchan, notes)
     factors = [_unit_factor(units[c] or units[0] or 'm', f'channel {c + 1}', path)
                for c in cols]
+    notes += _unit_notes(keys.get('XUNITS', 'm') or 'm', x_factor,
+                         [units[c] or units[0] or 'm' for c in cols], factors)
     elevation = data[:, cols] * np.array(factors)
     try:
         x0 = float(keys.get('XSTART', '0') or 0.0)
@@ -200,6 +203,64 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
     name = f'{path}' + (f' ({title})' if title else '')
     return _clean(distance, elevation if elevation.shape[1] == 2 else elevation[:, 0], name,
                   notes)
+
+
+def _unit_notes(x_unit: str, x_factor: float, z_units: list[str],
+                z_factors: list[float]) -> list[str]:
+    """The notes saying how an ERD file's units were converted to metres (none if in m)."""
+    notes = []
+    if x_factor != 1.0:
+        notes.append(f'distance converted from {x_unit.strip()} to m (x {x_factor:g})')
+    if any(f != 1.0 for f in z_factors):
+        notes.append(f'elevation converted from {"/".join(u.strip() for u in z_units)} to m '
+                     f'(x {"/".join(f"{f:g}" for f in z_factors)})')
+    return notes
+
+
+#: ERD header keywords of the IRI a profiler stored (left and right wheel path).
+ERD_IRI_KEYS = ('IRILWP', 'IRIRWP')
+
+
+def erd_stored_iri(path: str | Path) -> dict | None:
+    """The IRI an ERD file's header stores (``IRILWP`` / ``IRIRWP``), or None without them.
+
+    Returns
+    -------
+    dict
+        ``left``, ``right`` (float or None, as stored), ``unit`` (``'in/mi'`` when the file's
+        ``XUNITS`` are feet or inches, else ``'m/km'``: the keys carry no unit, the
+        profiler writes the IRI in the units of its distances), ``left_m_per_km`` and
+        ``right_m_per_km`` (converted).
+
+    Raises
+    ------
+    ValueError
+        Not a readable ERD file.
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(errors='replace').splitlines()
+    except OSError as exc:
+        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+    _erd_header(lines, path)
+    keys, _, _ = _erd_keywords(lines, path)
+    values = {}
+    for side, key in zip(('left', 'right'), ERD_IRI_KEYS):
+        text = keys.get(key, '').lstrip('=:').split()
+        try:
+            values[side] = float(text[0]) if text else None
+        except ValueError:
+            values[side] = None
+    if values['left'] is None and values['right'] is None:
+        return None
+    x_unit = (keys.get('XUNITS', 'm') or 'm').strip().lower().rstrip('.')
+    us = x_unit in ('ft', 'feet', 'foot', 'in', 'inch', 'inches', 'mi', 'mile', 'miles')
+    per = IN_PER_MI_PER_M_PER_KM if us else 1.0
+    out = {'left': values['left'], 'right': values['right'], 'unit': 'in/mi' if us else 'm/km'}
+    for side in ('left', 'right'):
+        v = values[side]
+        out[f'{side}_m_per_km'] = None if v is None else v / per
+    return out
 
 
 def _erd_header(lines: list[str], path: Path) -> tuple[int, int, float]:

@@ -6,7 +6,14 @@ before). Per segment and wheel: IRI (m/km) of the estimated profile and, when kn
 true profile; the dynamic load coefficient DLC = std(F_n)/mean(F_n); the peak vertical load;
 the largest |LTR|; the number of lift-off events (a wheel whose load reaches zero; one event
 per contiguous run of lifted samples, counted in the segment where it starts); and, when the
-drive has GNSS fixes, the coordinates of the segment's ends interpolated by stamp.
+drive has GNSS fixes, the coordinates of the segment's ends interpolated by stamp (an end up
+to one fix period beyond the first or last fix is placed from that fix along the drive's
+heading at the travelled distance).
+
+A segment without data (no sample in it: a gap in the recording) has NaN in every column but
+``lift_offs`` (0); a segment whose samples cover less than :data:`MIN_COVERAGE` of its length
+(spacings above :func:`max_step` do not count) has NaN IRI: a gap is never measured as a
+smooth road.
 
 This module imports numpy only (core).
 """
@@ -18,7 +25,11 @@ import numpy as np
 
 from road_force_estimator.core.gnss import positions_at
 
-__all__ = ['SEGMENT_COLUMNS', 'segment_bounds', 'segment_table']
+__all__ = ['SEGMENT_COLUMNS', 'MIN_COVERAGE', 'segment_bounds', 'segment_table',
+           'segment_samples', 'max_step']
+
+#: A segment's IRI needs samples over this fraction of its length.
+MIN_COVERAGE = 0.9
 
 #: Columns of the per-drive segment table, in order (INTERFACES.md, estimate_fleet; the
 #: ``true_iri_*`` columns are extra and NaN when the drive has no ground truth).
@@ -91,9 +102,51 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     table.update(_load_columns(seg, k, wheel_load_n, ltr, lift_off))
     px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
     table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
+    counts = segment_samples(x, edges)
+    sparse = _coverage(px, edges) < MIN_COVERAGE
+    for name in table:
+        if name.endswith('_m_per_km'):
+            table[name] = np.where(sparse, np.nan, table[name])
+        elif name not in ('start_m', 'end_m', 'lift_offs'):
+            table[name] = np.where(counts == 0, np.nan, table[name])
     table.update(_coordinate_columns(x, edges, stamps_ns, fix_stamps_ns, fix_latitude_deg,
                                      fix_longitude_deg))
     return {name: table[name] for name in SEGMENT_COLUMNS}
+
+
+def segment_samples(distance_m: np.ndarray, edges_m: np.ndarray) -> np.ndarray:
+    """Samples in each segment (int, (k,)): ``edges[j] <= x < edges[j + 1]``, the last edge
+    inclusive."""
+    x = np.asarray(distance_m, dtype=float)
+    k = len(edges_m) - 1
+    inside = (x >= edges_m[0]) & (x <= edges_m[-1])
+    seg = np.clip(np.searchsorted(edges_m, x[inside], side='right') - 1, 0, k - 1)
+    return np.bincount(seg, minlength=k).astype(np.int64)
+
+
+def max_step(distance_m: np.ndarray) -> float:
+    """The largest spacing of samples (m) that still counts as continuous data: 10 x the median
+    spacing, at least 0.5 m (a 5 s gap at 20 m/s, 100 m, is no data)."""
+    dx = np.diff(np.asarray(distance_m, dtype=float))
+    dx = dx[dx > 0]
+    return max(0.5, 10.0 * float(np.median(dx))) if dx.size else 0.5
+
+
+def _coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Fraction of each segment's length spanned by sample spacings up to :func:`max_step`."""
+    dx = np.diff(x)
+    good = (dx <= max_step(x)) & (dx > 0)
+    cum = np.concatenate([[0.0], np.cumsum(np.where(good, dx, 0.0))])
+
+    def covered_to(e: np.ndarray) -> np.ndarray:
+        """Covered length from x[0] to each e (inside a gap it stays flat)."""
+        i = np.clip(np.searchsorted(x, e, side='right') - 1, 0, max(x.size - 2, 0))
+        part = np.where(good[i], np.clip(e - x[i], 0.0, dx[i]), 0.0) if dx.size else 0.0
+        return cum[i] + part
+
+    c = covered_to(np.asarray(edges, dtype=float))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.diff(c) / np.diff(edges)
 
 
 def _load_columns(seg: np.ndarray, k: int, wheel_load_n, ltr, lift_off
@@ -154,7 +207,29 @@ def _coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_
         rel = (stamps - stamps[0]).astype(float)
         edge_ns = stamps[0] + np.round(np.interp(edges, x, rel)).astype(np.int64)
         lat, lon = positions_at(fix_stamps_ns, fix_latitude_deg, fix_longitude_deg, edge_ns)
+        _beyond_fixes(lat, lon, edges, edge_ns, x, stamps, fix_stamps_ns, fix_latitude_deg,
+                      fix_longitude_deg)
     else:
         lat = lon = np.full(k + 1, np.nan)
     return {'start_lat': lat[:-1].copy(), 'start_lon': lon[:-1].copy(),
             'end_lat': lat[1:].copy(), 'end_lon': lon[1:].copy()}
+
+
+def _beyond_fixes(lat: np.ndarray, lon: np.ndarray, edges: np.ndarray, edge_ns: np.ndarray,
+                  x: np.ndarray, stamps: np.ndarray, fix_stamps_ns, fix_lat, fix_lon) -> None:
+    """Place (in place) the ends up to one fix period before the first or after the last fix:
+    from that fix, along the heading of the two nearest fixes, at the travelled distance."""
+    f = np.asarray(fix_stamps_ns, dtype=np.int64)
+    flat, flon = np.asarray(fix_lat, dtype=float), np.asarray(fix_lon, dtype=float)
+    period = float(np.median(np.diff(f)))
+    rel = (stamps - stamps[0]).astype(float)
+    fx = np.interp((f - stamps[0]).astype(float), rel, x)     # distance at each fix
+    for near, far, side in ((-1, -2, 1), (0, 1, -1)):
+        gap = (edge_ns - f[near]) * side
+        sel = ~np.isfinite(lat) & (gap > 0) & (gap <= period)
+        span = fx[near] - fx[far]
+        if not sel.any() or span == 0.0:
+            continue
+        along = (edges[sel] - fx[near]) / span
+        lat[sel] = flat[near] + along * (flat[near] - flat[far])
+        lon[sel] = flon[near] + along * (flon[near] - flon[far])

@@ -4,15 +4,20 @@
 ddq, phi, dphi, ddphi) with the measurements, the body acceleration and heave, the wheel
 heaves, the band-passed profile against the truth (or a reference LPA profile), the loads and
 LTR against the truth, and an overview of the whole drive with the per-segment IRI. The detail
-figures show a window of ``window_s`` (the profile one ``profile_window_m``) from a third of
-the converged stretch.
+figures show a window of ``window_s`` (2 s: short enough to see single oscillations; the
+profile one ``profile_window_m``) from a third of the converged stretch.
+
+Readable at a glance: left blue, right orange, estimates solid, truth dashed black, the error
+(estimate - truth) in its own panel; loads are drawn as max(0, F) (a tire cannot pull); the
+whole-drive figure draws per pixel column the min-max envelope (no smear of 45 000 points),
+both wheels; IRI bars over FHWA's condition bands (good < 95, fair 95-170, poor > 170 in/mi),
+in the report's units.
 
 matplotlib (Agg backend) is imported here only, and only when figures are drawn.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import math
 from pathlib import Path
 from typing import Any
 
@@ -21,18 +26,25 @@ import numpy as np
 from road_force_estimator.report.alignment import Aligned, bandpass
 
 __all__ = ['FIGURES', 'DEFAULT_WINDOW_S', 'DEFAULT_PROFILE_WINDOW_M', 'MAX_OVERVIEW_POINTS',
-           'write_figures']
+           'ENVELOPE_COLUMNS', 'envelope', 'write_figures']
 
 #: Figure files of a report, in the order of the Markdown.
 FIGURES = ('states.png', 'body.png', 'wheels.png', 'profile.png', 'loads.png', 'overview.png')
 #: Time window of the detail figures (s) and distance window of the profile figure (m).
 DEFAULT_WINDOW_S = 2.0
 DEFAULT_PROFILE_WINDOW_M = 100.0
-#: Most points drawn per curve in the whole-drive figure.
+#: Most points drawn per curve in the whole-drive figure (kept for callers; the figure now
+#: draws :data:`ENVELOPE_COLUMNS` min-max columns).
 MAX_OVERVIEW_POINTS = 20000
 
+#: Pixel columns of the whole-drive figure's envelope.
+ENVELOPE_COLUMNS = 1200
+
 _SIDES = ('left', 'right')
-_COLORS = ('tab:blue', 'tab:red')
+_COLORS = ('tab:blue', 'tab:orange')
+_TRUTH = {'color': 'k', 'ls': '--', 'lw': 1.1}
+_ERROR = ('tab:purple', 'tab:brown')
+_BANDS = (('good', '#c8e6c9'), ('fair', '#fff3c4'), ('poor', '#ffcdd2'))
 
 
 def _window(al: Aligned, length_s: float) -> np.ndarray:
@@ -53,10 +65,6 @@ def _legend(ax, **kwargs) -> None:
         ax.legend(**kwargs)
 
 
-def _decimate(n: int) -> slice:
-    return slice(None, None, max(1, int(math.ceil(n / MAX_OVERVIEW_POINTS))))
-
-
 @dataclass
 class _Canvas:
     """What every figure needs: pyplot, the output folder and title, the estimates, the
@@ -69,6 +77,7 @@ class _Canvas:
     al: Aligned
     w: np.ndarray
     t: np.ndarray
+    units: str = 'si'
     written: list[str] = field(default_factory=list)
 
     def pick(self, name: str) -> np.ndarray:
@@ -118,8 +127,10 @@ def _profiles(est, al: Aligned) -> _Profiles:
 def write_figures(folder: str | Path, est, al: Aligned, drive=None, *,
                   segments: dict[str, np.ndarray] | None = None, title: str = '',
                   window_s: float = DEFAULT_WINDOW_S,
-                  profile_window_m: float = DEFAULT_PROFILE_WINDOW_M) -> list[str]:
-    """Draw the figures of :data:`FIGURES` into ``folder``; the file names written."""
+                  profile_window_m: float = DEFAULT_PROFILE_WINDOW_M,
+                  units: str = 'si') -> list[str]:
+    """Draw the figures of :data:`FIGURES` into ``folder``; the file names written
+    (``units``: those of the IRI bars)."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -128,7 +139,7 @@ def write_figures(folder: str | Path, est, al: Aligned, drive=None, *,
     if al.rows.size < 2:
         return []
     w = _window(al, window_s)
-    c = _Canvas(plt, folder, title, est, al, w, al.t_s[w])
+    c = _Canvas(plt, folder, title, est, al, w, al.t_s[w], units)
     _states_figure(c, drive)
     _body_figure(c)
     _wheels_figure(c)
@@ -165,7 +176,7 @@ def _states_figure(c: _Canvas, drive) -> None:
             else:
                 if r == 0 and meas_phi is not None:
                     a.plot(t, 1e3 * meas_phi, color='0.5', lw=0.5, alpha=0.5, label='measured')
-                a.plot(t, y, color='k', lw=1.0, label='estimated')
+                a.plot(t, y, color='tab:green', lw=1.0, label='estimated')
             a.set_ylabel(labels[col][r])
             a.grid(True, alpha=0.3)
             if r == 0:
@@ -180,10 +191,10 @@ def _body_figure(c: _Canvas) -> None:
     """Figures 6 and 7: body acceleration and body heave."""
     t = c.t
     fig, ax = c.plt.subplots(2, 1, figsize=(11, 6), sharex=True)
-    ax[0].plot(t, c.pick('body_accel_mps2'), color='k', lw=1.0)
+    ax[0].plot(t, c.pick('body_accel_mps2'), color='tab:green', lw=1.0)
     ax[0].set_ylabel('dd z_s (m/s$^2$)')
     ax[0].set_title('body heave acceleration', fontsize=10)
-    ax[1].plot(t, 1e3 * c.pick('body_heave_m'), color='k', lw=1.0)
+    ax[1].plot(t, 1e3 * c.pick('body_heave_m'), color='tab:green', lw=1.0)
     ax[1].set_ylabel('z_s (mm)')
     ax[1].set_title('body heave (band-limited)', fontsize=10)
     ax[1].set_xlabel('time (s)')
@@ -213,106 +224,172 @@ def _wheels_figure(c: _Canvas) -> None:
 
 
 def _profile_figure(c: _Canvas, p: _Profiles, profile_window_m: float) -> None:
-    """Figure 9: the band-passed profile against the truth or the reference."""
+    """Figure 9: the band-passed profile against the truth or the reference, and the error."""
     x, road, up = p.x, p.road, p.up
-    fig, ax = c.plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    fig, ax = c.plt.subplots(3, 1, figsize=(11, 8), sharex=True)
     conv_x = x[c.al.converged[up]] if c.al.converged[up].any() else x
     x0 = conv_x[0] + max(0.0, conv_x[-1] - conv_x[0] - profile_window_m) / 3.0
     pw = (x >= x0) & (x <= x0 + profile_window_m)
     for side in (0, 1):
         a = ax[side]
         if p.bp_est is not None:
-            if p.bp_true is not None:
-                a.plot(x[pw], 1e3 * p.bp_true[pw, side], color='0.4', lw=1.6, label=p.against)
-            a.plot(x[pw], 1e3 * p.bp_est[pw, side], color=_COLORS[side], lw=1.0,
+            a.plot(x[pw], 1e3 * p.bp_est[pw, side], color=_COLORS[side], lw=1.2,
                    label='estimated')
-            a.set_ylabel('elevation, 0.5-30 m band (mm)', fontsize=8)
+            if p.bp_true is not None:
+                a.plot(x[pw], 1e3 * p.bp_true[pw, side], label=p.against, **_TRUTH)
+                ax[2].plot(x[pw], 1e3 * (p.bp_est[pw, side] - p.bp_true[pw, side]),
+                           color=_COLORS[side], lw=0.9, label=_SIDES[side])
+            a.set_ylabel('0.5-30 m band (mm)', fontsize=8)
         else:
             a.plot(x[pw], 1e3 * road[pw, side], color=_COLORS[side], lw=1.0, label='estimated')
             a.set_ylabel('elevation (mm)')
         a.set_title(f'{_SIDES[side]} wheel path', fontsize=10)
+    ax[2].axhline(0.0, color='k', lw=0.5)
+    ax[2].set_ylabel('error (mm)')
+    ax[2].set_title(f'error: estimated - {p.against}' if p.bp_true is not None
+                    else 'error: no truth or reference', fontsize=10)
+    ax[2].set_xlabel('distance (m)')
+    for a in ax:
         a.grid(True, alpha=0.3)
         _legend(a, fontsize=7, loc='upper right')
-    ax[1].set_xlabel('distance (m)')
-    c.finish(fig, 'profile.png', 'Road profile')
+    c.finish(fig, 'profile.png', 'Road profile (100 m window)')
 
 
 def _loads_figure(c: _Canvas) -> None:
-    """Figure 10: wheel loads and LTR against the truth."""
+    """Figure 10: wheel loads (max(0, F)) and LTR against the truth, the load error."""
     t, al = c.t, c.al
-    fig, ax = c.plt.subplots(3, 1, figsize=(11, 8), sharex=True)
-    load = c.pick('wheel_load_n') / 1e3
+    fig, ax = c.plt.subplots(4, 1, figsize=(11, 10), sharex=True)
+    raw = c.pick('wheel_load_n')
+    load = np.maximum(raw, 0.0) / 1e3
     true = al.true_load_n[c.w] / 1e3 if al.true_load_n is not None else None
     for side in (0, 1):
         a = ax[side]
+        a.plot(t, load[:, side], color=_COLORS[side], lw=1.2, label='estimated, max(0, F)')
         if true is not None:
-            a.plot(t, true[:, side], color='0.4', lw=1.6, label='truth')
-        a.plot(t, load[:, side], color=_COLORS[side], lw=1.0, label='estimated')
+            a.plot(t, true[:, side], label='truth', **_TRUTH)
+            ax[2].plot(t, 1e3 * (raw[:, side] / 1e3 - true[:, side]), color=_COLORS[side],
+                       lw=0.9, label=_SIDES[side])
+        below = int(np.count_nonzero(raw[:, side] < 0.0))
         a.set_ylabel(f'F_n {_SIDES[side]} (kN)')
-        _legend(a, fontsize=7, loc='upper right')
+        a.set_title(f'{_SIDES[side]} wheel load' + (f' ({below} samples of this window below '
+                                                     'zero, drawn at 0)' if below else ''),
+                    fontsize=10)
+    ax[2].axhline(0.0, color='k', lw=0.5)
+    ax[2].set_ylabel('error (N)')
+    ax[2].set_title('load error: estimated - truth' if true is not None
+                    else 'load error: no truth in the bag', fontsize=10)
     ltr = c.pick('ltr')
+    ax[3].plot(t, ltr, color='tab:green', lw=1.2, label='estimated')
     if true is not None:
-        ax[2].plot(t, (true[:, 1] - true[:, 0]) / (true[:, 0] + true[:, 1]), color='0.4',
-                   lw=1.6, label='truth')
-    ax[2].plot(t, ltr, color='k', lw=1.0, label='estimated')
-    ax[2].set_ylabel('LTR')
-    _legend(ax[2], fontsize=7, loc='upper right')
-    ax[2].set_xlabel('time (s)')
+        ax[3].plot(t, (true[:, 1] - true[:, 0]) / (true[:, 0] + true[:, 1]), label='truth',
+                   **_TRUTH)
+    ax[3].set_ylabel('LTR')
+    ax[3].set_title('load transfer ratio (F_right - F_left) / (F_left + F_right)', fontsize=10)
+    ax[3].set_xlabel('time (s)')
     for a in ax:
         a.grid(True, alpha=0.3)
-    c.finish(fig, 'loads.png', 'Vertical wheel loads and load transfer ratio')
+        _legend(a, fontsize=7, loc='upper right')
+    c.finish(fig, 'loads.png', 'Vertical wheel loads and load transfer ratio (2 s window)')
+
+
+def envelope(x: np.ndarray, y: np.ndarray, columns: int = ENVELOPE_COLUMNS
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pixel column (``columns`` equal bins of ``x``): the bin centre, min and max of
+    ``y`` (NaN where a bin is empty); the points themselves when there are fewer."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size <= 2 * columns or x[-1] <= x[0]:
+        return x, y, y
+    edges = np.linspace(x[0], x[-1], columns + 1)
+    b = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, columns - 1)
+    lo = np.full(columns, np.inf)
+    hi = np.full(columns, -np.inf)
+    np.minimum.at(lo, b, y)
+    np.maximum.at(hi, b, y)
+    empty = ~np.isfinite(lo)
+    lo[empty] = hi[empty] = np.nan
+    return 0.5 * (edges[:-1] + edges[1:]), lo, hi
+
+
+def _band(ax, x, y, color: str, label: str, *, truth: bool = False) -> None:
+    """The envelope of ``y`` over ``x``: a coloured band for an estimate, a grey band with a
+    dashed outline behind it for a truth."""
+    xc, lo, hi = envelope(x, y)
+    if truth:
+        ax.fill_between(xc, lo, hi, color='0.75', lw=0, zorder=1)
+        ax.plot(xc, hi, lw=0.4, ls='--', color='k', zorder=1, label=label)
+        ax.plot(xc, lo, lw=0.4, ls='--', color='k', zorder=1)
+    else:
+        ax.fill_between(xc, lo, hi, color=color, alpha=0.6, lw=0, label=label, zorder=2)
 
 
 def _overview_figure(c: _Canvas, p: _Profiles, segments: dict[str, np.ndarray] | None) -> None:
-    """The whole drive: LTR over time, the band-passed left profile, the IRI per segment."""
+    """The whole drive: LTR over time, the band-passed profiles, the IRI per segment."""
     al = c.al
-    fig, ax = c.plt.subplots(3, 1, figsize=(11, 9))
-    d = _decimate(al.rows.size)
-    tt = al.t_s[d]
+    fig, ax = c.plt.subplots(4, 1, figsize=(11, 11))
+    _band(ax[0], al.t_s, al.pick(c.est, 'ltr'), 'tab:green', 'estimated')
     if al.true_load_n is not None:
-        tl = al.true_load_n[d]
-        ax[0].plot(tt, (tl[:, 1] - tl[:, 0]) / (tl[:, 0] + tl[:, 1]), color='0.4', lw=0.6,
-                   label='truth')
-    ax[0].plot(tt, al.pick(c.est, 'ltr')[d], color='k', lw=0.4, label='estimated')
+        tl = al.true_load_n
+        _band(ax[0], al.t_s, (tl[:, 1] - tl[:, 0]) / (tl[:, 0] + tl[:, 1]), 'k', 'truth',
+              truth=True)
     ax[0].set_ylabel('LTR')
     ax[0].set_xlabel('time (s)')
-    ax[0].set_title('load transfer ratio over the drive (|LTR| = 1: a wheel lifts off)',
-                    fontsize=10)
-    _legend(ax[0], fontsize=7, loc='upper right')
-    x = p.x
-    dx = _decimate(x.size)
-    if p.bp_est is not None:
-        if p.bp_true is not None:
-            ax[1].plot(x[dx], 1e3 * p.bp_true[dx, 0], color='0.4', lw=0.6,
-                       label=f'{p.against} left')
-        ax[1].plot(x[dx], 1e3 * p.bp_est[dx, 0], color=_COLORS[0], lw=0.5,
-                   label='estimated left')
-        ax[1].set_ylabel('left, 0.5-30 m band (mm)', fontsize=8)
-    ax[1].set_xlabel('distance (m)')
-    ax[1].set_title('road profile over the drive', fontsize=10)
-    _legend(ax[1], fontsize=7, loc='upper right')
+    ax[0].set_title('load transfer ratio over the drive, min-max per pixel column '
+                    '(|LTR| = 1: a wheel lifts off)', fontsize=10)
+    from road_force_estimator.core.units import units as unit_system
+
+    u = unit_system(c.units)
+    xs = p.x * u.length_per_m
+    for side in (0, 1):
+        a = ax[1 + side]
+        if p.bp_est is not None:
+            _band(a, xs, 1e3 * p.bp_est[:, side], _COLORS[side], f'estimated {_SIDES[side]}')
+            if p.bp_true is not None:
+                _band(a, xs, 1e3 * p.bp_true[:, side], 'k', f'{p.against} {_SIDES[side]}',
+                      truth=True)
+            a.set_ylabel('0.5-30 m band (mm)', fontsize=8)
+        a.set_xlabel(f'distance ({u.length_unit})')
+        a.set_title(f'road profile over the drive, {_SIDES[side]} wheel path (min-max per '
+                    'pixel column)', fontsize=10)
     if segments is not None and len(segments['start_m']):
-        _iri_bars(ax[2], segments, p.against)
+        _iri_bars(ax[3], segments, p.against, c.units)
     for a in ax:
         a.grid(True, alpha=0.3)
+        _legend(a, fontsize=7, loc='upper right')
     c.finish(fig, 'overview.png', 'The whole drive')
 
 
-def _iri_bars(ax, segments: dict[str, np.ndarray], against: str) -> None:
-    """IRI per segment (m/km): estimated and true (or reference), left and right."""
-    mid = 0.5 * (segments['start_m'] + segments['end_m'])
-    width = 0.2 * float(np.min(segments['end_m'] - segments['start_m']))
-    offsets = ((-1.5, 'iri_left_m_per_km', _COLORS[0], 'estimated left'),
-               (-0.5, 'iri_right_m_per_km', _COLORS[1], 'estimated right'),
-               (0.5, 'true_iri_left_m_per_km', '0.3', f'{against} left'),
-               (1.5, 'true_iri_right_m_per_km', '0.6', f'{against} right'))
-    for off, key, color, label in offsets:
+def _iri_bars(ax, segments: dict[str, np.ndarray], against: str, units: str = 'si') -> None:
+    """IRI per segment in ``units``: estimated and true (or reference), left and right, over
+    FHWA's condition bands."""
+    from road_force_estimator.core.units import condition_bands, units as unit_system
+
+    u = unit_system(units)
+    k = u.iri_per_m_per_km
+    mid = u.length(1.0) * 0.5 * (segments['start_m'] + segments['end_m'])
+    width = 0.2 * u.length(1.0) * float(np.min(segments['end_m'] - segments['start_m']))
+    offsets = ((-1.5, 'iri_left_m_per_km', _COLORS[0], 'estimated left', None),
+               (-0.5, 'iri_right_m_per_km', _COLORS[1], 'estimated right', None),
+               (0.5, 'true_iri_left_m_per_km', 'white', f'{against} left', _COLORS[0]),
+               (1.5, 'true_iri_right_m_per_km', 'white', f'{against} right', _COLORS[1]))
+    for off, key, color, label, edge in offsets:
         if np.isfinite(segments[key]).any():
-            ax.bar(mid + off * width, segments[key], width=width, color=color, label=label)
-    top = np.nanmax([np.nanmax(segments[k]) if np.isfinite(segments[k]).any() else 0.0
-                     for _, k, _, _ in offsets])
-    ax.set_ylim(0.0, 1.4 * top if top > 0.0 else 1.0)
-    ax.set_ylabel('IRI (m/km)')
-    ax.set_xlabel('segment centre (m)')
-    ax.set_title('IRI per segment', fontsize=10)
+            ax.bar(mid + off * width, k * segments[key], width=width, color=color, label=label,
+                   edgecolor=edge or color, hatch='//' if edge else None, zorder=3)
+    top = np.nanmax([np.nanmax(segments[key]) if np.isfinite(segments[key]).any() else 0.0
+                     for _, key, _, _, _ in offsets]) * k
+    good, poor = condition_bands(u)
+    ymax = max(1.3 * top if top > 0.0 else 1.0, 1.1 * good)
+    for (name, colour), lo, hi in zip(_BANDS, (0.0, good, poor), (good, poor, max(ymax, poor))):
+        ax.axhspan(lo, hi, color=colour, zorder=0)
+        if lo < ymax:
+            ax.text(0.005, min(0.5 * (lo + min(hi, ymax)), ymax), name, fontsize=8,
+                    transform=ax.get_yaxis_transform(), va='center', color='0.3')
+    ax.set_ylim(0.0, ymax)
+    ax.set_ylabel(f'IRI ({u.iri_unit})')
+    ax.set_xlabel(f'segment centre ({u.length_unit})')
+    ax.set_title(f'IRI per segment; FHWA condition: good < {good:.3g}, fair, poor > '
+                 f'{poor:.3g} {u.iri_unit}', fontsize=10)
     _legend(ax, fontsize=7, loc='upper right', ncol=2)

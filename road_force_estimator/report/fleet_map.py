@@ -24,11 +24,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
+
+# IN_PER_MI_PER_M_PER_KM (1 m/km = 63.36 in/mi) is core.units', offered here as before.
 __all__ = ['IN_PER_MI_PER_M_PER_KM', 'COORDINATE_DECIMALS', 'segment_lines',
            'segments_geojson', 'write_geojson', 'plot_segments_map']
 
-#: 1 m/km = 1 mm/m = 63.36 in/mi (63 360 inches in a mile, / 1000).
-IN_PER_MI_PER_M_PER_KM = 63.36
 #: Decimals kept in GeoJSON coordinates: 1e-8 deg is about 1 mm.
 COORDINATE_DECIMALS = 8
 
@@ -135,7 +136,8 @@ def write_geojson(path: str | Path, table: Mapping[str, Sequence],
 
 
 def plot_segments_map(path: str | Path, lines: Sequence[list | None],
-                      iri_m_per_km: Sequence[float], *, title: str = '') -> bool:
+                      iri_m_per_km: Sequence[float], *, title: str = '',
+                      labels: Sequence[str] | None = None, units: str = 'si') -> bool:
     """Draw the segments' polylines coloured by IRI into a PNG.
 
     Parameters
@@ -147,6 +149,10 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
         Colour value of each segment (m/km); NaN is drawn grey.
     title : str
         Figure title.
+    labels : sequence of str, optional
+        The drive of each segment: each drive is labelled at its first segment drawn.
+    units : 'si' or 'us'
+        Colour scale in m/km or in/mi.
 
     Returns
     -------
@@ -158,12 +164,16 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
-    drawn = [(np.asarray(line, dtype=float), float(v))
-             for line, v in zip(lines, iri_m_per_km) if line is not None]
+    from road_force_estimator.core.units import units as unit_system
+
+    u = unit_system(units)
+    names = list(labels) if labels is not None else [''] * len(lines)
+    drawn = [(np.asarray(line, dtype=float), u.iri(v), name)
+             for line, v, name in zip(lines, iri_m_per_km, names) if line is not None]
     if not drawn:
         return False
-    segs = [line for line, _ in drawn]
-    values = np.array([v for _, v in drawn])
+    segs = [line for line, _, _ in drawn]
+    values = np.array([v for _, v, _ in drawn])
     finite = np.isfinite(values)
     fig = Figure(figsize=(8.0, 7.0), dpi=110)
     FigureCanvasAgg(fig)
@@ -176,10 +186,11 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
         coll.set_array(values[finite])
         ax.add_collection(coll)
         bar = fig.colorbar(coll, ax=ax, shrink=0.8)
-        bar.set_label('IRI, mean of left and right (m/km; x 63.36 = in/mi)')
+        bar.set_label(f'IRI, mean of left and right ({u.iri_unit})')
     if (~finite).any():
         ax.add_collection(LineCollection([s for s, f in zip(segs, finite) if not f],
                                          colors='0.6', linewidths=2.0))
+    _label_drives(ax, drawn)
     allpts = np.vstack(segs)
     lat_mid = float(np.mean(allpts[:, 1]))
     ax.set_aspect(1.0 / max(math.cos(math.radians(lat_mid)), 1e-6))
@@ -194,3 +205,15 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
     fig.tight_layout()
     fig.savefig(str(path))
     return True
+
+
+def _label_drives(ax, drawn) -> None:
+    """Each drive's name at the start of its first segment drawn (a dot and the text)."""
+    seen: set[str] = set()
+    for line, _, name in drawn:
+        if not name or name in seen or line.size == 0:
+            continue
+        seen.add(name)
+        ax.plot(line[0, 0], line[0, 1], 'o', color='k', ms=4)
+        ax.annotate(name, (line[0, 0], line[0, 1]), xytext=(4, 4), textcoords='offset points',
+                    fontsize=8, bbox={'boxstyle': 'round,pad=0.2', 'fc': 'white', 'alpha': 0.8})

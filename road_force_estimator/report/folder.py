@@ -8,7 +8,8 @@
     LTR error), the IRI of the whole drive, the per-segment table and the figures
     (:mod:`.markdown`).
 ``segments.csv``
-    One row per segment (default 100 m):
+    One row per segment (default 100 m; SI units whatever ``--units``, named in the columns;
+    rounded to what the measurement supports: :data:`SEGMENT_DECIMALS`):
     :data:`road_force_estimator.core.segments.SEGMENT_COLUMNS` (IRI left/right of the
     estimated and, when known, the true profile; DLC; peak loads; max |LTR|; lift-off events;
     coordinates when the drive has ``/fix``).
@@ -33,12 +34,22 @@ from road_force_estimator.report.figures import write_figures
 from road_force_estimator.report.markdown import write_markdown
 from road_force_estimator.report.summary import DEFAULT_SEGMENT_LENGTH_M, summarize
 
-__all__ = ['csv_cell', 'write_segments_csv', 'write_report']
+__all__ = ['SEGMENT_DECIMALS', 'csv_cell', 'write_segments_csv', 'write_report']
+
+#: Decimals of ``segments.csv``'s float columns: 1 mm of distance, 0.001 m/km of IRI, 1 N of
+#: load, 1e-4 of DLC and LTR, 1e-7 deg (about 1 cm) of latitude and longitude.
+SEGMENT_DECIMALS = {
+    'start_m': 3, 'end_m': 3, 'iri_left_m_per_km': 3, 'iri_right_m_per_km': 3,
+    'true_iri_left_m_per_km': 3, 'true_iri_right_m_per_km': 3, 'dlc_left': 4, 'dlc_right': 4,
+    'peak_load_left_n': 0, 'peak_load_right_n': 0, 'max_abs_ltr': 4, 'start_lat': 7,
+    'start_lon': 7, 'end_lat': 7, 'end_lon': 7,
+}
 
 
-def csv_cell(value) -> str:
+def csv_cell(value, decimals: int | None = None) -> str:
     """A table cell as CSV text: ``true``/``false``, integers as such, text as it is, floats
-    in their shortest exact form (``repr``: they read back bit for bit), ``nan`` if unknown."""
+    with ``decimals`` decimals (no ``-0``), or when None in their shortest exact form (``repr``:
+    they read back bit for bit), ``nan`` if unknown."""
     if isinstance(value, (bool, np.bool_)):
         return str(bool(value)).lower()
     if isinstance(value, (int, np.integer)):
@@ -46,18 +57,24 @@ def csv_cell(value) -> str:
     if isinstance(value, str):
         return value
     v = float(value)
-    return 'nan' if math.isnan(v) else repr(v)
+    if math.isnan(v):
+        return 'nan'
+    if decimals is None or math.isinf(v):
+        return repr(v)
+    text = f'{v:.{decimals}f}'
+    return text[1:] if text.startswith('-') and float(text) == 0.0 else text
 
 
 def write_segments_csv(path: str | Path, segments: dict[str, np.ndarray]) -> None:
-    """``segments.csv``: a header of :data:`SEGMENT_COLUMNS`, one row per segment (exact
-    numbers, ``nan`` where unknown)."""
+    """``segments.csv``: a header of :data:`SEGMENT_COLUMNS`, one row per segment (numbers
+    rounded as :data:`SEGMENT_DECIMALS` says, ``nan`` where unknown)."""
     with Path(path).open('w', newline='') as f:
         w = csv.writer(f, lineterminator='\n')
         w.writerow(SEGMENT_COLUMNS)
         n = len(segments['start_m'])
         for i in range(n):
-            w.writerow([csv_cell(segments[c][i]) for c in SEGMENT_COLUMNS])
+            w.writerow([csv_cell(segments[c][i], SEGMENT_DECIMALS.get(c))
+                        for c in SEGMENT_COLUMNS])
 
 
 def _json_safe(obj):
@@ -79,7 +96,8 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
                  observer: ObserverParameters | None = None, *, mode: str = 'online',
                  input_name: str = '', reference=None, reference_offset_m: float | None = None,
                  segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M, figures: bool = True,
-                 extra: dict[str, Any] | None = None) -> dict[str, Any]:
+                 extra: dict[str, Any] | None = None, units: str = 'si',
+                 run_info: dict[str, Any] | None = None, raw_road=None) -> dict[str, Any]:
     """Write the report folder (see the module notes); returns the summary.
 
     Parameters are those of :func:`~.summary.summarize`, plus ``folder`` (created if needed) and
@@ -89,11 +107,13 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
     folder.mkdir(parents=True, exist_ok=True)
     summary, segments, al = summarize(
         est, drive, vehicle, observer, mode=mode, input_name=input_name, reference=reference,
-        reference_offset_m=reference_offset_m, segment_length_m=segment_length_m, extra=extra)
+        reference_offset_m=reference_offset_m, segment_length_m=segment_length_m, extra=extra,
+        units=units, run_info=run_info, raw_road=raw_road)
     names: list[str] = []
     if figures:
         names = write_figures(folder, est, al, drive, segments=segments,
-                              title=f'{input_name} ({mode})' if input_name else mode)
+                              title=f'{input_name} ({mode})' if input_name else mode,
+                              units=units)
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)

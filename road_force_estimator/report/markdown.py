@@ -8,8 +8,9 @@ from typing import Any
 import numpy as np
 
 from road_force_estimator.core.segments import SEGMENT_COLUMNS
+from road_force_estimator.core.units import Units, units
 
-__all__ = ['write_markdown']
+__all__ = ['write_markdown', 'FIGURE_NOTES']
 
 
 def _fmt(v, digits: int = 2) -> str:
@@ -29,25 +30,31 @@ def _fmt(v, digits: int = 2) -> str:
     return f'{v:.{digits}f}'
 
 
-def _segment_markdown(segments: dict[str, np.ndarray]) -> list[str]:
+def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
     n = len(segments['start_m'])
     if n == 0:
         return ['No segment: the drive covers no distance.']
     have_true = np.isfinite(segments['true_iri_left_m_per_km']).any()
     have_fix = np.isfinite(segments['start_lat']).any()
-    head = ['from (m)', 'to (m)', 'IRI L (m/km)', 'IRI R (m/km)']
+    lu, iu = u.length_unit, u.iri_unit
+    head = [f'from ({lu})', f'to ({lu})', f'IRI L ({iu})', f'IRI R ({iu})']
     if have_true:
-        head += ['true IRI L', 'true IRI R']
+        head += [f'true IRI L ({iu})', f'true IRI R ({iu})']
     head += ['DLC L', 'DLC R', 'peak L (kN)', 'peak R (kN)', 'max abs LTR', 'lift-offs']
     if have_fix:
         head += ['start lat, lon', 'end lat, lon']
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
     for i in range(n):
         s = {k: segments[k][i] for k in SEGMENT_COLUMNS}
-        row = [_fmt(s['start_m'], 1), _fmt(s['end_m'], 1), _fmt(s['iri_left_m_per_km']),
-               _fmt(s['iri_right_m_per_km'])]
+        row = [u.length_text(s['start_m'], 1), u.length_text(s['end_m'], 1)]
+        if not np.isfinite(s['peak_load_left_n']):
+            row += ['no data (gap)'] + [''] * (len(head) - 3)
+            lines.append('| ' + ' | '.join(row) + ' |')
+            continue
+        row += [u.iri_text(s['iri_left_m_per_km']), u.iri_text(s['iri_right_m_per_km'])]
         if have_true:
-            row += [_fmt(s['true_iri_left_m_per_km']), _fmt(s['true_iri_right_m_per_km'])]
+            row += [u.iri_text(s['true_iri_left_m_per_km']),
+                    u.iri_text(s['true_iri_right_m_per_km'])]
         row += [_fmt(s['dlc_left'], 3), _fmt(s['dlc_right'], 3),
                 _fmt(s['peak_load_left_n'] / 1e3, 1), _fmt(s['peak_load_right_n'] / 1e3, 1),
                 _fmt(s['max_abs_ltr'], 3), str(int(s['lift_offs']))]
@@ -60,45 +67,117 @@ def _segment_markdown(segments: dict[str, np.ndarray]) -> list[str]:
 
 def write_markdown(path: str | Path, summary: dict[str, Any], segments: dict[str, np.ndarray],
                    figures: list[str]) -> None:
-    """``report.md`` from :func:`~.summary.summarize`'s results."""
+    """``report.md`` from :func:`~.summary.summarize`'s results (in its ``units``)."""
     s = summary
+    u = units(s.get('units', 'si'))
     how = ('causal, what the observer node publishes' if s['mode'] == 'online'
            else 'non-causal, the whole recording')
     lines = [f'# Estimate report: {s["input"] or "drive"}', '',
              f'Mode **{s["mode"]}** ({how}); '
              f'{s["samples"]["estimated"]} samples estimated over {_fmt(s["duration_s"])} s and '
-             f'{_fmt(s["distance_m"], 1)} m.', '', '## Summary', '',
-             '| item | value |', '|---|---|']
-    lines += _summary_rows(s)
+             f'{u.length_text(s["distance_m"], 1)} {u.length_unit}.', '']
+    lines += _run_section(s, u)
+    lines += ['## Summary', '', '| item | value |', '|---|---|']
+    lines += _summary_rows(s, u)
+    lines += _summary_notes(s, u)
     lines += _messages_section(s)
     lines += _accuracy_section(s)
-    lines += ['', f'## Segments ({_fmt(s["segment_length_m"], 0)} m)', '',
-              'Also in `segments.csv`. DLC = std/mean of the wheel load; lift-offs = events.', '']
-    lines += _segment_markdown(segments)
+    lines += ['', f'## Segments ({u.segment_text(s["segment_length_m"])})', '',
+              'Also in `segments.csv` (SI units, named in its columns). DLC = std/mean of the '
+              'wheel load; lift-offs = events. "no data": no sample in the segment (a gap in '
+              'the recording); such segments have no IRI and are left out of the whole-drive '
+              'IRI, never counted as smooth road.', '']
+    lines += _segment_markdown(segments, u)
     if figures:
         lines += ['', '## Figures', '']
         for name in figures:
-            lines += [f'![{name[:-4]}]({name})', '']
+            lines += [f'![{name[:-4]}]({name})', '', FIGURE_NOTES.get(name, ''), '']
     Path(path).write_text('\n'.join(lines).rstrip() + '\n')
 
 
-def _summary_rows(s: dict[str, Any]) -> list[str]:
+#: What each figure shows (under it in report.md).
+FIGURE_NOTES = {
+    'states.png': 'The differentiator states over a 2 s window (detail figures: 2 s from a '
+                  'third of the converged stretch, so that single oscillations can be seen); '
+                  'measured deflections and roll light, estimates solid.',
+    'body.png': 'Body heave acceleration and heave over the same 2 s window.',
+    'wheels.png': 'Wheel heaves and accelerations over the same 2 s window, both wheels.',
+    'profile.png': 'Band-passed (0.5-30 m) profile over a 100 m window, truth dashed, the '
+                   'error (estimate - truth) in its own panel.',
+    'loads.png': 'Wheel loads (plotted as max(0, F): a tire cannot pull) and LTR over the 2 s '
+                 'window, truth dashed, the load error in its own panel.',
+    'overview.png': 'The whole drive: per pixel column the min-max envelope of LTR and of '
+                    'the band-passed profile of both wheels, and the IRI per segment with '
+                    "FHWA's condition bands (good < 95, fair 95-170, poor > 170 in/mi).",
+}
+
+
+def _run_section(s: dict[str, Any], u: Units) -> list[str]:
+    """What was run: the command, the parameters, the version, the road, the speed."""
+    run = s.get('run') or {}
+    if not run:
+        return []
+    sp = run.get('speed_mps')
+    speed = (f'{sp["mean"]:.2f} m/s mean ({sp["min"]:.2f} to {sp["max"]:.2f} m/s, '
+             f'{3.6 * sp["mean"]:.1f} km/h, {sp["mean"] / 0.44704:.1f} mph)' if sp else 'n/a')
+    latency = run.get('latency_s', 0.0)
+    mode = (f'{s["mode"]}, latency {1e3 * latency:g} ms' if s['mode'] == 'online'
+            else f'{s["mode"]} (non-causal: no latency)')
+    static = run.get('static_load_n') or []
+    over = ', '.join(f'`{o}`' for o in run.get('overrides') or ()) or 'none'
+    rows = [('command line', f'`{run["command"]}`' if run.get('command') else 'n/a (API call)'),
+            ('package version', f'road_force_estimator {run.get("package_version", "?")}'),
+            ('mode', mode),
+            ('parameter file', f'`{run["params_file"]}`' if run.get('params_file')
+             else 'none (package defaults)'),
+            ('overrides (-p)', over),
+            ('road source (from the bag)', run.get('road_source') or 'not recorded'),
+            ('speed', speed),
+            ('static wheel loads left / right (N)', ' / '.join(f'{v:.0f}' for v in static))]
+    lines = ['## What was run', '', '| item | value |', '|---|---|']
+    lines += [f'| {a} | {b} |' for a, b in rows]
+    lines += ['', '<details><summary>Parameter values used</summary>', '',
+              '| parameter | value |', '|---|---|']
+    lines += [f'| `{k}` | {_param_text(v)} |' for k, v in sorted(s['parameters'].items())]
+    lines += ['', '</details>', '']
+    return lines
+
+
+def _param_text(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return '[' + ', '.join(_param_text(x) for x in v) + ']'
+    return f'{v:.6g}' if isinstance(v, float) else str(v)
+
+
+def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
     """The rows of the summary table."""
     smp = s['samples']
+    conv = s.get('convergence') or {}
+    iri = s['iri_m_per_km']
+    ref = {'enveloped': 'reference: the true profile enveloped by the tire',
+           'truth': 'true profile', 'reference profile': 'reference profile'}.get(
+        iri.get('reference'), 'true (or reference) profile')
     rows = [('deflection samples in the input (accepted by the reader)', smp['input']),
             ('samples estimated', smp['estimated']),
             ('samples rejected (all topics and the estimator)', s['rejected_total']),
-            ('restarts (gaps)', f'{s["resets"]} ({s["gaps"]})'),
-            ('settling time of the estimator (s)', _fmt(s['settling_time_s'], 3)),
-            ('first converged sample (s)', _fmt(s['first_converged_s'], 3)),
+            ('estimator restarts (of which after a gap in the stamps)',
+             f'{s["resets"]} ({s["gaps"]})'),
+            ('convergence time t_0 (s)', _fmt(conv.get('time_s'), 3)),
             ('converged samples', smp['converged']),
             ('samples with a wheel lifted off', s['lift_off_samples']),
+            ('samples where a load estimate went below zero (plotted as 0)',
+             s.get('negative_load_samples', 0)),
             ('max abs LTR', _fmt(s['max_abs_ltr'], 3)),
             ('GNSS fixes', s['fixes']),
-            ('IRI of the estimated profile, left / right (m/km)',
-             _fmt(s['iri_m_per_km']['estimated'])),
-            ('IRI of the true (or reference) profile, left / right (m/km)',
-             _fmt(s['iri_m_per_km']['true']))]
+            (f'IRI of the whole drive, estimated profile, left / right ({u.iri_unit})',
+             ' / '.join(u.iri_text(v) for v in iri['estimated']) if iri['estimated'] else 'n/a'),
+            (f'IRI of the whole drive, {ref}, left / right ({u.iri_unit})',
+             ' / '.join(u.iri_text(v) for v in iri['true']) if iri['true'] else 'n/a')]
+    if iri.get('raw'):
+        rows.append((f'IRI of the whole drive, raw road (before the tire envelope), left / '
+                     f'right ({u.iri_unit})', ' / '.join(u.iri_text(v) for v in iri['raw'])))
+    if s.get('segments_without_data'):
+        rows.append(('segments without data (gap; no IRI)', s['segments_without_data']))
     if s.get('reference_profile'):
         rows += [('reference profile (no ground truth)', s['reference_profile']),
                  ('drive start along the reference (m)', _fmt(s['reference_offset_m'], 3))]
@@ -111,6 +190,31 @@ def _summary_rows(s: dict[str, Any]) -> list[str]:
     for key, value in (s.get('notes') or {}).items():
         rows.append((key, value))
     return [f'| {a} | {b} |' for a, b in rows]
+
+
+def _summary_notes(s: dict[str, Any], u: Units) -> list[str]:
+    """What the summary's figures mean: convergence, restarts, the reference profile."""
+    conv = s.get('convergence') or {}
+    if conv.get('source') == 'measured':
+        what = (f'the first time after which the {1e3 * conv["window_s"]:g} ms moving RMS of '
+                f'the wheel-load error (both wheels) stays below its tolerance '
+                f'({conv["tolerance_n"]:.0f} N: twice the judged RMS error, at least 1 % of '
+                f'the static load) for {conv["hold_s"]:g} s (MODEL.md "Metrics")')
+    else:
+        what = ("no truth to measure it against: the estimator's own figure, its first "
+                "converged sample (the differentiators' settling time, "
+                f'{_fmt(conv.get("settling_time_s"), 3)} s, after the start or a restart)')
+    notes = ['', f'- Convergence time t_0: {what}.',
+             '- Restarts: the estimator starts again from rest after a gap in the stamps '
+             '(longer than its gap threshold) or a reset; 0 (0) = it ran through once.']
+    ref = (s['iri_m_per_km'] or {}).get('reference')
+    if ref == 'enveloped':
+        notes.append('- True IRI: of the ground-truth profile, which is the road enveloped by '
+                     'the simulated tire (a moving average over the tire envelope length): what '
+                     "the tire follows and what accuracy is judged against, on the truth's own "
+                     'samples (the same in the online and offline reports); the raw road is '
+                     'shown beside it when the bag names it.')
+    return notes + ['']
 
 
 def _messages_section(s: dict[str, Any]) -> list[str]:
@@ -154,8 +258,7 @@ def _accuracy_section(s: dict[str, Any]) -> list[str]:
                 f'| LTR error RMS / peak | | | {_fmt(acc["ltr_rms_error"], 4)} / '
                 f'{_fmt(acc["ltr_peak_error"], 4)} |',
                 f'| max abs LTR estimated / true | | | {_fmt(acc["max_abs_ltr"], 3)} / '
-                f'{_fmt(acc["max_abs_ltr_true"], 3)} |',
-                f'| measured convergence time (s) | | | {_fmt(acc["convergence_s"], 3)} |']
+                f'{_fmt(acc["max_abs_ltr_true"], 3)} |']
         if 'profile_rms_m' in acc:
             lines += [
                 f'| profile error RMS in the 0.5-30 m band (mm) | '
@@ -169,8 +272,20 @@ def _accuracy_section(s: dict[str, Any]) -> list[str]:
         if s.get('judged_from') == 'settling time':
             lines += ['', 'The estimator never reported convergence: samples are judged from '
                       f'its settling time ({_fmt(s["settling_time_s"], 3)} s) on.']
-        lines += ['', f'Judged on {acc.get("samples_judged", 0)} converged samples (loads, LTR)'
-                  + (f' and {acc["profile_samples_judged"]} profile samples against the '
-                     f'{acc["profile_against"]}, 30 m in from each end' if
-                     'profile_samples_judged' in acc else '') + '.']
+        lines += ['', _judged_text(acc)]
     return lines
+
+
+def _judged_text(acc: dict[str, Any]) -> str:
+    """Which samples the accuracy was judged on (loads and LTR need a load truth)."""
+    parts = []
+    if 'samples_judged' in acc:
+        parts.append(f'{acc["samples_judged"]} converged samples (loads, LTR)')
+    if 'profile_samples_judged' in acc:
+        parts.append(f'{acc["profile_samples_judged"]} profile samples against the '
+                     f'{acc["profile_against"]}, 30 m in from each end')
+    text = 'Judged on ' + ' and '.join(parts) + '.'
+    if 'samples_judged' not in acc:
+        text += (' Loads and LTR are not judged: the bag has no ground truth of the loads '
+                 '(a reference profile judges the profile only).')
+    return text

@@ -18,15 +18,19 @@ from road_force_estimator.core import iri as iri_mod
 from road_force_estimator.core import metrics
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.segments import SEGMENT_COLUMNS, segment_table
+from road_force_estimator.report import drive_info
 from road_force_estimator.report.alignment import Aligned, align
 
-__all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'accuracy', 'drive_segments',
-           'summarize']
+__all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'CONVERGENCE_HOLD_S',
+           'accuracy', 'drive_segments', 'summarize', 'convergence']
 
 #: Default segment length (m).
 DEFAULT_SEGMENT_LENGTH_M = 100.0
-#: Window of the moving RMS that decides the measured convergence time (s).
+#: Window of the moving RMS of the load error whose convergence is measured (s).
 CONVERGENCE_WINDOW_S = 0.1
+#: The convergence time is the first time after which that error stays inside its tolerance
+#: for this long (s; MODEL.md "Metrics").
+CONVERGENCE_HOLD_S = 1.0
 
 
 def _pooled(rms: np.ndarray, ref: np.ndarray) -> float:
@@ -47,12 +51,11 @@ def accuracy(est, al: Aligned, vehicle: VehicleParameters) -> dict[str, Any] | N
     dict
         ``samples_judged``; loads: ``load_rms_n``, ``load_peak_n``, ``load_rms_pct_dynamic``,
         ``load_rms_pct_static`` (per wheel) and ``load_rms_pct_dynamic_both`` (pooled);
-        ``convergence_s`` (measured: the 100 ms moving RMS of the load error stays below
-        max(2 x its judged RMS, 1 % of the static load) from then on); LTR: ``ltr_rms_error``,
-        ``ltr_peak_error``, ``max_abs_ltr``, ``max_abs_ltr_true``; profile (when a truth or
-        reference profile exists and the drive is long enough): ``profile_samples_judged``,
-        ``profile_rms_m``, ``profile_rms_pct_band`` (per wheel), ``profile_rms_pct_band_both``,
-        ``profile_against``.
+        ``convergence_s`` and ``convergence_tolerance_n`` (:func:`convergence`); LTR:
+        ``ltr_rms_error``, ``ltr_peak_error``, ``max_abs_ltr``, ``max_abs_ltr_true``; profile
+        (when a truth or reference profile exists and the drive is long enough):
+        ``profile_samples_judged``, ``profile_rms_m``, ``profile_rms_pct_band`` (per wheel),
+        ``profile_rms_pct_band_both``, ``profile_against``.
     """
     out: dict[str, Any] = {}
     static = np.asarray(vehicle.static_load_n, dtype=float)
@@ -72,9 +75,9 @@ def accuracy(est, al: Aligned, vehicle: VehicleParameters) -> dict[str, Any] | N
                 load_rms_pct_dynamic_both=_pooled(st.rms, st.reference_rms),
                 true_dynamic_rms_n=_floats(st.reference_rms),
                 ltr_rms_error=lt['rms_error'], ltr_peak_error=lt['peak_error'],
-                max_abs_ltr=lt['max_abs'], max_abs_ltr_true=lt['max_abs_truth'],
-                convergence_s=_convergence(al, load, static, float(np.sqrt(np.mean(
-                    np.square(st.rms))))))
+                max_abs_ltr=lt['max_abs'], max_abs_ltr_true=lt['max_abs_truth'])
+            out['convergence_s'], out['convergence_tolerance_n'] = _convergence(
+                al, load, static, float(np.sqrt(np.mean(np.square(st.rms)))))
     truth = al.profile_truth
     if truth is not None:
         road = al.pick(est, 'road_m')
@@ -100,23 +103,38 @@ def accuracy(est, al: Aligned, vehicle: VehicleParameters) -> dict[str, Any] | N
     return out or None
 
 
-def _convergence(al: Aligned, load: np.ndarray, static: np.ndarray, judged_rms: float) -> float:
-    """Measured convergence time (s) of the load error (see :func:`accuracy`)."""
+def convergence(t_s: np.ndarray, error_n: np.ndarray, tolerance_n: float, *,
+                window_s: float = CONVERGENCE_WINDOW_S,
+                hold_s: float = CONVERGENCE_HOLD_S) -> float:
+    """The convergence time t_0 (s) of a load error (MODEL.md "Metrics"): the first time after
+    which the ``window_s`` moving RMS of ``error_n`` ((n,) or (n, 2) per wheel, pooled) stays
+    below ``tolerance_n`` for ``hold_s``; ``inf`` if it never does."""
+    t = np.asarray(t_s, dtype=float)
+    err = np.asarray(error_n, dtype=float)
+    err2 = np.mean(np.square(err.reshape(t.size, -1)), axis=1)
+    if t.size < 2:
+        return math.inf
+    dt = float(np.median(np.diff(t)))
+    w = max(1, int(round(window_s / dt))) if dt > 0 else 1
+    c = np.concatenate([[0.0], np.cumsum(err2)])
+    lo = np.maximum(np.arange(t.size) - w + 1, 0)
+    mrms = np.sqrt((c[1:] - c[lo]) / (np.arange(t.size) - lo + 1))
+    return metrics.convergence_time(t, mrms, tolerance_n, window_s=hold_s)
+
+
+def _convergence(al: Aligned, load: np.ndarray, static: np.ndarray,
+                 judged_rms: float) -> tuple[float, float]:
+    """Measured convergence time (s) of the load error and its tolerance (N): the tolerance
+    is max(2 x the judged RMS, 1 % of the static load) (see :func:`convergence`)."""
+    tol = max(2.0 * judged_rms, 0.01 * float(np.mean(static)))
     ok = np.isfinite(al.true_load_n).all(axis=1)
     if not ok.any() or not al.converged.any():
-        return math.inf
+        return math.inf, tol
     last = int(np.flatnonzero(al.converged)[-1])
     sel = np.flatnonzero(ok[:last + 1])
     if sel.size < 2:
-        return math.inf
-    err2 = np.mean(np.square(load[sel] - al.true_load_n[sel]), axis=1)
-    dt = float(np.median(np.diff(al.t_s[sel])))
-    w = max(1, int(round(CONVERGENCE_WINDOW_S / dt))) if dt > 0 else 1
-    c = np.concatenate([[0.0], np.cumsum(err2)])
-    lo = np.maximum(np.arange(sel.size) - w + 1, 0)
-    mrms = np.sqrt((c[1:] - c[lo]) / (np.arange(sel.size) - lo + 1))
-    tol = max(2.0 * judged_rms, 0.01 * float(np.mean(static)))
-    return metrics.convergence_time(al.t_s[sel], mrms, tol)
+        return math.inf, tol
+    return convergence(al.t_s[sel], load[sel] - al.true_load_n[sel], tol), tol
 
 
 def _iri_hook(distance_m, elevation_m, edges_m) -> np.ndarray:
@@ -131,8 +149,9 @@ def drive_segments(est, al: Aligned, drive=None, *,
                    segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M) -> dict[str, np.ndarray]:
     """Per-segment table (:func:`road_force_estimator.core.segments.segment_table`) of a drive.
 
-    IRI of the estimated profile and of the truth (or the reference) profile; coordinates from
-    the drive's fixes. Empty columns when the drive covers less than one sample of distance.
+    IRI of the estimated profile and of the truth (on the truth's own samples:
+    :func:`~.drive_info.true_segment_iri`) or the reference profile; coordinates from the
+    drive's fixes. Empty columns when the drive covers less than one sample of distance.
     """
     up = al.increasing()
     empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
@@ -151,7 +170,7 @@ def drive_segments(est, al: Aligned, drive=None, *,
             true_profile = np.column_stack([np.interp(x, x[ok], t[ok, i]) for i in (0, 1)])
     fixes = getattr(drive, 'fixes', None)
     try:
-        return segment_table(
+        table = segment_table(
             al.x_m[up], np.asarray(est.wheel_load_n)[rows], np.asarray(est.ltr)[rows],
             np.asarray(est.lift_off)[rows], profile_m=np.asarray(est.road_m)[rows],
             true_profile_m=true_profile, iri_segments=_iri_hook,
@@ -162,6 +181,13 @@ def drive_segments(est, al: Aligned, drive=None, *,
             segment_length_m=segment_length_m)
     except ValueError:
         return empty
+    if drive is not None and len(table['start_m']):
+        edges = np.concatenate([table['start_m'], table['end_m'][-1:]])
+        own = drive_info.true_segment_iri(drive, al, edges)
+        if own is not None:
+            table['true_iri_left_m_per_km'] = own[:, 0]
+            table['true_iri_right_m_per_km'] = own[:, 1]
+    return table
 
 
 def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
@@ -188,17 +214,20 @@ def _whole_from_segments(x: np.ndarray, z: np.ndarray | None, segments: dict,
         return _whole_iri(x, z)
     values = np.column_stack([segments[f'{prefix}_left_m_per_km'],
                               segments[f'{prefix}_right_m_per_km']])
-    used = counts > 0
-    if counts.sum() == 0 or not np.isfinite(values[used]).all():
-        return _whole_iri(x, z)
-    return _floats(values[used].T @ counts[used] / counts.sum())
+    used = (counts > 0) & np.isfinite(values).all(axis=1)
+    if not used.any():
+        return _whole_iri(x, z) if np.isfinite(values).all() else None
+    # Segments without data (a gap) are left out, never averaged as zero.
+    return _floats(values[used].T @ counts[used] / counts[used].sum())
 
 
 def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
               observer: ObserverParameters | None = None, *, mode: str = 'online',
               input_name: str = '', reference=None, reference_offset_m: float | None = None,
               segment_length_m: float = DEFAULT_SEGMENT_LENGTH_M,
-              extra: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict, Aligned]:
+              extra: dict[str, Any] | None = None, units: str = 'si',
+              run_info: dict[str, Any] | None = None,
+              raw_road=None) -> tuple[dict[str, Any], dict, Aligned]:
     """The report's numbers: ``(summary, segments, aligned)``.
 
     Parameters
@@ -221,6 +250,14 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         Segment length (m).
     extra : dict, optional
         More counts to show (e.g. samples whose speed was taken from the first twist).
+    units : 'si' or 'us'
+        Units of the report's text (``report.json`` and ``segments.csv`` stay SI).
+    run_info : dict, optional
+        ``command``, ``params_file``, ``overrides``: shown in the report
+        (:func:`~.drive_info.run_description`).
+    raw_road : RoadProfile, optional
+        The road before the tire envelope (default: read from the bag's simulator parameters
+        when the source is no bag: :func:`~.drive_info.raw_road`).
     """
     vehicle = VehicleParameters() if vehicle is None else vehicle
     observer = ObserverParameters() if observer is None else observer
@@ -247,25 +284,72 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'distance_m': float(al.x_m[-1] - al.x_m[0]) if al.x_m.size else 0.0,
         'settling_time_s': float(st.settling_time_s),
         'first_converged_s': float(al.t_s[conv_rows[0]]) if conv_rows.size else math.inf,
-        'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
-        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0,
+        **_load_counts(est, al),
         'fixes': int(len(drive.fixes.stamps_ns)) if getattr(drive, 'fixes', None) else 0,
         'has_ground_truth': al.true_load_n is not None,
         'reference_profile': al.reference_name or None,
         'reference_offset_m': al.reference_offset_m,
         'segment_length_m': float(segment_length_m),
+        'units': units,
+        'run': drive_info.run_description(drive, est, vehicle, observer, mode, run_info),
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
-    if extra:
-        summary['notes'] = dict(extra)
-    for key in ('noise_std', 'cutoff_hz'):
-        if hasattr(est, key):
-            summary.setdefault('offline', {})[key] = _floats(getattr(est, key))
+    summary.update(_notes(est, extra))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
-    summary['iri_m_per_km'] = _drive_iri(est, al, segments)
-    summary['segments'] = int(len(segments['start_m']))
+    summary.update(_segment_counts(segments))
+    summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
+    summary['convergence'] = _convergence_summary(summary)
     return summary, segments, al
+
+
+def _notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
+    """``notes`` (the caller's extra counts) and ``offline`` (the noise and cut-offs the
+    offline mode estimated), when there are any."""
+    out: dict[str, Any] = {'notes': dict(extra)} if extra else {}
+    for key in ('noise_std', 'cutoff_hz'):
+        if hasattr(est, key):
+            out.setdefault('offline', {})[key] = _floats(getattr(est, key))
+    return out
+
+
+def _segment_counts(segments: dict[str, np.ndarray]) -> dict[str, int]:
+    """Segments; those without data (no sample: a gap) and those without IRI."""
+    return {'segments': int(len(segments['start_m'])),
+            'segments_without_data': int(np.count_nonzero(
+                ~np.isfinite(segments['peak_load_left_n']))),
+            'segments_without_iri': int(np.count_nonzero(
+                ~np.isfinite(segments['iri_left_m_per_km'])))}
+
+
+def _load_counts(est, al: Aligned) -> dict[str, Any]:
+    """Samples with a wheel lifted off, with a load estimate below zero; the largest |LTR|."""
+    return {
+        'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
+        'negative_load_samples': _negative_loads(est, al),
+        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0}
+
+
+def _negative_loads(est, al: Aligned) -> int:
+    """Accepted samples where a wheel's load estimate went below zero before any clip (the
+    estimates' ``load_below_zero`` (n, 2) when they carry it, else ``wheel_load_n < 0``)."""
+    below = getattr(est, 'load_below_zero', None)
+    if below is None:
+        below = np.asarray(est.wheel_load_n, dtype=float) < 0.0
+    below = np.asarray(below, dtype=bool).reshape(len(est.stamp_ns), -1)
+    return int(np.count_nonzero(below[al.rows].any(axis=1))) if al.rows.size else 0
+
+
+def _convergence_summary(s: dict[str, Any]) -> dict[str, Any]:
+    """The one convergence figure of the report: measured against the truth when there is
+    one (:func:`convergence`), else the estimator's own (its first converged sample)."""
+    acc = s.get('accuracy') or {}
+    if 'convergence_s' in acc:
+        return {'time_s': acc['convergence_s'], 'source': 'measured',
+                'tolerance_n': acc['convergence_tolerance_n'],
+                'window_s': CONVERGENCE_WINDOW_S, 'hold_s': CONVERGENCE_HOLD_S}
+    return {'time_s': s['first_converged_s'], 'source': 'estimator',
+            'settling_time_s': s['settling_time_s']}
 
 
 def _rejections(drive, st) -> dict[str, dict[str, int]]:
@@ -282,15 +366,23 @@ def _rejections(drive, st) -> dict[str, dict[str, int]]:
     return rejected
 
 
-def _drive_iri(est, al: Aligned, segments: dict) -> dict[str, list[float] | None]:
-    """Whole-drive IRI (m/km, left and right) of the estimated and the true (or reference)
-    profile, None where unknown."""
+def _drive_iri(est, al: Aligned, segments: dict, drive=None, raw_road=None
+               ) -> dict[str, Any]:
+    """Whole-drive IRI (m/km, left and right): ``estimated``; ``true``, the reference
+    profile's (the truth on its own samples: the road enveloped by the tire,
+    :func:`~.drive_info.true_profile_iri`; else the reference profile given); ``raw``, the road
+    before the envelope; ``reference`` says which; None where unknown."""
     up = al.increasing()
-    iri_est = iri_true = None
+    iri_est = iri_true = raw = None
+    reference = None
     if np.count_nonzero(up) >= 2:
         x = al.x_m[up]
         iri_est = _whole_from_segments(x, al.pick(est, 'road_m')[up], segments, 'iri')
-        truth = al.profile_truth
-        if truth is not None:
-            iri_true = _whole_from_segments(x, truth[up], segments, 'true_iri')
-    return {'estimated': iri_est, 'true': iri_true}
+        own = drive_info.true_profile_iri(drive, al, raw_road) if drive is not None else None
+        if own is not None:
+            iri_true, raw = own['enveloped'], own['raw']
+            reference = 'enveloped'
+        elif al.profile_truth is not None:
+            iri_true = _whole_from_segments(x, al.profile_truth[up], segments, 'true_iri')
+            reference = 'truth' if al.true_road_m is not None else 'reference profile'
+    return {'estimated': iri_est, 'true': iri_true, 'raw': raw, 'reference': reference}

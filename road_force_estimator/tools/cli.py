@@ -18,14 +18,20 @@ from typing import Callable, Mapping, Sequence
 
 __all__ = [
     'MODES', 'UsageError', 'Parser', 'run_main', 'one_line', 'check_positive',
-    'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'add_force',
-    'add_no_progress', 'load_estimator_parameters', 'PROGRESS_MIN_SAMPLES', 'sample_progress',
+    'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'segment_length',
+    'add_force',
+    'add_no_progress', 'add_overrides', 'add_units', 'parameter_values',
+    'load_estimator_parameters', 'PROGRESS_MIN_SAMPLES', 'sample_progress', 'command_line',
 ]
 
 #: Estimation modes of estimate_bag and estimate_fleet.
 MODES = ('online', 'offline')
 #: Progress bars over samples appear from this many samples on.
 PROGRESS_MIN_SAMPLES = 50_000
+
+
+#: The arguments of the command :func:`run_main` runs (for :func:`command_line`).
+_ARGV: list[str] = []
 
 
 class UsageError(Exception):
@@ -64,6 +70,7 @@ def run_main(prog: str, parser: argparse.ArgumentParser,
         Exception types -> exit status; such an error prints ``<prog>: <first line>``.
     """
     try:
+        _ARGV[:] = sys.argv[1:] if argv is None else list(argv)     # for command_line()
         return body(parser.parse_args(argv))
     except SystemExit as done:          # --help
         return int(done.code or 0)
@@ -103,9 +110,22 @@ def add_mode(parser: argparse.ArgumentParser) -> None:
                              'non-causal, the whole recording')
 
 
-def add_segment_length(parser: argparse.ArgumentParser, help: str) -> None:
-    """``--segment-length M`` (m, default 100)."""
-    parser.add_argument('--segment-length', type=float, default=100.0, metavar='M', help=help)
+def add_segment_length(parser: argparse.ArgumentParser, help: str, *,
+                       default: float | None = 100.0) -> None:
+    """``--segment-length M`` (m, default 100; None: :func:`segment_length` gives the default
+    of ``--units``)."""
+    parser.add_argument('--segment-length', type=float, default=default, metavar='M',
+                        help=help)
+
+
+def segment_length(args: argparse.Namespace) -> float:
+    """``--segment-length`` (m), checked, else the default of ``--units`` (100 m, or 0.1 mi =
+    160.9344 m for ``us``; 100 m for a command without ``--units``)."""
+    from road_force_estimator.core.units import units
+    if args.segment_length is None:
+        return units(getattr(args, 'units', 'si')).segment_length_m
+    check_positive('--segment-length', args.segment_length)
+    return float(args.segment_length)
 
 
 def add_force(parser: argparse.ArgumentParser, help: str) -> None:
@@ -118,18 +138,59 @@ def add_no_progress(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
 
 
-def load_estimator_parameters(path: str | None, node_names: Sequence[str]):
-    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None).
+def add_overrides(parser: argparse.ArgumentParser) -> None:
+    """``-p NAME:=VALUE`` (repeatable): a parameter, applied after ``--params-file``."""
+    parser.add_argument('-p', dest='overrides', action='append', default=[],
+                        metavar='NAME:=VALUE',
+                        help='set one parameter (repeatable), after --params-file, e.g. '
+                             '-p observer.latency:=0.01; unknown names are refused')
+
+
+def add_units(parser: argparse.ArgumentParser) -> None:
+    """``--units si|us`` (default si)."""
+    parser.add_argument('--units', choices=('si', 'us'), default='si',
+                        help='si: IRI in m/km, distances in m, 100 m segments (default); us: '
+                             'in/mi, feet, 0.1-mile (160.9344 m) segments')
+
+
+def parameter_values(path: str | None, node_names: Sequence[str],
+                     overrides: Sequence[str] = ()) -> dict:
+    """``{dotted name: value}``: the parameter file's (none if None), then each ``-p
+    NAME:=VALUE`` of ``overrides``.
 
     Raises
     ------
     ValueError, OSError
-        A bad or unreadable file.
+        A bad or unreadable file, a bad override or an unknown name.
     """
-    from road_force_estimator.core.parameters import (
-        ObserverParameters, VehicleParameters, load_params_file)
+    from road_force_estimator.core.parameters import load_params_file, parse_override
     values = {} if path is None else load_params_file(path, node_names=tuple(node_names))
+    for text in overrides:
+        name, value = parse_override(text)
+        values[name] = value
+    return values
+
+
+def load_estimator_parameters(path: str | None, node_names: Sequence[str],
+                              overrides: Sequence[str] = ()):
+    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None) and
+    the ``-p`` overrides (:func:`parameter_values`).
+
+    Raises
+    ------
+    ValueError, OSError
+        A bad or unreadable file, a bad override.
+    """
+    from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+    values = parameter_values(path, node_names, overrides)
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
+
+
+def command_line(prog: str) -> str:
+    """The command line being run by :func:`run_main` (``prog`` and its arguments,
+    shell-quoted), for reports."""
+    import shlex
+    return ' '.join(shlex.quote(a) for a in [prog, *_ARGV])
 
 
 def sample_progress(total: int, enabled: bool, desc: str):

@@ -1,7 +1,8 @@
 """`estimate_bag`: the estimator over a recorded drive bag, without DDS.
 
-    estimate_bag INPUT --params-file FILE --output DIR [--mode online|offline]
-                 [--segment-length M] [--reference-profile SOURCE [--reference-offset M]]
+    estimate_bag INPUT [--params-file FILE] [-p NAME:=VALUE]... --output DIR
+                 [--mode online|offline] [--units si|us] [--segment-length M]
+                 [--reference-profile SOURCE [--reference-offset M]]
                  [--no-figures] [--force] [--no-progress]
 
 Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
@@ -56,9 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('input', metavar='INPUT', help='drive bag folder (rosbag2 MCAP)')
     cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
                            'observer.*; default: the package defaults')
+    cli.add_overrides(p)
     cli.add_output(p, 'output folder')
     cli.add_mode(p)
-    cli.add_segment_length(p, 'report segment length, m (default 100)')
+    cli.add_units(p)
+    cli.add_segment_length(p, 'report segment length, m (default 100 m; 0.1 mi = 160.9344 m '
+                              'with --units us)', default=None)
     p.add_argument('--reference-profile', metavar='SOURCE',
                    help='profile to compare the estimate with when the bag has no ground '
                         'truth: LPA bag, CSV or ERD')
@@ -71,9 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_parameters(path: str | None):
-    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None)."""
-    return cli.load_estimator_parameters(path, ('observer', PROG))
+def load_parameters(path: str | None, overrides=()):
+    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None)
+    and ``-p NAME:=VALUE`` overrides."""
+    return cli.load_estimator_parameters(path, ('observer', PROG), overrides)
 
 
 def drive_speed(drive) -> tuple[np.ndarray, int]:
@@ -163,8 +168,12 @@ class EstimateResult:
 def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
         mode: str = 'online', segment_length_m: float = 100.0, reference=None,
         reference_offset_m: float | None = None, figures: bool = True, force: bool = False,
-        progress: bool = False) -> EstimateResult:
+        progress: bool = False, units: str = 'si',
+        run_info: dict[str, Any] | None = None) -> EstimateResult:
     """Estimate one drive bag and write ``output/bag`` and ``output/report``.
+
+    ``units`` ('si' or 'us') are those of the report's text; ``run_info`` (the parameter file,
+    the overrides, the command line) is shown in it.
 
     Raises
     ------
@@ -190,15 +199,16 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     try:
         return _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode,
                     segment_length_m, reference, reference_offset_m, figures, force, progress,
-                    stages)
+                    stages, units, run_info)
     finally:
         stages.close()
 
 
 def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
-         reference, reference_offset_m, figures, force, progress, stages) -> EstimateResult:
+         reference, reference_offset_m, figures, force, progress, stages, units='si',
+         run_info=None) -> EstimateResult:
     from road_force_estimator import bagio
-    from road_force_estimator.report import write_report
+    from road_force_estimator.report import raw_road, write_report
     from road_force_estimator.estimation import estimate_recording
 
     stages.next('reading the bag')
@@ -245,11 +255,15 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
     summary = write_report(
         report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
         reference=reference, reference_offset_m=reference_offset_m,
-        segment_length_m=segment_length_m, figures=figures, extra=extra)
+        segment_length_m=segment_length_m, figures=figures, extra=extra, units=units,
+        run_info=run_info, raw_road=raw_road(drive, reader=bagio.road_from_source))
     return EstimateResult(summary, bag_dir, report_dir, est, written, warnings, drive)
 
 
-def _headline(result: EstimateResult) -> list[str]:
+def _headline(result: EstimateResult, units: str = 'si') -> list[str]:
+    from road_force_estimator.core.units import units as unit_system
+
+    u = unit_system(units)
     s = result.summary
     lines = [f'report: {result.report / "report.md"}', f'bag: {result.bag}',
              f'samples estimated: {s["samples"]["estimated"]} ({s["mode"]}), rejected: '
@@ -263,10 +277,11 @@ def _headline(result: EstimateResult) -> list[str]:
         lines.append(f'profile error (0.5-30 m band): {acc["profile_rms_pct_band_both"]:.2f} %')
     iri = s['iri_m_per_km']
     if iri['estimated']:
-        text = f'IRI left/right: {iri["estimated"][0]:.2f}/{iri["estimated"][1]:.2f} m/km'
+        est = '/'.join(u.iri_text(v) for v in iri['estimated'])
+        text = f'IRI of the whole drive, left/right: {est} {u.iri_unit}'
         if iri['true']:
             what = 'reference' if s.get('reference_profile') else 'true'
-            text += f' ({what} {iri["true"][0]:.2f}/{iri["true"][1]:.2f})'
+            text += f' ({what} {"/".join(u.iri_text(v) for v in iri["true"])})'
         lines.append(text)
     return lines
 
@@ -281,22 +296,25 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(args: argparse.Namespace) -> int:
     """The command's work: options, parameters, reference, :func:`run`, the headline."""
-    cli.check_positive('--segment-length', args.segment_length)
-    vehicle, observer = load_parameters(args.params_file)
+    segment_length_m = cli.segment_length(args)
+    vehicle, observer = load_parameters(args.params_file, args.overrides)
     reference = None
     if args.reference_offset is not None and not args.reference_profile:
         raise cli.UsageError('--reference-offset needs --reference-profile')
     if args.reference_profile:
         from road_force_estimator.bagio import road_from_source
         reference = road_from_source(args.reference_profile)
+        for note in getattr(reference, 'notes', ()):      # e.g. an ERD file's feet converted
+            print(f'{PROG}: note: {args.reference_profile}: {note}', file=sys.stderr)
     result = run(args.input, args.output, vehicle=vehicle, observer=observer,
-                 mode=args.mode, segment_length_m=args.segment_length, reference=reference,
+                 mode=args.mode, segment_length_m=segment_length_m, reference=reference,
                  reference_offset_m=args.reference_offset, figures=not args.no_figures,
-                 force=args.force,
-                 progress=not args.no_progress)
+                 force=args.force, progress=not args.no_progress, units=args.units,
+                 run_info={'params_file': args.params_file, 'overrides': list(args.overrides),
+                           'command': cli.command_line(PROG)})
     for line in result.warnings:
         print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
-    for line in _headline(result):
+    for line in _headline(result, args.units):
         print(f'{PROG}: {line}')
     return 0
 

@@ -1,8 +1,9 @@
 """`estimate_fleet`: many recorded drives on Dask distributed, one table and a map.
 
-    estimate_fleet INPUT... --params-file FILE --output DIR [--mode online|offline]
-                   [--segment-length M] [--scheduler ADDRESS] [--workers N] [--force]
-                   [--no-figures] [--no-progress]
+    estimate_fleet INPUT... [--params-file FILE] [-p NAME:=VALUE]... --output DIR
+                   [--mode online|offline] [--units si|us] [--segment-length M]
+                   [--scheduler ADDRESS] [--workers N] [--force] [--no-figures]
+                   [--no-progress]
 
 Each INPUT is a drive bag folder or a folder holding bag folders (any folder with a
 ``metadata.yaml``, searched recursively; the search does not enter a bag folder, nor DIR).
@@ -74,7 +75,8 @@ PROG = 'estimate_fleet'
 def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None, observer=None,
               mode: str = 'online', segment_length_m: float = 100.0, figures: bool = True,
               scheduler: str | None = None, workers: int | None = None, force: bool = False,
-              progress: bool = False, params_file: str | None = None) -> FleetResult:
+              progress: bool = False, params_file: str | None = None, units: str = 'si',
+              run_info: dict | None = None) -> FleetResult:
     """Process every drive under ``inputs`` into ``output`` (see the module notes).
 
     Parameters
@@ -99,6 +101,10 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
         A progress bar over drives on stderr.
     params_file : str, optional
         Shown in summary.md.
+    units : 'si' or 'us'
+        Units of summary.md and of the drives' reports.
+    run_info : dict, optional
+        The parameter file, overrides and command line, shown in the drives' reports.
 
     Raises
     ------
@@ -122,7 +128,7 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
         raise FleetError(f'cannot create {output}: {err.strerror or err}') from None
     shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)   # left by a stopped run
     settings = {'mode': mode, 'segment_length_m': float(segment_length_m),
-                'figures': bool(figures),
+                'figures': bool(figures), 'units': units, 'run_info': run_info or {},
                 'parameters': {**vehicle.to_parameters(), **observer.to_parameters()}}
     outcomes, tasks = _resume(out, drives, vehicle, observer, settings, force)
     timings = {'prepare': time.perf_counter() - t0, 'engine_start': 0.0, 'processing': 0.0}
@@ -205,11 +211,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('inputs', nargs='+', metavar='INPUT',
                    help='drive bag folder, or a folder holding bag folders (searched '
                         'recursively for metadata.yaml)')
-    cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:), as for estimate_bag',
-                        required=True)
+    cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:), as for estimate_bag; '
+                           'default: the package defaults')
+    cli.add_overrides(p)
     cli.add_output(p, 'output folder')
     cli.add_mode(p)
-    cli.add_segment_length(p, 'segment length, m (default 100; 160.9344 = 0.1 mile)')
+    cli.add_units(p)
+    cli.add_segment_length(p, 'segment length, m (default 100 m; 0.1 mi = 160.9344 m with '
+                              '--units us)', default=None)
     p.add_argument('--scheduler', metavar='ADDRESS',
                    help='an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a '
                         'local cluster)')
@@ -232,12 +241,16 @@ def _main(args: argparse.Namespace) -> int:
     """The command's work: the parameters, :func:`run_fleet`, the one-line result."""
     from road_force_estimator.tools.estimate_bag import load_parameters
 
+    segment_length_m = cli.segment_length(args)
     try:
-        vehicle, observer = load_parameters(args.params_file)
+        vehicle, observer = load_parameters(args.params_file, args.overrides)
     except (ValueError, OSError) as err:
         raise FleetError(cli.one_line(err)) from None
+    run_info = {'params_file': args.params_file, 'overrides': list(args.overrides),
+                'command': cli.command_line(PROG)}
     result = run_fleet(args.inputs, args.output, vehicle=vehicle, observer=observer,
-                       mode=args.mode, segment_length_m=args.segment_length,
+                       mode=args.mode, segment_length_m=segment_length_m, units=args.units,
+                       run_info=run_info,
                        figures=not args.no_figures, scheduler=args.scheduler,
                        workers=args.workers, force=args.force,
                        progress=not args.no_progress, params_file=args.params_file)

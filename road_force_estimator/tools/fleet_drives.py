@@ -185,7 +185,9 @@ def input_sha256(path: str | Path, *, chunk: int = 1 << 20) -> str:
 
 def drive_key(input_digest: str, settings: dict) -> str:
     """The key of a drive's outputs: SHA-256 of the input digest, the settings (parameters,
-    mode, segment length, figures) and :data:`KEY_FORMAT`, as canonical JSON."""
+    mode, segment length, figures, units; not ``run_info``, the command line shown in the
+    reports) and :data:`KEY_FORMAT`, as canonical JSON."""
+    settings = {k: v for k, v in settings.items() if k != 'run_info'}
     doc = {'format': KEY_FORMAT, 'input_sha256': input_digest, 'settings': settings}
     text = json.dumps(doc, sort_keys=True, separators=(',', ':'), allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()
@@ -267,7 +269,8 @@ def process_drive(task: DriveTask) -> DriveOutcome:
             result = estimate_bag.run(
                 task.input_path, tmp, vehicle=task.vehicle, observer=task.observer,
                 mode=settings['mode'], segment_length_m=settings['segment_length_m'],
-                figures=settings['figures'], force=False, progress=False)
+                figures=settings['figures'], force=False, progress=False,
+                units=settings.get('units', 'si'), run_info=settings.get('run_info'))
             table = read_segments_csv(tmp / 'report' / 'segments.csv')
             fixes = _fixes_of(result, task.input_path)
             est = result.estimates

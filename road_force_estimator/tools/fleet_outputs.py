@@ -75,13 +75,16 @@ def _atomic_write(path: Path, data: bytes | str) -> None:
 
 
 def _csv_text(header: Sequence[str], rows) -> str:
-    from road_force_estimator.report import csv_cell
+    """CSV text; the segment columns rounded as in a drive's ``segments.csv``
+    (:data:`road_force_estimator.report.SEGMENT_DECIMALS`)."""
+    from road_force_estimator.report import SEGMENT_DECIMALS, csv_cell
 
+    decimals = [SEGMENT_DECIMALS.get(name) for name in header]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
     for row in rows:
-        w.writerow([csv_cell(v) for v in row])
+        w.writerow([csv_cell(v, d) for v, d in zip(row, decimals)])
     return buf.getvalue()
 
 
@@ -130,8 +133,11 @@ def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_writ
                   '[![segments coloured by IRI](segments_map.png)](segments_map.png)', '']
     else:
         lines += ['## Map', '', 'No segment has coordinates (no drive with `/fix`): no map.', '']
-    lines += _drives_section(result.outcomes)
-    lines += _roughest_section(table)
+    from road_force_estimator.core.units import units
+
+    u = units(result.settings.get('units', 'si'))
+    lines += _drives_section(result.outcomes, u)
+    lines += _roughest_section(table, u)
     failed = [o for o in result.outcomes if o.status == 'failed']
     if failed:
         lines += ['## Failures', '', '| drive | reason |', '|---|---|']
@@ -150,9 +156,15 @@ def _summary_head(result: FleetResult, table: dict[str, np.ndarray],
     """The title and the run: drives, segments, settings, engine and times."""
     from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
 
+    from road_force_estimator.core.units import units
+
     s = result.settings
+    u = units(s.get('units', 'si'))
     n = len(result.outcomes)
     seg = s['segment_length_m']
+    run = s.get('run_info') or {}
+    iri_note = (f'- IRI in m/km (= mm/m); in/mi = m/km x {K:g}.' if u.name == 'si' else
+                f'- IRI in in/mi (= m/km x {K:g}); distances in feet (0.3048 m).')
     return [
         '# Fleet summary (`estimate_fleet`)', '',
         f'- Drives: {n}; processed {result.count("processed")}, skipped (already done) '
@@ -166,14 +178,32 @@ def _summary_head(result: FleetResult, table: dict[str, np.ndarray],
         f'- Engine: {result.engine}; wall time {result.seconds:.1f} s (engine start '
         f'{result.timings.get("engine_start", 0.0):.1f} s, processing '
         f'{result.timings.get("processing", 0.0):.1f} s).',
-        f'- IRI in m/km (= mm/m); in/mi = m/km x {K:g}.', '']
+        iri_note] + ([f'- Command: `{run["command"]}`.'] if run.get('command') else []) + [
+        f'- Overrides (-p): {", ".join(run["overrides"])}.' if run.get('overrides') else
+        '- Overrides (-p): none.', '']
 
 
-def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+def _iri_pair(u, v: float) -> str:
+    """IRI (m/km) in the units ``u``, the other system's in parentheses."""
+    from road_force_estimator.core.units import units
+
+    other = units('us' if u.name == 'si' else 'si')
+    return f'{u.iri_text(v)} ({other.iri_text(v)})'
+
+
+def _iri_head(u) -> str:
+    return f'{u.iri_unit} ({"in/mi" if u.name == "si" else "m/km"})'
+
+
+def _drives_section(outcomes: Sequence[DriveOutcome], u=None) -> list[str]:
     """One row per drive: status, segments, distance, mean IRI, peak load, LTR, lift-offs."""
+    from road_force_estimator.core.units import units
+
+    u = units() if u is None else u
+    dist_unit = 'mi' if u.name == 'us' else 'km'
     lines = ['## Drives', '',
-             '| drive | status | segments | distance (km) | IRI left m/km (in/mi) | '
-             'IRI right m/km (in/mi) | peak load (kN) | max abs LTR | lift-offs | GNSS | '
+             f'| drive | status | segments | distance ({dist_unit}) | IRI left {_iri_head(u)} | '
+             f'IRI right {_iri_head(u)} | peak load (kN) | max abs LTR | lift-offs | GNSS | '
              'time (s) |',
              '|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|']
     for o in outcomes:
@@ -181,7 +211,7 @@ def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
             lines.append(f'| {_md(o.drive_id)} | failed | | | | | | | | | '
                          f'{o.seconds:.1f} |')
         else:
-            lines.append(_drive_row(o))
+            lines.append(_drive_row(o, u))
     lines.append('')
     lines.append('IRI per drive: length-weighted mean of its segments. Time: the processing of '
                  'the drive (for a skipped drive, in the run that made it).')
@@ -189,13 +219,14 @@ def _drives_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
     return lines
 
 
-def _drive_row(o: DriveOutcome) -> str:
-    """The row of a drive done (processed or skipped)."""
-    from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
+def _drive_row(o: DriveOutcome, u) -> str:
+    """The row of a drive done (processed or skipped), IRI in the units ``u``."""
+    from road_force_estimator.core.units import M_PER_MILE
 
     t = o.table
     k = len(t['start_m'])
-    dist = (float(t['end_m'][-1] - t['start_m'][0]) / 1000.0) if k else 0.0
+    dist = (float(t['end_m'][-1] - t['start_m'][0])) if k else 0.0
+    dist /= M_PER_MILE if u.name == 'us' else 1000.0
     il, ir = _mean_iri(o, 'left'), _mean_iri(o, 'right')
     peak = np.fmax(t['peak_load_left_n'], t['peak_load_right_n']) if k else np.zeros(0)
     peak_kn = float(np.nanmax(peak)) / 1000.0 if k and np.isfinite(peak).any() else math.nan
@@ -203,23 +234,24 @@ def _drive_row(o: DriveOutcome) -> str:
         else math.nan
     gnss = 'yes' if k and np.isfinite(t['start_lat']).any() else 'no'
     return (
-        f'| {_md(o.drive_id)} | {o.status} | {k} | {dist:.3f} | {_f(il)} ({_f(il * K, ".0f")})'
-        f' | {_f(ir)} ({_f(ir * K, ".0f")}) | {_f(peak_kn, ".1f")} | {_f(ltr, ".3f")} | '
+        f'| {_md(o.drive_id)} | {o.status} | {k} | {dist:.3f} | {_iri_pair(u, il)}'
+        f' | {_iri_pair(u, ir)} | {_f(peak_kn, ".1f")} | {_f(ltr, ".3f")} | '
         f'{int(np.sum(t["lift_offs"])) if k else 0} | {gnss} | {o.seconds:.1f} |')
 
 
-def _roughest_section(table: dict[str, np.ndarray]) -> list[str]:
+def _roughest_section(table: dict[str, np.ndarray], u=None) -> list[str]:
     """The :data:`ROUGHEST` segments by mean IRI (none without a finite IRI)."""
-    from road_force_estimator.report import IN_PER_MI_PER_M_PER_KM as K
+    from road_force_estimator.core.units import units
 
+    u = units() if u is None else u
     mean = 0.5 * (table['iri_left_m_per_km'] + table['iri_right_m_per_km'])
     order = [int(j) for j in np.argsort(-np.where(np.isfinite(mean), mean, -np.inf))
              if np.isfinite(mean[j])][:ROUGHEST]
     if not order:
         return []
     lines = [f'## Roughest segments (top {len(order)} by mean IRI)', '',
-             '| drive | start (m) | end (m) | IRI left m/km (in/mi) | '
-             'IRI right m/km (in/mi) | start lat, lon | end lat, lon |',
+             f'| drive | start ({u.length_unit}) | end ({u.length_unit}) | IRI left '
+             f'{_iri_head(u)} | IRI right {_iri_head(u)} | start lat, lon | end lat, lon |',
              '|---|---:|---:|---:|---:|---|---|']
     for j in order:
         def pos(a, b):
@@ -227,9 +259,9 @@ def _roughest_section(table: dict[str, np.ndarray]) -> list[str]:
             return f'{la:.6f}, {lo:.6f}' if np.isfinite(la) and np.isfinite(lo) else 'n/a'
         il, ir = table['iri_left_m_per_km'][j], table['iri_right_m_per_km'][j]
         lines.append(
-            f'| {_md(table["drive"][j])} | {table["start_m"][j]:.1f} | '
-            f'{table["end_m"][j]:.1f} | {_f(il)} ({_f(il * K, ".0f")}) | {_f(ir)} '
-            f'({_f(ir * K, ".0f")}) | {pos("start_lat", "start_lon")} | '
+            f'| {_md(table["drive"][j])} | {u.length_text(table["start_m"][j], 1)} | '
+            f'{u.length_text(table["end_m"][j], 1)} | {_iri_pair(u, il)} | {_iri_pair(u, ir)}'
+            f' | {pos("start_lat", "start_lon")} | '
             f'{pos("end_lat", "end_lon")} |')
     lines.append('')
     return lines
@@ -256,9 +288,14 @@ def write_outputs(output: str | Path, result: FleetResult, *,
     png = out / 'segments_map.png'
     mean = 0.5 * (table['iri_left_m_per_km'] + table['iri_right_m_per_km'])
     tmp_png = out / f'.segments_map.{uuid.uuid4().hex[:8]}.png'
-    if plot_segments_map(tmp_png, lines, mean,
-                         title=f'IRI per {result.settings["segment_length_m"]:g} m segment, '
-                               f'{len({d for d in table["drive"]})} drives'):
+    from road_force_estimator.core.units import units
+
+    u = units(result.settings.get('units', 'si'))
+    drives = [o.drive_id for o in result.outcomes if o.status != 'failed' and o.table is not None
+              for _ in range(len(o.table['start_m']))]
+    if plot_segments_map(tmp_png, lines, mean, labels=drives, units=u.name,
+                         title=f'IRI per {u.segment_text(result.settings["segment_length_m"])} '
+                               f'segment, {len({d for d in table["drive"]})} drives'):
         os.replace(tmp_png, png)
         map_written = True
     else:

@@ -1,14 +1,15 @@
 """`profile_to_bag`: a road profile to an LPA bag, and an LPA bag back to CSV.
 
     profile_to_bag INPUT --output DIR [--survey-speed V] [--track-width T] [--length M]
-    profile_to_bag BAG --output FILE.csv
+    profile_to_bag BAG --output FILE.csv [--exact]
 
 INPUT is a profile file (CSV ``distance_m,left_m,right_m`` or ``distance_m,elevation_m``, UMTRI
 ERD, or whitespace columns such as profile_1.txt) or a synthetic road spec
 (``iso8608:C:seed=1``, ``flat``; ``--length`` sets its length). It becomes the LPA bag DIR:
 ``/lpa/left`` and ``/lpa/right`` (geometry_msgs/PointStamped, INTERFACES.md). When INPUT is a
 bag folder, the profile it holds is written to the CSV file given as ``--output`` instead,
-with every number printed exactly (shortest round-trip form), so CSV -> bag -> CSV loses
+rounded to what a profiler measures (1 mm of distance, 0.1 um of elevation), or with
+``--exact`` every number exactly (shortest round-trip form), so CSV -> bag -> CSV loses
 nothing.
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ import sys
 
 from road_force_estimator.tools import cli
 
-__all__ = ['build_parser', 'main', 'write_exact_csv']
+__all__ = ['build_parser', 'main', 'write_exact_csv', 'write_rounded_csv']
 
 PROG = 'profile_to_bag'
 
@@ -37,7 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
                     '/lpa/left and /lpa/right), or an LPA bag back into a CSV profile.',
         epilog='Direction: an INPUT that is a bag folder (it holds metadata.yaml or .mcap '
                'files) is converted to the CSV file --output; anything else to the bag folder '
-               '--output. The CSV has the header distance_m,left_m,right_m and exact numbers.')
+               '--output. The CSV has the header distance_m,left_m,right_m, numbers rounded '
+               'to 1 mm of distance and 0.1 um of elevation (--exact: exact).')
     parser.add_argument('input', metavar='INPUT',
                         help='profile file (.csv, .erd, .txt/.dat), road spec such as '
                              'iso8608:C:seed=1, or an LPA bag folder')
@@ -51,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
                                           f'y = +-T/2 (default {DEFAULT_TRACK_WIDTH_M:g})')
     parser.add_argument('--length', type=float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
+    parser.add_argument('--exact', action='store_true',
+                        help='bag to CSV: every number exactly (shortest round-trip form), '
+                             'so that CSV -> bag -> CSV loses nothing')
     cli.add_force(parser, 'replace an existing output bag folder or CSV file')
     return parser
 
@@ -67,6 +72,18 @@ def write_exact_csv(path: str | Path, profile) -> None:
             f.write(f'{x!r},{zl!r},{zr!r}\n')
 
 
+def write_rounded_csv(path: str | Path, profile) -> None:
+    """Write ``distance_m,left_m,right_m`` rounded to 1 mm of distance and 0.1 um of
+    elevation (:data:`road_force_estimator.core.units.DECIMALS`)."""
+    from road_force_estimator.core.units import rounded
+
+    with Path(path).open('w', newline='') as f:
+        f.write('distance_m,left_m,right_m\n')
+        for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
+            f.write(f'{rounded(x, "distance_m")},{rounded(zl, "elevation_m")},'
+                    f'{rounded(zr, "elevation_m")}\n')
+
+
 def _run(args: argparse.Namespace) -> list[str]:
     from road_force_estimator import bagio
     from road_force_estimator.bagio import road_from_source
@@ -78,7 +95,7 @@ def _run(args: argparse.Namespace) -> list[str]:
             raise ValueError(f'{output} exists (use --force to replace a file)')
         notes: list[str] = []
         profile = bagio.read_lpa_bag(source, issues=notes)
-        write_exact_csv(output, profile)
+        (write_exact_csv if args.exact else write_rounded_csv)(output, profile)
         return notes + [f'wrote {len(profile)} samples to {output}']
     cli.check_positive('--length', args.length, finite=False)
     profile = road_from_source(args.input, length_m=args.length)

@@ -1,7 +1,8 @@
 """`simulate_bag`: the plant driven over a road, offline (no DDS), into a drive bag.
 
     simulate_bag --road SOURCE --speed V --rate HZ [--duration S] [--params-file FILE]
-                 --output DIR [--seed N] [--noise-deflection M] [--noise-roll RAD]
+                 [-p NAME:=VALUE]... --output DIR [--seed N] [--noise-deflection M]
+                 [--noise-roll RAD]
                  [--tire-envelope M] [--gnss-rate HZ] [--lateral-acceleration A[@T]]
                  [--no-ground-truth] [--force] [--no-progress]
 
@@ -20,7 +21,8 @@ of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^
 Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
 ``custom_data``.
 
-Values come from the defaults, then the parameter file, then the command line. Exit status 0
+Values come from the defaults, then the parameter file, then ``-p NAME:=VALUE``, then the
+options (``--help`` shows the defaults). Exit status 0
 on success, 1 for bad input (bad parameter, unreadable road, existing output), 2 for a bad
 command line; each with one line on stderr.
 """
@@ -52,29 +54,42 @@ _OPTIONS = {
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``simulate_bag``."""
+    from road_force_estimator.core.parameters import defaults
+
+    d = defaults('simulator.')
+
+    def dflt(option: str) -> str:
+        return f' (default {d[_OPTIONS[option]]!r})'
+
     p = cli.Parser(prog=PROG, description='Drive the plant over a road offline and write a bag '
                 'with measurements and ground truth.',
-                epilog='Values: defaults < --params-file < command-line options.')
+                epilog='Values: defaults < --params-file < -p NAME:=VALUE < command-line '
+                       'options.')
     p.add_argument('--road', metavar='SOURCE',
-                   help='road: iso8608:<A-H>[:seed=N], flat, or an LPA bag / CSV / ERD path')
-    p.add_argument('--speed', type=float, metavar='V', help='speed, m/s')
-    p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz')
+                   help='road: iso8608:<A-H>[:seed=N], flat, or an LPA bag / CSV / ERD path'
+                        + dflt('road'))
+    p.add_argument('--speed', type=float, metavar='V', help='speed, m/s' + dflt('speed'))
+    p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz' + dflt('rate'))
     p.add_argument('--duration', type=float, metavar='S',
-                   help='duration, s (the drive also stops at the end of the road)')
+                   help='duration, s (the drive also stops at the end of the road)'
+                        + dflt('duration'))
     cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
-                           'simulator.*')
+                           'simulator.* (default: none, the package defaults)')
+    cli.add_overrides(p)
     cli.add_output(p, 'bag folder to create')
-    p.add_argument('--seed', type=int, metavar='N', help='seed of the sensor noise')
+    p.add_argument('--seed', type=int, metavar='N',
+                   help='seed of the sensor noise' + dflt('seed'))
     p.add_argument('--noise-deflection', type=float, metavar='M',
-                   help='deflection noise standard deviation, m')
+                   help='deflection noise standard deviation, m' + dflt('noise_deflection'))
     p.add_argument('--noise-roll', type=float, metavar='RAD',
-                   help='roll noise standard deviation, rad')
+                   help='roll noise standard deviation, rad' + dflt('noise_roll'))
     p.add_argument('--tire-envelope', type=float, metavar='M',
-                   help='tire envelope length, m (0 = point contact)')
-    p.add_argument('--gnss-rate', type=float, metavar='HZ', help='rate of /fix, Hz (0 = none)')
+                   help='tire envelope length, m (0 = point contact)' + dflt('tire_envelope'))
+    p.add_argument('--gnss-rate', type=float, metavar='HZ',
+                   help='rate of /fix, Hz (0 = none)' + dflt('gnss_rate'))
     p.add_argument('--lateral-acceleration', metavar='A[@T]',
                    help='lateral acceleration a_y, m/s^2 (> 0 to the left), from time T s on '
-                        '(default 0 s); bends the GNSS route')
+                        '(default 0 s); bends the GNSS route (default: none, 0 m/s^2)')
     p.add_argument('--no-ground-truth', action='store_true',
                    help='write the measurements only, as a real truck records them')
     cli.add_force(p, 'replace an existing bag folder')
@@ -83,12 +98,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def parameters_from(args: argparse.Namespace):
-    """``(VehicleParameters, SimulatorParameters)``: defaults < params file < options."""
+    """``(VehicleParameters, SimulatorParameters)``: defaults < params file < ``-p`` <
+    options."""
     from road_force_estimator.core.parameters import (
-        SimulatorParameters, VehicleParameters, load_params_file, validate_parameter)
-    values = {}
-    if args.params_file:
-        values = load_params_file(args.params_file, node_names=('plant_simulator', PROG))
+        SimulatorParameters, VehicleParameters, validate_parameter)
+    values = cli.parameter_values(args.params_file, ('plant_simulator', PROG),
+                                  getattr(args, 'overrides', ()))
     for option, name in _OPTIONS.items():
         value = getattr(args, option)
         if value is not None:

@@ -121,3 +121,18 @@ class TestConvergenceTime:
         assert convergence_time(t, two, [1.0, 4.0]) == 1.0
         with pytest.raises(ValueError, match='match'):
             convergence_time(t, np.zeros(5), 1.0)
+
+    def test_a_stated_window_on_a_constructed_error_signal(self):
+        """MODEL.md: the first time after which the error stays inside its tolerance for a
+        stated window - not the last spike of a long drive."""
+        t = np.arange(0.0, 30.0, 0.01)                      # 30 s at 100 Hz
+        err = np.where(t < 0.48, 10.0, 0.1)                  # converges at 0.48 s ...
+        err[(t >= 2.0) & (t < 2.05)] = 5.0                   # ... a spike at 2 s
+        err[(t >= 29.38) & (t < 29.40)] = 5.0                # ... and one near the end
+        assert convergence_time(t, err, 1.0) == pytest.approx(29.40)    # no window: the last
+        assert convergence_time(t, err, 1.0, window_s=1.0) == pytest.approx(0.48)
+        assert convergence_time(t, err, 1.0, window_s=1.6) == pytest.approx(2.05)
+        # The window must fit in the record, and a signal that never settles gives inf.
+        assert convergence_time(t, err, 1.0, window_s=40.0) == math.inf
+        assert convergence_time(t, np.full(t.size, 2.0), 1.0, window_s=1.0) == math.inf
+        assert convergence_time(t, np.zeros(t.size), 1.0, window_s=1.0) == 0.0

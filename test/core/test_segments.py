@@ -62,3 +62,70 @@ def test_coordinates_interpolated_at_segment_edges_and_iri_hook_called_per_side(
     assert table['end_lat'][0] == pytest.approx(48.005)
     assert table['start_lon'][1] == pytest.approx(17.010)
     assert table['end_lat'][2] == pytest.approx(48.015)
+
+
+def test_a_gap_leaves_segments_without_data_never_zero():
+    """A 5 s gap at 20 m/s (100 m without a sample): those segments have no data (NaN), the
+    segments the gap cuts into have no IRI, the others are as without the gap."""
+    x = np.concatenate([np.arange(0.0, 100.0, 0.02), np.arange(200.0, 400.0, 0.02)])
+    n = x.size
+    load = np.full((n, 2), 1e4)
+    calls = []
+
+    def fake_iri(d, z, edges):
+        calls.append(len(edges))
+        return np.full(len(edges) - 1, 3.0)
+    table = segment_table(x, load, np.zeros(n), np.zeros((n, 2), bool),
+                          profile_m=np.zeros((n, 2)), true_profile_m=np.zeros((n, 2)),
+                          iri_segments=fake_iri, segment_length_m=50.0)
+    assert table['start_m'].tolist() == [0.0, 50.0, 100.0, 150.0, 200.0, 250.0, 300.0, 350.0]
+    empty = [2, 3]                                   # 100-200 m: no sample
+    for j in empty:
+        for name in SEGMENT_COLUMNS:
+            if name not in ('start_m', 'end_m', 'lift_offs'):
+                assert np.isnan(table[name][j]), (name, j)
+        assert table['lift_offs'][j] == 0
+    full = [0, 4, 5, 6, 7]
+    assert table['iri_left_m_per_km'][full].tolist() == [3.0] * 5
+    assert table['true_iri_right_m_per_km'][full].tolist() == [3.0] * 5
+    assert table['peak_load_left_n'][full].tolist() == [1e4] * 5
+    # 50-100 m holds samples up to 99.98 m: covered, so its IRI stands.
+    assert table['iri_left_m_per_km'][1] == 3.0
+
+
+def test_a_segment_half_in_a_gap_has_no_iri():
+    x = np.concatenate([np.arange(0.0, 120.0, 0.02), np.arange(180.0, 300.0, 0.02)])
+    n = x.size
+    table = segment_table(x, np.full((n, 2), 1e4), np.zeros(n), np.zeros((n, 2), bool),
+                          profile_m=np.zeros((n, 2)),
+                          iri_segments=lambda d, z, e: np.full(len(e) - 1, 2.0),
+                          segment_length_m=100.0)
+    assert table['start_m'].tolist() == [0.0, 100.0, 200.0]
+    assert table['iri_left_m_per_km'][0] == 2.0 and table['iri_left_m_per_km'][2] == 2.0
+    assert np.isnan(table['iri_left_m_per_km'][1])          # 100-200 m: 40 % covered
+    assert table['peak_load_left_n'][1] == 1e4               # but it has load samples
+
+
+def test_last_segment_end_after_the_last_fix_is_placed_from_it():
+    """Fixes every 0.1 s stop 50 ms before the drive's end: the last edge lies less than one
+    fix period after the last fix and gets its position from that fix along the track, at the
+    travelled distance (no NaN)."""
+    x = np.linspace(0.0, 300.0, 3001)
+    stamps = (x / 20.0 * 1e9).astype(np.int64)        # 20 m/s: 15 s
+    fix_ns = np.arange(0, 14_960_000_000, 100_000_000, dtype=np.int64)   # last at 14.9 s
+    fix_lat = 48.0 + fix_ns * 1e-12
+    fix_lon = 17.0 + fix_ns * 2e-12
+    table = segment_table(x, np.full((3001, 2), 1e4), np.zeros(3001),
+                          np.zeros((3001, 2), bool), stamps_ns=stamps, fix_stamps_ns=fix_ns,
+                          fix_latitude_deg=fix_lat, fix_longitude_deg=fix_lon)
+    assert table['end_m'][-1] == 300.0                  # reached at 15 s, 0.1 s after 14.9 s
+    assert table['end_lat'][-1] == pytest.approx(48.015, abs=1e-9)
+    assert table['end_lon'][-1] == pytest.approx(17.030, abs=1e-9)
+    assert table['start_lat'][0] == pytest.approx(48.0)
+    # More than one period beyond the fixes: still unknown, never guessed.
+    fix_ns = fix_ns[fix_ns <= 14_000_000_000]
+    table = segment_table(x, np.full((3001, 2), 1e4), np.zeros(3001),
+                          np.zeros((3001, 2), bool), stamps_ns=stamps, fix_stamps_ns=fix_ns,
+                          fix_latitude_deg=48.0 + fix_ns * 1e-12,
+                          fix_longitude_deg=17.0 + fix_ns * 2e-12)
+    assert np.isnan(table['end_lat'][-1])

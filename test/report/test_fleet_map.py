@@ -44,3 +44,18 @@ def test_geojson_without_coordinates_has_null_geometry_and_null_nan():
     assert back['features'][1]['geometry'] is None
     assert back['features'][1]['properties'] == {'drive': 'a', 'start_m': 100.0,
                                                  'iri_left_m_per_km': None, 'lift_offs': 0}
+
+
+def test_the_map_labels_each_drive(tmp_path, monkeypatch):
+    """plot_segments_map names each drive at its first segment (one label per drive)."""
+    from road_force_estimator.report import fleet_map
+    seen = []
+    real = fleet_map._label_drives
+    monkeypatch.setattr(fleet_map, '_label_drives',
+                        lambda ax, drawn: seen.append([d[2] for d in drawn]) or real(ax, drawn))
+    lines = [[[17.0, 48.0], [17.0, 48.001]], [[17.0, 48.001], [17.0, 48.002]],
+             [[17.1, 48.0], [17.1, 48.001]]]
+    assert fleet_map.plot_segments_map(tmp_path / 'm.png', lines, [1.0, 2.0, 3.0],
+                                       labels=['a', 'a', 'b'], units='us')
+    assert seen == [['a', 'a', 'b']]
+    assert (tmp_path / 'm.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'

@@ -84,3 +84,51 @@ class TestNumbers:
         assert summary['accuracy']['profile_rms_m'][0] == pytest.approx(
             2e-4 / math.sqrt(2), rel=0.05)
         assert len(seg['start_m']) == 6
+
+
+class TestWhatTheReportSays:
+    def test_one_convergence_figure_on_a_constructed_load_error(self):
+        """The 100 ms moving RMS of a load error of 3 kN up to 0.48 s, then 50 N, with a 20 ms
+        spike at 29.38 s: t_0 is when the moving RMS falls below the tolerance for good over
+        the 1 s hold, not the last spike."""
+        from road_force_estimator.report import summary as summary_mod
+        t = np.arange(0.0, 30.0, 0.001)
+        err = np.where(t < 0.48, 3000.0, 50.0)
+        err[(t >= 29.38) & (t < 29.40)] = 3000.0
+        two = np.column_stack([err, err])
+        # Moving RMS over [t - 0.1, t]: below 500 N once the 3 kN share a of the window has
+        # a 3000^2 + (1 - a) 50^2 < 500^2, i.e. a < 0.02750; t > 0.48 + 0.1 (1 - a).
+        a = (500.0**2 - 50.0**2) / (3000.0**2 - 50.0**2)
+        expected = 0.48 + 0.1 * (1.0 - a)
+        assert summary_mod.convergence(t, two, 500.0) == pytest.approx(expected, abs=2e-3)
+        assert summary_mod.convergence(t, two, 10.0) == math.inf
+
+    def test_summary_says_what_was_run_and_counts_negative_loads(self):
+        est, drive, _ = make_case()
+        est.wheel_load_n[2000:2039, 1] = -4592.0          # 39 samples below zero
+        summary, _, _ = report.summarize(
+            est, drive, VEHICLE, mode='online', units='us',
+            run_info={'command': 'estimate_bag in -o out', 'params_file': 'p.yaml',
+                      'overrides': ['observer.latency:=0.01']})
+        assert summary['negative_load_samples'] == 39
+        run = summary['run']
+        assert run['command'] == 'estimate_bag in -o out' and run['params_file'] == 'p.yaml'
+        assert run['overrides'] == ['observer.latency:=0.01']
+        assert run['package_version'] and run['mode'] == 'online' and run['latency_s'] == 0.0
+        assert run['static_load_n'] == pytest.approx(list(VEHICLE.static_load_n))
+        conv = summary['convergence']
+        assert conv['source'] == 'measured' and conv['hold_s'] == 1.0
+        assert conv['time_s'] == summary['accuracy']['convergence_s']
+        assert summary['units'] == 'us'
+
+    def test_the_true_iri_is_taken_on_the_truths_own_samples(self):
+        """Online and offline estimates of the same drive accept different samples; the true
+        IRI comes from the truth's samples, so both reports show the same one."""
+        est, drive, _ = make_case()
+        s1, seg1, _ = report.summarize(est, drive, VEHICLE)
+        est.valid[7000:7400] = False                     # another mode drops other samples
+        s2, seg2, _ = report.summarize(est, drive, VEHICLE)
+        assert s1['iri_m_per_km']['true'] == s2['iri_m_per_km']['true']
+        assert s1['iri_m_per_km']['reference'] == 'enveloped'
+        np.testing.assert_array_equal(seg1['true_iri_left_m_per_km'],
+                                      seg2['true_iri_left_m_per_km'])

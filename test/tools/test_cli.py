@@ -103,3 +103,42 @@ class TestChecks:
         assert observer.lipschitz_deflection_mps3 == 2500.0
         with pytest.raises(ValueError, match='missing.yaml'):
             cli.load_estimator_parameters(str(tmp_path / 'missing.yaml'), ('observer',))
+
+    def test_p_overrides_a_file_value_and_refuses_an_unknown_name(self, tmp_path):
+        f = tmp_path / 'p.yaml'
+        f.write_text('/**:\n  ros__parameters:\n    observer.lipschitz_deflection: 2500.0\n'
+                     '    observer.latency: 0.005\n')
+        _, observer = cli.load_estimator_parameters(
+            str(f), ('observer',),
+            ['observer.lipschitz_deflection:=1800', 'observer.latency:=1e-2'])
+        assert observer.lipschitz_deflection_mps3 == 1800.0      # -p after the file
+        assert observer.latency_s == 0.01                         # YAML 1e-2 read as a double
+        vehicle, _ = cli.load_estimator_parameters(None, ('observer',),
+                                                   ['vehicle.unsprung_mass:=[400, 420]'])
+        assert tuple(vehicle.unsprung_mass_kg) == (400.0, 420.0)
+        with pytest.raises(ValueError, match="unknown parameter 'observer.lipschits'"):
+            cli.load_estimator_parameters(None, ('observer',), ['observer.lipschits:=1'])
+        with pytest.raises(ValueError, match='expected NAME:=VALUE'):
+            cli.load_estimator_parameters(None, ('observer',), ['observer.latency=0.01'])
+        with pytest.raises(ValueError, match='out of range'):
+            cli.load_estimator_parameters(None, ('observer',), ['observer.latency:=-1'])
+
+    def test_p_and_units_on_the_commands(self):
+        from road_force_estimator.tools import (
+            estimate_bag, estimate_fleet, road_profile_iri, simulate_bag)
+        for module in (estimate_bag, estimate_fleet, simulate_bag):
+            text = module.build_parser().format_help()
+            assert '-p NAME:=VALUE' in text, module.__name__
+        for module in (estimate_bag, estimate_fleet, road_profile_iri):
+            args = module.build_parser().parse_args(
+                [a for a in ('x', '-o', 'y', '--units', 'us')
+                 if module is not road_profile_iri or a not in ('-o', 'y')])
+            assert args.units == 'us' and cli.segment_length(args) == pytest.approx(160.9344)
+        args = estimate_fleet.build_parser().parse_args(['x', '-o', 'y'])   # no --params-file
+        assert args.params_file is None and cli.segment_length(args) == 100.0
+
+    def test_command_line_is_what_run_main_ran(self, capsys):
+        seen = []
+        rc, _ = run(['2', '-o', 'a b'], lambda args: seen.append(cli.command_line('demo')) or 0,
+                    capsys)
+        assert rc == 0 and seen == ["demo 2 -o 'a b'"]

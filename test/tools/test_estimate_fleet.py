@@ -212,7 +212,7 @@ def test_parquet_equals_csv_and_summary_counts(local_run):
     x1 = np.array([float(r[2]) for r in r1])
     iri = np.array([float(r[3]) for r in r1])
     mean = float(np.sum(iri * (x1 - x0)) / np.sum(x1 - x0))
-    assert f'{mean:.2f} ({mean * 63360 / 1000:.0f})' in summary
+    assert f'{mean:.3f} ({mean * 63360 / 1000:.2f})' in summary       # m/km (in/mi)
 
 
 # ------------------------------------------------------------------------------------------
@@ -425,7 +425,9 @@ def test_unreachable_scheduler_is_a_one_line_error(drives, tmp_path):
 
 @pytest.mark.parametrize('args, text', [
     ([], 'required'),
-    (['{inputs}', '--output', '{out}'], '--params-file'),
+    # --params-file is optional now (issue 18), as estimate_bag's; -p refuses unknown names.
+    (['{inputs}', '--output', '{out}', '-p', 'observer.nope:=1'],
+     "unknown parameter 'observer.nope'"),
     (['{root}/nope', '--params-file', '{params}', '--output', '{out}'], 'no such folder'),
     (['{root}', '--params-file', '{params}', '--output', '{out}', '--workers', '0'],
      '--workers'),

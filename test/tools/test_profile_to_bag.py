@@ -35,7 +35,7 @@ def test_csv_to_bag_to_csv_is_exact(tmp_path):
     source = read_csv_profile(csv)
     assert main([str(csv), '--output', str(tmp_path / 'bag')]) == 0
     assert_same(bagio.read_lpa_bag(tmp_path / 'bag'), source)
-    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'back.csv')]) == 0
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'back.csv'), '--exact']) == 0
     assert_same(read_csv_profile(tmp_path / 'back.csv'), source)
     assert (tmp_path / 'back.csv').read_text() == csv.read_text()
 
@@ -99,3 +99,16 @@ def test_installed_executable(tmp_path, shared_data):
     run = subprocess.run([exe, str(tmp_path / 'nothing.csv'), '--output', str(tmp_path / 'b')],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 1 and run.stderr.count('\n') == 1, run.stderr
+
+
+def test_bag_to_csv_is_rounded_unless_exact(tmp_path):
+    from road_force_estimator.core.road import RoadProfile
+    x = np.array([0.0, 0.1 * 3, 0.6000000000000001])
+    z = np.column_stack([[1.5240000000000001e-05, 2e-6, -1e-9], [0.0, 0.001, 0.0123456789]])
+    bagio.write_lpa_bag(tmp_path / 'bag', RoadProfile(x, z))
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'r.csv')]) == 0
+    assert (tmp_path / 'r.csv').read_text().splitlines() == [
+        'distance_m,left_m,right_m', '0.000,0.0000152,0.0000000', '0.300,0.0000020,0.0010000',
+        '0.600,0.0000000,0.0123457']                 # 1 mm, 0.1 um
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'e.csv'), '--exact']) == 0
+    assert (tmp_path / 'e.csv').read_text().splitlines()[1] == '0.0,1.5240000000000001e-05,0.0'

@@ -175,7 +175,28 @@ class TestBadInput:
         assert run(argv, capsys)[0] == 0
         code, _, err = run(argv, capsys)
         assert code == 1 and 'exists' in err
+        assert 'use --force' in err and 'overwrite=True' not in err   # no Python-API hint
         assert run(argv + ['--force'], capsys)[0] == 0
+
+    def test_help_shows_the_defaults_and_p_overrides_the_file(self, tmp_path, capsys):
+        text = ' '.join(build_parser().format_help().split())
+        for option in ('speed, m/s (default 20.0)', 'sample rate, Hz (default 1000.0)',
+                       "(default 'iso8608:C:seed=1')", 'standard deviation, m (default 1e-05)',
+                       '-p NAME:=VALUE'):
+            assert option in text, option
+        f = tmp_path / 'p.yaml'
+        f.write_text('/**:\n  ros__parameters:\n    simulator.speed: 12.0\n'
+                     '    simulator.rate: 100.0\n')
+        from road_force_estimator.tools.simulate_bag import parameters_from
+        args = build_parser().parse_args(['--params-file', str(f), '-p', 'simulator.speed:=8',
+                                          '--output', 'x'])
+        _, sim = parameters_from(args)
+        assert sim.speed_mps == 8.0 and sim.rate_hz == 100.0
+        args = build_parser().parse_args(['-p', 'simulator.speed:=8', '--speed', '9', '-o', 'x'])
+        assert parameters_from(args)[1].speed_mps == 9.0              # the option comes last
+        code, _, err = run(['--road', 'flat', '-p', 'simulator.sped:=8', '--output',
+                            tmp_path / 'd'], capsys)
+        assert code == 1 and "unknown parameter 'simulator.sped'" in err
 
 
 def test_bundled_bags_are_reproducible(tmp_path):
