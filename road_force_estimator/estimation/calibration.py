@@ -191,7 +191,7 @@ def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
     rel = (stamps - stamps[0]) / period
     index = np.rint(rel).astype(np.int64)
     if np.max(np.abs(rel - index)) > 0.05 or np.any(np.diff(index) < 1):
-        raise CalibrationError('the drive\'s stamps are not on a uniform grid (jitter beyond '
+        raise CalibrationError("the drive's stamps are not on a uniform grid (jitter beyond "
                                '5 % of the sample period): not supported')
     m = int(index[-1]) + 1
     measured = np.full((m, 3), np.nan)
@@ -245,6 +245,7 @@ class _Problem:
         self.t_s = np.arange(k1 - k0) * grid.dt_s
         self.full_measured = grid.measured[k0:k1]
         self._road_key = None
+        self.calls = 0
         step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
         self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
 
@@ -319,6 +320,7 @@ class _Problem:
         return self.fit_linear(theta)[0]
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
+        self.calls += 1
         return ((self.outputs(theta)[self.used] - self.measured) / self.sigma).ravel()
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -675,14 +677,19 @@ def _check_hold(hold) -> set[str]:
     return set(hold)
 
 
-def _align_drive(grid, stamps, q, roll, speed, road, nominal, observer, options, tick):
-    """The alignment of the drive's estimated profile with the (enveloped) survey."""
-    total = len(stamps)
-    est = estimate_batch(stamps, q, roll, speed, nominal, observer,
-                         progress=lambda n: tick(0.15 * n / max(total, 1)))
-    dist = grid.distance_m[grid.index]
+def _align_drive(grid, road, nominal, observer, options, tick):
+    """The alignment of the drive's estimated profile with the (enveloped) survey; the
+    estimator runs over every grid sample, the missing ones interpolated (a gap would restart
+    it)."""
+    n = grid.good.size
+    idx = np.arange(n)
+    ok = np.flatnonzero(grid.good)
+    filled = np.column_stack([np.interp(idx, ok, grid.measured[ok, c]) for c in range(3)])
+    stamps = grid.t0_ns + np.rint(idx * grid.dt_s * 1e9).astype(np.int64)
+    est = estimate_batch(stamps, filled[:, :2], filled[:, 2], grid.speed_mps, nominal, observer,
+                         progress=lambda k: tick(0.15 * k / max(n, 1)))
     start = road.start_m if options.start_offset_m is None else options.start_offset_m
-    return align(dist[est.valid], est.road_m[est.valid], road, start_m=start,
+    return align(grid.distance_m[est.valid], est.road_m[est.valid], road, start_m=start,
                  search_m=options.search_m, scale_error=options.scale_error,
                  min_correlation=options.min_correlation,
                  progress=lambda f: tick(0.001))
@@ -700,7 +707,7 @@ def _overlap(grid: DriveGrid, road: RoadProfile, alignment: Alignment, warm_up_s
     k1 = int(inside.size - np.argmax(inside[::-1]))
     warm = int(round(warm_up_s / grid.dt_s))
     good = np.count_nonzero(grid.good[k0 + warm:k1])
-    _too_short('the drive\'s overlap with the survey is', (good + warm) * grid.dt_s,
+    _too_short("the drive's overlap with the survey is", (good + warm) * grid.dt_s,
                float(x[k1 - 1] - x[k0]), warm_up_s)
     return k0, k1, warm
 
@@ -744,11 +751,8 @@ def calibrate(stamps_ns, q_m, roll_rad, speed_mps, survey: RoadProfile,
     _too_short('the drive is', np.count_nonzero(grid.good) * grid.dt_s,
                float(grid.distance_m[-1]), options.warm_up_s)
     road = survey.enveloped(options.tire_envelope_m)
-    ok = grid.good
-    alignment = _align_drive(grid, (grid.t0_ns + np.rint(np.flatnonzero(ok) * grid.dt_s * 1e9)
-                                    ).astype(np.int64), grid.measured[ok, :2],
-                             grid.measured[ok, 2], grid.speed_mps[ok], road, nominal, observer,
-                             options, lambda f: tick(f, 'alignment'))
+    alignment = _align_drive(grid, road, nominal, observer, options,
+                             lambda f: tick(f, 'alignment'))
     clock['alignment'] = time.perf_counter()
     k0, k1, warm = _overlap(grid, road, alignment, options.warm_up_s)
     scale = _Scale(options, nominal)
@@ -764,7 +768,7 @@ def _rounds(setup, options, clock, grid, tick) -> CalibrationResult:
     scale = setup['scale']
     for _ in range(max(1, options.max_rounds)):
         problem, result, sigma = _round(setup, auto, previous, sigma, lambda: tick(0.01))
-        nfev += result.nfev
+        nfev += problem.calls
         cov, deficient = _covariance(result)
         scaled = {s for s in SLOTS if s.kind == 'scale'
                   and (s in problem.free or s == scale.reference)}
