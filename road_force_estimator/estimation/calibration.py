@@ -158,7 +158,8 @@ class CalibrationResult:
 @dataclass(frozen=True)
 class DriveGrid:
     """Accepted samples on a uniform grid: ``measured`` (m, 3) NaN where no sample,
-    ``good`` (m,), ``speed_mps`` and ``distance_m`` (m,), ``dt_s``, ``t0_ns``."""
+    ``good`` (m,), ``speed_mps`` and ``distance_m`` (m,), ``dt_s``, ``t0_ns``; ``rejected``
+    counts the samples skipped (non-finite) and the grid rows with no sample."""
 
     measured: np.ndarray
     good: np.ndarray
@@ -201,7 +202,9 @@ def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
     speed = np.interp(np.arange(m), index, v)
     dt = period * 1e-9
     distance = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)))
-    return DriveGrid(measured, good, speed, distance, dt, int(stamps[0]), index, rejected)
+    missing = m - int(index.size)
+    return DriveGrid(measured, good, speed, distance, dt, int(stamps[0]), index,
+                     rejected + missing)
 
 
 def check_survey(survey: RoadProfile) -> None:

@@ -205,7 +205,7 @@ def _run(args) -> tuple[object, Path, list[str]]:
                          profile=str(args.profile), output=str(output),
                          figures=not args.no_figures)
     notes = [f'{len(result.parameters)} numbers, {result.used_samples} samples '
-             f'({result.rejected_samples + drive.rejected_total} rejected)']
+             f'({result.rejected_samples} missing or rejected)']
     return result, output, notes + [str(f) for f in files[:1]]
 
 
