@@ -15,8 +15,9 @@ parameters, and returns a :class:`CalibrationResult`:
    envelope, to the measured deflections and roll; free: the vehicle parameters of
    :data:`~.calibration_model.SLOTS` not held, the sensor offsets, and a fine alignment. Each
    channel is weighted by its noise level (a first pass with the signal RMS, then the
-   residual RMS: the noise levels, a by-product). The first ``warm_up_s`` of the overlap are
-   not fitted (the true start is not at rest).
+   residual RMS: the noise levels, a by-product). The initial state and the offsets enter
+   linearly and are solved for each vehicle (variable projection, :mod:`.calibration_fit`):
+   the true start, never at rest, does not bias the fit.
 4. The force scale: the kinematics fix only ratios. One scale-bearing parameter is held during
    the fit (the left tire stiffness, or one the user holds); afterwards every scale-bearing
    value is multiplied by one factor: from the static load (``F_c1 + F_c2 = (M + m_1 + m_2)
@@ -35,7 +36,6 @@ import time
 from typing import Callable
 
 import numpy as np
-from scipy import linalg, optimize
 
 # The core and estimation API the calibration uses (one place, for the lead to re-point).
 from road_force_estimator.core.parameters import (
@@ -44,36 +44,20 @@ from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.estimation.estimator import estimate_batch
 from road_force_estimator.estimation.calibration_alignment import (
     Alignment, AlignmentError, align)
+from road_force_estimator.estimation.calibration_fit import (
+    FINE_OFFSET_M, FINE_SCALE, MIN_DISTANCE_M, MIN_DURATION_S, CalibrationError, DriveGrid,
+    FitProblem, check_survey, covariance, drive_grid, effective_fraction, solve_without,
+    start_vector, solve, structural, too_short)
 from road_force_estimator.estimation.calibration_model import (
-    CHANNELS, SLOTS, Slot, free_response, linear_plant, log_bounds, simulate_outputs, slot_value,
-    vehicle_with)
+    CHANNELS, SLOTS, Slot, slot_value, vehicle_with)
 
 __all__ = ['CalibrationError', 'AlignmentError', 'CalibrationOptions', 'ParameterEstimate',
            'CalibrationResult', 'calibrate', 'MIN_DURATION_S', 'MIN_DISTANCE_M',
            'check_survey', 'DriveGrid', 'drive_grid']
 
-#: A drive needs at least this much time on the survey, besides the warm-up (s)...
-MIN_DURATION_S = 5.0
-#: ... and this much distance (m).
-MIN_DISTANCE_M = 100.0
-#: A survey step longer than this (and than 20 median steps) is a gap (m).
-SURVEY_GAP_M = 1.0
 #: A 95 % interval wider than this relative half-width: not identified (held).
 MAX_RELATIVE_HALF_WIDTH = 0.5
-#: Jacobian columns whose pivoted-QR diagonal is below this (relative) are rank-deficient.
-RANK_TOLERANCE = 1e-7
-#: Fine alignment range of the fit around the correlation's result (m, relative scale).
-FINE_OFFSET_M = 0.5
-FINE_SCALE = 1e-3
-#: Longest road step between two points of the simulation (m): samples are subdivided.
-SUBSTEP_M = 0.02
-#: Survey margin kept at the ends of the overlap (m).
-MARGIN_M = 1.0
 Z95 = 1.959963984540054
-
-
-class CalibrationError(ValueError):
-    """Bad input for a calibration (the message is one line)."""
 
 
 @dataclass(frozen=True)
@@ -153,298 +137,6 @@ class CalibrationResult:
 
 # --------------------------------------------------------------------------------------------
 # The drive on a uniform grid
-
-
-@dataclass(frozen=True)
-class DriveGrid:
-    """Accepted samples on a uniform grid: ``measured`` (m, 3) NaN where no sample,
-    ``good`` (m,), ``speed_mps`` and ``distance_m`` (m,), ``dt_s``, ``t0_ns``; ``rejected``
-    counts the samples skipped (non-finite) and the grid rows with no sample."""
-
-    measured: np.ndarray
-    good: np.ndarray
-    speed_mps: np.ndarray
-    distance_m: np.ndarray
-    dt_s: float
-    t0_ns: int
-    index: np.ndarray
-    rejected: int
-
-
-def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
-    """The accepted samples on their uniform sample grid.
-
-    Raises
-    ------
-    CalibrationError
-        No usable sample, stamps off a uniform grid (jitter beyond 5 % of the period).
-    """
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    y = np.column_stack([np.asarray(q_m, float), np.asarray(roll_rad, float)])
-    v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
-    ok = np.all(np.isfinite(y), axis=1) & np.isfinite(v)
-    rejected = int(np.count_nonzero(~ok))
-    if np.count_nonzero(ok) < 3:
-        raise CalibrationError(f'the drive has {np.count_nonzero(ok)} usable samples '
-                               '(deflections, roll and speed): nothing to calibrate on')
-    stamps, y, v = stamps[ok], y[ok], v[ok]
-    period = int(np.median(np.diff(stamps)))
-    rel = (stamps - stamps[0]) / period
-    index = np.rint(rel).astype(np.int64)
-    if np.max(np.abs(rel - index)) > 0.05 or np.any(np.diff(index) < 1):
-        raise CalibrationError("the drive's stamps are not on a uniform grid (jitter beyond "
-                               '5 % of the sample period): not supported')
-    m = int(index[-1]) + 1
-    measured = np.full((m, 3), np.nan)
-    measured[index] = y
-    good = np.zeros(m, bool)
-    good[index] = True
-    speed = np.interp(np.arange(m), index, v)
-    dt = period * 1e-9
-    distance = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)))
-    missing = m - int(index.size)
-    return DriveGrid(measured, good, speed, distance, dt, int(stamps[0]), index,
-                     rejected + missing)
-
-
-def check_survey(survey: RoadProfile) -> None:
-    """Refuse a survey with a gap (a step over :data:`SURVEY_GAP_M` and 20 median steps)."""
-    steps = np.diff(survey.distance_m)
-    limit = max(SURVEY_GAP_M, 20.0 * float(np.median(steps)))
-    if np.any(steps > limit):
-        i = int(np.argmax(steps))
-        raise CalibrationError(
-            f'the survey has a gap of {steps[i]:.2f} m at {survey.distance_m[i]:.2f} m (no '
-            f'profile there): calibrate on a survey without gaps')
-
-
-def _too_short(what: str, duration_s: float, distance_m: float, warm_up_s: float) -> None:
-    if duration_s < MIN_DURATION_S + warm_up_s or distance_m < MIN_DISTANCE_M:
-        raise CalibrationError(
-            f'{what} too short for a calibration: {duration_s:.1f} s and {distance_m:.0f} m; '
-            f'it must be at least {MIN_DURATION_S + warm_up_s:g} s (with {warm_up_s:g} s of '
-            f'warm-up) and {MIN_DISTANCE_M:g} m long')
-
-
-# --------------------------------------------------------------------------------------------
-# The fit
-
-
-class _Problem:
-    """The output-error residuals over the overlap [k0, k1) of the grid."""
-
-    def __init__(self, grid: DriveGrid, road: RoadProfile, nominal: VehicleParameters,
-                 alignment: Alignment, free: list[Slot], fixed: dict[Slot, float],
-                 k0: int, k1: int, warm: int) -> None:
-        self.grid, self.road, self.nominal = grid, road, nominal
-        self.alignment, self.free, self.fixed = alignment, free, fixed
-        self.k0, self.k1 = k0, k1
-        used = np.zeros(k1 - k0, bool)
-        used[warm:] = grid.good[k0 + warm:k1]
-        self.used = used
-        self.measured = grid.measured[k0:k1][used]
-        self.sigma = np.nanstd(self.measured, axis=0)
-        self.nominal_values = {s: slot_value(nominal, s) for s in free if s.physical}
-        self.t_s = np.arange(k1 - k0) * grid.dt_s
-        self.full_measured = grid.measured[k0:k1]
-        self._road_key = None
-        self.calls = 0
-        step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
-        self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
-
-    def unpack(self, theta: np.ndarray) -> tuple[dict, tuple[float, float]]:
-        """(physical slot values, (fine offset m, fine scale))."""
-        values = dict(self.fixed)
-        fine = [0.0, 0.0]
-        for slot, t in zip(self.free, theta):
-            if slot.physical:
-                values[slot] = self.nominal_values[slot] * math.exp(t)
-            else:
-                fine[0 if slot.name == 'alignment.offset' else 1] = t
-        return values, (fine[0], fine[1])
-
-    def road_input(self, fine: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-        """Road and its rate under the tires on the sub-sample grid (``substeps`` per
-        sample, so that the tire moves at most :data:`SUBSTEP_M` between points)."""
-        a = self.alignment
-        d = self.grid.distance_m[self.k0:self.k1]
-        v = self.grid.speed_mps[self.k0:self.k1]
-        if self.substeps > 1:
-            at = np.arange((d.size - 1) * self.substeps + 1) / self.substeps
-            d = np.interp(at, np.arange(d.size), d)
-            v = np.interp(at, np.arange(v.size), v)
-        x = a.offset_m + fine[0] + (a.scale + fine[1]) * d
-        v = (a.scale + fine[1]) * v
-        return self.road.elevation_at(x), self.road.slope_at(x) * v[:, None]
-
-    def fit_linear(self, theta: np.ndarray):
-        """For the vehicle of ``theta``: the best initial state and sensor offsets (linear
-        least squares, normal equations: the free responses live in the first seconds only),
-        and the outputs over the whole overlap with them.
-
-        Returns
-        -------
-        outputs (k1 - k0, 3), coefficients (the last three: offsets), normal matrix
-        """
-        values, fine = self.unpack(theta)
-        plant = linear_plant(vehicle_with(self.nominal, values))
-        if self._road_key != fine:
-            self._road = self.road_input(fine)
-            self._road_key = fine
-        u, du = self._road
-        forced = simulate_outputs(plant, u, du, self.grid.dt_s / self.substeps, at_rest=True,
-                                  every=self.substeps)
-        slowest = float(np.min(-plant.eig.real))
-        head = min(forced.shape[0], int(math.ceil(30.0 / max(slowest, 1e-3) / self.grid.dt_s)))
-        basis = free_response(plant, self.t_s[:head]) / self.sigma[None, :, None]
-        used = self.used[:head]
-        w2 = 1.0 / self.sigma ** 2
-        nb = basis.shape[2]
-        target = (self.full_measured - forced) / self.sigma            # NaN where not used
-        target[~self.used] = 0.0
-        normal = np.zeros((nb + 3, nb + 3))
-        rhs = np.zeros(nb + 3)
-        bu = basis[used].reshape(-1, nb)
-        normal[:nb, :nb] = bu.T @ bu
-        rhs[:nb] = bu.T @ target[:head][used].ravel()
-        cross = basis[used].sum(axis=0) / self.sigma[:, None]         # (3, nb)
-        normal[nb:, :nb] = cross
-        normal[:nb, nb:] = cross.T
-        normal[nb:, nb:] = np.diag(self.used.sum() * w2)
-        rhs[nb:] = target.sum(axis=0) / self.sigma
-        scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
-        coef = np.linalg.solve(normal / np.outer(scale, scale), rhs / scale) / scale
-        full = forced + coef[nb:]
-        full[:head] += (basis * self.sigma[None, :, None]) @ coef[:nb]
-        return full, coef, normal
-
-    def outputs(self, theta: np.ndarray) -> np.ndarray:
-        """Model outputs (best start and offsets) over the whole overlap, (k1 - k0, 3)."""
-        return self.fit_linear(theta)[0]
-
-    def residuals(self, theta: np.ndarray) -> np.ndarray:
-        self.calls += 1
-        return ((self.outputs(theta)[self.used] - self.measured) / self.sigma).ravel()
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = [], []
-        for slot in self.free:
-            if slot.physical:
-                b = log_bounds(slot, self.nominal_values[slot])
-            else:
-                b = (-FINE_OFFSET_M, FINE_OFFSET_M) if slot.name == 'alignment.offset' \
-                    else (-FINE_SCALE, FINE_SCALE)
-            lo.append(b[0])
-            hi.append(b[1])
-        return np.array(lo), np.array(hi)
-
-
-def _start(problem: _Problem, previous: dict[Slot, float] | None) -> np.ndarray:
-    """Start vector: previous results where there are, nominal else."""
-    theta = np.zeros(len(problem.free))
-    if previous:
-        for i, slot in enumerate(problem.free):
-            theta[i] = previous.get(slot, 0.0)
-    lo, hi = problem.bounds()
-    return np.clip(theta, lo + 1e-9, hi - 1e-9)
-
-
-def _solve(problem: _Problem, theta0: np.ndarray, progress) -> optimize.OptimizeResult:
-    """Trust-region least squares from ``theta0`` within the bounds."""
-    calls = [0]
-
-    def fun(theta):
-        calls[0] += 1
-        if progress is not None and calls[0] % 8 == 0:
-            progress()
-        return problem.residuals(theta)
-
-    lo, hi = problem.bounds()
-    return optimize.least_squares(fun, theta0, jac='2-point', bounds=(lo, hi), method='trf',
-                                  x_scale='jac', ftol=1e-12, xtol=1e-12, gtol=1e-12,
-                                  max_nfev=100 * (len(theta0) + 1))
-
-
-def _structural(problem: _Problem, theta: np.ndarray) -> set[Slot]:
-    """Physical slots whose Jacobian column is zero or in the span of the others (at the
-    start): the model does not depend on them, or only through a combination of others."""
-    base = problem.residuals(theta)
-    cols = []
-    for j in range(theta.size):
-        step = np.zeros(theta.size)
-        step[j] = 1e-6
-        cols.append((problem.residuals(theta + step) - base) / 1e-6)
-    jac = np.column_stack(cols)
-    norms = np.linalg.norm(jac, axis=0)
-    dead = norms <= 1e-12 * max(float(norms.max()), 1e-300)
-    if np.any(~dead):
-        _, r, piv = linalg.qr(jac[:, ~dead] / norms[~dead], mode='economic', pivoting=True)
-        diag = np.abs(np.diag(r))
-        alive = np.flatnonzero(~dead)
-        dead[alive[piv[diag < RANK_TOLERANCE * diag[0]]]] = True
-    return {s for s, d in zip(problem.free, dead) if d and s.physical}
-
-
-def _solve_without(problem: _Problem, theta: np.ndarray, held: list[int], progress):
-    """``theta`` after a fit with the entries ``held`` kept."""
-    keep = [i for i in range(theta.size) if i not in held]
-    free = problem.free
-    sub = _Problem.__new__(_Problem)
-    sub.__dict__.update(problem.__dict__)
-    sub.free = [free[i] for i in keep]
-    full = theta.copy()
-
-    def expand(t):
-        out = full.copy()
-        out[keep] = t
-        return out
-
-    sub.unpack = lambda t: problem.unpack(expand(t))
-    result = _solve(sub, theta[keep], progress)
-    return expand(result.x)
-
-
-def _effective_fraction(res: np.ndarray, channels: int = 3) -> float:
-    """n_eff / n of the residuals from their autocorrelation (Bartlett, lags up to 200)."""
-    r = res.reshape(-1, channels)
-    worst = 1.0
-    for c in range(channels):
-        x = r[:, c] - r[:, c].mean()
-        n = x.size
-        if n < 10 or not np.any(x):
-            continue
-        spec = np.fft.rfft(x, 2 * n)
-        acf = np.fft.irfft(spec * np.conj(spec))[:min(200, n // 4)]
-        rho = acf / acf[0]
-        cut = np.argmax(rho < 0.05) if np.any(rho < 0.05) else rho.size
-        tau = 1.0 + 2.0 * float(np.sum(rho[1:cut]))
-        worst = min(worst, 1.0 / max(tau, 1.0))
-    return worst
-
-
-def _covariance(result: optimize.OptimizeResult) -> tuple[np.ndarray, np.ndarray]:
-    """(covariance of theta, rank-deficient column flags) from the final Jacobian."""
-    jac = np.asarray(result.jac)
-    m, p = jac.shape
-    norms = np.linalg.norm(jac, axis=0)
-    safe = np.where(norms > 0.0, norms, 1.0)
-    _, r, piv = linalg.qr(jac / safe, mode='economic', pivoting=True)
-    diag = np.abs(np.diag(r))
-    deficient = np.zeros(p, bool)
-    deficient[piv[diag < RANK_TOLERANCE * max(diag[0], 1e-300)]] = True
-    deficient |= norms == 0.0
-    cov = np.full((p, p), np.nan)
-    ok = ~deficient
-    if np.any(ok):
-        s2 = float(np.sum(result.fun ** 2)) / max(m - int(ok.sum()), 1)
-        inflation = 1.0 / _effective_fraction(result.fun)
-        jn = jac[:, ok] / safe[ok]
-        inv = np.linalg.pinv(jn.T @ jn) / np.outer(safe[ok], safe[ok])
-        cov[np.ix_(ok, ok)] = inv * s2 * inflation
-    return cov, deficient
-
-
-# --------------------------------------------------------------------------------------------
 # The force scale
 
 
@@ -486,7 +178,7 @@ class _Scale:
         return self.nominal_tires / sum(values[s] for s in self.tires)
 
 
-def _final_values(problem: _Problem, scale: _Scale, theta: np.ndarray,
+def _final_values(problem: FitProblem, scale: _Scale, theta: np.ndarray,
                   scaled: set[Slot]) -> dict[Slot, float]:
     """Physical values after the force scale (``scaled``: the slots it multiplies)."""
     values, _ = problem.unpack(theta)
@@ -537,10 +229,10 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
     nominal, scale = setup['nominal'], setup['scale']
     free = _free_slots(nominal, setup['hold'], auto, scale.reference)
     fixed = {s: slot_value(nominal, s) for s in SLOTS if s.physical and s not in free}
-    problem = _Problem(setup['grid'], setup['road'], nominal, setup['alignment'], free, fixed,
+    problem = FitProblem(setup['grid'], setup['road'], nominal, setup['alignment'], free, fixed,
                        setup['k0'], setup['k1'], setup['warm'])
-    theta = _start(problem, previous)
-    dead = _structural(problem, theta)
+    theta = start_vector(problem, previous)
+    dead = structural(problem, theta)
     if dead:
         auto |= dead
         return _round(setup, auto, previous, sigma, progress)
@@ -548,15 +240,15 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
         # First the vehicle alone on the correlation's alignment (the fine alignment trades
         # against the parameters far from the optimum), then everything.
         fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment']
-        theta = _solve_without(problem, theta, fixed_align, progress)
+        theta = solve_without(problem, theta, fixed_align, progress)
     if sigma is None:
-        result = _solve(problem, theta, progress)
+        result = solve(problem, theta, progress)
         res = result.fun.reshape(-1, 3) * problem.sigma
         floor = 1e-6 * problem.sigma
         sigma = np.maximum(np.sqrt(np.mean(res ** 2, axis=0)), floor)
         theta = result.x
     problem.sigma = sigma
-    result = _solve(problem, theta, progress)
+    result = solve(problem, theta, progress)
     return problem, result, sigma
 
 
@@ -572,7 +264,7 @@ def _unidentified(problem, scale, result, cov, deficient, scaled) -> set[Slot]:
     return bad
 
 
-def _correlated(problem: _Problem, cov: np.ndarray) -> list[tuple[str, str, float]]:
+def _correlated(problem: FitProblem, cov: np.ndarray) -> list[tuple[str, str, float]]:
     """Pairs of free slots correlated beyond 0.95."""
     out = []
     sd = np.sqrt(np.abs(np.diag(cov)))
@@ -629,12 +321,12 @@ def _estimates(problem, scale, result, cov, scaled, hold, auto) -> list[Paramete
     return out
 
 
-def _offsets(problem: _Problem, result) -> list[ParameterEstimate]:
+def _offsets(problem: FitProblem, result) -> list[ParameterEstimate]:
     """The sensor offsets (linear in the fit) with their conditional 95 % intervals."""
     _, coef, normal = problem.fit_linear(result.x)
     p = normal.shape[0]
     s2 = float(np.sum(result.fun ** 2)) / max(result.fun.size - p - len(problem.free), 1)
-    cov = np.linalg.pinv(normal) * s2 / _effective_fraction(result.fun)
+    cov = np.linalg.pinv(normal) * s2 / effective_fraction(result.fun)
     out = []
     for c in range(3):
         slot = next(s for s in SLOTS if s.name == 'sensor.offset.' + CHANNELS[c])
@@ -710,7 +402,7 @@ def _overlap(grid: DriveGrid, road: RoadProfile, alignment: Alignment, warm_up_s
     k1 = int(inside.size - np.argmax(inside[::-1]))
     warm = int(round(warm_up_s / grid.dt_s))
     good = np.count_nonzero(grid.good[k0 + warm:k1])
-    _too_short("the drive's overlap with the survey is", (good + warm) * grid.dt_s,
+    too_short("the drive's overlap with the survey is", (good + warm) * grid.dt_s,
                float(x[k1 - 1] - x[k0]), warm_up_s)
     return k0, k1, warm
 
@@ -751,7 +443,7 @@ def calibrate(stamps_ns, q_m, roll_rad, speed_mps, survey: RoadProfile,
     hold = _check_hold(options.hold)
     check_survey(survey)
     grid = drive_grid(stamps_ns, q_m, roll_rad, speed_mps)
-    _too_short('the drive is', np.count_nonzero(grid.good) * grid.dt_s,
+    too_short('the drive is', np.count_nonzero(grid.good) * grid.dt_s,
                float(grid.distance_m[-1]), options.warm_up_s)
     road = survey.enveloped(options.tire_envelope_m)
     alignment = _align_drive(grid, road, nominal, observer, options,
@@ -772,7 +464,7 @@ def _rounds(setup, options, clock, grid, tick) -> CalibrationResult:
     for _ in range(max(1, options.max_rounds)):
         problem, result, sigma = _round(setup, auto, previous, sigma, lambda: tick(0.01))
         nfev += problem.calls
-        cov, deficient = _covariance(result)
+        cov, deficient = covariance(result)
         scaled = {s for s in SLOTS if s.kind == 'scale'
                   and (s in problem.free or s == scale.reference)}
         bad = _unidentified(problem, scale, result, cov, deficient, scaled)

@@ -32,7 +32,7 @@ import numpy as np
 import yaml
 
 # The APIs this command uses (one place, for the lead to re-point).
-from road_force_estimator.bagio.bag_io import BagReadError, read_drive_bag
+from road_force_estimator.bagio.bag_io import BagReadError, read_drive_bag, read_lpa_bag
 from road_force_estimator.core.parameters import (
     ObserverParameters, SPECS, SimulatorParameters, VehicleParameters, load_params_file,
     read_params_document, validate_parameter)
@@ -154,6 +154,14 @@ def report_folder(output: Path) -> Path:
     return output.with_name(output.stem + '_report')
 
 
+def _survey(source: str):
+    """The survey: an LPA bag folder through bagio, any other source through the core."""
+    path = Path(source).expanduser()
+    if path.is_dir() and (path / 'metadata.yaml').is_file():
+        return read_lpa_bag(path)
+    return road_from_source(source)
+
+
 def _written_values(result, static) -> dict:
     """The fitted vehicle parameters (and the static load when given), by name."""
     fitted = {e.slot.name for e in result.parameters
@@ -180,7 +188,7 @@ def _run(args) -> tuple[object, Path, list[str]]:
     drive = read_drive_bag(args.drive)
     if not np.any(np.isfinite(drive.speed_mps)):
         raise ValueError(f'{args.drive}: no usable /vehicle/twist: the speed is needed')
-    survey = road_from_source(args.profile)
+    survey = _survey(args.profile)
     options = CalibrationOptions(
         static_load_n=tuple(args.static_load) if args.static_load else None,
         hold=frozenset(args.hold), tire_envelope_m=sim.tire_envelope_length_m,
