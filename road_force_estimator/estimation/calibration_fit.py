@@ -141,6 +141,8 @@ class FitProblem:
         self.t_s = np.arange(k1 - k0) * grid.dt_s
         self.full_measured = grid.measured[k0:k1]
         self._road_key = None
+        x0 = alignment.offset_m + alignment.scale * grid.distance_m[k0]
+        self.datum_m = float(np.mean(road.elevation_at(np.array([x0]))))
         self.calls = 0
         step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
         self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
@@ -168,7 +170,9 @@ class FitProblem:
             v = np.interp(at, np.arange(v.size), v)
         x = a.offset_m + fine[0] + (a.scale + fine[1]) * d
         v = (a.scale + fine[1]) * v
-        return self.road.elevation_at(x), self.road.slope_at(x) * v[:, None]
+        # Less one elevation common to both tracks (a survey's absolute height): the outputs
+        # do not see it, and the start at rest plus free responses then stay small numbers.
+        return self.road.elevation_at(x) - self.datum_m, self.road.slope_at(x) * v[:, None]
 
     def fit_linear(self, theta: np.ndarray):
         """For the vehicle of ``theta``: the best initial state and sensor offsets (linear
