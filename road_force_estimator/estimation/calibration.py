@@ -25,8 +25,9 @@ parameters, and returns a :class:`CalibrationResult`:
    stiffnesses and damping rates are known only up to that factor; their ratios are fitted).
 5. Parameters the data cannot tell apart (a rank-deficient Jacobian, or a 95 % interval wider
    than +-50 %) are held at their nominal values, named, and the fit repeated.
-6. 95 % intervals from the Gauss-Newton covariance, scaled by the residual variance and by the
-   residuals' autocorrelation (the effective number of independent samples).
+6. 95 % intervals from the sandwich covariance with the Newey-West long-run covariance of the
+   scores over :data:`HAC_WINDOW_S` (white residuals: the Gauss-Newton covariance; a model
+   error, coloured, widens them).
 """
 from __future__ import annotations
 
@@ -58,6 +59,8 @@ __all__ = ['CalibrationError', 'AlignmentError', 'CalibrationOptions', 'Paramete
 #: A 95 % interval wider than this relative half-width: not identified (held).
 MAX_RELATIVE_HALF_WIDTH = 0.5
 Z95 = 1.959963984540054
+#: Lag window of the intervals' long-run score covariance (s): the slowest mode's period.
+HAC_WINDOW_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -464,7 +467,7 @@ def _rounds(setup, options, clock, grid, tick) -> CalibrationResult:
     for _ in range(max(1, options.max_rounds)):
         problem, result, sigma = _round(setup, auto, previous, sigma, lambda: tick(0.01))
         nfev += problem.calls
-        cov, deficient = covariance(result)
+        cov, deficient = covariance(result, lags=int(round(HAC_WINDOW_S / grid.dt_s)))
         scaled = {s for s in SLOTS if s.kind == 'scale'
                   and (s in problem.free or s == scale.reference)}
         bad = _unidentified(problem, scale, result, cov, deficient, scaled)

@@ -24,7 +24,7 @@ from road_force_estimator.estimation.calibration_model import (
 
 __all__ = ['CalibrationError', 'DriveGrid', 'drive_grid', 'check_survey', 'too_short',
            'FitProblem', 'start_vector', 'solve', 'solve_without', 'structural',
-           'effective_fraction', 'covariance', 'MIN_DURATION_S', 'MIN_DISTANCE_M',
+           'effective_fraction', 'covariance', 'score_covariance', 'MIN_DURATION_S', 'MIN_DISTANCE_M',
            'SURVEY_GAP_M', 'RANK_TOLERANCE', 'FINE_OFFSET_M', 'FINE_SCALE', 'SUBSTEP_M']
 
 #: A drive needs at least this much time on the survey, besides the warm-up (s)...
@@ -319,8 +319,29 @@ def effective_fraction(res: np.ndarray, channels: int = 3) -> float:
     return worst
 
 
-def covariance(result: optimize.OptimizeResult) -> tuple[np.ndarray, np.ndarray]:
-    """(covariance of theta, rank-deficient column flags) from the final Jacobian."""
+def score_covariance(scores: np.ndarray, lags: int) -> np.ndarray:
+    """Newey-West (Bartlett) long-run covariance of per-sample scores (m, p) up to ``lags``."""
+    m, p = scores.shape
+    lags = int(max(0, min(lags, m - 1)))
+    n = 1 << int(math.ceil(math.log2(2 * m)))
+    weights = np.zeros(n)
+    k = np.arange(lags + 1)
+    weights[k] = 1.0 - k / (lags + 1.0)
+    weights[n - k[1:]] = weights[k[1:]]
+    kernel = np.fft.fft(weights).real
+    spec = np.fft.fft(scores, n, axis=0)
+    return (np.conj(spec).T @ (spec * kernel[:, None])).real / n
+
+
+def covariance(result: optimize.OptimizeResult,
+               lags: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(covariance of theta, rank-deficient column flags) from the final Jacobian.
+
+    The covariance is the sandwich ``(J'J)^-1 S (J'J)^-1`` with ``S`` the Newey-West
+    long-run covariance of the per-sample scores ``J_k' r_k`` over ``lags`` samples: white
+    residuals give the Gauss-Newton ``s^2 (J'J)^-1``; coloured ones (a model error, a lag the
+    model lacks) widen the intervals as they should.
+    """
     jac = np.asarray(result.jac)
     m, p = jac.shape
     norms = np.linalg.norm(jac, axis=0)
@@ -333,11 +354,12 @@ def covariance(result: optimize.OptimizeResult) -> tuple[np.ndarray, np.ndarray]
     cov = np.full((p, p), np.nan)
     ok = ~deficient
     if np.any(ok):
-        s2 = float(np.sum(result.fun ** 2)) / max(m - int(ok.sum()), 1)
-        inflation = 1.0 / effective_fraction(result.fun)
         jn = jac[:, ok] / safe[ok]
-        inv = np.linalg.pinv(jn.T @ jn) / np.outer(safe[ok], safe[ok])
-        cov[np.ix_(ok, ok)] = inv * s2 * inflation
+        inv = np.linalg.pinv(jn.T @ jn)
+        dof = m / max(m - int(ok.sum()), 1)
+        scores = (jn * result.fun[:, None]).reshape(m // 3, 3, -1).sum(axis=1)
+        middle = score_covariance(scores, lags) * dof
+        cov[np.ix_(ok, ok)] = (inv @ middle @ inv) / np.outer(safe[ok], safe[ok])
     return cov, deficient
 
 
