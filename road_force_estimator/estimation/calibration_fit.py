@@ -24,8 +24,9 @@ from road_force_estimator.estimation.calibration_model import (
 
 __all__ = ['CalibrationError', 'DriveGrid', 'drive_grid', 'check_survey', 'too_short',
            'FitProblem', 'start_vector', 'solve', 'solve_without', 'structural',
-           'effective_fraction', 'covariance', 'score_covariance', 'MIN_DURATION_S', 'MIN_DISTANCE_M',
-           'SURVEY_GAP_M', 'RANK_TOLERANCE', 'FINE_OFFSET_M', 'FINE_SCALE', 'SUBSTEP_M']
+           'effective_fraction', 'covariance', 'score_covariance', 'MIN_DURATION_S',
+           'MIN_DISTANCE_M', 'SURVEY_GAP_M', 'RANK_TOLERANCE', 'FINE_OFFSET_M', 'FINE_SCALE',
+           'SUBSTEP_M']
 
 #: A drive needs at least this much time on the survey, besides the warm-up (s)...
 MIN_DURATION_S = 5.0
