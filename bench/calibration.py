@@ -142,7 +142,9 @@ def frequency_fit(result, stamps, q, roll, road, nominal, static) -> tuple[dict,
         diff = (model(theta)[1] - h_est) * weight
         return np.concatenate([diff.real.ravel(), diff.imag.ravel()])
 
-    sol = optimize.least_squares(residuals, np.zeros(len(free)), method='trf', x_scale='jac')
+    span = math.log(10.0)
+    sol = optimize.least_squares(residuals, np.zeros(len(free)), method='trf', x_scale='jac',
+                                 bounds=(-span, span))
     values = model(sol.x)[0]
     masses = sum(v for s, v in values.items()
                  if s.name in ('vehicle.sprung_mass', 'vehicle.unsprung_mass'))
@@ -179,9 +181,12 @@ def one_case(name, road, truck, seed, args, validation):
                          result.alignment.scale + result.fine_alignment[1] - ODOMETER,
                          result.alignment.correlation)}
     if args.frequency_domain:
-        values, fsec = frequency_fit(result, stamps, q, roll, road, VehicleParameters(),
-                                     truck.static_load_n)
-        out['frequency'] = (_errors(values, truck), fsec)
+        try:
+            values, fsec = frequency_fit(result, stamps, q, roll, road, VehicleParameters(),
+                                         truck.static_load_n)
+            out['frequency'] = (_errors(values, truck), fsec)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            print(f'(frequency-domain fit failed: {exc})')
     modes = ['zero latency', '10 ms'] + ([] if args.no_offline else ['offline'])
     vt, vs, vq, vr = validation
     out['validation'] = {label: _validate(v, vt, vs, vq, vr, truck.static_load_n, modes)

@@ -30,6 +30,9 @@ DEFAULT_BAND_M = (0.5, 10.0)
 MIN_CORRELATION = 0.5
 #: Grid spacing of the correlation (m).
 GRID_M = 0.1
+#: The first pass over the scales takes every COARSE_STEPS-th; the second the fine steps
+#: around the best.
+COARSE_STEPS = 8
 #: Estimated profile dropped at the start of the drive (observer convergence), m.
 SKIP_M = 10.0
 
@@ -119,6 +122,39 @@ def _refine(rho: np.ndarray, k: int) -> float:
     return float(k)
 
 
+class _Scan:
+    """The best normalised correlation over scales (each scale: every offset by FFT)."""
+
+    def __init__(self, g, mask_g, grid, e_drive, x0, lo, hi, min_overlap_m) -> None:
+        self.g, self.mask_g, self.grid, self.e_drive = g, mask_g, grid, e_drive
+        self.x0, self.lo, self.hi, self.min_overlap_m = x0, lo, hi, min_overlap_m
+        self.t_drive = x0 + GRID_M * np.arange(e_drive.shape[0])
+
+    def at(self, s: float) -> tuple[float, float, float, float]:
+        """(correlation, scale, offset m, overlap m) of the best offset at scale ``s``."""
+        x0, grid = self.x0, self.grid
+        # The drive's estimate at survey spacing: sample j at drive distance x0 + j dx / s.
+        xj = x0 + GRID_M / s * np.arange(int(self.e_drive.shape[0] * s))
+        e = np.column_stack([np.interp(xj, self.t_drive, self.e_drive[:, c]) for c in range(2)])
+        # Lag k puts e[0] at grid[k] = offset + s x0.
+        rho, count = _correlations(self.g, self.mask_g, e)
+        offsets = grid[0] + np.arange(rho.size) * GRID_M - s * x0
+        ok = (count * GRID_M >= self.min_overlap_m) & (offsets >= self.lo) & (offsets <= self.hi)
+        if not np.any(ok):
+            return (-2.0, float(s), 0.0, 0.0)
+        k = int(np.argmax(np.where(ok, rho, -2.0)))
+        offset = grid[0] + _refine(rho, k) * GRID_M - s * x0
+        return (float(rho[k]), float(s), float(offset), float(count[k] * GRID_M))
+
+    def best(self, scales, progress, start: float, share: float):
+        out = (-2.0, 1.0, 0.0, 0.0)
+        for i, s in enumerate(scales):
+            out = max(out, self.at(s))
+            if progress is not None:
+                progress(start + share * (i + 1) / len(scales))
+        return out
+
+
 def align(drive_m, profile_m, survey: RoadProfile, *, start_m: float = 0.0,
           search_m: float = 50.0, scale_error: float = 0.03, band=DEFAULT_BAND_M,
           min_correlation: float = MIN_CORRELATION, min_overlap_m: float = 50.0,
@@ -162,26 +198,14 @@ def align(drive_m, profile_m, survey: RoadProfile, *, start_m: float = 0.0,
     grid, g, mask_g = _survey_signal(survey, band, lo + lo_s * x0,
                                      hi + hi_s * (x0 + length) + GRID_M)
     step = min(1e-3, 0.5 * GRID_M / max(length + x0, 1.0))
-    count_s = 2 * int(math.ceil(scale_error / step)) + 1
-    scales = np.linspace(lo_s, hi_s, count_s)
-    best = (-2.0, 1.0, 0.0, 0.0)
-    t_drive = x0 + GRID_M * np.arange(e_drive.shape[0])
-    for i, s in enumerate(scales):
-        # The drive's estimate at survey spacing: sample j at drive distance x0 + j dx / s.
-        xj = x0 + GRID_M / s * np.arange(int(e_drive.shape[0] * s))
-        e = np.column_stack([np.interp(xj, t_drive, e_drive[:, c]) for c in range(2)])
-        # Lag k puts e[0] at grid[k] = offset + s x0.
-        rho, count = _correlations(g, mask_g, e)
-        lags = np.arange(rho.size)
-        offsets = grid[0] + lags * GRID_M - s * x0
-        ok = (count * GRID_M >= min_overlap_m) & (offsets >= lo) & (offsets <= hi)
-        if np.any(ok):
-            k = int(np.argmax(np.where(ok, rho, -2.0)))
-            if rho[k] > best[0]:
-                offset = grid[0] + _refine(rho, k) * GRID_M - s * x0
-                best = (float(rho[k]), float(s), float(offset), float(count[k] * GRID_M))
-        if progress is not None:
-            progress((i + 1) / count_s)
+    coarse = np.arange(lo_s, hi_s + 1e-12, COARSE_STEPS * step)
+    scan = _Scan(g, mask_g, grid, e_drive, x0, lo, hi, min_overlap_m)
+    best = scan.best(coarse, progress, 0.0, 0.8)
+    fine = np.arange(best[1] - COARSE_STEPS * step, best[1] + COARSE_STEPS * step + 1e-12,
+                     step)
+    fine = fine[(fine >= lo_s - 1e-12) & (fine <= hi_s + 1e-12)]
+    best = max(best, scan.best(fine, progress, 0.8, 0.2))
+    count_s = coarse.size + fine.size
     rho, scale, offset, overlap = best
     if rho <= -2.0:
         raise AlignmentError(f'no overlap of at least {min_overlap_m:g} m between the drive and '
