@@ -42,7 +42,8 @@ def report_dict(result, *, drive: str = '', profile: str = '', output: str = '')
         'timings_s': result.timings_s,
         'extending': 'vehicle.leaf_spring_friction and vehicle.sensor_time_constant are not '
                      'fitted yet: the core model does not carry them; each is one row per '
-                     'side of calibration_model.SLOTS once it does',
+                     'side of calibration_model.SLOTS once it does. The sensor offsets are '
+                     'reported, not written: no parameter carries them yet',
     }
 
 
