@@ -77,7 +77,6 @@ def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
     y = np.column_stack([np.asarray(q_m, float), np.asarray(roll_rad, float)])
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     ok = np.all(np.isfinite(y), axis=1) & np.isfinite(v)
-    rejected = int(np.count_nonzero(~ok))
     if np.count_nonzero(ok) < 3:
         raise CalibrationError(f'the drive has {np.count_nonzero(ok)} usable samples '
                                '(deflections, roll and speed): nothing to calibrate on')
@@ -96,9 +95,9 @@ def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
     speed = np.interp(np.arange(m), index, v)
     dt = period * 1e-9
     distance = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)))
-    missing = m - int(index.size)
+    # Rows of the grid with no usable sample: the skipped ones and those never received.
     return DriveGrid(measured, good, speed, distance, dt, int(stamps[0]), index,
-                     rejected + missing)
+                     m - int(index.size))
 
 
 def check_survey(survey: RoadProfile) -> None:
