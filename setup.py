@@ -18,6 +18,7 @@ EXECUTABLES = {
     'profile_to_bag': 'tools',
     'road_profile_iri': 'tools',
     'estimate_fleet': 'tools',
+    'calibrate_vehicle': 'tools',
 }
 
 

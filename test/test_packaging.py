@@ -11,8 +11,8 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = 'road_force_estimator'
 EXECUTABLES = ['plant_simulator', 'observer', 'bag_recorder', 'bag_player', 'simulate_bag',
-               'estimate_bag',
-               'profile_to_bag', 'road_profile_iri', 'estimate_fleet']
+               'estimate_bag', 'profile_to_bag', 'road_profile_iri', 'estimate_fleet',
+               'calibrate_vehicle']
 
 
 def test_package_xml_declares_ament_python_and_ros_dependencies():

@@ -1,0 +1,366 @@
+"""The calibration's output-error problem: the drive on its sample grid, the residuals of the
+linear plant against it, the solver, the rank test and the covariance (used by
+:mod:`.calibration`, see there).
+
+The residuals (:class:`FitProblem`) are those of a variable-projection fit: for each vector of
+nonlinear parameters (log vehicle values, the fine alignment) the initial state and the sensor
+offsets, on which the outputs depend linearly, are solved by linear least squares, so that the
+fit needs no warm-up and the true start (never at rest on a real drive) does not bias it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy import linalg, optimize
+
+# The core API the fit uses (one place, for the lead to re-point).
+from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.road import RoadProfile
+from road_force_estimator.estimation.calibration_alignment import Alignment
+from road_force_estimator.estimation.calibration_model import (
+    Slot, free_response, linear_plant, log_bounds, simulate_outputs, slot_value, vehicle_with)
+
+__all__ = ['CalibrationError', 'DriveGrid', 'drive_grid', 'check_survey', 'too_short',
+           'FitProblem', 'start_vector', 'solve', 'solve_without', 'structural',
+           'effective_fraction', 'covariance', 'score_covariance', 'MIN_DURATION_S',
+           'MIN_DISTANCE_M', 'SURVEY_GAP_M', 'RANK_TOLERANCE', 'FINE_OFFSET_M', 'FINE_SCALE',
+           'SUBSTEP_M']
+
+#: A drive needs at least this much time on the survey, besides the warm-up (s)...
+MIN_DURATION_S = 5.0
+#: ... and this much distance (m).
+MIN_DISTANCE_M = 100.0
+#: A survey step longer than this (and than 20 median steps) is a gap (m).
+SURVEY_GAP_M = 1.0
+#: Jacobian columns whose pivoted-QR diagonal is below this (relative) are rank-deficient.
+RANK_TOLERANCE = 1e-7
+#: Fine alignment range of the fit around the correlation's result (m, relative scale).
+FINE_OFFSET_M = 0.5
+FINE_SCALE = 1e-3
+#: Longest road step between two points of the simulation (m): samples are subdivided.
+SUBSTEP_M = 0.02
+
+
+class CalibrationError(ValueError):
+    """Bad input for a calibration (the message is one line)."""
+
+
+
+
+@dataclass(frozen=True)
+class DriveGrid:
+    """Accepted samples on a uniform grid: ``measured`` (m, 3) NaN where no sample,
+    ``good`` (m,), ``speed_mps`` and ``distance_m`` (m,), ``dt_s``, ``t0_ns``; ``rejected``
+    counts the samples skipped (non-finite) and the grid rows with no sample."""
+
+    measured: np.ndarray
+    good: np.ndarray
+    speed_mps: np.ndarray
+    distance_m: np.ndarray
+    dt_s: float
+    t0_ns: int
+    index: np.ndarray
+    rejected: int
+
+
+def drive_grid(stamps_ns, q_m, roll_rad, speed_mps) -> DriveGrid:
+    """The accepted samples on their uniform sample grid.
+
+    Raises
+    ------
+    CalibrationError
+        No usable sample, stamps off a uniform grid (jitter beyond 5 % of the period).
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    y = np.column_stack([np.asarray(q_m, float), np.asarray(roll_rad, float)])
+    v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
+    ok = np.all(np.isfinite(y), axis=1) & np.isfinite(v)
+    if np.count_nonzero(ok) < 3:
+        raise CalibrationError(f'the drive has {np.count_nonzero(ok)} usable samples '
+                               '(deflections, roll and speed): nothing to calibrate on')
+    stamps, y, v = stamps[ok], y[ok], v[ok]
+    period = int(np.median(np.diff(stamps)))
+    rel = (stamps - stamps[0]) / period
+    index = np.rint(rel).astype(np.int64)
+    if np.max(np.abs(rel - index)) > 0.05 or np.any(np.diff(index) < 1):
+        raise CalibrationError("the drive's stamps are not on a uniform grid (jitter beyond "
+                               '5 % of the sample period): not supported')
+    m = int(index[-1]) + 1
+    measured = np.full((m, 3), np.nan)
+    measured[index] = y
+    good = np.zeros(m, bool)
+    good[index] = True
+    speed = np.interp(np.arange(m), index, v)
+    dt = period * 1e-9
+    distance = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)))
+    # Rows of the grid with no usable sample: the skipped ones and those never received.
+    return DriveGrid(measured, good, speed, distance, dt, int(stamps[0]), index,
+                     m - int(index.size))
+
+
+def check_survey(survey: RoadProfile) -> None:
+    """Refuse a survey with a gap (a step over :data:`SURVEY_GAP_M` and 20 median steps)."""
+    steps = np.diff(survey.distance_m)
+    limit = max(SURVEY_GAP_M, 20.0 * float(np.median(steps)))
+    if np.any(steps > limit):
+        i = int(np.argmax(steps))
+        raise CalibrationError(
+            f'the survey has a gap of {steps[i]:.2f} m at {survey.distance_m[i]:.2f} m (no '
+            f'profile there): calibrate on a survey without gaps')
+
+
+def too_short(what: str, duration_s: float, distance_m: float, warm_up_s: float) -> None:
+    if duration_s < MIN_DURATION_S + warm_up_s or distance_m < MIN_DISTANCE_M:
+        raise CalibrationError(
+            f'{what} too short for a calibration: {duration_s:.1f} s and {distance_m:.0f} m; '
+            f'it must be at least {MIN_DURATION_S + warm_up_s:g} s (with {warm_up_s:g} s of '
+            f'warm-up) and {MIN_DISTANCE_M:g} m long')
+
+
+# --------------------------------------------------------------------------------------------
+# The fit
+
+
+class FitProblem:
+    """The output-error residuals over the overlap [k0, k1) of the grid."""
+
+    def __init__(self, grid: DriveGrid, road: RoadProfile, nominal: VehicleParameters,
+                 alignment: Alignment, free: list[Slot], fixed: dict[Slot, float],
+                 k0: int, k1: int, warm: int) -> None:
+        self.grid, self.road, self.nominal = grid, road, nominal
+        self.alignment, self.free, self.fixed = alignment, free, fixed
+        self.k0, self.k1 = k0, k1
+        used = np.zeros(k1 - k0, bool)
+        used[warm:] = grid.good[k0 + warm:k1]
+        self.used = used
+        self.measured = grid.measured[k0:k1][used]
+        self.sigma = np.nanstd(self.measured, axis=0)
+        self.nominal_values = {s: slot_value(nominal, s) for s in free if s.physical}
+        self.t_s = np.arange(k1 - k0) * grid.dt_s
+        self.full_measured = grid.measured[k0:k1]
+        self._road_key = None
+        x0 = alignment.offset_m + alignment.scale * grid.distance_m[k0]
+        self.datum_m = float(np.mean(road.elevation_at(np.array([x0]))))
+        self.calls = 0
+        step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
+        self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
+
+    def unpack(self, theta: np.ndarray) -> tuple[dict, tuple[float, float]]:
+        """(physical slot values, (fine offset m, fine scale))."""
+        values = dict(self.fixed)
+        fine = [0.0, 0.0]
+        for slot, t in zip(self.free, theta):
+            if slot.physical:
+                values[slot] = self.nominal_values[slot] * math.exp(t)
+            else:
+                fine[0 if slot.name == 'alignment.offset' else 1] = t
+        return values, (fine[0], fine[1])
+
+    def road_input(self, fine: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """Road and its rate under the tires on the sub-sample grid (``substeps`` per
+        sample, so that the tire moves at most :data:`SUBSTEP_M` between points)."""
+        a = self.alignment
+        d = self.grid.distance_m[self.k0:self.k1]
+        v = self.grid.speed_mps[self.k0:self.k1]
+        if self.substeps > 1:
+            at = np.arange((d.size - 1) * self.substeps + 1) / self.substeps
+            d = np.interp(at, np.arange(d.size), d)
+            v = np.interp(at, np.arange(v.size), v)
+        x = a.offset_m + fine[0] + (a.scale + fine[1]) * d
+        v = (a.scale + fine[1]) * v
+        # Less one elevation common to both tracks (a survey's absolute height): the outputs
+        # do not see it, and the start at rest plus free responses then stay small numbers.
+        return self.road.elevation_at(x) - self.datum_m, self.road.slope_at(x) * v[:, None]
+
+    def fit_linear(self, theta: np.ndarray):
+        """For the vehicle of ``theta``: the best initial state and sensor offsets (linear
+        least squares, normal equations: the free responses live in the first seconds only),
+        and the outputs over the whole overlap with them.
+
+        Returns
+        -------
+        outputs (k1 - k0, 3), coefficients (the last three: offsets), normal matrix
+        """
+        values, fine = self.unpack(theta)
+        plant = linear_plant(vehicle_with(self.nominal, values))
+        if self._road_key != fine:
+            self._road = self.road_input(fine)
+            self._road_key = fine
+        u, du = self._road
+        forced = simulate_outputs(plant, u, du, self.grid.dt_s / self.substeps, at_rest=True,
+                                  every=self.substeps)
+        slowest = float(np.min(-plant.eig.real))
+        head = min(forced.shape[0], int(math.ceil(30.0 / max(slowest, 1e-3) / self.grid.dt_s)))
+        basis = free_response(plant, self.t_s[:head]) / self.sigma[None, :, None]
+        used = self.used[:head]
+        w2 = 1.0 / self.sigma ** 2
+        nb = basis.shape[2]
+        target = (self.full_measured - forced) / self.sigma            # NaN where not used
+        target[~self.used] = 0.0
+        normal = np.zeros((nb + 3, nb + 3))
+        rhs = np.zeros(nb + 3)
+        bu = basis[used].reshape(-1, nb)
+        normal[:nb, :nb] = bu.T @ bu
+        rhs[:nb] = bu.T @ target[:head][used].ravel()
+        cross = basis[used].sum(axis=0) / self.sigma[:, None]         # (3, nb)
+        normal[nb:, :nb] = cross
+        normal[:nb, nb:] = cross.T
+        normal[nb:, nb:] = np.diag(self.used.sum() * w2)
+        rhs[nb:] = target.sum(axis=0) / self.sigma
+        scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
+        coef = np.linalg.solve(normal / np.outer(scale, scale), rhs / scale) / scale
+        full = forced + coef[nb:]
+        full[:head] += (basis * self.sigma[None, :, None]) @ coef[:nb]
+        return full, coef, normal
+
+    def outputs(self, theta: np.ndarray) -> np.ndarray:
+        """Model outputs (best start and offsets) over the whole overlap, (k1 - k0, 3)."""
+        return self.fit_linear(theta)[0]
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        return ((self.outputs(theta)[self.used] - self.measured) / self.sigma).ravel()
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = [], []
+        for slot in self.free:
+            if slot.physical:
+                b = log_bounds(slot, self.nominal_values[slot])
+            else:
+                b = (-FINE_OFFSET_M, FINE_OFFSET_M) if slot.name == 'alignment.offset' \
+                    else (-FINE_SCALE, FINE_SCALE)
+            lo.append(b[0])
+            hi.append(b[1])
+        return np.array(lo), np.array(hi)
+
+
+def start_vector(problem: FitProblem, previous: dict[Slot, float] | None) -> np.ndarray:
+    """Start vector: previous results where there are, nominal else."""
+    theta = np.zeros(len(problem.free))
+    if previous:
+        for i, slot in enumerate(problem.free):
+            theta[i] = previous.get(slot, 0.0)
+    lo, hi = problem.bounds()
+    return np.clip(theta, lo + 1e-9, hi - 1e-9)
+
+
+def solve(problem: FitProblem, theta0: np.ndarray, progress) -> optimize.OptimizeResult:
+    """Trust-region least squares from ``theta0`` within the bounds."""
+    calls = [0]
+
+    def fun(theta):
+        calls[0] += 1
+        if progress is not None and calls[0] % 8 == 0:
+            progress()
+        return problem.residuals(theta)
+
+    lo, hi = problem.bounds()
+    return optimize.least_squares(fun, theta0, jac='2-point', bounds=(lo, hi), method='trf',
+                                  x_scale='jac', ftol=1e-12, xtol=1e-12, gtol=1e-12,
+                                  max_nfev=100 * (len(theta0) + 1))
+
+
+def structural(problem: FitProblem, theta: np.ndarray) -> set[Slot]:
+    """Physical slots whose Jacobian column is zero or in the span of the others (at the
+    start): the model does not depend on them, or only through a combination of others."""
+    base = problem.residuals(theta)
+    cols = []
+    for j in range(theta.size):
+        step = np.zeros(theta.size)
+        step[j] = 1e-6
+        cols.append((problem.residuals(theta + step) - base) / 1e-6)
+    jac = np.column_stack(cols)
+    norms = np.linalg.norm(jac, axis=0)
+    dead = norms <= 1e-12 * max(float(norms.max()), 1e-300)
+    if np.any(~dead):
+        _, r, piv = linalg.qr(jac[:, ~dead] / norms[~dead], mode='economic', pivoting=True)
+        diag = np.abs(np.diag(r))
+        alive = np.flatnonzero(~dead)
+        dead[alive[piv[diag < RANK_TOLERANCE * diag[0]]]] = True
+    return {s for s, d in zip(problem.free, dead) if d and s.physical}
+
+
+def solve_without(problem: FitProblem, theta: np.ndarray, held: list[int], progress):
+    """``theta`` after a fit with the entries ``held`` kept."""
+    keep = [i for i in range(theta.size) if i not in held]
+    free = problem.free
+    sub = FitProblem.__new__(FitProblem)
+    sub.__dict__.update(problem.__dict__)
+    sub.free = [free[i] for i in keep]
+    full = theta.copy()
+
+    def expand(t):
+        out = full.copy()
+        out[keep] = t
+        return out
+
+    sub.unpack = lambda t: problem.unpack(expand(t))
+    result = solve(sub, theta[keep], progress)
+    return expand(result.x)
+
+
+def effective_fraction(res: np.ndarray, channels: int = 3) -> float:
+    """n_eff / n of the residuals from their autocorrelation (Bartlett, lags up to 200)."""
+    r = res.reshape(-1, channels)
+    worst = 1.0
+    for c in range(channels):
+        x = r[:, c] - r[:, c].mean()
+        n = x.size
+        if n < 10 or not np.any(x):
+            continue
+        spec = np.fft.rfft(x, 2 * n)
+        acf = np.fft.irfft(spec * np.conj(spec))[:min(200, n // 4)]
+        rho = acf / acf[0]
+        cut = np.argmax(rho < 0.05) if np.any(rho < 0.05) else rho.size
+        tau = 1.0 + 2.0 * float(np.sum(rho[1:cut]))
+        worst = min(worst, 1.0 / max(tau, 1.0))
+    return worst
+
+
+def score_covariance(scores: np.ndarray, lags: int) -> np.ndarray:
+    """Newey-West (Bartlett) long-run covariance of per-sample scores (m, p) up to ``lags``."""
+    m, p = scores.shape
+    lags = int(max(0, min(lags, m - 1)))
+    n = 1 << int(math.ceil(math.log2(2 * m)))
+    weights = np.zeros(n)
+    k = np.arange(lags + 1)
+    weights[k] = 1.0 - k / (lags + 1.0)
+    weights[n - k[1:]] = weights[k[1:]]
+    kernel = np.fft.fft(weights).real
+    spec = np.fft.fft(scores, n, axis=0)
+    return (np.conj(spec).T @ (spec * kernel[:, None])).real / n
+
+
+def covariance(result: optimize.OptimizeResult,
+               lags: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(covariance of theta, rank-deficient column flags) from the final Jacobian.
+
+    The covariance is the sandwich ``(J'J)^-1 S (J'J)^-1`` with ``S`` the Newey-West
+    long-run covariance of the per-sample scores ``J_k' r_k`` over ``lags`` samples: white
+    residuals give the Gauss-Newton ``s^2 (J'J)^-1``; coloured ones (a model error, a lag the
+    model lacks) widen the intervals as they should.
+    """
+    jac = np.asarray(result.jac)
+    m, p = jac.shape
+    norms = np.linalg.norm(jac, axis=0)
+    safe = np.where(norms > 0.0, norms, 1.0)
+    _, r, piv = linalg.qr(jac / safe, mode='economic', pivoting=True)
+    diag = np.abs(np.diag(r))
+    deficient = np.zeros(p, bool)
+    deficient[piv[diag < RANK_TOLERANCE * max(diag[0], 1e-300)]] = True
+    deficient |= norms == 0.0
+    cov = np.full((p, p), np.nan)
+    ok = ~deficient
+    if np.any(ok):
+        jn = jac[:, ok] / safe[ok]
+        inv = np.linalg.pinv(jn.T @ jn)
+        dof = m / max(m - int(ok.sum()), 1)
+        scores = (jn * result.fun[:, None]).reshape(m // 3, 3, -1).sum(axis=1)
+        middle = score_covariance(scores, lags) * dof
+        cov[np.ix_(ok, ok)] = (inv @ middle @ inv) / np.outer(safe[ok], safe[ok])
+    return cov, deficient
+
+
+# --------------------------------------------------------------------------------------------

@@ -1,0 +1,241 @@
+"""The calibration's plant: the free-parameter vector and the linear model's simulation.
+
+The model is :class:`road_force_estimator.core.vehicle_model.VehicleModel` (its
+:meth:`~road_force_estimator.core.vehicle_model.VehicleModel.linearised` state matrices and the
+output kinematics of :meth:`~road_force_estimator.core.vehicle_model.VehicleModel.evaluate`),
+never the equations written again: what the core model gains (the gravity moment, leaf-spring
+friction, a sensor lag) reaches the calibration.
+
+The free parameters are one table, :data:`SLOTS`: one row per fitted number (a name, the index
+in a ``[left, right]`` pair, and a kind). ``'scale'`` values (masses, inertia, stiffnesses,
+damping rates, forces) all scale with the one force factor the kinematics cannot see (MODEL.md
+"Calibration"); ``'geometry'`` values (the CG height) and ``'time'`` values (a sensor time
+constant) do not; ``'offset'`` values are the sensor offsets (m, m, rad) and ``'alignment'``
+the fine start offset (m) and odometer scale refined by the fit. Positive physical values are
+fitted as ``log(value / nominal)``. To free ``vehicle.leaf_spring_friction`` (kind
+``'scale'``) or ``vehicle.sensor_time_constant`` (kind ``'time'``) once the core model has
+them, add one row per side or channel to :data:`SLOTS`.
+
+Simulation: the linear plant, started at its equilibrium on the road under the first sample
+(as :mod:`road_force_estimator.core.plant` starts), is integrated exactly in modal coordinates
+with the road linear in time between samples (first-order hold), one
+:func:`scipy.signal.lfilter` per mode.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy import signal
+
+# The core API the calibration uses (one place, for the lead to re-point).
+from road_force_estimator.core.parameters import SPECS, VehicleParameters
+from road_force_estimator.core.vehicle_model import VehicleModel
+
+__all__ = ['Slot', 'SLOTS', 'CHANNELS', 'vehicle_with', 'LinearPlant', 'linear_plant',
+           'simulate_outputs', 'slot_value', 'free_response']
+
+#: Measured channels, in order: deflections left, right (m), roll (rad).
+CHANNELS = ('left_suspension', 'right_suspension', 'roll')
+
+
+@dataclass(frozen=True)
+class Slot:
+    """One free number of the fit.
+
+    ``name`` is the parameter (``vehicle.*``) or a pseudo-name (``sensor.offset.*``,
+    ``alignment.*``); ``index`` 0/1 picks a side of a pair (None for a scalar); ``kind`` is
+    ``'scale'``, ``'geometry'``, ``'time'``, ``'offset'`` or ``'alignment'``; ``unit`` for
+    reports.
+    """
+
+    name: str
+    index: int | None
+    kind: str
+    unit: str
+
+    @property
+    def label(self) -> str:
+        """``name`` or ``name[left]`` / ``name[right]``."""
+        if self.index is None:
+            return self.name
+        return f'{self.name}[{("left", "right")[self.index]}]'
+
+    @property
+    def physical(self) -> bool:
+        """True for a vehicle parameter (fitted in log scale)."""
+        return self.kind in ('scale', 'geometry', 'time')
+
+
+def _pair(name: str, kind: str, unit: str) -> tuple[Slot, Slot]:
+    return Slot(name, 0, kind, unit), Slot(name, 1, kind, unit)
+
+
+#: Every number the fit can free. Future rows: ``*_pair('vehicle.leaf_spring_friction',
+#: 'scale', 'N')`` and ``*_pair('vehicle.sensor_time_constant', 'time', 's')``.
+SLOTS: tuple[Slot, ...] = (
+    Slot('vehicle.sprung_mass', None, 'scale', 'kg'),
+    Slot('vehicle.roll_inertia', None, 'scale', 'kg m^2'),
+    Slot('vehicle.cg_height_above_roll_axis', None, 'geometry', 'm'),
+    *_pair('vehicle.unsprung_mass', 'scale', 'kg'),
+    *_pair('vehicle.suspension_stiffness', 'scale', 'N/m'),
+    *_pair('vehicle.suspension_damping', 'scale', 'N s/m'),
+    *_pair('vehicle.tire_stiffness', 'scale', 'N/m'),
+    Slot('sensor.offset.left_suspension', None, 'offset', 'm'),
+    Slot('sensor.offset.right_suspension', None, 'offset', 'm'),
+    Slot('sensor.offset.roll', None, 'offset', 'rad'),
+    Slot('alignment.offset', None, 'alignment', 'm'),
+    Slot('alignment.scale', None, 'alignment', ''),
+)
+
+
+def slot_value(vehicle: VehicleParameters, slot: Slot) -> float:
+    """The value of a physical slot in ``vehicle`` (SI)."""
+    value = vehicle.to_parameters()[slot.name]
+    return float(value if slot.index is None else value[slot.index])
+
+
+def vehicle_with(vehicle: VehicleParameters, values: dict[Slot, float]) -> VehicleParameters:
+    """``vehicle`` with the physical slots set to ``values`` (SI); validated as any file is.
+
+    Raises
+    ------
+    ValueError
+        A value outside the parameter's range (the message names it).
+    """
+    params = vehicle.to_parameters()
+    for slot, value in values.items():
+        if slot.index is None:
+            params[slot.name] = float(value)
+        else:
+            pair = list(params[slot.name])
+            pair[slot.index] = float(value)
+            params[slot.name] = pair
+    return VehicleParameters.from_parameters(params)
+
+
+def log_bounds(slot: Slot, nominal: float, span: float = math.log(10.0)) -> tuple[float, float]:
+    """Bounds of ``log(value / nominal)``: the parameter's range, within a factor of 10."""
+    spec = SPECS[slot.name]
+    low = math.log(spec.low / nominal) if spec.low > 0.0 else -math.inf
+    high = math.log(spec.high / nominal) if math.isfinite(spec.high) else math.inf
+    return max(low, -span), min(high, span)
+
+
+@dataclass(frozen=True)
+class LinearPlant:
+    """The linear model in modal form: ``x = Re(V xi)``, ``y = C x``.
+
+    ``eig`` (8,) continuous-time poles (1/s), ``vectors`` V (8, 8), ``inputs`` V^-1 B for the
+    road and its rate (8, 4: u_1, u_2, du_1, du_2), ``outputs`` C V (3, 8); ``model`` the
+    :class:`VehicleModel` (for the equilibrium).
+    """
+
+    eig: np.ndarray
+    vectors: np.ndarray
+    inputs: np.ndarray
+    outputs: np.ndarray
+    model: VehicleModel
+
+
+def output_matrix(model: VehicleModel) -> np.ndarray:
+    """``C`` (3, 8): (q_1, q_2, phi) of a small state, from the model's own kinematics."""
+    eps = 1e-7
+    cols = []
+    for j in range(8):
+        x = np.zeros(8)
+        x[j] = eps
+        plus = model.evaluate(x, (0.0, 0.0))
+        minus = model.evaluate(-x, (0.0, 0.0))
+        cols.append(np.concatenate([(plus.q_m - minus.q_m), [x[1] * 2.0]]) / (2.0 * eps))
+    return np.column_stack(cols)
+
+
+def linear_plant(vehicle: VehicleParameters) -> LinearPlant:
+    """The modal form of ``VehicleModel(vehicle).linearised()``."""
+    model = VehicleModel(vehicle)
+    a, b = model.linearised().state_matrices()
+    eig, vectors = np.linalg.eig(a)
+    inv = np.linalg.inv(vectors)
+    return LinearPlant(eig, vectors, inv @ b[:, :4], output_matrix(model) @ vectors, model)
+
+
+def simulate_outputs(plant: LinearPlant, road_m: np.ndarray, road_rate_mps: np.ndarray,
+                     dt_s: float, *, at_rest: bool = False, every: int = 1) -> np.ndarray:
+    """The outputs (q_1, q_2, phi) over a uniform time grid.
+
+    Parameters
+    ----------
+    plant : LinearPlant
+    road_m, road_rate_mps : ndarray, shape (n, 2)
+        Road under each tire (m) and its rate (m/s) at the samples.
+    dt_s : float
+        Sample period (s).
+    at_rest : bool
+        Start from the zero state instead of the equilibrium on the road at sample 0 (add
+        :func:`free_response` columns for any other start).
+    every : int
+        Return every ``every``-th sample only (the road given on a finer grid).
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Row 0 is the start; the road is linear in time between samples (exact integration of
+        the linear model under that hold).
+    """
+    rate = np.any(plant.inputs[:, 2:] != 0.0)          # tire damping: the road rate acts
+    w = np.ascontiguousarray((np.concatenate([road_m, road_rate_mps], axis=1) if rate
+                              else road_m).T)            # (4 or 2, n)
+    x0 = plant.model.equilibrium(road_m[0], road_rate_mps[0])
+    xi0 = np.linalg.solve(plant.vectors, x0.astype(complex)) * (0.0 if at_rest else 1.0)
+    # One mode of each complex-conjugate pair (weight 2 on the real part), real modes once.
+    lam = plant.eig
+    keep = lam.imag >= 0.0
+    lam, weight = lam[keep], np.where(lam[keep].imag > 0.0, 2.0, 1.0)
+    b, c, xi0 = plant.inputs[keep, :w.shape[0]], plant.outputs[:, keep] * weight, xi0[keep]
+    lh = lam * dt_s
+    e = np.exp(lh)
+    phi1 = np.expm1(lh) / lam                                    # int_0^h e^(lam (h - t)) dt
+    phi2 = (np.expm1(lh) - lh) / (lam * lh)                     # ... times t / h
+    bw = b.real @ w + 1j * (b.imag @ w)                          # (modes, n)
+    d = bw[:, :-1] * (phi1 - phi2)[:, None] + bw[:, 1:] * phi2[:, None]
+    xi = np.empty((lam.size, w.shape[1]), dtype=complex)
+    xi[:, 0] = xi0
+    for j in range(lam.size):
+        xi[j, 1:], _ = signal.lfilter([1.0], [1.0, -e[j]], d[j], zi=[e[j] * xi0[j]])
+    xi = xi[:, ::every]
+    return np.ascontiguousarray((c.real @ xi.real - c.imag @ xi.imag).T)
+
+
+def model_outputs(vehicle: VehicleParameters, road_m: np.ndarray, road_rate_mps: np.ndarray,
+                  dt_s: float) -> np.ndarray:
+    """:func:`simulate_outputs` for a parameter set (shape (n, 3))."""
+    return simulate_outputs(linear_plant(vehicle), road_m, road_rate_mps, dt_s)
+
+
+
+def free_response(plant: LinearPlant, t_s: np.ndarray) -> np.ndarray:
+    """The outputs' response to every initial state, as real columns.
+
+    Parameters
+    ----------
+    plant : LinearPlant
+    t_s : ndarray (m,)
+        Times since the start (s).
+
+    Returns
+    -------
+    ndarray, shape (m, 3, 8)
+        Columns spanning the free (unforced) responses of (q_1, q_2, phi) from any initial
+        state: the real and imaginary parts of each complex mode pair, each real mode once.
+    """
+    lam = plant.eig
+    keep = lam.imag >= 0.0
+    cols = []
+    for j in np.flatnonzero(keep):
+        z = np.exp(lam[j] * t_s)[:, None] * plant.outputs[:, j][None, :]
+        cols.append(z.real)
+        if lam[j].imag > 0.0:
+            cols.append(z.imag)
+    return np.stack(cols, axis=2)
