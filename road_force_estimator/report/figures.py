@@ -78,6 +78,7 @@ class _Canvas:
     w: np.ndarray
     t: np.ndarray
     units: str = 'si'
+    static_load_n: tuple[float, float] | None = None
     written: list[str] = field(default_factory=list)
 
     def pick(self, name: str) -> np.ndarray:
@@ -128,9 +129,11 @@ def write_figures(folder: str | Path, est, al: Aligned, drive=None, *,
                   segments: dict[str, np.ndarray] | None = None, title: str = '',
                   window_s: float = DEFAULT_WINDOW_S,
                   profile_window_m: float = DEFAULT_PROFILE_WINDOW_M,
-                  units: str = 'si') -> list[str]:
+                  units: str = 'si',
+                  static_load_n: tuple[float, float] | None = None) -> list[str]:
     """Draw the figures of :data:`FIGURES` into ``folder``; the file names written
-    (``units``: those of the IRI bars)."""
+    (``units``: those of the IRI bars; ``static_load_n``: the static wheel loads (N), drawn
+    as a line on the loads)."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -139,7 +142,7 @@ def write_figures(folder: str | Path, est, al: Aligned, drive=None, *,
     if al.rows.size < 2:
         return []
     w = _window(al, window_s)
-    c = _Canvas(plt, folder, title, est, al, w, al.t_s[w], units)
+    c = _Canvas(plt, folder, title, est, al, w, al.t_s[w], units, static_load_n)
     _states_figure(c, drive)
     _body_figure(c)
     _wheels_figure(c)
@@ -267,6 +270,10 @@ def _loads_figure(c: _Canvas) -> None:
         a.plot(t, load[:, side], color=_COLORS[side], lw=1.2, label='estimated, max(0, F)')
         if true is not None:
             a.plot(t, true[:, side], label='truth', **_TRUTH)
+        if c.static_load_n is not None:
+            a.axhline(c.static_load_n[side] / 1e3, color='0.45', lw=0.9, ls=':',
+                      label=f'static load {c.static_load_n[side] / 1e3:.1f} kN')
+        if true is not None:
             ax[2].plot(t, 1e3 * (raw[:, side] / 1e3 - true[:, side]), color=_COLORS[side],
                        lw=0.9, label=_SIDES[side])
         below = int(np.count_nonzero(raw[:, side] < 0.0))

@@ -113,7 +113,8 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
     if figures:
         names = write_figures(folder, est, al, drive, segments=segments,
                               title=f'{input_name} ({mode})' if input_name else mode,
-                              units=units)
+                              units=units, static_load_n=(
+                                  vehicle or VehicleParameters()).static_load_n)
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)
