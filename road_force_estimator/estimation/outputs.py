@@ -124,6 +124,7 @@ class EstimatorStatus:
     accepted: int = 0               #: samples used (including the (re)starts)
     rejected_nonfinite: int = 0     #: NaN/inf or malformed value or stamp
     rejected_range: int = 0         #: physically impossible value
+    rejected_speed: int = 0         #: speed negative or above MAX_SPEED_MPS
     rejected_time: int = 0          #: duplicate or backwards stamp
     resets: int = 0                 #: restarts after the first sample (gaps + numerical)
     gaps: int = 0                   #: steps longer than the gap threshold
@@ -148,7 +149,8 @@ class EstimatorStatus:
     @property
     def rejected(self) -> int:
         """All rejected samples."""
-        return self.rejected_nonfinite + self.rejected_range + self.rejected_time
+        return (self.rejected_nonfinite + self.rejected_range + self.rejected_speed
+                + self.rejected_time)
 
     def as_dict(self) -> dict:
         return asdict(self)

@@ -275,6 +275,7 @@ def _rejections(drive, st) -> dict[str, dict[str, int]]:
     for topic, reasons in sorted((getattr(drive, 'rejected', None) or {}).items()):
         rejected[topic] = {r: int(c) for r, c in sorted(reasons.items()) if c}
     core = {'nonfinite': st.rejected_nonfinite, 'out_of_range': st.rejected_range,
+            'speed_out_of_range': getattr(st, 'rejected_speed', 0),
             'duplicate_or_backwards_stamp': st.rejected_time}
     core = {k: int(v) for k, v in core.items() if v}
     if core:

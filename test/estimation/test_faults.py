@@ -1,0 +1,86 @@
+"""Faults of real drives (issue 16): a far-future stamp, speeds out of range, a step the model
+design cannot handle, samples rejected inside an offline run."""
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.estimation import Estimator, estimate_batch
+from road_force_estimator.estimation.acceptance import accept_arrays
+from road_force_estimator.estimation.smoother import smooth
+from model_observer_data import SPEED, VEHICLE
+
+YEAR_2033_NS = 1_988_150_400 * 1_000_000_000
+
+
+def _inputs(drive, n=3000):
+    stamps = (np.arange(n) * 1_000_000).astype(np.int64) + 1_700_000_000 * 10 ** 9
+    return stamps, drive.q_m[:n].copy(), drive.roll_rad[:n].copy(), np.full(n, SPEED)
+
+
+class TestFarFutureStamp:
+    def test_one_corrupt_stamp_loses_one_sample(self, drive):
+        stamps, q, phi, v = _inputs(drive)
+        bad = stamps.copy()
+        bad[1500] = YEAR_2033_NS
+        keep = np.arange(stamps.size) != 1500
+        obs = ObserverParameters()
+        est = estimate_batch(bad, q, phi, v, VEHICLE, obs)
+        ref = estimate_batch(stamps[keep], q[keep], phi[keep], v[keep], VEHICLE, obs)
+        st = est.status
+        assert (st.rejected, st.rejected_time, st.accepted) == (1, 1, stamps.size - 1)
+        assert st.gaps == st.resets == 0
+        assert np.flatnonzero(~est.valid).tolist() == [1500]
+        np.testing.assert_array_equal(est.wheel_load_n[keep], ref.wheel_load_n)
+        np.testing.assert_array_equal(est.road_m[keep], ref.road_m)
+
+    def test_the_same_one_sample_at_a_time_and_offline(self, drive):
+        stamps, q, phi, v = _inputs(drive, 1200)
+        stamps[600] = YEAR_2033_NS
+        obs = ObserverParameters()
+        online = Estimator(VEHICLE, obs)
+        outs = [online.update(int(t), qq, p, s) for t, qq, p, s in zip(stamps, q, phi, v)]
+        assert sum(o is None for o in outs) == 1 and outs[600] is None
+        assert online.status.rejected_time == 1
+        batch = estimate_batch(stamps, q, phi, v, VEHICLE, obs)
+        np.testing.assert_array_equal(
+            np.array([o.wheel_load_n for o in outs if o is not None]),
+            batch.wheel_load_n[batch.valid])
+        off = smooth(stamps, q, phi, v, VEHICLE, obs)
+        assert np.flatnonzero(~off.valid).tolist() == [600]
+        assert off.status.rejected_time == 1 and off.status.gaps == 0
+
+    def test_a_real_far_jump_restarts_and_loses_its_first_sample(self):
+        stamps = np.concatenate([np.arange(100), 10 ** 6 + np.arange(100)]) * 1_000_000
+        z = np.zeros(200)
+        q = np.zeros((200, 2))
+        valid, restart, _, cnt = accept_arrays(stamps, q, z, z + SPEED, 0.1)
+        assert np.flatnonzero(~valid).tolist() == [100]
+        assert np.flatnonzero(restart).tolist() == [0, 101]
+        assert (cnt['rejected_time'], cnt['gaps']) == (1, 1)
+        est = estimate_batch(stamps, q, z, SPEED, VEHICLE, ObserverParameters())
+        np.testing.assert_array_equal(est.valid, valid)
+        assert (est.status.rejected_time, est.status.gaps) == (1, 1)
+
+
+class TestSpeedOutOfRange:
+    @pytest.mark.parametrize('speed', [-1.0, -1e-3, 1e6, 100.5])
+    def test_refused_and_counted_as_speed(self, speed):
+        n = 50
+        stamps = np.arange(n) * 1_000_000
+        v = np.full(n, SPEED)
+        v[20:30] = speed
+        q = np.zeros((n, 2))
+        z = np.zeros(n)
+        est = estimate_batch(stamps, q, z, v, VEHICLE, ObserverParameters())
+        st = est.status
+        assert (st.rejected_speed, st.rejected, st.accepted) == (10, 10, 40)
+        assert not est.valid[20:30].any()
+        _, _, _, cnt = accept_arrays(stamps, q, z, v, 0.1)
+        assert cnt['rejected_speed'] == 10 and cnt['rejected_range'] == 0
+        assert smooth(stamps, q, z, v, VEHICLE).status.rejected_speed == 10
+
+    def test_nothing_usable_says_why(self):
+        n = 20
+        est = estimate_batch(np.arange(n) * 1_000_000, np.zeros((n, 2)), np.zeros(n), 1e6,
+                             VEHICLE, ObserverParameters())
+        assert est.status.accepted == 0 and est.status.rejected_speed == n
