@@ -35,7 +35,8 @@ Robustness (counted in :class:`EstimatorStatus`; nothing non-finite ever leaves)
   a gap (``gap_threshold_s`` defaults to :data:`GAP_THRESHOLD_S` = 0.1 s, i.e. 100 samples
   at 1 kHz; streams slower than ~20 Hz need a larger one): the estimate restarts at that
   sample (``resets``, ``gaps``) and reconverges; a non-finite intermediate (never seen,
-  guarded anyway) also restarts it (``resets``, ``numerical_resets``);
+  guarded anyway) also restarts it (``resets``, ``numerical_resets``), and so does a step
+  the model's design cannot handle (no stable filter at that dt: ``resets``, ``gaps``);
 - ``converged`` turns true once the time since the last (re)start reaches
   ``settling_time_s`` (chain: :func:`.chain.settling_time_s`); it is about the loads and LTR:
   the profile's body-heave high-pass needs a few ``lambda_c / v`` more.
@@ -203,11 +204,14 @@ class Estimator:
             self._flushed = False
             self._status.resets += 1
             return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
-        if not self._advance(stamp, q1, q2, phi, v, dt, False, dt_typ):
+        try:
+            if self._advance(stamp, q1, q2, phi, v, dt, False, dt_typ):
+                return True
             self._status.numerical_resets += 1
-            self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
-        return True
+        except ValueError:    # a step the model design cannot handle: a gap
+            self._status.gaps += 1
+        self._status.resets += 1
+        return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
 
     def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
                  restart: bool, dt_typ: float) -> bool:
