@@ -163,6 +163,8 @@ class Estimator:
         if not self._ready:
             return None
         stamp, row = self._ready.popleft()
+        if row[Column.FN1] <= 0.0 or row[Column.FN2] <= 0.0:
+            self._status.negative_load_samples += 1
         est = estimate_from_row(stamp, row)
         self.last = est
         return est
@@ -177,6 +179,8 @@ class Estimator:
         """
         self._finish()
         out = [estimate_from_row(stamp, row) for stamp, row in self._ready]
+        self._status.negative_load_samples += sum(
+            est.wheel_load_n[0] <= 0.0 or est.wheel_load_n[1] <= 0.0 for est in out)
         self._ready.clear()
         if out:
             self.last = out[-1]
@@ -292,4 +296,6 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
         # rejected rows hold the previous row (zeros before the first accepted sample)
         held, src = hold_rejected(valid)
         table[held] = table[src]
-    return arrays_from_table(table, output_stamps(stamps), valid, est.status)
+    out = arrays_from_table(table, output_stamps(stamps), valid, est.status)
+    out.status.negative_load_samples = out.negative_load_samples()
+    return out

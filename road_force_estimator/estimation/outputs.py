@@ -110,7 +110,7 @@ class Estimate(NamedTuple):
     wheel_accel_mps2: tuple[float, float]       #: dd z_ui (m/s^2)
     road_m: tuple[float, float]                 #: u_i, band-limited profile (m)
     tire_force_dynamic_n: tuple[float, float]   #: dF_i (N), upward on the wheel
-    wheel_load_n: tuple[float, float]           #: F_n,i = F_c,i + dF_i (N)
+    wheel_load_n: tuple[float, float]           #: F_n,i = max(0, F_c,i + dF_i) (N)
     ltr: float                                  #: (F_n2 - F_n1) / (F_n1 + F_n2)
     residual_nm: float                          #: I_x ddphi - s cos(phi)(F_b1 - F_b2) (N m)
     lift_off: tuple[bool, bool]                 #: F_n,i <= LIFT_OFF_FRACTION F_c,i
@@ -137,6 +137,7 @@ class EstimatorStatus:
     typical_dt_s: float = 0.0       #: running average of the accepted steps (s)
     last_residual_nm: float = 0.0
     lift_off: tuple[bool, bool] = (False, False)
+    negative_load_samples: int = 0  #: estimates with F_c,i + dF_i < 0 (published as 0 N)
     method: str = 'model'           #: 'model' or 'chain'
     latency_samples: int = 0        #: lag N of the published estimates (samples)
     pending: int = 0                #: accepted samples whose estimate is not out yet
@@ -190,6 +191,16 @@ class EstimateArrays:
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
+
+    @property
+    def load_clipped(self) -> np.ndarray:
+        """(n, 2) bool: the accepted samples whose load estimate ``F_c,i + dF_i`` went below
+        zero (a lift-off; ``wheel_load_n`` holds 0 N there)."""
+        return (self.wheel_load_n <= 0.0) & self.valid[:, None]
+
+    def negative_load_samples(self) -> int:
+        """Accepted samples with a load estimate below zero on either wheel."""
+        return int(np.count_nonzero(self.load_clipped.any(axis=1)))
 
     @property
     def t_s(self) -> np.ndarray:

@@ -169,7 +169,9 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
         status.converged = bool(fields['converged'][last])
     smoother.fill_status(status)
-    return EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status, **fields)
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
 
 
 class _Smoother:

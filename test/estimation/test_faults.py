@@ -107,3 +107,33 @@ class TestStepTheDesignCannotHandle:
         np.testing.assert_array_equal(np.array([o.wheel_load_n for o in outs]),
                                       batch.wheel_load_n)
         assert np.isfinite(batch.wheel_load_n).all()
+
+
+class TestLiftOff:
+    def test_loads_clipped_at_zero_and_counted(self):
+        """5 cm at 10 Hz on the left deflection: the wheel-hop forces exceed the static load,
+        the unclipped estimate goes below zero. Published: max(0, F), counted the same way by
+        the per-sample path, the batch and the smoother; |LTR| <= 1."""
+        n = 2000
+        t = np.arange(n) * 1e-3
+        stamps = np.arange(n) * 1_000_000
+        q = np.zeros((n, 2))
+        q[:, 0] = 0.05 * np.sin(2 * np.pi * 10.0 * t)
+        z = np.zeros(n)
+        obs = ObserverParameters()
+        batch = estimate_batch(stamps, q, z, SPEED, VEHICLE, obs)
+        clipped = batch.load_clipped
+        assert clipped[:, 0].sum() > 100 and not clipped[:, 1].any()
+        assert (batch.wheel_load_n >= 0.0).all()
+        fc1 = VEHICLE.static_load_n[0]
+        np.testing.assert_array_equal(clipped[:, 0], batch.tire_force_dynamic_n[:, 0] < -fc1)
+        assert batch.status.negative_load_samples == int(clipped.any(axis=1).sum())
+        assert (np.abs(batch.ltr) <= 1.0).all() and (batch.ltr[clipped[:, 0]] == 1.0).all()
+        est = Estimator(VEHICLE, obs)
+        outs = [est.update(int(s), qq, 0.0, SPEED) for s, qq in zip(stamps, q)]
+        np.testing.assert_array_equal(np.array([o.wheel_load_n for o in outs]),
+                                      batch.wheel_load_n)
+        assert est.status.negative_load_samples == batch.status.negative_load_samples
+        off = smooth(stamps, q, z, SPEED, VEHICLE, obs)
+        assert (off.wheel_load_n >= 0.0).all() and off.load_clipped[:, 0].sum() > 100
+        assert off.status.negative_load_samples == int(off.load_clipped.any(axis=1).sum())
