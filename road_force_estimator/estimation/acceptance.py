@@ -3,7 +3,11 @@
 A sample is rejected when a value or the stamp (integer nanoseconds) is non-finite or
 malformed (``rejected_nonfinite``), when a value is impossible (``|q| > 1 m``,
 ``|phi| > pi/2``: ``rejected_range``), when the speed is negative or above 100 m/s
-(``rejected_speed``) or when its stamp is not later than the last accepted one
+(``rejected_speed``), when the deflections and roll repeat exactly, for the
+:data:`FROZEN_REPEATS` th time in a row or more, those of a sample that was moving while the
+speed now reads standing (below :data:`~.speed_check.STANDING_MPS`): a CAN drop-out holding
+the last values (``rejected_stale``; a truck that stands still from the start keeps its
+estimate), or when its stamp is not later than the last accepted one
 (``rejected_time``). A stamp more than :data:`MAX_STAMP_JUMP_S` (and a gap) ahead of the last
 accepted one is held back (counted in ``rejected_time``): the next sample decides. Earlier
 than the held stamp (a lone corrupt header, e.g. a year ahead), it is judged against the
@@ -23,9 +27,11 @@ import math
 
 import numpy as np
 
+from road_force_estimator.estimation.speed_check import STANDING_MPS
+
 __all__ = [
     'GAP_THRESHOLD_S', 'GAP_PERIODS', 'MAX_DEFLECTION_M', 'MAX_ROLL_RAD', 'MAX_SPEED_MPS',
-    'MAX_STAMP_JUMP_S', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold', 'batch_inputs', 'SampleGate',
+    'MAX_STAMP_JUMP_S', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold', 'batch_inputs', 'SampleGate',
     'accept_arrays', 'gap_samples', 'output_stamps',
 ]
 
@@ -42,6 +48,9 @@ MAX_SPEED_MPS = 100.0
 #: A forward stamp step longer than this (s) is held until the next sample confirms it.
 MAX_STAMP_JUMP_S = 60.0
 _MAX_JUMP_NS = int(MAX_STAMP_JUMP_S * 1e9)
+#: Exact repeats of (q_1, q_2, phi) in a row from which samples are stale (a real sensor
+#: has noise).
+FROZEN_REPEATS = 10
 
 
 def check_gap_threshold(gap_threshold_s) -> float:
@@ -84,6 +93,9 @@ class SampleGate:
         self.stamp = 0
         self.dt_typ = 0.0
         self.held = None        # stamp (ns) of a far jump not confirmed yet
+        self._values = None     # (q1, q2, phi) of the last sample with good values
+        self._moving = False    # whether the sample that first had them was moving
+        self._repeats = 0
 
     def check_pair(self, q_m):
         """``(q1, q2)`` of a deflection pair, or None (counted as malformed) if it is none."""
@@ -115,6 +127,16 @@ class SampleGate:
                 and -MAX_ROLL_RAD <= phi <= MAX_ROLL_RAD and 0.0 <= v <= MAX_SPEED_MPS):
             self._count_bad(q1, q2, phi, v)
             return None
+        values = (q1, q2, phi)
+        if values == self._values:
+            self._repeats += 1
+            if self._repeats >= FROZEN_REPEATS and self._moving and v < STANDING_MPS:
+                st.rejected_stale += 1
+                return None
+        else:
+            self._values = values
+            self._moving = v >= STANDING_MPS
+            self._repeats = 0
         if not self.started:
             return stamp, q1, q2, phi, v, 0.0, True, 0.0
         dt_ns = stamp - self.stamp
@@ -183,13 +205,13 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
     stamp_int : ndarray of int64 (n,)
         The accepted stamps (0 where rejected).
     counts : dict
-        ``rejected_nonfinite``, ``rejected_range``, ``rejected_speed``, ``rejected_time``,
-        ``gaps``, ``resets``.
+        ``rejected_nonfinite``, ``rejected_range``, ``rejected_speed``, ``rejected_stale``,
+        ``rejected_time``, ``gaps``, ``resets``.
     """
     st = np.asarray(stamps)
     n = st.shape[0]
-    cnt = dict(rejected_nonfinite=0, rejected_range=0, rejected_speed=0, rejected_time=0,
-               gaps=0, resets=0)
+    cnt = dict(rejected_nonfinite=0, rejected_range=0, rejected_speed=0, rejected_stale=0,
+               rejected_time=0, gaps=0, resets=0)
     if np.issubdtype(st.dtype, np.integer):
         stamp_ok = np.ones(n, bool)
         stamp_int = st.astype(np.int64)
@@ -210,6 +232,9 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
     cnt['rejected_range'] += int(np.count_nonzero(out & finite & ~values_ok))
     cnt['rejected_nonfinite'] += int(np.count_nonzero(out & ~finite))
     cand = stamp_ok & in_range
+    stale = _stale(q, phi, v, cand)
+    cnt['rejected_stale'] = int(np.count_nonzero(stale))
+    cand &= ~stale
     # accepted: later than every earlier candidate (the time-rejected ones are never later
     # than the last accepted stamp, so they do not change the running maximum)
     low = np.iinfo(np.int64).min
@@ -237,10 +262,32 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
     return valid, restart, stamp_int, cnt
 
 
+def _stale(q, phi, v, cand) -> np.ndarray:
+    """(n,) bool: the candidates that repeat the values of a moving candidate for the
+    :data:`FROZEN_REPEATS` th time in a row or more while the speed reads standing."""
+    n = cand.size
+    out = np.zeros(n, bool)
+    idx = np.flatnonzero(cand)
+    if idx.size <= FROZEN_REPEATS:
+        return out
+    vals = np.column_stack([q[idx], phi[idx]])
+    same = np.zeros(idx.size, bool)
+    same[1:] = (vals[1:] == vals[:-1]).all(axis=1)
+    if not same.any():
+        return out
+    k = np.arange(idx.size)
+    last_new = np.maximum.accumulate(np.where(same, 0, k))
+    vi = v[idx]
+    out[idx[((k - last_new) >= FROZEN_REPEATS) & (vi[last_new] >= STANDING_MPS)
+            & (vi < STANDING_MPS)]] = True
+    return out
+
+
 class _Counts:
     """The time counters of a :class:`SampleGate` run by :func:`_gate_over`."""
 
     rejected_time = gaps = resets = 0
+    rejected_nonfinite = rejected_range = rejected_speed = rejected_stale = 0
 
 
 def _gate_over(stamp_int, q, phi, v, cand, gap_threshold_s: float):

@@ -125,6 +125,7 @@ class EstimatorStatus:
     rejected_nonfinite: int = 0     #: NaN/inf or malformed value or stamp
     rejected_range: int = 0         #: physically impossible value
     rejected_speed: int = 0         #: speed negative or above MAX_SPEED_MPS
+    rejected_stale: int = 0         #: values frozen (repeated exactly FROZEN_REPEATS times)
     rejected_time: int = 0          #: duplicate or backwards stamp
     resets: int = 0                 #: restarts after the first sample (gaps + numerical)
     gaps: int = 0                   #: steps longer than the gap threshold
@@ -138,6 +139,7 @@ class EstimatorStatus:
     last_residual_nm: float = 0.0
     lift_off: tuple[bool, bool] = (False, False)
     negative_load_samples: int = 0  #: estimates with F_c,i + dF_i < 0 (published as 0 N)
+    speed_contradicted: int = 0     #: samples whose standing speed the deflections contradict
     method: str = 'model'           #: 'model' or 'chain'
     latency_samples: int = 0        #: lag N of the published estimates (samples)
     pending: int = 0                #: accepted samples whose estimate is not out yet
@@ -151,7 +153,7 @@ class EstimatorStatus:
     def rejected(self) -> int:
         """All rejected samples."""
         return (self.rejected_nonfinite + self.rejected_range + self.rejected_speed
-                + self.rejected_time)
+                + self.rejected_stale + self.rejected_time)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -188,6 +190,12 @@ class EstimateArrays:
     lift_off: np.ndarray
     converged: np.ndarray
     status: EstimatorStatus = field(default_factory=EstimatorStatus)
+    #: (n,) bool: samples whose standing speed the deflections contradicted (:mod:`.speed_check`)
+    speed_contradicted: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.speed_contradicted is None:
+            self.speed_contradicted = np.zeros(len(self.stamp_ns), bool)
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
@@ -240,7 +248,8 @@ def field_columns(n: int) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
 
 
 def arrays_from_table(table: np.ndarray, stamp_ns: np.ndarray, valid: np.ndarray,
-                      status: EstimatorStatus) -> EstimateArrays:
+                      status: EstimatorStatus,
+                      speed_contradicted: np.ndarray | None = None) -> EstimateArrays:
     """:class:`EstimateArrays` from rows of output rows (table (n, :data:`N_COLUMNS`))."""
     out = {}
     for name, idx in FIELD_COLUMNS.items():
@@ -248,7 +257,8 @@ def arrays_from_table(table: np.ndarray, stamp_ns: np.ndarray, valid: np.ndarray
         if name in FLAG_FIELDS:
             arr = arr != 0.0
         out[name] = np.ascontiguousarray(arr)
-    return EstimateArrays(stamp_ns=stamp_ns, valid=valid, status=status, **out)
+    return EstimateArrays(stamp_ns=stamp_ns, valid=valid, status=status,
+                          speed_contradicted=speed_contradicted, **out)
 
 
 def hold_rejected(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

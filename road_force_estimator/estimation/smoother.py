@@ -22,6 +22,7 @@ from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
 from road_force_estimator.estimation.schedule import GainSchedule
+from road_force_estimator.estimation.speed_check import check_arrays
 
 __all__ = ['smooth', 'lti', 'grid_steps', 'LTI_BLOCK']
 
@@ -156,18 +157,23 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     v_all = speed[acc]
     # distance over all accepted samples, continued across gaps
     dist = distance_m(np.diff(t_all), v_all)
+    # the model's speed: the recorded one unless the deflections contradict it
+    contradicted, v_model = check_arrays(t_all, q[acc], v_all, restart[acc])
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
         rows = ([col[idx[0]:idx[-1] + 1] for col in columns] if whole
                 else field_columns(idx.size)[1])
         rows[Column.DISTANCE][:] = dist[r0:r1]
-        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_all[r0:r1], rows)
+        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_model[r0:r1], rows)
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
     status = EstimatorStatus(**cnt)
     status.accepted = int(acc.size)
+    status.speed_contradicted = int(np.count_nonzero(contradicted))
+    flags = np.zeros(n, bool)
+    flags[acc] = contradicted
     if acc.size:
         if acc.size < n:                            # rejected rows hold the previous row
             held, src = hold_rejected(valid)
@@ -179,7 +185,8 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
         status.converged = bool(fields['converged'][last])
     smoother.fill_status(status)
-    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status, **fields)
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                         speed_contradicted=flags, **fields)
     status.negative_load_samples = out.negative_load_samples()
     return out
 

@@ -276,6 +276,7 @@ def _rejections(drive, st) -> dict[str, dict[str, int]]:
         rejected[topic] = {r: int(c) for r, c in sorted(reasons.items()) if c}
     core = {'nonfinite': st.rejected_nonfinite, 'out_of_range': st.rejected_range,
             'speed_out_of_range': getattr(st, 'rejected_speed', 0),
+            'frozen_values': getattr(st, 'rejected_stale', 0),
             'duplicate_or_backwards_stamp': st.rejected_time}
     core = {k: int(v) for k, v in core.items() if v}
     if core:

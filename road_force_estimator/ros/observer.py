@@ -41,7 +41,7 @@ SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
 # The core's counters, by the names the diagnostics give them.
 CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
-                 'rejected_speed': 'speed',
+                 'rejected_speed': 'speed', 'rejected_stale': 'stale',
                  'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
 # Further EstimatorStatus fields reported as they are (those the core has).
 ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
@@ -213,7 +213,8 @@ class Observer(Node):
                      elapsed: float) -> diagnostics.Status:
         st = self.estimator.status
         rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
-        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'speed', 'time') if fresh[k]})
+        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'speed', 'stale', 'time')
+                        if fresh[k]})
         received, missed = period['received'], period['missed']
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
                   'published': period['published'], 'missed': missed,
