@@ -158,7 +158,9 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     # distance over all accepted samples, continued across gaps
     dist = distance_m(np.diff(t_all), v_all)
     # the model's speed: the recorded one unless the deflections contradict it
-    contradicted, v_model = check_arrays(t_all, q[acc], v_all, restart[acc])
+    steps = np.zeros(acc.size)
+    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
+    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside

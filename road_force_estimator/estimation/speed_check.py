@@ -6,12 +6,16 @@ deflections. The excitation is the wheel-hop band of both deflections: each thro
 second-order high-pass at :data:`BAND_HZ` [0] (two first-order sections, so the body modes at
 1-2 Hz and a standing truck's settling drop out) and a first-order low-pass at
 :data:`BAND_HZ` [1]; its mean square is averaged (time constant :data:`ENERGY_TAU_S`) only
-while the speed reads standing, from 0 at the moment it does, so that a real stop (whose
-wheel hop has died out by then) never shows it. A band RMS above :data:`BAND_RMS_MIN_M` then
+while the speed reads standing, from 0 :data:`PROBATION_S` after it starts to, so that a
+real stop (whose wheel hop has died out by then) never shows it. A band RMS above :data:`BAND_RMS_MIN_M` then
 marks the sample *contradicted*: the estimators use the last trusted speed for the model
 instead (:data:`FALLBACK_SPEED_MPS` when none was ever trusted), while the distance still
 follows the recorded speed (it does not advance while the speed is unknown); the samples are
-counted (``speed_contradicted``).
+counted (``speed_contradicted``). During the first :data:`PROBATION_S` of a standing
+speed, before the energy is judged, the model keeps the last trusted speed too (not
+counted): a drop-out's first samples then never reach the model's noise and roughness
+statistics with a standing speed; at a real stop the last trusted speed is the one just
+above :data:`STANDING_MPS`.
 
 :class:`SpeedCheck` runs one sample at a time (the per-sample estimator), :func:`check_arrays`
 over arrays (the offline smoother) with the same numbers.
@@ -22,7 +26,8 @@ import math
 
 import numpy as np
 
-__all__ = ['STANDING_MPS', 'BAND_HZ', 'ENERGY_TAU_S', 'BAND_RMS_MIN_M', 'FALLBACK_SPEED_MPS',
+__all__ = ['STANDING_MPS', 'BAND_HZ', 'ENERGY_TAU_S', 'BAND_RMS_MIN_M', 'PROBATION_S',
+           'FALLBACK_SPEED_MPS',
            'SpeedCheck', 'check_arrays']
 
 #: A recorded speed below this (m/s) says the truck stands.
@@ -33,6 +38,9 @@ BAND_HZ = (8.0, 30.0)
 ENERGY_TAU_S = 0.25
 #: Band RMS (m, both deflections) above which a standing speed is contradicted.
 BAND_RMS_MIN_M = 1e-4
+#: Time (s) after the speed starts to read standing during which the model keeps the last
+#: trusted speed.
+PROBATION_S = 0.25
 #: Model speed (m/s) of contradicted samples when no speed was ever trusted.
 FALLBACK_SPEED_MPS = 20.0
 
@@ -49,6 +57,7 @@ class SpeedCheck:
         self.trusted = math.nan      # last trusted speed (m/s) at or above STANDING_MPS
         self._s = [0.0] * 6          # per side: high-pass lows 1, 2, band low-pass
         self._energy = 0.0
+        self._standing_s = 0.0
         self._dt = -1.0
         self._a = (0.0, 0.0, 0.0)
 
@@ -56,6 +65,7 @@ class SpeedCheck:
         """A new run: the filters start at this sample (the energy at 0); returns v."""
         self._s = [q1, 0.0, 0.0, q2, 0.0, 0.0]
         self._energy = 0.0
+        self._standing_s = 0.0
         if v >= STANDING_MPS:
             self.trusted = v
         return v
@@ -79,7 +89,11 @@ class SpeedCheck:
         if v >= STANDING_MPS:
             self.trusted = v
             self._energy = 0.0
+            self._standing_s = 0.0
             return v
+        self._standing_s += dt
+        if self._standing_s <= PROBATION_S:     # the wheel hop of a real stop dies out
+            return v if math.isnan(self.trusted) else self.trusted
         self._energy += a_e * (e - self._energy)
         if self._energy <= _E_MIN:
             return v
@@ -87,9 +101,10 @@ class SpeedCheck:
         return FALLBACK_SPEED_MPS if math.isnan(self.trusted) else self.trusted
 
 
-def check_arrays(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, restart: np.ndarray):
-    """:class:`SpeedCheck` over the accepted samples of a recording: times (s), deflections
-    (m, (m, 2)), recorded speeds (m/s), run starts; ``(contradicted (m,) bool, model speed
+def check_arrays(steps_s: np.ndarray, q: np.ndarray, v: np.ndarray, restart: np.ndarray):
+    """:class:`SpeedCheck` over the accepted samples of a recording: the step (s) to each
+    (the per-sample path's ``dt_ns * 1e-9``; not used at run starts), deflections (m,
+    (m, 2)), recorded speeds (m/s), run starts; ``(contradicted (m,) bool, model speed
     (m,))``. Without a standing speed the speeds are returned as they are."""
     m = v.size
     flags = np.zeros(m, bool)
@@ -97,14 +112,12 @@ def check_arrays(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, restart: np.ndar
         return flags, v
     out = v.copy()
     check = SpeedCheck()
-    tl, q1, q2, vl = t_s.tolist(), q[:, 0].tolist(), q[:, 1].tolist(), v.tolist()
-    prev = tl[0] if m else 0.0
+    tl, q1, q2, vl = steps_s.tolist(), q[:, 0].tolist(), q[:, 1].tolist(), v.tolist()
     for k in range(m):
         if restart[k]:
             check.restart(q1[k], q2[k], vl[k])
         else:
             before = check.contradicted
-            out[k] = check.step(tl[k] - prev, q1[k], q2[k], vl[k])
+            out[k] = check.step(tl[k], q1[k], q2[k], vl[k])
             flags[k] = check.contradicted > before
-        prev = tl[k]
     return flags, out

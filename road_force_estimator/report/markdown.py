@@ -82,6 +82,20 @@ def write_markdown(path: str | Path, summary: dict[str, Any], segments: dict[str
     Path(path).write_text('\n'.join(lines).rstrip() + '\n')
 
 
+def _finding_rows(s: dict[str, Any]) -> list[tuple[str, Any]]:
+    """Rows of what went wrong with the input or the estimate, when it did."""
+    rows: list[tuple[str, Any]] = []
+    sc = s.get('speed_contradicted')
+    if sc:
+        spans = ', '.join(f'{a:.3f}-{b:.3f}' for a, b in sc['spans_s'])
+        rows.append(('WARNING: speed reads standing while the deflections show motion '
+                     '(samples; spans, s)', f'{sc["samples"]}; {spans}'))
+    if s.get('negative_load_samples'):
+        rows.append(('load estimates below zero, published as 0 N (samples)',
+                     s['negative_load_samples']))
+    return rows
+
+
 def _summary_rows(s: dict[str, Any]) -> list[str]:
     """The rows of the summary table."""
     smp = s['samples']
@@ -93,6 +107,7 @@ def _summary_rows(s: dict[str, Any]) -> list[str]:
             ('first converged sample (s)', _fmt(s['first_converged_s'], 3)),
             ('converged samples', smp['converged']),
             ('samples with a wheel lifted off', s['lift_off_samples']),
+            *_finding_rows(s),
             ('max abs LTR', _fmt(s['max_abs_ltr'], 3)),
             ('GNSS fixes', s['fixes']),
             ('IRI of the estimated profile, left / right (m/km)',

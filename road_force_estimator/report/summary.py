@@ -256,6 +256,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'segment_length_m': float(segment_length_m),
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
+    summary.update(_speed_and_load_findings(est))
     if extra:
         summary['notes'] = dict(extra)
     for key in ('noise_std', 'cutoff_hz'):
@@ -266,6 +267,27 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     summary['iri_m_per_km'] = _drive_iri(est, al, segments)
     summary['segments'] = int(len(segments['start_m']))
     return summary, segments, al
+
+
+def _speed_and_load_findings(est) -> dict[str, Any]:
+    """``speed_contradicted`` (samples and the spans (s from the first stamp) where the
+    deflections contradicted a standing speed) and ``negative_load_samples`` (load estimates
+    below zero, published as 0 N), each only when there are some."""
+    out: dict[str, Any] = {}
+    flags = getattr(est, 'speed_contradicted', None)
+    if flags is not None and np.any(flags):
+        t = (np.asarray(est.stamp_ns, dtype=np.int64) - int(est.stamp_ns[0])) * 1e-9
+        f = np.concatenate([[False], np.asarray(flags, bool), [False]]).astype(np.int8)
+        starts = np.flatnonzero(np.diff(f) == 1)
+        ends = np.flatnonzero(np.diff(f) == -1) - 1
+        out['speed_contradicted'] = {
+            'samples': int(np.count_nonzero(flags)),
+            'spans_s': [[round(float(t[a]), 3), round(float(t[b]), 3)]
+                        for a, b in zip(starts.tolist(), ends.tolist())]}
+    negative = int(getattr(est.status, 'negative_load_samples', 0))
+    if negative:
+        out['negative_load_samples'] = negative
+    return out
 
 
 def _rejections(drive, st) -> dict[str, dict[str, int]]:
