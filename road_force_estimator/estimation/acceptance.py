@@ -31,7 +31,8 @@ from road_force_estimator.estimation.speed_check import STANDING_MPS
 
 __all__ = [
     'GAP_THRESHOLD_S', 'GAP_PERIODS', 'MAX_DEFLECTION_M', 'MAX_ROLL_RAD', 'MAX_SPEED_MPS',
-    'MAX_STAMP_JUMP_S', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold', 'batch_inputs', 'SampleGate',
+    'MAX_STAMP_JUMP_S', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold',
+    'batch_inputs', 'SampleGate',
     'accept_arrays', 'gap_samples', 'output_stamps',
 ]
 

@@ -1,21 +1,21 @@
 """Is the speed plausible? A standing truck's deflections show no road excitation.
 
 A recorded speed below :data:`STANDING_MPS` while the deflections keep showing road
-excitation (a dropped-out CAN speed signal reads 0 while the truck drives on) contradicts the
-deflections. The excitation is the wheel-hop band of both deflections: each through a
-second-order high-pass at :data:`BAND_HZ` [0] (two first-order sections, so the body modes at
-1-2 Hz and a standing truck's settling drop out) and a first-order low-pass at
+excitation (a dropped-out CAN speed signal reads 0 while the truck drives on) contradicts
+the deflections. The excitation is the wheel-hop band of both deflections: each through a
+second-order high-pass at :data:`BAND_HZ` [0] (two first-order sections, so the body modes
+at 1-2 Hz and a standing truck's settling drop out) and a first-order low-pass at
 :data:`BAND_HZ` [1]; its mean square is averaged (time constant :data:`ENERGY_TAU_S`) only
 while the speed reads standing, from 0 :data:`PROBATION_S` after it starts to, so that a
-real stop (whose wheel hop has died out by then) never shows it. A band RMS above :data:`BAND_RMS_MIN_M` then
-marks the sample *contradicted*: the estimators use the last trusted speed for the model
-instead (:data:`FALLBACK_SPEED_MPS` when none was ever trusted), while the distance still
-follows the recorded speed (it does not advance while the speed is unknown); the samples are
-counted (``speed_contradicted``). During the first :data:`PROBATION_S` of a standing
-speed, before the energy is judged, the model keeps the last trusted speed too (not
-counted): a drop-out's first samples then never reach the model's noise and roughness
-statistics with a standing speed; at a real stop the last trusted speed is the one just
-above :data:`STANDING_MPS`.
+real stop (whose wheel hop has died out by then) never shows it. A band RMS above
+:data:`BAND_RMS_MIN_M` then marks the sample *contradicted*: the estimators use the last
+trusted speed for the model instead (:data:`FALLBACK_SPEED_MPS` when none was ever trusted),
+while the distance still follows the recorded speed (it does not advance while the speed is
+unknown); the samples are counted (``speed_contradicted``). During the first
+:data:`PROBATION_S` of a standing speed, before the energy is judged, the model keeps the
+last trusted speed too (not counted): a drop-out's first samples then never reach the
+model's noise and roughness statistics with a standing speed; at a real stop the last
+trusted speed is the one just above :data:`STANDING_MPS`.
 
 :class:`SpeedCheck` runs one sample at a time (the per-sample estimator), :func:`check_arrays`
 over arrays (the offline smoother) with the same numbers.
