@@ -63,6 +63,8 @@ class Scenario:
     event : None or (kind, side, start_m, length_m, height_m) for ``road.add_event``.
     lateral_step_mps2, lateral_step_s : a_y step (m/s^2, + = left) at that time (s).
     skip_s : convergence skip before scoring (s).
+    speed_dropout : None or (start_s, length_s): the recorded speed reads 0 there while the
+        truck drives on (a CAN speed drop-out; the truth and the deflections are the drive's).
     """
 
     name: str
@@ -78,6 +80,7 @@ class Scenario:
     lateral_step_mps2: float = 0.0
     lateral_step_s: float = 10.0
     skip_s: float = 2.0
+    speed_dropout: tuple | None = None
     description: str = ''
 
     @property
@@ -111,6 +114,9 @@ def _scenarios() -> tuple[Scenario, ...]:
                 description='a_y step of 3 m/s^2 to the left at 10 s'),
         replace(base, name='profile_1', road='profile_1', duration_s=28.0,
                 description='measured track (profile_1.txt, both wheels), detrended'),
+        # (appended: the noise seeds of the scenarios above stay)
+        replace(base, name='C20-speed-dropout', duration_s=30.0, speed_dropout=(10.0, 10.0),
+                description='recorded speed 0 for 10 s (10-20 s) while the truck drives on'),
     ]
     return tuple(replace(s, noise_seed=1 + i) for i, s in enumerate(out))
 
@@ -237,9 +243,13 @@ def build_drive(scenario: Scenario, *, noise_deflection_m: float | None = None,
         'q_m': q_true,
         'roll_rad': roll_true,
     }
+    speed = np.full(n, scenario.speed_mps)
+    if scenario.speed_dropout is not None:
+        start, length = scenario.speed_dropout
+        speed[(t_s >= start) & (t_s < start + length)] = 0.0
     return Drive(replace(scenario, noise_deflection_m=noise), t_s,
                  np.asarray(q_meas, dtype=float), np.asarray(roll_meas, dtype=float),
-                 np.full(n, scenario.speed_mps), plant_vehicle,
+                 speed, plant_vehicle,
                  observer_vehicle(plant_vehicle, scenario.param_error), truth)
 
 

@@ -2,8 +2,17 @@
 
 A sample is rejected when a value or the stamp (integer nanoseconds) is non-finite or
 malformed (``rejected_nonfinite``), when a value is impossible (``|q| > 1 m``,
-``|phi| > pi/2``, ``|v| > 100 m/s``: ``rejected_range``) or when its stamp is not later than
-the last accepted one (``rejected_time``). A step longer than ``max(gap_threshold_s,``
+``|phi| > pi/2``: ``rejected_range``), when the speed is negative or above 100 m/s
+(``rejected_speed``), when the deflections and roll repeat exactly, for the
+:data:`FROZEN_REPEATS` th time in a row or more, those of a sample that was moving while the
+speed now reads standing (below :data:`~.speed_check.STANDING_MPS`): a CAN drop-out holding
+the last values (``rejected_stale``; a truck that stands still from the start keeps its
+estimate), or when its stamp is not later than the last accepted one
+(``rejected_time``). A stamp more than :data:`MAX_STAMP_JUMP_S` (and a gap) ahead of the last
+accepted one is held back (counted in ``rejected_time``): the next sample decides. Earlier
+than the held stamp (a lone corrupt header, e.g. a year ahead), it is judged against the
+stream as if the outlier had never come; later (the stream really jumped), it starts a new
+run there (a gap), and the held sample stays lost. A step longer than ``max(gap_threshold_s,``
 :data:`GAP_PERIODS` ``typical steps)`` is a gap (the estimate restarts there; ``gaps``,
 ``resets``); the typical step is the running average ``dt_typ += 0.05 (dt - dt_typ)`` of the
 accepted steps, restarted (the next step taken as it is) at every restart.
@@ -18,9 +27,12 @@ import math
 
 import numpy as np
 
+from road_force_estimator.estimation.speed_check import STANDING_MPS
+
 __all__ = [
     'GAP_THRESHOLD_S', 'GAP_PERIODS', 'MAX_DEFLECTION_M', 'MAX_ROLL_RAD', 'MAX_SPEED_MPS',
-    'TYPICAL_STEP_WEIGHT', 'check_gap_threshold', 'batch_inputs', 'SampleGate',
+    'MAX_STAMP_JUMP_S', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold',
+    'batch_inputs', 'SampleGate',
     'accept_arrays', 'gap_samples', 'output_stamps',
 ]
 
@@ -34,6 +46,12 @@ TYPICAL_STEP_WEIGHT = 0.05
 MAX_DEFLECTION_M = 1.0
 MAX_ROLL_RAD = 0.5 * math.pi
 MAX_SPEED_MPS = 100.0
+#: A forward stamp step longer than this (s) is held until the next sample confirms it.
+MAX_STAMP_JUMP_S = 60.0
+_MAX_JUMP_NS = int(MAX_STAMP_JUMP_S * 1e9)
+#: Exact repeats of (q_1, q_2, phi) in a row from which samples are stale (a real sensor
+#: has noise).
+FROZEN_REPEATS = 10
 
 
 def check_gap_threshold(gap_threshold_s) -> float:
@@ -75,6 +93,10 @@ class SampleGate:
         self.started = False
         self.stamp = 0
         self.dt_typ = 0.0
+        self.held = None        # stamp (ns) of a far jump not confirmed yet
+        self._values = None     # (q1, q2, phi) of the last sample with good values
+        self._moving = False    # whether the sample that first had them was moving
+        self._repeats = 0
 
     def check_pair(self, q_m):
         """``(q1, q2)`` of a deflection pair, or None (counted as malformed) if it is none."""
@@ -103,13 +125,19 @@ class SampleGate:
         # One chain of comparisons passes every good sample (NaN compares false).
         if not (-MAX_DEFLECTION_M <= q1 <= MAX_DEFLECTION_M
                 and -MAX_DEFLECTION_M <= q2 <= MAX_DEFLECTION_M
-                and -MAX_ROLL_RAD <= phi <= MAX_ROLL_RAD and -MAX_SPEED_MPS <= v <= MAX_SPEED_MPS):
-            if (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(phi)
-                    and math.isfinite(v)):
-                st.rejected_range += 1
-            else:
-                st.rejected_nonfinite += 1
+                and -MAX_ROLL_RAD <= phi <= MAX_ROLL_RAD and 0.0 <= v <= MAX_SPEED_MPS):
+            self._count_bad(q1, q2, phi, v)
             return None
+        values = (q1, q2, phi)
+        if values == self._values:
+            self._repeats += 1
+            if self._repeats >= FROZEN_REPEATS and self._moving and v < STANDING_MPS:
+                st.rejected_stale += 1
+                return None
+        else:
+            self._values = values
+            self._moving = v >= STANDING_MPS
+            self._repeats = 0
         if not self.started:
             return stamp, q1, q2, phi, v, 0.0, True, 0.0
         dt_ns = stamp - self.stamp
@@ -118,12 +146,39 @@ class SampleGate:
             return None
         dt = dt_ns * 1e-9
         if dt > self.gap_threshold_s and dt > GAP_PERIODS * self.dt_typ:
+            if not self._jump_confirmed(stamp, dt_ns):
+                st.rejected_time += 1
+                return None
             st.gaps += 1
             st.resets += 1
             return stamp, q1, q2, phi, v, dt, True, 0.0
+        self.held = None
         typ = self.dt_typ
         return (stamp, q1, q2, phi, v, dt, False,
                 dt if typ == 0.0 else typ + TYPICAL_STEP_WEIGHT * (dt - typ))
+
+    def _count_bad(self, q1: float, q2: float, phi: float, v: float) -> None:
+        """Count a sample with a value out of its range: speed, range or non-finite."""
+        st = self.status
+        if not (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(phi)
+                and math.isfinite(v)):
+            st.rejected_nonfinite += 1
+        elif (abs(q1) <= MAX_DEFLECTION_M and abs(q2) <= MAX_DEFLECTION_M
+              and abs(phi) <= MAX_ROLL_RAD):
+            st.rejected_speed += 1
+        else:
+            st.rejected_range += 1
+
+    def _jump_confirmed(self, stamp: int, dt_ns: int) -> bool:
+        """Whether a gap of dt_ns (ns) to ``stamp`` starts a new run now: short gaps at once,
+        a far jump only when it continues from the held far stamp (else this one is held)."""
+        held, self.held = self.held, None
+        if dt_ns <= _MAX_JUMP_NS:
+            return True
+        if held is not None and 0 < stamp - held <= _MAX_JUMP_NS:
+            return True
+        self.held = stamp
+        return False
 
     def commit(self, stamp: int, dt_typ: float) -> None:
         """Record an accepted sample and the typical step after it."""
@@ -151,11 +206,13 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
     stamp_int : ndarray of int64 (n,)
         The accepted stamps (0 where rejected).
     counts : dict
-        ``rejected_nonfinite``, ``rejected_range``, ``rejected_time``, ``gaps``, ``resets``.
+        ``rejected_nonfinite``, ``rejected_range``, ``rejected_speed``, ``rejected_stale``,
+        ``rejected_time``, ``gaps``, ``resets``.
     """
     st = np.asarray(stamps)
     n = st.shape[0]
-    cnt = dict(rejected_nonfinite=0, rejected_range=0, rejected_time=0, gaps=0, resets=0)
+    cnt = dict(rejected_nonfinite=0, rejected_range=0, rejected_speed=0, rejected_stale=0,
+               rejected_time=0, gaps=0, resets=0)
     if np.issubdtype(st.dtype, np.integer):
         stamp_ok = np.ones(n, bool)
         stamp_int = st.astype(np.int64)
@@ -166,13 +223,19 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
             np.int64)
     cnt['rejected_nonfinite'] += int(np.count_nonzero(~stamp_ok))
     a, b = q[:, 0], q[:, 1]
-    in_range = ((np.abs(a) <= MAX_DEFLECTION_M) & (np.abs(b) <= MAX_DEFLECTION_M)
-                & (np.abs(phi) <= MAX_ROLL_RAD) & (np.abs(v) <= MAX_SPEED_MPS))
+    values_ok = ((np.abs(a) <= MAX_DEFLECTION_M) & (np.abs(b) <= MAX_DEFLECTION_M)
+                 & (np.abs(phi) <= MAX_ROLL_RAD))
+    speed_ok = (v >= 0.0) & (v <= MAX_SPEED_MPS)
+    in_range = values_ok & speed_ok
     out = stamp_ok & ~in_range
     finite = np.isfinite(a) & np.isfinite(b) & np.isfinite(phi) & np.isfinite(v)
-    cnt['rejected_range'] += int(np.count_nonzero(out & finite))
+    cnt['rejected_speed'] += int(np.count_nonzero(out & finite & values_ok))
+    cnt['rejected_range'] += int(np.count_nonzero(out & finite & ~values_ok))
     cnt['rejected_nonfinite'] += int(np.count_nonzero(out & ~finite))
     cand = stamp_ok & in_range
+    stale = _stale(q, phi, v, cand)
+    cnt['rejected_stale'] = int(np.count_nonzero(stale))
+    cand &= ~stale
     # accepted: later than every earlier candidate (the time-rejected ones are never later
     # than the last accepted stamp, so they do not change the running maximum)
     low = np.iinfo(np.int64).min
@@ -182,10 +245,15 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
         before[0] = low
         before[1:] = run_max[:-1]
     valid = cand & (stamp_int > before)
+    acc = np.flatnonzero(valid)
+    if acc.size > 1 and int(np.max(np.diff(stamp_int[acc]))) > _MAX_JUMP_NS:
+        # a far jump: held until the next sample decides, one sample at a time
+        valid, restart, gate = _gate_over(stamp_int, q, phi, v, cand, gap_threshold_s)
+        cnt.update(rejected_time=gate.rejected_time, gaps=gate.gaps, resets=gate.resets)
+        return valid, restart, np.where(valid, stamp_int, 0), cnt
     cnt['rejected_time'] = int(np.count_nonzero(cand & ~valid))
     stamp_int = np.where(valid, stamp_int, 0)
     restart = np.zeros(n, bool)
-    acc = np.flatnonzero(valid)
     if acc.size:
         restart[acc[0]] = True
         dts = np.diff(stamp_int[acc]) * 1e-9                   # dts[i]: acc[i] -> acc[i + 1]
@@ -193,6 +261,51 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
         restart[acc[gaps + 1]] = True
         cnt['gaps'] = cnt['resets'] = int(gaps.size)
     return valid, restart, stamp_int, cnt
+
+
+def _stale(q, phi, v, cand) -> np.ndarray:
+    """(n,) bool: the candidates that repeat the values of a moving candidate for the
+    :data:`FROZEN_REPEATS` th time in a row or more while the speed reads standing."""
+    n = cand.size
+    out = np.zeros(n, bool)
+    idx = np.flatnonzero(cand)
+    if idx.size <= FROZEN_REPEATS:
+        return out
+    vals = np.column_stack([q[idx], phi[idx]])
+    same = np.zeros(idx.size, bool)
+    same[1:] = (vals[1:] == vals[:-1]).all(axis=1)
+    if not same.any():
+        return out
+    k = np.arange(idx.size)
+    last_new = np.maximum.accumulate(np.where(same, 0, k))
+    vi = v[idx]
+    out[idx[((k - last_new) >= FROZEN_REPEATS) & (vi[last_new] >= STANDING_MPS)
+            & (vi < STANDING_MPS)]] = True
+    return out
+
+
+class _Counts:
+    """The time counters of a :class:`SampleGate` run by :func:`_gate_over`."""
+
+    rejected_time = gaps = resets = 0
+    rejected_nonfinite = rejected_range = rejected_speed = rejected_stale = 0
+
+
+def _gate_over(stamp_int, q, phi, v, cand, gap_threshold_s: float):
+    """The time rules of :class:`SampleGate` over the candidates ``cand`` (values good),
+    sample by sample: ``(valid, restart, counts)``."""
+    n = stamp_int.shape[0]
+    counts = _Counts()
+    gate = SampleGate(gap_threshold_s, counts)
+    valid = np.zeros(n, bool)
+    restart = np.zeros(n, bool)
+    for i in np.flatnonzero(cand).tolist():
+        sample = gate.check(int(stamp_int[i]), q[i, 0], q[i, 1], phi[i], v[i])
+        if sample is not None:
+            valid[i] = True
+            restart[i] = sample[6]
+            gate.commit(sample[0], sample[7])
+    return valid, restart, counts
 
 
 def gap_samples(dts: np.ndarray, threshold_s: float, periods: float = GAP_PERIODS) -> np.ndarray:

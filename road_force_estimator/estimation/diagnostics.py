@@ -60,9 +60,12 @@ def status(name: str, hardware_id: str, message: str, values: Mapping[str, Any],
                   tuple((str(k), text(v)) for k, v in values.items()))
 
 
-def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0) -> str:
-    """The estimator status' words: 'converging', 'N lift-off samples', 'N restarts' or 'ok'
-    (in that order of precedence)."""
+def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
+                      speed_contradicted: int = 0) -> str:
+    """The estimator status' words: 'speed contradicted by the deflections (N samples)',
+    'converging', 'N lift-off samples', 'N restarts' or 'ok' (in that order of precedence)."""
+    if speed_contradicted:
+        return f'speed contradicted by the deflections ({speed_contradicted} samples)'
     if not converged:
         return 'converging'
     if lift_off_samples:
@@ -73,16 +76,19 @@ def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0)
 
 
 def estimator_status(name: str, hardware_id: str, values: Mapping[str, Any], *,
-                     converged: bool, lift_off_samples: int, restarts: int = 0) -> Status:
-    """The estimator's status (convergence, lift-offs, restarts) with ``values``."""
-    return status(name, hardware_id,
-                  estimator_message(converged, lift_off_samples, restarts), values)
+                     converged: bool, lift_off_samples: int, restarts: int = 0,
+                     speed_contradicted: int = 0) -> Status:
+    """The estimator's status (speed contradicted, convergence, lift-offs, restarts) with
+    ``values``; WARN unless 'ok'."""
+    return status(name, hardware_id, estimator_message(converged, lift_off_samples, restarts,
+                                                       speed_contradicted), values)
 
 
 def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.ndarray,
                       lift_off: np.ndarray, ltr: np.ndarray, residual_nm: np.ndarray,
-                      totals: Mapping[str, Any], name: str,
-                      hardware_id: str) -> list[tuple[int, list[Status]]]:
+                      totals: Mapping[str, Any], name: str, hardware_id: str,
+                      speed_contradicted: np.ndarray | None = None
+                      ) -> list[tuple[int, list[Status]]]:
     """The estimator status per second of data time over a batch of estimates.
 
     Parameters
@@ -97,6 +103,9 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
         Whole-drive counts, reported as ``total.<key>`` on the last status.
     name, hardware_id : str
         The status' name and hardware id.
+    speed_contradicted : (n,) bool array, optional
+        Samples whose standing speed the deflections contradicted: a window with some
+        reports ``speed_contradicted_samples`` and WARNs.
 
     Returns
     -------
@@ -116,15 +125,20 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
     abs_res = np.abs(np.asarray(residual_nm)[rows])
     lifted = np.asarray(lift_off)[rows].any(axis=1)
     conv = np.asarray(converged)[rows]
+    contra = (np.zeros(rows.size, bool) if speed_contradicted is None
+              else np.asarray(speed_contradicted, bool)[rows])
     out = []
     for j, (a, b) in enumerate(bounds):
         values = _window_values(b - a, bool(conv[b - 1]), lifted[a:b], abs_ltr[a:b],
                                 abs_res[a:b])
+        bad_speed = int(np.count_nonzero(contra[a:b]))
+        if bad_speed:
+            values['speed_contradicted_samples'] = bad_speed
         if j == len(bounds) - 1:
             values.update({f'total.{k}': v for k, v in totals.items()})
         out.append((int(stamps[b - 1]), [estimator_status(
             name, hardware_id, values, converged=values['converged'],
-            lift_off_samples=values['lift_off_samples'])]))
+            lift_off_samples=values['lift_off_samples'], speed_contradicted=bad_speed)]))
     return out
 
 

@@ -35,7 +35,8 @@ Robustness (counted in :class:`EstimatorStatus`; nothing non-finite ever leaves)
   a gap (``gap_threshold_s`` defaults to :data:`GAP_THRESHOLD_S` = 0.1 s, i.e. 100 samples
   at 1 kHz; streams slower than ~20 Hz need a larger one): the estimate restarts at that
   sample (``resets``, ``gaps``) and reconverges; a non-finite intermediate (never seen,
-  guarded anyway) also restarts it (``resets``, ``numerical_resets``);
+  guarded anyway) also restarts it (``resets``, ``numerical_resets``), and so does a step
+  the model's design cannot handle (no stable filter at that dt: ``resets``, ``gaps``);
 - ``converged`` turns true once the time since the last (re)start reaches
   ``settling_time_s`` (chain: :func:`.chain.settling_time_s`); it is about the loads and LTR:
   the profile's body-heave high-pass needs a few ``lambda_c / v`` more.
@@ -51,6 +52,7 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, SampleGate, batch_inputs, check_gap_threshold, output_stamps)
 from road_force_estimator.estimation.cores import CORES
+from road_force_estimator.estimation.speed_check import SpeedCheck
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, Column, Estimate, EstimateArrays, EstimatorStatus, arrays_from_table,
     estimate_from_row, hold_rejected)
@@ -109,6 +111,7 @@ class Estimator:
         self._dt = 0.0
         self._t_run = 0.0
         self._flushed = False
+        self._speed = SpeedCheck()
         self.core.reset()
 
     @property
@@ -124,6 +127,7 @@ class Estimator:
         st.last_stamp_ns = gate.stamp if gate.started else None
         st.last_dt_s = self._dt
         st.typical_dt_s = gate.dt_typ
+        st.speed_contradicted = self._speed.contradicted
         row = core.last_row
         if row is not None:
             st.last_residual_nm = row[Column.RESIDUAL]
@@ -162,6 +166,8 @@ class Estimator:
         if not self._ready:
             return None
         stamp, row = self._ready.popleft()
+        if row[Column.FN1] <= 0.0 or row[Column.FN2] <= 0.0:
+            self._status.negative_load_samples += 1
         est = estimate_from_row(stamp, row)
         self.last = est
         return est
@@ -176,6 +182,8 @@ class Estimator:
         """
         self._finish()
         out = [estimate_from_row(stamp, row) for stamp, row in self._ready]
+        self._status.negative_load_samples += sum(
+            est.wheel_load_n[0] <= 0.0 or est.wheel_load_n[1] <= 0.0 for est in out)
         self._ready.clear()
         if out:
             self.last = out[-1]
@@ -197,26 +205,34 @@ class Estimator:
         if sample is None:
             return False
         stamp, q1, q2, phi, v, dt, restart, dt_typ = sample
+        if restart or self._flushed:
+            vm = self._speed.restart(q1, q2, v)
+        else:
+            vm = self._speed.step(dt, q1, q2, v)   # the model's speed (v unless contradicted)
         if restart:
-            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
+            return self._advance(stamp, q1, q2, phi, v, vm, dt, True, 0.0)
         if self._flushed:
             self._flushed = False
             self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
-        if not self._advance(stamp, q1, q2, phi, v, dt, False, dt_typ):
+            return self._advance(stamp, q1, q2, phi, v, vm, dt, True, 0.0)
+        try:
+            if self._advance(stamp, q1, q2, phi, v, vm, dt, False, dt_typ):
+                return True
             self._status.numerical_resets += 1
-            self._status.resets += 1
-            return self._advance(stamp, q1, q2, phi, v, dt, True, 0.0)
-        return True
+        except ValueError:    # a step the model design cannot handle: a gap
+            self._status.gaps += 1
+        self._status.resets += 1
+        return self._advance(stamp, q1, q2, phi, v, vm, dt, True, 0.0)
 
-    def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
-                 restart: bool, dt_typ: float) -> bool:
+    def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, vm: float,
+                 dt: float, restart: bool, dt_typ: float) -> bool:
         """One step of the core (or a (re)start); False (state untouched) if non-finite.
+        ``v`` the recorded speed (the distance), ``vm`` the model's (:mod:`.speed_check`);
         ``dt_typ``: the typical step (s) once this sample is used."""
         gate = self._gate
         x = self._x + 0.5 * (self._v + v) * dt if gate.started else 0.0
         t_run = 0.0 if restart else self._t_run + dt
-        if not self.core.step(stamp, q1, q2, phi, v, dt, restart, x, t_run, dt_typ):
+        if not self.core.step(stamp, q1, q2, phi, vm, dt, restart, x, t_run, dt_typ):
             return False
         gate.commit(stamp, dt_typ)
         self._x = x
@@ -265,12 +281,17 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
     take = rows.append
     valid_list = []
     flag = valid_list.append
+    check = est._speed
+    contradicted = []
+    mark = contradicted.append
     stamp_list = stamps.tolist()
     columns = (stamp_list, q.tolist(), phi.tolist(), speed.tolist())
     block = PROGRESS_BLOCK if progress is not None else max(n, 1)
     for start in range(0, n, block):
         for t, (a, b), p, v in zip(*(c[start:start + block] for c in columns)):
+            before = check.contradicted
             flag(process(t, a, b, p, v))
+            mark(check.contradicted != before)
             while ready:
                 take(ready.popleft()[1])
         if progress is not None:
@@ -288,4 +309,7 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
         # rejected rows hold the previous row (zeros before the first accepted sample)
         held, src = hold_rejected(valid)
         table[held] = table[src]
-    return arrays_from_table(table, output_stamps(stamps), valid, est.status)
+    out = arrays_from_table(table, output_stamps(stamps), valid, est.status,
+                            np.array(contradicted, dtype=bool))
+    out.status.negative_load_samples = out.negative_load_samples()
+    return out

@@ -437,8 +437,10 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         for arr in fields.values():
             arr[held] = arr[src]
     _fill_status(status, fields, stamp_i, acc, starts, runs, edge)
-    return OfflineEstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
-                                 noise_std=noise, cutoff_hz=cut, runs=runs, **fields)
+    out = OfflineEstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                                noise_std=noise, cutoff_hz=cut, runs=runs, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
 
 
 def _fill_status(status: EstimatorStatus, fields: dict, stamp_i, acc, starts, runs,

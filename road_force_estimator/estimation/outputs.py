@@ -110,7 +110,7 @@ class Estimate(NamedTuple):
     wheel_accel_mps2: tuple[float, float]       #: dd z_ui (m/s^2)
     road_m: tuple[float, float]                 #: u_i, band-limited profile (m)
     tire_force_dynamic_n: tuple[float, float]   #: dF_i (N), upward on the wheel
-    wheel_load_n: tuple[float, float]           #: F_n,i = F_c,i + dF_i (N)
+    wheel_load_n: tuple[float, float]           #: F_n,i = max(0, F_c,i + dF_i) (N)
     ltr: float                                  #: (F_n2 - F_n1) / (F_n1 + F_n2)
     residual_nm: float                          #: I_x ddphi - s cos(phi)(F_b1 - F_b2) (N m)
     lift_off: tuple[bool, bool]                 #: F_n,i <= LIFT_OFF_FRACTION F_c,i
@@ -124,6 +124,8 @@ class EstimatorStatus:
     accepted: int = 0               #: samples used (including the (re)starts)
     rejected_nonfinite: int = 0     #: NaN/inf or malformed value or stamp
     rejected_range: int = 0         #: physically impossible value
+    rejected_speed: int = 0         #: speed negative or above MAX_SPEED_MPS
+    rejected_stale: int = 0         #: values frozen (repeated exactly FROZEN_REPEATS times)
     rejected_time: int = 0          #: duplicate or backwards stamp
     resets: int = 0                 #: restarts after the first sample (gaps + numerical)
     gaps: int = 0                   #: steps longer than the gap threshold
@@ -136,6 +138,8 @@ class EstimatorStatus:
     typical_dt_s: float = 0.0       #: running average of the accepted steps (s)
     last_residual_nm: float = 0.0
     lift_off: tuple[bool, bool] = (False, False)
+    negative_load_samples: int = 0  #: estimates with F_c,i + dF_i < 0 (published as 0 N)
+    speed_contradicted: int = 0     #: samples whose standing speed the deflections contradict
     method: str = 'model'           #: 'model' or 'chain'
     latency_samples: int = 0        #: lag N of the published estimates (samples)
     pending: int = 0                #: accepted samples whose estimate is not out yet
@@ -148,7 +152,8 @@ class EstimatorStatus:
     @property
     def rejected(self) -> int:
         """All rejected samples."""
-        return self.rejected_nonfinite + self.rejected_range + self.rejected_time
+        return (self.rejected_nonfinite + self.rejected_range + self.rejected_speed
+                + self.rejected_stale + self.rejected_time)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -185,9 +190,25 @@ class EstimateArrays:
     lift_off: np.ndarray
     converged: np.ndarray
     status: EstimatorStatus = field(default_factory=EstimatorStatus)
+    #: (n,) bool: samples whose standing speed the deflections contradicted (:mod:`.speed_check`)
+    speed_contradicted: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.speed_contradicted is None:
+            self.speed_contradicted = np.zeros(len(self.stamp_ns), bool)
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
+
+    @property
+    def load_clipped(self) -> np.ndarray:
+        """(n, 2) bool: the accepted samples whose load estimate ``F_c,i + dF_i`` went below
+        zero (a lift-off; ``wheel_load_n`` holds 0 N there)."""
+        return (self.wheel_load_n <= 0.0) & self.valid[:, None]
+
+    def negative_load_samples(self) -> int:
+        """Accepted samples with a load estimate below zero on either wheel."""
+        return int(np.count_nonzero(self.load_clipped.any(axis=1)))
 
     @property
     def t_s(self) -> np.ndarray:
@@ -227,7 +248,8 @@ def field_columns(n: int) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
 
 
 def arrays_from_table(table: np.ndarray, stamp_ns: np.ndarray, valid: np.ndarray,
-                      status: EstimatorStatus) -> EstimateArrays:
+                      status: EstimatorStatus,
+                      speed_contradicted: np.ndarray | None = None) -> EstimateArrays:
     """:class:`EstimateArrays` from rows of output rows (table (n, :data:`N_COLUMNS`))."""
     out = {}
     for name, idx in FIELD_COLUMNS.items():
@@ -235,7 +257,8 @@ def arrays_from_table(table: np.ndarray, stamp_ns: np.ndarray, valid: np.ndarray
         if name in FLAG_FIELDS:
             arr = arr != 0.0
         out[name] = np.ascontiguousarray(arr)
-    return EstimateArrays(stamp_ns=stamp_ns, valid=valid, status=status, **out)
+    return EstimateArrays(stamp_ns=stamp_ns, valid=valid, status=status,
+                          speed_contradicted=speed_contradicted, **out)
 
 
 def hold_rejected(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

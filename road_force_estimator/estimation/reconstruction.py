@@ -12,10 +12,11 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
    dF_i``: ``dF_i / kt_i`` through the first-order lag ``ct_i / kt_i`` (:func:`tire_decay`,
    :func:`tire_deflections`; the model observer has ``w_i`` as a state).
 7. Distance ``x = integral of v dt`` (trapezoidal, :func:`distance_m`), continued across gaps.
-8. ``F_n,i = F_c,i + dF_i`` (not clipped at 0, so that the total-load identity holds on the
-   estimates); ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left) of the loads
-   clipped at zero (a tire cannot pull), so ``|LTR| <= 1``; the denominator floored at
-   :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`).
+8. ``F_n,i = max(0, F_c,i + dF_i)``: a tire cannot pull, so an estimate below zero (a
+   lift-off; ``dF_i`` keeps the unclipped value, and :attr:`.EstimateArrays.load_clipped`
+   / ``negative_load_samples`` count them) is published as 0; ``LTR = (F_n2 - F_n1) /
+   (F_n1 + F_n2)`` (right minus left) of those loads, so ``|LTR| <= 1``; the denominator
+   floored at :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`).
 9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2)`` (N m); it equals
    ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when
    ``F_n,i <=`` :data:`LIFT_OFF_FRACTION` ``F_c,i``.
@@ -103,6 +104,10 @@ class Reconstruction:
         zu2 = zs - ssin - q2
         fn1 = fc1 + df1
         fn2 = fc2 + df2
+        if fn1 < 0.0:
+            fn1 = 0.0
+        if fn2 < 0.0:
+            fn2 = 0.0
         return (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
                 dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
                 fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
@@ -122,8 +127,8 @@ class Reconstruction:
         cph = np.cos(phi)
         ssin = s * np.sin(phi)
         srate = s * cph * dphi
-        fn1 = fc1 + df1
-        fn2 = fc2 + df2
+        fn1 = np.maximum(fc1 + df1, 0.0)
+        fn2 = np.maximum(fc2 + df2, 0.0)
         if heave is None:   # (the operations in the order the smoother's numbers were made)
             zu1, zu2 = ssin - q1, -ssin - q2
             dzu1, dzu2 = srate - dq1, -srate - dq2

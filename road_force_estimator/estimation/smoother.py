@@ -22,8 +22,9 @@ from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
 from road_force_estimator.estimation.schedule import GainSchedule
+from road_force_estimator.estimation.speed_check import check_arrays
 
-__all__ = ['smooth', 'lti', 'LTI_BLOCK']
+__all__ = ['smooth', 'lti', 'grid_steps', 'LTI_BLOCK']
 
 #: Block length of the blocked linear recursion of the offline smoother (:func:`lti`).
 LTI_BLOCK = 128
@@ -103,6 +104,16 @@ def lti(f: np.ndarray | _Powers, drive: np.ndarray, x_init: np.ndarray) -> np.nd
     return out
 
 
+def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0) -> np.ndarray | None:
+    """The steps ``dts`` (s) as whole numbers of grid steps dt (s), when each is one to
+    within 1e-3 dt and the grid has at most ``max_fill`` times as many points; else None."""
+    k = np.rint(dts / dt)
+    if (k.size == 0 or np.min(k) < 1.0 or np.max(np.abs(dts - k * dt)) > 1e-3 * dt
+            or np.sum(k) > max_fill * k.size):
+        return None
+    return k.astype(np.int64)
+
+
 def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
            observer: ObserverParameters | None = None, *,
            gap_threshold_s: float = GAP_THRESHOLD_S) -> EstimateArrays:
@@ -146,18 +157,25 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     v_all = speed[acc]
     # distance over all accepted samples, continued across gaps
     dist = distance_m(np.diff(t_all), v_all)
+    # the model's speed: the recorded one unless the deflections contradict it
+    steps = np.zeros(acc.size)
+    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
+    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
         rows = ([col[idx[0]:idx[-1] + 1] for col in columns] if whole
                 else field_columns(idx.size)[1])
         rows[Column.DISTANCE][:] = dist[r0:r1]
-        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_all[r0:r1], rows)
+        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_model[r0:r1], rows)
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
     status = EstimatorStatus(**cnt)
     status.accepted = int(acc.size)
+    status.speed_contradicted = int(np.count_nonzero(contradicted))
+    flags = np.zeros(n, bool)
+    flags[acc] = contradicted
     if acc.size:
         if acc.size < n:                            # rejected rows hold the previous row
             held, src = hold_rejected(valid)
@@ -169,7 +187,10 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
         status.converged = bool(fields['converged'][last])
     smoother.fill_status(status)
-    return EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status, **fields)
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                         speed_contradicted=flags, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
 
 
 class _Smoother:
@@ -219,11 +240,33 @@ class _Smoother:
                 sched.statistics(y, dts.tolist())
             g = sched.design(dt, 0)
             uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
+            steps = None if uniform else grid_steps(dts, dt)
             if uniform:
                 self._uniform(g, dt, y, x0, out)
+            elif steps is not None:
+                self._bridged(g, dt, speed, t, steps, y, x0, out)
+                return
             else:
                 self._uneven(g, dts, y, x0, out)
         self._heave(t, dt, speed, out)
+
+    def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
+                 y: np.ndarray, x0: np.ndarray, out: list) -> None:
+        """A run on a grid of dt (s) with samples missing (rejected, or lost): the run is
+        completed on the grid (the measurements of the missing points interpolated linearly
+        between their neighbours), smoothed as an evenly sampled run (:meth:`_uniform`, the
+        body heave over the whole grid), and the rows of the samples present written to
+        ``out``. ``steps``: grid steps between the samples (>= 1)."""
+        pos = np.concatenate([[0], np.cumsum(steps)])
+        m = int(pos[-1]) + 1
+        grid = np.arange(m)
+        yg = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
+        cols = field_columns(m)[1]
+        self._uniform(g, dt, yg, x0, cols)
+        self._heave(t[0] + dt * grid, dt, speed, cols)
+        for j, col in enumerate(cols):
+            if j != Column.DISTANCE:
+                out[j][:] = col[pos]
 
     def _uneven(self, g: Gains, dts: np.ndarray, y: np.ndarray, x0: np.ndarray,
                 out: list) -> None:

@@ -149,6 +149,18 @@ def _param_text(v) -> str:
     return f'{v:.6g}' if isinstance(v, float) else str(v)
 
 
+def _finding_rows(s: dict[str, Any]) -> list[tuple[str, Any]]:
+    """Rows of what went wrong with the input, when it did (the negative loads have their
+    own row)."""
+    rows: list[tuple[str, Any]] = []
+    sc = s.get('speed_contradicted')
+    if sc:
+        spans = ', '.join(f'{a:.3f}-{b:.3f}' for a, b in sc['spans_s'])
+        rows.append(('WARNING: speed reads standing while the deflections show motion '
+                     '(samples; spans, s)', f'{sc["samples"]}; {spans}'))
+    return rows
+
+
 def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
     """The rows of the summary table."""
     smp = s['samples']
@@ -167,6 +179,7 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
             ('samples with a wheel lifted off', s['lift_off_samples']),
             ('samples where a load estimate went below zero (plotted as 0)',
              s.get('negative_load_samples', 0)),
+            *_finding_rows(s),
             ('max abs LTR', _fmt(s['max_abs_ltr'], 3)),
             ('GNSS fixes', s['fixes']),
             (f'IRI of the whole drive, estimated profile, left / right ({u.iri_unit})',

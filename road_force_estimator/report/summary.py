@@ -295,6 +295,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(_notes(est, extra))
+    summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
     summary.update(_segment_counts(segments))
@@ -331,9 +332,10 @@ def _load_counts(est, al: Aligned) -> dict[str, Any]:
 
 
 def _negative_loads(est, al: Aligned) -> int:
-    """Accepted samples where a wheel's load estimate went below zero before any clip (the
-    estimates' ``load_below_zero`` (n, 2) when they carry it, else ``wheel_load_n < 0``)."""
-    below = getattr(est, 'load_below_zero', None)
+    """Accepted samples where a wheel's load estimate went below zero (the estimator publishes
+    0 N there: :attr:`EstimateArrays.load_clipped`; estimates without it: ``wheel_load_n <
+    0``)."""
+    below = getattr(est, 'load_clipped', None)
     if below is None:
         below = np.asarray(est.wheel_load_n, dtype=float) < 0.0
     below = np.asarray(below, dtype=bool).reshape(len(est.stamp_ns), -1)
@@ -352,6 +354,23 @@ def _convergence_summary(s: dict[str, Any]) -> dict[str, Any]:
             'settling_time_s': s['settling_time_s']}
 
 
+def _speed_findings(est) -> dict[str, Any]:
+    """``speed_contradicted``: samples and the spans (s from the first stamp) where the
+    deflections contradicted a standing speed, only when there are some."""
+    out: dict[str, Any] = {}
+    flags = getattr(est, 'speed_contradicted', None)
+    if flags is not None and np.any(flags):
+        t = (np.asarray(est.stamp_ns, dtype=np.int64) - int(est.stamp_ns[0])) * 1e-9
+        f = np.concatenate([[False], np.asarray(flags, bool), [False]]).astype(np.int8)
+        starts = np.flatnonzero(np.diff(f) == 1)
+        ends = np.flatnonzero(np.diff(f) == -1) - 1
+        out['speed_contradicted'] = {
+            'samples': int(np.count_nonzero(flags)),
+            'spans_s': [[round(float(t[a]), 3), round(float(t[b]), 3)]
+                        for a, b in zip(starts.tolist(), ends.tolist())]}
+    return out
+
+
 def _rejections(drive, st) -> dict[str, dict[str, int]]:
     """Rejected samples by topic and reason: the reader's (``drive.rejected``), then the
     estimator's (``'estimator'``), zero counts left out."""
@@ -359,6 +378,8 @@ def _rejections(drive, st) -> dict[str, dict[str, int]]:
     for topic, reasons in sorted((getattr(drive, 'rejected', None) or {}).items()):
         rejected[topic] = {r: int(c) for r, c in sorted(reasons.items()) if c}
     core = {'nonfinite': st.rejected_nonfinite, 'out_of_range': st.rejected_range,
+            'speed_out_of_range': getattr(st, 'rejected_speed', 0),
+            'frozen_values': getattr(st, 'rejected_stale', 0),
             'duplicate_or_backwards_stamp': st.rejected_time}
     core = {k: int(v) for k, v in core.items() if v}
     if core:

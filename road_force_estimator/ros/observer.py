@@ -41,6 +41,9 @@ SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
 # The core's counters, by the names the diagnostics give them.
 CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
+                 'rejected_speed': 'speed', 'rejected_stale': 'stale',
+                 'speed_contradicted': 'speed_contradicted',
+                 'negative_load_samples': 'negative_loads',
                  'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
 # Further EstimatorStatus fields reported as they are (those the core has).
 ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
@@ -225,7 +228,8 @@ class Observer(Node):
                      elapsed: float) -> diagnostics.Status:
         st = self.estimator.status
         rejected = Counter({k: v for k, v in period.items() if k not in FLOW_COUNTS})
-        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'time') if fresh[k]})
+        rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'speed', 'stale', 'time')
+                        if fresh[k]})
         received, missed = period['received'], period['missed']
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
                   'published': period['published'], 'missed': missed,
@@ -255,9 +259,14 @@ class Observer(Node):
                   'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
                   'lift_off_right': st.lift_off[1], **ex}
         values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
+        if fresh['speed_contradicted']:
+            values['speed_contradicted_samples'] = fresh['speed_contradicted']
+        if fresh['negative_loads']:
+            values['negative_load_samples'] = fresh['negative_loads']
         return diagnostics.estimator_status('observer: estimator', self.get_name(), values,
                                             converged=st.converged, lift_off_samples=lifts,
-                                            restarts=resets)
+                                            restarts=resets,
+                                            speed_contradicted=fresh['speed_contradicted'])
 
     def configuration_status(self) -> diagnostics.Status:
         values = {f'finding.{i}': f for i, f in enumerate(self.findings)}

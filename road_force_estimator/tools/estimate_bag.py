@@ -146,7 +146,8 @@ def _diagnostics(est, summary_counts: dict[str, int], mode: str):
 
     per_second = batch_diagnostics(est.stamp_ns, est.valid, est.converged, est.lift_off, est.ltr,
                                    est.residual_nm, summary_counts,
-                                   f'{PROG}: estimator ({mode})', PROG)
+                                   f'{PROG}: estimator ({mode})', PROG,
+                                   speed_contradicted=getattr(est, 'speed_contradicted', None))
     return [(stamp, [st.as_dict() for st in statuses]) for stamp, statuses in per_second]
 
 

@@ -49,7 +49,9 @@ class TestRobustness:
         assert est.update(1_000_000, (2.0, 0.0), 0.0, SPEED) is None
         assert est.update(2_000_000, (0.0, 0.0), 2.0, SPEED) is None
         assert est.update(3_000_000, (0.0, 0.0), 0.0, 1e3) is None
-        assert est.status.rejected_range == 3 and est.status.rejected == 3
+        assert est.update(4_000_000, (0.0, 0.0), 0.0, -1.0) is None
+        st = est.status
+        assert (st.rejected_range, st.rejected_speed, st.rejected) == (2, 2, 4)
 
     def test_duplicate_and_backward_stamps_are_rejected(self):
         est = Estimator(VEHICLE, ObserverParameters())

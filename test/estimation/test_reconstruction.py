@@ -63,7 +63,9 @@ def test_identities_of_the_row():
     rows = _rows(rec, mo, False)
     s = VEHICLE.half_track_m
     fc = np.array(VEHICLE.static_load_n)
-    np.testing.assert_array_equal(rows[:, [Column.FN1, Column.FN2]], fc + mo['df'])
+    # F_n = max(0, F_c + dF): a tire cannot pull (issue 18)
+    np.testing.assert_array_equal(rows[:, [Column.FN1, Column.FN2]],
+                                  np.maximum(fc + mo['df'], 0.0))
     zu1 = mo['zs'] + s * np.sin(mo['phi']) - mo['q'][:, 0]
     np.testing.assert_allclose(rows[:, Column.ZU1], zu1, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(rows[:, Column.U1] - rows[:, Column.ZU1], mo['w'][:, 0],
@@ -111,3 +113,25 @@ def test_tire_lag_per_sample_and_over_arrays():
         np.testing.assert_allclose(w[:, 0], ref, rtol=1e-9, atol=1e-15)
         np.testing.assert_array_equal(w[:, 1], df[:, 1] / kt[1])   # no damping: dF / kt
     assert tire_decay(1e-3, 1e6, 0.0) == 0.0
+
+
+def test_a_tire_cannot_pull():
+    """An estimate below zero is published as 0 N (the unclipped value stays in dF), per
+    sample and over arrays; the LTR of those samples is the rollover limit."""
+    rec = Reconstruction(VEHICLE)
+    fc1, fc2 = VEHICLE.static_load_n
+    zero = (0.0,) * 2
+    row = rec.row(0.0, *zero, *zero, *zero, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *zero, *zero,
+                  -fc1 - 4592.0, 1000.0, *zero, True)
+    assert row[Column.FN1] == 0.0 and row[Column.FN2] == fc2 + 1000.0
+    assert row[Column.DF1] == -fc1 - 4592.0 and row[Column.LTR] == 1.0
+    assert row[Column.LIFT_OFF1] and not row[Column.LIFT_OFF2]
+    df = np.array([[-fc1 - 4592.0, 1000.0], [-0.5 * fc1, -fc2 - 1.0], [0.0, 0.0]])
+    out = [np.zeros(3) for _ in range(len(Column))]
+    z3 = np.zeros(3)
+    pair = (z3, z3)
+    rec.columns(out, pair, pair, pair, z3, z3, z3, z3, pair, pair, (df[:, 0], df[:, 1]),
+                pair, (z3, z3))
+    np.testing.assert_array_equal(out[Column.FN1], [0.0, 0.5 * fc1, fc1])
+    np.testing.assert_array_equal(out[Column.FN2], [fc2 + 1000.0, 0.0, fc2])
+    np.testing.assert_array_equal(out[Column.LTR], [1.0, -1.0, (fc2 - fc1) / (fc1 + fc2)])

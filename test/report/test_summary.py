@@ -132,3 +132,28 @@ class TestWhatTheReportSays:
         assert s1['iri_m_per_km']['reference'] == 'enveloped'
         np.testing.assert_array_equal(seg1['true_iri_left_m_per_km'],
                                       seg2['true_iri_left_m_per_km'])
+
+
+class TestFindings:
+    def test_speed_contradicted_and_negative_loads_reported(self, tmp_path):
+        """The drive's contradicted-speed spans (s from the first stamp) and the count of
+        load estimates below zero, in the summary and as report lines (issues 16, 18)."""
+        from road_force_estimator.report.markdown import write_markdown
+
+        est, drive, _ = make_case()
+        est.speed_contradicted[2500:3000] = True        # 5.0 - 5.998 s at 500 Hz
+        est.speed_contradicted[5000:5010] = True
+        est.wheel_load_n[100:107, 0] = 0.0               # 7 samples clipped at 0 N
+        summary, seg, _ = report.summarize(est, drive, VEHICLE, mode='online')
+        assert summary['speed_contradicted'] == {'samples': 510,
+                                                 'spans_s': [[5.0, 5.998], [10.0, 10.018]]}
+        assert summary['negative_load_samples'] == 7
+        write_markdown(tmp_path / 'report.md', summary, seg, [])
+        text = (tmp_path / 'report.md').read_text()
+        assert '510; 5.000-5.998, 10.000-10.018' in text and 'WARNING: speed reads' in text
+        assert 'samples where a load estimate went below zero (plotted as 0) | 7' in text
+
+    def test_no_findings_no_lines(self):
+        est, drive, _ = make_case()
+        summary, _, _ = report.summarize(est, drive, VEHICLE, mode='online')
+        assert 'speed_contradicted' not in summary and summary['negative_load_samples'] == 0
