@@ -1,0 +1,262 @@
+"""Damaged and hostile bags (issue 16): the good data read, the fault named, never a
+traceback, a hang, a crash or unbounded memory.
+
+References: the ``mcap`` library's readers on the same bytes (``bag_crafting.mcap_recovers``),
+and the undamaged bag read by this package.
+"""
+import os
+from pathlib import Path
+import resource
+import subprocess
+import sys
+
+from mcap_walk import top_level_records
+import pytest
+
+from bag_crafting import (
+    SAMPLES,
+    chunk_record,
+    mcap_recovers,
+    rewrite_with_mcap,
+    small_drive,
+    with_extra_chunk,
+)
+from bag_samples import make_trajectory
+from road_force_estimator import bagio
+from road_force_estimator.bagio import BagReadError, mcap_scan
+from road_force_estimator.interfaces import DEFLECTIONS
+
+REPO = Path(__file__).resolve().parents[2]
+#: Address space of a subprocess that reads a hostile bag (numpy and the decoders fit).
+LIMIT_AS = 1536 << 20
+
+
+def run_python(code: str, *args, limit_as: int | None = LIMIT_AS, timeout: float = 120):
+    """``code`` run by a fresh interpreter (this tree and the test helpers on its path),
+    its address space capped: the CompletedProcess."""
+    path = [str(REPO), str(REPO / 'test'), str(REPO / 'test' / 'bagio'),
+            os.environ.get('PYTHONPATH', '')]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1',
+               PYTHONPATH=os.pathsep.join(path))
+
+    def cap():
+        if limit_as:
+            resource.setrlimit(resource.RLIMIT_AS, (limit_as, limit_as))
+    return subprocess.run([sys.executable, '-c', code, *map(str, args)], env=env,
+                          capture_output=True, text=True, timeout=timeout, preexec_fn=cap)
+
+
+def chunks_of(data: bytes) -> list[int]:
+    return [at for op, at, _ in top_level_records(data) if op == 0x06]
+
+
+@pytest.fixture(scope='module')
+def drives(tmp_path_factory):
+    """``{writer: (folder, mcap bytes)}``: a small drive by our writer and by the mcap
+    library (8 KiB chunks, schemas and channels inside them)."""
+    root = tmp_path_factory.mktemp('drives')
+    small_drive(root / 'ours')
+    rewrite_with_mcap(root / 'ours', root / 'mcap')
+    return {name: (root / name, next((root / name).glob('*.mcap')).read_bytes())
+            for name in ('ours', 'mcap')}
+
+
+def damaged(tmp_path, drives, writer, data):
+    """A copy of the drive folder of ``writer`` whose .mcap holds ``data``."""
+    folder, original = drives[writer]
+    out = tmp_path / writer
+    out.mkdir()
+    (out / 'metadata.yaml').write_bytes((folder / 'metadata.yaml').read_bytes())
+    (out / next(folder.glob('*.mcap')).name).write_bytes(data)
+    return out
+
+
+@pytest.mark.parametrize('byte, bit', [(8, 7), (1, 0), (4, 2)])
+def test_a_flipped_chunk_length_resumes_at_the_next_chunk(tmp_path, drives, byte, bit):
+    """Before: the read ended at the flipped length (up to 8,411 of 10,001 samples lost)."""
+    _, data = drives['mcap']
+    chunks = chunks_of(data)
+    assert len(chunks) >= 6
+    broken = bytearray(data)
+    broken[chunks[2] + byte] ^= 1 << bit
+    d = bagio.read_drive_bag(damaged(tmp_path, drives, 'mcap', bytes(broken)))
+    assert mcap_recovers(bytes(broken)) == SAMPLES
+    assert d.messages[DEFLECTIONS] == SAMPLES and d.stamps_ns.size == SAMPLES
+    assert any('chunk index' in line for line in d.issues), d.issues
+
+
+def test_a_flipped_chunk_length_in_our_bags(tmp_path):
+    trajectory, q, roll = make_trajectory(n=3000)
+    bagio.write_drive_bag(tmp_path / 'd', trajectory, q, roll)
+    (mcap,) = (tmp_path / 'd').glob('*.mcap')
+    data = bytearray(mcap.read_bytes())
+    assert len(chunks_of(bytes(data))) >= 2
+    data[chunks_of(bytes(data))[0] + 6] ^= 0x10
+    mcap.write_bytes(bytes(data))
+    d = bagio.read_drive_bag(tmp_path / 'd')
+    assert d.messages[DEFLECTIONS] == mcap_recovers(bytes(data)) == 3000
+    assert len(d.issues) == 1 and 'chunk index is used' in d.issues[0], d.issues
+
+
+def test_schemas_and_channels_of_a_damaged_first_chunk_come_from_the_summary(tmp_path, drives):
+    """Before: "no /suspension/deflections topic" (the channels sat in the first chunk)."""
+    _, data = drives['mcap']
+    first, second = chunks_of(data)[:2]
+    broken = bytearray(data)
+    broken[(first + second) // 2] ^= 0x01             # the first chunk fails its CRC
+    d = bagio.read_drive_bag(damaged(tmp_path, drives, 'mcap', bytes(broken)))
+    expected = mcap_recovers(bytes(broken))
+    assert 0 < expected < SAMPLES
+    assert d.messages[DEFLECTIONS] == expected
+    assert len(d.issues) == 1 and 'fails its CRC check' in d.issues[0], d.issues
+
+
+TRUNCATE_WHILE_READING = """
+import subprocess, sys
+from pathlib import Path
+from road_force_estimator import bagio
+from road_force_estimator.bagio import reader
+folder = Path(sys.argv[1])
+(mcap,) = folder.glob('*.mcap')
+add = reader._TopicReader.add_block
+def cut_then_add(self, block):
+    if mcap.stat().st_size > 100000:      # another process cuts the file under the reader
+        subprocess.run(['truncate', '-s', '90000', str(mcap)], check=True)
+    add(self, block)
+reader._TopicReader.add_block = cut_then_add
+try:
+    bagio.read_drive_bag(folder)
+except bagio.BagReadError as err:
+    print(err)
+    sys.exit(1)
+"""
+
+
+def test_a_file_cut_while_it_is_read_is_an_error_not_a_crash(tmp_path):
+    """Before: SIGBUS (the file was memory-mapped): the process died without a message."""
+    trajectory, q, roll = make_trajectory(n=3000)
+    bagio.write_drive_bag(tmp_path / 'd', trajectory, q, roll)
+    done = run_python(TRUNCATE_WHILE_READING, tmp_path / 'd')
+    assert done.returncode == 1, (done.returncode, done.stderr)
+    assert done.stderr == '' and done.stdout.count('\n') == 1
+    assert 'changed while being read' in done.stdout and 'messages read before' in done.stdout
+
+
+def test_an_empty_deflections_topic(tmp_path, drives):
+    """A bag cut after its channel records. Before: "cannot reshape array of size 0"."""
+    _, data = drives['ours']
+    folder = damaged(tmp_path, drives, 'ours', data[:chunks_of(data)[0]])
+    d = bagio.read_drive_bag(folder)
+    assert d.messages[DEFLECTIONS] == 0 and d.stamps_ns.size == 0 and d.q_m.shape == (0, 2)
+    assert len(d.issues) == 1 and 'without the MCAP end-of-data record' in d.issues[0]
+    from road_force_estimator.tools.estimate_bag import main
+    assert main([str(folder), '--output', str(tmp_path / 'o'), '--no-figures']) == 1
+
+
+@pytest.mark.parametrize('text, why', [
+    ('rosbag2_bagfile_information: [1, 2]\n', 'not a mapping'),
+    ('[1, 2]\n', 'not a mapping'),
+    ('rosbag2_bagfile_information: {relative_file_paths: 7}\n', 'not a list'),
+])
+def test_metadata_of_the_wrong_shape(tmp_path, drives, text, why):
+    """Before: AttributeError traceback."""
+    folder = damaged(tmp_path, drives, 'ours', drives['ours'][1])
+    (folder / 'metadata.yaml').write_text(text)
+    d = bagio.read_drive_bag(folder)
+    assert d.stamps_ns.size == SAMPLES
+    assert any(why in line and 'metadata.yaml' in line for line in d.issues), d.issues
+
+
+def test_metadata_naming_files_outside_the_bag_folder(tmp_path, drives):
+    """Before: ``../../x.mcap`` and absolute paths were read."""
+    folder = damaged(tmp_path, drives, 'ours', drives['ours'][1])
+    (mcap,) = folder.glob('*.mcap')
+    outside = tmp_path / 'outside.mcap'
+    outside.write_bytes(drives['mcap'][1])
+    meta = (folder / 'metadata.yaml').read_text()
+    for name in ('../outside.mcap', str(outside)):
+        (folder / 'metadata.yaml').write_text(meta.replace(mcap.name, name))
+        mcap.rename(tmp_path / 'away.mcap')
+        with pytest.raises(BagReadError, match='outside the bag folder'):
+            bagio.read_drive_bag(folder)
+        (tmp_path / 'away.mcap').rename(mcap)
+        d = bagio.read_drive_bag(folder)         # refused, named; the folder's own file read
+        assert d.stamps_ns.size == SAMPLES
+        assert any(f'{name}: outside the bag folder' in line for line in d.issues), d.issues
+
+
+NOT_REGULAR = """
+import os, sys
+from pathlib import Path
+from road_force_estimator import bagio
+root = Path(sys.argv[1])
+fifo = root / 'fifo'; fifo.mkdir(); os.mkfifo(fifo / 'a.mcap')
+zero = root / 'zero'; zero.mkdir(); (zero / 'a.mcap').symlink_to('/dev/zero')
+for folder in (fifo, zero, fifo / 'a.mcap', zero / 'a.mcap'):
+    try:
+        bagio.read_drive_bag(folder)
+    except bagio.BagReadError as err:
+        print(err)
+"""
+
+
+def test_only_regular_files_are_read(tmp_path):
+    """Before: a FIFO named a.mcap hung forever; a link to /dev/zero read until MemoryError."""
+    done = run_python(NOT_REGULAR, tmp_path, timeout=60)
+    assert done.returncode == 0 and done.stderr == '', done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) == 4, lines
+    assert 'a FIFO' in lines[0] and 'a character device' in lines[1]
+    assert 'a FIFO' in lines[2] and 'a character device' in lines[3]
+
+
+READ_COUNT = """
+import sys
+from road_force_estimator import bagio
+d = bagio.read_drive_bag(sys.argv[1])
+print(d.messages['/suspension/deflections'])
+print('|'.join(d.issues))
+"""
+
+
+def zero_stream(compression: str, total: int) -> bytes:
+    """``total`` zero bytes compressed, a MiB at a time."""
+    block = bytes(1 << 20)
+    if compression == 'zstd':
+        import zstandard
+        c = zstandard.ZstdCompressor().compressobj()
+        return b''.join(c.compress(block) for _ in range(total >> 20)) + c.flush()
+    import lz4.frame
+    c = lz4.frame.LZ4FrameCompressor()
+    return c.begin() + b''.join(c.compress(block) for _ in range(total >> 20)) + c.flush()
+
+
+@pytest.mark.parametrize('compression, total, declared', [
+    ('zstd', 2 << 30, None), ('lz4', 1 << 30, None),   # honest sizes beyond the cap
+    ('zstd', 2 << 30, 1000), ('lz4', 1 << 30, 1000),   # lying sizes: output stops there
+])
+def test_decompression_bombs_are_skipped_in_bounded_memory(tmp_path, drives, compression,
+                                                           total, declared):
+    """Before: peak RSS grew with the declared size (MemoryError under this cap)."""
+    bomb = zero_stream(compression, total)
+    assert len(bomb) < 8 << 20
+    chunk = chunk_record(b'', compression=compression, compressed=bomb,
+                         declared=total if declared is None else declared)
+    folder = damaged(tmp_path, drives, 'mcap', with_extra_chunk(drives['mcap'][1], chunk))
+    done = run_python(READ_COUNT, folder)
+    assert done.returncode == 0 and done.stderr == '', done.stderr[-2000:]
+    count, issues = done.stdout.splitlines()
+    assert int(count) == SAMPLES
+    assert 'skipped' in issues and ('MAX_CHUNK_BYTES' in issues or 'not 1000' in issues), issues
+    assert mcap_scan.MAX_CHUNK_BYTES < total
+
+
+def test_a_chunk_larger_than_the_cap_is_counted(tmp_path, drives, monkeypatch):
+    """The cap is a module constant: lowered below the chunks' size, they are skipped."""
+    monkeypatch.setattr(mcap_scan, 'MAX_CHUNK_BYTES', 1000)
+    folder = damaged(tmp_path, drives, 'mcap', drives['mcap'][1])
+    d = bagio.read_drive_bag(folder)
+    assert d.messages.get(DEFLECTIONS, 0) == 0
+    assert sum('MAX_CHUNK_BYTES' in line for line in d.issues) == len(chunks_of(
+        drives['mcap'][1]))
+
