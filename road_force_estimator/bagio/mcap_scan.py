@@ -281,6 +281,10 @@ class McapScan:
         if nxt > end:
             raise _Truncated(f'file ends inside a record (op 0x{op:02x}) at byte {pos}: '
                              f'{nxt - end} bytes missing')
+        after = bisect.bisect_right(self._starts, pos)
+        if after < len(self._starts) and self._starts[after] < nxt:
+            raise _Truncated(f'record (op 0x{op:02x}) at byte {pos} runs over the chunk at '
+                             f'byte {self._starts[after]} (a corrupt length)')
         if op in (0x03, 0x04, 0x05):
             if length > MAX_CHUNK_BYTES:
                 raise _Truncated(f'corrupt record (op 0x{op:02x}, {length} bytes) at byte '
@@ -364,7 +368,7 @@ class McapScan:
                        f'end of the file, its records end at byte {pos + rstart + rlen}: used')
             nxt = pos + rstart + rlen
             rec = rec[:rstart + rlen]
-        if size > MAX_CHUNK_BYTES:
+        if compression and size > MAX_CHUNK_BYTES:
             self._skip(pos, f'declares {size} bytes uncompressed, more than MAX_CHUNK_BYTES '
                        f'({MAX_CHUNK_BYTES})')
             return nxt

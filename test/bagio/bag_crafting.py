@@ -5,14 +5,19 @@ where they must not come from our writer, and what the ``mcap`` library recovers
 again with the ``mcap`` library (small chunks, schemas and channels inside chunks);
 ``mcap_recovers`` counts the messages of a topic the ``mcap`` library's readers get from some
 bytes, chunk by chunk, leaving out chunks whose CRC fails; ``chunk_record`` and
-``with_extra_chunk`` splice a hand-made chunk into a bag.
+``with_extra_chunk`` splice a hand-made chunk into a bag; ``run_python`` runs code in a
+fresh interpreter whose address space is capped.
 """
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
+import resource
 import shutil
 import struct
+import subprocess
+import sys
 import zlib
 
 from mcap.reader import make_reader
@@ -27,6 +32,24 @@ from road_force_estimator.interfaces import DEFLECTIONS
 #: The fuzz's drive: samples and the mcap writer's chunk size (several chunks).
 SAMPLES = 400
 CHUNK = 8192
+REPO = Path(__file__).resolve().parents[2]
+#: Address space of a subprocess that reads a hostile bag (numpy and the decoders fit).
+LIMIT_AS = 1536 << 20
+
+
+def run_python(code: str, *args, limit_as: int | None = LIMIT_AS, timeout: float = 120):
+    """``code`` run by a fresh interpreter (this tree and the test helpers on its path),
+    its address space capped: the CompletedProcess."""
+    path = [str(REPO), str(REPO / 'test'), str(REPO / 'test' / 'bagio'),
+            os.environ.get('PYTHONPATH', '')]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1',
+               PYTHONPATH=os.pathsep.join(path))
+
+    def cap():
+        if limit_as:
+            resource.setrlimit(resource.RLIMIT_AS, (limit_as, limit_as))
+    return subprocess.run([sys.executable, '-c', code, *map(str, args)], env=env,
+                          capture_output=True, text=True, timeout=timeout, preexec_fn=cap)
 
 
 def small_drive(folder: Path, n: int = SAMPLES, seed: int = 5) -> Path:

@@ -4,17 +4,12 @@ traceback, a hang, a crash or unbounded memory.
 References: the ``mcap`` library's readers on the same bytes (``bag_crafting.mcap_recovers``),
 and the undamaged bag read by this package.
 """
-import os
-from pathlib import Path
-import resource
-import subprocess
-import sys
-
 from mcap_walk import top_level_records
 import pytest
 
 from bag_crafting import (
     SAMPLES,
+    run_python,
     chunk_record,
     mcap_recovers,
     rewrite_with_mcap,
@@ -25,26 +20,6 @@ from bag_samples import make_trajectory
 from road_force_estimator import bagio
 from road_force_estimator.bagio import BagReadError, mcap_scan
 from road_force_estimator.interfaces import DEFLECTIONS
-
-REPO = Path(__file__).resolve().parents[2]
-#: Address space of a subprocess that reads a hostile bag (numpy and the decoders fit).
-LIMIT_AS = 1536 << 20
-
-
-def run_python(code: str, *args, limit_as: int | None = LIMIT_AS, timeout: float = 120):
-    """``code`` run by a fresh interpreter (this tree and the test helpers on its path),
-    its address space capped: the CompletedProcess."""
-    path = [str(REPO), str(REPO / 'test'), str(REPO / 'test' / 'bagio'),
-            os.environ.get('PYTHONPATH', '')]
-    env = dict(os.environ, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1',
-               PYTHONPATH=os.pathsep.join(path))
-
-    def cap():
-        if limit_as:
-            resource.setrlimit(resource.RLIMIT_AS, (limit_as, limit_as))
-    return subprocess.run([sys.executable, '-c', code, *map(str, args)], env=env,
-                          capture_output=True, text=True, timeout=timeout, preexec_fn=cap)
-
 
 def chunks_of(data: bytes) -> list[int]:
     return [at for op, at, _ in top_level_records(data) if op == 0x06]
