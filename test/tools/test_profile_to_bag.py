@@ -99,3 +99,13 @@ def test_installed_executable(tmp_path, shared_data):
     run = subprocess.run([exe, str(tmp_path / 'nothing.csv'), '--output', str(tmp_path / 'b')],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 1 and run.stderr.count('\n') == 1, run.stderr
+
+
+def test_impossible_values_are_not_written(tmp_path, capsys):
+    """Issue 16: CSV elevations of 1e30 were written into the bag."""
+    csv = tmp_path / 'p.csv'
+    csv.write_text('distance_m,left_m,right_m\n0,0,0\n0.25,1e30,0\n0.5,0,0\n')
+    assert main([str(csv), '--output', str(tmp_path / 'bag')]) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'line 3: elevation 1e+30 m' in err
+    assert not (tmp_path / 'bag').exists()
