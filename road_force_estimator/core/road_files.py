@@ -60,8 +60,8 @@ def _clean(distance: np.ndarray, elevation: np.ndarray, name: str,
            notes: list[str] | None = None, line_numbers=None,
            where: str | None = None) -> RoadProfile:
     """Refuse physically impossible values (:func:`_check_physical`: ``line_numbers`` of the
-    rows, default the row index + 2, in file ``where``, default ``name``); drop non-finite rows and rows whose distance does not
-    increase, counted in notes."""
+    rows, default the row index + 2, in file ``where``, default ``name``); drop non-finite
+    rows and rows whose distance does not increase, counted in notes."""
     notes = list(notes or [])
     distance = np.asarray(distance, dtype=np.float64)
     elevation = np.asarray(elevation, dtype=np.float64)

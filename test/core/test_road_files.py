@@ -195,7 +195,8 @@ def test_erd_with_an_impossible_step_is_refused(tmp_path, step):
     "Maximum allowed size exceeded"."""
     path = tmp_path / 'step.erd'
     path.write_text(ERD_METRES.replace('2.500000e-01', step))
-    with pytest.raises(ValueError, match=r'line 2: STEP = (100000|1e\+06|1e\+30) m is more than 100 m'):
+    with pytest.raises(ValueError,
+                       match=r'line 2: STEP = (100000|1e\+06|1e\+30) m is more than 100 m'):
         read_erd_profile(path)
     path.write_text(ERD_METRES.replace('2.500000e-01', '1.000000e+02'))   # 100 m: accepted
     assert read_erd_profile(path).distance_m[-1] == 400.0
