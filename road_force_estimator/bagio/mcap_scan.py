@@ -1,10 +1,14 @@
 """Reading the MCAP container (https://mcap.dev/spec) of a bag, record by record.
 
 :class:`McapScan` walks a file from its start so that a cut or corrupt file yields every
-message it can trust (a chunk failing its CRC is skipped; a cut record ends the file), and
-takes a chunk through its message index when that index accounts for every record in it
-(checked with numpy), which is several times faster than the walk. The record layouts and the
-writer are :mod:`.mcap_file`.
+message it can trust: a chunk failing its CRC, not decompressing or declaring more than
+:data:`MAX_CHUNK_BYTES` is skipped; after a corrupt record the read resumes at the next chunk
+of the summary's chunk index (whose lengths also overrule a chunk's own, and whose schemas and
+channels stand in for those of a damaged chunk); a cut record ends the file. A chunk is taken
+through its message index when that index accounts for every record in it (checked with
+numpy), which is several times faster than the walk. The bytes come through
+:class:`.mcap_source.McapSource` (regular files only, copies, no memory map); the record
+layouts and the writer are :mod:`.mcap_file`.
 """
 from __future__ import annotations
 

@@ -7,7 +7,10 @@ skipped and reading goes on; a cut or corrupt record outside chunks ends the fil
 readers take a chunk whose message index accounts for every record in it through that index,
 about five times faster than the walk and with the same result; any other chunk is walked
 (bench/bag_read_speed.py). Messages come in file order, which is log-time order for the bags
-rosbag2, the bag_recorder node and this package write.
+rosbag2, the bag_recorder node and this package write. Only regular files inside the bag
+folder are read (a FIFO, a device, or a ``metadata.yaml`` entry such as ``../x.mcap`` or an
+absolute path is refused and named); a file that changes while it is read is a
+:class:`BagReadError`.
 """
 from __future__ import annotations
 
