@@ -246,7 +246,7 @@ class McapScan:
                 (self._schema if op == 0x03 else self._channel)(body, 0, len(body), at)
             except _Truncated:
                 pass                         # the record in the data section may be good
-        self.chunk_at = summary.chunks
+        self.chunk_at = summary.chunks if summary.trusted else {}
         self._starts = sorted(summary.chunks)
 
     def _resync(self, pos: int, why: str, pending: int) -> int:
@@ -367,15 +367,12 @@ class McapScan:
         except (struct.error, UnicodeDecodeError):
             raise _Truncated(f'chunk at byte {pos} has a corrupt header') from None
         rstart = rpos + 8
+        limit = min(size, MAX_CHUNK_BYTES)
         if nxt > src.size and pos + rstart + rlen <= src.size:
             self._note(f'chunk at byte {pos}: its length field ({length} bytes) runs past the '
                        f'end of the file, its records end at byte {pos + rstart + rlen}: used')
             nxt = pos + rstart + rlen
             rec = rec[:rstart + rlen]
-        if compression and size > MAX_CHUNK_BYTES:
-            self._skip(pos, f'declares {size} bytes uncompressed, more than MAX_CHUNK_BYTES '
-                       f'({MAX_CHUNK_BYTES})')
-            return nxt
         if nxt > src.size:
             # The file ends inside this chunk: recover its complete records, then stop.
             data = _decompress_partial(rec[rstart:rstart + rlen], compression)
@@ -384,22 +381,32 @@ class McapScan:
                              f'({nxt - src.size} bytes missing'
                              + (f'; {inner}' if inner else '') + ')')
         if rstart + rlen > len(rec):
-            self._skip(pos, f'is corrupt (its records run {rstart + rlen - len(rec)} bytes '
-                       'past its end)')
-            return nxt
-        self._chunk_records(src, pos, rec, rstart, rlen, compression, size, crc, out)
+            if not crc:
+                self._skip(pos, f'is corrupt (its records run {rstart + rlen - len(rec)} '
+                           'bytes past its end)')
+                return nxt
+            self._note(f'chunk at byte {pos}: its records length field ({rlen} bytes) runs '
+                       'past its end: the rest of the record is taken (its CRC checks it)')
+            rlen = len(rec) - rstart
+        self._chunk_records(src, pos, rec, rstart, rlen, compression, (size, limit), crc, out)
         return nxt
 
     def _chunk_records(self, src: McapSource, pos: int, rec: bytes, rstart: int, rlen: int,
-                       compression: str, size: int, crc: int, out: list) -> None:
-        """Decompress and check a complete chunk's records, then read them."""
+                       compression: str, sizes: tuple[int, int], crc: int, out: list) -> None:
+        """Decompress (``sizes``: declared, at most that many bytes) and check a complete
+        chunk's records, then read them."""
+        size, limit = sizes
         try:
             if compression == '':
                 data = memoryview(rec)[rstart:rstart + rlen]      # no copy
             else:
-                data = _decompress(rec[rstart:rstart + rlen], compression, size)
+                data = _decompress(rec[rstart:rstart + rlen], compression, limit)
         except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own types
             self._skip(pos, f'does not decompress ({err})')
+            return
+        if compression and len(data) > MAX_CHUNK_BYTES:
+            self._skip(pos, f'declares {size} bytes uncompressed and holds more than '
+                       f'MAX_CHUNK_BYTES ({MAX_CHUNK_BYTES})')
             return
         if crc and zlib.crc32(data) != crc:
             self._skip(pos, 'fails its CRC check (corrupt)')

@@ -95,16 +95,19 @@ class McapSource:
 class Summary:
     """What the summary section holds: ``records`` ``(op, body, at)`` of its schemas (0x03)
     and channels (0x04), ``chunks`` chunk start -> chunk record length (bytes, head
-    included), ``issue`` why it was not (all) used, or None."""
+    included), ``trusted`` False when it fails its CRC check (the ``mcap`` library reads it
+    all the same: a hint, not a fact), ``issue`` why it was not (all) used, or None."""
 
     records: list[tuple[int, bytes, int]] = field(default_factory=list)
     chunks: dict[int, int] = field(default_factory=dict)
+    trusted: bool = True
     issue: str | None = None
 
 
 def read_summary(src: McapSource) -> Summary:
-    """The summary section of a file whose footer and summary are intact (CRC-checked when
-    the footer has one); an empty :class:`Summary` otherwise (a cut file has no footer)."""
+    """The summary section of a file whose footer is intact (CRC-checked when the footer
+    has a CRC: not ``trusted`` when it fails); an empty :class:`Summary` when there is none
+    (a cut file has no footer)."""
     out = Summary()
     tail = _FOOTER.size + len(MAGIC)
     if src.size < len(MAGIC) + tail:
@@ -122,8 +125,8 @@ def read_summary(src: McapSource) -> Summary:
         return out
     data = src.read(start, end - start)
     if crc and zlib.crc32(footer[:_FOOTER.size - 4], zlib.crc32(data)) != crc:
-        out.issue = 'the summary section fails its CRC check: not used'
-        return out
+        out.trusted = False
+        out.issue = 'the summary section fails its CRC check: used only where the data lack'
     pos = 0
     while pos + RECORD.size <= len(data):
         op, length = RECORD.unpack_from(data, pos)
