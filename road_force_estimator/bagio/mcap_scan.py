@@ -27,6 +27,7 @@ from road_force_estimator.bagio.mcap_source import (
     FileChanged,
     McapSource,
     NotRegular,
+    find_chunk,
     read_summary,
 )
 
@@ -218,7 +219,7 @@ class McapScan:
             try:
                 pos = self._top(src, pos, out)
             except _Truncated as err:
-                pos = self._resync(pos, err.args[0], len(out))
+                pos = self._resync(src, pos, err.args[0], len(out))
             if out and (len(out) >= 4096 or self.blocks or pos in self.chunk_at or pos < 0):
                 self.messages += len(out)
                 yield out
@@ -249,18 +250,22 @@ class McapScan:
         self.chunk_at = summary.chunks if summary.trusted else {}
         self._starts = sorted(summary.chunks)
 
-    def _resync(self, pos: int, why: str, pending: int) -> int:
+    def _resync(self, src: McapSource, pos: int, why: str, pending: int) -> int:
         """Where to go on after a corrupt record at ``pos`` (``pending`` messages not yet
-        yielded): the next chunk of the summary's chunk index, or the end (-2) when none
+        yielded): the next chunk of the summary's chunk index, else (no summary, as in a cut
+        recording) the next chunk head found in the bytes, or the end (-2) when none
         follows."""
         at = bisect.bisect_right(self._starts, pos)
-        if at == len(self._starts):
+        if at < len(self._starts):
+            nxt, how = self._starts[at], 'from the chunk index'
+        elif not self._starts and (found := find_chunk(src, pos + 1)) is not None:
+            nxt, how = found, 'found by its head'
+        else:
             self._note(f'{why}; read {self.messages + pending} messages before it')
             return -2
         self.resyncs += 1
-        self._note(f'{why}: resuming at the next chunk (byte {self._starts[at]}, from the '
-                   'chunk index)')
-        return self._starts[at]
+        self._note(f'{why}: resuming at the next chunk (byte {nxt}, {how})')
+        return nxt
 
     def _top(self, src: McapSource, pos: int, out: list) -> int:
         """Read the record at ``pos`` of the data section; the position of the next one, or

@@ -4,8 +4,9 @@
 without blocking) with ``pread``, never a memory map: a file cut or changed by another process
 while it is read raises :class:`FileChanged` instead of killing the process with SIGBUS.
 :func:`read_summary` takes the summary section's schemas, channels and chunk index (the
-offsets to resynchronise on after a corrupt record) when the footer and the section are
-intact. The record layouts are :mod:`.mcap_file`.
+offsets to resynchronise on after a corrupt record) when the footer is intact;
+:func:`find_chunk` finds the next chunk by its head in a file without one. The record layouts
+are :mod:`.mcap_file`.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import zlib
 
 from road_force_estimator.bagio.mcap_file import MAGIC, RECORD
 
-__all__ = ['FileChanged', 'NotRegular', 'McapSource', 'Summary', 'read_summary',
+__all__ = ['FileChanged', 'NotRegular', 'McapSource', 'Summary', 'read_summary', 'find_chunk',
            'MAX_SUMMARY_BYTES']
 
 #: The largest summary section read (bytes): a chunk index is about 100 bytes a chunk.
@@ -142,3 +143,36 @@ def read_summary(src: McapSource) -> Summary:
                 out.chunks[chunk_start] = chunk_length
         pos = nxt
     return out
+
+
+_CHUNK_HEAD = struct.Struct('<BQQQQII')   # op, length, times, size, CRC, compression length
+_COMPRESSIONS = (b'', b'zstd', b'lz4')
+#: Bytes searched at a time by :func:`find_chunk`.
+_WINDOW = 1 << 20
+
+
+def find_chunk(src: McapSource, pos: int) -> int | None:
+    """The first byte from ``pos`` on where a chunk record starts, judged by its head alone:
+    op 0x06, a known compression, and a length equal to its header plus its records' length
+    (a false match in other bytes is all but impossible; the chunk's CRC checks the rest).
+    None when there is none (the resynchronisation of a file without a summary)."""
+    while pos < src.size:
+        window = src.read(pos, _WINDOW + _CHUNK_HEAD.size + 16)
+        i = window.find(b'\x06')
+        while 0 <= i < min(len(window), _WINDOW):
+            if _is_chunk_head(window, i):
+                return pos + i
+            i = window.find(b'\x06', i + 1)
+        pos += _WINDOW
+    return None
+
+
+def _is_chunk_head(buf: bytes, i: int) -> bool:
+    if i + _CHUNK_HEAD.size > len(buf):
+        return False
+    _, length, _, _, _, _, n = _CHUNK_HEAD.unpack_from(buf, i)
+    start = i + _CHUNK_HEAD.size
+    if n > 4 or start + n + 8 > len(buf) or buf[start:start + n] not in _COMPRESSIONS:
+        return False
+    (records,) = struct.unpack_from('<Q', buf, start + n)
+    return length == 8 + 8 + 8 + 4 + 4 + n + 8 + records

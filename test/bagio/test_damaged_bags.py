@@ -42,7 +42,7 @@ def damaged(tmp_path, drives, writer, data):
     """A copy of the drive folder of ``writer`` whose .mcap holds ``data``."""
     folder, original = drives[writer]
     out = tmp_path / writer
-    out.mkdir()
+    out.mkdir(parents=True)
     (out / 'metadata.yaml').write_bytes((folder / 'metadata.yaml').read_bytes())
     (out / next(folder.glob('*.mcap')).name).write_bytes(data)
     return out
@@ -278,3 +278,19 @@ def test_compressed_chunks_with_a_corrupt_field(tmp_path, lz4_drive, how):
     assert mcap_recovers(broken) == SAMPLES
     assert d.messages[DEFLECTIONS] == SAMPLES and d.stamps_ns.size == SAMPLES, d.issues
     assert d.issues, 'the damage is named'
+
+
+def test_a_cut_recording_resumes_at_the_next_chunk_head(tmp_path, drives):
+    """No summary (the recording was cut): after a corrupt record the next chunk is found by
+    its head. Before: the read ended at the corrupt record."""
+    _, data = drives['mcap']
+    chunks = chunks_of(data)
+    cut = data[:(chunks[-2] + chunks[-1]) // 2]           # inside the last chunk but one
+    whole = bagio.read_drive_bag(damaged(tmp_path / 'a', drives, 'mcap', cut))
+    broken = bytearray(cut)
+    (length,) = struct.unpack_from('<Q', cut, chunks[2] + 1)
+    broken[chunks[2] + 9 + length + 8] ^= 0x80            # a message index length
+    d = bagio.read_drive_bag(damaged(tmp_path / 'b', drives, 'mcap', bytes(broken)))
+    assert d.messages[DEFLECTIONS] == whole.messages[DEFLECTIONS] > mcap_recovers(
+        bytes(broken))
+    assert any('found by its head' in line for line in d.issues), d.issues
