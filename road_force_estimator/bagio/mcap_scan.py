@@ -40,6 +40,7 @@ __all__ = ['MAX_CHUNK_BYTES', 'Channel', 'Block', 'McapScan']
 MAX_CHUNK_BYTES = 64 * McapFile.CHUNK_BYTES
 
 _MESSAGE = struct.Struct('<HIQQ')
+_INDEX_WINDOW = 1 << 18           # bytes of message index records read at a time
 _CHUNK = struct.Struct('<QQQI')
 
 
@@ -422,7 +423,9 @@ class McapScan:
                 return
             self._note(f'chunk at byte {pos} declares {size} bytes uncompressed but holds '
                        f'{len(data)} (its CRC is good): read')
-        if self.indexed and self._indexed_chunk(data, self._index_records(src, pos + len(rec))):
+        window = min(_INDEX_WINDOW, len(rec) // 2 + 4096)   # an index is < half its chunk
+        if self.indexed and self._indexed_chunk(
+                data, self._index_records(src, pos + len(rec), window)):
             self.indexed_chunks += 1
             return
         self.walked_chunks += 1
@@ -441,19 +444,27 @@ class McapScan:
         return None
 
     @staticmethod
-    def _index_records(src: McapSource, pos: int) -> bytes:
-        """The message index records that follow a chunk ending at ``pos``."""
-        parts = []
+    def _index_records(src: McapSource, pos: int, window: int) -> bytes:
+        """The message index records that follow a chunk ending at ``pos``, read ``window``
+        bytes at a time (one read for most chunks)."""
+        buf, end = src.read(pos, window), 0
         while True:
-            head = src.read(pos, RECORD.size)
-            if len(head) < RECORD.size or head[0] != 0x07:
+            if len(buf) - end < RECORD.size:
+                more = src.read(pos + len(buf), window)
+                if not more:
+                    break
+                buf += more
+                continue
+            if buf[end] != 0x07:
                 break
-            (length,) = struct.unpack_from('<Q', head, 1)
-            if length > MAX_CHUNK_BYTES or pos + RECORD.size + length > src.size:
+            (length,) = struct.unpack_from('<Q', buf, end + 1)
+            nxt = end + RECORD.size + length
+            if length > MAX_CHUNK_BYTES or pos + nxt > src.size:
                 break
-            parts.append(head + src.read(pos + RECORD.size, length))
-            pos += RECORD.size + length
-        return b''.join(parts)
+            if nxt > len(buf):
+                buf += src.read(pos + len(buf), nxt - len(buf))
+            end = nxt
+        return buf[:end]
 
     @staticmethod
     def _message_index(buf) -> list[tuple[int, np.ndarray]]:
