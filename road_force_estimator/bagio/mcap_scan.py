@@ -394,13 +394,14 @@ class McapScan:
             self._note(f'chunk at byte {pos}: its records length field ({rlen} bytes) runs '
                        'past its end: the rest of the record is taken (its CRC checks it)')
             rlen = len(rec) - rstart
-        self._chunk_records(src, pos, rec, rstart, rlen, compression, (size, limit), crc, out)
-        return nxt
+        return nxt + self._chunk_records(src, pos, rec, rstart, rlen, compression,
+                                         (size, limit), crc, out)
 
     def _chunk_records(self, src: McapSource, pos: int, rec: bytes, rstart: int, rlen: int,
-                       compression: str, sizes: tuple[int, int], crc: int, out: list) -> None:
+                       compression: str, sizes: tuple[int, int], crc: int, out: list) -> int:
         """Decompress (``sizes``: declared, at most that many bytes) and check a complete
-        chunk's records, then read them."""
+        chunk's records, then read them; the bytes of message index records after the chunk
+        read with it (0 when none was read)."""
         size, limit = sizes
         try:
             if compression == '':
@@ -409,30 +410,32 @@ class McapScan:
                 data = _decompress(rec[rstart:rstart + rlen], compression, limit)
         except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own types
             self._skip(pos, f'does not decompress ({err})')
-            return
+            return 0
         if compression and len(data) > MAX_CHUNK_BYTES:
             self._skip(pos, f'declares {size} bytes uncompressed and holds more than '
                        f'MAX_CHUNK_BYTES ({MAX_CHUNK_BYTES})')
-            return
+            return 0
         if crc and zlib.crc32(data) != crc:
             self._skip(pos, 'fails its CRC check (corrupt)')
-            return
+            return 0
         if len(data) != size:
             if not crc or len(data) > size:
                 self._skip(pos, f'decompresses to {len(data)} bytes, not {size}')
-                return
+                return 0
             self._note(f'chunk at byte {pos} declares {size} bytes uncompressed but holds '
                        f'{len(data)} (its CRC is good): read')
-        window = min(_INDEX_WINDOW, len(rec) // 2 + 4096)   # an index is < half its chunk
-        if self.indexed and self._indexed_chunk(
-                data, self._index_records(src, pos + len(rec), window)):
-            self.indexed_chunks += 1
-            return
+        index = b''
+        if self.indexed:
+            index = self._index_records(src, pos + len(rec), len(rec))
+            if self._indexed_chunk(data, index):
+                self.indexed_chunks += 1
+                return len(index)
         self.walked_chunks += 1
         inner = self._records_in_chunk(bytes(data), out)
         if inner is not None:
             self._note(f'{inner} in the chunk at byte {pos}: the rest of that chunk is '
                        'skipped')
+        return len(index)
 
     def _records_in_chunk(self, data: bytes, out: list) -> str | None:
         """Parse a chunk's records into ``out``; the break, if any (positions inside the
@@ -443,14 +446,17 @@ class McapScan:
             return err.args[0]
         return None
 
-    @staticmethod
-    def _index_records(src: McapSource, pos: int, window: int) -> bytes:
-        """The message index records that follow a chunk ending at ``pos``, read ``window``
-        bytes at a time (one read for most chunks)."""
+    def _index_records(self, src: McapSource, pos: int, chunk: int) -> bytes:
+        """The message index records that follow a chunk of ``chunk`` bytes ending at
+        ``pos`` (up to the next chunk of the chunk index), read a window at a time (one read
+        for most chunks: an index is less than half its chunk)."""
+        at = bisect.bisect_left(self._starts, pos)
+        stop = self._starts[at] if at < len(self._starts) else src.size
+        window = min(_INDEX_WINDOW, chunk // 2 + 4096, stop - pos)
         buf, end = src.read(pos, window), 0
         while True:
             if len(buf) - end < RECORD.size:
-                more = src.read(pos + len(buf), window)
+                more = src.read(pos + len(buf), min(window, stop - pos - len(buf)))
                 if not more:
                     break
                 buf += more
@@ -459,7 +465,7 @@ class McapScan:
                 break
             (length,) = struct.unpack_from('<Q', buf, end + 1)
             nxt = end + RECORD.size + length
-            if length > MAX_CHUNK_BYTES or pos + nxt > src.size:
+            if length > MAX_CHUNK_BYTES or pos + nxt > stop:
                 break
             if nxt > len(buf):
                 buf += src.read(pos + len(buf), nxt - len(buf))
