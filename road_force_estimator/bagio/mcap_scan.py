@@ -27,6 +27,8 @@ from road_force_estimator.bagio.mcap_source import (
     FileChanged,
     McapSource,
     NotRegular,
+    decompress,
+    decompress_partial,
     find_chunk,
     read_summary,
 )
@@ -67,54 +69,6 @@ def _string(buf, pos: int) -> tuple[str, int]:
     if end > len(buf):
         raise struct.error('string runs past its record')
     return bytes(buf[pos + 4:end]).decode('utf-8'), end
-
-
-def _decompress(data: bytes, compression: str, size: int) -> bytes:
-    """A chunk's records: at most ``size + 1`` bytes are produced, whatever the compressed
-    stream holds (a decompression bomb stops there)."""
-    if compression == '':
-        return bytes(data)
-    if compression == 'zstd':
-        try:
-            import zstandard
-        except ImportError:
-            from backports import zstd  # rosbags' own dependency
-            return zstd.ZstdDecompressor().decompress(data, max_length=size + 1)
-        parts, got = [], 0
-        with zstandard.ZstdDecompressor().stream_reader(data) as stream:
-            while got <= size:
-                part = stream.read(size + 1 - got)
-                if not part:
-                    break
-                parts.append(part)
-                got += len(part)
-        return b''.join(parts)
-    if compression == 'lz4':
-        import lz4.frame
-        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
-    raise _Truncated(f'unsupported chunk compression {compression!r}')
-
-
-def _decompress_partial(data: bytes, compression: str) -> bytes:
-    """As much as can be decompressed of a chunk cut short (at most MAX_CHUNK_BYTES)."""
-    try:
-        if compression == '':
-            return bytes(data)
-        if compression == 'zstd':
-            import zstandard
-            parts, got = [], 0
-            for part in zstandard.ZstdDecompressor().read_to_iter(data):
-                parts.append(part)
-                got += len(part)
-                if got > MAX_CHUNK_BYTES:
-                    break
-            return b''.join(parts)[:MAX_CHUNK_BYTES]
-        if compression == 'lz4':
-            import lz4.frame
-            return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=MAX_CHUNK_BYTES)
-    except Exception:  # noqa: BLE001 - nothing recoverable
-        return b''
-    return b''
 
 
 @dataclass
@@ -272,6 +226,8 @@ class McapScan:
         """Read the record at ``pos`` of the data section; the position of the next one, or
         -1 at the end-of-data record (or the footer)."""
         end = src.size
+        if not self._starts and (run := self._message_run(src, pos, out)) > pos:
+            return run
         if end - pos < RECORD.size:
             raise _Truncated(f'file ends inside a record header at byte {pos}')
         op, length = RECORD.unpack(src.read(pos, RECORD.size))
@@ -309,6 +265,27 @@ class McapScan:
         elif op == 0x00 or 0x0F < op < 0x80:   # 0x80-0xFF: private records, skipped
             raise _Truncated(f'corrupt record (op 0x{op:02x}) at byte {pos}')
         return nxt
+
+    def _message_run(self, src: McapSource, pos: int, out: list) -> int:
+        """Read the message records from ``pos`` on that lie whole in the read-ahead window,
+        in one loop (a file without chunks); the position after them."""
+        buf, off = src.window(pos)
+        start, end = off, len(buf)
+        unpack_record, unpack_message = RECORD.unpack_from, _MESSAGE.unpack_from
+        keep, channels, append = self.keep, self.channels, out.append
+        while end - off >= RECORD.size:
+            op, length = unpack_record(buf, off)
+            nxt = off + RECORD.size + length
+            if op != 0x05 or length < _MESSAGE.size or nxt > end:
+                break
+            cid, _, log_ns, _ = unpack_message(buf, off + RECORD.size)
+            channel = keep.get(cid)
+            if channel is not None:
+                append((channel, log_ns, buf[off + RECORD.size + _MESSAGE.size:nxt]))
+            elif cid not in channels:
+                self.unknown_channel += 1
+            off = nxt
+        return pos + off - start
 
     def _message(self, buf, body: int, nxt: int, out: list) -> None:
         cid, _, log_ns, _ = _MESSAGE.unpack_from(buf, body)
@@ -381,7 +358,7 @@ class McapScan:
             rec = rec[:rstart + rlen]
         if nxt > src.size:
             # The file ends inside this chunk: recover its complete records, then stop.
-            data = _decompress_partial(rec[rstart:rstart + rlen], compression)
+            data = decompress_partial(rec[rstart:rstart + rlen], compression, MAX_CHUNK_BYTES)
             inner = self._records_in_chunk(data, out)
             raise _Truncated(f'file ends inside the chunk at byte {pos} '
                              f'({nxt - src.size} bytes missing'
@@ -407,7 +384,7 @@ class McapScan:
             if compression == '':
                 data = memoryview(rec)[rstart:rstart + rlen]      # no copy
             else:
-                data = _decompress(rec[rstart:rstart + rlen], compression, limit)
+                data = decompress(rec[rstart:rstart + rlen], compression, limit)
         except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own types
             self._skip(pos, f'does not decompress ({err})')
             return 0

@@ -5,8 +5,9 @@ without blocking) with ``pread``, never a memory map: a file cut or changed by a
 while it is read raises :class:`FileChanged` instead of killing the process with SIGBUS.
 :func:`read_summary` takes the summary section's schemas, channels and chunk index (the
 offsets to resynchronise on after a corrupt record) when the footer is intact;
-:func:`find_chunk` finds the next chunk by its head in a file without one. The record layouts
-are :mod:`.mcap_file`.
+:func:`find_chunk` finds the next chunk by its head in a file without one; :func:`decompress`
+gives a chunk's records, never more bytes than asked (a decompression bomb stops there). The
+record layouts are :mod:`.mcap_file`.
 """
 from __future__ import annotations
 
@@ -20,10 +21,11 @@ import zlib
 from road_force_estimator.bagio.mcap_file import MAGIC, RECORD
 
 __all__ = ['FileChanged', 'NotRegular', 'McapSource', 'Summary', 'read_summary', 'find_chunk',
-           'MAX_SUMMARY_BYTES']
+           'decompress', 'decompress_partial', 'MAX_SUMMARY_BYTES']
 
 #: The largest summary section read (bytes): a chunk index is about 100 bytes a chunk.
 MAX_SUMMARY_BYTES = 64 << 20
+_CACHE = 1 << 16          # bytes read ahead for small reads
 _FOOTER = struct.Struct('<BQQQI')          # op, length, summary start, offsets start, CRC
 _CHUNK_INDEX = struct.Struct('<QQQQ')      # start and end times, chunk start, chunk length
 
@@ -63,9 +65,30 @@ class McapSource:
             raise NotRegular(_kind(st.st_mode))
         self.size = st.st_size
         self._stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
+        self._cache, self._cache_at = b'', 0
 
     def read(self, pos: int, n: int) -> bytes:
-        """``n`` bytes from ``pos`` (fewer only where the file, at its opening size, ends)."""
+        """``n`` bytes from ``pos`` (fewer only where the file, at its opening size, ends).
+
+        Small reads are served from a window of :data:`_CACHE` bytes read ahead (record heads,
+        the records of a file without chunks, small chunks)."""
+        n = max(0, min(n, self.size - pos))
+        if n > _CACHE // 4:
+            return self._pread(pos, n)
+        off = pos - self._cache_at
+        if not (0 <= off and off + n <= len(self._cache)):
+            self._cache, self._cache_at, off = self._pread(pos, _CACHE), pos, 0
+        return self._cache[off:off + n]
+
+    def window(self, pos: int) -> tuple[bytes, int]:
+        """``(buffer, offset)``: the read-ahead window holding the bytes from ``pos`` (at
+        least a quarter of it, unless the file ends first) at ``buffer[offset:]``."""
+        off = pos - self._cache_at
+        if not (0 <= off and len(self._cache) - off >= min(_CACHE // 4, self.size - pos)):
+            self._cache, self._cache_at, off = self._pread(pos, _CACHE), pos, 0
+        return self._cache, off
+
+    def _pread(self, pos: int, n: int) -> bytes:
         n = max(0, min(n, self.size - pos))
         parts, got = [], 0
         while got < n:
@@ -176,3 +199,51 @@ def _is_chunk_head(buf: bytes, i: int) -> bool:
         return False
     (records,) = struct.unpack_from('<Q', buf, start + n)
     return length == 8 + 8 + 8 + 4 + 4 + n + 8 + records
+
+
+def decompress(data: bytes, compression: str, size: int) -> bytes:
+    """A chunk's records: at most ``size + 1`` bytes are produced, whatever the compressed
+    stream holds (a decompression bomb stops there)."""
+    if compression == '':
+        return bytes(data)
+    if compression == 'zstd':
+        try:
+            import zstandard
+        except ImportError:
+            from backports import zstd  # rosbags' own dependency
+            return zstd.ZstdDecompressor().decompress(data, max_length=size + 1)
+        parts, got = [], 0
+        with zstandard.ZstdDecompressor().stream_reader(data) as stream:
+            while got <= size:
+                part = stream.read(size + 1 - got)
+                if not part:
+                    break
+                parts.append(part)
+                got += len(part)
+        return b''.join(parts)
+    if compression == 'lz4':
+        import lz4.frame
+        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    raise ValueError(f'unsupported chunk compression {compression!r}')
+
+
+def decompress_partial(data: bytes, compression: str, limit: int) -> bytes:
+    """As much as can be decompressed of a chunk cut short (at most ``limit`` bytes)."""
+    try:
+        if compression == '':
+            return bytes(data)
+        if compression == 'zstd':
+            import zstandard
+            parts, got = [], 0
+            for part in zstandard.ZstdDecompressor().read_to_iter(data):
+                parts.append(part)
+                got += len(part)
+                if got > limit:
+                    break
+            return b''.join(parts)[:limit]
+        if compression == 'lz4':
+            import lz4.frame
+            return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit)
+    except Exception:  # noqa: BLE001 - nothing recoverable
+        return b''
+    return b''

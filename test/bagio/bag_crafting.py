@@ -61,9 +61,10 @@ def small_drive(folder: Path, n: int = SAMPLES, seed: int = 5) -> Path:
 
 
 def rewrite_with_mcap(src: Path, dst: Path, *, compression: str = 'none',
-                      chunk_size: int = CHUNK) -> Path:
+                      chunk_size: int = CHUNK, chunked: bool = True) -> Path:
     """The bag folder ``src`` written again by the ``mcap`` library into ``dst`` (same file
-    name, same metadata.yaml); its .mcap file."""
+    name, same metadata.yaml; ``chunked`` False: every record at the top level); its .mcap
+    file."""
     (mcap,) = Path(src).glob('*.mcap')
     dst.mkdir()
     shutil.copy(Path(src) / 'metadata.yaml', dst / 'metadata.yaml')
@@ -71,7 +72,7 @@ def rewrite_with_mcap(src: Path, dst: Path, *, compression: str = 'none',
     with mcap.open('rb') as f, out.open('wb') as g:
         reader = make_reader(f)
         writer = Writer(g, compression=CompressionType[compression.upper()],
-                        chunk_size=chunk_size)
+                        chunk_size=chunk_size, use_chunking=chunked)
         writer.start(profile='ros2', library='test')
         ids: dict[int, int] = {}
         for schema, channel, message in reader.iter_messages(log_time_order=False):

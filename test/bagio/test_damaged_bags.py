@@ -294,3 +294,20 @@ def test_a_cut_recording_resumes_at_the_next_chunk_head(tmp_path, drives):
     assert d.messages[DEFLECTIONS] == whole.messages[DEFLECTIONS] > mcap_recovers(
         bytes(broken))
     assert any('found by its head' in line for line in d.issues), d.issues
+
+
+def test_a_file_without_chunks(tmp_path, drives):
+    """Every record at the top level (rosbag2's fastwrite preset): read whole, then cut and
+    flipped, at least what the mcap library recovers."""
+    mcap = rewrite_with_mcap(drives['ours'][0], tmp_path / 'flat', chunked=False)
+    data = mcap.read_bytes()
+    assert not chunks_of(data)
+    full = bagio.read_drive_bag(tmp_path / 'flat')
+    assert full.stamps_ns.size == SAMPLES and not full.issues
+    for cut in (len(data) // 3, 2 * len(data) // 3):
+        broken = bytearray(data[:cut])
+        broken[cut // 2] ^= 0x04
+        mcap.write_bytes(bytes(broken))
+        d = bagio.read_drive_bag(tmp_path / 'flat')
+        assert d.messages.get(DEFLECTIONS, 0) >= mcap_recovers(bytes(broken)) > 0
+        assert d.issues
