@@ -67,6 +67,8 @@ def basic_checks(cols: TopicColumns, rejects: Rejects) -> tuple[np.ndarray, np.n
 
 
 def _finite_rows(values: np.ndarray) -> np.ndarray:
+    if values.shape[0] == 0:
+        return np.ones(0, dtype=bool)
     v = values.reshape(values.shape[0], -1)
     ok = np.ones(v.shape[0], dtype=bool)
     for j in range(v.shape[1]):                 # column by column: faster than axis=1

@@ -125,6 +125,9 @@ class Drive:
         Breaks: a truncated or corrupt file (read up to the break), missing files.
     custom_data : dict
         metadata.yaml ``custom_data``.
+    noted : dict
+        ``topic -> {reason -> count}``: messages kept with a caveat: ``fix_status_unknown``
+        (a NavSatFix of status -2, STATUS_UNKNOWN, with a finite position).
     """
 
     stamps_ns: np.ndarray
@@ -139,6 +142,7 @@ class Drive:
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
     issues: tuple[str, ...] = ()
     custom_data: dict[str, str] = field(default_factory=dict)
+    noted: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def rejected_total(self) -> int:
@@ -151,6 +155,9 @@ class Drive:
         for topic, reasons in sorted(self.rejected.items()):
             for reason, count in sorted(reasons.items()):
                 lines.append(f'{topic}: {count} rejected ({reason})')
+        for topic, reasons in sorted(self.noted.items()):
+            for reason, count in sorted(reasons.items()):
+                lines.append(f'{topic}: {count} kept ({reason})')
         lines.extend(self.issues)
         return lines
 
@@ -392,25 +399,36 @@ def read_drive_bag(path: str | Path) -> Drive:
             s, x, _, z = read_points(cols[TRUE_ROAD[side]], rejects)
             parts['road_' + key] = (s, z)
             parts['x_' + key] = (s, x)
-    fixes = None
-    if FIX in cols:
-        c = cols[FIX]
-        s, ok = basic_checks(c, rejects)
-        lat, _ = c.column('latitude')
-        lon, _ = c.column('longitude')
-        alt, _ = c.column('altitude')
-        status, _ = c.column('status.status', dtype=np.int64)
-        finite = np.isfinite(lat) & np.isfinite(lon)
-        rejects.add(FIX, 'nonfinite', np.count_nonzero(ok & ~finite))
-        nofix = ok & finite & (status < 0)
-        rejects.add(FIX, 'no_fix', np.count_nonzero(nofix))
-        keep = accept_in_order(s, ok & finite & ~nofix, FIX, rejects)
-        fixes = Fixes(s[keep], lat[keep], lon[keep], alt[keep])
+    fixes, noted = _read_fixes(cols[FIX], rejects) if FIX in cols else (None, {})
     return Drive(
         stamps_ns=stamps, q_m=pos[:, :2].copy(), roll_rad=pos[:, 2].copy(), speed_mps=speed,
         twist_stamps_ns=twist_ns, twist_speed_mps=twist_v, truth=_union_truth(parts),
         fixes=fixes, messages={t: c.count for t, c in cols.items()}, rejected=rejects.counts,
-        issues=tuple(issues), custom_data=bag_custom_data(path))
+        issues=tuple(issues), custom_data=bag_custom_data(path), noted=noted)
+
+
+#: NavSatStatus: no fix (rejected), and unknown (ROS 2 Jazzy: a fix of unknown quality, kept).
+_STATUS_NO_FIX, _STATUS_UNKNOWN = -1, -2
+
+
+def _read_fixes(c, rejects: Rejects) -> tuple[Fixes, dict[str, dict[str, int]]]:
+    """The accepted fixes and the caveats counted: a non-finite position and status -1
+    (NO_FIX, or any other negative but -2) are rejected; status -2 (UNKNOWN) with a finite
+    position is kept and counted as ``fix_status_unknown``."""
+    s, ok = basic_checks(c, rejects)
+    lat, _ = c.column('latitude')
+    lon, _ = c.column('longitude')
+    alt, _ = c.column('altitude')
+    status, _ = c.column('status.status', dtype=np.int64)
+    finite = np.isfinite(lat) & np.isfinite(lon)
+    rejects.add(FIX, 'nonfinite', np.count_nonzero(ok & ~finite))
+    unknown = status == _STATUS_UNKNOWN
+    nofix = ok & finite & (status < 0) & ~unknown
+    rejects.add(FIX, 'no_fix', np.count_nonzero(nofix))
+    keep = accept_in_order(s, ok & finite & ~nofix, FIX, rejects)
+    kept_unknown = int(np.count_nonzero(keep & unknown))
+    noted = {FIX: {'fix_status_unknown': kept_unknown}} if kept_unknown else {}
+    return Fixes(s[keep], lat[keep], lon[keep], alt[keep]), noted
 
 
 

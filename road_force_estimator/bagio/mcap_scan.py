@@ -1,15 +1,19 @@
 """Reading the MCAP container (https://mcap.dev/spec) of a bag, record by record.
 
 :class:`McapScan` walks a file from its start so that a cut or corrupt file yields every
-message it can trust (a chunk failing its CRC is skipped; a cut record ends the file), and
-takes a chunk through its message index when that index accounts for every record in it
-(checked with numpy), which is several times faster than the walk. The record layouts and the
-writer are :mod:`.mcap_file`.
+message it can trust: a chunk failing its CRC, not decompressing or declaring more than
+:data:`MAX_CHUNK_BYTES` is skipped; after a corrupt record the read resumes at the next chunk
+of the summary's chunk index (whose lengths also overrule a chunk's own, and whose schemas and
+channels stand in for those of a damaged chunk); a cut record ends the file. A chunk is taken
+through its message index when that index accounts for every record in it (checked with
+numpy), which is several times faster than the walk. The bytes come through
+:class:`.mcap_source.McapSource` (regular files only, copies, no memory map); the record
+layouts and the writer are :mod:`.mcap_file`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-import mmap
+import bisect
 from pathlib import Path
 import struct
 from typing import Callable, Iterator
@@ -17,11 +21,28 @@ import zlib
 
 import numpy as np
 
-from road_force_estimator.bagio.mcap_file import MAGIC, RECORD, U32
+from road_force_estimator.bagio.errors import BagReadError
+from road_force_estimator.bagio.mcap_file import MAGIC, RECORD, U32, McapFile
+from road_force_estimator.bagio.mcap_source import (
+    FileChanged,
+    McapSource,
+    NotRegular,
+    decompress,
+    decompress_partial,
+    find_chunk,
+    read_summary,
+)
 
-__all__ = ['Channel', 'Block', 'McapScan']
+__all__ = ['MAX_CHUNK_BYTES', 'Channel', 'Block', 'McapScan']
+
+#: The largest uncompressed chunk read (bytes): the writer's chunk size times a margin (the
+#: ``mcap`` library and rosbag2 write chunks of about 1-4 MiB). A chunk declaring more (a
+#: decompression bomb, a corrupt header) is skipped and counted; change it for bags written
+#: with larger chunks.
+MAX_CHUNK_BYTES = 64 * McapFile.CHUNK_BYTES
 
 _MESSAGE = struct.Struct('<HIQQ')
+_INDEX_WINDOW = 1 << 18           # bytes of message index records read at a time
 _CHUNK = struct.Struct('<QQQI')
 
 
@@ -50,38 +71,6 @@ def _string(buf, pos: int) -> tuple[str, int]:
     return bytes(buf[pos + 4:end]).decode('utf-8'), end
 
 
-def _decompress(data: bytes, compression: str, size: int | None) -> bytes:
-    if compression == '':
-        return bytes(data)
-    if compression == 'zstd':
-        try:
-            import zstandard
-            return zstandard.ZstdDecompressor().decompress(data, max_output_size=size or 0)
-        except ImportError:
-            from backports import zstd  # rosbags' own dependency
-            return zstd.decompress(data)
-    if compression == 'lz4':
-        import lz4.frame
-        return lz4.frame.decompress(data)
-    raise _Truncated(f'unsupported chunk compression {compression!r}')
-
-
-def _decompress_partial(data: bytes, compression: str) -> bytes:
-    """As much as can be decompressed of a chunk cut short."""
-    try:
-        if compression == '':
-            return bytes(data)
-        if compression == 'zstd':
-            import zstandard
-            return zstandard.ZstdDecompressor().decompressobj().decompress(data)
-        if compression == 'lz4':
-            import lz4.frame
-            return lz4.frame.LZ4FrameDecompressor().decompress(data)
-    except Exception:  # noqa: BLE001 - nothing recoverable
-        return b''
-    return b''
-
-
 @dataclass
 class Block:
     """The messages of one topic in one chunk, read through the chunk's message index.
@@ -101,16 +90,6 @@ class Block:
         return int(self.log_ns.size)
 
 
-def _open_buffer(path: Path):
-    """The bytes of a file: a read-only memory map (no copy, pages read on demand), or the
-    bytes read when it cannot be mapped (an empty file)."""
-    with path.open('rb') as f:
-        try:
-            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-        except (ValueError, OSError):
-            return f.read()
-
-
 def _take_records(raw: np.ndarray, starts: np.ndarray, size: int) -> np.ndarray:
     """The ``size`` bytes from each of ``starts`` in ``raw`` (uint8): an (m, size) copy."""
     if size == 0:
@@ -122,10 +101,14 @@ def _take_records(raw: np.ndarray, starts: np.ndarray, size: int) -> np.ndarray:
 class McapScan:
     """Sequential reader of one MCAP file that keeps going past what it can skip safely.
 
-    A chunk that fails its CRC or does not decompress is skipped whole (its length is
-    known); a chunk whose records break is read up to the break; a record that runs past
-    the end of the file (a cut recording) or a corrupt record outside chunks ends the file.
-    Every such event is one line in :attr:`issues`.
+    A chunk that fails its CRC, does not decompress or declares more than
+    :data:`MAX_CHUNK_BYTES` is skipped whole (its length is known); a chunk whose records
+    break is read up to the break; a corrupt record (a flipped length) resumes at the next
+    chunk the summary's chunk index lists, whose lengths also overrule a chunk's own. A
+    record that runs past the end of the file (a cut recording) ends the file. Schemas and
+    channels come from the summary section too, so a damaged first chunk that held them
+    loses only its own messages. Every such event is one line in :attr:`issues`; a file
+    that changes while it is read raises :class:`BagReadError`.
 
     With ``indexed``, a chunk followed by message index records (rosbag2, the ``mcap``
     library and this module write them) that account for every record in it is read with
@@ -146,7 +129,11 @@ class McapScan:
         self.messages = 0
         self.indexed_chunks = 0
         self.walked_chunks = 0
+        self.skipped_chunks = 0          #: corrupt, undecompressable or too large
+        self.resyncs = 0                 #: corrupt records passed over to the next chunk
         self.blocks: list[Block] = []
+        self.chunk_at: dict[int, int] = {}
+        self._starts: list[int] = []
 
     def _note(self, text: str) -> None:
         self.issues.append(f'{self.path.name}: {text}')
@@ -160,61 +147,163 @@ class McapScan:
         """The wanted messages in lists of about a chunk each (cheaper than one by one):
         ``(channel, log_ns, payload)`` tuples, or (``indexed``) lists of :class:`Block`."""
         try:
-            buf = _open_buffer(self.path)
+            src = McapSource(self.path)
+        except NotRegular as err:
+            self._note(f'{err.args[0]}, not a regular file: not read')
+            return
         except OSError as err:
             self._note(f'cannot be read ({err.strerror})')
             return
         try:
-            yield from self._batches(buf)
+            yield from self._batches(src)
+            src.check()
+        except FileChanged as err:
+            raise BagReadError(f'{self.path}: {err.args[0]}; {self.messages} messages read '
+                               'before: not read further') from None
         finally:
-            if isinstance(buf, mmap.mmap):
-                try:
-                    buf.close()
-                except BufferError:      # a view is still alive: closed when collected
-                    pass
+            src.close()
 
-    def _batches(self, buf) -> Iterator[list]:
-        if len(buf) < len(MAGIC) or buf[:len(MAGIC)] != MAGIC:
+    def _batches(self, src: McapSource) -> Iterator[list]:
+        if src.read(0, len(MAGIC)) != MAGIC:
             self._note('not an MCAP file (bad magic)')
             return
+        self._summary(src)
         out: list[tuple[Channel, int, bytes]] = []
-        pos, end = len(MAGIC), len(buf)
-        try:
-            while pos < end:
-                pos = self._parse(buf, pos, end, out, top=True)
-                if out:
-                    self.messages += len(out)
-                    yield out
-                    out = []
-                if self.blocks:
-                    blocks, self.blocks = self.blocks, []
-                    self.messages += sum(block.count for block in blocks)
-                    yield blocks
-                if pos < 0:                      # end-of-data record reached
-                    return
-        except _Truncated as err:
-            if out:
+        pos, end = len(MAGIC), src.size
+        while pos < end:
+            try:
+                pos = self._top(src, pos, out)
+            except _Truncated as err:
+                pos = self._resync(src, pos, err.args[0], len(out))
+            if out and (len(out) >= 4096 or self.blocks or pos in self.chunk_at or pos < 0):
                 self.messages += len(out)
                 yield out
-            self._note(f'{err.args[0]}; read {self.messages} messages before it')
-            return
-        self._note(f'ends at byte {len(buf)} without the MCAP end-of-data record '
-                   f'(recording cut short?); read {self.messages} messages')
+                out = []
+            if self.blocks:
+                blocks, self.blocks = self.blocks, []
+                self.messages += sum(block.count for block in blocks)
+                yield blocks
+            if pos < 0:                      # end-of-data record reached
+                break
+        if out:
+            self.messages += len(out)
+            yield out
+        if pos == end:
+            self._note(f'ends at byte {end} without the MCAP end-of-data record '
+                       f'(recording cut short?); read {self.messages} messages')
 
-    def _parse(self, buf, start: int, end: int, out: list, *, top: bool) -> int:
-        """Append the wanted messages of the records in ``buf[start:end]`` to ``out``.
+    def _summary(self, src: McapSource) -> None:
+        """Schemas, channels and chunk offsets of the summary section (if intact)."""
+        summary = read_summary(src)
+        if summary.issue:
+            self._note(summary.issue)
+        for op, body, at in summary.records:
+            try:
+                (self._schema if op == 0x03 else self._channel)(body, 0, len(body), at)
+            except _Truncated:
+                pass                         # the record in the data section may be good
+        self.chunk_at = summary.chunks if summary.trusted else {}
+        self._starts = sorted(summary.chunks)
 
-        At the top level it returns after each chunk (the position to go on from), or -1 at
-        the end-of-data record; inside a chunk it parses all of it.
-        """
-        pos = start
+    def _resync(self, src: McapSource, pos: int, why: str, pending: int) -> int:
+        """Where to go on after a corrupt record at ``pos`` (``pending`` messages not yet
+        yielded): the next chunk of the summary's chunk index, else (no summary, as in a cut
+        recording) the next chunk head found in the bytes, or the end (-2) when none
+        follows."""
+        at = bisect.bisect_right(self._starts, pos)
+        if at < len(self._starts):
+            nxt, how = self._starts[at], 'from the chunk index'
+        elif not self._starts and (found := find_chunk(src, pos + 1)) is not None:
+            nxt, how = found, 'found by its head'
+        else:
+            self._note(f'{why}; read {self.messages + pending} messages before it')
+            return -2
+        self.resyncs += 1
+        self._note(f'{why}: resuming at the next chunk (byte {nxt}, {how})')
+        return nxt
+
+    def _top(self, src: McapSource, pos: int, out: list) -> int:
+        """Read the record at ``pos`` of the data section; the position of the next one, or
+        -1 at the end-of-data record (or the footer)."""
+        end = src.size
+        if not self._starts and (run := self._message_run(src, pos, out)) > pos:
+            return run
+        if end - pos < RECORD.size:
+            raise _Truncated(f'file ends inside a record header at byte {pos}')
+        op, length = RECORD.unpack(src.read(pos, RECORD.size))
+        known = self.chunk_at.get(pos)
+        if known is not None and (op != 0x06 or length != known - RECORD.size):
+            self._note(f'chunk at byte {pos}: its record head (op 0x{op:02x}, {length} bytes) '
+                       f'disagrees with the chunk index ({known - RECORD.size} bytes): the '
+                       'chunk index is used')
+            op, length = 0x06, known - RECORD.size
+        body = pos + RECORD.size
+        nxt = body + length
+        if op == 0x06:
+            return self._chunk(src, pos, length, out)
+        if op == 0x05 and (nxt > end or length < 22):
+            raise _Truncated(f'message record at byte {pos} is cut or corrupt ({length} bytes '
+                             'claimed)')
+        if nxt > end:
+            raise _Truncated(f'file ends inside a record (op 0x{op:02x}) at byte {pos}: '
+                             f'{nxt - end} bytes missing')
+        after = bisect.bisect_right(self._starts, pos)
+        if after < len(self._starts) and self._starts[after] < nxt:
+            raise _Truncated(f'record (op 0x{op:02x}) at byte {pos} runs over the chunk at '
+                             f'byte {self._starts[after]} (a corrupt length)')
+        if op in (0x03, 0x04, 0x05):
+            if length > MAX_CHUNK_BYTES:
+                raise _Truncated(f'corrupt record (op 0x{op:02x}, {length} bytes) at byte '
+                                 f'{pos}')
+            data = src.read(body, length)
+            if op == 0x05:
+                self._message(data, 0, length, out)
+            else:
+                (self._schema if op == 0x03 else self._channel)(data, 0, length, pos)
+        elif op in (0x0F, 0x02):
+            return -1
+        elif op == 0x00 or 0x0F < op < 0x80:   # 0x80-0xFF: private records, skipped
+            raise _Truncated(f'corrupt record (op 0x{op:02x}) at byte {pos}')
+        return nxt
+
+    def _message_run(self, src: McapSource, pos: int, out: list) -> int:
+        """Read the message records from ``pos`` on that lie whole in the read-ahead window,
+        in one loop (a file without chunks); the position after them."""
+        buf, off = src.window(pos)
+        start, end = off, len(buf)
+        unpack_record, unpack_message = RECORD.unpack_from, _MESSAGE.unpack_from
+        keep, channels, append = self.keep, self.channels, out.append
+        while end - off >= RECORD.size:
+            op, length = unpack_record(buf, off)
+            nxt = off + RECORD.size + length
+            if op != 0x05 or length < _MESSAGE.size or nxt > end:
+                break
+            cid, _, log_ns, _ = unpack_message(buf, off + RECORD.size)
+            channel = keep.get(cid)
+            if channel is not None:
+                append((channel, log_ns, buf[off + RECORD.size + _MESSAGE.size:nxt]))
+            elif cid not in channels:
+                self.unknown_channel += 1
+            off = nxt
+        return pos + off - start
+
+    def _message(self, buf, body: int, nxt: int, out: list) -> None:
+        cid, _, log_ns, _ = _MESSAGE.unpack_from(buf, body)
+        channel = self.keep.get(cid)
+        if channel is not None:
+            out.append((channel, log_ns, buf[body + 22:nxt]))
+        elif cid not in self.channels:
+            self.unknown_channel += 1
+
+    def _parse(self, buf, end: int, out: list) -> None:
+        """Append the wanted messages of a chunk's records ``buf[:end]`` to ``out``."""
+        pos = 0
         unpack_record, unpack_message = RECORD.unpack_from, _MESSAGE.unpack_from
         keep, channels = self.keep, self.channels
         append = out.append
-        where = 'file' if top else 'chunk'
         while pos < end:
             if end - pos < 9:
-                raise _Truncated(f'{where} ends inside a record header at byte {pos}')
+                raise _Truncated(f'chunk ends inside a record header at byte {pos}')
             op, length = unpack_record(buf, pos)
             body = pos + 9
             nxt = body + length
@@ -228,78 +317,143 @@ class McapScan:
                     append((channel, log_ns, buf[body + 22:nxt]))
                 elif cid not in channels:
                     self.unknown_channel += 1
-            elif op == 0x06 and top:
-                self._chunk(buf, pos, body, min(nxt, end), out, complete=nxt <= end)
-                return nxt
             elif nxt > end:
-                raise _Truncated(f'{where} ends inside a record (op 0x{op:02x}) at byte '
+                raise _Truncated(f'chunk ends inside a record (op 0x{op:02x}) at byte '
                                  f'{pos}: {nxt - end} bytes missing')
             elif op == 0x03:
                 self._schema(buf, body, nxt, pos)
             elif op == 0x04:
                 self._channel(buf, body, nxt, pos)
-            elif op in (0x0F, 0x02) and top:
-                return -1
             elif op == 0x00 or 0x0F < op < 0x80:   # 0x80-0xFF: private records, skipped
                 raise _Truncated(f'corrupt record (op 0x{op:02x}) at byte {pos}')
             pos = nxt
-        return pos
 
-    def _chunk(self, buf, pos: int, body: int, end: int, out: list, *,
-               complete: bool) -> None:
+    def _skip(self, pos: int, why: str) -> None:
+        self.skipped_chunks += 1
+        self._note(f'chunk at byte {pos} {why}: skipped')
+
+    def _chunk(self, src: McapSource, pos: int, length: int, out: list) -> int:
+        """Read the chunk record at ``pos`` (``length`` bytes after its head); the position
+        after it."""
+        nxt = pos + RECORD.size + length
+        if length > 2 * MAX_CHUNK_BYTES:
+            if nxt > src.size:
+                raise _Truncated(f'chunk at byte {pos} is corrupt ({length} bytes claimed, '
+                                 f'{nxt - src.size} past the end of the file)')
+            self._skip(pos, f'is {length} bytes long, more than twice MAX_CHUNK_BYTES')
+            return nxt
+        rec = src.read(pos, nxt - pos)
         try:
-            _, _, size, crc = _CHUNK.unpack_from(buf, body)
-            compression, rpos = _string(buf, body + 28)
-            (rlen,) = struct.unpack_from('<Q', buf, rpos)
+            _, _, size, crc = _CHUNK.unpack_from(rec, RECORD.size)
+            compression, rpos = _string(rec, RECORD.size + 28)
+            (rlen,) = struct.unpack_from('<Q', rec, rpos)
         except (struct.error, UnicodeDecodeError):
             raise _Truncated(f'chunk at byte {pos} has a corrupt header') from None
         rstart = rpos + 8
-        if not (complete and rstart + rlen <= end):
+        limit = min(size, MAX_CHUNK_BYTES)
+        if nxt > src.size and pos + rstart + rlen <= src.size:
+            self._note(f'chunk at byte {pos}: its length field ({length} bytes) runs past the '
+                       f'end of the file, its records end at byte {pos + rstart + rlen}: used')
+            nxt = pos + rstart + rlen
+            rec = rec[:rstart + rlen]
+        if nxt > src.size:
             # The file ends inside this chunk: recover its complete records, then stop.
-            data = _decompress_partial(buf[rstart:end], compression)
+            data = decompress_partial(rec[rstart:rstart + rlen], compression, MAX_CHUNK_BYTES)
             inner = self._records_in_chunk(data, out)
             raise _Truncated(f'file ends inside the chunk at byte {pos} '
-                             f'({rstart + rlen - end} bytes missing'
+                             f'({nxt - src.size} bytes missing'
                              + (f'; {inner}' if inner else '') + ')')
+        if rstart + rlen > len(rec):
+            if not crc:
+                self._skip(pos, f'is corrupt (its records run {rstart + rlen - len(rec)} '
+                           'bytes past its end)')
+                return nxt
+            self._note(f'chunk at byte {pos}: its records length field ({rlen} bytes) runs '
+                       'past its end: the rest of the record is taken (its CRC checks it)')
+            rlen = len(rec) - rstart
+        return nxt + self._chunk_records(src, pos, rec, rstart, rlen, compression,
+                                         (size, limit), crc, out)
+
+    def _chunk_records(self, src: McapSource, pos: int, rec: bytes, rstart: int, rlen: int,
+                       compression: str, sizes: tuple[int, int], crc: int, out: list) -> int:
+        """Decompress (``sizes``: declared, at most that many bytes) and check a complete
+        chunk's records, then read them; the bytes of message index records after the chunk
+        read with it (0 when none was read)."""
+        size, limit = sizes
         try:
             if compression == '':
-                data = memoryview(buf)[rstart:rstart + rlen]      # no copy
+                data = memoryview(rec)[rstart:rstart + rlen]      # no copy
             else:
-                data = _decompress(buf[rstart:rstart + rlen], compression, size)
+                data = decompress(rec[rstart:rstart + rlen], compression, limit)
         except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own types
-            self._note(f'chunk at byte {pos} does not decompress ({err}): skipped')
-            return
-        if len(data) != size:
-            self._note(f'chunk at byte {pos} decompresses to {len(data)} bytes, not {size}: '
-                       'skipped')
-            return
+            self._skip(pos, f'does not decompress ({err})')
+            return 0
+        if compression and len(data) > MAX_CHUNK_BYTES:
+            self._skip(pos, f'declares {size} bytes uncompressed and holds more than '
+                       f'MAX_CHUNK_BYTES ({MAX_CHUNK_BYTES})')
+            return 0
         if crc and zlib.crc32(data) != crc:
-            self._note(f'chunk at byte {pos} fails its CRC check (corrupt): its messages '
-                       'are skipped')
-            return
-        if self.indexed and self._indexed_chunk(data, buf, end):
-            self.indexed_chunks += 1
-            return
+            self._skip(pos, 'fails its CRC check (corrupt)')
+            return 0
+        if len(data) != size:
+            if not crc or len(data) > size:
+                self._skip(pos, f'decompresses to {len(data)} bytes, not {size}')
+                return 0
+            self._note(f'chunk at byte {pos} declares {size} bytes uncompressed but holds '
+                       f'{len(data)} (its CRC is good): read')
+        index = b''
+        if self.indexed:
+            index = self._index_records(src, pos + len(rec), len(rec))
+            if self._indexed_chunk(data, index):
+                self.indexed_chunks += 1
+                return len(index)
         self.walked_chunks += 1
         inner = self._records_in_chunk(bytes(data), out)
         if inner is not None:
             self._note(f'{inner} in the chunk at byte {pos}: the rest of that chunk is '
                        'skipped')
+        return len(index)
 
     def _records_in_chunk(self, data: bytes, out: list) -> str | None:
         """Parse a chunk's records into ``out``; the break, if any (positions inside the
         chunk's records)."""
         try:
-            self._parse(data, 0, len(data), out, top=False)
+            self._parse(data, len(data), out)
         except _Truncated as err:
             return err.args[0]
         return None
 
+    def _index_records(self, src: McapSource, pos: int, chunk: int) -> bytes:
+        """The message index records that follow a chunk of ``chunk`` bytes ending at
+        ``pos`` (up to the next chunk of the chunk index), read a window at a time (one read
+        for most chunks: an index is less than half its chunk)."""
+        at = bisect.bisect_left(self._starts, pos)
+        stop = self._starts[at] if at < len(self._starts) else src.size
+        window = min(_INDEX_WINDOW, chunk // 2 + 4096, stop - pos)
+        buf, end = src.read(pos, window), 0
+        while True:
+            if len(buf) - end < RECORD.size:
+                more = src.read(pos + len(buf), min(window, stop - pos - len(buf)))
+                if not more:
+                    break
+                buf += more
+                continue
+            if buf[end] != 0x07:
+                break
+            (length,) = struct.unpack_from('<Q', buf, end + 1)
+            nxt = end + RECORD.size + length
+            if length > MAX_CHUNK_BYTES or pos + nxt > stop:
+                break
+            if nxt > len(buf):
+                buf += src.read(pos + len(buf), nxt - len(buf))
+            end = nxt
+        return buf[:end]
+
     @staticmethod
-    def _message_index(buf, pos: int) -> list[tuple[int, np.ndarray]]:
-        """``(channel id, record offsets)`` of the message index records from ``pos`` on."""
+    def _message_index(buf) -> list[tuple[int, np.ndarray]]:
+        """``(channel id, record offsets)`` of the message index records in ``buf``."""
         index = []
-        end = len(buf)
+        pos, end = 0, len(buf)
         while pos + 15 <= end and buf[pos] == 0x07:
             (length,) = struct.unpack_from('<Q', buf, pos + 1)
             cid, nbytes = struct.unpack_from('<HI', buf, pos + 9)
@@ -310,9 +464,9 @@ class McapScan:
             pos += 9 + length
         return index
 
-    def _indexed_chunk(self, data, buf, at: int) -> bool:
+    def _indexed_chunk(self, data, index_records: bytes) -> bool:
         """Read a chunk's records ``data`` through the message index records that follow the
-        chunk at byte ``at`` of ``buf``, into :attr:`blocks`.
+        chunk (``index_records``), into :attr:`blocks`.
 
         Only when the indexed records tile ``data`` exactly (the first at 0, each starting
         where the one before ends, the last ending at its end) and every one is a message
@@ -322,7 +476,7 @@ class McapScan:
         returns False having read nothing.
         """
         size = len(data)
-        index = self._message_index(buf, at)
+        index = self._message_index(index_records)
         if not index or any(cid not in self.channels for cid, _ in index):
             return size == 0 and not index
         offsets = np.concatenate([o for _, o in index]).view(np.int64)

@@ -7,12 +7,16 @@ skipped and reading goes on; a cut or corrupt record outside chunks ends the fil
 readers take a chunk whose message index accounts for every record in it through that index,
 about five times faster than the walk and with the same result; any other chunk is walked
 (bench/bag_read_speed.py). Messages come in file order, which is log-time order for the bags
-rosbag2, the bag_recorder node and this package write.
+rosbag2, the bag_recorder node and this package write. Only regular files inside the bag
+folder are read (a FIFO, a device, or a ``metadata.yaml`` entry such as ``../x.mcap`` or an
+absolute path is refused and named); a file that changes while it is read is a
+:class:`BagReadError`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
+import stat
 from typing import Any, Collection, Iterable, Iterator, Mapping
 
 import numpy as np
@@ -43,37 +47,95 @@ USE_MESSAGE_INDEX = True
 _YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
 
 
+def _not_regular(path: Path) -> str | None:
+    """What ``path`` is when it is neither a regular file nor a folder (a FIFO, a device)."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return NOT_REGULAR_KINDS.get(stat.S_IFMT(mode), 'not a regular file')
+
+
+NOT_REGULAR_KINDS = {stat.S_IFIFO: 'a FIFO', stat.S_IFCHR: 'a character device',
+                     stat.S_IFBLK: 'a block device', stat.S_IFSOCK: 'a socket'}
+
+
+def _metadata(meta_path: Path, issues: list[str]) -> dict[str, Any]:
+    """``rosbag2_bagfile_information`` of a metadata.yaml (empty, with an issue, when it
+    cannot be parsed or has the wrong shape)."""
+    if not meta_path.is_file():
+        return {}
+    try:
+        doc = yaml.load(meta_path.read_text('utf-8'), Loader=_YAML_LOADER)
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        issues.append(f'metadata.yaml cannot be parsed ({type(err).__name__}): '
+                      'reading the .mcap files directly')
+        return {}
+    info = doc.get('rosbag2_bagfile_information') if isinstance(doc, Mapping) else doc
+    if info is None:
+        return {}
+    if not isinstance(info, Mapping):
+        issues.append('metadata.yaml: rosbag2_bagfile_information is not a mapping '
+                      f'({type(info).__name__}): reading the .mcap files directly')
+        return {}
+    return dict(info)
+
+
+def _listed_files(path: Path, info: Mapping[str, Any], issues: list[str]) -> list[Path]:
+    """The files metadata.yaml lists that are inside the bag folder and regular files."""
+    names = info.get('relative_file_paths') or []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        issues.append('metadata.yaml: relative_file_paths is not a list of file names: '
+                      'reading the .mcap files found in the folder')
+        return []
+    files = []
+    for name in names:
+        rel = PurePath(name)
+        if rel.is_absolute() or '..' in rel.parts or not rel.parts:
+            issues.append(f'{name}: outside the bag folder (listed in metadata.yaml): not read')
+            continue
+        f = path / rel
+        kind = _not_regular(f)
+        if kind:
+            issues.append(f'{name}: {kind}, not a regular file (listed in metadata.yaml): '
+                          'not read')
+        elif not f.is_file():
+            issues.append(f'{f.name}: listed in metadata.yaml but missing')
+        else:
+            files.append(f)
+    return files
+
+
 def _bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
     """The storage files of a bag folder (or a single .mcap), its metadata and issues."""
     issues: list[str] = []
     if not path.exists():
         raise BagReadError(f'{path}: no such bag folder or file')
+    kind = _not_regular(path)
+    if kind:
+        raise BagReadError(f'{path}: {kind}, not a regular file or a bag folder: not read')
     if path.is_file():
         if path.suffix != '.mcap':
             raise BagReadError(f'{path}: not a bag folder or an .mcap file')
         return [path], {}, issues
-    meta_path = path / 'metadata.yaml'
-    info: dict[str, Any] = {}
-    if meta_path.is_file():
-        try:
-            info = (yaml.load(meta_path.read_text('utf-8'), Loader=_YAML_LOADER) or {}).get(
-                'rosbag2_bagfile_information', {}) or {}
-        except (yaml.YAMLError, UnicodeDecodeError, AttributeError) as err:
-            issues.append(f'metadata.yaml cannot be parsed ({type(err).__name__}): '
-                          'reading the .mcap files directly')
-            info = {}
+    info = _metadata(path / 'metadata.yaml', issues)
     storage = info.get('storage_identifier', 'mcap')
     if storage != 'mcap':
         raise BagReadError(f'{path}: storage {storage!r}: only MCAP bags are read here')
-    files = [path / name for name in info.get('relative_file_paths') or []]
-    missing = [f for f in files if not f.is_file()]
-    for f in missing:
-        issues.append(f'{f.name}: listed in metadata.yaml but missing')
-    files = [f for f in files if f.is_file()]
+    files = _listed_files(path, info, issues)
     if not files:
         files = sorted(path.glob('*.mcap'))
         if files and not info:
             issues.append('no metadata.yaml: reading the .mcap files found in the folder')
+        for f in files:
+            kind = _not_regular(f)
+            if kind:
+                issues.append(f'{f.name}: {kind}, not a regular file: not read')
+        files = [f for f in files if f.is_file()]
+        if not files and issues:
+            raise BagReadError(f'{path}: no readable .mcap file ({"; ".join(issues)})')
     if not files:
         raise BagReadError(f'{path}: no metadata.yaml and no .mcap file: not an MCAP bag')
     return files, info, issues

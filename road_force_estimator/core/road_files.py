@@ -21,7 +21,16 @@ from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
 __all__ = [
     'read_csv_profile', 'write_csv_profile', 'read_erd_profile', 'write_erd_profile',
     'read_text_profile', 'road_from_source', 'erd_stored_iri', 'ERD_IRI_KEYS',
+    'MAX_ELEVATION_M', 'MAX_DISTANCE_M', 'MAX_STEP_M',
 ]
+
+#: Physical bounds of a profile file's values; beyond them the file is refused (naming the
+#: line): no road is higher or deeper than 10 km (elevations are relative or above sea
+#: level), longer than 10,000 km, or sampled more coarsely than every 100 m (an ERD STEP).
+#: They also bound what a consumer resamples the profile to.
+MAX_ELEVATION_M = 1e4
+MAX_DISTANCE_M = 1e7
+MAX_STEP_M = 100.0
 
 _LENGTH_UNITS_M = {
     'm': 1.0, 'meter': 1.0, 'meters': 1.0, 'metre': 1.0, 'metres': 1.0,
@@ -33,14 +42,36 @@ _LENGTH_UNITS_M = {
 }
 
 
+def _check_physical(distance: np.ndarray, elevation: np.ndarray, name: str,
+                    line_numbers) -> None:
+    """Refuse finite values beyond :data:`MAX_DISTANCE_M` / :data:`MAX_ELEVATION_M`, naming
+    the first such row's line (``line_numbers[i]`` of row i)."""
+    for values, bound, what in ((distance[:, None], MAX_DISTANCE_M, 'distance'),
+                                (elevation, MAX_ELEVATION_M, 'elevation')):
+        beyond = np.flatnonzero(np.any(np.abs(values) > bound, axis=1)
+                                & np.all(np.isfinite(values), axis=1))
+        if beyond.size:
+            i = int(beyond[0])
+            worst = values[i][np.argmax(np.abs(values[i]))]
+            raise ValueError(f'{name}, line {int(line_numbers[i])}: {what} {worst:.6g} m is '
+                             f'beyond +-{bound:g} m, not a road profile (a wrong unit or a '
+                             f'corrupt value?); {beyond.size} such row(s)')
+
+
 def _clean(distance: np.ndarray, elevation: np.ndarray, name: str,
-           notes: list[str] | None = None) -> RoadProfile:
-    """Drop non-finite rows and rows whose distance does not increase; count them in notes."""
+           notes: list[str] | None = None, line_numbers=None,
+           where: str | None = None) -> RoadProfile:
+    """Refuse physically impossible values (:func:`_check_physical`: ``line_numbers`` of the
+    rows, default the row index + 2, in file ``where``, default ``name``); drop non-finite
+    rows and rows whose distance does not increase, counted in notes."""
     notes = list(notes or [])
     distance = np.asarray(distance, dtype=np.float64)
     elevation = np.asarray(elevation, dtype=np.float64)
     if elevation.ndim == 1:
         elevation = np.column_stack((elevation, elevation))
+    if line_numbers is None:
+        line_numbers = np.arange(distance.size) + 2
+    _check_physical(distance, elevation, where or name, line_numbers)
     finite = np.isfinite(distance) & np.all(np.isfinite(elevation), axis=1)
     if not np.all(finite):
         notes.append(f'{int(np.sum(~finite))} rows with a non-finite value dropped')
@@ -124,13 +155,14 @@ def read_text_profile(path: str | Path) -> RoadProfile:
         lines = path.read_text().splitlines()
     except OSError as exc:
         raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
-    values = []
+    values, numbers = [], []
     width = None
     for i, line in enumerate(lines):
         text = line.strip()
         if not text or text.startswith('#'):
             continue
         row = _numbers(text, path, i + 1)
+        numbers.append(i + 1)
         if width is None:
             width = len(row)
             if width not in (2, 3):
@@ -142,7 +174,7 @@ def read_text_profile(path: str | Path) -> RoadProfile:
         raise ValueError(f'{path}: no profile points')
     data = np.array(values)
     elevation = data[:, 1:] if width == 3 else data[:, 1]
-    return _clean(data[:, 0], elevation, name=str(path))
+    return _clean(data[:, 0], elevation, name=str(path), line_numbers=numbers)
 
 
 def _unit_factor(unit: str, what: str, path: Path) -> float:
@@ -182,12 +214,15 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
         units = ['m'] * nchan
     names = _fixed_fields(raw_keys.get('SHORTNAM', ''), nchan)
     notes: list[str] = []
-    data = _erd_rows(lines, end, nchan, path)
+    data, numbers = _erd_rows(lines, end, nchan, path)
     if nsamp > 0 and data.shape[0] < nsamp:
         notes.append(f'truncated: {data.shape[0]} of {nsamp} samples')
     elif nsamp > 0 and data.shape[0] > nsamp:
         notes.append(f'{data.shape[0] - nsamp} rows beyond NSAMP = {nsamp} ignored')
-        data = data[:nsamp]
+        data, numbers = data[:nsamp], numbers[:nsamp]
+    if step * x_factor > MAX_STEP_M:
+        raise ValueError(f'{path}, line 2: STEP = {step:.6g} {keys.get("XUNITS", "m") or "m"} is '
+                         f'more than {MAX_STEP_M:g} m between samples: not a road profile')
     cols = _pick_tracks(names, nchan, notes)
     factors = [_unit_factor(units[c] or units[0] or 'm', f'channel {c + 1}', path)
                for c in cols]
@@ -202,7 +237,7 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
     title = keys.get('TITLE', '')
     name = f'{path}' + (f' ({title})' if title else '')
     return _clean(distance, elevation if elevation.shape[1] == 2 else elevation[:, 0], name,
-                  notes)
+                  notes, numbers, str(path))
 
 
 def _unit_notes(x_unit: str, x_factor: float, z_units: list[str],
@@ -301,9 +336,11 @@ def _erd_keywords(lines: list[str], path: Path) -> tuple[dict[str, str], dict[st
     raise ValueError(f'{path}: ERD header has no END line')
 
 
-def _erd_rows(lines: list[str], end: int, nchan: int, path: Path) -> np.ndarray:
-    """The data rows after the END line, (m, NCHAN) in the file's units."""
-    rows = []
+def _erd_rows(lines: list[str], end: int, nchan: int,
+              path: Path) -> tuple[np.ndarray, list[int]]:
+    """The data rows after the END line, (m, NCHAN) in the file's units, and their line
+    numbers."""
+    rows, numbers = [], []
     for i in range(end + 1, len(lines)):
         text = lines[i].strip()
         if not text:
@@ -312,7 +349,8 @@ def _erd_rows(lines: list[str], end: int, nchan: int, path: Path) -> np.ndarray:
         if len(row) != nchan:
             raise ValueError(f'{path}, line {i + 1}: expected {nchan} values, got {len(row)}')
         rows.append(row)
-    return np.array(rows, dtype=np.float64).reshape(-1, nchan)
+        numbers.append(i + 1)
+    return np.array(rows, dtype=np.float64).reshape(-1, nchan), numbers
 
 
 def _fixed_fields(text: str, count: int) -> list[str]:

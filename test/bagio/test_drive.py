@@ -6,7 +6,7 @@ from mcap_ros2.reader import read_ros2_messages
 import numpy as np
 import yaml
 
-from bag_samples import BASE_NS, T, joint_state, make_trajectory, twist
+from bag_samples import BASE_NS, T, header, joint_state, make_trajectory, twist
 from road_force_estimator import bagio, interfaces
 from road_force_estimator.bagio import (
     BagWriter,
@@ -124,3 +124,33 @@ class TestDriveBag:
         assert d.rejected_total == 11
         assert d.messages['/suspension/deflections'] == 12
         assert any('12 messages' in line for line in d.summary_lines())
+
+
+def navsatfix(stamp_ns, status, lat, lon):
+    return T['sensor_msgs/msg/NavSatFix'](
+        header=header(stamp_ns, 'gnss'),
+        status=T['sensor_msgs/msg/NavSatStatus'](status=status, service=1),
+        latitude=lat, longitude=lon, altitude=0.0, position_covariance=np.zeros(9),
+        position_covariance_type=0)
+
+
+def test_a_fix_of_unknown_status_is_kept_and_counted(tmp_path):
+    """NavSatStatus -2 (STATUS_UNKNOWN, Jazzy) with a finite position is a fix of unknown
+    quality: kept and counted; -1 (NO_FIX) and non-finite positions are rejected (issue 17).
+    Before: every status < 0 was rejected as no_fix."""
+    from road_force_estimator.interfaces import DEFLECTION_JOINTS
+    statuses = [0, -2, -1, 2, -2, -2, 1]
+    lats = [48.0, 48.1, 48.2, 48.3, float('nan'), 48.5, 48.6]
+    with bagio.BagWriter(tmp_path / 'd') as bag:
+        bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState')
+        bag.add_topic('/fix', 'sensor_msgs/msg/NavSatFix')
+        for i, (status, lat) in enumerate(zip(statuses, lats)):
+            stamp = BASE_NS + i * 10**8
+            bag.write('/suspension/deflections', stamp,
+                      joint_state(stamp, DEFLECTION_JOINTS, [0.0, 0.0, 0.0]))
+            bag.write('/fix', stamp, navsatfix(stamp, status, lat, 17.0))
+    d = bagio.read_drive_bag(tmp_path / 'd')
+    np.testing.assert_array_equal(d.fixes.latitude_deg, [48.0, 48.1, 48.3, 48.5, 48.6])
+    assert d.rejected['/fix'] == {'nonfinite': 1, 'no_fix': 1}
+    assert d.noted == {'/fix': {'fix_status_unknown': 2}}
+    assert '/fix: 2 kept (fix_status_unknown)' in d.summary_lines()

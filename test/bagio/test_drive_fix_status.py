@@ -9,7 +9,6 @@ and the marker must then go).
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from rosbags.typesys import Stores, get_typestore
 
 from road_force_estimator.bagio import BagWriter, read_drive_bag
@@ -24,8 +23,6 @@ def header(stamp_ns: int, frame: str):
         sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id=frame)
 
 
-@pytest.mark.xfail(strict=True, reason='bagio drive reader: keep fixes of status unknown '
-                   '(issue 17; another branch rewrites the reader)')
 def test_fixes_of_unknown_status_with_a_position_are_kept(tmp_path):
     joint, twist, fix = ('sensor_msgs/msg/JointState', 'geometry_msgs/msg/TwistStamped',
                          'sensor_msgs/msg/NavSatFix')

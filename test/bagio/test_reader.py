@@ -70,10 +70,22 @@ class TestBrokenFiles:
         data = bytearray(mcap.read_bytes())
         second = [at for op, at, _ in top_level_records(bytes(data)) if op == 0x06][1]
         data[second] = 0x33                            # not an MCAP opcode
+        data[-1] ^= 0xFF                               # no footer: no chunk index either
         mcap.write_bytes(bytes(data))
         d = bagio.read_drive_bag(folder)
         self.assert_prefix(d, full)
         assert len(d.issues) == 1 and 'corrupt record (op 0x33)' in d.issues[0], d.issues
+
+    def test_the_chunk_index_overrules_a_corrupt_chunk_head(self, drive):
+        folder, mcap, full = drive
+        data = bytearray(mcap.read_bytes())
+        second = [at for op, at, _ in top_level_records(bytes(data)) if op == 0x06][1]
+        data[second] = 0x33                            # not an MCAP opcode
+        mcap.write_bytes(bytes(data))
+        d = bagio.read_drive_bag(folder)
+        np.testing.assert_array_equal(d.stamps_ns, full.stamps_ns)
+        np.testing.assert_array_equal(d.q_m, full.q_m)
+        assert len(d.issues) == 1 and 'chunk index is used' in d.issues[0], d.issues
 
     @pytest.mark.parametrize('compression', ['zstd', 'lz4'])
     def test_compressed_chunks_of_other_writers(self, tmp_path, compression):

@@ -188,6 +188,43 @@ def test_erd_errors(tmp_path):
         read_erd_profile(path)
 
 
+
+@pytest.mark.parametrize('step', ['1.000000e+05', '1.000000e+06', '1.000000e+30'])
+def test_erd_with_an_impossible_step_is_refused(tmp_path, step):
+    """Issue 16. Before: STEP 1e5 / 1e6 took 672 MB / 5.6 GB downstream, 1e30 a raw numpy
+    "Maximum allowed size exceeded"."""
+    path = tmp_path / 'step.erd'
+    path.write_text(ERD_METRES.replace('2.500000e-01', step))
+    with pytest.raises(ValueError,
+                       match=r'line 2: STEP = (100000|1e\+06|1e\+30) m is more than 100 m'):
+        read_erd_profile(path)
+    path.write_text(ERD_METRES.replace('2.500000e-01', '1.000000e+02'))   # 100 m: accepted
+    assert read_erd_profile(path).distance_m[-1] == 400.0
+
+
+def test_impossible_elevations_and_distances_are_refused_with_the_line(tmp_path):
+    """Issue 16. Before: CSV elevations of 1e30 gave an IRI of 7e30 m/km with exit 0."""
+    csv = tmp_path / 'p.csv'
+    csv.write_text('distance_m,left_m,right_m\n0,0,0\n0.25,0.001,0\n0.5,1e30,0\n'
+                   '0.75,0,-2e4\n')
+    with pytest.raises(ValueError, match=r'p.csv, line 4: elevation 1e\+30 m is beyond '
+                       r'\+-10000 m.*2 such row'):
+        read_csv_profile(csv)
+    csv.write_text('distance_m,elevation_m\n0,0\n0.25,0.001\n1e30,0\n')
+    with pytest.raises(ValueError, match=r'line 4: distance 1e\+30 m is beyond'):
+        read_csv_profile(csv)
+    txt = tmp_path / 'p.txt'
+    txt.write_text('# x z\n0 0\n\n0.25 5e4\n')
+    with pytest.raises(ValueError, match=r'p.txt, line 4: elevation 50000 m'):
+        read_text_profile(txt)
+    erd = tmp_path / 'p.erd'
+    erd.write_text(ERD_METRES.replace(' 0.0030  0.0000', ' 0.0030  1e30'))
+    with pytest.raises(ValueError, match=r'p.erd, line 13: elevation 1e\+30 m'):
+        read_erd_profile(erd)
+    erd.write_text(ERD_METRES.replace(' 0.0030  0.0000', ' 0.0030  nan'))   # dropped, noted
+    assert read_erd_profile(erd).distance_m.size == 4
+
+
 @pytest.mark.parametrize('units, factor', [('m', 1.0), ('mm', 1e-3), ('in', INCH),
                                            ('ft', FOOT)])
 def test_erd_round_trip(tmp_path, units, factor):

@@ -112,3 +112,13 @@ def test_bag_to_csv_is_rounded_unless_exact(tmp_path):
         '0.600,0.0000000,0.0123457']                 # 1 mm, 0.1 um
     assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'e.csv'), '--exact']) == 0
     assert (tmp_path / 'e.csv').read_text().splitlines()[1] == '0.0,1.5240000000000001e-05,0.0'
+
+
+def test_impossible_values_are_not_written(tmp_path, capsys):
+    """Issue 16: CSV elevations of 1e30 were written into the bag."""
+    csv = tmp_path / 'p.csv'
+    csv.write_text('distance_m,left_m,right_m\n0,0,0\n0.25,1e30,0\n0.5,0,0\n')
+    assert main([str(csv), '--output', str(tmp_path / 'bag')]) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'line 3: elevation 1e+30 m' in err
+    assert not (tmp_path / 'bag').exists()
