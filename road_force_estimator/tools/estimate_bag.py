@@ -20,9 +20,15 @@ Then it estimates:
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
-(:mod:`road_force_estimator.report`). Exit status: 0 on success (skipped messages are counted
-in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
-parameters), 2 for a bad command line; each with one line on stderr.
+(:mod:`road_force_estimator.report`). Both are built in a temporary folder in DIR and renamed
+into place when complete, with ``DIR/.written-by-road-force-estimator.json`` listing the files
+written (:mod:`.output_folder`): a failure (out of space) leaves nothing behind, and
+``--force`` replaces only what estimate_bag wrote there, never INPUT nor other files.
+
+Exit status: 0 on success (skipped messages are counted in the report, never fatal), 1 for
+bad input (not a bag, no usable sample, no speed, no sample the estimator accepts: every speed
+out of range, say), an output that may not be replaced or cannot be written, or bad
+parameters, 2 for a bad command line; each with one line on stderr.
 """
 from __future__ import annotations
 
@@ -65,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='distance along the reference profile where the drive starts, m from '
                         'its start (default: found by correlation within +-10 m)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
-    cli.add_force(p, 'replace DIR/bag and DIR/report')
+    cli.add_force(p, 'replace DIR/bag and DIR/report written by an earlier estimate_bag')
     cli.add_no_progress(p)
     return p
 

@@ -224,6 +224,8 @@ def output_lock(output_dir: str | Path, *, wait: bool = False,
             if on_wait is not None:
                 on_wait()
             fcntl.flock(stream, fcntl.LOCK_EX)
+        except OSError as err:                 # a file system without locks
+            raise FleetError(f'cannot lock {lock}: {err.strerror or err}') from None
         stream.seek(0)
         stream.truncate()
         stream.write(f'{os.getpid()}\n')

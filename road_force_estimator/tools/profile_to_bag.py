@@ -10,6 +10,10 @@ ERD, or whitespace columns such as profile_1.txt) or a synthetic road spec
 bag folder, the profile it holds is written to the CSV file given as ``--output`` instead,
 with every number printed exactly (shortest round-trip form), so CSV -> bag -> CSV loses
 nothing.
+
+The output is built beside its place and renamed into it when complete (:mod:`.output_folder`);
+``--force`` replaces only an LPA bag (``custom_data`` kind ``lpa_profile``, nothing else in the
+folder) or a CSV file starting with the header this command writes, never INPUT.
 """
 from __future__ import annotations
 
@@ -52,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
                                           f'y = +-T/2 (default {DEFAULT_TRACK_WIDTH_M:g})')
     parser.add_argument('--length', type=float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
-    cli.add_force(parser, 'replace an existing output bag folder or CSV file')
+    cli.add_force(parser, 'replace an LPA bag folder or CSV file this command wrote')
     return parser
 
 

@@ -20,6 +20,10 @@ of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^
 Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
 ``custom_data``.
 
+The bag is built beside its place and renamed into it when complete (:mod:`.output_folder`);
+``--force`` replaces only a bag simulate_bag wrote (its ``custom_data`` says so) that holds
+nothing else, never the road it reads.
+
 Values come from the defaults, then the parameter file, then the command line. Exit status 0
 on success, 1 for bad input (bad parameter, unreadable road, existing output), 2 for a bad
 command line; each with one line on stderr.
@@ -77,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '(default 0 s); bends the GNSS route')
     p.add_argument('--no-ground-truth', action='store_true',
                    help='write the measurements only, as a real truck records them')
-    cli.add_force(p, 'replace an existing bag folder')
+    cli.add_force(p, 'replace a bag folder simulate_bag wrote')
     cli.add_no_progress(p)
     return p
 
