@@ -106,6 +106,7 @@ def _probe_tcp(address: str, text: str) -> None:
     except OSError as err:
         raise FleetError(f'cannot reach the Dask scheduler at {address}: '
                          f'{err.strerror or type(err).__name__}') from None
+    _probe_comm(address, text, 'tcp')
 
 
 def _receive(sock, n: int, deadline: float) -> bytes:
@@ -148,7 +149,9 @@ def _check_handshake(body: bytes) -> None:
 
 
 def _probe_comm(address: str, text: str, scheme: str) -> None:
-    """:func:`probe_scheduler` for protocols other than tcp: Dask's own connect, bounded."""
+    """:func:`probe_scheduler` with Dask's own comm (after the handshake check for tcp):
+    connect and ask its identity, each step within :data:`CONNECT_TIMEOUT_S`; it must be a
+    ``Scheduler`` (a worker's address is refused)."""
     import asyncio
 
     from distributed.comm import connect
@@ -164,18 +167,26 @@ def _probe_comm(address: str, text: str, scheme: str) -> None:
                          'configuration (distributed.comm.tls.ca-file, .client.cert, '
                          '.client.key); none are set')
 
-    async def attempt() -> None:
+    async def identity() -> dict:
         comm = await asyncio.wait_for(connect(text, timeout=timeout, **args), timeout)
-        await comm.close()
+        try:
+            await asyncio.wait_for(comm.write({'op': 'identity', 'reply': True}), timeout)
+            return await asyncio.wait_for(comm.read(), timeout)
+        finally:
+            await comm.close()
 
     try:
-        asyncio.run(attempt())
+        kind = asyncio.run(identity())
+        kind = kind.get('type') if isinstance(kind, dict) else None
     except (asyncio.TimeoutError, TimeoutError):
         raise FleetError(f'cannot reach the Dask scheduler at {address}: no Dask handshake '
                          f'within {timeout:g} s') from None
     except Exception as err:  # noqa: BLE001 - whatever the comm raises: one line
         raise FleetError(f'cannot reach the Dask scheduler at {address}: '
                          f'{type(err).__name__}: {one_line(err)}') from None
+    if kind != 'Scheduler':
+        raise FleetError(f'--scheduler {address}: not a Dask scheduler (it says it is a '
+                         f'{kind or "service of unknown type"}: give the scheduler\'s address)')
 
 
 @contextmanager
@@ -188,7 +199,7 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as err:
+        except Exception as err:  # noqa: BLE001 - whatever Dask raises: one line
             raise FleetError(f'cannot reach the Dask scheduler at {scheduler} within '
                              f'{CONNECT_TIMEOUT_S:g} s ({one_line(err)})') from None
         try:

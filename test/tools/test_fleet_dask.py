@@ -98,20 +98,26 @@ def test_addresses_another_process_cannot_use(fleet_args, tmp_path, capsys, addr
     assert not (tmp_path / 'out').exists()
 
 
-def test_a_real_scheduler_passes_the_probe(monkeypatch):
+def test_a_real_scheduler_passes_the_probe_and_a_worker_does_not(monkeypatch):
     import asyncio
 
-    from distributed import Scheduler
+    from distributed import Scheduler, Worker
 
     monkeypatch.setattr(fleet_dask, 'CONNECT_TIMEOUT_S', 10.0)
 
     async def serve():
         async with Scheduler(host='127.0.0.1', port=0, dashboard_address=None) as sched:
-            loop = asyncio.get_running_loop()
-            await loop.run_in_executor(None, fleet_dask.probe_scheduler, sched.address)
-            return sched.address
+            async with Worker(sched.address, host='127.0.0.1', nthreads=1) as worker:
+                loop = asyncio.get_running_loop()
+                await loop.run_in_executor(None, fleet_dask.probe_scheduler, sched.address)
+                try:
+                    await loop.run_in_executor(None, fleet_dask.probe_scheduler,
+                                               worker.address)
+                except FleetError as err:
+                    return str(err)
+        return ''
 
-    assert asyncio.run(serve()).startswith('tcp://127.0.0.1:')
+    assert 'not a Dask scheduler (it says it is a Worker' in asyncio.run(serve())
     with pytest.raises(FleetError, match='cannot reach'):
         with socket.socket() as free:
             free.bind(('127.0.0.1', 0))
