@@ -219,9 +219,17 @@ class BagWriter:
         if self._file is None:
             return
         f, info = self._file, None
-        f.flush_chunk()
-        info = self._metadata()
-        f.close(_yaml(info))
+        try:
+            f.flush_chunk()
+            info = self._metadata()
+            f.close(_yaml(info))
+        except BaseException:
+            self._file = None
+            try:                # out of space: no file descriptor left open on the bag
+                f.file.close()
+            except OSError:
+                pass
+            raise
         self._file = None
         tmp = self.path / 'metadata.yaml.tmp'
         tmp.write_text(_yaml({'rosbag2_bagfile_information': info}), 'utf-8')

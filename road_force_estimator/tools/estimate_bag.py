@@ -6,7 +6,7 @@
                  [--no-figures] [--force] [--no-progress]
 
 Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
-present the ground truth and ``/fix``) with :func:`bagio.bagio.read_drive_bag`,
+present the ground truth and ``/fix``) with :func:`bagio.read_drive_bag`,
 which rejects and counts what cannot be trusted (NaN, missing joint names, duplicate or
 backward stamps, undecodable messages) and reads a truncated or corrupt bag up to its break.
 Then it estimates:
@@ -21,9 +21,15 @@ Then it estimates:
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
-(:mod:`road_force_estimator.report`). Exit status: 0 on success (skipped messages are counted
-in the report, never fatal), 1 for bad input (not a bag, no usable sample, no speed, bad
-parameters), 2 for a bad command line; each with one line on stderr.
+(:mod:`road_force_estimator.report`). Both are built in a temporary folder in DIR and renamed
+into place when complete, with ``DIR/.written-by-road-force-estimator.json`` listing the files
+written (:mod:`.output_folder`): a failure (out of space) leaves nothing behind, and
+``--force`` replaces only what estimate_bag wrote there, never INPUT nor other files.
+
+Exit status: 0 on success (skipped messages are counted in the report, never fatal), 1 for
+bad input (not a bag, no usable sample, no speed, no sample the estimator accepts: every speed
+out of range, say), an output that may not be replaced or cannot be written, or bad
+parameters, 2 for a bad command line; each with one line on stderr.
 """
 from __future__ import annotations
 
@@ -31,13 +37,12 @@ import argparse
 from dataclasses import dataclass, field
 import math
 from pathlib import Path
-import shutil
 import sys
 from typing import Any
 
 import numpy as np
 
-from road_force_estimator.tools import cli
+from road_force_estimator.tools import cli, output_folder
 from road_force_estimator.tools.cli import MODES
 
 __all__ = ['PROG', 'MODES', 'EstimateResult', 'build_parser', 'load_parameters', 'drive_speed',
@@ -70,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='distance along the reference profile where the drive starts, m from '
                         'its start (default: found by correlation within +-10 m)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
-    cli.add_force(p, 'replace DIR/bag and DIR/report')
+    cli.add_force(p, 'replace DIR/bag and DIR/report written by an earlier estimate_bag')
     cli.add_no_progress(p)
     return p
 
@@ -169,17 +174,26 @@ class EstimateResult:
 def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
         mode: str = 'online', segment_length_m: float = 100.0, reference=None,
         reference_offset_m: float | None = None, figures: bool = True, force: bool = False,
-        progress: bool = False, units: str = 'si',
+        progress: bool = False, standalone: bool = True, units: str = 'si',
         run_info: dict[str, Any] | None = None) -> EstimateResult:
     """Estimate one drive bag and write ``output/bag`` and ``output/report``.
 
     ``units`` ('si' or 'us') are those of the report's text; ``run_info`` (the parameter file,
     the overrides, the command line) is shown in it.
 
+    Both are built in a temporary folder in ``output`` and renamed into place with the marker
+    :data:`~.output_folder.MARKER_NAME` when complete (:mod:`.output_folder`); ``force``
+    replaces only what estimate_bag wrote there, never the input. ``standalone`` False:
+    ``output`` is a fresh folder that the caller builds and renames itself (estimate_fleet),
+    written directly and without the marker.
+
     Raises
     ------
     InputError
         Not a drive bag, no usable sample or speed, output exists without ``force``.
+    OutputError
+        An output that may not be replaced, or a write that failed (out of space: nothing is
+        left behind).
     """
     from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 
@@ -191,25 +205,34 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
         raise InputError(f'segment length {segment_length_m!r} m: must be > 0')
     input_path = Path(input_path)
     output = Path(output)
-    bag_dir, report_dir = output / 'bag', output / 'report'
-    if not force:
-        for p in (bag_dir, report_dir):
-            if p.exists():
-                raise InputError(f'{p} exists (use --force to replace it)')
+    target = output_folder.FolderOutput(output, ('bag', 'report'), PROG,
+                                        force=force and standalone, inputs=[input_path])
+    target.check()
     stages = _Stages(progress)
     try:
-        return _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode,
-                    segment_length_m, reference, reference_offset_m, figures, force, progress,
-                    stages, units, run_info)
+        drive, est, extra = _estimate(input_path, vehicle, observer, mode, progress, stages)
+        options = dict(mode=mode, reference=reference, reference_offset_m=reference_offset_m,
+                       segment_length_m=segment_length_m, figures=figures, units=units,
+                       run_info=run_info)
+        if not standalone:
+            return _write(output, output, input_path, drive, est, extra, vehicle, observer,
+                          options, stages)
+        with target.staged() as stage:
+            return _write(stage, output, input_path, drive, est, extra, vehicle, observer,
+                          options, stages)
     finally:
         stages.close()
 
 
-def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segment_length_m,
-         reference, reference_offset_m, figures, force, progress, stages, units='si',
-         run_info=None) -> EstimateResult:
+def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, stages):
+    """Read the bag and estimate: ``(drive, estimates, notes for the report)``.
+
+    Raises
+    ------
+    InputError
+        Not a drive bag, no usable sample or speed, no sample estimated.
+    """
     from road_force_estimator import bagio
-    from road_force_estimator.report import raw_road, write_report
     from road_force_estimator.estimation import estimate_recording
 
     stages.next('reading the bag')
@@ -217,7 +240,6 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
         drive = bagio.read_drive_bag(input_path)
     except bagio.BagReadError as err:
         raise InputError(str(err)) from None
-    warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     if len(drive.stamps_ns) == 0:
         raise InputError(f'{input_path}: no usable /suspension/deflections message'
                          + (f' ({drive.issues[0]})' if drive.issues else ''))
@@ -228,37 +250,70 @@ def _run(input_path, output, bag_dir, report_dir, vehicle, observer, mode, segme
         est = estimate_online(*args, progress=progress)
     else:
         est = estimate_recording(*args)
+    if est.status.accepted == 0:
+        raise InputError(f'{input_path}: no sample could be estimated: '
+                         f'{_why_none_estimated(drive, speed, est.status)}')
     extra = {}
     if early:
         extra['samples before the first twist (given its speed)'] = early
+    return drive, est, extra
+
+
+def _why_none_estimated(drive, speed: np.ndarray, status) -> str:
+    """Why every one of the drive's samples was rejected (one phrase)."""
+    from road_force_estimator.estimation.acceptance import (
+        MAX_DEFLECTION_M, MAX_ROLL_RAD, MAX_SPEED_MPS)
+
+    n = len(speed)
+    finite = np.isfinite(speed)
+    if not np.any(finite & (np.abs(speed) <= MAX_SPEED_MPS)):
+        worst = speed[finite][np.argmax(np.abs(speed[finite]))] if finite.any() else math.nan
+        return (f'every speed out of range ({worst:g} m/s; the limit is |v| <= '
+                f'{MAX_SPEED_MPS:g} m/s)')
+    if np.all(speed < 0.0):
+        return f'every speed negative (e.g. {speed[0]:g} m/s)'
+    q = np.asarray(drive.q_m, dtype=float)
+    roll = np.asarray(drive.roll_rad, dtype=float)
+    if not np.any(np.all(np.abs(q) <= MAX_DEFLECTION_M, axis=1)):
+        return f'every deflection out of range (|q| <= {MAX_DEFLECTION_M:g} m)'
+    if not np.any(np.abs(roll) <= MAX_ROLL_RAD):
+        return f'every roll angle out of range (|phi| <= {MAX_ROLL_RAD:g} rad)'
+    return (f'all {n} samples rejected ({status.rejected_range} out of range, '
+            f'{status.rejected_nonfinite} non-finite, {status.rejected_time} with a bad stamp)')
+
+
+def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict, vehicle,
+           observer, options: dict, stages) -> EstimateResult:
+    """Write ``folder/bag`` and ``folder/report``; the result names them in ``output``."""
+    from road_force_estimator import bagio
+    from road_force_estimator.report import raw_road, write_report
+
+    mode = options['mode']
+    bag_dir, report_dir = folder / 'bag', folder / 'report'
+    for p in (bag_dir, report_dir):
+        if p.exists():
+            raise InputError(f'{p} exists (use --force to replace it)')
     st = est.status
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
-    output.mkdir(parents=True, exist_ok=True)
-    if force and bag_dir.exists():
-        shutil.rmtree(bag_dir)
+    folder.mkdir(parents=True, exist_ok=True)
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,
               'road_force_estimator.writer_command': PROG}
     stages.next('writing the bag')
-    try:
-        written = bagio.write_estimate_bag(
-            bag_dir, est, track_width_m=vehicle.track_width_m,
-            diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
-    except (bagio.BagWriteError, OSError) as err:
-        raise InputError(f'cannot write {bag_dir}: {err}') from None
+    written = bagio.write_estimate_bag(
+        bag_dir, est, track_width_m=vehicle.track_width_m,
+        diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
-    if force and report_dir.exists():
-        shutil.rmtree(report_dir)
-    stages.next('writing the report' + (' and figures' if figures else ''))
-    summary = write_report(
-        report_dir, est, drive, vehicle, observer, mode=mode, input_name=input_path.name,
-        reference=reference, reference_offset_m=reference_offset_m,
-        segment_length_m=segment_length_m, figures=figures, extra=extra, units=units,
-        run_info=run_info, raw_road=raw_road(drive, reader=bagio.road_from_source))
-    return EstimateResult(summary, bag_dir, report_dir, est, written, warnings, drive)
+    stages.next('writing the report' + (' and figures' if options['figures'] else ''))
+    summary = write_report(report_dir, est, drive, vehicle, observer,
+                           input_name=input_path.name, extra=extra,
+                           raw_road=raw_road(drive, reader=bagio.road_from_source), **options)
+    warnings = [f'{input_path}: {issue}' for issue in drive.issues]
+    return EstimateResult(summary, output / 'bag', output / 'report', est, written, warnings,
+                          drive)
 
 
 def _headline(result: EstimateResult, units: str = 'si') -> list[str]:

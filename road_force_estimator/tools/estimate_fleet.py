@@ -2,7 +2,7 @@
 
     estimate_fleet INPUT... [--params-file FILE] [-p NAME:=VALUE]... --output DIR
                    [--mode online|offline] [--units si|us] [--segment-length M]
-                   [--scheduler ADDRESS] [--workers N] [--force] [--no-figures]
+                   [--scheduler ADDRESS] [--workers N] [--force] [--wait] [--no-figures]
                    [--no-progress]
 
 Each INPUT is a drive bag folder or a folder holding bag folders (any folder with a
@@ -27,7 +27,10 @@ is run again elsewhere (Dask's ``allowed-failures`` for lost workers, plus
 into place only when complete, with ``fleet.json`` (a key: SHA-256 of the input bag's files,
 the parameters, the mode, the segment length and the figures switch); a drive whose stored key
 matches is skipped unless ``--force``, so a run that was stopped resumes where it stopped
-(:mod:`.fleet_drives`).
+(:mod:`.fleet_drives`). The input key leaves DIR out when DIR lies inside a bag folder.
+
+One run at a time per DIR: a run holds ``DIR/.fleet-lock`` (``flock``); a second run into the
+same DIR refuses (exit status 2), or with ``--wait`` waits for the first to end.
 
 Outputs in DIR (:mod:`.fleet_outputs`): ``drives/<id>/`` (``bag/``, ``report/``,
 ``fleet.json``), ``segments.parquet`` and ``segments.csv`` (:data:`~.fleet_drives.FLEET_COLUMNS`,
@@ -56,13 +59,13 @@ from road_force_estimator.tools.fleet_dask import (
     CONNECT_TIMEOUT_S, RETRIES, WORKER_WAIT_S, dask_client, default_workers, probe_scheduler,
     run_tasks)
 from road_force_estimator.tools.fleet_drives import (
-    FLEET_COLUMNS, KEY_FORMAT, STAMP_NAME, TMP_NAME, DriveInput, DriveOutcome, DriveTask,
-    FleetError, drive_key, find_drives, input_sha256, load_done, process_drive,
-    read_segments_csv)
+    FLEET_COLUMNS, KEY_FORMAT, LOCK_NAME, STAMP_NAME, TMP_NAME, DriveInput, DriveOutcome,
+    DriveTask, FleetError, drive_key, find_drives, input_sha256, load_done, output_lock,
+    process_drive, read_segments_csv)
 from road_force_estimator.tools.fleet_outputs import FleetResult, write_outputs
 
 __all__ = [
-    'PROG', 'FLEET_COLUMNS', 'STAMP_NAME', 'TMP_NAME', 'KEY_FORMAT', 'RETRIES',
+    'PROG', 'FLEET_COLUMNS', 'STAMP_NAME', 'TMP_NAME', 'LOCK_NAME', 'KEY_FORMAT', 'RETRIES',
     'CONNECT_TIMEOUT_S', 'WORKER_WAIT_S', 'FleetError', 'DriveInput', 'DriveTask',
     'DriveOutcome', 'FleetResult', 'find_drives', 'input_sha256', 'drive_key',
     'read_segments_csv', 'process_drive', 'load_done', 'default_workers', 'dask_client',
@@ -76,7 +79,7 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
               mode: str = 'online', segment_length_m: float = 100.0, figures: bool = True,
               scheduler: str | None = None, workers: int | None = None, force: bool = False,
               progress: bool = False, params_file: str | None = None, units: str = 'si',
-              run_info: dict | None = None) -> FleetResult:
+              run_info: dict | None = None, wait: bool = False) -> FleetResult:
     """Process every drive under ``inputs`` into ``output`` (see the module notes).
 
     Parameters
@@ -105,6 +108,9 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
         Units of summary.md and of the drives' reports.
     run_info : dict, optional
         The parameter file, overrides and command line, shown in the drives' reports.
+    wait : bool
+        When another run writes ``output`` (it holds DIR/:data:`LOCK_NAME`), wait for it to
+        end instead of refusing (``--wait``).
 
     Raises
     ------
@@ -126,20 +132,25 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
         (out / 'drives').mkdir(exist_ok=True)
     except OSError as err:
         raise FleetError(f'cannot create {output}: {err.strerror or err}') from None
-    shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)   # left by a stopped run
-    settings = {'mode': mode, 'segment_length_m': float(segment_length_m),
-                'figures': bool(figures), 'units': units, 'run_info': run_info or {},
-                'parameters': {**vehicle.to_parameters(), **observer.to_parameters()}}
-    outcomes, tasks = _resume(out, drives, vehicle, observer, settings, force)
-    timings = {'prepare': time.perf_counter() - t0, 'engine_start': 0.0, 'processing': 0.0}
-    engine = 'none (every drive already done)'
-    if tasks or scheduler:
-        engine = _process(out, tasks, outcomes, timings, total=len(drives),
-                          scheduler=scheduler, workers=workers, progress=progress)
-    ordered = [outcomes[d.drive_id] for d in drives]
-    t3 = time.perf_counter()
-    result = FleetResult(ordered, engine, t3 - t0, settings, timings)
-    write_outputs(out, result, params_file=params_file)
+
+    def waiting() -> None:
+        print(f'{PROG}: waiting for the other run writing {output} to end', file=sys.stderr)
+
+    with output_lock(out, wait=wait, on_wait=waiting):
+        shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)   # left by a stopped run
+        settings = {'mode': mode, 'segment_length_m': float(segment_length_m),
+                    'figures': bool(figures), 'units': units, 'run_info': run_info or {},
+                    'parameters': {**vehicle.to_parameters(), **observer.to_parameters()}}
+        outcomes, tasks = _resume(out, drives, vehicle, observer, settings, force)
+        timings = {'prepare': time.perf_counter() - t0, 'engine_start': 0.0, 'processing': 0.0}
+        engine = 'none (every drive already done)'
+        if tasks or scheduler:
+            engine = _process(out, tasks, outcomes, timings, total=len(drives),
+                              scheduler=scheduler, workers=workers, progress=progress)
+        ordered = [outcomes[d.drive_id] for d in drives]
+        t3 = time.perf_counter()
+        result = FleetResult(ordered, engine, t3 - t0, settings, timings)
+        write_outputs(out, result, params_file=params_file)
     timings['write'] = time.perf_counter() - t3
     result.seconds = time.perf_counter() - t0
     return result
@@ -171,7 +182,7 @@ def _resume(out: Path, drives: Sequence[DriveInput], vehicle, observer, settings
         digest = ''
         if not force and (out / 'drives' / d.drive_id / STAMP_NAME).is_file():
             try:
-                digest = input_sha256(d.path)
+                digest = input_sha256(d.path, exclude=[out])
             except OSError:
                 digest = ''
             done = load_done(out, d, drive_key(digest, settings)) if digest else None
@@ -225,6 +236,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--workers', type=int, metavar='N',
                    help='worker processes of the local cluster (default: the CPUs)')
     cli.add_force(p, 'recompute drives already done')
+    p.add_argument('--wait', action='store_true',
+                   help='when another run is writing DIR, wait for it to end (default: refuse)')
     p.add_argument('--no-figures', action='store_true',
                    help='reports without figures (much faster for short drives)')
     cli.add_no_progress(p)
@@ -253,7 +266,8 @@ def _main(args: argparse.Namespace) -> int:
                        run_info=run_info,
                        figures=not args.no_figures, scheduler=args.scheduler,
                        workers=args.workers, force=args.force,
-                       progress=not args.no_progress, params_file=args.params_file)
+                       progress=not args.no_progress, params_file=args.params_file,
+                       wait=args.wait)
     n = len(result.outcomes)
     print(f'{PROG}: {n} drive{"s" if n != 1 else ""}: {result.count("processed")} processed, '
           f'{result.count("skipped")} skipped, {result.count("failed")} failed '

@@ -2,14 +2,17 @@
 drive tasks on it.
 
 A scheduler that cannot be reached is a :class:`~.fleet_drives.FleetError` (exit status 2),
-never a silent local fallback. A task whose worker dies is run again elsewhere (Dask's
-``allowed-failures`` for lost workers, plus :data:`RETRIES`).
+never a silent local fallback, nor a hang: :func:`probe_scheduler` reads the scheduler's
+handshake within :data:`CONNECT_TIMEOUT_S` and names what answered instead. A task whose
+worker dies is run again elsewhere (Dask's ``allowed-failures`` for lost workers, plus
+:data:`RETRIES`).
 """
 from __future__ import annotations
 
 from contextlib import contextmanager
 import os
 import sys
+import time
 from typing import Any, Iterator
 import uuid
 
@@ -17,13 +20,15 @@ from road_force_estimator.tools.cli import one_line
 from road_force_estimator.tools.fleet_drives import (
     DriveOutcome, DriveTask, FleetError, process_drive)
 
-__all__ = ['RETRIES', 'CONNECT_TIMEOUT_S', 'WORKER_WAIT_S', 'default_workers',
-           'probe_scheduler', 'dask_client', 'run_tasks']
+__all__ = ['RETRIES', 'CONNECT_TIMEOUT_S', 'HANDSHAKE_MAX_BYTES', 'WORKER_WAIT_S',
+           'default_workers', 'probe_scheduler', 'dask_client', 'run_tasks']
 
 #: Extra attempts of a task that raised (lost workers are retried by the scheduler too).
 RETRIES = 2
-#: Time allowed to reach a --scheduler (s).
+#: Time allowed to reach a --scheduler and read its handshake (s).
 CONNECT_TIMEOUT_S = 10.0
+#: Largest first message accepted from a --scheduler (bytes; Dask's handshake is ~60).
+HANDSHAKE_MAX_BYTES = 1 << 16
 #: Time allowed for a --scheduler to have at least one worker (s).
 WORKER_WAIT_S = 120.0
 
@@ -36,30 +41,152 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+class _NotDask(Exception):
+    """What a --scheduler sent is not a Dask handshake."""
+
+
 def probe_scheduler(address: str) -> None:
-    """Fail at once when a ``tcp://HOST:PORT`` (or ``HOST:PORT``) scheduler does not accept a
-    connection (Dask itself would retry until its timeout); other protocols go to Dask."""
+    """Fail within :data:`CONNECT_TIMEOUT_S` unless ``address`` answers as a Dask scheduler
+    (Dask's own client waits forever on a TCP service that accepts and says nothing).
+
+    ``tcp://HOST:PORT`` (or ``HOST:PORT``): the first message must be a Dask handshake (at
+    most :data:`HANDSHAKE_MAX_BYTES`); ``inproc://`` is refused (it lives inside one
+    process); other protocols (``tls://`` with the TLS settings of the Dask configuration)
+    must connect with Dask's own comm.
+
+    Raises
+    ------
+    FleetError
+        The reason, in one line.
+    """
+    text = address if '://' in address else 'tcp://' + address
+    scheme = text.split('://', 1)[0].lower()
+    if scheme == 'inproc':
+        raise FleetError(f'--scheduler {address}: an inproc:// address lives inside one '
+                         "process; give the scheduler's tcp:// address")
+    if scheme == 'tcp':
+        _probe_tcp(address, text)
+    else:
+        _probe_comm(address, text, scheme)
+
+
+def _probe_tcp(address: str, text: str) -> None:
+    """:func:`probe_scheduler` for ``tcp://``: connect, then read the Dask handshake."""
     import socket
     from urllib.parse import urlsplit
 
-    text = address if '://' in address else 'tcp://' + address
-    parts = urlsplit(text)
-    if parts.scheme != 'tcp':
-        return
     try:
+        parts = urlsplit(text)
         host, port = parts.hostname, parts.port
     except ValueError as err:
         raise FleetError(f'--scheduler {address!r}: {err}') from None
     if not host or port is None:
         raise FleetError(f'--scheduler {address!r}: expected tcp://HOST:PORT')
+    timeout = CONNECT_TIMEOUT_S
+    deadline = time.monotonic() + timeout
     try:
-        with socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S):
-            pass
+        sock = socket.create_connection((host, port), timeout=timeout)
     except OSError as err:
         reason = err.strerror or type(err).__name__
         if isinstance(err, socket.timeout):
-            reason = f'no answer within {CONNECT_TIMEOUT_S:g} s'
+            reason = f'no answer within {timeout:g} s'
         raise FleetError(f'cannot reach the Dask scheduler at {address}: {reason}') from None
+    try:
+        with sock:
+            size = int.from_bytes(_receive(sock, 8, deadline), 'little')
+            if not 16 <= size <= HANDSHAKE_MAX_BYTES:
+                raise _NotDask(f'its first message declares {size} bytes')
+            _check_handshake(_receive(sock, size, deadline))
+    except _NotDask as err:
+        raise FleetError(f'--scheduler {address}: not a Dask scheduler ({err})') from None
+    except socket.timeout:
+        raise FleetError(f'cannot reach the Dask scheduler at {address}: the service there '
+                         f'sent no Dask handshake within {timeout:g} s (is it a Dask '
+                         'scheduler?)') from None
+    except OSError as err:
+        raise FleetError(f'cannot reach the Dask scheduler at {address}: '
+                         f'{err.strerror or type(err).__name__}') from None
+    _probe_comm(address, text, 'tcp')
+
+
+def _receive(sock, n: int, deadline: float) -> bytes:
+    """Exactly ``n`` bytes from ``sock`` before ``deadline`` (time.monotonic, s)."""
+    import socket
+
+    data = bytearray()
+    while len(data) < n:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise socket.timeout('timed out')
+        sock.settimeout(left)
+        block = sock.recv(min(n - len(data), 1 << 16))
+        if not block:
+            raise _NotDask('it closed the connection before a Dask handshake')
+        data += block
+    return bytes(data)
+
+
+def _check_handshake(body: bytes) -> None:
+    """Raise :class:`_NotDask` unless ``body`` holds Dask frames whose first is a msgpack map
+    (the handshake: ``compression``, ``python``, ``pickle-protocol``)."""
+    import struct
+
+    import msgpack
+
+    n = struct.unpack_from('<Q', body)[0]
+    if not 1 <= n <= 16 or 8 + 8 * n > len(body):
+        raise _NotDask(f'{n} frames in its first message')
+    lengths = struct.unpack_from(f'<{n}Q', body, 8)
+    start = 8 + 8 * n
+    if start + sum(lengths) != len(body):
+        raise _NotDask('frame lengths that do not add up')
+    try:
+        first = msgpack.unpackb(body[start:start + lengths[0]], raw=False)
+    except Exception:  # noqa: BLE001 - any decoding failure: not Dask
+        first = None
+    if not isinstance(first, dict):
+        raise _NotDask('its first message is not a handshake')
+
+
+def _probe_comm(address: str, text: str, scheme: str) -> None:
+    """:func:`probe_scheduler` with Dask's own comm (after the handshake check for tcp):
+    connect and ask its identity, each step within :data:`CONNECT_TIMEOUT_S`; it must be a
+    ``Scheduler`` (a worker's address is refused)."""
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    timeout = CONNECT_TIMEOUT_S
+    try:
+        args = Security().get_connection_args('client')
+    except Exception as err:  # noqa: BLE001 - a bad TLS configuration
+        raise FleetError(f'--scheduler {address}: {one_line(err)}') from None
+    if scheme == 'tls' and args.get('ssl_context') is None:
+        raise FleetError(f'--scheduler {address}: tls:// needs TLS settings in the Dask '
+                         'configuration (distributed.comm.tls.ca-file, .client.cert, '
+                         '.client.key); none are set')
+
+    async def identity() -> dict:
+        comm = await asyncio.wait_for(connect(text, timeout=timeout, **args), timeout)
+        try:
+            await asyncio.wait_for(comm.write({'op': 'identity', 'reply': True}), timeout)
+            return await asyncio.wait_for(comm.read(), timeout)
+        finally:
+            await comm.close()
+
+    try:
+        kind = asyncio.run(identity())
+        kind = kind.get('type') if isinstance(kind, dict) else None
+    except (asyncio.TimeoutError, TimeoutError):
+        raise FleetError(f'cannot reach the Dask scheduler at {address}: no Dask handshake '
+                         f'within {timeout:g} s') from None
+    except Exception as err:  # noqa: BLE001 - whatever the comm raises: one line
+        raise FleetError(f'cannot reach the Dask scheduler at {address}: '
+                         f'{type(err).__name__}: {one_line(err)}') from None
+    if kind != 'Scheduler':
+        raise FleetError(f'--scheduler {address}: not a Dask scheduler (it says it is a '
+                         f'{kind or "service of unknown type"}: give the scheduler\'s address)')
 
 
 @contextmanager
@@ -72,7 +199,7 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as err:
+        except Exception as err:  # noqa: BLE001 - whatever Dask raises: one line
             raise FleetError(f'cannot reach the Dask scheduler at {scheduler} within '
                              f'{CONNECT_TIMEOUT_S:g} s ({one_line(err)})') from None
         try:

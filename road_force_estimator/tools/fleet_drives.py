@@ -11,6 +11,7 @@ with the same key.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 import csv
 from dataclasses import dataclass, field
 import hashlib
@@ -21,17 +22,18 @@ from pathlib import Path
 import shutil
 import tempfile
 import time
-from typing import Any, Sequence
+from typing import Any, Callable, Iterator, Sequence
 import uuid
 
 import numpy as np
 
 from road_force_estimator.tools.cli import one_line
+from road_force_estimator.tools.output_folder import os_reason
 
 __all__ = [
-    'FLEET_COLUMNS', 'INT_COLUMNS', 'STAMP_NAME', 'TMP_NAME', 'KEY_FORMAT', 'FleetError',
-    'DriveInput', 'DriveTask', 'DriveOutcome', 'find_drives', 'input_sha256', 'drive_key',
-    'read_segments_csv', 'process_drive', 'load_done',
+    'FLEET_COLUMNS', 'INT_COLUMNS', 'STAMP_NAME', 'TMP_NAME', 'LOCK_NAME', 'KEY_FORMAT',
+    'FleetError', 'DriveInput', 'DriveTask', 'DriveOutcome', 'find_drives', 'input_sha256',
+    'drive_key', 'read_segments_csv', 'process_drive', 'load_done', 'output_lock',
 ]
 
 #: Columns of segments.csv / segments.parquet, in order (INTERFACES.md "Many drives").
@@ -46,6 +48,8 @@ INT_COLUMNS = ('lift_offs',)
 STAMP_NAME = 'fleet.json'
 #: Folder under DIR/drives where drives are built before being renamed into place.
 TMP_NAME = '.fleet-tmp'
+#: Lock file in DIR held (flock) by the run writing DIR.
+LOCK_NAME = '.fleet-lock'
 #: Bump when the per-drive outputs change meaning: every stored key then misses.
 KEY_FORMAT = 1
 
@@ -164,13 +168,18 @@ def find_drives(inputs: Sequence[str | Path], *, exclude: Sequence[str | Path] =
     return sorted(drives, key=lambda d: d.drive_id)
 
 
-def input_sha256(path: str | Path, *, chunk: int = 1 << 20) -> str:
+def input_sha256(path: str | Path, *, chunk: int = 1 << 20,
+                 exclude: Sequence[str | Path] = ()) -> str:
     """SHA-256 (hex) of a bag folder's content: every file's relative path, size and bytes,
-    in sorted path order (a single file: its bytes)."""
+    in sorted path order (a single file: its bytes); files inside an ``exclude`` folder (the
+    fleet's output folder, when it lies inside the bag folder) are left out."""
     path = Path(path)
+    skip = [Path(p).resolve() for p in exclude]
     h = hashlib.sha256()
     files = [path] if path.is_file() else sorted(
-        (p for p in path.rglob('*') if p.is_file()), key=lambda p: p.relative_to(path).as_posix())
+        (p for p in path.rglob('*')
+         if p.is_file() and not any(_is_inside(p.resolve(), s) for s in skip)),
+        key=lambda p: p.relative_to(path).as_posix())
     for f in files:
         rel = f.name if f == path else f.relative_to(path).as_posix()
         h.update(f'{rel}\0{f.stat().st_size}\0'.encode())
@@ -181,6 +190,50 @@ def input_sha256(path: str | Path, *, chunk: int = 1 << 20) -> str:
                     break
                 h.update(block)
     return h.hexdigest()
+
+
+@contextmanager
+def output_lock(output_dir: str | Path, *, wait: bool = False,
+                on_wait: Callable[[], None] | None = None) -> Iterator[Path]:
+    """Hold DIR/:data:`LOCK_NAME` (``fcntl.flock``, exclusive) for one run writing DIR.
+
+    Raises
+    ------
+    FleetError
+        Another run holds it (unless ``wait``: then ``on_wait()`` is called and the lock is
+        waited for), or it cannot be created.
+    """
+    import fcntl
+
+    lock = Path(output_dir) / LOCK_NAME
+    try:
+        stream = lock.open('a+')
+    except OSError as err:
+        raise FleetError(f'cannot create {lock}: {err.strerror or err}') from None
+    with stream:
+        try:
+            fcntl.flock(stream, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if not wait:
+                stream.seek(0)
+                holder = stream.read(40).strip()
+                raise FleetError(
+                    f'another estimate_fleet run{f" (pid {holder})" if holder else ""} is '
+                    f'writing {output_dir}: wait for it to end, or give --wait to wait for '
+                    'it') from None
+            if on_wait is not None:
+                on_wait()
+            fcntl.flock(stream, fcntl.LOCK_EX)
+        except OSError as err:                 # a file system without locks
+            raise FleetError(f'cannot lock {lock}: {err.strerror or err}') from None
+        stream.seek(0)
+        stream.truncate()
+        stream.write(f'{os.getpid()}\n')
+        stream.flush()
+        try:
+            yield lock
+        finally:
+            fcntl.flock(stream, fcntl.LOCK_UN)
 
 
 def drive_key(input_digest: str, settings: dict) -> str:
@@ -261,7 +314,7 @@ def process_drive(task: DriveTask) -> DriveOutcome:
     final = out / 'drives' / task.drive_id
     settings = task.settings
     try:
-        digest = task.input_sha256 or input_sha256(task.input_path)
+        digest = task.input_sha256 or input_sha256(task.input_path, exclude=[out])
         key = drive_key(digest, settings)
         tmp_root.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=_safe_name(task.drive_id) + '-', dir=tmp_root))
@@ -269,7 +322,7 @@ def process_drive(task: DriveTask) -> DriveOutcome:
             result = estimate_bag.run(
                 task.input_path, tmp, vehicle=task.vehicle, observer=task.observer,
                 mode=settings['mode'], segment_length_m=settings['segment_length_m'],
-                figures=settings['figures'], force=False, progress=False,
+                figures=settings['figures'], force=False, progress=False, standalone=False,
                 units=settings.get('units', 'si'), run_info=settings.get('run_info'))
             table = read_segments_csv(tmp / 'report' / 'segments.csv')
             fixes = _fixes_of(result, task.input_path)
@@ -301,6 +354,8 @@ def process_drive(task: DriveTask) -> DriveOutcome:
         plain = type(err) in (estimate_bag.InputError, BagReadError, BagWriteError, ValueError)
         plain = plain or isinstance(err, OSError)
         reason = one_line(err) if plain else f'{type(err).__name__}: {one_line(err)}'
+        if isinstance(err, OSError) and os_reason(err):
+            reason = f'cannot write {final}: {os_reason(err)}'
         return DriveOutcome(task.drive_id, 'failed', reason=reason,
                             seconds=time.perf_counter() - t0, input_path=task.input_path)
 

@@ -11,6 +11,10 @@ bag folder, the profile it holds is written to the CSV file given as ``--output`
 rounded to what a profiler measures (1 mm of distance, 0.1 um of elevation), or with
 ``--exact`` every number exactly (shortest round-trip form), so CSV -> bag -> CSV loses
 nothing.
+
+The output is built beside its place and renamed into it when complete (:mod:`.output_folder`);
+``--force`` replaces only an LPA bag (``custom_data`` kind ``lpa_profile``, nothing else in the
+folder) or a CSV file starting with the header this command writes, never INPUT.
 """
 from __future__ import annotations
 
@@ -18,11 +22,12 @@ import argparse
 from pathlib import Path
 import sys
 
-from road_force_estimator.tools import cli
+from road_force_estimator.tools import cli, output_folder
 
 __all__ = ['build_parser', 'main', 'write_exact_csv', 'write_rounded_csv']
 
 PROG = 'profile_to_bag'
+_CSV_HEADER = 'distance_m,left_m,right_m\n'
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--exact', action='store_true',
                         help='bag to CSV: every number exactly (shortest round-trip form), '
                              'so that CSV -> bag -> CSV loses nothing')
-    cli.add_force(parser, 'replace an existing output bag folder or CSV file')
+    cli.add_force(parser, 'replace an LPA bag folder or CSV file this command wrote')
     return parser
 
 
@@ -67,7 +72,7 @@ def _is_bag(path: Path) -> bool:
 def write_exact_csv(path: str | Path, profile) -> None:
     """Write ``distance_m,left_m,right_m`` with every float in its shortest exact form."""
     with Path(path).open('w', newline='') as f:
-        f.write('distance_m,left_m,right_m\n')
+        f.write(_CSV_HEADER)
         for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
             f.write(f'{x!r},{zl!r},{zr!r}\n')
 
@@ -85,25 +90,49 @@ def write_rounded_csv(path: str | Path, profile) -> None:
 
 
 def _run(args: argparse.Namespace) -> list[str]:
+    """Convert (see the module notes); the lines to print. The output is built beside its
+    place and renamed into it when complete (:mod:`.output_folder`); ``--force`` replaces
+    only an LPA bag or a CSV this command writes, never the input."""
     from road_force_estimator import bagio
     from road_force_estimator.bagio import road_from_source
 
     source = Path(args.input).expanduser()
     output = Path(args.output).expanduser()
+    inputs = [source] if source.exists() else []
     if _is_bag(source):
-        if output.exists() and not (args.force and output.is_file()):
-            raise ValueError(f'{output} exists (use --force to replace a file)')
+        target = output_folder.FileOutput(output, PROG, force=args.force, owned=_csv_written_here,
+                                          inputs=inputs)
+        target.check()
         notes: list[str] = []
         profile = bagio.read_lpa_bag(source, issues=notes)
-        (write_exact_csv if args.exact else write_rounded_csv)(output, profile)
+        with target.staged() as tmp:
+            (write_exact_csv if args.exact else write_rounded_csv)(tmp, profile)
         return notes + [f'wrote {len(profile)} samples to {output}']
     cli.check_positive('--length', args.length, finite=False)
+    target = output_folder.BagOutput(output, PROG, force=args.force, owned=_lpa_written_here,
+                                     inputs=inputs)
+    target.check()
     profile = road_from_source(args.input, length_m=args.length)
-    bagio.write_lpa_bag(output, profile, survey_speed_mps=args.survey_speed,
-                         track_width_m=args.track_width, overwrite=args.force)
+    with target.staged() as bag:
+        bagio.write_lpa_bag(bag, profile, survey_speed_mps=args.survey_speed,
+                            track_width_m=args.track_width)
     return list(getattr(profile, 'notes', ())) + [
         f'wrote {len(profile)} samples ({profile.distance_m[0]:g} m to '
         f'{profile.distance_m[-1]:g} m) to {output}']
+
+
+def _lpa_written_here(custom: dict[str, str]) -> bool:
+    """A bag's ``custom_data`` says it is an LPA bag (what this command writes)."""
+    return custom.get('road_force_estimator.kind') == 'lpa_profile'
+
+
+def _csv_written_here(path: Path) -> bool:
+    """A file begins with the header :func:`write_exact_csv` writes."""
+    try:
+        with path.open('rb') as f:
+            return f.readline(64) == _CSV_HEADER.encode()
+    except OSError:
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:

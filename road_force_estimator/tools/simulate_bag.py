@@ -21,6 +21,10 @@ of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^
 Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
 ``custom_data``.
 
+The bag is built beside its place and renamed into it when complete (:mod:`.output_folder`);
+``--force`` replaces only a bag simulate_bag wrote (its ``custom_data`` says so) that holds
+nothing else, never the road it reads.
+
 Values come from the defaults, then the parameter file, then ``-p NAME:=VALUE``, then the
 options (``--help`` shows the defaults). Exit status 0
 on success, 1 for bad input (bad parameter, unreadable road, existing output), 2 for a bad
@@ -37,7 +41,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from road_force_estimator.tools import cli
+from road_force_estimator.tools import cli, output_folder
 
 __all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'main']
 
@@ -92,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '(default 0 s); bends the GNSS route (default: none, 0 m/s^2)')
     p.add_argument('--no-ground-truth', action='store_true',
                    help='write the measurements only, as a real truck records them')
-    cli.add_force(p, 'replace an existing bag folder')
+    cli.add_force(p, 'replace a bag folder simulate_bag wrote')
     cli.add_no_progress(p)
     return p
 
@@ -213,11 +217,18 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
-    """The command's work: :func:`simulate`, the bag, the one-line result."""
-    from road_force_estimator.bagio import write_drive_bag
+    """The command's work: :func:`simulate`, the bag (:class:`~.output_folder.BagOutput`:
+    built beside it, renamed into place; ``--force`` replaces only a bag of simulate_bag),
+    the one-line result."""
+    from road_force_estimator import bagio
 
     lateral = _lateral(args.lateral_acceleration)
     vehicle, sim = parameters_from(args)
+    road_path = Path(sim.road).expanduser()
+    target = output_folder.BagOutput(
+        Path(args.output), PROG, force=args.force, owned=_written_here,
+        inputs=[road_path] if road_path.exists() else [])
+    target.check()
     traj, q_meas, roll_meas, fixes, road, reason = simulate(
         vehicle, sim, lateral=lateral, progress=not args.no_progress)
     used = {**vehicle.to_parameters(), **sim.to_parameters()}
@@ -226,10 +237,11 @@ def _main(args: argparse.Namespace) -> int:
               'road_force_estimator.writer_command': PROG}
     if lateral is not None:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
-    count = write_drive_bag(Path(args.output), traj, q_meas, roll_meas, fixes=fixes,
-                            speed_mps=sim.speed_mps, track_width_m=vehicle.track_width_m,
-                            ground_truth=not args.no_ground_truth, custom_data=custom,
-                            overwrite=args.force)
+    with target.staged() as bag:
+        count = bagio.write_drive_bag(bag, traj, q_meas, roll_meas, fixes=fixes,
+                                      speed_mps=sim.speed_mps,
+                                      track_width_m=vehicle.track_width_m,
+                                      ground_truth=not args.no_ground_truth, custom_data=custom)
     n = len(traj.t_s)
     if reason:
         print(f'{PROG}: {reason}', file=sys.stderr)
@@ -237,6 +249,11 @@ def _main(args: argparse.Namespace) -> int:
           f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at {sim.speed_mps:g} m/s) over '
           f'{road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
+
+
+def _written_here(custom: dict[str, str]) -> bool:
+    """A bag's ``custom_data`` says simulate_bag wrote it."""
+    return custom.get('road_force_estimator.writer_command') == PROG
 
 
 if __name__ == '__main__':

@@ -330,6 +330,26 @@ class TestBadBags:
         assert code == 1 and err.count('\n') == 1
 
 
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+@pytest.mark.parametrize('speed, cause', [(1e6, 'every speed out of range'),
+                                          (np.nan, 'no usable /vehicle/twist')])
+def test_no_usable_sample_is_exit_1_and_no_output(tmp_path, capsys, mode, speed, cause):
+    """A drive whose every sample is rejected (a speed of 1e6 m/s: |v| <= 100 m/s) is bad
+    input: exit 1, the cause in one line, nothing written (issue 16)."""
+    folder = tmp_path / 'fast'
+    with BagWriter(folder) as bag:
+        bag.add_topic('/vehicle/twist', 'geometry_msgs/msg/TwistStamped')
+        bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState')
+        for k in range(200):
+            s = 10**9 + k * 10**6
+            bag.write('/vehicle/twist', s, twist(s, speed))
+            bag.write('/suspension/deflections', s, joint_state(s, (0.001, 0.0), 0.0))
+    code, out, err = run([folder, '--output', tmp_path / 'o', '--mode', mode], capsys)
+    assert code == 1 and err.count('\n') == 1 and 'Traceback' not in err, err
+    assert cause in err and out == ''
+    assert not (tmp_path / 'o').exists()
+
+
 class TestBadInvocations:
     @pytest.mark.parametrize('extra, code, text', [
         (['--mode', 'smooth'], 2, 'invalid choice'),

@@ -455,3 +455,36 @@ def test_bad_params_file_is_refused(drives, tmp_path, capsys):
                               str(tmp_path / 'out')])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and 'vehicle.sprung_mass' in err[0]
+
+
+# ------------------------------------------------------------------------------------------
+# one run per output folder; an output folder inside a bag folder given directly (issue 16)
+
+def test_a_second_run_into_the_same_output_is_refused(drives, tmp_path, capsys):
+    import fcntl
+
+    out = tmp_path / 'out'
+    out.mkdir()
+    (out / 'drives' / estimate_fleet.TMP_NAME / 'd1-building').mkdir(parents=True)
+    with (out / estimate_fleet.LOCK_NAME).open('a') as held:
+        fcntl.flock(held, fcntl.LOCK_EX)          # the first run, still computing
+        rc = estimate_fleet.main([str(drives['inputs']), '--params-file', str(drives['params']),
+                                  '--output', str(out), '--no-progress'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and 'another estimate_fleet run' in err[0], err
+    assert '--wait' in err[0]
+    # The first run's half-built drive is left alone, nothing is written.
+    assert (out / 'drives' / estimate_fleet.TMP_NAME / 'd1-building').is_dir()
+    assert sorted(p.name for p in out.iterdir()) == [estimate_fleet.LOCK_NAME, 'drives']
+
+
+def test_output_inside_a_bag_folder_given_directly_is_not_recomputed(drives, tmp_path):
+    bag = tmp_path / 'd1'
+    shutil.copytree(drives['inputs'] / 'd1', bag)
+    argv = [str(bag), '--params-file', str(drives['params']), '--output', str(bag / 'fleet'),
+            '--segment-length', str(SEGMENT_M), '--no-figures', '--no-progress',
+            '--workers', '1']
+    assert estimate_fleet.main(argv) == 0
+    assert 'processed 1, skipped (already done) 0' in (bag / 'fleet' / 'summary.md').read_text()
+    assert estimate_fleet.main(argv) == 0
+    assert 'processed 0, skipped (already done) 1' in (bag / 'fleet' / 'summary.md').read_text()

@@ -48,3 +48,49 @@ def test_input_hash_and_key_see_every_change(tmp_path):
     for change in ({'mode': 'offline'}, {'segment_length_m': 160.9344}, {'figures': False},
                    {'parameters': {'vehicle.sprung_mass': 5001.0}}):
         assert fleet_drives.drive_key(h0, {**s, **change}) != k
+
+
+def test_output_inside_a_bag_folder_is_not_part_of_its_input(tmp_path):
+    """A fleet output folder inside a bag folder given directly (issue 16): neither a drive
+    nor part of the drive's input hash, so the drive is not recomputed on every run."""
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'metadata.yaml').write_text('a: 1\n')
+    (bag / 'bag_0.mcap').write_bytes(bytes(range(256)) * 10)
+    out = bag / 'out'
+    found = find_drives([bag], exclude=[out])
+    assert [(d.drive_id, d.path) for d in found] == [('bag', bag.resolve())]
+    h0 = fleet_drives.input_sha256(bag, exclude=[out])
+    (out / 'drives' / 'bag' / 'bag').mkdir(parents=True)
+    (out / 'drives' / 'bag' / 'bag' / 'metadata.yaml').write_text('b: 2\n')
+    (out / 'segments.csv').write_text('drive\n')
+    assert fleet_drives.input_sha256(bag, exclude=[out]) == h0
+    assert fleet_drives.input_sha256(bag) != h0                # without it: seen
+
+
+def test_output_lock_refuses_or_waits(tmp_path):
+    """One estimate_fleet run per output folder (issue 16): a second one refuses at once, or
+    waits for the first with ``wait``."""
+    import threading
+
+    out = tmp_path / 'out'
+    out.mkdir()
+    waiting = threading.Event()
+    got = []
+    with fleet_drives.output_lock(out):
+        with pytest.raises(FleetError, match='another estimate_fleet run'):
+            with fleet_drives.output_lock(out):
+                pass
+
+        def second():
+            with fleet_drives.output_lock(out, wait=True, on_wait=waiting.set):
+                got.append('locked')
+
+        thread = threading.Thread(target=second)
+        thread.start()
+        assert waiting.wait(60)
+        assert got == []                                       # still waiting
+    thread.join(60)
+    assert got == ['locked']
+    with fleet_drives.output_lock(out):                         # free again
+        pass
