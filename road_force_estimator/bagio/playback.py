@@ -30,6 +30,8 @@ from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, get_chunk_data_stream
 import yaml
 
+from road_force_estimator.bagio.errors import BagReadError
+from road_force_estimator.bagio.reader import bag_files
 from road_force_estimator.interfaces import SENSOR_DATA, qos_kind
 
 __all__ = ['PlaybackError', 'TopicQoS', 'PlayedTopic', 'Playback', 'open_playback']
@@ -282,37 +284,21 @@ def open_playback(path: str | Path) -> Playback:
         metadata.yaml that cannot be read.
     """
     path = Path(path)
-    if not path.exists():
-        raise PlaybackError(f'{path}: no such bag folder or file')
+    try:
+        files, info, _ = bag_files(path)   # regular files inside the folder only
+    except BagReadError as exc:
+        raise PlaybackError(str(exc)) from None
     topics: dict[str, PlayedTopic] = {}
-    if path.is_file():
-        files = [path]
-    else:
-        meta_path = path / 'metadata.yaml'
-        files = sorted(path.glob('*.mcap'))
-        if meta_path.is_file():
-            try:
-                info = yaml.safe_load(meta_path.read_text())['rosbag2_bagfile_information']
-                names = info.get('relative_file_paths') or []
-                entries = info.get('topics_with_message_count') or []
-            except (yaml.YAMLError, KeyError, TypeError, AttributeError, OSError) as exc:
-                raise PlaybackError(f'{meta_path}: not a rosbag2 metadata file ({exc})'.splitlines(
-                    )[0]) from None
-            if names:
-                files = [path / n for n in names if (path / n).is_file()]
-            for entry in entries:
-                meta = entry.get('topic_metadata', {})
-                name = meta.get('name')
-                if not name:
-                    continue
-                qos = _qos_from_profiles(meta.get('offered_qos_profiles'))
-                topics[name] = PlayedTopic(
-                    name, _normal_type(str(meta.get('type', ''))),
-                    str(meta.get('serialization_format', 'cdr')),
-                    qos or TopicQoS.of_kind(qos_kind(name)),
-                    int(entry.get('message_count', -1)))
-        if not files:
-            raise PlaybackError(f'{path}: no .mcap file in the bag folder')
+    for entry in info.get('topics_with_message_count') or []:
+        meta = entry.get('topic_metadata', {}) if isinstance(entry, dict) else {}
+        name = meta.get('name') if isinstance(meta, dict) else None
+        if not name:
+            continue
+        qos = _qos_from_profiles(meta.get('offered_qos_profiles'))
+        topics[name] = PlayedTopic(
+            name, _normal_type(str(meta.get('type', ''))),
+            str(meta.get('serialization_format', 'cdr')),
+            qos or TopicQoS.of_kind(qos_kind(name)), int(entry.get('message_count', -1)))
     for file in files:
         with file.open('rb') as f:
             if f.read(8) != b'\x89MCAP0\r\n':

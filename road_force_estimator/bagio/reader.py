@@ -108,8 +108,16 @@ def _listed_files(path: Path, info: Mapping[str, Any], issues: list[str]) -> lis
     return files
 
 
-def _bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
-    """The storage files of a bag folder (or a single .mcap), its metadata and issues."""
+def bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
+    """The storage files of a bag folder (or a single .mcap), its metadata (the
+    ``rosbag2_bagfile_information`` mapping, or {}) and issues: regular files inside the folder
+    only (metadata.yaml naming a file outside it, a FIFO or a device: refused, named).
+
+    Raises
+    ------
+    BagReadError
+        No such folder or file, not MCAP storage, no readable .mcap file.
+    """
     issues: list[str] = []
     if not path.exists():
         raise BagReadError(f'{path}: no such bag folder or file')
@@ -147,7 +155,7 @@ def _raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],
     """Lists of wanted ``(channel, log_ns, payload)`` of every file of a bag, file order
     (``indexed``: or lists of :class:`Block`, see :class:`McapScan`)."""
     wanted = None if topics is None else set(topics)
-    files, _, file_issues = _bag_files(path)
+    files, _, file_issues = bag_files(path)
     issues.extend(file_issues)
 
     def want(channel: Channel) -> bool:
@@ -198,7 +206,7 @@ def bag_info(path: str | Path) -> BagInfo:
 def bag_custom_data(path: str | Path) -> dict[str, str]:
     """metadata.yaml ``custom_data`` of a bag (empty when it has none or is no bag)."""
     try:
-        _, info, _ = _bag_files(Path(path))
+        _, info, _ = bag_files(Path(path))
     except BagReadError:
         return {}
     data = info.get('custom_data') or {}

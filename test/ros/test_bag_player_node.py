@@ -204,7 +204,7 @@ def test_a_cut_bag_plays_up_to_the_break_and_says_so(tmp_path):
     (['{tmp}', '--rate', '0'], 2, 'bag_player: error: argument --rate: 0 must be a number > 0'),
     (['{tmp}', '--remap', 'a=b'], 2,
      "bag_player: error: argument --remap: 'a=b' is not FROM:=TO (two absolute topic names)"),
-    (['{tmp}'], 1, 'bag_player: {tmp}: no .mcap file in the bag folder'),
+    (['{tmp}'], 1, 'bag_player: {tmp}: no metadata.yaml and no .mcap file: not an MCAP bag'),
 ])
 def test_bad_input_gives_one_line(tmp_path, args, code, line):
     args = [a.format(tmp=tmp_path) for a in args]
