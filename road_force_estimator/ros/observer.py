@@ -25,15 +25,16 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
+from road_force_estimator.bagio import CdrEncoder, CdrReader, message_template
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation import Estimator, diagnostics
 from road_force_estimator.ros.messages import (
-    MessageRejected, diagnostic_status, float64_msg, read_deflections, read_twist,
-    reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
+    MessageRejected, diagnostic_status, read_deflections, read_twist, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
 
@@ -50,6 +51,39 @@ ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m'
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
 FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
+
+
+class Wire:
+    """The node's messages as CDR bytes (:mod:`road_force_estimator.bagio.live`): readers of
+    the inputs in the layout our publishers and bag_player send (any other layout goes through
+    rclpy and :func:`.read_deflections` / :func:`.read_twist`), encoders of the six outputs
+    (the bytes rmw sends for the messages :mod:`.messages` builds)."""
+
+    def __init__(self) -> None:
+        self.deflections = CdrReader(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
+        self.twist = CdrReader(api.TWIST_STAMPED, message_template(
+            api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
+        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
+                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
+        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                               ['point.x', 'point.y', 'point.z'])
+        self.ltr = CdrEncoder(api.FLOAT64, message_template(api.FLOAT64), ['data'])
+        self.states = CdrEncoder(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
+            ['position', 'velocity'])
+
+
+def parse(data: bytes, msg_type, reader: CdrReader):
+    """The numbers ``reader`` reads from ``data`` when its layout is the usual one and they are
+    finite, else the message rclpy deserialises (None when it cannot: not CDR of the type)."""
+    fast = reader.read(data)
+    if fast is not None and math.isfinite(sum(fast[1])):
+        return fast
+    try:
+        return deserialize_message(data, msg_type)
+    except Exception:  # noqa: BLE001 - any failure means: not a message of this type
+        return None
 
 
 def build(values):
@@ -93,9 +127,11 @@ class Observer(Node):
         self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
+        self.wire = Wire()
         self.create_subscription(JointState, api.DEFLECTIONS, self.deflections_callback,
-                                 sensor_qos(1000))
-        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10))
+                                 sensor_qos(1000), raw=True)
+        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10),
+                                 raw=True)
         self.create_timer(1.0, self.diagnostics_callback)
         self.input_seen = False  # logged once: waiting, then the rate input arrives at
         self.get_logger().info('waiting for /suspension/deflections and /vehicle/twist')
@@ -128,19 +164,29 @@ class Observer(Node):
         self.period[reason] += 1
         self.last_rejection = detail
 
-    def twist_callback(self, msg: TwistStamped) -> None:
+    def twist_callback(self, data: bytes) -> None:
+        msg = parse(data, TwistStamped, self.wire.twist)
         try:
-            _, self.speed_mps = read_twist(msg)
+            if msg is None:
+                raise MessageRejected('undecodable', f'not a TwistStamped ({len(data)} bytes)')
+            self.speed_mps = msg[1][0] if isinstance(msg, tuple) else read_twist(msg)[1]
         except MessageRejected as exc:
             self.reject('twist_' + exc.reason, str(exc))
             return
         while self.waiting:
             self.estimate(*self.waiting.popleft())
 
-    def deflections_callback(self, msg: JointState) -> None:
+    def deflections_callback(self, data: bytes) -> None:
         self.period['received'] += 1
+        msg = parse(data, JointState, self.wire.deflections)
         try:
-            sample = read_deflections(msg)
+            if msg is None:
+                raise MessageRejected('undecodable', f'not a JointState ({len(data)} bytes)')
+            if isinstance(msg, tuple):
+                stamp_ns, (q1, q2, phi) = msg
+                sample = stamp_ns, (q1, q2), phi
+            else:
+                sample = read_deflections(msg)
         except MessageRejected as exc:
             self.reject(exc.reason, str(exc))
             return
@@ -181,13 +227,13 @@ class Observer(Node):
                              + sum(velocity)):
             self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
-        t = est.stamp_ns
-        for pub, frame, load in zip(self.load_pubs, api.WHEEL_FRAMES, (f1, f2)):
-            pub.publish(wrench_msg(t, frame, load))
+        t, wire = est.stamp_ns, self.wire
+        for pub, encoder, load in zip(self.load_pubs, wire.loads, (f1, f2)):
+            pub.publish(encoder.encode(t, (load,)))
         for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
-            pub.publish(road_point_msg(t, est.distance_m, y, road))
-        self.ltr_pub.publish(float64_msg(est.ltr))
-        self.states_pub.publish(states_msg(t, position, velocity))
+            pub.publish(wire.road.encode(t, (est.distance_m, y, road)))
+        self.ltr_pub.publish(wire.ltr.encode(None, (est.ltr,)))
+        self.states_pub.publish(wire.states.encode(t, position + velocity))
         self.period['published'] += 1
         self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
         ex = self.extremes
