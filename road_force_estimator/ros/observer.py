@@ -4,7 +4,8 @@ Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` 
 which matches reliable and best-effort publishers); per accepted deflection message publishes
 ``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio`` and
 ``/observer/states`` (reliable), stamped with the estimate's stamp (the input's), and
-``/diagnostics`` at 1 Hz (INTERFACES.md).
+``/diagnostics`` at 1 Hz (INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`:
+the same bytes as rclpy's, without a message object per message).
 
 Rejected and counted, never misread (the node keeps running and never publishes NaN): a
 JointState whose arrays differ in length from ``name`` or that lacks a joint, a non-finite value
@@ -25,18 +26,17 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, CdrReader, message_template
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation import Estimator, diagnostics
 from road_force_estimator.ros.messages import (
-    MessageRejected, diagnostic_status, read_deflections, read_twist, reliable_qos, sensor_qos)
+    MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
+from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
@@ -51,39 +51,6 @@ ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m'
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
 FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
-
-
-class Wire:
-    """The node's messages as CDR bytes (:mod:`road_force_estimator.bagio.live`): readers of
-    the inputs in the layout our publishers and bag_player send (any other layout goes through
-    rclpy and :func:`.read_deflections` / :func:`.read_twist`), encoders of the six outputs
-    (the bytes rmw sends for the messages :mod:`.messages` builds)."""
-
-    def __init__(self) -> None:
-        self.deflections = CdrReader(api.JOINT_STATE, message_template(
-            api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
-        self.twist = CdrReader(api.TWIST_STAMPED, message_template(
-            api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
-        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
-                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
-        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
-                               ['point.x', 'point.y', 'point.z'])
-        self.ltr = CdrEncoder(api.FLOAT64, message_template(api.FLOAT64), ['data'])
-        self.states = CdrEncoder(api.JOINT_STATE, message_template(
-            api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
-            ['position', 'velocity'])
-
-
-def parse(data: bytes, msg_type, reader: CdrReader):
-    """The numbers ``reader`` reads from ``data`` when its layout is the usual one and they are
-    finite, else the message rclpy deserialises (None when it cannot: not CDR of the type)."""
-    fast = reader.read(data)
-    if fast is not None and math.isfinite(sum(fast[1])):
-        return fast
-    try:
-        return deserialize_message(data, msg_type)
-    except Exception:  # noqa: BLE001 - any failure means: not a message of this type
-        return None
 
 
 def build(values):
@@ -165,11 +132,8 @@ class Observer(Node):
         self.last_rejection = detail
 
     def twist_callback(self, data: bytes) -> None:
-        msg = parse(data, TwistStamped, self.wire.twist)
         try:
-            if msg is None:
-                raise MessageRejected('undecodable', f'not a TwistStamped ({len(data)} bytes)')
-            self.speed_mps = msg[1][0] if isinstance(msg, tuple) else read_twist(msg)[1]
+            _, self.speed_mps = self.wire.read_twist(data)
         except MessageRejected as exc:
             self.reject('twist_' + exc.reason, str(exc))
             return
@@ -178,15 +142,8 @@ class Observer(Node):
 
     def deflections_callback(self, data: bytes) -> None:
         self.period['received'] += 1
-        msg = parse(data, JointState, self.wire.deflections)
         try:
-            if msg is None:
-                raise MessageRejected('undecodable', f'not a JointState ({len(data)} bytes)')
-            if isinstance(msg, tuple):
-                stamp_ns, (q1, q2, phi) = msg
-                sample = stamp_ns, (q1, q2), phi
-            else:
-                sample = read_deflections(msg)
+            sample = self.wire.read_deflections(data)
         except MessageRejected as exc:
             self.reject(exc.reason, str(exc))
             return
