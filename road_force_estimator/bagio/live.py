@@ -73,20 +73,46 @@ class CdrEncoder:
         self.regions = _regions(self.layout, paths)
         self.count = sum(k for _, _, k in self.regions)
         self.stamped = _stamped(self.layout)
+        self._packer, self._consts, self._order = self._plan()
+
+    def _plan(self) -> tuple[struct.Struct, tuple[bytes, ...], tuple[int, ...]]:
+        """One :class:`struct.Struct` for the whole message: the template's bytes between
+        the numbers as ``s`` fields; ``order`` picks its arguments out of
+        ``consts + (sec, nanosec) + values``."""
+        numbers = [(offset, packer.format[1:], k) for packer, offset, k in self.regions]
+        if self.stamped:
+            numbers.insert(0, (_STAMP_OFFSET, 'iI', -2))
+        fmt, consts, order, pos, value = ['<'], [], [], 0, 0
+        n_consts = len(numbers) + 1
+        for offset, code, k in sorted(numbers):
+            if offset < pos:
+                raise ValueError(f'{self.layout.msgtype}: fields overlap at byte {offset}')
+            fmt.append(f'{offset - pos}s')
+            order.append(len(consts))
+            consts.append(self.template[pos:offset])
+            fmt.append(code)
+            if k == -2:
+                order += [n_consts, n_consts + 1]
+                pos = offset + _STAMP.size
+            else:
+                order += [n_consts + 2 + value + j for j in range(k)]
+                value += k
+                pos = offset + 8 * k
+        fmt.append(f'{len(self.template) - pos}s')
+        order.append(len(consts))
+        consts.append(self.template[pos:])
+        if value != self.count or sorted(numbers) != numbers:
+            raise ValueError(f'{self.layout.msgtype}: paths must be given in byte order')
+        return struct.Struct(''.join(fmt)), tuple(consts), tuple(order)
 
     def encode(self, stamp_ns: int | None, values: Sequence[float]) -> bytes:
         """The message with stamp ``stamp_ns`` (ns; None for a type without a header) and
         ``values`` (:attr:`count` numbers, in ``paths``' order)."""
-        buf = bytearray(self.template)
-        if self.stamped:
-            _STAMP.pack_into(buf, _STAMP_OFFSET, *divmod(int(stamp_ns), NS_PER_S))
         if len(values) != self.count:
             raise ValueError(f'{self.layout.msgtype}: {len(values)} numbers for {self.count}')
-        i = 0
-        for packer, offset, k in self.regions:
-            packer.pack_into(buf, offset, *values[i:i + k])
-            i += k
-        return bytes(buf)
+        stamp = divmod(int(stamp_ns), NS_PER_S) if self.stamped else (0, 0)
+        args = self._consts + stamp + tuple(values)
+        return self._packer.pack(*[args[i] for i in self._order])
 
 
 class CdrReader:
