@@ -4,10 +4,11 @@ Writing (:class:`BagWriter`, as Jazzy's rosbag2 does) and reading (:func:`iter_m
 :func:`read_topic_columns`, :func:`bag_info`), and the bag formats of INTERFACES.md: drives
 (:func:`write_drive_bag`, :func:`read_drive_bag`), LPA road profiles (:func:`write_lpa_bag`,
 :func:`read_lpa_bag`, :func:`road_from_source`) and the observer's estimates
-(:func:`write_estimate_bag`, :func:`diagnostic_array`). Modules: :mod:`.cdr` (CDR a column at a
-time), :mod:`.mcap_file` / :mod:`.mcap_scan` (the MCAP container), :mod:`.writer`,
-:mod:`.row_blocks`, :mod:`.reader`, :mod:`.checks`, :mod:`.messages`, :mod:`.drive`,
-:mod:`.lpa`, :mod:`.estimates`, :mod:`.road_source`.
+(:func:`write_estimate_bag`, :func:`diagnostic_array`); the nodes' messages as CDR bytes
+(:class:`CdrEncoder`, :class:`CdrReader`). Modules: :mod:`.cdr` (CDR a column at a time),
+:mod:`.live` (a message at a time), :mod:`.mcap_file` / :mod:`.mcap_scan` (the MCAP
+container), :mod:`.writer`, :mod:`.row_blocks`, :mod:`.reader`, :mod:`.checks`,
+:mod:`.messages`, :mod:`.drive`, :mod:`.lpa`, :mod:`.estimates`, :mod:`.road_source`.
 """
 from road_force_estimator.bagio.cdr import (
     TYPESTORE,
@@ -31,6 +32,7 @@ from road_force_estimator.bagio.estimates import (
     diagnostic_array,
     write_estimate_bag,
 )
+from road_force_estimator.bagio.live import CdrEncoder, CdrReader
 from road_force_estimator.bagio.lpa import DEFAULT_SURVEY_SPEED_MPS, read_lpa_bag, write_lpa_bag
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS,
@@ -61,6 +63,7 @@ __all__ = [
     'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'write_lpa_bag', 'road_from_source',
     'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag', 'TYPESTORE', 'CdrLayout',
     'cdr_layout', 'encode_columns', 'decode_columns', 'stamps_to_ns', 'ns_to_stamps',
+    'CdrEncoder', 'CdrReader',
     'message_class', 'message_template', 'stamp_columns', 'DEFAULT_START_STAMP_NS',
     'DEFAULT_TRACK_WIDTH_M', 'DEFAULT_SURVEY_SPEED_MPS', 'ROSBAG2_VERSION', 'SENSOR_DATA_QOS',
     'RELIABLE_QOS',

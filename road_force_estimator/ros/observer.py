@@ -4,7 +4,8 @@ Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` 
 which matches reliable and best-effort publishers); per accepted deflection message publishes
 ``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio`` and
 ``/observer/states`` (reliable), stamped with the estimate's stamp (the input's), and
-``/diagnostics`` at 1 Hz (INTERFACES.md).
+``/diagnostics`` at 1 Hz (INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`:
+the same bytes as rclpy's, without a message object per message).
 
 Rejected and counted, never misread (the node keeps running and never publishes NaN): a
 JointState whose arrays differ in length from ``name`` or that lacks a joint, a non-finite value
@@ -32,10 +33,10 @@ from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation import Estimator, diagnostics
 from road_force_estimator.ros.messages import (
-    MessageRejected, diagnostic_status, float64_msg, read_deflections, read_twist,
-    reliable_qos, road_point_msg, sensor_qos, states_msg, wrench_msg)
+    MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
+from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
 MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
@@ -96,9 +97,11 @@ class Observer(Node):
         self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
+        self.wire = Wire()
         self.create_subscription(JointState, api.DEFLECTIONS, self.deflections_callback,
-                                 sensor_qos(1000))
-        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10))
+                                 sensor_qos(1000), raw=True)
+        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10),
+                                 raw=True)
         self.create_timer(1.0, self.diagnostics_callback)
         self.input_seen = False  # logged once: waiting, then the rate input arrives at
         self.get_logger().info('waiting for /suspension/deflections and /vehicle/twist')
@@ -131,19 +134,19 @@ class Observer(Node):
         self.period[reason] += 1
         self.last_rejection = detail
 
-    def twist_callback(self, msg: TwistStamped) -> None:
+    def twist_callback(self, data: bytes) -> None:
         try:
-            _, self.speed_mps = read_twist(msg)
+            _, self.speed_mps = self.wire.read_twist(data)
         except MessageRejected as exc:
             self.reject('twist_' + exc.reason, str(exc))
             return
         while self.waiting:
             self.estimate(*self.waiting.popleft())
 
-    def deflections_callback(self, msg: JointState) -> None:
+    def deflections_callback(self, data: bytes) -> None:
         self.period['received'] += 1
         try:
-            sample = read_deflections(msg)
+            sample = self.wire.read_deflections(data)
         except MessageRejected as exc:
             self.reject(exc.reason, str(exc))
             return
@@ -184,13 +187,13 @@ class Observer(Node):
                              + sum(velocity)):
             self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
-        t = est.stamp_ns
-        for pub, frame, load in zip(self.load_pubs, api.WHEEL_FRAMES, (f1, f2)):
-            pub.publish(wrench_msg(t, frame, load))
+        t, wire = est.stamp_ns, self.wire
+        for pub, encoder, load in zip(self.load_pubs, wire.loads, (f1, f2)):
+            pub.publish(encoder.encode(t, (load,)))
         for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
-            pub.publish(road_point_msg(t, est.distance_m, y, road))
-        self.ltr_pub.publish(float64_msg(est.ltr))
-        self.states_pub.publish(states_msg(t, position, velocity))
+            pub.publish(wire.road.encode(t, (est.distance_m, y, road)))
+        self.ltr_pub.publish(wire.ltr.encode(None, (est.ltr,)))
+        self.states_pub.publish(wire.states.encode(t, position + velocity))
         self.period['published'] += 1
         self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
         ex = self.extremes

@@ -1,0 +1,84 @@
+"""The observer's messages as CDR bytes: its inputs read and its outputs written without rclpy
+building a message object (:mod:`road_force_estimator.bagio.live`), the same bytes as before.
+
+rclpy takes a message as serialized bytes (``Publisher.publish(bytes)``) and gives it so
+(``create_subscription(..., raw=True)``). An input in the layout our publishers and bag_player
+send (names in the contract's order, frame ``base_link``, no velocity or effort) is read
+straight from its bytes; any other goes through rclpy's deserialisation and
+:func:`.messages.read_deflections` / :func:`.messages.read_twist` (mapped by name, rejected as
+they reject). The outputs are the bytes rmw sends for the messages :mod:`.messages` builds
+(:func:`.messages.wrench_msg`, ...): test_wire compares them.
+"""
+from __future__ import annotations
+
+import math
+
+from geometry_msgs.msg import TwistStamped
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+
+from road_force_estimator import interfaces as api
+from road_force_estimator.bagio import CdrEncoder, CdrReader, message_template
+from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
+
+__all__ = ['Wire', 'deserialize']
+
+
+class Wire:
+    """Readers of the observer's two inputs and encoders of its six outputs.
+
+    Attributes
+    ----------
+    deflections, twist : CdrReader
+        The usual layouts of ``/suspension/deflections`` and ``/vehicle/twist``.
+    loads : list of CdrEncoder
+        ``/wheel_load/left|right`` (WrenchStamped): ``wrench.force.z`` F_n (N).
+    road : CdrEncoder
+        ``/road_profile/left|right`` (PointStamped): ``point.x, y, z`` (m).
+    ltr : CdrEncoder
+        ``/load_transfer_ratio`` (Float64, no header).
+    states : CdrEncoder
+        ``/observer/states`` (JointState of :data:`.interfaces.STATE_JOINTS`): positions,
+        then velocities.
+    """
+
+    def __init__(self) -> None:
+        self.deflections = CdrReader(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
+        self.twist = CdrReader(api.TWIST_STAMPED, message_template(
+            api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
+        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
+                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
+        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                               ['point.x', 'point.y', 'point.z'])
+        self.ltr = CdrEncoder(api.FLOAT64, message_template(api.FLOAT64), ['data'])
+        self.states = CdrEncoder(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
+            ['position', 'velocity'])
+
+    def read_deflections(self, data: bytes) -> tuple[int, tuple[float, float], float]:
+        """:func:`.read_deflections` of the JointState in ``data``: read straight from the
+        bytes when their layout is the usual one and the numbers are finite."""
+        fast = self.deflections.read(data)
+        if fast is not None and math.isfinite(sum(fast[1])):
+            stamp_ns, (q1, q2, phi) = fast
+            return stamp_ns, (q1, q2), phi
+        return read_deflections(deserialize(data, JointState))
+
+    def read_twist(self, data: bytes) -> tuple[int, float]:
+        """:func:`.read_twist` of the TwistStamped in ``data`` (straight from the bytes, as
+        :meth:`read_deflections`)."""
+        fast = self.twist.read(data)
+        if fast is not None and math.isfinite(fast[1][0]):
+            return fast[0], fast[1][0]
+        return read_twist(deserialize(data, TwistStamped))
+
+
+def deserialize(data: bytes, msg_type):
+    """The message of ``msg_type`` rclpy reads from ``data``; :class:`.MessageRejected`
+    ('undecodable') when it cannot."""
+    try:
+        return deserialize_message(data, msg_type)
+    except Exception as err:  # noqa: BLE001 - any failure means: not a message of this type
+        raise MessageRejected('undecodable', f'not a {msg_type.__name__} '
+                                             f'({len(data)} bytes)') from err
