@@ -51,7 +51,7 @@ class Column(enum.IntEnum):
     FN1 = 23          #: wheel load F_n,1 = F_c,1 + dF_1 (N)
     FN2 = 24
     LTR = 25          #: (F_n2 - F_n1) / (F_n1 + F_n2)
-    RESIDUAL = 26     #: I_x ddphi - s cos(phi) (F_b1 - F_b2) (N m)
+    RESIDUAL = 26     #: I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi) (N m)
     LIFT_OFF1 = 27    #: lift-off flag of the left wheel
     LIFT_OFF2 = 28
     CONVERGED = 29    #: time since (re)start >= settling time
@@ -112,7 +112,7 @@ class Estimate(NamedTuple):
     tire_force_dynamic_n: tuple[float, float]   #: dF_i (N), upward on the wheel
     wheel_load_n: tuple[float, float]           #: F_n,i = F_c,i + dF_i (N)
     ltr: float                                  #: (F_n2 - F_n1) / (F_n1 + F_n2)
-    residual_nm: float                          #: I_x ddphi - s cos(phi)(F_b1 - F_b2) (N m)
+    residual_nm: float                          #: step 9 residual (N m)
     lift_off: tuple[bool, bool]                 #: F_n,i <= LIFT_OFF_FRACTION F_c,i
     converged: bool                             #: time since (re)start >= settling time
 

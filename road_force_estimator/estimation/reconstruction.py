@@ -16,7 +16,7 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
    estimates); ``LTR = (F_n2 - F_n1) / (F_n1 + F_n2)`` (right minus left) of the loads
    clipped at zero (a tire cannot pull), so ``|LTR| <= 1``; the denominator floored at
    :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`).
-9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2)`` (N m); it equals
+9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi)`` (N m); it equals
    ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when
    ``F_n,i <=`` :data:`LIFT_OFF_FRACTION` ``F_c,i``.
 """
@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 from road_force_estimator.estimation.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.estimation.outputs import Column
 
@@ -85,6 +85,8 @@ class Reconstruction:
         fc1, fc2 = vehicle.static_load_n
         self.s = vehicle.half_track_m
         self.ix = vehicle.roll_inertia_kgm2
+        #: M g h (N m): the gravity moment per unit sin(phi) in the residual of step 9
+        self.mgh = vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m
         self.static_n = (fc1, fc2)
         self.lift_off_n = (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
         self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
@@ -97,7 +99,8 @@ class Reconstruction:
         """The output row (slots :class:`.Column`) of one sample (SI, see the module notes)."""
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
         cphi = math.cos(phi)
-        ssin = s * math.sin(phi)
+        sphi = math.sin(phi)
+        ssin = s * sphi
         srate = s * cphi * dphi
         zu1 = zs + ssin - q1
         zu2 = zs - ssin - q2
@@ -106,7 +109,7 @@ class Reconstruction:
         return (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
                 dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
                 fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
-                ix * ddphi - s * cphi * (fb1 - fb2), fn1 <= lift1, fn2 <= lift2, conv)
+                ix * ddphi - s * cphi * (fb1 - fb2) - self.mgh * sphi, fn1 <= lift1, fn2 <= lift2, conv)
 
     def columns(self, out: list, q: tuple, dq: tuple, ddq: tuple, phi, dphi, ddphi, ddzs,
                 ddzu: tuple, w: tuple, df: tuple, fb: tuple, heave: tuple | None) -> None:
@@ -120,7 +123,8 @@ class Reconstruction:
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
         (q1, q2), (dq1, dq2), (df1, df2), (w1, w2) = q, dq, df, w
         cph = np.cos(phi)
-        ssin = s * np.sin(phi)
+        sph = np.sin(phi)
+        ssin = s * sph
         srate = s * cph * dphi
         fn1 = fc1 + df1
         fn2 = fc2 + df2
@@ -142,7 +146,7 @@ class Reconstruction:
                        (C.DZU2, dzu2), (C.DDZU1, ddzu[0]), (C.DDZU2, ddzu[1]), (C.U1, u1),
                        (C.U2, u2), (C.DF1, df1), (C.DF2, df2), (C.FN1, fn1), (C.FN2, fn2),
                        (C.LTR, load_transfer_ratios(fn1, fn2, ltr_floor)),
-                       (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1])),
+                       (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1]) - self.mgh * sph),
                        (C.LIFT_OFF1, fn1 <= lift1), (C.LIFT_OFF2, fn2 <= lift2)):
             out[j][:] = col
 
