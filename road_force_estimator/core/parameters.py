@@ -106,6 +106,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        0.05, 50.0),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
+    _p('simulator.speed_profile', 'string', '', '',
+       'varying speed: "" = constant simulator.speed, or a CSV path with the header '
+       'time_s,speed_mps (linearly interpolated, speed >= 0: stops allowed)'),
     _p('simulator.duration', 'double', 60.0, 's',
        'simulated time; the drive also stops at the end of the road profile', 0.0, 1e6),
     _p('simulator.road', 'string', 'iso8608:C:seed=1', '',
@@ -264,6 +267,7 @@ class SimulatorParameters(_FromParameters):
 
     rate_hz: float = _param('simulator.rate')
     speed_mps: float = _param('simulator.speed')
+    speed_profile: str = _param('simulator.speed_profile')
     duration_s: float = _param('simulator.duration')
     road: str = _param('simulator.road')
     noise_deflection_m: float = _param('simulator.noise.deflection')

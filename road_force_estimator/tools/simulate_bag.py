@@ -148,8 +148,13 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
+    from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
+                                                         speed_knots)
 
-    length = sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0
+    profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
+    travel = sim.speed_mps * sim.duration_s if profile is None else \
+        profile_distance(speed_knots(*profile), sim.duration_s)
+    length = travel + 2.0 * sim.tire_envelope_length_m + 1.0
     road = road_from_source(sim.road, length_m=length)
     accel = None
     if lateral is not None:
@@ -159,7 +164,8 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
             return a_y if t_s >= t_on else 0.0
 
     plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                  lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m)
+                  lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m,
+                  speed_profile=profile)
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
@@ -183,7 +189,9 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         t_s=np.array(cols['t_s']), distance_m=np.array(cols['distance_m']),
         q_m=np.array(cols['q_m']), roll_rad=np.array(cols['roll_rad']),
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
-        lateral_accel_mps2=np.array(cols['lateral_accel_mps2']), speed_mps=sim.speed_mps)
+        lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
+    # the speed of each sample (/vehicle/twist): constant, or the profile's
+    traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)
     sensors = SensorModel.from_simulator(sim)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = None
@@ -191,7 +199,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
         first = np.concatenate([[True], period[1:] > period[:-1]])
         idx = np.flatnonzero(first)
-        fixes = route(traj.t_s[idx], sim.speed_mps,
+        fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
                       start_latitude_deg=sim.gnss_start_latitude_deg,
                       start_longitude_deg=sim.gnss_start_longitude_deg,
                       heading_deg=sim.gnss_heading_deg,
@@ -227,16 +235,23 @@ def _main(args: argparse.Namespace) -> int:
     if lateral is not None:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
     count = write_drive_bag(Path(args.output), traj, q_meas, roll_meas, fixes=fixes,
-                            speed_mps=sim.speed_mps, track_width_m=vehicle.track_width_m,
+                            speed_mps=traj.speed_mps, track_width_m=vehicle.track_width_m,
                             ground_truth=not args.no_ground_truth, custom_data=custom,
                             overwrite=args.force)
     n = len(traj.t_s)
     if reason:
         print(f'{PROG}: {reason}', file=sys.stderr)
     print(f'{PROG}: wrote {count} messages ({n} samples, {traj.t_s[-1]:g} s, '
-          f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at {sim.speed_mps:g} m/s) over '
+          f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at '
+          f'{_speed_text(sim)}) over '
           f'{road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
+
+
+def _speed_text(sim) -> str:
+    """The speed of the summary line: constant, or the profile's file."""
+    return f'{sim.speed_mps:g} m/s' if not sim.speed_profile else \
+        f'the speed profile {sim.speed_profile}'
 
 
 if __name__ == '__main__':

@@ -37,10 +37,14 @@ class Reference:
         self.fc = [(p.sprung_mass_kg / 2 + m) * GRAVITY_MPS2 for m in p.unsprung_mass_kg]
 
     def road(self, t):
-        x = self.x0 + self.v * t
+        if callable(self.v):    # a speed profile: (distance(t), speed(t))
+            x, v = self.v(t)
+            x += self.x0
+        else:
+            x, v = self.x0 + self.v * t, self.v
         u = [np.interp(x, self.x, self.z[:, i]) for i in (0, 1)]
         j = min(max(int(np.searchsorted(self.x, x, side='right')) - 1, 0), len(self.x) - 2)
-        return u, [self.v * self.slope[j, 0], self.v * self.slope[j, 1]]
+        return u, [v * self.slope[j, 0], v * self.slope[j, 1]]
 
     def forces(self, t, y):
         p, s = self.p, self.s
@@ -112,6 +116,44 @@ def test_bump_and_step_match_solve_ivp():
     assert relative_error(tr.q_m, q) < 1e-7
     assert relative_error(tr.tire_force_dynamic_n, df) < 1e-7
     np.testing.assert_allclose(tr.road_m, [ref.road(t)[0] for t in tr.t_s], atol=1e-15)
+
+
+def test_speed_profile_with_braking_a_stop_and_pulling_away_matches_solve_ivp():
+    # simulator.speed_profile: accelerate 5 -> 15 m/s, brake to a stop, stand 0.3 s, pull
+    # away; distance = the integral of the speed, written here by hand (trapezoids of the
+    # linear interpolation).
+    knots_t = np.array([0.0, 0.4, 0.8, 1.1, 1.5])
+    knots_v = np.array([5.0, 15.0, 0.0, 0.0, 8.0])
+
+    def motion(t):
+        x = 0.0
+        for i in range(len(knots_t) - 1):
+            t0, t1 = knots_t[i], knots_t[i + 1]
+            a = (knots_v[i + 1] - knots_v[i]) / (t1 - t0)
+            tau = min(max(t - t0, 0.0), t1 - t0)
+            x += knots_v[i] * tau + 0.5 * a * tau * tau
+        return x, float(np.interp(t, knots_t, knots_v))
+
+    road = flat_profile(30.0, dx_m=0.05)
+    road = add_event(road, 'bump', 'left', 3.0, 0.6, 0.03)
+    road = add_event(road, 'step', 'right', 7.9, 0.4, 0.02)
+    tr = simulate(ASYM, road, speed_mps=10.0, rate_hz=1000.0, duration_s=1.5,
+                  speed_profile=(knots_t, knots_v))
+    assert tr.completed
+    ref = Reference(ASYM, road.distance_m, road.elevation_m, motion)
+    y, q, df = ref.solve(np.zeros(8), tr.t_s, max_step=1e-3)
+    got = states(tr)
+    np.testing.assert_allclose(tr.distance_m, [motion(t)[0] for t in tr.t_s], rtol=1e-12,
+                               atol=1e-12)
+    for i in range(8):
+        assert relative_error(got[:, i], y[:, i]) < 1e-5, i
+    assert relative_error(tr.q_m, q) < 1e-5
+    assert relative_error(tr.tire_force_dynamic_n, df) < 1e-5
+    # standing still: the road under the tires does not move
+    still = (tr.t_s >= 0.8) & (tr.t_s <= 1.1)
+    assert np.ptp(tr.distance_m[still]) < 1e-12
+    assert np.ptp(tr.road_m[still], axis=0).max() < 1e-15
+    assert np.all(tr.road_rate_mps[still] == 0.0)
 
 
 def test_iso_road_with_default_substeps_matches_solve_ivp():

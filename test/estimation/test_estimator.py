@@ -194,3 +194,76 @@ class TestQuasiStaticLtr:
                zip(stamps[:3000], q[:3000], phi[:3000])]
         np.testing.assert_array_equal([g.ltr_quasi_static for g in got],
                                       est.ltr_quasi_static[:3000])
+
+
+class TestVaryingSpeed:
+    """A drive that brakes to a stop, stands 3 s and pulls away (simulator.speed_profile):
+    the estimator follows the measured speed per sample."""
+
+    def test_standstill_keeps_the_loads_and_holds_the_profile(self):
+        from road_force_estimator.core.plant import simulate
+        from road_force_estimator.core.road import iso8608_profile
+        from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+        assert SPEED_FLOOR_MPS > 0.0        # the body-heave cutoff's low-speed floor
+        knots = (np.array([0.0, 3.0, 6.0, 9.0, 12.0, 15.0]),
+                 np.array([20.0, 20.0, 0.0, 0.0, 15.0, 15.0]))
+        road = iso8608_profile('C', 300.0, seed=12)
+        tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=15.0,
+                      tire_envelope_m=0.25, speed_profile=knots)
+        speed = np.interp(tr.t_s, *knots)
+        rng = np.random.default_rng(8)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, speed, VEHICLE, ObserverParameters())
+        assert est.valid.all() and np.isfinite(est.wheel_load_n).all()
+        still = (tr.t_s >= 6.5) & (tr.t_s <= 9.0)
+        # standing: the distance does not move, the loads are still estimated (static)
+        assert np.ptp(est.distance_m[still]) < 1e-9
+        assert np.ptp(tr.distance_m[still]) < 1e-9
+        fc = np.array(VEHICLE.static_load_n)
+        err = np.abs(est.wheel_load_n[still] - tr.wheel_load_n[still])
+        assert err.max() < 0.01 * fc.min()
+        # the profile at the one standing distance: no jump, but NOT held exactly: the body
+        # heave's high-pass runs in time with its 1 m/s floor (0.01 Hz at 100 m), so it
+        # forgets the body's level while standing (measured: 8.7 mm over 2.5 s)
+        assert np.isfinite(est.road_m[still]).all()
+        assert np.ptp(est.road_m[still], axis=0).max() < 1.2e-2
+        assert np.abs(np.diff(est.road_m[still], axis=0)).max() < 5e-4   # noise: 0.2 mm
+        # per sample and in the batch: the same numbers through the stop
+        single = Estimator(VEHICLE, ObserverParameters())
+        stamps = _stamps(tr.t_s)
+        part = slice(5500, 7500)
+        ref = estimate_batch(stamps[part], q[part], phi[part], speed[part], VEHICLE,
+                             ObserverParameters())
+        got = [single.update(int(s), tuple(qq), float(p), float(v)) for s, qq, p, v in
+               zip(stamps[part], q[part], phi[part], speed[part])]
+        np.testing.assert_array_equal([g.wheel_load_n for g in got], ref.wheel_load_n)
+        np.testing.assert_array_equal([g.road_m for g in got], ref.road_m)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 19, open: after a 3 s stop the load error stays '
+                   'about twice the constant-speed one (measured 0.32 against 0.16 of the dynamic '
+                   'RMS at 15 m/s) and the roughness estimate is ~47x too high (moment matching '
+                   'at a stop); leaving stopped blocks out of the roughness history fixes the '
+                   'roughness (4.5e-4 m^3) but not the loads (0.40): cause not found yet')
+def test_loads_after_a_stop_are_as_good_as_before():
+    from road_force_estimator.core.plant import simulate
+    from road_force_estimator.core.road import iso8608_profile
+    knots = (np.array([0.0, 3.0, 6.0, 9.0, 12.0, 15.0]),
+             np.array([20.0, 20.0, 0.0, 0.0, 15.0, 15.0]))
+    road = iso8608_profile('C', 300.0, seed=12)
+    fc = np.array(VEHICLE.static_load_n)
+
+    def late_error(profile):
+        tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=15.0,
+                      tire_envelope_m=0.25, speed_profile=profile)
+        rng = np.random.default_rng(8)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, np.interp(tr.t_s, *profile), VEHICLE,
+                             ObserverParameters())
+        late = tr.t_s > 12.0
+        e = est.wheel_load_n[late] - tr.wheel_load_n[late]
+        return np.sqrt(np.mean(e ** 2)) / np.sqrt(np.mean((tr.wheel_load_n[late] - fc) ** 2))
+    steady = late_error((np.array([0.0, 15.0]), np.array([15.0, 15.0])))
+    assert late_error(knots) < 1.25 * steady
