@@ -148,14 +148,11 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
-    from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
-                                                         speed_knots)
+    from road_force_estimator.core.speed_profile import read_speed_profile
 
     profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
-    travel = sim.speed_mps * sim.duration_s if profile is None else \
-        profile_distance(speed_knots(*profile), sim.duration_s)
-    length = travel + 2.0 * sim.tire_envelope_length_m + 1.0
-    road = road_from_source(sim.road, length_m=length)
+    road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
+                            + 2.0 * sim.tire_envelope_length_m + 1.0)
     accel = None
     if lateral is not None:
         a_y, t_on = lateral
@@ -190,8 +187,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         q_m=np.array(cols['q_m']), roll_rad=np.array(cols['roll_rad']),
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
         lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
-    # the speed of each sample (/vehicle/twist): constant, or the profile's
-    traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)
+    traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
     sensors = SensorModel.from_simulator(sim)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = None
@@ -246,6 +242,16 @@ def _main(args: argparse.Namespace) -> int:
           f'{_speed_text(sim)}) over '
           f'{road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
+
+
+def _travel_m(sim, profile) -> float:
+    """The distance (m) the drive covers in simulator.duration: constant speed, or the
+    integral of the speed profile ``(time_s, speed_mps)``."""
+    from road_force_estimator.core.speed_profile import profile_distance, speed_knots
+
+    if profile is None:
+        return sim.speed_mps * sim.duration_s
+    return profile_distance(speed_knots(*profile), sim.duration_s)
 
 
 def _speed_text(sim) -> str:
