@@ -41,7 +41,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy import linalg, signal
 
-from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 
 __all__ = [
     'PeerResult', 'reconstruct', 'paper_euler', 'lowpass_fd', 'kf_jerk', 'zero_phase_offline',
@@ -238,7 +238,8 @@ def reconstruct(t_s: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
             e[:, i] = dfi[:, i] / kt[i]
     road = zu + e
     # 9. roll-equation residual (= M h a_y cos(phi) without other faults)
-    residual = vehicle.roll_inertia_kgm2 * ddphi - s * np.cos(phi) * (fb[:, 0] - fb[:, 1])
+    residual = (vehicle.roll_inertia_kgm2 * ddphi - s * np.cos(phi) * (fb[:, 0] - fb[:, 1])
+                - vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m * np.sin(phi))
     return PeerResult(wheel_load, road, _ltr(wheel_load), _distance(t_s, np.asarray(speed)),
                       latency_samples,
                       {'body_accel_mps2': ddzs, 'wheel_accel_mps2': ddzu, 'body_heave_m': zs,
@@ -643,6 +644,8 @@ class RollPlaneKalman:
         idist = 8 + n_road if n_dist else None
         minv = 1.0 / mass
         stiff = d.T @ k @ d + sw.T @ kt @ sw
+        # the gravity moment M g h sin(phi) of MODEL.md's roll equation, linearised
+        stiff[1, 1] -= vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m
         damp = d.T @ c @ d + sw.T @ ct @ sw
         a = np.zeros((nx, nx))
         a[0:4, 4:8] = np.eye(4)

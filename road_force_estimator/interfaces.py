@@ -10,10 +10,10 @@ from __future__ import annotations
 
 __all__ = [
     'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
-    'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'ROAD', 'LTR', 'STATES',
-    'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH', 'TWIST_STAMPED', 'FLOAT64',
-    'NAVSATFIX', 'DIAGNOSTIC_ARRAY', 'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS',
-    'qos_kind',
+    'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'ROAD', 'LTR',
+    'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
+    'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
+    'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
 ]
 
 SIDES = ('left', 'right')
@@ -36,6 +36,8 @@ FIX = '/fix'
 LOAD = ('/wheel_load/left', '/wheel_load/right')
 ROAD = ('/road_profile/left', '/road_profile/right')
 LTR = '/load_transfer_ratio'
+#: x = LTR, y = quasi-static LTR (MODEL.md step 8, rollover warnings), z = 0; frame base_link
+LOAD_TRANSFER = '/load_transfer'
 STATES = '/observer/states'
 DIAGNOSTICS = '/diagnostics'
 LPA = ('/lpa/left', '/lpa/right')
@@ -46,6 +48,7 @@ POINT = 'geometry_msgs/msg/PointStamped'
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
 FLOAT64 = 'std_msgs/msg/Float64'
+VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
 NAVSATFIX = 'sensor_msgs/msg/NavSatFix'
 DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
 
@@ -58,6 +61,7 @@ TOPIC_TYPES: dict[str, str] = {
     **{topic: WRENCH for topic in LOAD},
     **{topic: POINT for topic in ROAD},
     LTR: FLOAT64,
+    LOAD_TRANSFER: VECTOR3_STAMPED,
     STATES: JOINT_STATE,
     DIAGNOSTICS: DIAGNOSTIC_ARRAY,
     FIX: NAVSATFIX,

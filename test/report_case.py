@@ -46,6 +46,7 @@ def make_case(n=15000, load_offset=(100.0, -200.0), with_truth=True, fixes=False
         body_accel_mps2=zeros, wheel_heave_m=pair, wheel_heave_rate=pair,
         wheel_accel_mps2=pair, road_m=est_road, tire_force_dynamic_n=est_load - fc,
         wheel_load_n=est_load, ltr=ltr, residual_nm=zeros, lift_off=lift, converged=conv,
+        ltr_quasi_static=ltr,
         status=EstimatorStatus(accepted=n, settling_time_s=0.2))
     truth = GroundTruth(stamps, true_load, true_road, x) if with_truth else None
     fx = None

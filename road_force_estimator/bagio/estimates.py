@@ -1,7 +1,8 @@
 """Estimate bags: the observer's output topics for a batch of estimates, and its diagnostics.
 
 Topics (INTERFACES.md): ``/wheel_load/left|right``, ``/road_profile/left|right``,
-``/load_transfer_ratio``, ``/observer/states`` and ``/diagnostics``; the fields are those of
+``/load_transfer_ratio``, ``/load_transfer``, ``/observer/states`` and ``/diagnostics``; the
+fields are those of
 :class:`road_force_estimator.estimation.estimator.EstimateArrays`.
 """
 from __future__ import annotations
@@ -28,12 +29,14 @@ from road_force_estimator.interfaces import (
     FLOAT64,
     JOINT_STATE,
     LOAD,
+    LOAD_TRANSFER,
     LTR,
     ROAD,
     ROAD_FRAME,
     STATE_JOINTS,
     STATES,
     TOPIC_TYPES,
+    VECTOR3_STAMPED,
     WHEEL_FRAMES,
     WRENCH,
     qos_kind,
@@ -47,7 +50,8 @@ ESTIMATE_FIELDS = {
     'wheel_load_n': '(n, 2) [/wheel_load/left|right wrench.force.z]',
     'distance_m': '(n,) [/road_profile/* point.x]',
     'road_m': '(n, 2) band-passed road [/road_profile/* point.z]',
-    'ltr': '(n,) [/load_transfer_ratio]',
+    'ltr': '(n,) [/load_transfer_ratio; /load_transfer vector.x]',
+    'ltr_quasi_static': '(n,), optional [/load_transfer vector.y; without it no /load_transfer]',
     'q_m, roll_rad, body_heave_m, wheel_heave_m (n, 2)': '[/observer/states position]',
     'dq, droll, body_heave_rate, wheel_heave_rate (n, 2)': '[/observer/states velocity]',
     'valid': '(n,) bool, optional: rows to write',
@@ -94,6 +98,7 @@ class _EstimateColumns:
     road: np.ndarray
     distance: np.ndarray
     ltr: np.ndarray
+    ltr_quasi_static: np.ndarray | None
     position: list[np.ndarray]
     velocity: list[np.ndarray]
     valid: np.ndarray
@@ -113,16 +118,19 @@ class _EstimateColumns:
         road = arr(e.road_m, width=2)
         dist = arr(e.distance_m)
         ltr = arr(e.ltr)
+        quasi = getattr(e, 'ltr_quasi_static', None)
+        quasi = None if quasi is None else arr(quasi)
         position = [arr(e.q_m, width=2), arr(e.roll_rad), arr(e.body_heave_m),
                     arr(e.wheel_heave_m, width=2)]
         velocity = [arr(e.dq, width=2), arr(e.droll), arr(e.body_heave_rate),
                     arr(e.wheel_heave_rate, width=2)]
         valid = np.asarray(getattr(e, 'valid', np.ones(n, bool)), dtype=bool).reshape(n)
         finite = np.ones(n, dtype=bool)
-        for values in [load, road, dist, ltr] + position + velocity:
+        for values in [load, road, dist, ltr] + ([] if quasi is None else [quasi]) + position \
+                + velocity:
             for column in (values.T if values.ndim == 2 else [values]):
                 finite &= np.isfinite(column)
-        return cls(stamps, load, road, dist, ltr, position, velocity, valid, finite)
+        return cls(stamps, load, road, dist, ltr, quasi, position, velocity, valid, finite)
 
 
 def write_estimate_bag(path: str | Path, estimates, *,
@@ -135,7 +143,8 @@ def write_estimate_bag(path: str | Path, estimates, *,
     Topics (INTERFACES.md): ``/wheel_load/left|right`` (WrenchStamped, ``force.z``, frames
     ``front_left_wheel`` / ``front_right_wheel``), ``/road_profile/left|right`` (PointStamped,
     x = distance, y = +-T/2, z = estimated band-passed road, frame ``road``),
-    ``/load_transfer_ratio`` (Float64), ``/observer/states`` (JointState, names
+    ``/load_transfer_ratio`` (Float64), ``/load_transfer`` (Vector3Stamped, x = LTR, y =
+    quasi-static LTR, z = 0, frame ``base_link``), ``/observer/states`` (JointState, names
     :data:`road_force_estimator.interfaces.STATE_JOINTS`, position and velocity), and
     ``/diagnostics`` for the given ``(stamp_ns, DiagnosticArray)`` pairs. Header stamp = log
     time = the measurement's stamp.
@@ -200,6 +209,11 @@ def _estimate_streams(est: _EstimateColumns, s: np.ndarray, stamp_cols: dict,
             LazyColumns([est.road[:, side]], index), ROAD_FRAME, stamp_cols)))
     streams.append((LTR, s, ColumnRows(FLOAT64, message_template(FLOAT64), m,
                                        {'data': LazyColumns([est.ltr], index)})))
+    if est.ltr_quasi_static is not None:
+        cols = dict(stamp_cols, **{'vector.x': LazyColumns([est.ltr], index),
+                                   'vector.y': LazyColumns([est.ltr_quasi_static], index)})
+        streams.append((LOAD_TRANSFER, s, ColumnRows(
+            VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), m, cols)))
     cols = dict(stamp_cols, position=LazyColumns(est.position, index),
                 velocity=LazyColumns(est.velocity, index))
     streams.append((STATES, s, ColumnRows(

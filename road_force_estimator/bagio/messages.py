@@ -16,6 +16,7 @@ from road_force_estimator.interfaces import (
     NAVSATFIX,
     POINT,
     TWIST_STAMPED,
+    VECTOR3_STAMPED,
     WRENCH,
 )
 
@@ -59,6 +60,8 @@ def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = ()
         return message_class(TWIST_STAMPED)(header=_header(frame_id), twist=twist)
     if msgtype == FLOAT64:
         return message_class(FLOAT64)(data=0.0)
+    if msgtype == VECTOR3_STAMPED:
+        return message_class(VECTOR3_STAMPED)(header=_header(frame_id), vector=_vector3())
     if msgtype == JOINT_STATE:
         k = len(names)
         return message_class(JOINT_STATE)(

@@ -53,7 +53,7 @@ def route(time_s: np.ndarray, speed_mps: np.ndarray | float, *, start_latitude_d
     time_s : array (n,)
         Sample times (s).
     speed_mps : array (n,) or float
-        Vehicle speed (m/s), > 0.
+        Vehicle speed (m/s), >= 0 (a stop: the position holds).
     start_latitude_deg, start_longitude_deg : float
         WGS84 position at ``time_s[0]``.
     heading_deg : float

@@ -101,8 +101,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.road_correlation_length', 'double', 0.0, 'm',
        'correlation length of the road velocity under the tire (tire envelope) of the model '
        'observer; 0 = scheduled on the noise level', 0.0, 20.0),
+    _p('observer.rollover_cutoff_frequency', 'double', 2.0, 'Hz',
+       'low-pass cutoff of the quasi-static LTR for rollover warnings (below the wheel hop)',
+       0.05, 50.0),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
+    _p('simulator.speed_profile', 'string', '', '',
+       'varying speed: "" = constant simulator.speed, or a CSV path with the header '
+       'time_s,speed_mps (linearly interpolated, speed >= 0: stops allowed)'),
     _p('simulator.duration', 'double', 60.0, 's',
        'simulated time; the drive also stops at the end of the road profile', 0.0, 1e6),
     _p('simulator.road', 'string', 'iso8608:C:seed=1', '',
@@ -252,6 +258,7 @@ class ObserverParameters(_FromParameters):
     noise_roll_rad: float = _param('observer.noise.roll')
     road_roughness_m3: float = _param('observer.road_roughness')
     road_correlation_length_m: float = _param('observer.road_correlation_length')
+    rollover_cutoff_frequency_hz: float = _param('observer.rollover_cutoff_frequency')
 
 
 @dataclass(frozen=True)
@@ -260,6 +267,7 @@ class SimulatorParameters(_FromParameters):
 
     rate_hz: float = _param('simulator.rate')
     speed_mps: float = _param('simulator.speed')
+    speed_profile: str = _param('simulator.speed_profile')
     duration_s: float = _param('simulator.duration')
     road: str = _param('simulator.road')
     noise_deflection_m: float = _param('simulator.noise.deflection')

@@ -22,6 +22,7 @@ import numpy as np
 
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile
+from road_force_estimator.core.speed_profile import profile_distance, speed_knots
 from road_force_estimator.core.vehicle_model import VehicleModel
 
 __all__ = ['Plant', 'PlantSample', 'Trajectory', 'simulate', 'default_substeps',
@@ -176,7 +177,11 @@ class Plant:
         The road; with ``tire_envelope_m`` > 0 the plant drives on
         ``road.enveloped(tire_envelope_m)`` (see :attr:`road`).
     speed_mps : float
-        Constant speed v (m/s), > 0.
+        Constant speed v (m/s), > 0 (the nominal speed with a ``speed_profile``).
+    speed_profile : (time_s, speed_mps) arrays, optional
+        A varying speed (``simulator.speed_profile``): knots from t = 0, speeds >= 0 (stops
+        allowed), linearly interpolated, held after the last knot. The distance is its exact
+        integral: at v = 0 the road under the tires does not move.
     rate_hz : float
         Output sample rate (Hz), > 0.
     substeps : int, optional
@@ -201,7 +206,8 @@ class Plant:
     def __init__(self, vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
                  rate_hz: float, substeps: int | None = None,
                  lateral_acceleration: float | Callable[[float], float] | None = None,
-                 start_m: float | None = None, tire_envelope_m: float = 0.0) -> None:
+                 start_m: float | None = None, tire_envelope_m: float = 0.0,
+                 speed_profile: tuple | None = None) -> None:
         if not isinstance(road, RoadProfile):
             raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
         speed_mps, rate_hz = float(speed_mps), float(rate_hz)
@@ -215,6 +221,8 @@ class Plant:
         self.road = road.enveloped(tire_envelope_m)
         self.tire_envelope_m = float(tire_envelope_m)
         self.speed_mps = speed_mps
+        #: (time_s, speed_mps, distance_m at the knots) of a varying speed, or None
+        self.speed_profile = None if speed_profile is None else speed_knots(*speed_profile)
         self.rate_hz = rate_hz
         fastest = self.model.max_pole_magnitude()
         if substeps is None:
@@ -323,18 +331,44 @@ class Plant:
     # ----------------------------------------------------------------------------------------
 
     def _distance(self, j):
-        """Distance (m) at stage-time index j (int or int array): x0 + v t_j."""
+        """Distance (m) at stage-time index j (int or int array): x0 + v t_j, or x0 + the
+        integral of the speed profile."""
+        if self.speed_profile is not None:
+            return self.start_m + profile_distance(self.speed_profile, j / self._half_rate)
         return self.start_m + self.speed_mps * (j / self._half_rate)
+
+    def speed_at(self, t_s):
+        """The speed (m/s) at time(s) t_s (s): constant, or the profile interpolated."""
+        if self.speed_profile is None:
+            return np.full(np.shape(t_s), self.speed_mps) if np.ndim(t_s) else self.speed_mps
+        ts, vs, _ = self.speed_profile
+        return np.interp(t_s, ts, vs)
 
     def _find_last_sample(self) -> int:
         per = 2 * self.substeps
         limit = self.road.end_m + _END_TOLERANCE_M
+        if self.speed_profile is not None:
+            return self._find_last_sample_profile(per, limit)
         k = int((self.road.end_m - self.start_m) / self.speed_mps * self.rate_hz)
         while k > 0 and self._distance(per * k) > limit:
             k -= 1
         while self._distance(per * (k + 1)) <= limit:
             k += 1
         return k
+
+    def _find_last_sample_profile(self, per: int, limit: float) -> int:
+        """The last sample on the road with a speed profile (bisection: the distance never
+        decreases); a drive that stops for good before the end has no last sample (huge)."""
+        ts, vs, xs = self.speed_profile
+        if self.start_m + xs[-1] <= limit and vs[-1] <= 0.0:
+            return _NO_END_SAMPLE
+        lo, hi = 0, 1
+        while self._distance(per * hi) <= limit:
+            lo, hi = hi, 2 * hi
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            lo, hi = (mid, hi) if self._distance(per * mid) <= limit else (lo, mid)
+        return lo
 
     def _prepare(self, first: int) -> None:
         """Road, road rate and a_y at the stage times of samples first .. first + block."""
@@ -347,7 +381,9 @@ class Plant:
         # Road rate at the samples (outputs): v * slope of the segment holding x (point rate).
         xs = x[::per]
         seg = np.clip(np.searchsorted(road_x, xs, side='right') - 1, 0, len(road_x) - 2)
-        self._sample_rate = [(self.speed_mps * self._slopes[seg, i]).tolist() for i in (0, 1)]
+        speed = self.speed_mps if self.speed_profile is None else \
+            self.speed_at(j[::per] / self._half_rate)
+        self._sample_rate = [(speed * self._slopes[seg, i]).tolist() for i in (0, 1)]
         # Road rate inside the integration: over each RK4 substep, the mean rate
         # r = (u(t + h) - u(t)) / h, the exact rate wherever the substep lies on one segment of
         # the interpolated road. du/dt jumps at the knots; with r (and the wheel-velocity
@@ -477,11 +513,15 @@ def _rk4_sample(acc, state, inputs, base, substeps, h, g1, g2):
     return zs, ph, z1, z2, vs, vp, v1, v2
 
 
+#: The last sample index of a drive that never reaches the end of its road.
+_NO_END_SAMPLE = 2 ** 62
+
+
 def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
              rate_hz: float, duration_s: float,
              lateral_acceleration: float | Callable[[float], float] | None = None,
              substeps: int | None = None, start_m: float | None = None,
-             tire_envelope_m: float = 0.0) -> Trajectory:
+             tire_envelope_m: float = 0.0, speed_profile: tuple | None = None) -> Trajectory:
     """Drive ``duration_s`` seconds (or to the end of the road) and return every sample.
 
     Parameters are those of :class:`Plant`, plus ``duration_s`` (s, >= 0). The trajectory
@@ -494,7 +534,7 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
         raise ValueError(f'duration_s = {duration_s!r} must be >= 0 s')
     plant = Plant(vehicle, road, speed_mps=speed_mps, rate_hz=rate_hz, substeps=substeps,
                   lateral_acceleration=lateral_acceleration, start_m=start_m,
-                  tire_envelope_m=tire_envelope_m)
+                  tire_envelope_m=tire_envelope_m, speed_profile=speed_profile)
     wanted = int(math.floor(duration_s * plant.rate_hz + 1e-9)) + 1
     rows = []
     for _ in range(wanted):

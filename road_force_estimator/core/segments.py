@@ -37,7 +37,7 @@ SEGMENT_COLUMNS = (
     'start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km',
     'true_iri_left_m_per_km', 'true_iri_right_m_per_km',
     'dlc_left', 'dlc_right', 'peak_load_left_n', 'peak_load_right_n', 'max_abs_ltr',
-    'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon',
+    'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon', 'max_abs_ltr_quasi_static',
 )
 
 
@@ -69,7 +69,8 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
                   fix_stamps_ns: np.ndarray | None = None,
                   fix_latitude_deg: np.ndarray | None = None,
                   fix_longitude_deg: np.ndarray | None = None,
-                  segment_length_m: float = 100.0) -> dict[str, np.ndarray]:
+                  segment_length_m: float = 100.0,
+                  ltr_quasi_static: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per-segment table of one drive: ``{column: array (k,)}`` with :data:`SEGMENT_COLUMNS`.
 
     Parameters
@@ -92,6 +93,8 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
         Stamps of the estimates and the GNSS fixes; coordinates are NaN without fixes.
     segment_length_m : float
         Segment length (m), default 100.
+    ltr_quasi_static : array (n,), optional
+        The quasi-static LTR (MODEL.md step 8) for ``max_abs_ltr_quasi_static`` (NaN without).
     """
     x = np.asarray(distance_m, dtype=float)
     edges = segment_bounds(float(x[0]), float(x[-1]), segment_length_m)
@@ -100,6 +103,10 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     seg = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, k - 1)
     table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(), 'end_m': edges[1:].copy()}
     table.update(_load_columns(seg, k, wheel_load_n, ltr, lift_off))
+    quasi = np.full(k, np.nan)
+    if ltr_quasi_static is not None:
+        np.fmax.at(quasi, seg, np.abs(np.asarray(ltr_quasi_static, dtype=float)))
+    table['max_abs_ltr_quasi_static'] = quasi
     px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
     table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
     counts = segment_samples(x, edges)

@@ -13,13 +13,13 @@ Kinematics and forces (index 1 = left, 2 = right, s = T/2)::
     dF_i = max(kt_i (u_i - z_ui) + ct_i (du_i - dz_ui), -F_c,i)   (dynamic tire force; the
                                                                     tire never pulls)
     M   dd z_s = F_b1 + F_b2
-    I_x dd phi = s cos(phi) (F_b1 - F_b2) + M h a_y cos(phi)
+    I_x dd phi = s cos(phi) (F_b1 - F_b2) + M h (a_y cos(phi) + g sin(phi))
     m_i dd z_ui = -F_bi + dF_i
     F_n,i = F_c,i + dF_i >= 0                                        (vertical wheel load)
 
-As in MODEL.md, the roll equation has no gravitational moment M g h sin(phi) and the heave
-equation no cos(phi) on the suspension forces: this is the model the observers invert, and the
-plant must be exactly that model.
+The gravity moment M g h sin(phi) (MODEL.md, issue 19) lowers the roll stiffness from
+2 k s^2 to 2 k s^2 - M g h; the heave equation has no cos(phi) on the suspension forces, as
+in MODEL.md. This is the model the observers invert, and the plant is exactly that model.
 
 The per-sample path (:meth:`VehicleModel.make_accelerations`) works on plain floats with the
 math module; the array methods broadcast over leading dimensions.
@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 
 __all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode']
 
@@ -155,15 +155,16 @@ class VehicleModel:
 
     def _scalars(self) -> tuple[float, ...]:
         """The parameters as plain floats for the per-sample closures: ``(s, 1/M, 1/I_x, M h,
-        k_1, k_2, c_1, c_2, kt_1, kt_2, ct_1, ct_2, 1/m_1, 1/m_2, F_c1, F_c2)``."""
+        M g h, k_1, k_2, c_1, c_2, kt_1, kt_2, ct_1, ct_2, 1/m_1, 1/m_2, F_c1, F_c2)``."""
         k1, k2 = (float(x) for x in self._k)
         c1, c2 = (float(x) for x in self._c)
         kt1, kt2 = (float(x) for x in self._kt)
         ct1, ct2 = (float(x) for x in self._ct)
         inv_m1, inv_m2 = (1.0 / float(x) for x in self._mu)
         fc1, fc2 = (float(x) for x in self._fc)
-        return (self._s, 1.0 / self._m, 1.0 / self._ix, self._m * self._h, k1, k2, c1, c2, kt1,
-                kt2, ct1, ct2, inv_m1, inv_m2, fc1, fc2)
+        mh = self._m * self._h
+        return (self._s, 1.0 / self._m, 1.0 / self._ix, mh, mh * GRAVITY_MPS2, k1, k2, c1, c2,
+                kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1, fc2)
 
     def make_accelerations(self) -> Callable[..., tuple[float, float, float, float]]:
         """A fast float-only function for integrators (the per-sample path).
@@ -174,13 +175,14 @@ class VehicleModel:
             ``f(z_s, phi, z_u1, z_u2, dz_s, dphi, dz_u1, dz_u2, u_1, u_2, du_1, du_2, a_y)``
             returning ``(dd z_s, dd phi, dd z_u1, dd z_u2)``; all plain floats, SI units.
         """
-        (s, inv_m, inv_ix, mh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+        (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
         floor1, floor2 = -fc1, -fc2
         sin, cos = math.sin, math.cos
 
         def accelerations(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
-            sp = s * sin(ph)
+            sn = sin(ph)
+            sp = s * sn
             cp = cos(ph)
             w = s * cp * vp
             fb1 = -(k1 * (zs + sp - z1) + c1 * (vs + w - v1))
@@ -192,7 +194,7 @@ class VehicleModel:
             if f2 < floor2:
                 f2 = floor2
             return ((fb1 + fb2) * inv_m,
-                    (s * cp * (fb1 - fb2) + mh * ay * cp) * inv_ix,
+                    (s * cp * (fb1 - fb2) + mh * ay * cp + mgh * sn) * inv_ix,
                     (f1 - fb1) * inv_m1,
                     (f2 - fb2) * inv_m2)
 
@@ -209,12 +211,13 @@ class VehicleModel:
             dd z_s, dd phi, dd z_u1, dd z_u2)`` with the same arithmetic as
             :meth:`make_accelerations`.
         """
-        (s, inv_m, inv_ix, mh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+        (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
         sin, cos = math.sin, math.cos
 
         def outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
-            sp = s * sin(ph)
+            sn = sin(ph)
+            sp = s * sn
             cp = cos(ph)
             w = s * cp * vp
             q1, q2 = zs + sp - z1, zs - sp - z2
@@ -229,7 +232,7 @@ class VehicleModel:
                 f2 = -fc2
             return (q1, q2, dq1, dq2, fb1, fb2, f1, f2, max(fc1 + f1, 0.0), max(fc2 + f2, 0.0),
                     (fb1 + fb2) * inv_m,
-                    (s * cp * (fb1 - fb2) + mh * ay * cp) * inv_ix,
+                    (s * cp * (fb1 - fb2) + mh * ay * cp + mgh * sn) * inv_ix,
                     (f1 - fb1) * inv_m1,
                     (f2 - fb2) * inv_m2)
 
@@ -269,7 +272,9 @@ class VehicleModel:
         load = np.maximum(self._fc + df, 0.0)
         cp = np.cos(ph)
         acc_s = (fb[..., 0] + fb[..., 1]) / self._m
-        acc_p = (s * cp * (fb[..., 0] - fb[..., 1]) + self._m * self._h * ay * cp) / self._ix
+        mh = self._m * self._h
+        acc_p = (s * cp * (fb[..., 0] - fb[..., 1]) + mh * ay * cp
+                 + mh * GRAVITY_MPS2 * np.sin(ph)) / self._ix
         acc_u = (df - fb) / self._mu
         return ModelOutputs(q, dq, fb, df, load, lift, acc_s, acc_p, acc_u)
 
@@ -287,34 +292,38 @@ class VehicleModel:
         """The state at rest on the road (quasi-static), shape (8,).
 
         Positions: the static equilibrium under a constant ``a_y`` on a road held at
-        ``road_m`` (for a_y = 0: z_ui = u_i, q_i = 0, z_s = (u_1 + u_2)/2,
-        sin(phi) = (u_1 - u_2) / (2 s)). Rates: the whole axle follows the road's rate
-        (dz_ui = du_i, dq_i = 0), so that no spring or damper force acts at the start.
+        ``road_m``: F_b1 = -F_b2 = F, dF_i = F_bi, and the roll equation
+        ``2 s cos(phi) F + M h (a_y cos(phi) + g sin(phi)) = 0`` with the kinematics
+        ``2 s sin(phi) = u_1 - u_2 - F (1/k_1 + 1/k_2 + 1/kt_1 + 1/kt_2)``, solved for phi by
+        Newton's method (the gravity moment couples them; equal sides, small angles:
+        ``phi = M h a_y / (2 k_e s^2 - M g h)`` on a level road, k_e the suspension and the
+        tire in series). Rates: the whole axle follows the road's rate (dz_ui = du_i,
+        dq_i = 0), so that no spring or damper force acts at the start.
 
         Raises
         ------
         ValueError
-            ``a_y`` beyond the rollover limit (a wheel would lift off: no equilibrium).
+            ``a_y`` beyond the rollover limit (a wheel would lift off: no equilibrium), or a
+            roll the gravity moment tips over.
         """
         u1, u2 = (float(v) for v in road_m)
         du1, du2 = (float(v) for v in road_rate_mps)
         ay = float(lateral_accel_mps2)
         s = self._s
-        # Body: F_b1 + F_b2 = 0; roll: s (F_b1 - F_b2) + M h a_y = 0; wheels: dF_i = F_bi.
-        fb1 = -self._m * self._h * ay / (2.0 * s)
+        phi = _roll_equilibrium(s, self._m * self._h, ay, u1 - u2,
+                                float(np.sum(1.0 / self._k) + np.sum(1.0 / self._kt)))
+        fb1 = -self._m * self._h * (ay + GRAVITY_MPS2 * math.tan(phi)) / (2.0 * s)
         fb = np.array([fb1, -fb1])
         if np.any(fb < -self._fc):
-            limit = 2.0 * s * float(np.min(self._fc)) / (self._m * self._h)
+            fc = float(np.min(self._fc))
+            tilt = math.asin(min(fc * float(np.sum(1.0 / self._k) + np.sum(1.0 / self._kt))
+                                 / (2.0 * s), 1.0))
+            limit = 2.0 * s * fc / (self._m * self._h) - GRAVITY_MPS2 * math.tan(tilt)
             raise ValueError(f'lateral_accel_mps2 = {ay:g} at the start exceeds the rollover '
                              f'limit {limit:.3g} m/s^2 of this vehicle: no equilibrium')
         q = -fb / self._k
         zu = np.array([u1, u2]) - fb / self._kt
         a1, a2 = q + zu                     # z_s +- s sin(phi)
-        sin_phi = (a1 - a2) / (2.0 * s)
-        if abs(sin_phi) >= 1.0:
-            raise ValueError(f'road_m = {u1:g}, {u2:g}: the left/right difference exceeds the '
-                             f'track width, no equilibrium')
-        phi = math.asin(sin_phi)
         zs = 0.5 * (a1 + a2)
         dphi = (du1 - du2) / (2.0 * s * math.cos(phi))
         return np.array([zs, phi, zu[0], zu[1], 0.5 * (du1 + du2), dphi, du1, du2])
@@ -344,8 +353,9 @@ class VehicleModel:
         road_k = np.array([[0.0, 0.0], [0.0, 0.0], [kt1, 0.0], [0.0, kt2]])
         road_c = np.array([[0.0, 0.0], [0.0, 0.0], [ct1, 0.0], [0.0, ct2]])
         lateral = np.array([0.0, self._m * self._h, 0.0, 0.0])
-        return LinearModel(mass, matrix(c1, c2, ct1, ct2), matrix(k1, k2, kt1, kt2),
-                           road_k, road_c, lateral)
+        stiffness = matrix(k1, k2, kt1, kt2)
+        stiffness[1, 1] -= self._m * GRAVITY_MPS2 * self._h     # the gravity moment M g h phi
+        return LinearModel(mass, matrix(c1, c2, ct1, ct2), stiffness, road_k, road_c, lateral)
 
     def modes(self) -> list[Mode]:
         """The four vibration modes, sorted by undamped frequency.
@@ -386,6 +396,29 @@ class VehicleModel:
         """Largest |lambda| of the linear state matrix (1/s): it bounds the RK4 step."""
         a, _ = self.linearised().state_matrices()
         return float(np.max(np.abs(np.linalg.eigvals(a))))
+
+
+def _roll_equilibrium(s: float, mh: float, ay: float, du: float, compliance: float) -> float:
+    """The roll angle (rad) at rest: the root of ``2 s sin(phi) - du + F(phi) compliance``,
+    ``F(phi) = -M h (a_y + g tan(phi)) / (2 s)`` (see :meth:`VehicleModel.equilibrium`)."""
+    ratio = du / (2.0 * s)
+    if abs(ratio) >= 1.0:
+        raise ValueError(f'road difference {du:g} m exceeds the track width, no equilibrium')
+    phi = math.asin(ratio)
+    g = GRAVITY_MPS2
+    for _ in range(100):
+        cp = math.cos(phi)
+        res = 2.0 * s * math.sin(phi) - du - mh * (ay + g * math.tan(phi)) * compliance / (2 * s)
+        slope = 2.0 * s * cp - mh * g * compliance / (2.0 * s * cp * cp)
+        if slope <= 0.0:
+            raise ValueError('the gravity moment exceeds the roll stiffness: no equilibrium')
+        step = res / slope
+        phi -= step
+        if abs(step) <= 1e-15 * max(1.0, abs(phi)):
+            break
+    if abs(phi) >= 0.5 * math.pi:
+        raise ValueError('no roll equilibrium within +-90 degrees')
+    return phi
 
 
 def _name_modes(values: np.ndarray, shapes: np.ndarray, mass_diag: np.ndarray) -> dict:

@@ -82,7 +82,7 @@ class ChainCore:
                    + v.unsprung_mass_kg + (1.0 / v.sprung_mass_kg,)
                    + v.tire_stiffness_npm + v.tire_damping_nspm
                    + (body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m),))
-        self._rows = Reconstruction(vehicle)
+        self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._settle = settling_time_s(lq, lr, 0.0)
         self.ready: deque = deque()
         self.reset()
@@ -197,8 +197,10 @@ class ChainCore:
             e2 = cache[2]
             w1 = e1 * self._w[0] + (1.0 - e1) * df1 / kt1
             w2 = e2 * self._w[1] + (1.0 - e2) * df2 / kt2
+        if restart:
+            self._rows.restart()
         row = self._rows.row(x, a0, b0, a1, b1, a2, b2, c0, c1_, c2_, h[-2], h[-1], ddzs,
-                             ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv)
+                             ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt)
         # Every output depends on one of these; nothing non-finite leaves.
         if not math.isfinite(row[_X] + row[_FN1] + row[_FN2] + row[_LTR] + row[_RES]
                              + row[_ZS] + row[_DZS] + w1 + w2 + row[_DZU1]):

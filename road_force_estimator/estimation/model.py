@@ -25,7 +25,7 @@ velocities under the tires and ``M_r`` an unknown roll moment (N m; ``M h a_y`` 
 unmeasured lateral acceleration, a cross wind ...). Equations (linear, phi small)::
 
     F_bi = -(k_i q_i + c_i dq_i)             dz_ui = dz_s +- s dphi - dq_i
-    dd z_s = (F_b1 + F_b2) / M               dd phi = (s (F_b1 - F_b2) + M_r) / I_x
+    dd z_s = (F_b1 + F_b2) / M               dd phi = (s (F_b1 - F_b2) + M g h phi + M_r) / I_x
     dw_i = du_i - dz_ui                      dF_i = kt_i w_i + ct_i dw_i
     dd z_ui = (dF_i - F_bi) / m_i            dd q_i = dd z_s +- s dd phi - dd z_ui
     d du_i = -w_v du_i + xi_i                d M_r = eta
@@ -94,7 +94,7 @@ import math
 
 import numpy as np
 
-from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 # The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
 # part of the estimate.
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
@@ -235,13 +235,14 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
     speed = max(abs(float(speed_mps)), SPEED_FLOOR_MPS)
     w_v = 2.0 * math.pi * speed / correlation_length_m
     sig = (1.0, -1.0)
+    mgh = mass * GRAVITY_MPS2 * v.cg_height_m     # the gravity moment's stiffness (N m/rad)
 
     def derivative(x):
         # The equations of the module notes, on the columns of x (exactly linear).
         q, dq = (x[State.Q1], x[State.Q2]), (x[State.DQ1], x[State.DQ2])
         fb = [-(k[i] * q[i] + c[i] * dq[i]) for i in range(2)]
         ddzs = (fb[0] + fb[1]) / mass
-        ddphi = (s * (fb[0] - fb[1]) + x[State.M_R]) / ix
+        ddphi = (s * (fb[0] - fb[1]) + mgh * x[State.PHI] + x[State.M_R]) / ix
         dzu = [x[State.DZ_S] + sig[i] * s * x[State.DPHI] - dq[i] for i in range(2)]
         w, du = (x[State.W1], x[State.W2]), (x[State.DU1], x[State.DU2])
         dw = [du[i] - dzu[i] for i in range(2)]
@@ -295,5 +296,5 @@ def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> 
     x[State.Q1], x[State.Q2], x[State.PHI] = q1, q2, phi
     x[State.W1] = (fb1 + m1 * ddzs) / kt1
     x[State.W2] = (fb2 + m2 * ddzs) / kt2
-    x[State.M_R] = -s * (fb1 - fb2)
+    x[State.M_R] = -s * (fb1 - fb2) - v.sprung_mass_kg * GRAVITY_MPS2 * v.cg_height_m * phi
     return x

@@ -99,7 +99,7 @@ class ModelCore:
     def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
         self.vehicle = vehicle
         self.observer = observer
-        self._rows = Reconstruction(vehicle)
+        self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
         self.sm_gain = float(observer.sliding_mode_gain)
         lq, lr = sm_lipschitz(vehicle)
@@ -466,8 +466,9 @@ class ModelCore:
             zs = dzs = 0.0
             self._hstate = body_heave.start(ddzs)
             self._body_started = True
+            self._rows.restart()
         row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
-                             ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv)
+                             ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt)
         self.last_row = row
         self.ready.append((stamp, row))
 

@@ -415,7 +415,7 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     noise, cut = _channel_settings(q, phi, stamp_i, acc, bounds, cutoff_hz)
     # Distance over every accepted sample (continued across gaps), as the estimator's.
     columns[Column.DISTANCE][acc] = distance_m(np.diff(stamp_i[acc]) * 1e-9, v[acc])
-    rec = Reconstruction(vehicle)
+    rec = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
     runs: list[RunInfo] = []
     edge = math.inf
     for a, b in bounds:
@@ -425,6 +425,7 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         edge = edge_time_s(cut, r['dt'])
         part = field_columns(rows.size)[1]
         _run_columns(r, t, vehicle, rec, part)
+        rec.add_quasi_static(part, t)
         part[Column.CONVERGED][:] = (t >= edge) & (t <= t[-1] - edge)
         for j, col in enumerate(columns):
             if j != Column.DISTANCE:

@@ -51,10 +51,11 @@ class Column(enum.IntEnum):
     FN1 = 23          #: wheel load F_n,1 = F_c,1 + dF_1 (N)
     FN2 = 24
     LTR = 25          #: (F_n2 - F_n1) / (F_n1 + F_n2)
-    RESIDUAL = 26     #: I_x ddphi - s cos(phi) (F_b1 - F_b2) (N m)
+    RESIDUAL = 26     #: I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi) (N m)
     LIFT_OFF1 = 27    #: lift-off flag of the left wheel
     LIFT_OFF2 = 28
     CONVERGED = 29    #: time since (re)start >= settling time
+    LTR_QUASI_STATIC = 30   #: the LTR of the loads low-passed below the wheel hop (MODEL.md 8)
 
 
 N_COLUMNS = len(Column)
@@ -81,12 +82,13 @@ FIELD_COLUMNS: dict[str, tuple[Column, ...]] = {
     'residual_nm': (Column.RESIDUAL,),
     'lift_off': (Column.LIFT_OFF1, Column.LIFT_OFF2),
     'converged': (Column.CONVERGED,),
+    'ltr_quasi_static': (Column.LTR_QUASI_STATIC,),
 }
 #: Fields of :class:`Estimate` that are (left, right) pairs / scalars (after stamp_ns).
 PAIR_FIELDS = ('q_m', 'dq', 'ddq', 'wheel_heave_m', 'wheel_heave_rate', 'wheel_accel_mps2',
                'road_m', 'tire_force_dynamic_n', 'wheel_load_n', 'lift_off')
 SCALAR_FIELDS = ('distance_m', 'roll_rad', 'droll', 'ddroll', 'body_heave_m', 'body_heave_rate',
-                 'body_accel_mps2', 'ltr', 'residual_nm', 'converged')
+                 'body_accel_mps2', 'ltr', 'residual_nm', 'converged', 'ltr_quasi_static')
 #: Boolean fields.
 FLAG_FIELDS = ('lift_off', 'converged')
 
@@ -112,9 +114,10 @@ class Estimate(NamedTuple):
     tire_force_dynamic_n: tuple[float, float]   #: dF_i (N), upward on the wheel
     wheel_load_n: tuple[float, float]           #: F_n,i = max(0, F_c,i + dF_i) (N)
     ltr: float                                  #: (F_n2 - F_n1) / (F_n1 + F_n2)
-    residual_nm: float                          #: I_x ddphi - s cos(phi)(F_b1 - F_b2) (N m)
+    residual_nm: float                          #: step 9 residual (N m)
     lift_off: tuple[bool, bool]                 #: F_n,i <= LIFT_OFF_FRACTION F_c,i
     converged: bool                             #: time since (re)start >= settling time
+    ltr_quasi_static: float                     #: LTR of the low-passed loads (rollover)
 
 
 @dataclass
@@ -189,6 +192,7 @@ class EstimateArrays:
     residual_nm: np.ndarray
     lift_off: np.ndarray
     converged: np.ndarray
+    ltr_quasi_static: np.ndarray
     status: EstimatorStatus = field(default_factory=EstimatorStatus)
     #: (n,) bool: samples whose standing speed the deflections contradicted (:mod:`.speed_check`)
     speed_contradicted: np.ndarray | None = None
@@ -221,11 +225,12 @@ class EstimateArrays:
 def estimate_from_row(stamp: int, row: tuple) -> Estimate:
     """An :class:`Estimate` from an output row (slots :class:`Column`)."""
     (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2, dzu1, dzu2,
-     ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv) = row
+     ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv, ltr_qs) = row
     # tuple.__new__ directly: the namedtuple's generated __new__ is one Python frame more
     return _new_tuple(Estimate, (stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi,
                                  zs, dzs, ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2),
-                                 (u1, u2), (df1, df2), (fn1, fn2), ltr, res, (lo1, lo2), conv))
+                                 (u1, u2), (df1, df2), (fn1, fn2), ltr, res, (lo1, lo2), conv,
+                                 ltr_qs))
 
 
 _new_tuple = tuple.__new__

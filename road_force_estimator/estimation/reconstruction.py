@@ -16,8 +16,13 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
    lift-off; ``dF_i`` keeps the unclipped value, and :attr:`.EstimateArrays.load_clipped`
    / ``negative_load_samples`` count them) is published as 0; ``LTR = (F_n2 - F_n1) /
    (F_n1 + F_n2)`` (right minus left) of those loads, so ``|LTR| <= 1``; the denominator
-   floored at :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`).
-9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2)`` (N m); it equals
+   floored at :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`). The
+   quasi-static LTR for rollover warnings: the same ratio of the loads low-passed below the
+   wheel-hop band, causal: two first-order lags in cascade (critically damped, -3 dB at
+   ``observer.rollover_cutoff_frequency``, exact for loads held over each step), restarted
+   with each run at the loads of its first sample (:meth:`Reconstruction.row` with the step,
+   :meth:`Reconstruction.add_quasi_static` over a run's arrays: the same numbers).
+9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi)`` (N m); it equals
    ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when
    ``F_n,i <=`` :data:`LIFT_OFF_FRACTION` ``F_c,i``.
 """
@@ -27,7 +32,7 @@ import math
 
 import numpy as np
 
-from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 from road_force_estimator.estimation.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.estimation.outputs import Column
 
@@ -38,6 +43,8 @@ __all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distanc
 LIFT_OFF_FRACTION = 0.05
 #: Floor of the LTR denominator, as a fraction of the static axle load.
 LTR_FLOOR_FRACTION = 0.01
+#: -3 dB frequency of a cascade of two equal first-order lags, per unit pole frequency.
+_CASCADE_3DB = math.sqrt(math.sqrt(2.0) - 1.0)
 
 
 def distance_m(steps_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
@@ -82,23 +89,66 @@ def tire_deflections(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
 class Reconstruction:
     """Steps 5, 8 and 9 of MODEL.md for one vehicle (see the module notes)."""
 
-    def __init__(self, vehicle: VehicleParameters) -> None:
+    def __init__(self, vehicle: VehicleParameters, rollover_cutoff_hz: float = 2.0) -> None:
         fc1, fc2 = vehicle.static_load_n
         self.s = vehicle.half_track_m
         self.ix = vehicle.roll_inertia_kgm2
+        #: M g h (N m): the gravity moment per unit sin(phi) in the residual of step 9
+        self.mgh = vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m
         self.static_n = (fc1, fc2)
         self.lift_off_n = (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
         self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
         self._c = (self.s, self.ix, fc1, fc2) + self.lift_off_n + (self.ltr_floor_n,)
+        #: pole rate (1/s) of each lag of the quasi-static LTR's low-pass
+        self.rollover_rate = 2.0 * math.pi * float(rollover_cutoff_hz) / _CASCADE_3DB
+        self._qs: tuple | None = None       # the low-pass's (left 1, left 2, right 1, right 2)
+        self._qs_e = (-1.0, 0.0)            # (dt, exp(-dt rate)) of the last step
+
+    def restart(self) -> None:
+        """A new run: the quasi-static LTR's low-pass starts again at the next sample."""
+        self._qs = None
+
+    def quasi_static_ltr(self, fn1: float, fn2: float, dt: float) -> float:
+        """The quasi-static LTR of the next sample from its loads (N) and the step dt (s)
+        since the previous one (ignored at a restart); a non-finite load leaves the state."""
+        a = fn1 if fn1 > 0.0 else 0.0
+        b = fn2 if fn2 > 0.0 else 0.0
+        st = self._qs
+        if not math.isfinite(a + b):
+            return math.nan
+        if st is None:
+            st = (a, a, b, b)
+        else:
+            if self._qs_e[0] != dt:
+                self._qs_e = (dt, math.exp(-dt * self.rollover_rate))
+            e = self._qs_e[1]
+            g = 1.0 - e
+            a1 = e * st[0] + g * a
+            b1 = e * st[2] + g * b
+            st = (a1, e * st[1] + g * a1, b1, e * st[3] + g * b1)
+        self._qs = st
+        return load_transfer_ratio(st[1], st[3], self.ltr_floor_n)
+
+    def add_quasi_static(self, out: list, t: np.ndarray) -> None:
+        """The quasi-static LTR column of one run's columns ``out`` (loads filled) at the
+        times t (s): :meth:`quasi_static_ltr` sample by sample from a restart."""
+        self.restart()
+        fn1, fn2 = out[Column.FN1].tolist(), out[Column.FN2].tolist()
+        steps = [0.0] + np.diff(np.asarray(t, dtype=float)).tolist()
+        step = self.quasi_static_ltr
+        out[Column.LTR_QUASI_STATIC][:] = [step(a, b, d) for a, b, d in zip(fn1, fn2, steps)]
+        self.restart()
 
     def row(self, x: float, q1: float, q2: float, dq1: float, dq2: float, ddq1: float,
             ddq2: float, phi: float, dphi: float, ddphi: float, zs: float, dzs: float,
             ddzs: float, ddzu1: float, ddzu2: float, w1: float, w2: float, df1: float,
-            df2: float, fb1: float, fb2: float, conv: bool) -> tuple:
-        """The output row (slots :class:`.Column`) of one sample (SI, see the module notes)."""
+            df2: float, fb1: float, fb2: float, conv: bool, dt: float = 0.0) -> tuple:
+        """The output row (slots :class:`.Column`) of one sample (SI, see the module notes);
+        ``dt`` (s): the step since the previous row of the run (see :meth:`restart`)."""
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
         cphi = math.cos(phi)
-        ssin = s * math.sin(phi)
+        sphi = math.sin(phi)
+        ssin = s * sphi
         srate = s * cphi * dphi
         zu1 = zs + ssin - q1
         zu2 = zs - ssin - q2
@@ -111,12 +161,14 @@ class Reconstruction:
         return (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
                 dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
                 fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
-                ix * ddphi - s * cphi * (fb1 - fb2), fn1 <= lift1, fn2 <= lift2, conv)
+                ix * ddphi - s * cphi * (fb1 - fb2) - self.mgh * sphi, fn1 <= lift1,
+                fn2 <= lift2, conv, self.quasi_static_ltr(fn1, fn2, dt))
 
     def columns(self, out: list, q: tuple, dq: tuple, ddq: tuple, phi, dphi, ddphi, ddzs,
                 ddzu: tuple, w: tuple, df: tuple, fb: tuple, heave: tuple | None) -> None:
         """:meth:`row` over arrays: fill the columns ``out`` (slots :class:`.Column`, each
-        (m,)) but the distance and ``converged``.
+        (m,)) but the distance, ``converged`` and the quasi-static LTR
+        (:meth:`add_quasi_static`, over the whole run).
 
         Pairs are ``(left, right)`` arrays. ``heave`` = ``(z_s, dz_s)`` arrays, or None for
         a smoother that has the body heave only after the whole run: then the wheel heaves
@@ -125,7 +177,8 @@ class Reconstruction:
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
         (q1, q2), (dq1, dq2), (df1, df2), (w1, w2) = q, dq, df, w
         cph = np.cos(phi)
-        ssin = s * np.sin(phi)
+        sph = np.sin(phi)
+        ssin = s * sph
         srate = s * cph * dphi
         fn1 = np.maximum(fc1 + df1, 0.0)
         fn2 = np.maximum(fc2 + df2, 0.0)
@@ -147,7 +200,7 @@ class Reconstruction:
                        (C.DZU2, dzu2), (C.DDZU1, ddzu[0]), (C.DDZU2, ddzu[1]), (C.U1, u1),
                        (C.U2, u2), (C.DF1, df1), (C.DF2, df2), (C.FN1, fn1), (C.FN2, fn2),
                        (C.LTR, load_transfer_ratios(fn1, fn2, ltr_floor)),
-                       (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1])),
+                       (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1]) - self.mgh * sph),
                        (C.LIFT_OFF1, fn1 <= lift1), (C.LIFT_OFF2, fn2 <= lift2)):
             out[j][:] = col
 

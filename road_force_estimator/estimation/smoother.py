@@ -200,7 +200,7 @@ class _Smoother:
         self.vehicle = vehicle
         self.observer = observer
         self.schedule = GainSchedule(vehicle, observer)
-        self.rows = Reconstruction(vehicle)
+        self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self.h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h[_SMOOTH_OUTPUTS]
 
     def fill_status(self, status: EstimatorStatus) -> None:
@@ -350,5 +350,6 @@ class _Smoother:
             zs = body_heave.zero_phase(out[Column.DDZS], dt, w_c)
             dzs = np.gradient(zs, t, edge_order=2)
             self.rows.add_heave(out, zs, dzs)
+        self.rows.add_quasi_static(out, t)
         settle = self.schedule.settling_time_s(dt)
         out[Column.CONVERGED][:] = (t - t[0]) >= settle

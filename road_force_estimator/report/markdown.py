@@ -40,7 +40,8 @@ def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
     head = [f'from ({lu})', f'to ({lu})', f'IRI L ({iu})', f'IRI R ({iu})']
     if have_true:
         head += [f'true IRI L ({iu})', f'true IRI R ({iu})']
-    head += ['DLC L', 'DLC R', 'peak L (kN)', 'peak R (kN)', 'max abs LTR', 'lift-offs']
+    head += ['DLC L', 'DLC R', 'peak L (kN)', 'peak R (kN)', 'max abs LTR',
+             'max abs LTR quasi-static', 'lift-offs']
     if have_fix:
         head += ['start lat, lon', 'end lat, lon']
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
@@ -57,7 +58,8 @@ def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
                     u.iri_text(s['true_iri_right_m_per_km'])]
         row += [_fmt(s['dlc_left'], 3), _fmt(s['dlc_right'], 3),
                 _fmt(s['peak_load_left_n'] / 1e3, 1), _fmt(s['peak_load_right_n'] / 1e3, 1),
-                _fmt(s['max_abs_ltr'], 3), str(int(s['lift_offs']))]
+                _fmt(s['max_abs_ltr'], 3), _fmt(s['max_abs_ltr_quasi_static'], 3),
+                str(int(s['lift_offs']))]
         if have_fix:
             row += [f'{_fmt(s["start_lat"], 6)}, {_fmt(s["start_lon"], 6)}',
                     f'{_fmt(s["end_lat"], 6)}, {_fmt(s["end_lon"], 6)}']

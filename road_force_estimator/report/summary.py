@@ -178,7 +178,8 @@ def drive_segments(est, al: Aligned, drive=None, *,
             fix_stamps_ns=None if fixes is None else fixes.stamps_ns,
             fix_latitude_deg=None if fixes is None else fixes.latitude_deg,
             fix_longitude_deg=None if fixes is None else fixes.longitude_deg,
-            segment_length_m=segment_length_m)
+            segment_length_m=segment_length_m,
+            ltr_quasi_static=_quasi_static(est, rows))
     except ValueError:
         return empty
     if drive is not None and len(table['start_m']):
@@ -404,3 +405,9 @@ def _drive_iri(est, al: Aligned, segments: dict, drive=None, raw_road=None
             iri_true = _whole_from_segments(x, al.profile_truth[up], segments, 'true_iri')
             reference = 'truth' if al.true_road_m is not None else 'reference profile'
     return {'estimated': iri_est, 'true': iri_true, 'raw': raw, 'reference': reference}
+
+
+def _quasi_static(est, rows) -> np.ndarray | None:
+    """The estimate's quasi-static LTR at ``rows`` (None for estimates without one)."""
+    quasi = getattr(est, 'ltr_quasi_static', None)
+    return None if quasi is None else np.asarray(quasi)[rows]

@@ -14,7 +14,7 @@ from typing import Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from sensor_msgs.msg import JointState
@@ -138,6 +138,17 @@ def road_point_msg(stamp_ns: int, distance_m: float, lateral_m: float,
     msg.header.frame_id = ROAD_FRAME
     msg.point.x, msg.point.y, msg.point.z = float(distance_m), float(lateral_m), float(
         elevation_m)
+    return msg
+
+
+def load_transfer_msg(stamp_ns: int, ltr: float, ltr_quasi_static: float) -> Vector3Stamped:
+    """``/load_transfer``: x = LTR, y = quasi-static LTR (MODEL.md step 8), z = 0, frame
+    ``base_link``."""
+    msg = Vector3Stamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = BASE_FRAME
+    msg.vector.x = float(ltr)
+    msg.vector.y = float(ltr_quasi_static)
     return msg
 
 

@@ -2,10 +2,11 @@
 
 Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` (best effort,
 which matches reliable and best-effort publishers); per accepted deflection message publishes
-``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio`` and
-``/observer/states`` (reliable), stamped with the estimate's stamp (the input's), and
-``/diagnostics`` at 1 Hz (INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`:
-the same bytes as rclpy's, without a message object per message).
+``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio``,
+``/load_transfer`` (x = LTR, y = quasi-static LTR) and ``/observer/states`` (reliable),
+stamped with the estimate's stamp (the input's), and ``/diagnostics`` at 1 Hz
+(INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`: the same bytes as rclpy's,
+without a message object per message).
 
 Rejected and counted, never misread (the node keeps running and never publishes NaN): a
 JointState whose arrays differ in length from ``name`` or that lacks a joint, a non-finite value
@@ -23,7 +24,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -94,6 +95,8 @@ class Observer(Node):
         self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos())
                           for topic in api.ROAD]
         self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos())
+        self.load_transfer_pub = self.create_publisher(Vector3Stamped, api.LOAD_TRANSFER,
+                                                       reliable_qos())
         self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
@@ -123,7 +126,8 @@ class Observer(Node):
         """Publish the estimates still held back (``observer.latency`` > 0) before leaving."""
         for est in self.estimator.flush():
             self.publish(est)
-        for pub in (*self.load_pubs, *self.road_pubs, self.ltr_pub, self.states_pub):
+        for pub in (*self.load_pubs, *self.road_pubs, self.ltr_pub, self.load_transfer_pub,
+                    self.states_pub):
             pub.wait_for_all_acked(Duration(seconds=1.0))
 
     def core_counts(self, estimator=None) -> Counter:
@@ -179,12 +183,12 @@ class Observer(Node):
             self.publish(est)
 
     def publish(self, est) -> None:
-        """The six output messages of one estimate, stamped with its sample's stamp."""
+        """The seven output messages of one estimate, stamped with its sample's stamp."""
         (f1, f2), (u1, u2), s = est.wheel_load_n, est.road_m, self.half_track_m
         position = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m)
         velocity = (*est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
-        if not math.isfinite(f1 + f2 + u1 + u2 + est.ltr + est.distance_m + sum(position)
-                             + sum(velocity)):
+        if not math.isfinite(f1 + f2 + u1 + u2 + est.ltr + est.ltr_quasi_static
+                             + est.distance_m + sum(position) + sum(velocity)):
             self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
         t, wire = est.stamp_ns, self.wire
@@ -193,6 +197,8 @@ class Observer(Node):
         for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
             pub.publish(wire.road.encode(t, (est.distance_m, y, road)))
         self.ltr_pub.publish(wire.ltr.encode(None, (est.ltr,)))
+        self.load_transfer_pub.publish(wire.load_transfer.encode(
+            t, (est.ltr, est.ltr_quasi_static, 0.0)))
         self.states_pub.publish(wire.states.encode(t, position + velocity))
         self.period['published'] += 1
         self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]

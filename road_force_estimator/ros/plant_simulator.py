@@ -37,6 +37,8 @@ from road_force_estimator.ros.messages import (
     twist_msg, wrench_msg)
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
+from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
+                                                     speed_knots)
 from road_force_estimator.bagio import road_from_source
 from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
@@ -110,11 +112,15 @@ class PlantSimulator(Node):
     def build_plant(self, vehicle, sim) -> None:
         """The road of ``simulator.road`` and the plant on it (refused: ParameterError)."""
         try:
-            length = min(sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0,
+            profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
+            travel = sim.speed_mps * sim.duration_s if profile is None else \
+                profile_distance(speed_knots(*profile), sim.duration_s)
+            length = min(travel + 2.0 * sim.tire_envelope_length_m + 1.0,
                          MAX_SYNTHETIC_LENGTH_M)
             self.road = road_from_source(sim.road, length_m=length)
             self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                               tire_envelope_m=sim.tire_envelope_length_m)
+                               tire_envelope_m=sim.tire_envelope_length_m,
+                               speed_profile=profile)
         except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None
@@ -181,7 +187,7 @@ class PlantSimulator(Node):
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
         load_l, load_r, road_l, road_r = self.reliable
-        self.twist_pub.publish(twist_msg(stamp_ns, self.sim.speed_mps))
+        self.twist_pub.publish(twist_msg(stamp_ns, self.speed_at(sample.t_s)))
         self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))
         for pub, frame, load in zip((load_l, load_r), api.WHEEL_FRAMES, sample.wheel_load_n):
             pub.publish(wrench_msg(stamp_ns, frame, load))
@@ -191,11 +197,17 @@ class PlantSimulator(Node):
         if self.fix_pub is not None and int(sample.t_s * self.sim.gnss_rate_hz) > self.fix[0]:
             self.publish_fix(sample.t_s, stamp_ns)
 
+    def speed_at(self, t_s: float) -> float:
+        """The speed (m/s) at t_s: simulator.speed, or simulator.speed_profile's."""
+        if self.plant is None or self.plant.speed_profile is None:
+            return self.sim.speed_mps
+        return float(self.plant.speed_at(t_s))
+
     def publish_fix(self, t_s: float, stamp_ns: int) -> None:
         """``/fix`` on the straight route (WGS84), integrated from the previous fix."""
         j, t0, lat, lon, heading = self.fix
         if j >= 0:
-            r = route([t0, t_s], self.sim.speed_mps, start_latitude_deg=lat,
+            r = route([t0, t_s], [self.speed_at(t0), self.speed_at(t_s)], start_latitude_deg=lat,
                       start_longitude_deg=lon, heading_deg=heading)
             lat, lon, heading = r.latitude_deg[-1], r.longitude_deg[-1], r.heading_deg[-1]
         self.fix = (int(t_s * self.sim.gnss_rate_hz), t_s, float(lat), float(lon), heading)

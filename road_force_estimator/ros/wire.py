@@ -25,7 +25,7 @@ __all__ = ['Wire', 'deserialize']
 
 
 class Wire:
-    """Readers of the observer's two inputs and encoders of its six outputs.
+    """Readers of the observer's two inputs and encoders of its seven outputs.
 
     Attributes
     ----------
@@ -37,6 +37,8 @@ class Wire:
         ``/road_profile/left|right`` (PointStamped): ``point.x, y, z`` (m).
     ltr : CdrEncoder
         ``/load_transfer_ratio`` (Float64, no header).
+    load_transfer : CdrEncoder
+        ``/load_transfer`` (Vector3Stamped): x = LTR, y = quasi-static LTR, z = 0.
     states : CdrEncoder
         ``/observer/states`` (JointState of :data:`.interfaces.STATE_JOINTS`): positions,
         then velocities.
@@ -52,6 +54,8 @@ class Wire:
         self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
                                ['point.x', 'point.y', 'point.z'])
         self.ltr = CdrEncoder(api.FLOAT64, message_template(api.FLOAT64), ['data'])
+        self.load_transfer = CdrEncoder(api.VECTOR3_STAMPED, message_template(
+            api.VECTOR3_STAMPED, api.BASE_FRAME), ['vector.x', 'vector.y', 'vector.z'])
         self.states = CdrEncoder(api.JOINT_STATE, message_template(
             api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
             ['position', 'velocity'])

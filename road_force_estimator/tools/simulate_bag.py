@@ -152,9 +152,11 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
+    from road_force_estimator.core.speed_profile import read_speed_profile
 
-    length = sim.speed_mps * sim.duration_s + 2.0 * sim.tire_envelope_length_m + 1.0
-    road = road_from_source(sim.road, length_m=length)
+    profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
+    road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
+                            + 2.0 * sim.tire_envelope_length_m + 1.0)
     accel = None
     if lateral is not None:
         a_y, t_on = lateral
@@ -163,7 +165,8 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
             return a_y if t_s >= t_on else 0.0
 
     plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                  lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m)
+                  lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m,
+                  speed_profile=profile)
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
@@ -187,7 +190,8 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         t_s=np.array(cols['t_s']), distance_m=np.array(cols['distance_m']),
         q_m=np.array(cols['q_m']), roll_rad=np.array(cols['roll_rad']),
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
-        lateral_accel_mps2=np.array(cols['lateral_accel_mps2']), speed_mps=sim.speed_mps)
+        lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
+    traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
     sensors = SensorModel.from_simulator(sim)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = None
@@ -195,7 +199,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
         first = np.concatenate([[True], period[1:] > period[:-1]])
         idx = np.flatnonzero(first)
-        fixes = route(traj.t_s[idx], sim.speed_mps,
+        fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
                       start_latitude_deg=sim.gnss_start_latitude_deg,
                       start_longitude_deg=sim.gnss_start_longitude_deg,
                       heading_deg=sim.gnss_heading_deg,
@@ -239,14 +243,15 @@ def _main(args: argparse.Namespace) -> int:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
     with target.staged() as bag:
         count = bagio.write_drive_bag(bag, traj, q_meas, roll_meas, fixes=fixes,
-                                      speed_mps=sim.speed_mps,
+                                      speed_mps=traj.speed_mps,
                                       track_width_m=vehicle.track_width_m,
                                       ground_truth=not args.no_ground_truth, custom_data=custom)
     n = len(traj.t_s)
     if reason:
         print(f'{PROG}: {reason}', file=sys.stderr)
     print(f'{PROG}: wrote {count} messages ({n} samples, {traj.t_s[-1]:g} s, '
-          f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at {sim.speed_mps:g} m/s) over '
+          f'{traj.distance_m[-1] - traj.distance_m[0]:.1f} m at '
+          f'{_speed_text(sim)}) over '
           f'{road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
 
@@ -254,6 +259,22 @@ def _main(args: argparse.Namespace) -> int:
 def _written_here(custom: dict[str, str]) -> bool:
     """A bag's ``custom_data`` says simulate_bag wrote it."""
     return custom.get('road_force_estimator.writer_command') == PROG
+
+
+def _travel_m(sim, profile) -> float:
+    """The distance (m) the drive covers in simulator.duration: constant speed, or the
+    integral of the speed profile ``(time_s, speed_mps)``."""
+    from road_force_estimator.core.speed_profile import profile_distance, speed_knots
+
+    if profile is None:
+        return sim.speed_mps * sim.duration_s
+    return profile_distance(speed_knots(*profile), sim.duration_s)
+
+
+def _speed_text(sim) -> str:
+    """The speed of the summary line: constant, or the profile's file."""
+    return f'{sim.speed_mps:g} m/s' if not sim.speed_profile else \
+        f'the speed profile {sim.speed_profile}'
 
 
 if __name__ == '__main__':

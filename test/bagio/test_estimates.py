@@ -61,3 +61,27 @@ class TestEstimateBag:
             == (BASE_NS // 10**9 + 1, 1, '3')
         with pytest.raises(ValueError, match='diagnostic level'):
             bagio.diagnostic_array(0, [{'name': 'x', 'level': 7}])
+
+
+def test_load_transfer_topic_carries_both_ratios(tmp_path):
+    # /load_transfer (INTERFACES.md): Vector3Stamped, x = LTR, y = quasi-static LTR, z = 0,
+    # frame base_link, reliable; beside /load_transfer_ratio.
+    rng = np.random.default_rng(3)
+    n = 20
+    e = SimpleNamespace(
+        stamp_ns=BASE_NS + 1_000_000 * np.arange(n), distance_m=0.02 * np.arange(n),
+        q_m=rng.normal(size=(n, 2)), dq=rng.normal(size=(n, 2)), roll_rad=rng.normal(size=n),
+        droll=rng.normal(size=n), body_heave_m=rng.normal(size=n),
+        body_heave_rate=rng.normal(size=n), wheel_heave_m=rng.normal(size=(n, 2)),
+        wheel_heave_rate=rng.normal(size=(n, 2)), road_m=rng.normal(size=(n, 2)),
+        wheel_load_n=rng.normal(2e4, 1e3, (n, 2)), ltr=rng.normal(size=n),
+        ltr_quasi_static=rng.normal(size=n))
+    bagio.write_estimate_bag(tmp_path / 'e', e)
+    msgs = list(bagio.iter_messages(tmp_path / 'e', [interfaces.LOAD_TRANSFER]))
+    assert len(msgs) == n
+    assert interfaces.TOPIC_TYPES[interfaces.LOAD_TRANSFER] == 'geometry_msgs/msg/Vector3Stamped'
+    assert interfaces.qos_kind(interfaces.LOAD_TRANSFER) == interfaces.RELIABLE
+    for k, (_, _, m) in enumerate(msgs):
+        assert m.header.frame_id == 'base_link'
+        assert (m.vector.x, m.vector.y, m.vector.z) == (e.ltr[k], e.ltr_quasi_static[k], 0.0)
+        assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == e.stamp_ns[k]

@@ -129,3 +129,16 @@ def test_last_segment_end_after_the_last_fix_is_placed_from_it():
                           fix_latitude_deg=48.0 + fix_ns * 1e-12,
                           fix_longitude_deg=17.0 + fix_ns * 2e-12)
     assert np.isnan(table['end_lat'][-1])
+
+
+def test_max_abs_quasi_static_ltr_per_segment():
+    # INTERFACES.md: max |quasi-static LTR| per segment (NaN when the estimate has none)
+    x = np.linspace(0.0, 300.0, 3001)
+    quasi = np.where(x < 100.0, -0.3, 0.1) * np.sin(x)
+    args = (x, np.full((3001, 2), 1e4), np.zeros(3001), np.zeros((3001, 2), bool))
+    table = segment_table(*args, ltr_quasi_static=quasi)
+    assert 'max_abs_ltr_quasi_static' in SEGMENT_COLUMNS
+    for j in range(3):
+        inside = (x >= 100.0 * j) & ((x < 100.0 * (j + 1)) if j < 2 else (x <= 300.0))
+        assert table['max_abs_ltr_quasi_static'][j] == np.abs(quasi[inside]).max()
+    assert np.isnan(segment_table(*args)['max_abs_ltr_quasi_static']).all()

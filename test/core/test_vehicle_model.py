@@ -18,6 +18,9 @@ ASYM = VehicleParameters(
     tire_damping_nspm=(1500.0, 2500.0))
 
 
+G_MPS2 = 9.80665     # standard gravity (the gravity moment M g h sin(phi) of MODEL.md)
+
+
 def reference_rhs(p, y, u, du, ay):
     """MODEL.md's equations of motion, written independently of vehicle_model."""
     M, Ix, s, h = p.sprung_mass_kg, p.roll_inertia_kgm2, p.track_width_m / 2, p.cg_height_m
@@ -37,7 +40,8 @@ def reference_rhs(p, y, u, du, ay):
     return np.array([
         dzs, dphi, dzu1, dzu2,
         (fb1 + fb2) / M,
-        (s * math.cos(phi) * (fb1 - fb2) + M * h * ay * math.cos(phi)) / Ix,
+        (s * math.cos(phi) * (fb1 - fb2) + M * h * (ay * math.cos(phi) + G_MPS2 * math.sin(phi)))
+        / Ix,
         (-fb1 + df1) / p.unsprung_mass_kg[0],
         (-fb2 + df2) / p.unsprung_mass_kg[1],
     ])
@@ -45,12 +49,14 @@ def reference_rhs(p, y, u, du, ay):
 
 def reference_matrices(p):
     """M, C, K of the small-motion model, from the potential and dissipation energies
-    V = 1/2 sum k_i q_i^2 + kt_i (z_ui - u_i)^2 with q_i = z_s +- s phi - z_ui."""
+    V = 1/2 sum k_i q_i^2 + kt_i (z_ui - u_i)^2 + M g h cos(phi) with q_i = z_s +- s phi - z_ui
+    (the body's weight at h above the roll axis: -M g h in the roll stiffness)."""
     s = p.track_width_m / 2
     # q = G x for x = (z_s, phi, z_u1, z_u2); tire deflection = E x.
     G = np.array([[1.0, s, -1.0, 0.0], [1.0, -s, 0.0, -1.0]])
     E = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
     K = G.T @ np.diag(p.suspension_stiffness_npm) @ G + E.T @ np.diag(p.tire_stiffness_npm) @ E
+    K[1, 1] -= p.sprung_mass_kg * G_MPS2 * p.cg_height_m
     C = G.T @ np.diag(p.suspension_damping_nspm) @ G + E.T @ np.diag(p.tire_damping_nspm) @ E
     mass = np.diag([p.sprung_mass_kg, p.roll_inertia_kgm2, *p.unsprung_mass_kg])
     return mass, C, K
@@ -139,9 +145,11 @@ def test_sign_conventions():
     assert eq[State.PHI] > 0.0
     assert out.q_m[0] > 0.0 > out.q_m[1]
     assert out.wheel_load_n[1] > out.wheel_load_n[0]
-    # Load transfer s (F_n2 - F_n1) = M h a_y (moments about the roll axis).
-    assert (out.wheel_load_n[1] - out.wheel_load_n[0]) * 1.0 == pytest.approx(
-        5000.0 * 0.8 * 3.0, rel=1e-12)
+    # Load transfer s cos(phi) (F_n2 - F_n1) = M h (a_y cos(phi) + g sin(phi)) (moments
+    # about the roll axis, with the gravity moment of the rolled body).
+    phi = eq[State.PHI]
+    assert (out.wheel_load_n[1] - out.wheel_load_n[0]) * 1.0 * math.cos(phi) == pytest.approx(
+        5000.0 * 0.8 * (3.0 * math.cos(phi) + G_MPS2 * math.sin(phi)), rel=1e-12)
 
 
 @pytest.mark.parametrize('ay', [0.0, 4.0, -7.5])
@@ -157,8 +165,12 @@ def test_equilibrium_is_at_rest(ay):
 
 def test_equilibrium_beyond_rollover_is_refused():
     model = VehicleModel(VehicleParameters())
-    # Lift-off when M h a_y / (2 s) > F_c: a_y > 2 s F_c / (M h) = 14.46 m/s^2.
-    limit = 2 * 1.0 * VehicleParameters().static_load_n[0] / (5000.0 * 0.8)
+    # Lift-off when M h (a_y + g tan(phi)) / (2 s) > F_c, at the roll of that load transfer:
+    # 2 s sin(phi) = F_c (2/k + 2/kt), a_y > 2 s F_c / (M h) - g tan(phi) = 13.3 m/s^2.
+    fc = VehicleParameters().static_load_n[0]
+    phi = math.asin(fc * (2 / 400e3 + 2 / 1000e3) / 2.0)
+    limit = 2 * 1.0 * fc / (5000.0 * 0.8) - G_MPS2 * math.tan(phi)
+    assert 13.0 < limit < 13.6
     model.equilibrium([0.0, 0.0], lateral_accel_mps2=0.99 * limit)
     with pytest.raises(ValueError, match='rollover'):
         model.equilibrium([0.0, 0.0], lateral_accel_mps2=1.01 * limit)
@@ -214,6 +226,34 @@ def test_modes_match_reference_eigenvalues(vehicle):
     for m in modes.values():
         pole = lam[np.argmin(np.abs(lam.imag / (2 * np.pi) - m.damped_frequency_hz))]
         assert m.damping_ratio == pytest.approx(-pole.real / abs(pole), rel=1e-9)
+
+
+def test_roll_stiffness_is_lowered_by_the_gravity_moment():
+    # MODEL.md: roll stiffness 2 k s^2 - M g h (the rigid-tire roll mode, by hand).
+    p = VehicleParameters()
+    lin = VehicleModel(p).linearised()
+    assert lin.stiffness[1, 1] == pytest.approx(2 * 400e3 * 1.0 - 5000.0 * G_MPS2 * 0.8,
+                                                rel=1e-14)
+    rigid = VehicleParameters(tire_stiffness_npm=(1e9, 1e9))     # (series share 4e-4)
+    f = VehicleModel(rigid).natural_frequencies_hz()
+    assert f['roll'] == pytest.approx(
+        math.sqrt((2 * 400e3 - 5000.0 * G_MPS2 * 0.8) / 3000.0) / (2 * math.pi), rel=1e-3)
+
+
+@pytest.mark.parametrize('ay', [1.0, 3.0, -4.0])
+def test_steady_curve_roll_is_model_md_phi_ss(ay):
+    # MODEL.md: phi_ss = M h a_y / (2 k s^2 - M g h) for equal sides, k the suspension in
+    # series with the tire (the tires roll the axle too); small angles: O(phi^2).
+    p = VehicleParameters()
+    k_e = 400e3 * 1000e3 / 1400e3
+    phi_ss = 5000.0 * 0.8 * ay / (2 * k_e * 1.0 - 5000.0 * G_MPS2 * 0.8)
+    eq = VehicleModel(p).equilibrium([0.0, 0.0], lateral_accel_mps2=ay)
+    assert eq[State.PHI] == pytest.approx(phi_ss, rel=2e-3)
+    # (near) rigid tires: the suspension alone, as MODEL.md writes it
+    eq = VehicleModel(VehicleParameters(tire_stiffness_npm=(1e9, 1e9))).equilibrium(
+        [0.0, 0.0], lateral_accel_mps2=ay)
+    assert eq[State.PHI] == pytest.approx(5000.0 * 0.8 * ay / (2 * 400e3 - 5000 * G_MPS2 * 0.8),
+                                          rel=3e-3)
 
 
 def test_default_truck_frequencies_are_those_of_model_md():

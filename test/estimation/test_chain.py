@@ -156,7 +156,9 @@ class TestEndToEnd:
         fb = -(np.array(v.suspension_stiffness_npm) * est.q_m
                + np.array(v.suspension_damping_nspm) * est.dq)
         np.testing.assert_allclose(est.residual_nm, v.roll_inertia_kgm2 * est.ddroll
-                                   - s * np.cos(est.roll_rad) * (fb[:, 0] - fb[:, 1]),
+                                   - s * np.cos(est.roll_rad) * (fb[:, 0] - fb[:, 1])
+                                   - v.sprung_mass_kg * 9.80665 * v.cg_height_m
+                                   * np.sin(est.roll_rad),
                                    rtol=1e-9, atol=1e-6)
         np.testing.assert_allclose(est.ltr, _ltr(est.wheel_load_n), rtol=1e-12)
 

@@ -134,3 +134,138 @@ class TestPaths:
         # Rejected samples hold the previous estimate in the batch.
         np.testing.assert_array_equal(batch.wheel_load_n[100], batch.wheel_load_n[99])
 
+
+
+class TestQuasiStaticLtr:
+    """MODEL.md step 8: the rollover warning's LTR, low-passed below the wheel hop."""
+
+    @staticmethod
+    def _low_passed_ltr(loads, dt, cutoff_hz=2.0):
+        # two first-order lags in cascade, -3 dB at cutoff_hz, from the first sample (here)
+        from scipy.signal import lfilter
+        e = math.exp(-dt * 2 * math.pi * cutoff_hz / math.sqrt(math.sqrt(2) - 1))
+        out = []
+        for side in (0, 1):
+            x = np.maximum(loads[:, side], 0.0)
+            y, _ = lfilter([1 - e], [1, -e], x[1:], zi=[e * x[0]])
+            z, _ = lfilter([1 - e], [1, -e], y, zi=[e * x[0]])
+            out.append(np.r_[x[0], z])
+        return (out[1] - out[0]) / (out[0] + out[1])
+
+    def test_straight_class_c_road_stays_near_zero(self, drive_c):
+        tr = drive_c
+        rng = np.random.default_rng(5)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, SPEED, VEHICLE, ObserverParameters())
+        after = tr.t_s > 1.0
+        inst = np.abs(est.ltr[after]).max()
+        assert inst > 0.4           # wheel hop swings it (measured 0.43)
+        # what is left is the body's own roll on the rough road (~1.5 Hz, passes the 2 Hz
+        # low-pass; measured: max 0.15, RMS 0.047), far from a rollover warning's 0.6-0.8
+        quasi = est.ltr_quasi_static[after]
+        assert np.abs(quasi).max() < 0.2 and np.abs(quasi).max() < 0.4 * inst
+        assert np.sqrt(np.mean(quasi ** 2)) < 0.06
+        truth = self._low_passed_ltr(tr.wheel_load_n, 1e-3)
+        assert np.abs(truth[after]).max() < 0.2
+
+    def test_steady_curve_matches_the_truths_low_passed_ltr(self):
+        from road_force_estimator.core.plant import simulate
+        from road_force_estimator.core.road import iso8608_profile
+        road = iso8608_profile('C', 260.0, seed=8)
+        tr = simulate(VEHICLE, road, speed_mps=SPEED, rate_hz=1000.0, duration_s=12.0,
+                      tire_envelope_m=0.25, lateral_acceleration=lambda t: 3.0 * min(t / 2, 1))
+        rng = np.random.default_rng(6)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, SPEED, VEHICLE, ObserverParameters())
+        truth = self._low_passed_ltr(tr.wheel_load_n, 1e-3)
+        steady = tr.t_s > 4.0
+        # 3 m/s^2: M h (a_y + g phi_ss) / s over the axle load (MODEL.md's phi_ss), 0.223
+        g = 9.80665
+        phi_ss = 5000 * 0.8 * 3.0 / (2 * (400e3 * 1000e3 / 1400e3) - 5000 * g * 0.8)
+        ratio = 5000 * 0.8 * (3.0 + g * phi_ss) / sum(VEHICLE.static_load_n)
+        assert truth[steady].mean() == pytest.approx(ratio, abs=0.005)
+        err = est.ltr_quasi_static[steady] - truth[steady]
+        assert np.abs(err).max() < 0.03
+        assert abs(err.mean()) < 0.01
+        # per sample and in the batch: the same numbers
+        single = Estimator(VEHICLE, ObserverParameters())
+        stamps = _stamps(tr.t_s)
+        got = [single.update(int(s), tuple(qq), float(p), SPEED) for s, qq, p in
+               zip(stamps[:3000], q[:3000], phi[:3000])]
+        np.testing.assert_array_equal([g.ltr_quasi_static for g in got],
+                                      est.ltr_quasi_static[:3000])
+
+
+class TestVaryingSpeed:
+    """A drive that brakes to a stop, stands 3 s and pulls away (simulator.speed_profile):
+    the estimator follows the measured speed per sample."""
+
+    def test_standstill_keeps_the_loads_and_holds_the_profile(self):
+        from road_force_estimator.core.plant import simulate
+        from road_force_estimator.core.road import iso8608_profile
+        from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+        assert SPEED_FLOOR_MPS > 0.0        # the body-heave cutoff's low-speed floor
+        knots = (np.array([0.0, 3.0, 6.0, 9.0, 12.0, 15.0]),
+                 np.array([20.0, 20.0, 0.0, 0.0, 15.0, 15.0]))
+        road = iso8608_profile('C', 300.0, seed=12)
+        tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=15.0,
+                      tire_envelope_m=0.25, speed_profile=knots)
+        speed = np.interp(tr.t_s, *knots)
+        rng = np.random.default_rng(8)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, speed, VEHICLE, ObserverParameters())
+        assert est.valid.all() and np.isfinite(est.wheel_load_n).all()
+        still = (tr.t_s >= 6.5) & (tr.t_s <= 9.0)
+        # standing: the distance does not move, the loads are still estimated (static)
+        assert np.ptp(est.distance_m[still]) < 1e-9
+        assert np.ptp(tr.distance_m[still]) < 1e-9
+        fc = np.array(VEHICLE.static_load_n)
+        err = np.abs(est.wheel_load_n[still] - tr.wheel_load_n[still])
+        assert err.max() < 0.01 * fc.min()
+        # the profile at the one standing distance: no jump, but NOT held exactly: the body
+        # heave's high-pass runs in time with its 1 m/s floor (0.01 Hz at 100 m), so it
+        # forgets the body's level while standing (measured: 8.7 mm over 2.5 s)
+        assert np.isfinite(est.road_m[still]).all()
+        assert np.ptp(est.road_m[still], axis=0).max() < 1.2e-2
+        assert np.abs(np.diff(est.road_m[still], axis=0)).max() < 5e-4   # noise: 0.2 mm
+        # per sample and in the batch: the same numbers through the stop
+        single = Estimator(VEHICLE, ObserverParameters())
+        stamps = _stamps(tr.t_s)
+        part = slice(5500, 7500)
+        ref = estimate_batch(stamps[part], q[part], phi[part], speed[part], VEHICLE,
+                             ObserverParameters())
+        got = [single.update(int(s), tuple(qq), float(p), float(v)) for s, qq, p, v in
+               zip(stamps[part], q[part], phi[part], speed[part])]
+        np.testing.assert_array_equal([g.wheel_load_n for g in got], ref.wheel_load_n)
+        np.testing.assert_array_equal([g.road_m for g in got], ref.road_m)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 19, open: after a 3 s stop the load error stays '
+                   'about twice the constant-speed one (measured 0.32 against 0.16 of the dynamic '
+                   'RMS at 15 m/s) and the roughness estimate is ~47x too high (moment matching '
+                   'at a stop); leaving stopped blocks out of the roughness history fixes the '
+                   'roughness (4.5e-4 m^3) but not the loads (0.40): cause not found yet')
+def test_loads_after_a_stop_are_as_good_as_before():
+    from road_force_estimator.core.plant import simulate
+    from road_force_estimator.core.road import iso8608_profile
+    knots = (np.array([0.0, 3.0, 6.0, 9.0, 12.0, 15.0]),
+             np.array([20.0, 20.0, 0.0, 0.0, 15.0, 15.0]))
+    road = iso8608_profile('C', 300.0, seed=12)
+    fc = np.array(VEHICLE.static_load_n)
+
+    def late_error(profile):
+        tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=15.0,
+                      tire_envelope_m=0.25, speed_profile=profile)
+        rng = np.random.default_rng(8)
+        q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+        phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+        est = estimate_batch(_stamps(tr.t_s), q, phi, np.interp(tr.t_s, *profile), VEHICLE,
+                             ObserverParameters())
+        late = tr.t_s > 12.0
+        e = est.wheel_load_n[late] - tr.wheel_load_n[late]
+        return np.sqrt(np.mean(e ** 2)) / np.sqrt(np.mean((tr.wheel_load_n[late] - fc) ** 2))
+    steady = late_error((np.array([0.0, 15.0]), np.array([15.0, 15.0])))
+    assert late_error(knots) < 1.25 * steady

@@ -3,6 +3,7 @@ numbers; one lift-off threshold and one LTR floor."""
 import math
 
 import numpy as np
+import pytest
 
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.estimation.outputs import Column, field_columns
@@ -21,13 +22,19 @@ def _motions(rng, m):
                                    else m) * s for k, s in scale.items()}
 
 
+def _times(m):
+    return np.cumsum(np.r_[0.0, np.full(m - 1, 1e-3)])
+
+
 def _rows(rec, mo, conv):
     out = []
+    steps = np.r_[0.0, np.diff(_times(mo['phi'].size))]
+    rec.restart()
     for k in range(mo['phi'].size):
         g = {name: a[k].tolist() for name, a in mo.items()}
         out.append(rec.row(1.5, *g['q'], *g['dq'], *g['ddq'], g['phi'], g['dphi'], g['ddphi'],
                            g['zs'], g['dzs'], g['ddzs'], *g['ddzu'], *g['w'], *g['df'],
-                           *g['fb'], conv))
+                           *g['fb'], conv, float(steps[k])))
     return np.array(out, dtype=float)
 
 
@@ -41,6 +48,7 @@ def _columns(rec, mo, heave):
                 pair(mo['fb']), (mo['zs'], mo['dzs']) if heave else None)
     if not heave:
         rec.add_heave(cols, mo['zs'], mo['dzs'])
+    rec.add_quasi_static(cols, _times(mo['phi'].size))
     return np.column_stack([np.asarray(c, dtype=float) for c in cols])
 
 
@@ -70,9 +78,11 @@ def test_identities_of_the_row():
     np.testing.assert_allclose(rows[:, Column.ZU1], zu1, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(rows[:, Column.U1] - rows[:, Column.ZU1], mo['w'][:, 0],
                                rtol=1e-9, atol=1e-15)
+    # step 9 with the gravity moment: r = I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi)
+    mgh = VEHICLE.sprung_mass_kg * 9.80665 * VEHICLE.cg_height_m
     res = (VEHICLE.roll_inertia_kgm2 * mo['ddphi']
-           - s * np.cos(mo['phi']) * (mo['fb'][:, 0] - mo['fb'][:, 1]))
-    np.testing.assert_allclose(rows[:, Column.RESIDUAL], res, rtol=1e-12)
+           - s * np.cos(mo['phi']) * (mo['fb'][:, 0] - mo['fb'][:, 1]) - mgh * np.sin(mo['phi']))
+    np.testing.assert_allclose(rows[:, Column.RESIDUAL], res, rtol=1e-12, atol=1e-9)
 
 
 def test_one_lift_off_threshold_and_one_ltr_floor():
@@ -135,3 +145,43 @@ def test_a_tire_cannot_pull():
     np.testing.assert_array_equal(out[Column.FN1], [0.0, 0.5 * fc1, fc1])
     np.testing.assert_array_equal(out[Column.FN2], [fc2 + 1000.0, 0.0, fc2])
     np.testing.assert_array_equal(out[Column.LTR], [1.0, -1.0, (fc2 - fc1) / (fc1 + fc2)])
+
+
+def test_quasi_static_ltr_is_the_low_passed_loads_ratio():
+    # Step 8: the ratio of the loads (clipped at zero) through two first-order lags in
+    # cascade, -3 dB at observer.rollover_cutoff_frequency (written here).
+    rec = Reconstruction(VEHICLE, rollover_cutoff_hz=2.0)
+    fc1, fc2 = VEHICLE.static_load_n
+    t = np.arange(4000) * 1e-3
+    rng = np.random.default_rng(4)
+    fn1 = fc1 - 8000.0 * (t > 0.5) + 15000.0 * np.sin(2 * np.pi * 9.0 * t) + rng.normal(0, 2e3,
+                                                                                      t.size)
+    fn2 = fc2 + 8000.0 * (t > 0.5) - 15000.0 * np.sin(2 * np.pi * 9.0 * t)
+    rec.restart()
+    got = np.array([rec.quasi_static_ltr(a, b, d) for a, b, d in
+                    zip(fn1, fn2, np.r_[0.0, np.diff(t)])])
+    rate = 2 * np.pi * 2.0 / math.sqrt(math.sqrt(2) - 1)
+    e = math.exp(-1e-3 * rate)
+    ref = []
+    st = None
+    for a, b in zip(np.maximum(fn1, 0), np.maximum(fn2, 0)):
+        if st is None:
+            st = [a, a, b, b]
+        else:
+            st[0] = e * st[0] + (1 - e) * a
+            st[1] = e * st[1] + (1 - e) * st[0]
+            st[2] = e * st[2] + (1 - e) * b
+            st[3] = e * st[3] + (1 - e) * st[2]
+        ref.append((st[3] - st[1]) / (st[1] + st[3]))
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12)
+    # the 9 Hz wheel hop (LTR +-0.45 instantaneous) is damped ~9-fold (after the start's
+    # transient); the step passes
+    inst = (fn2 - fn1) / (fn1 + fn2)
+    assert np.abs(inst).max() > 0.4
+    assert np.abs(got[(t > 0.2) & (t < 0.5)]).max() < 0.07
+    assert got[-1] == pytest.approx(16000.0 / (fc1 + fc2), abs=0.03)
+    # -3 dB at the cutoff: the low-pass of a 2 Hz sine
+    rec.restart()
+    sine = 0.1 * np.sin(2 * np.pi * 2.0 * t)
+    out = np.array([rec.quasi_static_ltr(fc1 * (1 - a), fc2 * (1 + a), 1e-3) for a in sine])
+    assert np.abs(out[t > 2.0]).max() == pytest.approx(0.1 / math.sqrt(2), rel=0.01)

@@ -29,7 +29,7 @@ from road_force_estimator.ros.ros_parameters import ParameterError
 from ros_helpers import spin_until
 
 OUTPUTS = ['/wheel_load/left', '/wheel_load/right', '/road_profile/left', '/road_profile/right',
-           '/load_transfer_ratio', '/observer/states']
+           '/load_transfer_ratio', '/load_transfer', '/observer/states']
 STAMPED = [t for t in OUTPUTS if t != '/load_transfer_ratio']
 T0_NS = 1_700_000_000_000_000_000
 
@@ -79,6 +79,13 @@ def test_plant_to_observer_one_output_per_input_and_load_error(ros_context):
     assert {m.point.y for m in got['/road_profile/right']} == {-1.0}
     np.testing.assert_allclose([m.data for m in got['/load_transfer_ratio']], ref.ltr,
                                rtol=1e-12, atol=1e-15)
+    # /load_transfer: x = LTR, y = quasi-static LTR (MODEL.md step 8), z = 0, base_link
+    both = got['/load_transfer']
+    assert {m.header.frame_id for m in both} == {'base_link'}
+    np.testing.assert_allclose([[m.vector.x, m.vector.y, m.vector.z] for m in both],
+                               np.column_stack([ref.ltr, ref.ltr_quasi_static,
+                                                np.zeros(len(ref.ltr))]), rtol=1e-12,
+                               atol=1e-15)
     states = got['/observer/states']
     assert {tuple(m.name) for m in states} == {STATE_JOINTS}
     np.testing.assert_allclose([m.position for m in states], np.column_stack(

@@ -89,7 +89,7 @@ class TestOnline:
         bag = estimated['online'] / 'bag'
         got = {t: [] for t in ('/wheel_load/left', '/wheel_load/right', '/road_profile/left',
                                '/road_profile/right', '/load_transfer_ratio',
-                               '/observer/states')}
+                               '/load_transfer', '/observer/states')}
         stamps = {t: [] for t in got}
         for topic, log_ns, msg in bagio.iter_messages(bag, topics=list(got)):
             got[topic].append(msg)
@@ -107,6 +107,9 @@ class TestOnline:
             header = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in pts]
             assert header == d.stamps_ns.tolist()
         np.testing.assert_array_equal([m.data for m in got['/load_transfer_ratio']], ref.ltr)
+        np.testing.assert_array_equal([m.vector.x for m in got['/load_transfer']], ref.ltr)
+        np.testing.assert_array_equal([m.vector.y for m in got['/load_transfer']],
+                                      ref.ltr_quasi_static)
         states = got['/observer/states']
         assert list(states[0].name) == list(interfaces.STATE_JOINTS)
         pos = np.array([m.position for m in states])

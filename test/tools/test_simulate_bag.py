@@ -224,3 +224,28 @@ def test_installed_executable(tmp_path):
     bad = subprocess.run([str(EXE), '--road', 'flat', '--rate', '0', '--output',
                           str(tmp_path / 'e')], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 1 and bad.stderr.count('\n') == 1 and 'simulator.rate' in bad.stderr
+
+
+def test_speed_profile_brakes_stops_and_pulls_away(tmp_path, capsys):
+    # simulator.speed_profile (INTERFACES.md): a CSV time_s,speed_mps; /vehicle/twist, the
+    # distance and /fix follow it, and standing still the route does not move.
+    csv = tmp_path / 'speed.csv'
+    csv.write_text('time_s,speed_mps\n0,10\n1,10\n2,0\n3,0\n4,5\n')
+    code, _, err = run(['--road', 'flat:length=100', '--rate', 200, '--duration', 4,
+                        '--gnss-rate', 5, '-p', f'simulator.speed_profile:={csv}',
+                        '--output', tmp_path / 'd'], capsys)
+    assert code == 0, err
+    d = bagio.read_drive_bag(tmp_path / 'd')
+    t = (d.stamps_ns - d.stamps_ns[0]) * 1e-9
+    np.testing.assert_allclose(d.speed_mps, np.interp(t, [0, 1, 2, 3, 4], [10, 10, 0, 0, 5]),
+                               atol=1e-12)
+    f = d.fixes
+    ft = (f.stamps_ns - d.stamps_ns[0]) * 1e-9
+    still = (ft >= 2.0) & (ft <= 3.0)
+    assert still.sum() >= 5
+    assert np.ptp(f.latitude_deg[still]) == 0.0
+    # 10 m in the first second, 5 m braking, 2.5 m pulling away: 17.5 m north in all
+    lat = np.radians(f.latitude_deg[-1])
+    meridian = WGS84_A * (1 - WGS84_E2) / (1 - WGS84_E2 * np.sin(lat) ** 2) ** 1.5
+    travelled = np.radians(f.latitude_deg[-1] - f.latitude_deg[0]) * meridian
+    assert travelled == pytest.approx(17.5, rel=1e-3)
