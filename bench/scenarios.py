@@ -65,6 +65,9 @@ class Scenario:
     skip_s : convergence skip before scoring (s).
     speed_dropout : None or (start_s, length_s): the recorded speed reads 0 there while the
         truck drives on (a CAN speed drop-out; the truth and the deflections are the drive's).
+    speed_profile : None or ((time_s...), (speed_mps...)): the truck's speed varies (the
+        plant's ``simulator.speed_profile``, linearly interpolated; stops allowed), and the
+        recorded speed is that speed.
     """
 
     name: str
@@ -81,6 +84,7 @@ class Scenario:
     lateral_step_s: float = 10.0
     skip_s: float = 2.0
     speed_dropout: tuple | None = None
+    speed_profile: tuple | None = None
     description: str = ''
 
     @property
@@ -117,6 +121,11 @@ def _scenarios() -> tuple[Scenario, ...]:
         # (appended: the noise seeds of the scenarios above stay)
         replace(base, name='C20-speed-dropout', duration_s=30.0, speed_dropout=(10.0, 10.0),
                 description='recorded speed 0 for 10 s (10-20 s) while the truck drives on'),
+        replace(base, name='C20-stop', duration_s=34.0,
+                speed_profile=((0.0, 8.0, 12.0, 22.0, 26.0, 34.0),
+                               (20.0, 20.0, 0.0, 0.0, 20.0, 20.0)),
+                description='a consistent stop: braking at 5 m/s^2 to 0 (8-12 s), standing '
+                            '10 s, pulling away to 20 m/s (22-26 s)'),
     ]
     return tuple(replace(s, noise_seed=1 + i) for i, s in enumerate(out))
 
@@ -225,7 +234,8 @@ def build_drive(scenario: Scenario, *, noise_deflection_m: float | None = None,
 
     traj = simulate(plant_vehicle, road, speed_mps=scenario.speed_mps,
                     rate_hz=scenario.rate_hz, duration_s=duration,
-                    lateral_acceleration=lateral, tire_envelope_m=TIRE_ENVELOPE_M)
+                    lateral_acceleration=lateral, tire_envelope_m=TIRE_ENVELOPE_M,
+                    speed_profile=scenario.speed_profile)
     q_true = np.asarray(traj.q_m, dtype=float)
     roll_true = np.asarray(traj.roll_rad, dtype=float)
     sensor = SensorModel(deflection_std_m=noise, roll_std_rad=ROLL_NOISE_PER_DEFLECTION * noise,
@@ -244,6 +254,8 @@ def build_drive(scenario: Scenario, *, noise_deflection_m: float | None = None,
         'roll_rad': roll_true,
     }
     speed = np.full(n, scenario.speed_mps)
+    if scenario.speed_profile is not None:
+        speed = np.interp(t_s, *scenario.speed_profile)
     if scenario.speed_dropout is not None:
         start, length = scenario.speed_dropout
         speed[(t_s >= start) & (t_s < start + length)] = 0.0

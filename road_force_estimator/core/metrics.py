@@ -40,8 +40,9 @@ def profile_bandpass(distance_m, elevation_m, *, short_m: float = BAND_SHORT_M,
     Parameters
     ----------
     distance_m : array_like, shape (n,)
-        Distance (m), strictly increasing. Uneven spacing is resampled to the median spacing,
-        filtered and interpolated back.
+        Distance (m), non-decreasing. Uneven spacing is resampled to the median spacing,
+        filtered and interpolated back; at a repeated distance (the truck standing) the
+        moving samples are filtered and the standing ones read at their distance.
     elevation_m : array_like, shape (n,) or (n, k)
         Elevation(s) (m).
     short_m, long_m : float
@@ -69,8 +70,16 @@ def profile_bandpass(distance_m, elevation_m, *, short_m: float = BAND_SHORT_M,
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(z))):
         raise ValueError('distance_m and elevation_m must be finite')
     dx_all = np.diff(x)
-    if np.any(dx_all <= 0.0):
-        raise ValueError('distance_m must be strictly increasing')
+    if np.any(dx_all < 0.0):
+        raise ValueError('distance_m must be non-decreasing')
+    if np.any(dx_all == 0.0):  # a standstill repeats a distance: filter where the truck moves
+        keep = np.concatenate([[True], dx_all > 0.0])
+        moving = profile_bandpass(x[keep], z[keep], short_m=short_m, long_m=long_m,
+                                  order=order)
+        if z.ndim == 1:
+            return np.interp(x, x[keep], moving)
+        return np.column_stack([np.interp(x, x[keep], moving[:, i])
+                                for i in range(moving.shape[1])])
     dx = float(np.median(dx_all))
     if short_m < 4.0 * dx:
         raise ValueError(f'short_m = {short_m:g} m is under 4 grid spacings ({dx:g} m)')

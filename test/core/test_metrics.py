@@ -53,8 +53,8 @@ class TestBandpass:
                                    * [0, 1], atol=0.02)
 
     def test_bad_input(self):
-        with pytest.raises(ValueError, match='increasing'):
-            profile_bandpass([0.0, 1.0, 1.0, 2.0], np.zeros(4))
+        with pytest.raises(ValueError, match='non-decreasing'):   # a standstill is allowed
+            profile_bandpass([0.0, 1.0, 0.5, 2.0], np.zeros(4))
         with pytest.raises(ValueError, match='short_m'):
             profile_bandpass(np.arange(100.0), np.zeros(100))   # 1 m grid: 0.5 m unresolved
         with pytest.raises(ValueError, match='finite'):
@@ -136,3 +136,22 @@ class TestConvergenceTime:
         assert convergence_time(t, err, 1.0, window_s=40.0) == math.inf
         assert convergence_time(t, np.full(t.size, 2.0), 1.0, window_s=1.0) == math.inf
         assert convergence_time(t, np.zeros(t.size), 1.0, window_s=1.0) == 0.0
+
+
+def test_band_pass_through_a_standstill_reads_standing_samples_at_their_distance():
+    """A stop repeats a distance: the band-pass of the moving samples, read back at each
+    sample's distance (the same numbers as the moving samples alone)."""
+    x_moving = np.arange(0.0, 300.0, 0.02)
+    z_moving = 0.003 * np.sin(2 * np.pi * x_moving / 7.0)
+    stop = 5000                                       # 2000 samples standing at x[5000]
+    x = np.concatenate([x_moving[:stop + 1], np.full(2000, x_moving[stop]),
+                        x_moving[stop + 1:]])
+    z = np.concatenate([z_moving[:stop + 1], np.full(2000, z_moving[stop]),
+                        z_moving[stop + 1:]])
+    alone = profile_bandpass(x_moving, z_moving)
+    got = profile_bandpass(x, z)
+    np.testing.assert_array_equal(got[:stop + 1], alone[:stop + 1])
+    np.testing.assert_array_equal(got[stop + 1:stop + 2001], alone[stop])
+    np.testing.assert_array_equal(got[stop + 2001:], alone[stop + 1:])
+    with pytest.raises(ValueError, match='non-decreasing'):
+        profile_bandpass(x[::-1], z)
