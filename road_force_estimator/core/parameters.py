@@ -21,8 +21,8 @@ import yaml
 __all__ = [
     'ParameterSpec', 'PARAMETERS', 'SPECS', 'GRAVITY_MPS2',
     'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
-    'validate_parameter', 'parse_override', 'load_params_file', 'read_params_document',
-    'defaults', 'MAX_PARAMS_FILE_BYTES',
+    'validate_parameter', 'check_spec', 'parse_override', 'load_params_file',
+    'read_params_document', 'defaults', 'MAX_PARAMS_FILE_BYTES',
 ]
 
 GRAVITY_MPS2 = 9.80665
@@ -150,7 +150,20 @@ def validate_parameter(name: str, value: Any) -> Any:
     spec = SPECS.get(name)
     if spec is None:
         raise ValueError(f'unknown parameter {name!r}')
-    bad = f'{name} = {value!r}'
+    return check_spec(spec, value)
+
+
+def check_spec(spec: ParameterSpec, value: Any) -> Any:
+    """Return ``value`` checked and normalised for ``spec`` (kinds 'string', 'integer',
+    'double', 'double_pair'): the one rule for the shared table and the nodes' own
+    parameters.
+
+    Raises
+    ------
+    ValueError
+        Wrong type or out of range; the message names the parameter, the value and the range.
+    """
+    bad = f'{spec.name} = {value!r}'
     if spec.kind == 'string':
         if not isinstance(value, str):
             raise ValueError(f'{bad}: expected a string ({spec.range_text()})')
@@ -167,7 +180,9 @@ def validate_parameter(name: str, value: Any) -> Any:
         if isinstance(value, (str, bytes)) or not hasattr(value, '__len__') or len(value) != 2:
             raise ValueError(f'{bad}: expected [left, right], each in {spec.range_text()}')
         return tuple(_check_double(spec, v, bad) for v in value)
-    return _check_double(spec, value, bad)
+    if spec.kind == 'double':
+        return _check_double(spec, value, bad)
+    raise ValueError(f'{bad}: unsupported parameter kind {spec.kind!r}')
 
 
 def _check_double(spec: ParameterSpec, value: Any, bad: str) -> float:

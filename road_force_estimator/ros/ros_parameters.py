@@ -38,7 +38,7 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from road_force_estimator.core.parameters import (
-    PARAMETERS, SPECS, ParameterSpec, validate_parameter)
+    PARAMETERS, SPECS, ParameterSpec, check_spec)
 
 __all__ = [
     'ParameterError', 'NODE_LOCAL_NAMES', 'local_spec', 'specs_with_prefix', 'descriptor',
@@ -160,8 +160,6 @@ def check_value(spec: ParameterSpec, value: Any) -> Any:
         Wrong type or out of range; the message names the parameter, the value and the range.
     """
     value = _coerce(spec, value)
-    if SPECS.get(spec.name) == spec:
-        return validate_parameter(spec.name, value)
     bad = f'{spec.name} = {value!r}'
     if spec.kind == 'string_list':
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
@@ -171,25 +169,7 @@ def check_value(spec: ParameterSpec, value: Any) -> Any:
         if not isinstance(value, bool):
             raise ValueError(f'{bad}: expected true or false')
         return value
-    if spec.kind in ('double', 'integer', 'string'):
-        return _check_scalar(spec, value, bad)
-    raise ValueError(f'{bad}: unsupported parameter kind {spec.kind!r}')
-
-
-def _check_scalar(spec: ParameterSpec, value: Any, bad: str) -> Any:
-    if spec.kind == 'string':
-        if not isinstance(value, str):
-            raise ValueError(f'{bad}: expected a string ({spec.range_text()})')
-        if spec.choices and value not in spec.choices:
-            raise ValueError(f'{bad}: must be {spec.range_text()}')
-        return value
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-            spec.kind == 'integer' and not isinstance(value, int)):
-        word = 'an integer' if spec.kind == 'integer' else 'a number'
-        raise ValueError(f'{bad}: expected {word} in {spec.range_text()}')
-    if not (math.isfinite(value) and spec.low <= value <= spec.high):
-        raise ValueError(f'{bad} is out of range {spec.range_text()}')
-    return int(value) if spec.kind == 'integer' else float(value)
+    return check_spec(spec, value)
 
 
 def _ros_value(spec: ParameterSpec, value: Any):

@@ -171,7 +171,27 @@ def _staging(target: Path, parent: Path, prefix: str, made: list[Path]) -> Itera
             shutil.rmtree(stage, ignore_errors=True)
 
 
-class BagOutput:
+class _OneOutput:
+    """One path a command writes (a bag folder or a file): ``owned`` says whether an existing
+    one is the command's own; the inputs are never replaced."""
+
+    def __init__(self, path: str | Path, prog: str, *, force: bool, owned: Callable,
+                 inputs: Sequence = ()) -> None:
+        self.path, self.prog, self.force = Path(path), prog, force
+        self.owned, self.inputs = owned, list(inputs)
+
+    def _exists(self) -> bool:
+        """Refuse an input as the output; True when an existing output must be vetted
+        (``--force`` given), False when there is nothing there."""
+        check_not_input([self.path], self.inputs, self.prog)
+        return _refuse_existing(self.path, self.force)
+
+    def _not_ours(self) -> OutputError:
+        return OutputError(f'{self.path} was not written by {self.prog}: --force replaces '
+                           f'only what {self.prog} wrote; not replacing it')
+
+
+class BagOutput(_OneOutput):
     """A bag folder a command writes (``simulate_bag``, ``profile_to_bag``).
 
     Parameters
@@ -188,23 +208,16 @@ class BagOutput:
         What the command reads (never replaced).
     """
 
-    def __init__(self, path: str | Path, prog: str, *, force: bool,
-                 owned: Callable[[dict[str, str]], bool], inputs: Sequence = ()) -> None:
-        self.path, self.prog, self.force = Path(path), prog, force
-        self.owned, self.inputs = owned, list(inputs)
-
     def check(self) -> None:
         """Raise :class:`OutputError` unless the bag may be written (or replaced)."""
         path = self.path
-        check_not_input([path], self.inputs, self.prog)
-        if not _refuse_existing(path, self.force):
+        if not self._exists():
             return
         if path.is_symlink() or not path.is_dir():
             raise OutputError(f'{path} exists and is not a folder: not replacing it')
         found = bag_metadata(path)
         if found is None or not self.owned(found[0]):
-            raise OutputError(f'{path} was not written by {self.prog}: --force replaces only '
-                              f'what {self.prog} wrote; not replacing it')
+            raise self._not_ours()
         allowed = {'metadata.yaml', *found[1]}
         extra = sorted(p.name for p in path.iterdir()
                        if p.name not in allowed or p.is_symlink() or not p.is_file())
@@ -223,26 +236,19 @@ class BagOutput:
             _install([(stage / self.path.name, self.path)], stage)
 
 
-class FileOutput:
+class FileOutput(_OneOutput):
     """A file a command writes (``profile_to_bag``'s CSV); ``owned(path) -> bool`` says an
     existing file is one the command wrote."""
-
-    def __init__(self, path: str | Path, prog: str, *, force: bool,
-                 owned: Callable[[Path], bool], inputs: Sequence = ()) -> None:
-        self.path, self.prog, self.force = Path(path), prog, force
-        self.owned, self.inputs = owned, list(inputs)
 
     def check(self) -> None:
         """Raise :class:`OutputError` unless the file may be written (or replaced)."""
         path = self.path
-        check_not_input([path], self.inputs, self.prog)
-        if not _refuse_existing(path, self.force):
+        if not self._exists():
             return
         if path.is_symlink() or not path.is_file():
             raise OutputError(f'{path} exists and is not a file: not replacing it')
         if not self.owned(path):
-            raise OutputError(f'{path} was not written by {self.prog}: --force replaces only '
-                              f'what {self.prog} wrote; not replacing it')
+            raise self._not_ours()
 
     @contextmanager
     def staged(self) -> Iterator[Path]:
