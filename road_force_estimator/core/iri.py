@@ -27,7 +27,7 @@ Roughness Index from longitudinal road profile", Transportation Research Record 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import expm
@@ -37,8 +37,8 @@ from road_force_estimator.core.segments import segment_bounds
 
 __all__ = [
     'GOLDEN_K1', 'GOLDEN_K2', 'GOLDEN_C', 'GOLDEN_MU', 'IRI_SPEED_MPS', 'BASE_LENGTH_M',
-    'INIT_LENGTH_M', 'RectifiedSlope', 'golden_car_matrices', 'rectified_slope', 'iri',
-    'iri_segments', 'interval_counts', 'iri_table',
+    'INIT_LENGTH_M', 'RectifiedSlope', 'golden_car_matrices', 'rectified_slope',
+    'filtered_slope', 'iri', 'iri_segments', 'interval_counts', 'iri_table',
 ]
 
 #: Golden quarter-car, normalised by the sprung mass (ASTM E1926).
@@ -187,6 +187,19 @@ def rectified_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
     recursion runs on the decoupled modes of ST (first-order filters), which keeps its
     accuracy when dx is small and ST is close to the identity.
     """
+    out = filtered_slope(distance_m, elevation_m, dx_m=dx_m)
+    return replace(out, slope=np.abs(out.slope))
+
+
+def filtered_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
+                   dx_m: float | None = None) -> RectifiedSlope:
+    """The IRI filter's signed output: the golden quarter-car's ``(z_s' - z_u') / V``.
+
+    What :func:`rectified_slope` rectifies (same arguments, same intervals, same
+    initialisation): the slope of each interval with its sign (m/m, positive when the sprung
+    mass rises faster than the axle). The IRI filter of profile comparisons (the cross
+    correlation of :mod:`road_force_estimator.core.profile_correlation`) is this signal.
+    """
     z = np.asarray(elevation_m, dtype=float)
     if z.ndim != 1:
         raise ValueError(f'elevation_m shape {z.shape}: one track (n,) expected')
@@ -214,7 +227,7 @@ def rectified_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
         eta, _ = lfilter([beta[j]], [1.0, -lam[j]], slope, zi=[lam[j] * eta0[j]])
         rel += (2.0 if lam[j].imag > 0.0 else 1.0) * (out[j] * eta).real
     position = x[0] + dx * (np.arange(slope.size) + 0.5)
-    return RectifiedSlope(position_m=position, slope=np.abs(rel.real), dx_m=dx, base_samples=k)
+    return RectifiedSlope(position_m=position, slope=rel.real, dx_m=dx, base_samples=k)
 
 
 def iri(distance_m: np.ndarray, elevation_m: np.ndarray, *,
