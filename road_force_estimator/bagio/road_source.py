@@ -23,8 +23,8 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     source : str
         A bag folder holding ``metadata.yaml`` (an LPA bag), or any source of
         :func:`road_force_estimator.core.road_files.road_from_source`
-        (``iso8608:<A-H>[:option=value...]``, ``flat[...]``, a ``.csv``, ``.erd``, ``.txt`` /
-        ``.dat`` file).
+        (``iso8608:<A-H>[:option=value...]``, ``flat[...]``, ``jpcp[...]``, a ``.csv``,
+        ``.erd``, ``.txt`` / ``.dat`` file).
     length_m : float, optional
         Length of a synthetic road when the source gives none (default 1000 m); ignored for
         files and bags.
@@ -38,7 +38,7 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     """
     text = str(source).strip()
     head = text.split(':', 1)[0].lower()
-    if head not in ('iso8608', 'flat'):
+    if head not in ('iso8608', 'flat', 'jpcp'):
         path = Path(text).expanduser()
         if path.is_dir() and (path / 'metadata.yaml').is_file():
             return read_lpa_bag(path)

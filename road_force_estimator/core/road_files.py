@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from road_force_estimator.core.road import RoadProfile, synthetic_profile
+from road_force_estimator.core.road_jpcp import jpcp_from_source
 from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
 
 __all__ = [
@@ -422,7 +423,9 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     source : str
         ``iso8608:<A-H>[:option=value...]`` with options ``seed`` (int, default 1), ``length``
         (m), ``dx`` (m, default 0.05), ``coherence`` (default, identical, independent or a
-        number), ``start`` (m); or ``flat[:length=..][:dx=..]``; or a path: ``.csv``,
+        number), ``start`` (m); or ``flat[:length=..][:dx=..]``; or a jointed concrete road
+        ``jpcp[:joint_spacing=..][:faulting=..][:curl=..][:roughness=..][:seed=..]``
+        (:mod:`road_force_estimator.core.road_jpcp`); or a path: ``.csv``,
         ``.erd``, ``.txt`` / ``.dat`` (whitespace columns). A bag folder (holding
         ``metadata.yaml``) is refused: :func:`road_force_estimator.bagio.road_from_source`
         reads LPA bags and every source of this function.
@@ -439,6 +442,8 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     head = text.split(':', 1)[0].lower()
     if head in ('iso8608', 'flat'):
         return synthetic_profile(text, length_m)
+    if head == 'jpcp':
+        return jpcp_from_source(text, length_m)
     path = Path(text).expanduser()
     if path.is_dir():
         if not (path / 'metadata.yaml').is_file():
@@ -446,8 +451,8 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
         raise ValueError(f'road source {text!r} is a bag folder: read it with '
                          'road_force_estimator.bagio.road_from_source')
     if not path.exists():
-        raise ValueError(f'road source {text!r}: no such file, and not "iso8608:<class>" or '
-                         f'"flat"')
+        raise ValueError(f'road source {text!r}: no such file, and not "iso8608:<class>", '
+                         f'"jpcp[...]" or "flat"')
     suffix = path.suffix.lower()
     if suffix == '.csv':
         return read_csv_profile(path)
