@@ -54,7 +54,9 @@ class Scenario:
     Attributes
     ----------
     name : short identifier used in the tables.
-    road : ISO 8608 class 'A'..'H', or 'profile_1' (../shared/data/profile_1.txt).
+    road : ISO 8608 class 'A'..'H', 'profile_1' (../shared/data/profile_1.txt), or 'jpcp' (a
+        jointed concrete road, :func:`road_force_estimator.core.road_jpcp.jpcp_profile` with
+        its defaults and ``road_seed``).
     road_seed : seed of the synthetic road.
     speed_mps, rate_hz, duration_s : drive (duration clipped to the road's length).
     noise_deflection_m : std of the deflection noise (m); roll noise follows (module notes).
@@ -126,6 +128,9 @@ def _scenarios() -> tuple[Scenario, ...]:
                                (20.0, 20.0, 0.0, 0.0, 20.0, 20.0)),
                 description='a consistent stop: braking at 5 m/s^2 to 0 (8-12 s), standing '
                             '10 s, pulling away to 20 m/s (22-26 s)'),
+        replace(base, name='jpcp', road='jpcp',
+                description='jointed concrete (jpcp:seed=1): 4.6 m slabs, joints faulted '
+                            '1-3 mm, curl 1 mm, ISO A underneath'),
     ]
     return tuple(replace(s, noise_seed=1 + i) for i, s in enumerate(out))
 
@@ -204,6 +209,10 @@ def _road(scenario: Scenario, length_m: float):
         sos = signal.butter(2, 1.0 / 100.0, btype='highpass', fs=1.0 / dx, output='sos')
         z = signal.sosfiltfilt(sos, z, axis=0)
         prof = road_mod.RoadProfile(x, z, name='profile_1 (detrended, high-passed 100 m)')
+    elif scenario.road == 'jpcp':
+        from road_force_estimator.core.road_jpcp import jpcp_profile
+
+        prof = jpcp_profile(length_m, seed=scenario.road_seed)
     else:
         prof = road_mod.iso8608_profile(scenario.road, length_m, seed=scenario.road_seed)
     if scenario.event is not None:
@@ -276,6 +285,25 @@ def _combined(stats) -> tuple[float, float]:
     return rms, ref
 
 
+def _xcorr_figures(x: np.ndarray, road_est: np.ndarray, road_true: np.ndarray,
+                   segment_m: float) -> dict[str, float]:
+    """``xcorr`` and ``xcorr_seg_min``: both profiles through the IRI filter from the skip on
+    (the same start, so the same initial transient), judged from 30 m after it (:func:`score`).
+    NaN when the estimate is not finite or the stretch is too short."""
+    from road_force_estimator.core import profile_correlation as pc
+
+    start = float(x[0]) + PROFILE_BAND_M[1]
+    if not np.all(np.isfinite(road_est)) or x[-1] - start < 0.5 * segment_m:
+        return {'xcorr': math.nan, 'xcorr_seg_min': math.nan}
+    whole, seg = [], []
+    for side in (0, 1):
+        res = pc.segment_correlation(x, road_est[:, side], x, road_true[:, side],
+                                     segment_length_m=segment_m, start_m=start)
+        whole.append(res.whole.rating)
+        seg += [c.rating for c in res.segments]
+    return {'xcorr': float(min(whole)), 'xcorr_seg_min': float(np.nanmin(seg))}
+
+
 def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[str, float]:
     """Error figures of a peer's (or the estimator's) result against the truth.
 
@@ -291,10 +319,13 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         (% of the static load), ``load_rms_n``, ``load_peak_n``; ``profile_rms_pct_band``
         (0.5-30 m band, % of the band-passed true profile's RMS); ``iri_err_pct_mean`` and
         ``iri_err_pct_max`` (|IRI error| per 100 m segment of the scored stretch, % of the true
-        segment IRI, both wheels); ``ltr_rms``, ``ltr_peak``; ``convergence_s`` (start-up:
-        time after which the 100 ms trailing RMS of the load error stays below max(2 x its
-        scored RMS, 1 % of the static load) until skip + 3 s, before any scripted event; inf
-        if it is still above then).
+        segment IRI, both wheels); ``xcorr`` and ``xcorr_seg_min`` (the IRI-filtered cross
+        correlation of ProVAL, :mod:`road_force_estimator.core.profile_correlation`, at the
+        samples' true distance: the lower wheel's rating over the stretch from 30 m after the
+        skip, and the lowest rating of its 100 m segments, both wheels); ``ltr_rms``,
+        ``ltr_peak``; ``convergence_s`` (start-up: time after which the 100 ms trailing RMS of
+        the load error stays below max(2 x its scored RMS, 1 % of the static load) until
+        skip + 3 s, before any scripted event; inf if it is still above then).
     """
     from road_force_estimator.core import iri as iri_mod
     from road_force_estimator.core import metrics
@@ -338,6 +369,7 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         out['iri_err_pct_max'] = float(np.nanmax(rel))
     else:
         out['iri_err_pct_mean'] = out['iri_err_pct_max'] = math.nan
+    out.update(_xcorr_figures(x[k0:], road_est[k0:], t['road_m'][k0:], iri_segment_m))
     ls = metrics.ltr_stats(np.asarray(result.ltr, dtype=float), t['ltr'], mask=mask)
     out['ltr_rms'] = ls['rms_error']
     out['ltr_peak'] = ls['peak_error']

@@ -63,7 +63,7 @@ def test_one_tiny_scenario_end_to_end(tmp_path, capsys):
         assert 'error' not in fig, fig
         assert 0.0 < fig['load_rms_pct_dyn'] < 100.0
         assert math.isfinite(fig['profile_rms_pct_band'])
-    assert len(doc['targets']) == 6
+    assert len(doc['targets']) == 7
 
 
 class TestScoringAndColumns:
@@ -87,6 +87,8 @@ class TestScoringAndColumns:
         for key in ('load_rms_pct_dyn', 'load_rms_pct_static', 'profile_rms_pct_band',
                     'iri_err_pct_mean', 'iri_err_pct_max', 'ltr_rms'):
             assert fig[key] == pytest.approx(0.0, abs=1e-9), key
+        for key in ('xcorr', 'xcorr_seg_min'):       # a profile rates 1 against itself
+            assert fig[key] == pytest.approx(1.0, abs=1e-9), key
 
     def test_an_unavailable_column_shows_na_and_its_reason(self, truth_run):
         out, methods = truth_run
@@ -124,3 +126,18 @@ def test_zero_latency_verdict_follows_the_numbers():
     assert 'NOT MET' in line and 'C20-1k-10um (17.0 vs 16.0)' in line
     methods = [rb.METHODS[n] for n in ('kf-model', 'ours-online')]
     assert 'C20-1k-10um (17.0 vs kf-model 16.0)' in rb.losses(bad, scs, methods)[0]
+
+
+def test_cross_correlation_verdict_follows_the_numbers():
+    scs = [scenario_by_name('C20-1k-10um'), scenario_by_name('jpcp')]
+
+    def table(off, lag):
+        return {'results': {sc.name: {'ours-offline': {'xcorr': o, 'xcorr_seg_min': o - 0.01},
+                                      'ours-latency-10ms': {'xcorr': g, 'xcorr_seg_min': g}}
+                            for sc, o, g in zip(scs, off, lag)}}
+
+    line = rb._xcorr_target(table([0.995, 0.991], [0.985, 0.99]), [s.name for s in scs])
+    assert ': MET:' in line
+    line = rb._xcorr_target(table([0.995, 0.95], [0.985, 0.99]), [s.name for s in scs])
+    assert 'NOT MET' in line and 'worst jpcp: 0.950' in line and 'segment 0.940' in line
+    assert 'NOT MEASURED' in rb._xcorr_target({'results': {}}, [s.name for s in scs])

@@ -39,8 +39,8 @@ import numpy as np
 from road_force_estimator.core.iri import filtered_slope
 from road_force_estimator.core.segments import segment_bounds
 
-__all__ = ['MAX_LAG_M', 'MIN_GRID_M', 'Correlation', 'iri_filter', 'rating_at_lags',
-           'cross_correlation', 'segment_correlation']
+__all__ = ['MAX_LAG_M', 'MIN_GRID_M', 'Correlation', 'SegmentCorrelations', 'iri_filter',
+           'rating_at_lags', 'cross_correlation', 'segment_correlation']
 
 #: Offset search window (m): +-1 m (issue 21).
 MAX_LAG_M = 1.0
@@ -187,18 +187,28 @@ def cross_correlation(distance_m, elevation_m, reference_distance_m, reference_e
     return _best(p, q, shift, float(grid[1] - grid[0]))
 
 
+@dataclass(frozen=True)
+class SegmentCorrelations:
+    """The rating of a drive and of its segments (:func:`segment_correlation`)."""
+
+    whole: Correlation                #: over the whole judged window
+    edges_m: np.ndarray               #: segment edges (m), (k + 1,)
+    segments: tuple[Correlation, ...]  #: per segment, (k,)
+
+
 def segment_correlation(distance_m, elevation_m, reference_distance_m,
                         reference_elevation_m, edges_m=None, *,
                         segment_length_m: float = 100.0, max_lag_m: float = MAX_LAG_M,
                         start_m: float | None = None, end_m: float | None = None
-                        ) -> tuple[np.ndarray, list[Correlation]]:
-    """The cross correlation per segment: ``(edges_m, [Correlation per segment])``.
+                        ) -> SegmentCorrelations:
+    """The cross correlation of the whole window and per segment.
 
-    Both profiles are filtered once over their whole length; each segment (in the reference's
-    distance) is rated with its own offset search. Segments as
+    Both profiles are filtered once over their whole length; the window and each segment (in
+    the reference's distance) are rated with their own offset search. Segments as
     :func:`road_force_estimator.core.segments.segment_bounds` cuts the judged window (a
     remainder under half a segment joins the one before) unless ``edges_m`` are given (they
-    are clipped to the judged window; a segment left with under 2 grid points is NaN).
+    are clipped to the judged window; a segment left with under 2 grid points is NaN). Other
+    arguments as :func:`cross_correlation`.
     """
     if not (max_lag_m >= 0.0 and math.isfinite(max_lag_m)):
         raise ValueError(f'max_lag_m = {max_lag_m!r}: must be >= 0')
@@ -208,10 +218,12 @@ def segment_correlation(distance_m, elevation_m, reference_distance_m,
     edges = (segment_bounds(lo, hi, segment_length_m) if edges_m is None
              else np.asarray(edges_m, dtype=float))
     p, q, shift, grid = _common_grid(xp, fp, dxp, xq, fq, dxq, lo, hi, max_lag_m)
-    dx = float(grid[1] - grid[0]) if grid.size > 1 else 0.0
+    if grid.size < 2:
+        return SegmentCorrelations(_NAN, edges, (_NAN,) * (edges.size - 1))
+    dx = float(grid[1] - grid[0])
     idx = np.searchsorted(grid, np.clip(edges, lo, hi), side='left')
     idx[-1] = grid.size if edges[-1] >= hi else idx[-1]
     idx = np.maximum.accumulate(idx)
-    out = [_best(p[a:b + 2 * shift], q[a:b], shift, dx) if b - a >= 2 else _NAN
-           for a, b in zip(idx[:-1].tolist(), idx[1:].tolist())]
-    return edges, out
+    out = tuple(_best(p[a:b + 2 * shift], q[a:b], shift, dx) if b - a >= 2 else _NAN
+                for a, b in zip(idx[:-1].tolist(), idx[1:].tolist()))
+    return SegmentCorrelations(_best(p, q, shift, dx), edges, out)

@@ -101,7 +101,9 @@ def test_different_sample_intervals_are_compared_on_one_grid(road):
 
 def test_segments_each_find_their_offset(road):
     x, z = road
-    edges, segs = segment_correlation(x - 0.3, z, x, z, segment_length_m=100.0)
+    res = segment_correlation(x - 0.3, z, x, z, segment_length_m=100.0)
+    edges, segs = res.edges_m, res.segments
+    assert res.whole == cross_correlation(x - 0.3, z, x, z)
     assert np.all(np.diff(edges) > 0)
     assert len(segs) == edges.size - 1 >= 7
     for s in segs:
@@ -116,7 +118,7 @@ def test_a_distance_scale_error_drops_the_rating(road):
     x, z = road
     whole = cross_correlation(1.01 * x, z, x, z)
     assert whole.rating < 0.5
-    edges, segs = segment_correlation(1.01 * x, z, x, z, edges_m=[10.0, 40.0, 500.0, 600.0])
+    segs = segment_correlation(1.01 * x, z, x, z, edges_m=[10.0, 40.0, 500.0, 600.0]).segments
     assert segs[0].rating > 0.9
     assert segs[2].rating < 0.5
 
