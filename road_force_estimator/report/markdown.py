@@ -284,6 +284,12 @@ def _accuracy_section(s: dict[str, Any]) -> list[str]:
                 f'{_fmt(acc["profile_rms_pct_band"][0])} | '
                 f'{_fmt(acc["profile_rms_pct_band"][1])} | '
                 f'{_fmt(acc["profile_rms_pct_band_both"])} |']
+        if 'profile_xcorr' in acc:
+            lines.append(
+                f'| profile cross correlation, IRI-filtered (ProVAL; 1 = identical), lowest '
+                f'segment in "both" | {_fmt(acc["profile_xcorr"][0], 3)} | '
+                f'{_fmt(acc["profile_xcorr"][1], 3)} | '
+                f'{_fmt(acc["profile_xcorr_segment_min"], 3)} |')
         if s.get('judged_from') == 'settling time':
             lines += ['', 'The estimator never reported convergence: samples are judged from '
                       f'its settling time ({_fmt(s["settling_time_s"], 3)} s) on.']
@@ -299,6 +305,13 @@ def _judged_text(acc: dict[str, Any]) -> str:
     if 'profile_samples_judged' in acc:
         parts.append(f'{acc["profile_samples_judged"]} profile samples against the '
                      f'{acc["profile_against"]}, 30 m in from each end')
+    if 'profile_xcorr' in acc:
+        where = ('the distance truly travelled' if acc['profile_xcorr_distance'] == 'true'
+                 else "the estimate's distance")
+        parts.append('the cross correlation from 30 m after the first converged sample, the '
+                     f'truth at {where}, the estimate at its own (best offsets '
+                     + ' / '.join(f'{_fmt(v, 2)}' for v in acc['profile_xcorr_lag_m'])
+                     + ' m)')
     text = 'Judged on ' + ' and '.join(parts) + '.'
     if 'samples_judged' not in acc:
         text += (' Loads and LTR are not judged: the bag has no ground truth of the loads '

@@ -20,6 +20,7 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.core.segments import SEGMENT_COLUMNS, segment_table
 from road_force_estimator.report import drive_info
 from road_force_estimator.report.alignment import Aligned, align
+from road_force_estimator.report.correlation import correlation_figures
 
 __all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'CONVERGENCE_HOLD_S',
            'accuracy', 'drive_segments', 'summarize', 'convergence']
@@ -55,7 +56,8 @@ def accuracy(est, al: Aligned, vehicle: VehicleParameters) -> dict[str, Any] | N
         ``ltr_rms_error``, ``ltr_peak_error``, ``max_abs_ltr``, ``max_abs_ltr_true``; profile
         (when a truth or reference profile exists and the drive is long enough):
         ``profile_samples_judged``, ``profile_rms_m``, ``profile_rms_pct_band`` (per wheel),
-        ``profile_rms_pct_band_both``, ``profile_against``.
+        ``profile_rms_pct_band_both``, ``profile_against``; the IRI-filtered cross
+        correlation is added by :func:`summarize` (:mod:`.correlation`).
     """
     out: dict[str, Any] = {}
     static = np.asarray(vehicle.static_load_n, dtype=float)
@@ -296,6 +298,11 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
+    if summary['accuracy'] is not None:
+        edges = (np.concatenate([segments['start_m'], segments['end_m'][-1:]])
+                 if len(segments['start_m']) else None)
+        summary['accuracy'].update(correlation_figures(
+            est, al, drive, edges, segment_length_m=segment_length_m))
     summary.update(_segment_counts(segments))
     summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
     summary['convergence'] = _convergence_summary(summary)
