@@ -6,8 +6,8 @@
                  [--tire-envelope M] [--gnss-rate HZ] [--lateral-acceleration A[@T]]
                  [--no-ground-truth] [--force] [--no-progress]
 
-SOURCE is a road spec (``iso8608:C:seed=1``, ``flat``) or a path to an LPA bag, CSV or ERD
-profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
+SOURCE is a road spec (``iso8608:C:seed=1``, ``jpcp:seed=1``, ``flat``) or a path to an LPA
+bag, CSV or ERD profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
 (:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
 runs at the rate for the duration, or to the end of the road; the sensors
 (:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
@@ -70,7 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
                 epilog='Values: defaults < --params-file < -p NAME:=VALUE < command-line '
                        'options.')
     p.add_argument('--road', metavar='SOURCE',
-                   help='road: iso8608:<A-H>[:seed=N], flat, or an LPA bag / CSV / ERD path'
+                   help='road: iso8608:<A-H>[:seed=N], jpcp[:seed=N] (jointed concrete), flat, '
+                        'or an LPA bag / CSV / ERD path'
                         + dflt('road'))
     p.add_argument('--speed', type=float, metavar='V', help='speed, m/s' + dflt('speed'))
     p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz' + dflt('rate'))
