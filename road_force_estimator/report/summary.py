@@ -298,15 +298,22 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
-    if summary['accuracy'] is not None:
-        edges = (np.concatenate([segments['start_m'], segments['end_m'][-1:]])
-                 if len(segments['start_m']) else None)
-        summary['accuracy'].update(correlation_figures(
-            est, al, drive, edges, segment_length_m=segment_length_m))
+    _add_correlation(summary['accuracy'], est, al, drive, segments, segment_length_m)
     summary.update(_segment_counts(segments))
     summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
     summary['convergence'] = _convergence_summary(summary)
     return summary, segments, al
+
+
+def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segments: dict,
+                     segment_length_m: float) -> None:
+    """The IRI-filtered cross correlation (:mod:`.correlation`) into the accuracy figures, on
+    the report's segments."""
+    if acc is None:
+        return
+    edges = (np.concatenate([segments['start_m'], segments['end_m'][-1:]])
+             if len(segments['start_m']) else None)
+    acc.update(correlation_figures(est, al, drive, edges, segment_length_m=segment_length_m))
 
 
 def _notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
