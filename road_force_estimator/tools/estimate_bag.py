@@ -249,7 +249,7 @@ def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, st
     if mode == 'online':
         est = estimate_online(*args, progress=progress)
     else:
-        est = estimate_recording(*args)
+        est = estimate_recording(*args, fixes=drive.fixes)
     if est.status.accepted == 0:
         raise InputError(f'{input_path}: no sample could be estimated: '
                          f'{_why_none_estimated(drive, speed, est.status)}')
@@ -297,6 +297,10 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
+    fit = getattr(est, 'odometer', None)          # observer.odometer_fusion = gnss, offline
+    if fit is not None:
+        counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
+                      odometer_fixes_rejected=fit.rejected)
     folder.mkdir(parents=True, exist_ok=True)
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,

@@ -1,0 +1,302 @@
+"""The travelled distance fused from the speed and GNSS: the odometer scale, estimated.
+
+A wheel-speed odometer's scale drifts 1-3 % with tire wear and pressure, and the profile's
+distance (MODEL.md step 7, ``x = integral of v dt``) with it: every 100 m segment moves by
+metres per kilometre. The fixes (``/fix``) measure the route; the speed integral ``x`` (m, the
+odometer) measures the distance along it up to a scale ``k`` (true metres per odometer metre;
+the speed reads high by ``1 / k - 1``).
+
+:func:`fit_odometer` runs an extended Kalman filter over the fixes with the state
+``[east, north, theta, kappa, k]`` (m on the plane tangent at the first fix,
+:func:`~.core.gnss.local_east_north`; heading theta counter-clockwise from east, rad;
+curvature kappa, 1/m; scale k). Between two fixes the odometer advances by ``d >= 0`` and the
+vehicle by ``s = k d`` along an arc of constant curvature::
+
+    theta_m = theta + kappa s / 2
+    east += s cos(theta_m),  north += s sin(theta_m),  theta += kappa s
+
+(exact on a circle), with random walks per metre travelled (:data:`PROCESS_STD`: position,
+heading, curvature, and the slow drift of the scale). A fix measures ``[east, north]`` with the
+standard deviation ``sigma`` estimated from the fixes themselves (:func:`fix_noise_m`). A fix
+whose innovation has a squared Mahalanobis distance above :data:`GATE` (chi-square, 2 degrees
+of freedom, p = 1e-6) is rejected and counted; when every fix over :data:`RESET_AFTER_M` of
+odometer distance is rejected, the position restarts at the next fix (counted: ``resets``).
+A gap in the fixes only makes ``d`` longer; at a standstill (``d = 0``) nothing moves and no
+uncertainty grows. The forward pass gives the causal scale at each fix (what an onboard filter
+would know then); the Rauch-Tung-Striebel smoother (Rauch, Tung, Striebel 1965), backward over
+each stretch between restarts, the offline one.
+
+:func:`scale_at` gives the scale at any stamps; the offline estimate (:func:`.offline.
+estimate_recording` with ``observer.odometer_fusion = gnss``) multiplies the speed by it, so
+its distance is ``integral of k v dt`` and every profile point and segment boundary follows.
+
+This module imports numpy only (core, estimation).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from road_force_estimator.core.gnss import local_east_north
+from road_force_estimator.estimation.reconstruction import distance_m
+
+__all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', 'INIT_BASE_M',
+           'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at']
+
+#: Random-walk standard deviations per square root of metre travelled: position (m), heading
+#: (rad), curvature (1/m), scale (1): model errors, a road's changing bends, the scale's drift
+#: (1e-6: 1e-4 over 10 km).
+PROCESS_STD = (0.01, 1e-3, 1e-4, 1e-6)
+#: Squared Mahalanobis distance above which a fix is an outlier (chi^2_2, p = 1e-6).
+GATE = -2.0 * math.log(1e-6)
+#: Odometer distance (m) of consecutive rejected fixes after which the position restarts.
+RESET_AFTER_M = 50.0
+#: Floor of the fix noise (m): exact (simulated) fixes still get a finite weight.
+MIN_NOISE_M = 0.05
+#: Fewest fixes for a fit.
+MIN_FIXES = 10
+#: Odometer distance (m) of the first fixes whose line starts the filter (heading, scale).
+INIT_BASE_M = 50.0
+#: Prior standard deviations of the scale (1) and the curvature (1/m) at the start.
+PRIOR_SCALE_STD = 0.05
+PRIOR_CURVATURE_STD = 0.005
+
+
+@dataclass(frozen=True)
+class OdometerFit:
+    """The odometer scale of a drive, from its fixes.
+
+    Attributes
+    ----------
+    fix_stamps_ns : ndarray (m,) int64
+        Stamps of the fixes inside the odometer's span, from the filter's first on.
+    scale_causal, scale_smoothed, scale_std : ndarray (m,)
+        The scale k (true m per odometer m) at each fix: the forward filter's (causal), the
+        smoother's, and the smoother's standard deviation.
+    accepted : ndarray (m,) of bool
+        Fixes used (False: rejected as outliers).
+    scale, scale_sigma : float
+        The drive's scale (the odometer-distance-weighted mean of ``scale_smoothed``) and its
+        standard deviation (the smoother's, at the middle fix).
+    noise_m : float
+        Fix noise used (m, per axis).
+    fixes, rejected, resets : int
+        Fixes in the span, rejected outliers, restarts of the position.
+    """
+
+    fix_stamps_ns: np.ndarray
+    scale_causal: np.ndarray
+    scale_smoothed: np.ndarray
+    scale_std: np.ndarray
+    accepted: np.ndarray
+    scale: float
+    scale_sigma: float
+    noise_m: float
+    fixes: int
+    rejected: int
+    resets: int
+
+    @property
+    def speed_error(self) -> float:
+        """The fraction by which the speed reads high: ``1 / k - 1``."""
+        return 1.0 / self.scale - 1.0
+
+    def as_dict(self) -> dict:
+        """The report's figures (``odometer`` of the summary)."""
+        return {'scale': self.scale, 'scale_std': self.scale_sigma,
+                'speed_error_pct': 100.0 * self.speed_error,
+                'speed_error_std_pct': 100.0 * self.scale_sigma / self.scale ** 2,
+                'fix_noise_m': self.noise_m, 'fixes': self.fixes,
+                'fixes_rejected': self.rejected, 'resets': self.resets}
+
+
+def odometer_distance(stamps_ns, speed_mps) -> tuple[np.ndarray, np.ndarray]:
+    """``(stamps (n,) int64, x (n,) m)``: the speed integral (the estimator's trapezoid rule,
+    :func:`.reconstruction.distance_m`) over the samples with a finite speed and a stamp
+    beyond every earlier one."""
+    s = np.asarray(stamps_ns, dtype=np.int64)
+    v = np.broadcast_to(np.asarray(speed_mps, dtype=float), s.shape)
+    before = np.concatenate([[np.iinfo(np.int64).min], np.maximum.accumulate(s)[:-1]]) \
+        if s.size else s
+    keep = np.isfinite(v) & (s > before)
+    s, v = s[keep], v[keep]
+    return s, distance_m(np.diff(s) * 1e-9, v)
+
+
+def fix_noise_m(east_m: np.ndarray, north_m: np.ndarray, stamps_ns: np.ndarray) -> float:
+    """White fix noise (m, per axis) from the second differences of positions at even fix
+    steps (variance 6 sigma^2; the motion's share, ``a dt^2``, is centimetres at 10 Hz),
+    robustly: ``sigma = 1.4826 MAD / sqrt(6)``; at least :data:`MIN_NOISE_M`."""
+    dt = np.diff(np.asarray(stamps_ns, dtype=np.int64)).astype(float)
+    if dt.size < 2:
+        return MIN_NOISE_M
+    even = np.abs(dt[1:] - dt[:-1]) <= 0.01 * dt[1:]
+    d2 = np.concatenate([np.diff(np.asarray(a, dtype=float), 2)[even]
+                         for a in (east_m, north_m)])
+    if d2.size < 4:
+        return MIN_NOISE_M
+    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    return max(MIN_NOISE_M, 1.4826 * mad / math.sqrt(6.0))
+
+
+def _initial_state(xf: np.ndarray, east: np.ndarray, north: np.ndarray, sigma: float):
+    """State and covariance at the first fix from a line fitted (least squares, then once
+    more without the residuals above 5 sigma) to the fixes of the first :data:`INIT_BASE_M`
+    of odometer; None when they span less than that."""
+    near = np.flatnonzero(xf - xf[0] <= INIT_BASE_M)
+    if xf[-1] - xf[0] < INIT_BASE_M or near.size < 3:
+        return None
+    rows = near
+    for _ in range(2):
+        a = np.column_stack([np.ones(rows.size), xf[rows] - xf[0]])
+        (e0, be), *_ = np.linalg.lstsq(a, east[rows], rcond=None)
+        (n0, bn), *_ = np.linalg.lstsq(a, north[rows], rcond=None)
+        res = np.hypot(east[near] - e0 - be * (xf[near] - xf[0]),
+                       north[near] - n0 - bn * (xf[near] - xf[0]))
+        rows = near[res <= max(5.0 * sigma, 1e-9)]
+        if rows.size < 3:
+            return None
+    span = float(xf[near[-1]] - xf[0])
+    k0 = float(np.clip(math.hypot(be, bn), 1.0 - 3 * PRIOR_SCALE_STD, 1.0 + 3 * PRIOR_SCALE_STD))
+    x = np.array([e0, n0, math.atan2(bn, be), 0.0, k0])
+    heading_var = (2.0 * sigma / span) ** 2 + (PRIOR_CURVATURE_STD * span / 2.0) ** 2 + 1e-6
+    p = np.diag([sigma ** 2, sigma ** 2, heading_var, PRIOR_CURVATURE_STD ** 2,
+                 PRIOR_SCALE_STD ** 2])
+    return x, p
+
+
+def _predict(x: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x', F, Q)``: the state after ``d`` odometer metres, its Jacobian and process noise."""
+    e, n, th, ka, k = x
+    s = k * d
+    tm = th + 0.5 * ka * s
+    c, sn = math.cos(tm), math.sin(tm)
+    xn = np.array([e + s * c, n + s * sn, th + ka * s, ka, k])
+    f = np.eye(5)
+    f[0, 2], f[0, 3], f[0, 4] = -s * sn, -0.5 * s * s * sn, d * c - 0.5 * s * sn * ka * d
+    f[1, 2], f[1, 3], f[1, 4] = s * c, 0.5 * s * s * c, d * sn + 0.5 * s * c * ka * d
+    f[2, 3], f[2, 4] = s, ka * d
+    qp, qt, qk, qs = PROCESS_STD
+    q = np.diag([qp * qp, qp * qp, qt * qt, qk * qk, qs * qs]) * abs(s)
+    return xn, f, q
+
+
+def _forward(xf, east, north, sigma, x, p):
+    """The filter over the fixes: per fix the a-priori and a-posteriori states and
+    covariances, the Jacobians, the accepted mask and where the position restarted."""
+    m = xf.size
+    xs_p, ps_p = np.empty((m, 5)), np.empty((m, 5, 5))
+    xs_f, ps_f = np.empty((m, 5)), np.empty((m, 5, 5))
+    fs = np.empty((m, 5, 5))
+    accepted = np.zeros(m, bool)
+    restart = np.zeros(m, bool)
+    r = sigma * sigma
+    rejected_since = None
+    for j in range(m):
+        if j:
+            x, f, q = _predict(x, max(float(xf[j] - xf[j - 1]), 0.0))
+            p = f @ p @ f.T + q
+            fs[j] = f
+        else:
+            fs[j] = np.eye(5)
+        xs_p[j], ps_p[j] = x, p
+        z = np.array([east[j] - x[0], north[j] - x[1]])
+        s = p[:2, :2] + r * np.eye(2)
+        si = np.linalg.inv(s)
+        if float(z @ si @ z) <= GATE:
+            g = p[:, :2] @ si
+            x = x + g @ z
+            p = p - g @ p[:2, :]
+            p = 0.5 * (p + p.T)
+            accepted[j] = True
+            rejected_since = None
+        elif rejected_since is None:
+            rejected_since = xf[j]
+        elif xf[j] - rejected_since >= RESET_AFTER_M:
+            x = x.copy()
+            x[:2] = east[j], north[j]
+            p = p.copy()
+            p[:2, :], p[:, :2] = 0.0, 0.0
+            p[0, 0] = p[1, 1] = r
+            p[2, 2] = max(p[2, 2], 0.04)
+            restart[j] = True
+            rejected_since = None
+        xs_f[j], ps_f[j] = x, p
+    return xs_p, ps_p, xs_f, ps_f, fs, accepted, restart
+
+
+def _smooth(xs_p, ps_p, xs_f, ps_f, fs, restart) -> tuple[np.ndarray, np.ndarray]:
+    """RTS smoother, backward over each stretch between restarts: states and covariances."""
+    m = xs_f.shape[0]
+    xs, ps = xs_f.copy(), ps_f.copy()
+    for j in range(m - 2, -1, -1):
+        if restart[j + 1]:
+            continue
+        c = ps_f[j] @ fs[j + 1].T @ np.linalg.pinv(ps_p[j + 1])
+        xs[j] = xs_f[j] + c @ (xs[j + 1] - xs_p[j + 1])
+        ps[j] = ps_f[j] + c @ (ps[j + 1] - ps_p[j + 1]) @ c.T
+    return xs, ps
+
+
+def fit_odometer(stamps_ns, odometer_m, fix_stamps_ns, fix_latitude_deg,
+                 fix_longitude_deg) -> OdometerFit | None:
+    """Estimate the odometer scale from the fixes (see the module notes).
+
+    Parameters
+    ----------
+    stamps_ns : array (n,) int64
+        Stamps of the odometer readings, increasing.
+    odometer_m : array (n,)
+        The speed integral at them (m, non-decreasing): :func:`odometer_distance`.
+    fix_stamps_ns, fix_latitude_deg, fix_longitude_deg : arrays (f,)
+        The fixes (increasing stamps; WGS84 degrees).
+
+    Returns
+    -------
+    OdometerFit or None
+        None with fewer than :data:`MIN_FIXES` fixes inside the odometer's span or less than
+        :data:`INIT_BASE_M` of odometer distance between them.
+    """
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    x = np.asarray(odometer_m, dtype=float)
+    fsn = np.asarray(fix_stamps_ns, dtype=np.int64)
+    if t.size < 2 or fsn.size < MIN_FIXES:
+        return None
+    inside = (fsn >= t[0]) & (fsn <= t[-1])
+    fsn = fsn[inside]
+    if fsn.size < MIN_FIXES:
+        return None
+    lat = np.asarray(fix_latitude_deg, dtype=float)[inside]
+    lon = np.asarray(fix_longitude_deg, dtype=float)[inside]
+    east, north = local_east_north(lat, lon, float(lat[0]), float(lon[0]))
+    xf = np.interp((fsn - t[0]).astype(float), (t - t[0]).astype(float), x)
+    sigma = fix_noise_m(east, north, fsn)
+    start = _initial_state(xf, east, north, sigma)
+    if start is None:
+        return None
+    xs_p, ps_p, xs_f, ps_f, fs, accepted, restart = _forward(xf, east, north, sigma, *start)
+    xs, ps = _smooth(xs_p, ps_p, xs_f, ps_f, fs, restart)
+    k_s = xs[:, 4]
+    std = np.sqrt(np.maximum(ps[:, 4, 4], 0.0))
+    w = np.diff(xf)
+    mid = 0.5 * (k_s[1:] + k_s[:-1])
+    scale = float(np.sum(w * mid) / np.sum(w)) if np.sum(w) > 0 else float(k_s[-1])
+    return OdometerFit(fsn, xs_f[:, 4].copy(), k_s.copy(), std, accepted, scale,
+                       float(std[np.searchsorted(xf, 0.5 * (xf[0] + xf[-1]))]
+                             if xf.size else std[-1]),
+                       sigma, int(fsn.size), int(np.count_nonzero(~accepted)),
+                       int(np.count_nonzero(restart)))
+
+
+def scale_at(stamps_ns, fit: OdometerFit, *, causal: bool = False) -> np.ndarray:
+    """The scale k at ``stamps_ns`` (n,): offline the smoothed scale interpolated between
+    fixes in time (held before the first and after the last); ``causal``, the filter's at the
+    latest fix at or before each stamp (1 before the first: the odometer as it reads)."""
+    q = np.asarray(stamps_ns, dtype=np.int64)
+    f = fit.fix_stamps_ns
+    if causal:
+        j = np.searchsorted(f, q, side='right') - 1
+        return np.where(j >= 0, fit.scale_causal[np.maximum(j, 0)], 1.0)
+    return np.interp((q - f[0]).astype(float), (f - f[0]).astype(float), fit.scale_smoothed)
