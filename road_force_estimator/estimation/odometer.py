@@ -7,7 +7,7 @@ odometer) measures the distance along it up to a scale ``k`` (true metres per od
 the speed reads high by ``1 / k - 1``).
 
 :func:`fit_odometer` runs an extended Kalman filter over the fixes with the state
-``[east, north, theta, kappa, k]`` (m on the plane tangent at the first fix,
+``[east, north, theta, kappa, k]`` (m on a plane, built fix to fix from the first,
 :func:`~.core.gnss.local_east_north`; heading theta counter-clockwise from east, rad;
 curvature kappa, 1/m; scale k). Between two fixes the odometer advances by ``d >= 0`` and the
 vehicle by ``s = k d`` along an arc of constant curvature::
@@ -42,13 +42,16 @@ import numpy as np
 from road_force_estimator.core.gnss import local_east_north
 from road_force_estimator.estimation.reconstruction import distance_m
 
+_DIAG = (np.arange(5), np.arange(5))
+
 __all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', 'INIT_BASE_M',
            'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at']
 
 #: Random-walk standard deviations per square root of metre travelled: position (m), heading
 #: (rad), curvature (1/m), scale (1): model errors, a road's changing bends, the scale's drift
 #: (1e-6: 1e-4 over 10 km).
-PROCESS_STD = (0.01, 1e-3, 1e-4, 1e-6)
+PROCESS_STD = (0.003, 3e-4, 1e-4, 1e-6)
+_Q_PER_M = np.square(np.array([PROCESS_STD[0], *PROCESS_STD]))
 #: Squared Mahalanobis distance above which a fix is an outlier (chi^2_2, p = 1e-6).
 GATE = -2.0 * math.log(1e-6)
 #: Odometer distance (m) of consecutive rejected fixes after which the position restarts.
@@ -59,6 +62,8 @@ MIN_NOISE_M = 0.05
 MIN_FIXES = 10
 #: Odometer distance (m) of the first fixes whose line starts the filter (heading, scale).
 INIT_BASE_M = 50.0
+#: Passes of the iterated smoother (1: the extended Kalman smoother).
+ITERATIONS = 2
 #: Prior standard deviations of the scale (1) and the curvature (1/m) at the start.
 PRIOR_SCALE_STD = 0.05
 PRIOR_CURVATURE_STD = 0.005
@@ -168,73 +173,94 @@ def _initial_state(xf: np.ndarray, east: np.ndarray, north: np.ndarray, sigma: f
 
 
 def _predict(x: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(x', F, Q)``: the state after ``d`` odometer metres, its Jacobian and process noise."""
+    """``(x', F, q)``: the state after ``d`` odometer metres, its Jacobian and the diagonal of
+    the process noise."""
     e, n, th, ka, k = x
     s = k * d
     tm = th + 0.5 * ka * s
     c, sn = math.cos(tm), math.sin(tm)
     xn = np.array([e + s * c, n + s * sn, th + ka * s, ka, k])
-    f = np.eye(5)
-    f[0, 2], f[0, 3], f[0, 4] = -s * sn, -0.5 * s * s * sn, d * c - 0.5 * s * sn * ka * d
-    f[1, 2], f[1, 3], f[1, 4] = s * c, 0.5 * s * s * c, d * sn + 0.5 * s * c * ka * d
-    f[2, 3], f[2, 4] = s, ka * d
-    qp, qt, qk, qs = PROCESS_STD
-    q = np.diag([qp * qp, qp * qp, qt * qt, qk * qk, qs * qs]) * abs(s)
-    return xn, f, q
+    hs = 0.5 * s
+    f = np.array([[1.0, 0.0, -s * sn, -hs * s * sn, d * c - hs * sn * ka * d],
+                  [0.0, 1.0, s * c, hs * s * c, d * sn + hs * c * ka * d],
+                  [0.0, 0.0, 1.0, s, ka * d],
+                  [0.0, 0.0, 0.0, 1.0, 0.0],
+                  [0.0, 0.0, 0.0, 0.0, 1.0]])
+    return xn, f, _Q_PER_M * abs(s)
 
 
-def _forward(xf, east, north, sigma, x, p):
+def _forward(xf, east, north, sigma, x, p, lin=None, decided=None):
     """The filter over the fixes: per fix the a-priori and a-posteriori states and
-    covariances, the Jacobians, the accepted mask and where the position restarted."""
+    covariances, the Jacobians, the accepted mask and where the position restarted.
+
+    ``lin`` (m, 5): the trajectory to linearise the motion about (an iterated smoother's
+    previous pass; default the filter's own estimate, the extended Kalman filter);
+    ``decided``: ``(accepted, restart)`` of an earlier pass, kept instead of gating again.
+    """
     m = xf.size
+    x, p = np.array(x, dtype=float), np.array(p, dtype=float)
     xs_p, ps_p = np.empty((m, 5)), np.empty((m, 5, 5))
     xs_f, ps_f = np.empty((m, 5)), np.empty((m, 5, 5))
     fs = np.empty((m, 5, 5))
-    accepted = np.zeros(m, bool)
-    restart = np.zeros(m, bool)
+    accepted = np.zeros(m, bool) if decided is None else decided[0]
+    restart = np.zeros(m, bool) if decided is None else decided[1]
     r = sigma * sigma
     rejected_since = None
+    fs[0] = np.eye(5)
     for j in range(m):
         if j:
-            x, f, q = _predict(x, max(float(xf[j] - xf[j - 1]), 0.0))
-            p = f @ p @ f.T + q
+            d = max(float(xf[j] - xf[j - 1]), 0.0)
+            if lin is None:
+                x, f, q = _predict(x, d)
+            else:
+                xl, f, q = _predict(lin[j - 1], d)
+                x = xl + f @ (x - lin[j - 1])
+            p = f @ p @ f.T
+            p[_DIAG] += q
             fs[j] = f
-        else:
-            fs[j] = np.eye(5)
         xs_p[j], ps_p[j] = x, p
-        z = np.array([east[j] - x[0], north[j] - x[1]])
-        s = p[:2, :2] + r * np.eye(2)
-        si = np.linalg.inv(s)
-        if float(z @ si @ z) <= GATE:
+        z0, z1 = east[j] - x[0], north[j] - x[1]
+        a, b, c = p[0, 0] + r, p[0, 1], p[1, 1] + r
+        det = a * c - b * b
+        si = np.array([[c, -b], [-b, a]]) / det
+        if decided is None:
+            accepted[j] = (c * z0 * z0 - 2.0 * b * z0 * z1 + a * z1 * z1) / det <= GATE
+            if accepted[j]:
+                rejected_since = None
+            elif rejected_since is None:
+                rejected_since = xf[j]
+            elif xf[j] - rejected_since >= RESET_AFTER_M:
+                restart[j] = True
+                rejected_since = None
+        if accepted[j]:
             g = p[:, :2] @ si
-            x = x + g @ z
+            x = x + g @ np.array([z0, z1])
             p = p - g @ p[:2, :]
             p = 0.5 * (p + p.T)
-            accepted[j] = True
-            rejected_since = None
-        elif rejected_since is None:
-            rejected_since = xf[j]
-        elif xf[j] - rejected_since >= RESET_AFTER_M:
+        elif restart[j]:
             x = x.copy()
             x[:2] = east[j], north[j]
             p = p.copy()
             p[:2, :], p[:, :2] = 0.0, 0.0
             p[0, 0] = p[1, 1] = r
             p[2, 2] = max(p[2, 2], 0.04)
-            restart[j] = True
-            rejected_since = None
         xs_f[j], ps_f[j] = x, p
     return xs_p, ps_p, xs_f, ps_f, fs, accepted, restart
 
 
 def _smooth(xs_p, ps_p, xs_f, ps_f, fs, restart) -> tuple[np.ndarray, np.ndarray]:
-    """RTS smoother, backward over each stretch between restarts: states and covariances."""
+    """RTS smoother, backward over each stretch between restarts: states and covariances.
+    The gains ``C_j = P_j F_(j+1)^T Pp_(j+1)^-1`` at once (stacked solves), then the
+    recursion."""
     m = xs_f.shape[0]
     xs, ps = xs_f.copy(), ps_f.copy()
+    if m < 2:
+        return xs, ps
+    gains = np.linalg.solve(ps_p[1:], fs[1:] @ ps_f[:-1]).transpose(0, 2, 1)
     for j in range(m - 2, -1, -1):
         if restart[j + 1]:
             continue
-        c = ps_f[j] @ fs[j + 1].T @ np.linalg.pinv(ps_p[j + 1])
+        c = gains[j]
         xs[j] = xs_f[j] + c @ (xs[j + 1] - xs_p[j + 1])
         ps[j] = ps_f[j] + c @ (ps[j + 1] - ps_p[j + 1]) @ c.T
     return xs, ps
@@ -270,20 +296,26 @@ def fit_odometer(stamps_ns, odometer_m, fix_stamps_ns, fix_latitude_deg,
         return None
     lat = np.asarray(fix_latitude_deg, dtype=float)[inside]
     lon = np.asarray(fix_longitude_deg, dtype=float)[inside]
-    east, north = local_east_north(lat, lon, float(lat[0]), float(lon[0]))
+    east, north = local_east_north(lat, lon)
     xf = np.interp((fsn - t[0]).astype(float), (t - t[0]).astype(float), x)
     sigma = fix_noise_m(east, north, fsn)
     start = _initial_state(xf, east, north, sigma)
     if start is None:
         return None
     xs_p, ps_p, xs_f, ps_f, fs, accepted, restart = _forward(xf, east, north, sigma, *start)
+    causal = xs_f[:, 4].copy()
     xs, ps = _smooth(xs_p, ps_p, xs_f, ps_f, fs, restart)
+    for _ in range(ITERATIONS - 1):
+        # Iterated smoother (Gauss-Newton on the whole trajectory): the motion linearised
+        # about the last smoothed trajectory, not about the filter's own, noisier, estimate.
+        out = _forward(xf, east, north, sigma, *start, lin=xs, decided=(accepted, restart))
+        xs, ps = _smooth(*out[:5], restart)
     k_s = xs[:, 4]
     std = np.sqrt(np.maximum(ps[:, 4, 4], 0.0))
     w = np.diff(xf)
     mid = 0.5 * (k_s[1:] + k_s[:-1])
     scale = float(np.sum(w * mid) / np.sum(w)) if np.sum(w) > 0 else float(k_s[-1])
-    return OdometerFit(fsn, xs_f[:, 4].copy(), k_s.copy(), std, accepted, scale,
+    return OdometerFit(fsn, causal, k_s.copy(), std, accepted, scale,
                        float(std[np.searchsorted(xf, 0.5 * (xf[0] + xf[-1]))]
                              if xf.size else std[-1]),
                        sigma, int(fsn.size), int(np.count_nonzero(~accepted)),

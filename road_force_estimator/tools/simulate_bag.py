@@ -152,7 +152,6 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps`` (the true
         speed; the twist's is :func:`twist_speed`).
     """
-    from road_force_estimator.core.gnss import FixNoise, route
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
@@ -198,26 +197,33 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
     sensors = SensorModel.from_simulator(sim)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
-    fixes = None
-    if sim.gnss_rate_hz > 0.0:
-        period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
-        first = np.concatenate([[True], period[1:] > period[:-1]])
-        idx = np.flatnonzero(first)
-        fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
-                      start_latitude_deg=sim.gnss_start_latitude_deg,
-                      start_longitude_deg=sim.gnss_start_longitude_deg,
-                      heading_deg=sim.gnss_heading_deg,
-                      lateral_accel_mps2=traj.lateral_accel_mps2[idx])
-        if sim.gnss_noise_m > 0.0:
-            lat, lon = FixNoise(sim.gnss_noise_m, sim.seed).apply(fixes.latitude_deg,
-                                                                   fixes.longitude_deg)
-            fixes = type(fixes)(fixes.time_s, lat, lon, fixes.heading_deg)
+    fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
     reason = ''
     if done < requested:
         reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
                   f'samples ({traj.t_s[-1]:g} s)')
     return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def _fixes(traj, sim, profile):
+    """The fixes of a drive (``core.gnss.GnssRoute``): one at the first sample of each GNSS
+    period, on the true route, with the receiver noise."""
+    from road_force_estimator.core.gnss import FixNoise, route
+
+    period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
+    first = np.concatenate([[True], period[1:] > period[:-1]])
+    idx = np.flatnonzero(first)
+    fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
+                  start_latitude_deg=sim.gnss_start_latitude_deg,
+                  start_longitude_deg=sim.gnss_start_longitude_deg,
+                  heading_deg=sim.gnss_heading_deg,
+                  lateral_accel_mps2=traj.lateral_accel_mps2[idx])
+    if sim.gnss_noise_m > 0.0:
+        lat, lon = FixNoise(sim.gnss_noise_m, sim.seed).apply(fixes.latitude_deg,
+                                                               fixes.longitude_deg)
+        fixes = type(fixes)(fixes.time_s, lat, lon, fixes.heading_deg)
+    return fixes
 
 
 def main(argv: list[str] | None = None) -> int:
