@@ -1,16 +1,19 @@
 """Odometer fusion: the offline profile and the segments when the speed reads high.
 
     python -m bench.odometer [--duration 100] [--speed-error 0.015] [--gnss-noise 2.5]
-                             [--lateral 0] [--seed 1] [--json FILE]
+                             [--lateral 0] [--seeds 1 2 3] [--json FILE]
+
+One drive per seed (``--seeds``):
 
 1. Simulates a drive with ``simulate_bag``'s :func:`~road_force_estimator.tools.simulate_bag.
    simulate` (ISO 8608 class C, seed 1, 20 m/s, 1 kHz, 100 s = 2 km; GNSS at 10 Hz with white
    noise ``--gnss-noise`` m per axis; ``--lateral`` m/s^2 of lateral acceleration bends the
    route from 10 s on), the twist reading ``1 + --speed-error`` times the true speed.
 2. Estimates it offline (:func:`estimation.estimate_recording`) with
-   ``observer.odometer_fusion`` ``off`` (the speed's distance) and ``gnss`` (the fused one),
-   and, for the causal figures, the forward filter's scale (:func:`estimation.odometer.
-   scale_at` with ``causal``) applied to the speed's distance.
+   ``observer.distance_source`` ``speed`` (the speed's distance) and ``gnss`` (the fused one),
+   and, for the causal figures, that profile at the distance an onboard filter would know
+   (:func:`estimation.odometer.causal_distance`: the forward filter's latest scale times the
+   odometer).
 3. Per case: the odometer scale estimated and its error against the true ``1 / (1 + e)``;
    the IRI-filtered cross-correlation of the estimated profile (at its distance) with the true
    one (at the true distance), per wheel and the lower of the two; the position error (m) of
@@ -117,8 +120,7 @@ def segment_errors(stamps_ns, distance_m, truth, length_m: float = 100.0) -> np.
 
 
 def _case(name, est_distance, est, truth, fit, k_true) -> dict:
-    from road_force_estimator.core.segments import segment_bounds  # noqa: F401 (doc)
-
+    """The figures of one estimate placed at ``est_distance``."""
     rows = np.flatnonzero(est.valid)
     x = np.asarray(est_distance, float)[rows]
     road = np.asarray(est.road_m)[rows]
@@ -139,30 +141,21 @@ def _case(name, est_distance, est, truth, fit, k_true) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+def run_drive(args, seed: int) -> dict:
+    """One drive (module notes, steps 1-3) with the noise seed ``seed``: its figures."""
     from road_force_estimator.core.parameters import (
         ObserverParameters, SimulatorParameters, VehicleParameters)
     from road_force_estimator.estimation import estimate_recording, odometer
     from road_force_estimator.estimation.reconstruction import distance_m
     from road_force_estimator.tools.simulate_bag import simulate, twist_speed
 
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument('--duration', type=float, default=100.0, help='s (20 m/s)')
-    p.add_argument('--speed-error', type=float, default=0.015, help='fraction (0.015: 1.5 %%)')
-    p.add_argument('--gnss-noise', type=float, default=2.5, help='m per axis')
-    p.add_argument('--lateral', type=float, default=0.0, help='m/s^2 from 10 s on')
-    p.add_argument('--seed', type=int, default=1, help='seed of the sensor and GNSS noise')
-    p.add_argument('--road', default='iso8608:C:seed=1')
-    p.add_argument('--json', metavar='FILE')
-    args = p.parse_args(argv)
-
     vehicle = VehicleParameters()
-    sim = SimulatorParameters(duration_s=args.duration, road=args.road, seed=args.seed,
+    sim = SimulatorParameters(duration_s=args.duration, road=args.road, seed=seed,
                               gnss_noise_m=args.gnss_noise, speed_scale_error=args.speed_error)
     t0 = time.perf_counter()
     traj, q, roll, fixes, _, _ = simulate(vehicle, sim, lateral=(args.lateral, 10.0)
                                           if args.lateral else None)
-    t_sim = time.perf_counter() - t0
+    timing = {'simulate_s': time.perf_counter() - t0}
     stamps = 1_700_000_000 * 10**9 + np.round(traj.t_s * 1e9).astype(np.int64)
     speed = np.broadcast_to(np.asarray(twist_speed(traj.speed_mps, sim), float), stamps.shape)
 
@@ -175,52 +168,44 @@ def main(argv: list[str] | None = None) -> int:
     truth = Truth()
     truth.stamps_ns, truth.distance_m, truth.road_m = stamps, traj.distance_m, traj.road_m
     k_true = 1.0 / (1.0 + args.speed_error)
-    cases = []
-    timing = {'simulate_s': t_sim}
-    for fusion in ('off', 'gnss'):
-        obs = ObserverParameters(odometer_fusion=fusion)
+    cases, ests = [], {}
+    for fusion in ('speed', 'gnss'):
         t0 = time.perf_counter()
-        est = estimate_recording(stamps, q, roll, speed, vehicle, obs, fixes=Fixes)
+        est = ests[fusion] = estimate_recording(
+            stamps, q, roll, speed, vehicle, ObserverParameters(distance_source=fusion),
+            fixes=Fixes)
         timing[f'estimate_{fusion}_s'] = time.perf_counter() - t0
-        fit = getattr(est, 'odometer', None)
-        cases.append(_case(f'offline, fusion {fusion}', est.distance_m, est, truth, fit, k_true))
-        cases[-1]['est'] = est
-        if fusion == 'off':
-            t0 = time.perf_counter()
-            fit_c = odometer.fit_odometer(*odometer.odometer_distance(stamps, speed),
-                                          Fixes.stamps_ns, Fixes.latitude_deg,
-                                          Fixes.longitude_deg)
-            timing['fit_s'] = time.perf_counter() - t0
-            k_c = odometer.scale_at(stamps, fit_c, causal=True)
-            x_c = distance_m(np.diff(stamps) * 1e-9, speed * k_c)
-            c = _case('offline profile, causal scale (forward filter)', x_c, est, truth, None,
-                      k_true)
-            c['scale_causal_end'] = float(fit_c.scale_causal[-1])
-            c['scale_causal_end_error_pct'] = 100.0 * (fit_c.scale_causal[-1] / k_true - 1.0)
-            cases.append(c)
+        cases.append(_case(f'offline, distance from {fusion}', est.distance_m, est, truth,
+                           getattr(est, 'odometer', None), k_true))
+    t0 = time.perf_counter()
+    odo = odometer.odometer_distance(stamps, speed)
+    fit_c = odometer.fit_odometer(*odo, Fixes.stamps_ns, Fixes.latitude_deg,
+                                  Fixes.longitude_deg)
+    timing['fit_s'] = time.perf_counter() - t0
+    x_c = odometer.causal_distance(stamps, distance_m(np.diff(stamps) * 1e-9, speed), fit_c)
+    c = _case('offline profile at the causal distance (forward filter)', x_c, ests['speed'],
+              truth, None, k_true)
+    c['scale_causal_end'] = float(fit_c.scale_causal[-1])
+    c['scale_causal_end_error_pct'] = 100.0 * (fit_c.scale_causal[-1] / k_true - 1.0)
+    cases.append(c)
     # What limits the correlation: the fusion-off profile placed at the true scale times
     # (1 + delta), for scale errors delta (the cross-correlation's sensitivity to the scale).
-    off = cases[0]['est']
-    sweep = {}
-    for delta in (0.0, 5e-5, 1e-4, 2e-4, 5e-4, 1e-3):
-        c = _case('', off.distance_m * k_true * (1.0 + delta), off, truth, None, k_true)
-        sweep[f'{100 * delta:g} %'] = c['cross_correlation_min']
-    for c in cases:
-        c.pop('est', None)
-    result = {'sweep_scale_error_to_cross_correlation': sweep,
-              'command': 'python -m bench.odometer ' + ' '.join(argv or sys.argv[1:]),
-              'drive': {'duration_s': args.duration, 'distance_m': float(traj.distance_m[-1]
-                                                                         - traj.distance_m[0]),
-                        'speed_error': args.speed_error, 'gnss_noise_m': args.gnss_noise,
-                        'lateral_mps2': args.lateral, 'seed': args.seed, 'road': args.road,
-                        'fixes': int(len(Fixes.stamps_ns)), 'true_scale': k_true},
-              'cases': cases, 'timing': timing}
-    print(f'# Odometer fusion ({result["command"]})\n')
-    print(f'drive: {result["drive"]}\n')
-    print('| case | scale (err %) | cross-corr L / R | segment err at 1 km (m) | '
+    off = ests['speed']
+    sweep = {f'{100 * delta:g} %': _case('', off.distance_m * k_true * (1.0 + delta), off,
+                                          truth, None, k_true)['cross_correlation_min']
+             for delta in (0.0, 5e-5, 1e-4, 2e-4, 5e-4, 1e-3)}
+    return {'seed': seed, 'distance_m': float(traj.distance_m[-1] - traj.distance_m[0]),
+            'fixes': int(len(Fixes.stamps_ns)), 'true_scale': k_true, 'cases': cases,
+            'sweep_scale_error_to_cross_correlation': sweep, 'timing': timing}
+
+
+def _print_drive(r: dict) -> None:
+    k_true = r['true_scale']
+    print(f'\n## seed {r["seed"]}: {r["distance_m"]:.0f} m, {r["fixes"]} fixes\n')
+    print('| case | scale (err %, +- 1 std) | cross-corr L / R | segment err at 1 km (m) | '
           'max to 1 km (m) | max (m) |')
     print('|---|---|---|---|---|---|')
-    for c in cases:
+    for c in r['cases']:
         sc = (f'{c["scale"]:.5f} ({c["scale_error_pct"]:+.3f} +- '
               f'{100 * c["scale_std"] / k_true:.3f})' if 'scale' in c else
               (f'{c["scale_causal_end"]:.5f} ({c["scale_causal_end_error_pct"]:+.3f}) at end'
@@ -229,10 +214,44 @@ def main(argv: list[str] | None = None) -> int:
               f'{c["cross_correlation"][1]:.3f} | {c["segment_error_at_1km_m"]:+.2f} | '
               f'{c["segment_error_max_to_1km_m"]:.2f} | {c["segment_error_max_m"]:.2f} |')
     print('\ncross-correlation (lower wheel) of the profile at the true scale times (1 + delta): '
-          + ', '.join(f'delta {k}: {v:.3f}' for k, v in sweep.items()))
-    print(f'\ntiming (s): {", ".join(f"{k} {v:.2f}" for k, v in timing.items())}')
+          + ', '.join(f'delta {k}: {v:.3f}'
+                      for k, v in r['sweep_scale_error_to_cross_correlation'].items()))
+    print(f'\ntiming (s): {", ".join(f"{k} {v:.2f}" for k, v in r["timing"].items())}')
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--duration', type=float, default=100.0, help='s (20 m/s)')
+    p.add_argument('--speed-error', type=float, default=0.015, help='fraction (0.015: 1.5 %%)')
+    p.add_argument('--gnss-noise', type=float, default=2.5, help='m per axis')
+    p.add_argument('--lateral', type=float, default=0.0, help='m/s^2 from 10 s on')
+    p.add_argument('--seeds', type=int, nargs='+', default=[1, 2, 3],
+                   help='seeds of the sensor and GNSS noise, one drive each')
+    p.add_argument('--road', default='iso8608:C:seed=1')
+    p.add_argument('--json', metavar='FILE')
+    args = p.parse_args(argv)
+    command = 'python -m bench.odometer ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    print(f'# Odometer fusion\n\n`{command}`: {args.duration:g} s at 20 m/s over {args.road}, '
+          f'speed read {100 * args.speed_error:g} % high, GNSS 10 Hz with {args.gnss_noise:g} m '
+          f'of white noise per axis, lateral acceleration {args.lateral:g} m/s^2 from 10 s')
+    drives = []
+    for seed in args.seeds:
+        drives.append(run_drive(args, seed))
+        _print_drive(drives[-1])
+    fused = [d['cases'][1] for d in drives]
+    summary = {'cross_correlation_min': min(c['cross_correlation_min'] for c in fused),
+               'cross_correlation_median': float(np.median(
+                   [c['cross_correlation_min'] for c in fused])),
+               'segment_error_max_m': max(c['segment_error_max_m'] for c in fused),
+               'scale_error_pct_max': max(abs(c['scale_error_pct']) for c in fused)}
+    print(f'\n## over the seeds {args.seeds}, offline with the fusion\n\n'
+          f'cross-correlation (lower wheel): min {summary["cross_correlation_min"]:.3f}, median '
+          f'{summary["cross_correlation_median"]:.3f} (target >= 0.95); largest segment error '
+          f'{summary["segment_error_max_m"]:.2f} m (target 2 m); largest scale error '
+          f'{summary["scale_error_pct_max"]:.3f} %')
     if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1))
+        Path(args.json).write_text(json.dumps({'command': command, 'args': vars(args),
+                                               'drives': drives, 'summary': summary}, indent=1))
     return 0
 
 

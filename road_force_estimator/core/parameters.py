@@ -104,10 +104,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.rollover_cutoff_frequency', 'double', 2.0, 'Hz',
        'low-pass cutoff of the quasi-static LTR for rollover warnings (below the wheel hop)',
        0.05, 50.0),
-    _p('observer.odometer_fusion', 'string', 'off', '',
-       'offline travelled distance: "off" = the integral of /vehicle/twist; "gnss" = the '
+    _p('observer.distance_source', 'string', 'speed', '',
+       'offline travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the '
        'speed times the odometer scale estimated from /fix (estimation.odometer; offline '
-       'mode of estimate_bag and estimate_fleet only)', choices=('off', 'gnss')),
+       'mode of estimate_bag and estimate_fleet only)', choices=('speed', 'gnss')),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.speed_profile', 'string', '', '',
@@ -284,7 +284,7 @@ class ObserverParameters(_FromParameters):
     road_roughness_m3: float = _param('observer.road_roughness')
     road_correlation_length_m: float = _param('observer.road_correlation_length')
     rollover_cutoff_frequency_hz: float = _param('observer.rollover_cutoff_frequency')
-    odometer_fusion: str = _param('observer.odometer_fusion')
+    distance_source: str = _param('observer.distance_source')
 
 
 @dataclass(frozen=True)

@@ -23,11 +23,11 @@ of freedom, p = 1e-6) is rejected and counted; when every fix over :data:`RESET_
 odometer distance is rejected, the position restarts at the next fix (counted: ``resets``).
 A gap in the fixes only makes ``d`` longer; at a standstill (``d = 0``) nothing moves and no
 uncertainty grows. The forward pass gives the causal scale at each fix (what an onboard filter
-would know then); the Rauch-Tung-Striebel smoother (Rauch, Tung, Striebel 1965), backward over
-each stretch between restarts, the offline one.
+would know then: :func:`causal_distance`); the Rauch-Tung-Striebel smoother (Rauch, Tung,
+Striebel 1965), backward over each stretch between restarts, the offline one.
 
 :func:`scale_at` gives the scale at any stamps; the offline estimate (:func:`.offline.
-estimate_recording` with ``observer.odometer_fusion = gnss``) multiplies the speed by it, so
+estimate_recording` with ``observer.distance_source = gnss``) multiplies the speed by it, so
 its distance is ``integral of k v dt`` and every profile point and segment boundary follows.
 
 This module imports numpy only (core, estimation).
@@ -45,7 +45,8 @@ from road_force_estimator.estimation.reconstruction import distance_m
 _DIAG = (np.arange(5), np.arange(5))
 
 __all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', 'INIT_BASE_M',
-           'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at']
+           'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at',
+           'causal_distance']
 
 #: Random-walk standard deviations per square root of metre travelled: position (m), heading
 #: (rad), curvature (1/m), scale (1): model errors, a road's changing bends, the scale's drift
@@ -332,3 +333,11 @@ def scale_at(stamps_ns, fit: OdometerFit, *, causal: bool = False) -> np.ndarray
         j = np.searchsorted(f, q, side='right') - 1
         return np.where(j >= 0, fit.scale_causal[np.maximum(j, 0)], 1.0)
     return np.interp((q - f[0]).astype(float), (f - f[0]).astype(float), fit.scale_smoothed)
+
+
+def causal_distance(stamps_ns, odometer_m, fit: OdometerFit) -> np.ndarray:
+    """The fused distance an onboard filter would know at each stamp (m, (n,)): the odometer
+    times the forward filter's latest scale, ``k_f(t) x(t)`` (not the integral of the scale's
+    history, which would keep the early, poorly known, scales forever), never decreasing."""
+    x = np.asarray(odometer_m, dtype=float)
+    return np.maximum.accumulate(scale_at(stamps_ns, fit, causal=True) * (x - x[0])) + x[0]

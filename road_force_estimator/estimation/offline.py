@@ -473,7 +473,7 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     differentiator scheme (``euler``, ``taylor``, ``implicit``), the zero-phase chain of
     :func:`estimate_offline`. Row k is the estimate for sample k in both.
 
-    With ``observer.odometer_fusion == 'gnss'`` and ``fixes`` (``stamps_ns``,
+    With ``observer.distance_source == 'gnss'`` and ``fixes`` (``stamps_ns``,
     ``latitude_deg``, ``longitude_deg``), the odometer scale is estimated from the fixes
     (:func:`.odometer.fit_odometer`) and the speed multiplied by it (:func:`.odometer.scale_at`)
     before the estimate: the distance is the fused one. The fit (or None: too few fixes) is
@@ -482,7 +482,7 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     """
     observer = ObserverParameters() if observer is None else observer
     fit = None
-    fused = observer.odometer_fusion == 'gnss' and fixes is not None
+    fused = observer.distance_source == 'gnss' and fixes is not None
     if fused:
         speed_mps, fit = _fused_speed(stamps_ns, speed_mps, fixes)
     if observer.discretization == 'model':

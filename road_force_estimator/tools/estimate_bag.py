@@ -297,7 +297,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
-    fit = getattr(est, 'odometer', None)          # observer.odometer_fusion = gnss, offline
+    fit = getattr(est, 'odometer', None)          # observer.distance_source = gnss, offline
     if fit is not None:
         counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
                       odometer_fixes_rejected=fit.rejected)

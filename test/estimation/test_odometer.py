@@ -143,12 +143,12 @@ def inputs(drive):
 
 
 class TestOfflineEstimate:
-    """estimate_recording with observer.odometer_fusion on the plant's drive."""
+    """estimate_recording with observer.distance_source on the plant's drive."""
 
     def test_fused_distance_follows_the_true_one(self, drive, inputs):
         stamps, q, phi, v, fixes = inputs
         est = estimate_recording(stamps, q, phi, v, VEHICLE,
-                                 ObserverParameters(odometer_fusion='gnss'), fixes=fixes)
+                                 ObserverParameters(distance_source='gnss'), fixes=fixes)
         assert est.odometer.scale == pytest.approx(TRUE_SCALE, rel=1e-5)   # exact fixes
         true = drive.distance_m - drive.distance_m[0]
         assert np.max(np.abs(est.distance_m - true)) < 0.01
@@ -160,7 +160,7 @@ class TestOfflineEstimate:
         stamps, q, phi, v, fixes = inputs
         base = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters())
         for obs, fx in ((ObserverParameters(), fixes),
-                        (ObserverParameters(odometer_fusion='gnss'), None)):
+                        (ObserverParameters(distance_source='gnss'), None)):
             other = estimate_recording(stamps, q, phi, v, VEHICLE, obs, fixes=fx)
             for name in ('distance_m', 'road_m', 'wheel_load_n', 'ltr', 'converged'):
                 np.testing.assert_array_equal(getattr(other, name), getattr(base, name))
