@@ -85,7 +85,10 @@ def test_outliers_rejected_and_counted():
     lon[bad] += np.degrees(40.0 * np.cos(angle) / (6.37e6 * np.cos(np.radians(48.15))))
     f = fit(stamps, v, fs, lat, lon)
     assert not f.accepted[bad].any()
-    assert bad.size <= f.rejected <= bad.size + 2
+    # Each outlier is rejected on its own but where two share a group (10 m of fixes: here
+    # fixes 210 and 212), whose point the filter then rejects with its good fixes.
+    assert bad.size <= f.rejected <= bad.size + 5
+    assert f.rejected == np.count_nonzero(~f.accepted)
     assert f.resets == 0
     assert abs(f.scale / TRUE_SCALE - 1.0) < 1e-3
 
@@ -104,11 +107,21 @@ def test_a_gap_in_the_fixes_and_a_standstill():
 def test_causal_scale_is_the_forward_filters_and_starts_at_one():
     stamps, v, fs, lat, lon, _, _ = drive(noise_m=2.5, seed=7)
     f = fit(stamps, v, fs, lat, lon)
-    k = scale_at(np.array([fs[0] - 1, fs[0], fs[500] + 1, fs[-1] + 10]), f, causal=True)
-    np.testing.assert_array_equal(k, [1.0, f.scale_causal[0], f.scale_causal[500],
+    known = f.known_ns
+    assert np.all(np.isin(known, fs)) and np.all(np.diff(known) > 0)
+    k = scale_at(np.array([known[0] - 1, known[0], known[50] + 1, known[-1] + 10]), f,
+                 causal=True)
+    np.testing.assert_array_equal(k, [1.0, f.scale_causal[0], f.scale_causal[50],
                                       f.scale_causal[-1]])
     # At the end of the drive the causal scale has seen every fix: within 0.1 % as well.
     assert abs(f.scale_causal[-1] / TRUE_SCALE - 1.0) < 1e-3
+    # The causal distance: segment ends within 2 m from 1 km on (early scales are poor).
+    x = odometer_distance(stamps, v)[1]
+    xc = odometer.causal_distance(stamps, x, f)
+    assert np.all(np.diff(xc) >= 0.0)
+    truth = x / (1.0 + ERROR)
+    far = x > 1000.0
+    assert np.max(np.abs(xc[far] - truth[far])) < 2.0
 
 
 def test_too_few_fixes_or_too_short_gives_none():
