@@ -82,6 +82,8 @@ MIN_FIXES = 10
 INIT_BASE_M = 50.0
 #: Passes of the iterated smoother (1: the extended Kalman smoother).
 ITERATIONS = 2
+#: A fitted scale further than this from 1 is refused (an odometer is off by a few %).
+MAX_SCALE_ERROR = 0.2
 #: Prior standard deviations of the scale (1) and the curvature (1/m) at the start.
 PRIOR_SCALE_STD = 0.05
 PRIOR_CURVATURE_STD = 0.005
@@ -127,6 +129,16 @@ class OdometerFit:
     resets: int
 
     @property
+    def problem(self) -> str:
+        """Why the fit is not to be used ('' when it is): most fixes rejected, or a scale
+        beyond :data:`MAX_SCALE_ERROR` of 1 (frozen or wrong fixes, not an odometer)."""
+        if self.rejected > 0.5 * self.fixes:
+            return f'{self.rejected} of {self.fixes} fixes rejected'
+        if abs(self.scale - 1.0) > MAX_SCALE_ERROR:
+            return f'scale {self.scale:.4g} beyond 1 +- {MAX_SCALE_ERROR:g}'
+        return ''
+
+    @property
     def speed_error(self) -> float:
         """The fraction by which the speed reads high: ``1 / k - 1``."""
         return 1.0 / self.scale - 1.0
@@ -137,7 +149,8 @@ class OdometerFit:
                 'speed_error_pct': 100.0 * self.speed_error,
                 'speed_error_std_pct': 100.0 * self.scale_sigma / self.scale ** 2,
                 'fix_noise_m': self.noise_m, 'fixes': self.fixes,
-                'fixes_rejected': self.rejected, 'resets': self.resets}
+                'fixes_rejected': self.rejected, 'resets': self.resets,
+                'applied': not self.problem, 'problem': self.problem}
 
 
 def odometer_distance(stamps_ns, speed_mps) -> tuple[np.ndarray, np.ndarray]:

@@ -477,8 +477,8 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     ``latitude_deg``, ``longitude_deg``), the odometer scale is estimated from the fixes
     (:func:`.odometer.fit_odometer`) and the speed multiplied by it (:func:`.odometer.scale_at`)
     before the estimate: the distance is the fused one. The fit (or None: too few fixes) is
-    the result's ``odometer`` attribute; without fusion there is no such attribute and the
-    numbers are those without fixes.
+    the result's ``odometer`` attribute (a fit with a ``problem`` is reported, not applied);
+    without fusion there is no such attribute and the numbers are those without fixes.
     """
     observer = ObserverParameters() if observer is None else observer
     fit = None
@@ -497,13 +497,13 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
 
 
 def _fused_speed(stamps_ns, speed_mps, fixes):
-    """``(speed times the odometer scale, the fit)``; the speed as given and None when the
-    fixes do not make a fit."""
+    """``(speed times the odometer scale, the fit)``; the speed as given when the fixes do
+    not make a fit (None) or one to use (its ``problem`` says why)."""
     from road_force_estimator.estimation import odometer
 
     fit = odometer.fit_odometer(*odometer.odometer_distance(stamps_ns, speed_mps),
                                 fixes.stamps_ns, fixes.latitude_deg, fixes.longitude_deg)
-    if fit is None:
-        return speed_mps, None
+    if fit is None or fit.problem:
+        return speed_mps, fit
     v = np.broadcast_to(np.asarray(speed_mps, dtype=float), np.shape(stamps_ns))
     return v * odometer.scale_at(stamps_ns, fit), fit

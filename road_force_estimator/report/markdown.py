@@ -214,8 +214,10 @@ def _odometer_rows(odo) -> list[tuple[str, Any]]:
         return []
     if not odo:
         return [('odometer scale from GNSS', 'n/a (too few fixes: distance from the speed)')]
+    applied = 'applied to the distance' if odo['applied'] else \
+        f'NOT applied ({odo["problem"]}): distance from the speed'
     return [('odometer scale from GNSS (true m per odometer m, +- 1 std)',
-             f'{odo["scale"]:.5f} +- {odo["scale_std"]:.5f}'),
+             f'{odo["scale"]:.5f} +- {odo["scale_std"]:.5f}, {applied}'),
             ('speed reads high by (%, +- 1 std)',
              f'{odo["speed_error_pct"]:.3f} +- {odo["speed_error_std_pct"]:.3f}'),
             ('fixes used / rejected as outliers / position restarts; fix noise (m)',

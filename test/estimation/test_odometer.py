@@ -177,3 +177,20 @@ class TestOfflineEstimate:
             other = estimate_recording(stamps, q, phi, v, VEHICLE, obs, fixes=fx)
             for name in ('distance_m', 'road_m', 'wheel_load_n', 'ltr', 'converged'):
                 np.testing.assert_array_equal(getattr(other, name), getattr(base, name))
+
+
+def test_frozen_fixes_are_reported_not_applied(inputs):
+    """A receiver that repeats one position while the truck drives: the fit says so and the
+    distance stays the speed's."""
+    stamps, q, phi, v, fixes = inputs
+
+    class Frozen:
+        stamps_ns = fixes.stamps_ns
+        latitude_deg = np.full(len(fixes.stamps_ns), fixes.latitude_deg[0])
+        longitude_deg = np.full(len(fixes.stamps_ns), fixes.longitude_deg[0])
+    est = estimate_recording(stamps, q, phi, v, VEHICLE,
+                             ObserverParameters(distance_source='gnss'), fixes=Frozen)
+    assert est.odometer is not None and est.odometer.problem
+    assert not est.odometer.as_dict()['applied']
+    base = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters())
+    np.testing.assert_array_equal(est.distance_m, base.distance_m)
