@@ -50,8 +50,6 @@ import numpy as np
 from road_force_estimator.core.gnss import local_east_north
 from road_force_estimator.estimation.reconstruction import distance_m
 
-_DIAG = (np.arange(5), np.arange(5))
-
 __all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', 'INIT_BASE_M',
            'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at',
            'causal_distance']
@@ -61,6 +59,7 @@ __all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', '
 #: (1e-6: 1e-4 over 10 km).
 PROCESS_STD = (0.003, 3e-4, 1e-4, 1e-6)
 _Q_PER_M = np.square(np.array([PROCESS_STD[0], *PROCESS_STD]))
+_DIAG = (np.arange(5), np.arange(5))
 #: Squared Mahalanobis distance above which a fix is an outlier (chi^2_2, p = 1e-6).
 GATE = -2.0 * math.log(1e-6)
 #: Odometer distance (m) of consecutive rejected fixes after which the position restarts.
@@ -183,11 +182,13 @@ def fix_noise_m(east_m: np.ndarray, north_m: np.ndarray, stamps_ns: np.ndarray) 
 
 
 def _initial_state(xf: np.ndarray, east: np.ndarray, north: np.ndarray, sigma: float):
-    """State and covariance at the first fix from a line fitted (least squares, then once
-    more without the residuals above 5 sigma) to the fixes of the first :data:`INIT_BASE_M`
-    of odometer; None when they span less than that."""
-    near = np.flatnonzero(xf - xf[0] <= INIT_BASE_M)
-    if xf[-1] - xf[0] < INIT_BASE_M or near.size < 3:
+    """State and covariance at the first point from a line fitted (least squares, then once
+    more without the residuals above 5 sigma) to the points up to the first one
+    :data:`INIT_BASE_M` of odometer on; None when the drive is shorter."""
+    if xf[-1] - xf[0] < INIT_BASE_M:
+        return None
+    near = np.arange(int(np.argmax(xf - xf[0] >= INIT_BASE_M)) + 1)   # one beyond, at least
+    if near.size < 3:
         return None
     rows = near
     for _ in range(2):

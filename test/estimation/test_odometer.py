@@ -194,3 +194,13 @@ def test_frozen_fixes_are_reported_not_applied(inputs):
     assert not est.odometer.as_dict()['applied']
     base = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters())
     np.testing.assert_array_equal(est.distance_m, base.distance_m)
+
+
+def test_standing_at_the_start_with_no_fix_while_pulling_away():
+    def speed(t):      # 30 s standing, then 20 m/s
+        return np.interp(t, [0, 30, 32, 130], [0, 0, 20, 20])
+    stamps, v, fs, lat, lon, _, _ = drive(duration_s=130.0, speed=speed, seed=9)
+    tf = (fs - T0_NS) * 1e-9
+    keep = (tf < 29.0) | (tf > 36.0)                               # no fix while pulling away
+    f = fit(stamps, v, fs[keep], lat[keep], lon[keep])
+    assert abs(f.scale / TRUE_SCALE - 1.0) < 1e-3 and f.resets == 0
