@@ -7,15 +7,27 @@ Positions are integrated on the WGS84 ellipsoid with the local meridian and prim
 radii of curvature, so a constant heading follows a rhumb line; over the few kilometres of a
 drive this is exact to well below a centimetre per kilometre.
 
+The simulated receiver's error (:class:`FixNoise`) is white Gaussian noise in metres, north and
+east, of one standard deviation (``simulator.gnss.noise``), drawn two per fix in fix order from
+its own generator, so the batch path and the per-fix path (the plant_simulator node) give the
+same numbers. :func:`local_east_north` maps a track of positions to metres on a plane, step by
+step (for the odometer fusion).
+
 This module imports numpy only (core).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
-__all__ = ['WGS84_A_M', 'WGS84_E2', 'GnssRoute', 'route', 'positions_at', 'radii_of_curvature']
+__all__ = ['WGS84_A_M', 'WGS84_E2', 'GnssRoute', 'route', 'positions_at', 'radii_of_curvature',
+           'FixNoise', 'local_east_north', 'NOISE_SEED_OFFSET']
+
+#: The fix noise's generator is seeded with (simulator.seed, this): a stream of its own, apart
+#: from the sensor noise's.
+NOISE_SEED_OFFSET = 8608
 
 WGS84_A_M = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -112,3 +124,50 @@ def positions_at(fix_stamps_ns: np.ndarray, latitude_deg: np.ndarray,
     lat[outside] = np.nan
     lon[outside] = np.nan
     return lat, lon
+
+
+def local_east_north(lat_deg, lon_deg) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m, (k,)) of a track of positions, built step by step from the first:
+    each step's north and east with the WGS84 radii of curvature at its midpoint, so that the
+    distance between consecutive positions is exact to ~(step / 6400 km)^2 relative however
+    long the track (a tangent plane at one point would stretch distances by ~1e-5 per 2 km
+    away from it). The frame turns slowly with the meridians' convergence (``dlon sin(lat)``:
+    under 2 mrad per 10 km east at 48 deg), a bend of the track, not a change of its length."""
+    lat = np.asarray(lat_deg, dtype=float)
+    lon = np.asarray(lon_deg, dtype=float)
+    mid = 0.5 * (lat[1:] + lat[:-1])
+    m, n = radii_of_curvature(mid)
+    dn = np.radians(np.diff(lat)) * m
+    de = np.radians(np.diff(lon)) * n * np.cos(np.radians(mid))
+    zero = np.zeros(1)
+    return np.concatenate([zero, np.cumsum(de)]), np.concatenate([zero, np.cumsum(dn)])
+
+
+class FixNoise:
+    """White position noise of a simulated receiver: ``std_m`` (m) north and east per fix.
+
+    Parameters
+    ----------
+    std_m : float
+        Standard deviation per horizontal axis (m), >= 0 (0: no noise, nothing drawn).
+    seed : int
+        ``simulator.seed``; the generator is ``default_rng((seed, NOISE_SEED_OFFSET))``.
+    """
+
+    def __init__(self, std_m: float, seed: int) -> None:
+        if not (math.isfinite(std_m) and std_m >= 0.0):
+            raise ValueError(f'GNSS noise = {std_m!r} m: must be a finite number >= 0')
+        self.std_m = float(std_m)
+        self._rng = np.random.default_rng((int(seed), NOISE_SEED_OFFSET))
+
+    def apply(self, latitude_deg, longitude_deg) -> tuple[np.ndarray, np.ndarray]:
+        """The positions (deg, (k,)) with the next k fixes' noise added: two standard normals
+        per fix (north, east), in order; unchanged (same values) when ``std_m`` is 0."""
+        lat = np.array(latitude_deg, dtype=float, ndmin=1)
+        lon = np.array(longitude_deg, dtype=float, ndmin=1)
+        if self.std_m == 0.0:
+            return lat, lon
+        z = self._rng.standard_normal((lat.size, 2)) * self.std_m
+        m, n = radii_of_curvature(lat)
+        return (lat + np.degrees(z[:, 0] / m),
+                lon + np.degrees(z[:, 1] / (n * np.cos(np.radians(lat)))))

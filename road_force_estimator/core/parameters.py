@@ -104,6 +104,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.rollover_cutoff_frequency', 'double', 2.0, 'Hz',
        'low-pass cutoff of the quasi-static LTR for rollover warnings (below the wheel hop)',
        0.05, 50.0),
+    _p('observer.distance_source', 'string', 'speed', '',
+       'offline travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the '
+       'speed times the odometer scale estimated from /fix (estimation.odometer; offline '
+       'mode of estimate_bag and estimate_fleet only)', choices=('speed', 'gnss')),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.speed_profile', 'string', '', '',
@@ -128,6 +132,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'WGS84 longitude of the start of the route', -180.0, 180.0),
     _p('simulator.gnss.heading', 'double', 0.0, 'deg',
        'route heading, clockwise from north', -360.0, 360.0),
+    _p('simulator.gnss.noise', 'double', 0.0, 'm',
+       'standard deviation of the white position noise of /fix, per horizontal axis', 0.0,
+       100.0),
+    _p('simulator.speed_scale_error', 'double', 0.0, '',
+       'odometer error: the published /vehicle/twist speed is (1 + e) times the true one '
+       '(the route and /fix stay true)', -0.2, 0.2),
 )
 
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
@@ -274,6 +284,7 @@ class ObserverParameters(_FromParameters):
     road_roughness_m3: float = _param('observer.road_roughness')
     road_correlation_length_m: float = _param('observer.road_correlation_length')
     rollover_cutoff_frequency_hz: float = _param('observer.rollover_cutoff_frequency')
+    distance_source: str = _param('observer.distance_source')
 
 
 @dataclass(frozen=True)
@@ -293,6 +304,8 @@ class SimulatorParameters(_FromParameters):
     gnss_start_latitude_deg: float = _param('simulator.gnss.start_latitude')
     gnss_start_longitude_deg: float = _param('simulator.gnss.start_longitude')
     gnss_heading_deg: float = _param('simulator.gnss.heading')
+    gnss_noise_m: float = _param('simulator.gnss.noise')
+    speed_scale_error: float = _param('simulator.speed_scale_error')
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

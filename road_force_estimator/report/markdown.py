@@ -202,9 +202,27 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
                   f'{_fmt(1e3 * s["offline"]["noise_std"][2], 3)}'),
                  ('offline: low-pass cut-offs q1 / q2 / phi (Hz)',
                   _fmt(s['offline']['cutoff_hz'], 1))]
+    rows += _odometer_rows(s.get('odometer', False))
     for key, value in (s.get('notes') or {}).items():
         rows.append((key, value))
     return [f'| {a} | {b} |' for a, b in rows]
+
+
+def _odometer_rows(odo) -> list[tuple[str, Any]]:
+    """The odometer fusion's rows (none when it was off)."""
+    if odo is False:
+        return []
+    if not odo:
+        return [('odometer scale from GNSS', 'n/a (too few fixes: distance from the speed)')]
+    applied = 'applied to the distance' if odo['applied'] else \
+        f'NOT applied ({odo["problem"]}): distance from the speed'
+    return [('odometer scale from GNSS (true m per odometer m, +- 1 std)',
+             f'{odo["scale"]:.5f} +- {odo["scale_std"]:.5f}, {applied}'),
+            ('speed reads high by (%, +- 1 std)',
+             f'{odo["speed_error_pct"]:.3f} +- {odo["speed_error_std_pct"]:.3f}'),
+            ('fixes used / rejected as outliers / position restarts; fix noise (m)',
+             f'{odo["fixes"] - odo["fixes_rejected"]} / {odo["fixes_rejected"]} / '
+             f'{odo["resets"]}; {odo["fix_noise_m"]:.2f}')]
 
 
 def _summary_notes(s: dict[str, Any], u: Units) -> list[str]:

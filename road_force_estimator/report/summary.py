@@ -295,6 +295,8 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(_notes(est, extra))
+    if hasattr(est, 'odometer'):     # the fusion was on (observer.distance_source = gnss)
+        summary['odometer'] = est.odometer.as_dict() if est.odometer is not None else None
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)

@@ -14,7 +14,9 @@ the road or of ``simulator.duration`` it stops publishing and :attr:`finished` t
 Start-up order: the drive (sample 0) starts once ``/suspension/deflections`` has a subscriber
 (and the other topics theirs, or :data:`START_GRACE_S` later), or after the node-local
 ``start_timeout`` (s) with a warning, so that a recorder started beside it has every sample.
-``/fix`` carries status FIX, service GPS.
+``/fix`` carries status FIX, service GPS, and the receiver noise ``simulator.gnss.noise``
+(:class:`~.core.gnss.FixNoise`, the numbers of ``simulate_bag``); the twist carries the speed
+times ``1 + simulator.speed_scale_error`` (an odometer error; the route stays true).
 """
 from __future__ import annotations
 
@@ -30,7 +32,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState, NavSatFix, NavSatStatus
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.core.gnss import route
+from road_force_estimator.core.gnss import FixNoise, route
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.ros.messages import (
     deflections_msg, diagnostic_status, ns_to_stamp, reliable_qos, road_point_msg, sensor_qos,
@@ -95,6 +97,8 @@ class PlantSimulator(Node):
                           for topic in api.TRUE_ROAD]
         self.fix_pub = self.create_publisher(NavSatFix, api.FIX, sensor_qos(10)) if (
             sim.gnss_rate_hz > 0.0) else None
+        self.odometer = 1.0 + sim.speed_scale_error   # the twist reads (1 + e) v
+        self.fix_noise = FixNoise(sim.gnss_noise_m, sim.seed)
         self.fix = (-1, 0.0, sim.gnss_start_latitude_deg, sim.gnss_start_longitude_deg,
                     sim.gnss_heading_deg)  # (fix index, t_s, lat, lon, heading) of the last fix
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
@@ -187,7 +191,7 @@ class PlantSimulator(Node):
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
         load_l, load_r, road_l, road_r = self.reliable
-        self.twist_pub.publish(twist_msg(stamp_ns, self.speed_at(sample.t_s)))
+        self.twist_pub.publish(twist_msg(stamp_ns, self.speed_at(sample.t_s) * self.odometer))
         self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))
         for pub, frame, load in zip((load_l, load_r), api.WHEEL_FRAMES, sample.wheel_load_n):
             pub.publish(wrench_msg(stamp_ns, frame, load))
@@ -211,7 +215,8 @@ class PlantSimulator(Node):
                       start_longitude_deg=lon, heading_deg=heading)
             lat, lon, heading = r.latitude_deg[-1], r.longitude_deg[-1], r.heading_deg[-1]
         self.fix = (int(t_s * self.sim.gnss_rate_hz), t_s, float(lat), float(lon), heading)
-        msg = NavSatFix(latitude=float(lat), longitude=float(lon), altitude=0.0)
+        noisy_lat, noisy_lon = self.fix_noise.apply(lat, lon)
+        msg = NavSatFix(latitude=float(noisy_lat[0]), longitude=float(noisy_lon[0]), altitude=0.0)
         msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), 'gnss'
         msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
         msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS

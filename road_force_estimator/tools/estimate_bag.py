@@ -249,11 +249,13 @@ def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, st
     if mode == 'online':
         est = estimate_online(*args, progress=progress)
     else:
-        est = estimate_recording(*args)
+        est = estimate_recording(*args, fixes=drive.fixes)
     if est.status.accepted == 0:
         raise InputError(f'{input_path}: no sample could be estimated: '
                          f'{_why_none_estimated(drive, speed, est.status)}')
     extra = {}
+    if mode == 'online' and observer.distance_source == 'gnss':
+        extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
     if early:
         extra['samples before the first twist (given its speed)'] = early
     return drive, est, extra
@@ -297,6 +299,10 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
+    fit = getattr(est, 'odometer', None)          # observer.distance_source = gnss, offline
+    if fit is not None and not fit.problem:
+        counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
+                      odometer_fixes_rejected=fit.rejected)
     folder.mkdir(parents=True, exist_ok=True)
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,

@@ -17,7 +17,10 @@ measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground trut
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
 (a fix at the first sample of each GNSS period, as the plant_simulator node publishes them;
 the route is integrated between fixes with the lateral acceleration at the fixes, so a step
-of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^2).
+of a_y is smeared over one GNSS period: about a centimetre of position at 2 m/s^2), with the
+receiver's white noise ``simulator.gnss.noise`` (m, :class:`~.core.gnss.FixNoise`). The twist
+carries the speed times ``1 + simulator.speed_scale_error`` (an odometer that reads high for
+e > 0); the plant, the route and the fixes follow the true speed.
 Sample k is stamped ``start + round(k / rate)`` ns. The parameters used go to the bag's
 ``custom_data``.
 
@@ -43,7 +46,7 @@ import numpy as np
 
 from road_force_estimator.tools import cli, output_folder
 
-__all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'main']
+__all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'twist_speed', 'main']
 
 PROG = 'simulate_bag'
 
@@ -147,9 +150,9 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     -------
     trajectory, q_meas (n, 2), roll_meas (n,), fixes or None, road, stop_reason
         ``trajectory`` has ``t_s``, ``distance_m``, ``q_m``, ``roll_rad``, ``wheel_load_n``,
-        ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps``.
+        ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps`` (the true
+        speed; the twist's is :func:`twist_speed`).
     """
-    from road_force_estimator.core.gnss import route
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
@@ -195,22 +198,33 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
     sensors = SensorModel.from_simulator(sim)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
-    fixes = None
-    if sim.gnss_rate_hz > 0.0:
-        period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
-        first = np.concatenate([[True], period[1:] > period[:-1]])
-        idx = np.flatnonzero(first)
-        fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
-                      start_latitude_deg=sim.gnss_start_latitude_deg,
-                      start_longitude_deg=sim.gnss_start_longitude_deg,
-                      heading_deg=sim.gnss_heading_deg,
-                      lateral_accel_mps2=traj.lateral_accel_mps2[idx])
+    fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
     reason = ''
     if done < requested:
         reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
                   f'samples ({traj.t_s[-1]:g} s)')
     return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def _fixes(traj, sim, profile):
+    """The fixes of a drive (``core.gnss.GnssRoute``): one at the first sample of each GNSS
+    period, on the true route, with the receiver noise."""
+    from road_force_estimator.core.gnss import FixNoise, route
+
+    period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
+    first = np.concatenate([[True], period[1:] > period[:-1]])
+    idx = np.flatnonzero(first)
+    fixes = route(traj.t_s[idx], traj.speed_mps if profile is None else traj.speed_mps[idx],
+                  start_latitude_deg=sim.gnss_start_latitude_deg,
+                  start_longitude_deg=sim.gnss_start_longitude_deg,
+                  heading_deg=sim.gnss_heading_deg,
+                  lateral_accel_mps2=traj.lateral_accel_mps2[idx])
+    if sim.gnss_noise_m > 0.0:
+        lat, lon = FixNoise(sim.gnss_noise_m, sim.seed).apply(fixes.latitude_deg,
+                                                               fixes.longitude_deg)
+        fixes = type(fixes)(fixes.time_s, lat, lon, fixes.heading_deg)
+    return fixes
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -236,7 +250,7 @@ def _main(args: argparse.Namespace) -> int:
     target.check()
     traj, q_meas, roll_meas, fixes, road, reason = simulate(
         vehicle, sim, lateral=lateral, progress=not args.no_progress)
-    used = {**vehicle.to_parameters(), **sim.to_parameters()}
+    used = _recorded_parameters({**vehicle.to_parameters(), **sim.to_parameters()})
     custom = {'road_force_estimator.parameters': json.dumps(used, sort_keys=True),
               'road_force_estimator.road_name': road.name or sim.road,
               'road_force_estimator.writer_command': PROG}
@@ -244,7 +258,7 @@ def _main(args: argparse.Namespace) -> int:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
     with target.staged() as bag:
         count = bagio.write_drive_bag(bag, traj, q_meas, roll_meas, fixes=fixes,
-                                      speed_mps=traj.speed_mps,
+                                      speed_mps=twist_speed(traj.speed_mps, sim),
                                       track_width_m=vehicle.track_width_m,
                                       ground_truth=not args.no_ground_truth, custom_data=custom)
     n = len(traj.t_s)
@@ -255,6 +269,29 @@ def _main(args: argparse.Namespace) -> int:
           f'{_speed_text(sim)}) over '
           f'{road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
+
+
+#: Effects that came later, off by default: recorded in ``custom_data`` only when set, so a drive
+#: simulated without them is the very bag it was before (rosbag2 keeps the metadata in the
+#: MCAP file too).
+_RECORDED_WHEN_SET = ('simulator.gnss.noise', 'simulator.speed_scale_error')
+
+
+def _recorded_parameters(used: dict) -> dict:
+    """The parameters for ``custom_data``: all but those of :data:`_RECORDED_WHEN_SET` at
+    their defaults (a reader takes the default for a missing one)."""
+    from road_force_estimator.core.parameters import SPECS
+
+    return {k: v for k, v in used.items()
+            if not (k in _RECORDED_WHEN_SET and v == SPECS[k].default)}
+
+
+def twist_speed(speed_mps, sim):
+    """The speed the twist carries (m/s): the true one times ``1 + speed_scale_error`` (the
+    very values when the error is 0)."""
+    if sim.speed_scale_error == 0.0:
+        return speed_mps
+    return np.asarray(speed_mps, dtype=float) * (1.0 + sim.speed_scale_error)
 
 
 def _written_here(custom: dict[str, str]) -> bool:

@@ -82,3 +82,41 @@ def test_positions_between_fixes_are_interpolated_and_never_extrapolated():
     assert np.isnan(qlat[2:]).all() and np.isnan(qlon[2:]).all()
     nlat, _ = positions_at(stamps[:1], lat[:1], lon[:1], np.array([0]))
     assert np.isnan(nlat).all()
+
+
+def test_fix_noise_per_fix_equals_batch_and_has_its_standard_deviation():
+    from road_force_estimator.core.gnss import FixNoise, radii_of_curvature
+    r = route(np.arange(0.0, 400.0, 0.1), 20.0, start_latitude_deg=48.1486,
+              start_longitude_deg=17.1077, heading_deg=30.0)
+    lat, lon = FixNoise(2.5, 7).apply(r.latitude_deg, r.longitude_deg)
+    one = FixNoise(2.5, 7)                       # the node's path: one fix at a time
+    for k in (0, 1, 2, 3):
+        a, b = one.apply(r.latitude_deg[k], r.longitude_deg[k])
+        assert (a[0], b[0]) == (lat[k], lon[k])
+    m, n = radii_of_curvature(r.latitude_deg)
+    north = np.radians(lat - r.latitude_deg) * m
+    east = np.radians(lon - r.longitude_deg) * n * np.cos(np.radians(r.latitude_deg))
+    for axis in (north, east):                   # 4000 fixes: the std within 5 %
+        assert np.std(axis) == pytest.approx(2.5, rel=0.05)
+        assert abs(np.mean(axis)) < 0.15
+    assert abs(np.corrcoef(north, east)[0, 1]) < 0.05
+    same = FixNoise(0.0, 7).apply(r.latitude_deg, r.longitude_deg)
+    np.testing.assert_array_equal(same[0], r.latitude_deg)
+    with pytest.raises(ValueError, match='GNSS noise'):
+        FixNoise(-1.0, 1)
+
+
+@pytest.mark.parametrize('lat0, heading', [(48.1486, 30.0), (65.0, 90.0), (-33.9, 200.0)])
+def test_local_east_north_keeps_the_distances_along_a_track(lat0, heading):
+    from road_force_estimator.core.gnss import local_east_north
+    t = np.arange(0.0, 1000.0 + 1e-9, 1.0)       # 20 km, a fix every 20 m
+    r = route(t, 20.0, start_latitude_deg=lat0, start_longitude_deg=17.1, heading_deg=heading,
+              lateral_accel_mps2=np.where(t > 500.0, 0.2, 0.0))
+    e, n = local_east_north(r.latitude_deg, r.longitude_deg)
+    steps = np.hypot(np.diff(e), np.diff(n))
+    geodesic = np.array([vincenty_inverse(r.latitude_deg[k], r.longitude_deg[k],
+                                          r.latitude_deg[k + 1], r.longitude_deg[k + 1])[0]
+                         for k in range(t.size - 1)])
+    np.testing.assert_allclose(steps, geodesic, rtol=0.0, atol=1e-6)
+    assert np.sum(steps) == pytest.approx(np.sum(geodesic), abs=1e-4)    # over 20 km
+    assert np.sum(steps) == pytest.approx(20000.0, abs=0.2)   # the route's own chords

@@ -98,6 +98,25 @@ def test_fix_follows_the_straight_route(ros_context):
     assert {(f.status.status, f.status.service) for f in fixes} == {(0, 1)}
 
 
+def test_odometer_error_and_fix_noise(ros_context):
+    """simulator.speed_scale_error: the twist reads (1 + e) v, the distance stays v t;
+    simulator.gnss.noise: the fixes of the noise-free run plus FixNoise's numbers (the
+    simulate_bag path, same seed)."""
+    from road_force_estimator.core.gnss import FixNoise
+    params = dict(simulator__duration=0.5, simulator__road='flat:length=50',
+                  simulator__gnss__rate=10.0, realtime_factor=2.0)
+    _, clean = drive(ros_context, **params)
+    _, col = drive(ros_context, simulator__speed_scale_error=0.015,
+                   simulator__gnss__noise=2.5, **params)
+    assert {m.twist.linear.x for m in col.messages['/vehicle/twist']} == {20.0 * 1.015}
+    assert [m.point.x for m in col.messages[TRUTH[2]]] == \
+        [m.point.x for m in clean.messages[TRUTH[2]]]
+    lat, lon = FixNoise(2.5, 1).apply([f.latitude for f in clean.messages['/fix']],
+                                      [f.longitude for f in clean.messages['/fix']])
+    assert [f.latitude for f in col.messages['/fix']] == list(lat)
+    assert [f.longitude for f in col.messages['/fix']] == list(lon)
+
+
 def test_flat_road_gives_static_loads_and_the_noise_asked_for(ros_context):
     plant, col = drive(ros_context, simulator__duration=1.0, simulator__road='flat:length=100',
                        simulator__rate=500.0, simulator__noise__deflection=1e-4,
