@@ -295,8 +295,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(_notes(est, extra))
-    if hasattr(est, 'odometer'):     # the fusion was on (observer.distance_source = gnss)
-        summary['odometer'] = est.odometer.as_dict() if est.odometer is not None else None
+    summary.update(_odometer_summary(est))
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
@@ -305,6 +304,13 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
     summary['convergence'] = _convergence_summary(summary)
     return summary, segments, al
+
+
+def _odometer_summary(est) -> dict[str, Any]:
+    """``{'odometer': ...}`` when the fusion was on (observer.distance_source = gnss), else {}."""
+    if not hasattr(est, 'odometer'):
+        return {}
+    return {'odometer': est.odometer.as_dict() if est.odometer is not None else None}
 
 
 def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segments: dict,
