@@ -42,7 +42,8 @@ SEGMENT_DECIMALS = {
     'start_m': 3, 'end_m': 3, 'iri_left_m_per_km': 3, 'iri_right_m_per_km': 3,
     'true_iri_left_m_per_km': 3, 'true_iri_right_m_per_km': 3, 'dlc_left': 4, 'dlc_right': 4,
     'peak_load_left_n': 0, 'peak_load_right_n': 0, 'max_abs_ltr': 4, 'start_lat': 7,
-    'start_lon': 7, 'end_lat': 7, 'end_lon': 7, 'max_abs_ltr_quasi_static': 4,
+    'start_lon': 7, 'end_lat': 7, 'end_lon': 7, 'static_load_left_n': 0,
+    'static_load_right_n': 0, 'max_abs_ltr_quasi_static': 4,
 }
 
 

@@ -192,7 +192,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
         lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
-    sensors = SensorModel.from_simulator(sim)
+    sensors = SensorModel.from_simulator(sim, vehicle)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = None
     if sim.gnss_rate_hz > 0.0:
