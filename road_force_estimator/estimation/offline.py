@@ -443,6 +443,9 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         for arr in fields.values():
             arr[held] = arr[src]
     _fill_status(status, fields, stamp_i, acc, starts, runs, edge)
+    status.sprung_mass_kg = vehicle.sprung_mass_kg
+    status.static_load_n = (tuple(float(f) for f in fields['static_load_n'][acc[-1]])
+                            if acc.size else vehicle.static_load_n)
     out = OfflineEstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
                                 noise_std=noise, cutoff_hz=cut, runs=runs, **fields)
     status.negative_load_samples = out.negative_load_samples()

@@ -199,10 +199,12 @@ class EstimateArrays:
     lift_off: np.ndarray
     converged: np.ndarray
     ltr_quasi_static: np.ndarray
-    static_load_n: np.ndarray
     status: EstimatorStatus = field(default_factory=EstimatorStatus)
     #: (n,) bool: samples whose standing speed the deflections contradicted (:mod:`.speed_check`)
     speed_contradicted: np.ndarray | None = None
+    #: (n, 2): the static wheel loads F_c,i in use (N); every estimator fills it (None: a
+    #: hand-made batch without them)
+    static_load_n: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:

@@ -176,13 +176,28 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
+    status = _status(cnt, acc, valid, contradicted, stamp_int, fields, smoother)
+    flags = np.zeros(n, bool)
+    flags[acc] = contradicted
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                         speed_contradicted=flags, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
+
+
+def _status(cnt: dict, acc: np.ndarray, valid: np.ndarray, contradicted: np.ndarray,
+            stamp_int: np.ndarray, fields: dict, smoother: _Smoother) -> EstimatorStatus:
+    """The status of :func:`smooth` (the estimator's counts, the last accepted sample's
+    flags, the smoother's levels and vehicle); rejected rows of ``fields`` take the previous
+    row."""
     status = EstimatorStatus(**cnt)
     status.accepted = int(acc.size)
     status.speed_contradicted = int(np.count_nonzero(contradicted))
-    flags = np.zeros(n, bool)
-    flags[acc] = contradicted
+    vehicle = smoother.vehicle
+    status.sprung_mass_kg = vehicle.sprung_mass_kg
+    status.static_load_n = vehicle.static_load_n
     if acc.size:
-        if acc.size < n:                            # rejected rows hold the previous row
+        if acc.size < valid.size:                   # rejected rows hold the previous row
             held, src = hold_rejected(valid)
             for arr in fields.values():
                 arr[held] = arr[src]
@@ -191,11 +206,9 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status.last_residual_nm = float(fields['residual_nm'][last])
         status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
         status.converged = bool(fields['converged'][last])
+        status.static_load_n = tuple(float(f) for f in fields['static_load_n'][last])
     smoother.fill_status(status)
-    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
-                         speed_contradicted=flags, **fields)
-    status.negative_load_samples = out.negative_load_samples()
-    return out
+    return status
 
 
 class _Smoother:

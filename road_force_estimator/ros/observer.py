@@ -51,7 +51,7 @@ CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
                  'rejected_time': 'time', 'resets': 'resets', 'gaps': 'gaps'}
 # Further EstimatorStatus fields reported as they are (those the core has).
 ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
-                    'noise_roll_rad', 'road_roughness_m3', 'sprung_mass_kg')
+                    'noise_roll_rad', 'road_roughness_m3')
 # The rest of a period's counts are rejections. 'missed': inputs that never arrived, inferred
 # from the stamps (a step of k typical periods means k - 1 samples lost on the way, e.g. by
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
@@ -279,6 +279,10 @@ class Observer(Node):
                   'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
                   'lift_off_right': st.lift_off[1], **ex}
         values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
+        if getattr(self.estimator, 'static_load', None) is not None:   # zero_load: estimated
+            values.update(sprung_mass_kg=st.sprung_mass_kg,
+                          static_load_left_n=st.static_load_n[0],
+                          static_load_right_n=st.static_load_n[1])
         if fresh['speed_contradicted']:
             values['speed_contradicted_samples'] = fresh['speed_contradicted']
         if fresh['negative_loads']:

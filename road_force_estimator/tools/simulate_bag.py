@@ -11,8 +11,10 @@ profile (:func:`road_force_estimator.core.road.road_from_source`). The plant
 (:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
 runs at the rate for the duration, or to the end of the road; the sensors
 (:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
-measure it. The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`) holds the
-measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
+measure it, the deflections from a mechanical zero with ``vehicle.deflection_reference:
+zero_load`` (MODEL.md "Measurements": a payload is a file with a larger sprung mass or static
+load than the observer's). The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`)
+holds the measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
 ``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
 (a fix at the first sample of each GNSS period, as the plant_simulator node publishes them;
