@@ -130,11 +130,12 @@ class GainSchedule:
 
     def set_vehicle(self, vehicle: VehicleParameters) -> None:
         """Design for ``vehicle`` from now on (an estimated sprung mass): the caches of designs
-        are dropped, the estimates and levels stay."""
+        are dropped, the estimates and levels stay; the gains in use stay until the next design
+        (``stale``), so that samples held back can still be finalized."""
         self.vehicle = vehicle
         self._gains.clear()
         self._var_dq.clear()
-        self.invalidate()
+        self.stale = True
 
     def invalidate(self) -> None:
         """Drop the gains in use (e.g. the lag changed)."""

@@ -141,3 +141,22 @@ def test_segments_carry_the_mean_static_loads_before_the_quasi_static_ltr():
     none = segment_table(x, np.full((x.size, 2), 3e4), np.zeros(x.size),
                          np.zeros((x.size, 2), bool))
     assert np.isnan(none['static_load_left_n']).all()
+
+
+def test_latency_and_a_gap_per_sample_equals_batch(payload_drive):
+    # a 0.2 s gap (a restart) with 10 ms latency: every accepted sample gets one estimate,
+    # the per-sample path's (update, then flush) are the batch rows, the static loads go on
+    tr, stamps, q, phi = payload_drive
+    keep = np.r_[0:1500, 1700:3000]
+    s, qq, pp = stamps[keep], q[keep], phi[keep]
+    obs = ObserverParameters(latency_s=0.01)
+    batch = estimate_batch(s, qq, pp, 20.0, NOMINAL, obs)
+    est = Estimator(NOMINAL, obs)
+    rows = [r for r in (est.update(int(a), b, c, 20.0) for a, b, c in zip(s, qq, pp)) if r]
+    rows += est.flush()
+    assert est.status.resets == 1 and len(rows) == keep.size
+    np.testing.assert_array_equal(np.array([r.static_load_n for r in rows]),
+                                  batch.static_load_n)
+    np.testing.assert_array_equal(np.array([r.wheel_load_n for r in rows]), batch.wheel_load_n)
+    truth = np.array(LOADED.static_load_n)
+    assert np.max(np.abs(batch.static_load_n[-1] / truth - 1.0)) < 0.03
