@@ -26,7 +26,7 @@ Run: ``.venv/bin/python -m bench.static_load [--duration 100] [--friction 1500]`
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
+from dataclasses import fields, replace
 import sys
 import time
 
@@ -53,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--duration', type=float, default=100.0, help='drive length (s)')
     p.add_argument('--seed', type=int, default=1, help='road seed')
+    p.add_argument('--start', type=float, default=0.0,
+                   help='the observer starts this many seconds into the drive (s; 0: at the '
+                        "plant's equilibrium start, whose first reading is already the scale)")
     p.add_argument('--classes', nargs='+', default=['C', 'A'], choices=sorted(TOLERANCE))
     p.add_argument('--modes', nargs='+', default=['online', 'offline'],
                    choices=['online', 'offline'])
@@ -80,10 +83,17 @@ def vehicles(friction_n: float, in_file: bool) -> tuple[VehicleParameters, Vehic
     return truth, nominal
 
 
-def drive(truth: VehicleParameters, road_class: str, duration_s: float, seed: int):
-    road = iso8608_profile(road_class, SPEED * duration_s + 5.0, seed=seed)
-    tr = simulate(truth, road, speed_mps=SPEED, rate_hz=RATE, duration_s=duration_s,
+def drive(truth: VehicleParameters, road_class: str, duration_s: float, seed: int,
+          start_s: float = 0.0):
+    """The drive, its stamps and readings (zero-load and equilibrium), from ``start_s`` on."""
+    road = iso8608_profile(road_class, SPEED * (start_s + duration_s) + 5.0, seed=seed)
+    tr = simulate(truth, road, speed_mps=SPEED, rate_hz=RATE, duration_s=start_s + duration_s,
                   tire_envelope_m=0.25)
+    if start_s > 0.0:
+        k = int(round(start_s * RATE))
+        tr = replace(tr, **{f.name: getattr(tr, f.name)[k:] for f in fields(tr)
+                            if isinstance(getattr(tr, f.name), np.ndarray)})
+        tr = replace(tr, t_s=tr.t_s - tr.t_s[0])
     sensors = SensorModel(1e-5, 1e-4, seed=1)
     q, phi = replace(sensors, deflection_offset_m=truth.deflection_offset_m).measure(
         tr.q_m, tr.roll_rad)
@@ -140,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     truth_n = np.array(truth.static_load_n)
     print(f'drive (a): payload +{100 * (PAYLOAD - 1):.0f} % (M = {truth.sprung_mass_kg:.0f} kg, '
           f'observer file {nominal.sprung_mass_kg:.0f} kg), zero-load deflections, '
-          f'{SPEED:g} m/s, {args.duration:g} s, friction {args.friction:g} N'
+          f'{SPEED:g} m/s, {args.duration:g} s from {args.start:g} s, friction '
+          f'{args.friction:g} N'
           f'{" (stated in the file)" if args.friction_in_file else ""}; true F_c = '
           f'{truth_n[0]:.0f} / {truth_n[1]:.0f} N')
     print('| class | mode | tol | segments within | worst segment | settle (s) | M end (kg) '
@@ -148,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     print('|---|---|---|---|---|---|---|---|')
     for cls in args.classes:
         t0 = time.perf_counter()
-        tr, stamps, (q, phi), (q_eq, phi_eq) = drive(truth, cls, args.duration, args.seed)
+        tr, stamps, (q, phi), (q_eq, phi_eq) = drive(truth, cls, args.duration, args.seed,
+                                                     args.start)
         told = replace(truth, deflection_reference='equilibrium')
         tol = TOLERANCE[cls]
         for mode in args.modes:
