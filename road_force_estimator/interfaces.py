@@ -10,7 +10,8 @@ from __future__ import annotations
 
 __all__ = [
     'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
-    'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'ROAD', 'LTR',
+    'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'STATIC_LOAD',
+    'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'LTR',
     'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
     'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
@@ -34,6 +35,11 @@ TRUE_LOAD = ('/ground_truth/wheel_load/left', '/ground_truth/wheel_load/right')
 TRUE_ROAD = ('/ground_truth/road_profile/left', '/ground_truth/road_profile/right')
 FIX = '/fix'
 LOAD = ('/wheel_load/left', '/wheel_load/right')
+#: static wheel loads F_c,i (N) in wrench.force.z: configured, or estimated under zero_load
+STATIC_LOAD = ('/wheel_load/static/left', '/wheel_load/static/right')
+#: The static loads change slowly: they are published with the first estimate of each period
+#: of this many ns of the stamps (10 Hz; the observer node and the estimate bags alike).
+STATIC_LOAD_PERIOD_NS = 100_000_000
 ROAD = ('/road_profile/left', '/road_profile/right')
 LTR = '/load_transfer_ratio'
 #: x = LTR, y = quasi-static LTR (MODEL.md step 8, rollover warnings), z = 0; frame base_link
@@ -59,6 +65,7 @@ TOPIC_TYPES: dict[str, str] = {
     **{topic: WRENCH for topic in TRUE_LOAD},
     **{topic: POINT for topic in TRUE_ROAD},
     **{topic: WRENCH for topic in LOAD},
+    **{topic: WRENCH for topic in STATIC_LOAD},
     **{topic: POINT for topic in ROAD},
     LTR: FLOAT64,
     LOAD_TRANSFER: VECTOR3_STAMPED,
@@ -78,6 +85,13 @@ TOPIC_QOS: dict[str, str] = {
     topic: SENSOR_DATA if topic in (DEFLECTIONS, TWIST, FIX) else RELIABLE
     for topic in TOPIC_TYPES
 }
+
+
+def static_load_due(stamp_ns: int, last_stamp_ns: int | None) -> bool:
+    """Whether the estimate at ``stamp_ns`` publishes the static loads, after the last one
+    that did at ``last_stamp_ns`` (None: none yet): a new :data:`STATIC_LOAD_PERIOD_NS`."""
+    return last_stamp_ns is None or (stamp_ns // STATIC_LOAD_PERIOD_NS
+                                     != last_stamp_ns // STATIC_LOAD_PERIOD_NS)
 
 
 def qos_kind(topic: str) -> str:

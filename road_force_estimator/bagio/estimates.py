@@ -1,6 +1,7 @@
 """Estimate bags: the observer's output topics for a batch of estimates, and its diagnostics.
 
-Topics (INTERFACES.md): ``/wheel_load/left|right``, ``/road_profile/left|right``,
+Topics (INTERFACES.md): ``/wheel_load/left|right``, ``/wheel_load/static/left|right``,
+``/road_profile/left|right``,
 ``/load_transfer_ratio``, ``/load_transfer``, ``/observer/states`` and ``/diagnostics``; the
 fields are those of
 :class:`road_force_estimator.estimation.estimator.EstimateArrays`.
@@ -33,6 +34,8 @@ from road_force_estimator.interfaces import (
     LTR,
     ROAD,
     ROAD_FRAME,
+    STATIC_LOAD,
+    STATIC_LOAD_PERIOD_NS,
     STATE_JOINTS,
     STATES,
     TOPIC_TYPES,
@@ -52,6 +55,8 @@ ESTIMATE_FIELDS = {
     'road_m': '(n, 2) band-passed road [/road_profile/* point.z]',
     'ltr': '(n,) [/load_transfer_ratio; /load_transfer vector.x]',
     'ltr_quasi_static': '(n,), optional [/load_transfer vector.y; without it no /load_transfer]',
+    'static_load_n': '(n, 2), optional [/wheel_load/static/left|right wrench.force.z, the '
+                     'first row of each STATIC_LOAD_PERIOD_NS; without it none]',
     'q_m, roll_rad, body_heave_m, wheel_heave_m (n, 2)': '[/observer/states position]',
     'dq, droll, body_heave_rate, wheel_heave_rate (n, 2)': '[/observer/states velocity]',
     'valid': '(n,) bool, optional: rows to write',
@@ -99,6 +104,7 @@ class _EstimateColumns:
     distance: np.ndarray
     ltr: np.ndarray
     ltr_quasi_static: np.ndarray | None
+    static_load: np.ndarray | None
     position: list[np.ndarray]
     velocity: list[np.ndarray]
     valid: np.ndarray
@@ -120,17 +126,20 @@ class _EstimateColumns:
         ltr = arr(e.ltr)
         quasi = getattr(e, 'ltr_quasi_static', None)
         quasi = None if quasi is None else arr(quasi)
+        static = getattr(e, 'static_load_n', None)
+        static = None if static is None else arr(static, width=2)
         position = [arr(e.q_m, width=2), arr(e.roll_rad), arr(e.body_heave_m),
                     arr(e.wheel_heave_m, width=2)]
         velocity = [arr(e.dq, width=2), arr(e.droll), arr(e.body_heave_rate),
                     arr(e.wheel_heave_rate, width=2)]
         valid = np.asarray(getattr(e, 'valid', np.ones(n, bool)), dtype=bool).reshape(n)
         finite = np.ones(n, dtype=bool)
-        for values in [load, road, dist, ltr] + ([] if quasi is None else [quasi]) + position \
-                + velocity:
+        for values in ([load, road, dist, ltr] + [v for v in (quasi, static) if v is not None]
+                       + position + velocity):
             for column in (values.T if values.ndim == 2 else [values]):
                 finite &= np.isfinite(column)
-        return cls(stamps, load, road, dist, ltr, quasi, position, velocity, valid, finite)
+        return cls(stamps, load, road, dist, ltr, quasi, static, position, velocity, valid,
+                   finite)
 
 
 def write_estimate_bag(path: str | Path, estimates, *,
@@ -145,7 +154,9 @@ def write_estimate_bag(path: str | Path, estimates, *,
     x = distance, y = +-T/2, z = estimated band-passed road, frame ``road``),
     ``/load_transfer_ratio`` (Float64), ``/load_transfer`` (Vector3Stamped, x = LTR, y =
     quasi-static LTR, z = 0, frame ``base_link``), ``/observer/states`` (JointState, names
-    :data:`road_force_estimator.interfaces.STATE_JOINTS`, position and velocity), and
+    :data:`road_force_estimator.interfaces.STATE_JOINTS`, position and velocity),
+    ``/wheel_load/static/left|right`` (WrenchStamped, ``force.z`` = F_c,i, the first row written
+    in each :data:`~road_force_estimator.interfaces.STATIC_LOAD_PERIOD_NS` of the stamps), and
     ``/diagnostics`` for the given ``(stamp_ns, DiagnosticArray)`` pairs. Header stamp = log
     time = the measurement's stamp.
 
@@ -219,6 +230,26 @@ def _estimate_streams(est: _EstimateColumns, s: np.ndarray, stamp_cols: dict,
     streams.append((STATES, s, ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, STATE_JOINTS, velocity=True), m,
         cols)))
+    if est.static_load is not None:
+        streams += _static_streams(est, s, index)
+    return streams
+
+
+def _static_streams(est: _EstimateColumns, s: np.ndarray, index: np.ndarray | None) -> list:
+    """The /wheel_load/static/* streams: the rows written (``index``, all when None, stamped
+    ``s``) that open a period of STATIC_LOAD_PERIOD_NS, as the observer node publishes them."""
+    period = s // STATIC_LOAD_PERIOD_NS
+    first = np.flatnonzero(np.concatenate([[True], period[1:] != period[:-1]])) if s.size \
+        else np.zeros(0, np.int64)
+    rows = first if index is None else index[first]
+    stamps = s[first]
+    cols_stamp = stamp_columns(stamps)
+    streams = []
+    for side in (0, 1):
+        cols = dict(cols_stamp, **{'wrench.force.z': LazyColumns([est.static_load[:, side]],
+                                                                 rows)})
+        streams.append((STATIC_LOAD[side], stamps, ColumnRows(
+            WRENCH, message_template(WRENCH, WHEEL_FRAMES[side]), stamps.size, cols)))
     return streams
 
 

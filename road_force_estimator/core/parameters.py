@@ -76,6 +76,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'tire vertical damping per side [left, right]', 0.0, 1e6),
     _p('vehicle.static_load', 'double_pair', [0.0, 0.0], 'N',
        'static wheel load per side [left, right]; 0 = (M/2 + m_i) g', 0.0, 1e7),
+    _p('vehicle.deflection_reference', 'string', 'equilibrium', '',
+       'where the deflection sensors read from: "equilibrium" = static equilibrium under '
+       'vehicle.static_load; "zero_load" = a mechanical zero (the observer estimates the '
+       'static loads and the payload from the readings, MODEL.md "Measurements")',
+       choices=('equilibrium', 'zero_load')),
+    _p('vehicle.deflection_zero_load', 'double_pair', [0.0, 0.0], 'N',
+       'sprung load per side [left, right] at which each deflection sensor reads 0 under '
+       'zero_load; 0 = the spring unloaded', 0.0, 1e7),
     _p('observer.lipschitz_deflection', 'double', 3000.0, 'm/s^3',
        'Lipschitz constant L of the deflection differentiators (bound on |dddq|)', 1e-3, 1e9),
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
@@ -204,11 +212,16 @@ def _check_double(spec: ParameterSpec, value: Any, bad: str) -> float:
     return value
 
 
-def _param(name: str):
-    """A dataclass field whose default and validation come from :data:`SPECS`."""
+def _param(name: str, *, quiet_default: bool = False):
+    """A dataclass field whose default and validation come from :data:`SPECS`.
+
+    ``quiet_default``: :meth:`_FromParameters.to_parameters` leaves the parameter out while it
+    has its default (parameters added later, so that what earlier versions wrote, e.g. the
+    parameters recorded in a bag, stays byte-identical).
+    """
     spec = SPECS[name]
     default = tuple(spec.default) if spec.kind == 'double_pair' else spec.default
-    return field(default=default, metadata={'param': name})
+    return field(default=default, metadata={'param': name, 'quiet_default': quiet_default})
 
 
 class _FromParameters:
@@ -237,6 +250,8 @@ class _FromParameters:
         for f in fields(self):
             if 'param' in f.metadata:
                 v = getattr(self, f.name)
+                if f.metadata.get('quiet_default') and v == f.default:
+                    continue
                 out[f.metadata['param']] = list(v) if isinstance(v, tuple) else v
         return out
 
@@ -255,6 +270,9 @@ class VehicleParameters(_FromParameters):
     tire_stiffness_npm: tuple[float, float] = _param('vehicle.tire_stiffness')
     tire_damping_nspm: tuple[float, float] = _param('vehicle.tire_damping')
     static_load_setting_n: tuple[float, float] = _param('vehicle.static_load')
+    deflection_reference: str = _param('vehicle.deflection_reference', quiet_default=True)
+    deflection_zero_load_n: tuple[float, float] = _param('vehicle.deflection_zero_load',
+                                                         quiet_default=True)
 
     @property
     def half_track_m(self) -> float:
@@ -267,6 +285,23 @@ class VehicleParameters(_FromParameters):
         return tuple(
             setting if setting > 0.0 else (0.5 * self.sprung_mass_kg + m) * GRAVITY_MPS2
             for setting, m in zip(self.static_load_setting_n, self.unsprung_mass_kg))
+
+    @property
+    def zero_load(self) -> bool:
+        """True when the deflections are read from a mechanical zero
+        (``vehicle.deflection_reference: zero_load``)."""
+        return self.deflection_reference == 'zero_load'
+
+    @property
+    def deflection_offset_m(self) -> tuple[float, float]:
+        """What a sensor adds to the extension from equilibrium (m), per side: 0 under
+        ``equilibrium``; under ``zero_load`` ``-(F_s,i - F_0,i) / k_i`` with the static
+        sprung load ``F_s,i = F_c,i - m_i g`` (MODEL.md "Measurements", q_meas = q + offset)."""
+        if not self.zero_load:
+            return (0.0, 0.0)
+        return tuple(-(fc - m * GRAVITY_MPS2 - f0) / k for fc, m, f0, k in zip(
+            self.static_load_n, self.unsprung_mass_kg, self.deflection_zero_load_n,
+            self.suspension_stiffness_npm))
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,8 @@ SEGMENT_COLUMNS = (
     'start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km',
     'true_iri_left_m_per_km', 'true_iri_right_m_per_km',
     'dlc_left', 'dlc_right', 'peak_load_left_n', 'peak_load_right_n', 'max_abs_ltr',
-    'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon', 'max_abs_ltr_quasi_static',
+    'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon', 'static_load_left_n',
+    'static_load_right_n', 'max_abs_ltr_quasi_static',
 )
 
 
@@ -70,7 +71,8 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
                   fix_latitude_deg: np.ndarray | None = None,
                   fix_longitude_deg: np.ndarray | None = None,
                   segment_length_m: float = 100.0,
-                  ltr_quasi_static: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                  ltr_quasi_static: np.ndarray | None = None,
+                  static_load_n: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per-segment table of one drive: ``{column: array (k,)}`` with :data:`SEGMENT_COLUMNS`.
 
     Parameters
@@ -95,6 +97,9 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
         Segment length (m), default 100.
     ltr_quasi_static : array (n,), optional
         The quasi-static LTR (MODEL.md step 8) for ``max_abs_ltr_quasi_static`` (NaN without).
+    static_load_n : array (n, 2), optional
+        The static wheel loads F_c,i [left, right] (N) for ``static_load_left_n`` /
+        ``static_load_right_n``, their mean over each segment (NaN without).
     """
     x = np.asarray(distance_m, dtype=float)
     edges = segment_bounds(float(x[0]), float(x[-1]), segment_length_m)
@@ -107,6 +112,14 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     if ltr_quasi_static is not None:
         np.fmax.at(quasi, seg, np.abs(np.asarray(ltr_quasi_static, dtype=float)))
     table['max_abs_ltr_quasi_static'] = quasi
+    for side, name in enumerate(('static_load_left_n', 'static_load_right_n')):
+        table[name] = np.full(k, np.nan)
+        if static_load_n is not None:
+            values = np.asarray(static_load_n, dtype=float)[:, side]
+            sums = np.bincount(seg, weights=values, minlength=k)
+            counts_s = np.bincount(seg, minlength=k)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                table[name] = sums / counts_s
     px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
     table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
     counts = segment_samples(x, edges)

@@ -5,6 +5,11 @@ Each channel gets additive zero-mean Gaussian noise of its own standard deviatio
 The noise comes from ``numpy.random.default_rng(seed)``: three standard normals per sample,
 in the order q_1, q_2, phi, so the batch path (:meth:`SensorModel.measure`) and the per-sample
 path (:meth:`SensorModel.sampler`) give the same numbers for the same seed.
+
+Deflections read from a mechanical zero (``vehicle.deflection_reference: zero_load``) carry
+a constant offset per side, ``-(F_s,i - F_0,i) / k_i`` (MODEL.md "Measurements",
+:attr:`.VehicleParameters.deflection_offset_m`), added after the noise and before the
+quantisation.
 """
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from road_force_estimator.core.parameters import SimulatorParameters
+from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 
 __all__ = ['SensorModel']
 
@@ -38,6 +43,9 @@ class SensorModel:
         Quantisation step of phi (rad); 0 = none.
     seed : int
         Seed of the noise generator, >= 0.
+    deflection_offset_m : (float, float)
+        Constant added to q_1 and q_2 (m), [left, right]: the reading of the equilibrium
+        from a mechanical zero; (0, 0) = read from equilibrium.
     """
 
     deflection_std_m: float = 0.0
@@ -45,6 +53,7 @@ class SensorModel:
     deflection_quantum_m: float = 0.0
     roll_quantum_rad: float = 0.0
     seed: int = 1
+    deflection_offset_m: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ('deflection_std_m', 'roll_std_rad', 'deflection_quantum_m',
@@ -57,12 +66,21 @@ class SensorModel:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
                 or self.seed < 0:
             raise ValueError(f'seed = {self.seed!r} must be an integer >= 0')
+        offset = tuple(float(v) for v in self.deflection_offset_m)
+        if len(offset) != 2 or not all(math.isfinite(v) for v in offset):
+            raise ValueError(f'deflection_offset_m = {self.deflection_offset_m!r} must be two '
+                             'finite numbers (m)')
+        object.__setattr__(self, 'deflection_offset_m', offset)
 
     @classmethod
-    def from_simulator(cls, sim: SimulatorParameters) -> SensorModel:
-        """Noise and seed of ``simulator.noise.*`` and ``simulator.seed`` (no quantisation)."""
+    def from_simulator(cls, sim: SimulatorParameters,
+                       vehicle: VehicleParameters | None = None) -> SensorModel:
+        """Noise and seed of ``simulator.noise.*`` and ``simulator.seed`` (no quantisation);
+        with ``vehicle`` (the truth), its deflection reference
+        (:attr:`.VehicleParameters.deflection_offset_m`)."""
+        offset = (0.0, 0.0) if vehicle is None else vehicle.deflection_offset_m
         return cls(deflection_std_m=sim.noise_deflection_m, roll_std_rad=sim.noise_roll_rad,
-                   seed=sim.seed)
+                   seed=sim.seed, deflection_offset_m=offset)
 
     def measure(self, q_m, roll_rad) -> tuple[np.ndarray, np.ndarray]:
         """Measured channels for a whole trajectory.
@@ -89,6 +107,8 @@ class SensorModel:
 
     def _apply(self, q, phi, noise):
         q_meas = q + self.deflection_std_m * noise[..., 0:2]
+        if self.deflection_offset_m != (0.0, 0.0):
+            q_meas = q_meas + np.asarray(self.deflection_offset_m)
         roll_meas = phi + self.roll_std_rad * noise[..., 2]
         if self.deflection_quantum_m > 0.0:
             q_meas = np.round(q_meas / self.deflection_quantum_m) * self.deflection_quantum_m

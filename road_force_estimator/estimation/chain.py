@@ -87,6 +87,17 @@ class ChainCore:
         self.ready: deque = deque()
         self.reset()
 
+    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+        """Take ``vehicle`` (an estimated sprung mass and static loads, :mod:`.static_load`)
+        from the next sample on; the differentiators' state goes on."""
+        self.vehicle = v = vehicle
+        self._p = self._p[:6] + (1.0 / v.sprung_mass_kg,) + self._p[7:]
+        self._rows.set_vehicle(vehicle)
+
+    def set_static_loads(self, fc1: float, fc2: float) -> None:
+        """The static wheel loads F_c,i (N) of the rows made from now on."""
+        self._rows.set_static(fc1, fc2)
+
     def reset(self) -> None:
         """Forget everything; the next step must be a restart."""
         # Differentiators: (z0, z1, z2, last sample) for q_1, q_2, phi.

@@ -46,6 +46,13 @@ class Core(Protocol):
     def settling_time_s(self, dt_typ: float) -> float:
         """Time after a (re)start after which the estimate counts as converged (s)."""
 
+    def set_vehicle(self, vehicle) -> None:
+        """Take ``vehicle`` (a new sprung mass and static loads: :mod:`.static_load`) from the
+        next sample on; the model designs its gains again."""
+
+    def set_static_loads(self, fc1: float, fc2: float) -> None:
+        """The static wheel loads F_c,i (N) of the rows made from now on."""
+
 
 #: The core of each ``observer.discretization``.
 CORES: dict[str, type] = {

@@ -37,6 +37,12 @@ Robustness (counted in :class:`EstimatorStatus`; nothing non-finite ever leaves)
   sample (``resets``, ``gaps``) and reconverges; a non-finite intermediate (never seen,
   guarded anyway) also restarts it (``resets``, ``numerical_resets``), and so does a step
   the model's design cannot handle (no stable filter at that dt: ``resets``, ``gaps``);
+- with the deflections read from a mechanical zero (``vehicle.deflection_reference:
+  zero_load``) each accepted reading first goes through :mod:`.static_load`: the static
+  wheel loads and the sprung mass are estimated from the slow part of the readings, the
+  core gets the extensions from the estimated equilibrium, the estimated F_c,i for its
+  loads and, when the mass moves by more than 2 %, a vehicle of the new mass (its gains
+  designed again);
 - ``converged`` turns true once the time since the last (re)start reaches
   ``settling_time_s`` (chain: :func:`.chain.settling_time_s`); it is about the loads and LTR:
   the profile's body-heave high-pass needs a few ``lambda_c / v`` more.
@@ -53,6 +59,7 @@ from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, SampleGate, batch_inputs, check_gap_threshold, output_stamps)
 from road_force_estimator.estimation.cores import CORES
 from road_force_estimator.estimation.speed_check import SpeedCheck
+from road_force_estimator.estimation.static_load import StaticLoadTracker
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, Column, Estimate, EstimateArrays, EstimatorStatus, arrays_from_table,
     estimate_from_row, hold_rejected)
@@ -97,6 +104,8 @@ class Estimator:
                              f'{", ".join(CORES)}')
         self.core = CORES[observer.discretization](vehicle, observer)
         self._ready = self.core.ready
+        #: the static-load estimate (:mod:`.static_load`) under zero_load, else None
+        self.static_load = StaticLoadTracker(vehicle) if vehicle.zero_load else None
         self.reset()
 
     # -- state ----------------------------------------------------------------------------
@@ -112,6 +121,9 @@ class Estimator:
         self._t_run = 0.0
         self._flushed = False
         self._speed = SpeedCheck()
+        if self.static_load is not None:
+            self.static_load.reset()
+            self.core.set_vehicle(self.vehicle)
         self.core.reset()
 
     @property
@@ -133,6 +145,10 @@ class Estimator:
             st.last_residual_nm = row[Column.RESIDUAL]
             st.lift_off = (row[Column.LIFT_OFF1], row[Column.LIFT_OFF2])
         core.fill_status(st)
+        tracker = self.static_load
+        st.static_load_n = self.vehicle.static_load_n if tracker is None else tracker.static_n
+        st.sprung_mass_kg = (self.vehicle.sprung_mass_kg if tracker is None
+                             else tracker.sprung_mass_kg)
         return st
 
     @property
@@ -205,6 +221,8 @@ class Estimator:
         if sample is None:
             return False
         stamp, q1, q2, phi, v, dt, restart, dt_typ = sample
+        if self.static_load is not None:
+            q1, q2 = self._static_step(q1, q2, 0.0 if restart else dt)
         if restart or self._flushed:
             vm = self._speed.restart(q1, q2, v)
         else:
@@ -223,6 +241,16 @@ class Estimator:
             self._status.gaps += 1
         self._status.resets += 1
         return self._advance(stamp, q1, q2, phi, v, vm, dt, True, 0.0)
+
+    def _static_step(self, q1: float, q2: float, dt: float) -> tuple[float, float]:
+        """zero_load: the static-load estimate of one accepted reading (m, m) after dt (s; 0 at
+        a restart) handed to the core; the extensions from the estimated equilibrium."""
+        tracker = self.static_load
+        q1, q2 = tracker.update(q1, q2, dt)
+        if tracker.redesign is not None:
+            self.core.set_vehicle(tracker.redesign)
+        self.core.set_static_loads(*tracker.static_n)
+        return q1, q2
 
     def _advance(self, stamp: int, q1: float, q2: float, phi: float, v: float, vm: float,
                  dt: float, restart: bool, dt_typ: float) -> bool:

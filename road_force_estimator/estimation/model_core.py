@@ -111,6 +111,24 @@ class ModelCore:
         self.reset()
 
     # -- configuration --------------------------------------------------------------------
+    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+        """Take ``vehicle`` from the next sample on (an estimated sprung mass and static
+        loads, :mod:`.static_load`): the model, the reconstruction and the sliding mode's L;
+        the gains are designed again at the next step (the cache of designs is dropped); the
+        state, the run and the noise estimates go on."""
+        self.vehicle = vehicle
+        self._rows.set_vehicle(vehicle)
+        lq, lr = sm_lipschitz(vehicle)
+        self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
+                        math.sqrt(lr))
+        self._h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h
+        self.schedule.set_vehicle(vehicle)
+        self._m_dt = -1.0
+
+    def set_static_loads(self, fc1: float, fc2: float) -> None:
+        """The static wheel loads F_c,i (N) of the rows made from now on."""
+        self._rows.set_static(fc1, fc2)
+
     def reset(self) -> None:
         """Forget everything, the noise and roughness estimates included."""
         self._t = 0.0                      # time since the (re)start (s)

@@ -72,6 +72,7 @@ from road_force_estimator.estimation.outputs import (
 from road_force_estimator.estimation.reconstruction import (
     Reconstruction, distance_m, tire_deflections)
 from road_force_estimator.estimation.smoother import smooth
+from road_force_estimator.estimation.static_load import track_recording
 
 __all__ = [
     'FILTER_ORDER', 'NOISE_CROSSING', 'MIN_CUTOFF_HZ', 'MAX_CUTOFF_FRACTION', 'MIN_RUN_SAMPLES',
@@ -409,6 +410,8 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
     valid, restart, stamp_i, cnt = accept_arrays(stamps, q, phi, v, gap_threshold_s)
     status = EstimatorStatus(**cnt)
     acc = np.flatnonzero(valid)
+    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
+    q, static, vehicle = track_recording(vehicle, q, acc, stamp_i, restart)
     starts = np.flatnonzero(restart[acc]).tolist()
     bounds = list(zip(starts, starts[1:] + [acc.size]))
     fields, columns = field_columns(n)
@@ -426,6 +429,8 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         part = field_columns(rows.size)[1]
         _run_columns(r, t, vehicle, rec, part)
         rec.add_quasi_static(part, t)
+        if static is not None:
+            rec.restatic(part, static[a:b], t)
         part[Column.CONVERGED][:] = (t >= edge) & (t <= t[-1] - edge)
         for j, col in enumerate(columns):
             if j != Column.DISTANCE:
@@ -438,6 +443,9 @@ def estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParame
         for arr in fields.values():
             arr[held] = arr[src]
     _fill_status(status, fields, stamp_i, acc, starts, runs, edge)
+    status.sprung_mass_kg = vehicle.sprung_mass_kg
+    status.static_load_n = (tuple(float(f) for f in fields['static_load_n'][acc[-1]])
+                            if acc.size else vehicle.static_load_n)
     out = OfflineEstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
                                 noise_std=noise, cutoff_hz=cut, runs=runs, **fields)
     status.negative_load_samples = out.negative_load_samples()

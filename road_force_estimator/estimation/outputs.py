@@ -56,6 +56,8 @@ class Column(enum.IntEnum):
     LIFT_OFF2 = 28
     CONVERGED = 29    #: time since (re)start >= settling time
     LTR_QUASI_STATIC = 30   #: the LTR of the loads low-passed below the wheel hop (MODEL.md 8)
+    STATIC_LOAD1 = 31  #: static wheel load F_c,1 in use (N): configured, or estimated (zero_load)
+    STATIC_LOAD2 = 32
 
 
 N_COLUMNS = len(Column)
@@ -83,10 +85,11 @@ FIELD_COLUMNS: dict[str, tuple[Column, ...]] = {
     'lift_off': (Column.LIFT_OFF1, Column.LIFT_OFF2),
     'converged': (Column.CONVERGED,),
     'ltr_quasi_static': (Column.LTR_QUASI_STATIC,),
+    'static_load_n': (Column.STATIC_LOAD1, Column.STATIC_LOAD2),
 }
 #: Fields of :class:`Estimate` that are (left, right) pairs / scalars (after stamp_ns).
 PAIR_FIELDS = ('q_m', 'dq', 'ddq', 'wheel_heave_m', 'wheel_heave_rate', 'wheel_accel_mps2',
-               'road_m', 'tire_force_dynamic_n', 'wheel_load_n', 'lift_off')
+               'road_m', 'tire_force_dynamic_n', 'wheel_load_n', 'lift_off', 'static_load_n')
 SCALAR_FIELDS = ('distance_m', 'roll_rad', 'droll', 'ddroll', 'body_heave_m', 'body_heave_rate',
                  'body_accel_mps2', 'ltr', 'residual_nm', 'converged', 'ltr_quasi_static')
 #: Boolean fields.
@@ -118,6 +121,7 @@ class Estimate(NamedTuple):
     lift_off: tuple[bool, bool]                 #: F_n,i <= LIFT_OFF_FRACTION F_c,i
     converged: bool                             #: time since (re)start >= settling time
     ltr_quasi_static: float                     #: LTR of the low-passed loads (rollover)
+    static_load_n: tuple[float, float]          #: F_c,i in use (N): configured or estimated
 
 
 @dataclass
@@ -151,6 +155,8 @@ class EstimatorStatus:
     road_roughness_m3: float = 0.0  #: ISO 8608 Gd(n0) in use (model)
     statistics_blocks: int = 0      #: blocks of data the noise/roughness estimates have seen
     gain_designs: int = 0           #: gain designs (model; cache misses of the operating point)
+    static_load_n: tuple[float, float] = (0.0, 0.0)  #: F_c,i in use (N) (estimated: zero_load)
+    sprung_mass_kg: float = 0.0     #: sprung mass M in use (kg) (estimated: zero_load)
 
     @property
     def rejected(self) -> int:
@@ -196,6 +202,9 @@ class EstimateArrays:
     status: EstimatorStatus = field(default_factory=EstimatorStatus)
     #: (n,) bool: samples whose standing speed the deflections contradicted (:mod:`.speed_check`)
     speed_contradicted: np.ndarray | None = None
+    #: (n, 2): the static wheel loads F_c,i in use (N); every estimator fills it (None: a
+    #: hand-made batch without them)
+    static_load_n: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:
@@ -225,12 +234,12 @@ class EstimateArrays:
 def estimate_from_row(stamp: int, row: tuple) -> Estimate:
     """An :class:`Estimate` from an output row (slots :class:`Column`)."""
     (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2, dzu1, dzu2,
-     ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv, ltr_qs) = row
+     ddzu1, ddzu2, u1, u2, df1, df2, fn1, fn2, ltr, res, lo1, lo2, conv, ltr_qs, fc1, fc2) = row
     # tuple.__new__ directly: the namedtuple's generated __new__ is one Python frame more
     return _new_tuple(Estimate, (stamp, x, (q1, q2), (dq1, dq2), (ddq1, ddq2), phi, dphi, ddphi,
                                  zs, dzs, ddzs, (zu1, zu2), (dzu1, dzu2), (ddzu1, ddzu2),
                                  (u1, u2), (df1, df2), (fn1, fn2), ltr, res, (lo1, lo2), conv,
-                                 ltr_qs))
+                                 ltr_qs, (fc1, fc2)))
 
 
 _new_tuple = tuple.__new__

@@ -25,6 +25,11 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
 9. Residual ``r = I_x ddphi - s cos(phi) (F_b1 - F_b2) - M g h sin(phi)`` (N m); it equals
    ``M h a_y cos(phi)`` under a lateral acceleration a_y; ``lift_off_i`` when
    ``F_n,i <=`` :data:`LIFT_OFF_FRACTION` ``F_c,i``.
+
+The static loads F_c,i are the vehicle's (``vehicle.static_load``), or, with the deflections
+read from a mechanical zero, the estimates of :mod:`.static_load`, set per sample
+(:meth:`Reconstruction.set_static`) or per run (:meth:`Reconstruction.restatic`); each row
+carries the F_c,i it used (:attr:`.Column.STATIC_LOAD1`, ``STATIC_LOAD2``).
 """
 from __future__ import annotations
 
@@ -90,19 +95,55 @@ class Reconstruction:
     """Steps 5, 8 and 9 of MODEL.md for one vehicle (see the module notes)."""
 
     def __init__(self, vehicle: VehicleParameters, rollover_cutoff_hz: float = 2.0) -> None:
-        fc1, fc2 = vehicle.static_load_n
-        self.s = vehicle.half_track_m
-        self.ix = vehicle.roll_inertia_kgm2
-        #: M g h (N m): the gravity moment per unit sin(phi) in the residual of step 9
-        self.mgh = vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m
-        self.static_n = (fc1, fc2)
-        self.lift_off_n = (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
-        self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
-        self._c = (self.s, self.ix, fc1, fc2) + self.lift_off_n + (self.ltr_floor_n,)
+        self.set_vehicle(vehicle)
         #: pole rate (1/s) of each lag of the quasi-static LTR's low-pass
         self.rollover_rate = 2.0 * math.pi * float(rollover_cutoff_hz) / _CASCADE_3DB
         self._qs: tuple | None = None       # the low-pass's (left 1, left 2, right 1, right 2)
         self._qs_e = (-1.0, 0.0)            # (dt, exp(-dt rate)) of the last step
+
+    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+        """Take the track, roll inertia, gravity moment and static loads of ``vehicle`` (the
+        sprung mass estimated under ``zero_load``)."""
+        self.s = vehicle.half_track_m
+        self.ix = vehicle.roll_inertia_kgm2
+        #: M g h (N m): the gravity moment per unit sin(phi) in the residual of step 9
+        self.mgh = vehicle.sprung_mass_kg * GRAVITY_MPS2 * vehicle.cg_height_m
+        self.set_static(*vehicle.static_load_n)
+
+    def set_static(self, fc1: float, fc2: float) -> None:
+        """The static wheel loads F_c,i (N) of the next rows (and the lift-off thresholds and
+        the LTR floor that follow from them)."""
+        self.static_n = (fc1, fc2)
+        self.lift_off_n = (LIFT_OFF_FRACTION * fc1, LIFT_OFF_FRACTION * fc2)
+        self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
+        self._c = (self.s, self.ix, fc1, fc2) + self.lift_off_n + (self.ltr_floor_n,)
+
+    def restatic(self, out: list, static_n: np.ndarray, t: np.ndarray) -> None:
+        """The columns of one run ``out`` (:meth:`columns` and :meth:`add_quasi_static`
+        done) again with per-sample static loads ``static_n`` (N, (m, 2)) at the times t (s):
+        the loads, LTR, lift-off flags and the quasi-static LTR (restarted at the run's
+        start), as :meth:`row` gives them sample by sample with :meth:`set_static`."""
+        fc1, fc2 = static_n[:, 0], static_n[:, 1]
+        fn1 = np.maximum(fc1 + out[Column.DF1], 0.0)
+        fn2 = np.maximum(fc2 + out[Column.DF2], 0.0)
+        C = Column
+        for j, col in ((C.FN1, fn1), (C.FN2, fn2),
+                       (C.LTR, load_transfer_ratios(fn1, fn2, LTR_FLOOR_FRACTION * (fc1 + fc2))),
+                       (C.LIFT_OFF1, fn1 <= LIFT_OFF_FRACTION * fc1),
+                       (C.LIFT_OFF2, fn2 <= LIFT_OFF_FRACTION * fc2),
+                       (C.STATIC_LOAD1, fc1), (C.STATIC_LOAD2, fc2)):
+            out[j][:] = col
+        self.restart()
+        floor = self.ltr_floor_n
+        steps = [0.0] + np.diff(np.asarray(t, dtype=float)).tolist()
+        qs = []
+        for a, b, f1, f2, d in zip(fn1.tolist(), fn2.tolist(), fc1.tolist(), fc2.tolist(),
+                                   steps):
+            self.ltr_floor_n = LTR_FLOOR_FRACTION * (f1 + f2)
+            qs.append(self.quasi_static_ltr(a, b, d))
+        out[Column.LTR_QUASI_STATIC][:] = qs
+        self.ltr_floor_n = floor
+        self.restart()
 
     def restart(self) -> None:
         """A new run: the quasi-static LTR's low-pass starts again at the next sample."""
@@ -162,7 +203,7 @@ class Reconstruction:
                 dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
                 fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
                 ix * ddphi - s * cphi * (fb1 - fb2) - self.mgh * sphi, fn1 <= lift1,
-                fn2 <= lift2, conv, self.quasi_static_ltr(fn1, fn2, dt))
+                fn2 <= lift2, conv, self.quasi_static_ltr(fn1, fn2, dt), fc1, fc2)
 
     def columns(self, out: list, q: tuple, dq: tuple, ddq: tuple, phi, dphi, ddphi, ddzs,
                 ddzu: tuple, w: tuple, df: tuple, fb: tuple, heave: tuple | None) -> None:
@@ -201,7 +242,8 @@ class Reconstruction:
                        (C.U2, u2), (C.DF1, df1), (C.DF2, df2), (C.FN1, fn1), (C.FN2, fn2),
                        (C.LTR, load_transfer_ratios(fn1, fn2, ltr_floor)),
                        (C.RESIDUAL, ix * ddphi - s * cph * (fb[0] - fb[1]) - self.mgh * sph),
-                       (C.LIFT_OFF1, fn1 <= lift1), (C.LIFT_OFF2, fn2 <= lift2)):
+                       (C.LIFT_OFF1, fn1 <= lift1), (C.LIFT_OFF2, fn2 <= lift2),
+                       (C.STATIC_LOAD1, fc1), (C.STATIC_LOAD2, fc2)):
             out[j][:] = col
 
     @staticmethod

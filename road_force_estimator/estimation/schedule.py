@@ -128,6 +128,15 @@ class GainSchedule:
         settle = self.gains.settle_s if self.gains is not None else 0.0
         return max(settle, 20.0 * dt_s, MIN_SETTLE_S)
 
+    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+        """Design for ``vehicle`` from now on (an estimated sprung mass): the caches of designs
+        are dropped, the estimates and levels stay; the gains in use stay until the next design
+        (``stale``), so that samples held back can still be finalized."""
+        self.vehicle = vehicle
+        self._gains.clear()
+        self._var_dq.clear()
+        self.stale = True
+
     def invalidate(self) -> None:
         """Drop the gains in use (e.g. the lag changed)."""
         self.gains = None

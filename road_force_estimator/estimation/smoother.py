@@ -21,6 +21,7 @@ from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
+from road_force_estimator.estimation.static_load import track_recording
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
@@ -147,9 +148,11 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
     n = stamps.shape[0]
     valid, restart, stamp_int, cnt = accept_arrays(stamps, q, phi, speed, gap_threshold_s)
+    acc = np.flatnonzero(valid)
+    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
+    q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
     smoother = _Smoother(vehicle, observer)
     fields, columns = field_columns(n)
-    acc = np.flatnonzero(valid)
     starts = np.flatnonzero(restart[acc]).tolist() + [acc.size]
     # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
     # ~0.2 us, enough to make an even sample step look uneven
@@ -168,16 +171,33 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
                 else field_columns(idx.size)[1])
         rows[Column.DISTANCE][:] = dist[r0:r1]
         smoother.run(t_all[r0:r1], q[idx], phi[idx], v_model[r0:r1], rows)
+        if static is not None:
+            smoother.rows.restatic(rows, static[r0:r1], t_all[r0:r1])
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
+    status = _status(cnt, acc, valid, contradicted, stamp_int, fields, smoother)
+    flags = np.zeros(n, bool)
+    flags[acc] = contradicted
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+                         speed_contradicted=flags, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
+
+
+def _status(cnt: dict, acc: np.ndarray, valid: np.ndarray, contradicted: np.ndarray,
+            stamp_int: np.ndarray, fields: dict, smoother: _Smoother) -> EstimatorStatus:
+    """The status of :func:`smooth` (the estimator's counts, the last accepted sample's
+    flags, the smoother's levels and vehicle); rejected rows of ``fields`` take the previous
+    row."""
     status = EstimatorStatus(**cnt)
     status.accepted = int(acc.size)
     status.speed_contradicted = int(np.count_nonzero(contradicted))
-    flags = np.zeros(n, bool)
-    flags[acc] = contradicted
+    vehicle = smoother.vehicle
+    status.sprung_mass_kg = vehicle.sprung_mass_kg
+    status.static_load_n = vehicle.static_load_n
     if acc.size:
-        if acc.size < n:                            # rejected rows hold the previous row
+        if acc.size < valid.size:                   # rejected rows hold the previous row
             held, src = hold_rejected(valid)
             for arr in fields.values():
                 arr[held] = arr[src]
@@ -186,11 +206,9 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status.last_residual_nm = float(fields['residual_nm'][last])
         status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
         status.converged = bool(fields['converged'][last])
+        status.static_load_n = tuple(float(f) for f in fields['static_load_n'][last])
     smoother.fill_status(status)
-    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
-                         speed_contradicted=flags, **fields)
-    status.negative_load_samples = out.negative_load_samples()
-    return out
+    return status
 
 
 class _Smoother:

@@ -42,7 +42,8 @@ SEGMENT_DECIMALS = {
     'start_m': 3, 'end_m': 3, 'iri_left_m_per_km': 3, 'iri_right_m_per_km': 3,
     'true_iri_left_m_per_km': 3, 'true_iri_right_m_per_km': 3, 'dlc_left': 4, 'dlc_right': 4,
     'peak_load_left_n': 0, 'peak_load_right_n': 0, 'max_abs_ltr': 4, 'start_lat': 7,
-    'start_lon': 7, 'end_lat': 7, 'end_lon': 7, 'max_abs_ltr_quasi_static': 4,
+    'start_lon': 7, 'end_lat': 7, 'end_lon': 7, 'static_load_left_n': 0,
+    'static_load_right_n': 0, 'max_abs_ltr_quasi_static': 4,
 }
 
 
@@ -92,6 +93,15 @@ def _json_safe(obj):
     return obj
 
 
+def _static_line(summary: dict[str, Any], vehicle: VehicleParameters | None
+                 ) -> tuple[float, float]:
+    """The static loads drawn in the load figures: the configured ones, or the estimate at
+    the end of the drive under zero_load (MODEL.md "Measurements")."""
+    vehicle = vehicle or VehicleParameters()
+    final = summary.get('static_load_final_n')
+    return tuple(final) if vehicle.zero_load and final else vehicle.static_load_n
+
+
 def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters | None = None,
                  observer: ObserverParameters | None = None, *, mode: str = 'online',
                  input_name: str = '', reference=None, reference_offset_m: float | None = None,
@@ -113,8 +123,7 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
     if figures:
         names = write_figures(folder, est, al, drive, segments=segments,
                               title=f'{input_name} ({mode})' if input_name else mode,
-                              units=units, static_load_n=(
-                                  vehicle or VehicleParameters()).static_load_n)
+                              units=units, static_load_n=_static_line(summary, vehicle))
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)

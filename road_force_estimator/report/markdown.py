@@ -41,7 +41,7 @@ def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
     if have_true:
         head += [f'true IRI L ({iu})', f'true IRI R ({iu})']
     head += ['DLC L', 'DLC R', 'peak L (kN)', 'peak R (kN)', 'max abs LTR',
-             'max abs LTR quasi-static', 'lift-offs']
+             'static L (kN)', 'static R (kN)', 'max abs LTR quasi-static', 'lift-offs']
     if have_fix:
         head += ['start lat, lon', 'end lat, lon']
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
@@ -58,7 +58,8 @@ def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
                     u.iri_text(s['true_iri_right_m_per_km'])]
         row += [_fmt(s['dlc_left'], 3), _fmt(s['dlc_right'], 3),
                 _fmt(s['peak_load_left_n'] / 1e3, 1), _fmt(s['peak_load_right_n'] / 1e3, 1),
-                _fmt(s['max_abs_ltr'], 3), _fmt(s['max_abs_ltr_quasi_static'], 3),
+                _fmt(s['max_abs_ltr'], 3), _fmt(s['static_load_left_n'] / 1e3, 2),
+                _fmt(s['static_load_right_n'] / 1e3, 2), _fmt(s['max_abs_ltr_quasi_static'], 3),
                 str(int(s['lift_offs']))]
         if have_fix:
             row += [f'{_fmt(s["start_lat"], 6)}, {_fmt(s["start_lon"], 6)}',
@@ -183,6 +184,8 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
              s.get('negative_load_samples', 0)),
             *_finding_rows(s),
             ('max abs LTR', _fmt(s['max_abs_ltr'], 3)),
+            ('static wheel loads at the end, left / right (N; estimated under zero_load)',
+             ' / '.join(f'{v:.0f}' for v in s.get('static_load_final_n') or ()) or 'n/a'),
             ('GNSS fixes', s['fixes']),
             (f'IRI of the whole drive, estimated profile, left / right ({u.iri_unit})',
              ' / '.join(u.iri_text(v) for v in iri['estimated']) if iri['estimated'] else 'n/a'),

@@ -181,7 +181,8 @@ def drive_segments(est, al: Aligned, drive=None, *,
             fix_latitude_deg=None if fixes is None else fixes.latitude_deg,
             fix_longitude_deg=None if fixes is None else fixes.longitude_deg,
             segment_length_m=segment_length_m,
-            ltr_quasi_static=_quasi_static(est, rows))
+            ltr_quasi_static=_quasi_static(est, rows),
+            static_load_n=_optional(est, 'static_load_n', rows))
     except ValueError:
         return empty
     if drive is not None and len(table['start_m']):
@@ -348,7 +349,17 @@ def _load_counts(est, al: Aligned) -> dict[str, Any]:
     return {
         'lift_off_samples': int(np.count_nonzero(np.asarray(est.lift_off)[al.rows].any(axis=1))),
         'negative_load_samples': _negative_loads(est, al),
-        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0}
+        'max_abs_ltr': float(np.max(np.abs(al.pick(est, 'ltr')))) if al.rows.size else 0.0,
+        'static_load_final_n': _final_static(est, al)}
+
+
+def _final_static(est, al: Aligned) -> list[float] | None:
+    """The static wheel loads in use at the last estimate (N, [left, right]): configured, or
+    estimated under zero_load (None for estimates without them)."""
+    values = getattr(est, 'static_load_n', None)
+    if values is None or not al.rows.size:
+        return None
+    return _floats(np.asarray(values)[al.rows[-1]])
 
 
 def _negative_loads(est, al: Aligned) -> int:
@@ -431,5 +442,10 @@ def _drive_iri(est, al: Aligned, segments: dict, drive=None, raw_road=None
 
 def _quasi_static(est, rows) -> np.ndarray | None:
     """The estimate's quasi-static LTR at ``rows`` (None for estimates without one)."""
-    quasi = getattr(est, 'ltr_quasi_static', None)
-    return None if quasi is None else np.asarray(quasi)[rows]
+    return _optional(est, 'ltr_quasi_static', rows)
+
+
+def _optional(est, name: str, rows) -> np.ndarray | None:
+    """The estimate's field ``name`` at ``rows`` (None for estimates without it)."""
+    values = getattr(est, name, None)
+    return None if values is None else np.asarray(values)[rows]

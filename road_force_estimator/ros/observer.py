@@ -4,7 +4,9 @@ Subscribes ``/suspension/deflections`` (sensor-data QoS) and ``/vehicle/twist`` 
 which matches reliable and best-effort publishers); per accepted deflection message publishes
 ``/wheel_load/left|right``, ``/road_profile/left|right``, ``/load_transfer_ratio``,
 ``/load_transfer`` (x = LTR, y = quasi-static LTR) and ``/observer/states`` (reliable),
-stamped with the estimate's stamp (the input's), and ``/diagnostics`` at 1 Hz
+stamped with the estimate's stamp (the input's), ``/wheel_load/static/left|right`` (the static
+loads F_c,i: configured, or estimated under ``vehicle.deflection_reference: zero_load``) with
+the first estimate of every 0.1 s of stamps, and ``/diagnostics`` at 1 Hz
 (INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`: the same bytes as rclpy's,
 without a message object per message).
 
@@ -92,6 +94,9 @@ class Observer(Node):
         self.reconfigure(self.params.config)
         self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
                           for topic in api.LOAD]
+        self.static_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+                            for topic in api.STATIC_LOAD]
+        self.static_stamp_ns = None   # stamp of the last static loads published
         self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos())
                           for topic in api.ROAD]
         self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos())
@@ -126,8 +131,8 @@ class Observer(Node):
         """Publish the estimates still held back (``observer.latency`` > 0) before leaving."""
         for est in self.estimator.flush():
             self.publish(est)
-        for pub in (*self.load_pubs, *self.road_pubs, self.ltr_pub, self.load_transfer_pub,
-                    self.states_pub):
+        for pub in (*self.load_pubs, *self.static_pubs, *self.road_pubs, self.ltr_pub,
+                    self.load_transfer_pub, self.states_pub):
             pub.wait_for_all_acked(Duration(seconds=1.0))
 
     def core_counts(self, estimator=None) -> Counter:
@@ -183,7 +188,8 @@ class Observer(Node):
             self.publish(est)
 
     def publish(self, est) -> None:
-        """The seven output messages of one estimate, stamped with its sample's stamp."""
+        """The seven output messages of one estimate, stamped with its sample's stamp, and
+        the static loads once per :data:`.interfaces.STATIC_LOAD_PERIOD_NS`."""
         (f1, f2), (u1, u2), s = est.wheel_load_n, est.road_m, self.half_track_m
         position = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m)
         velocity = (*est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
@@ -200,6 +206,11 @@ class Observer(Node):
         self.load_transfer_pub.publish(wire.load_transfer.encode(
             t, (est.ltr, est.ltr_quasi_static, 0.0)))
         self.states_pub.publish(wire.states.encode(t, position + velocity))
+        if api.static_load_due(t, self.static_stamp_ns) and math.isfinite(
+                sum(est.static_load_n)):
+            self.static_stamp_ns = t
+            for pub, encoder, load in zip(self.static_pubs, wire.loads, est.static_load_n):
+                pub.publish(encoder.encode(t, (load,)))
         self.period['published'] += 1
         self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
         ex = self.extremes
@@ -268,6 +279,10 @@ class Observer(Node):
                   'lift_off_samples': lifts, 'lift_off_left': st.lift_off[0],
                   'lift_off_right': st.lift_off[1], **ex}
         values.update({k: getattr(st, k) for k in ESTIMATOR_VALUES if hasattr(st, k)})
+        if getattr(self.estimator, 'static_load', None) is not None:   # zero_load: estimated
+            values.update(sprung_mass_kg=st.sprung_mass_kg,
+                          static_load_left_n=st.static_load_n[0],
+                          static_load_right_n=st.static_load_n[1])
         if fresh['speed_contradicted']:
             values['speed_contradicted_samples'] = fresh['speed_contradicted']
         if fresh['negative_loads']:

@@ -85,7 +85,7 @@ class PlantSimulator(Node):
             self.build_plant(vehicle, sim)
             self.last_index = min(self.last_index, self.plant.last_sample_index)
         self.wait_since = None         # when the drive began waiting for the live road
-        self.measure = SensorModel.from_simulator(sim).sampler()
+        self.measure = SensorModel.from_simulator(sim, vehicle).sampler()
         self.half_track_m = vehicle.half_track_m
         self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
         self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,

@@ -32,7 +32,9 @@ class Wire:
     deflections, twist : CdrReader
         The usual layouts of ``/suspension/deflections`` and ``/vehicle/twist``.
     loads : list of CdrEncoder
-        ``/wheel_load/left|right`` (WrenchStamped): ``wrench.force.z`` F_n (N).
+        ``/wheel_load/left|right`` (WrenchStamped): ``wrench.force.z`` F_n (N); the same
+        layout (frames ``front_left_wheel`` / ``front_right_wheel``) carries
+        ``/wheel_load/static/left|right``, F_c,i (N).
     road : CdrEncoder
         ``/road_profile/left|right`` (PointStamped): ``point.x, y, z`` (m).
     ltr : CdrEncoder

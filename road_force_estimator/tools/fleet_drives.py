@@ -40,7 +40,8 @@ __all__ = [
 FLEET_COLUMNS = (
     'drive', 'start_m', 'end_m', 'iri_left_m_per_km', 'iri_right_m_per_km', 'dlc_left',
     'dlc_right', 'peak_load_left_n', 'peak_load_right_n', 'max_abs_ltr', 'lift_offs',
-    'start_lat', 'start_lon', 'end_lat', 'end_lon', 'max_abs_ltr_quasi_static',
+    'start_lat', 'start_lon', 'end_lat', 'end_lon', 'static_load_left_n', 'static_load_right_n',
+    'max_abs_ltr_quasi_static',
 )
 #: The integer columns of :data:`FLEET_COLUMNS` (the others are floats, but ``drive``).
 INT_COLUMNS = ('lift_offs',)

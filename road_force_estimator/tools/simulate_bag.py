@@ -11,8 +11,10 @@ bag, CSV or ERD profile (:func:`road_force_estimator.core.road.road_from_source`
 (:class:`core.plant.Plant`, the tire envelope ``simulator.tire_envelope_length``)
 runs at the rate for the duration, or to the end of the road; the sensors
 (:class:`road_force_estimator.core.sensors.SensorModel`: ``simulator.noise.*``, ``simulator.seed``)
-measure it. The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`) holds the
-measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
+measure it, the deflections from a mechanical zero with ``vehicle.deflection_reference:
+zero_load`` (MODEL.md "Measurements": a payload is a file with a larger sprung mass or static
+load than the observer's). The bag DIR (:func:`road_force_estimator.bagio.write_drive_bag`)
+holds the measurements ``/suspension/deflections`` and ``/vehicle/twist``, the ground truth
 ``/ground_truth/wheel_load/*`` and ``/ground_truth/road_profile/*``, and ``/fix`` at
 ``simulator.gnss.rate`` (0 = none) on the route of :func:`road_force_estimator.core.gnss.route`
 (a fix at the first sample of each GNSS period, as the plant_simulator node publishes them;
@@ -196,7 +198,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
         lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
-    sensors = SensorModel.from_simulator(sim)
+    sensors = SensorModel.from_simulator(sim, vehicle)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1

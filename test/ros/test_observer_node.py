@@ -322,3 +322,45 @@ def test_the_log_says_waiting_then_the_input_rate_then_only_rejections(make_rig,
     assert 'waiting for /suspension/deflections and /vehicle/twist' in lines[0]
     assert 'input arriving on /suspension/deflections at' in lines[1]
     assert 'rejected inputs: names 1 (last: JointState names' in lines[2]
+
+
+def test_static_loads_from_a_mechanical_zero_are_published_at_10_hz(ros_context):
+    # The plant: a truck 40 % heavier than the observer's file, its deflections read from
+    # the unloaded spring (vehicle.deflection_reference: zero_load, both nodes). The
+    # observer's /wheel_load/static/* are its core's static loads (estimate_batch on the same
+    # inputs), one per 0.1 s of stamps, and near the truth file's F_c,i = (M/2 + m_i) g.
+    static = ['/wheel_load/static/left', '/wheel_load/static/right']
+    collector = Collector(ros_context, ['/suspension/deflections', '/observer/states', *static])
+    zero = Parameter('vehicle.deflection_reference', value='zero_load')
+    observer = Observer(context=ros_context, parameter_overrides=[zero])
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        zero, Parameter('vehicle.sprung_mass', value=7000.0),
+        Parameter('vehicle.roll_inertia', value=4200.0),
+        Parameter('simulator.duration', value=3.0), Parameter('simulator.road',
+                                                              value='iso8608:C:seed=3'),
+        Parameter('realtime_factor', value=0.5)])
+    executor = make_executor(ros_context, collector, observer, plant)
+    try:
+        assert spin_until(executor, lambda: plant.finished, 60.0)
+        assert spin_until(executor, lambda: collector.count('/observer/states') >= plant.k,
+                          30.0)
+        executor.spin_once(timeout_sec=0.1)
+    finally:
+        close(executor, plant, observer, collector)
+    stamps = collector.stamps('/observer/states')
+    by_stamp = dict(zip(collector.stamps('/suspension/deflections'),
+                        collector.messages['/suspension/deflections']))
+    inputs = [by_stamp[s] for s in stamps]
+    ref = estimate_batch(np.array(stamps), np.array([m.position[:2] for m in inputs]),
+                         np.array([m.position[2] for m in inputs]), 20.0,
+                         VehicleParameters(deflection_reference='zero_load'),
+                         ObserverParameters())
+    index = {s: k for k, s in enumerate(stamps)}
+    for side, topic in enumerate(static):
+        got = collector.stamps(topic)
+        assert got == [s for k, s in enumerate(stamps)
+                       if k == 0 or s // 10**8 != stamps[k - 1] // 10**8]
+        values = [m.wrench.force.z for m in collector.messages[topic]]
+        np.testing.assert_allclose(values, ref.static_load_n[[index[s] for s in got], side],
+                                   rtol=1e-12)
+        assert values[-1] == pytest.approx((3500.0 + 450.0) * 9.80665, rel=0.03)
