@@ -66,7 +66,8 @@ def tire_deflections(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
     """Step 6 over arrays: ``w = u - z_u`` (m, (m, 2)) from ``ct dw + kt w = dF`` (exact, dF
     held), from the dynamic tire forces df (N, (m, 2)) at the times t (s); the first sample
     at its steady state ``dF / kt``."""
-    from scipy.signal import lfilter
+    from road_force_estimator.core.scipy_signal import signal
+    lfilter = signal().lfilter
 
     w = df / kt
     m = t.size
