@@ -213,7 +213,8 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         rows = ([col[idx[0]:idx[-1] + 1] for col in columns] if whole
                 else field_columns(idx.size)[1])
         rows[Column.DISTANCE][:] = dist[r0:r1]
-        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_model[r0:r1], rows)
+        pick = slice(idx[0], idx[-1] + 1) if whole else idx      # a view when whole
+        smoother.run(t_all[r0:r1], q[pick], phi[pick], v_model[r0:r1], rows)
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
