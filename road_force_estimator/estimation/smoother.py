@@ -2,7 +2,9 @@
 run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
 from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
-online observer (:mod:`.model_core`).
+online observer (:mod:`.model_core`). Long evenly sampled runs go through in overlapping
+windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
+drive; the numbers are those of one piece to ~1e-11 of each field's RMS.
 """
 from __future__ import annotations
 
@@ -136,10 +138,13 @@ def window_samples(dt_s: float, speed_mps: float, cutoff_wavelength_m: float,
     The overlap on each side is ``taus`` times the slower of ``filter_tau_s`` (s, the
     smoother's slowest mode) and the body heave's high-pass time constant
     ``lambda_c / (2 pi v sin(pi / 8))`` (|v| floored at :data:`.SPEED_FLOOR_MPS`); the window
-    :data:`WINDOW_SAMPLES`, or four overlaps if longer.
+    :data:`WINDOW_SAMPLES`, or four overlaps if longer (a mode that does not fade: no
+    windows).
     """
     w_c = 2.0 * math.pi * max(abs(speed_mps), SPEED_FLOOR_MPS) / cutoff_wavelength_m
     tau = max(filter_tau_s, 1.0 / (w_c * math.sin(math.pi / 8.0)))
+    if not math.isfinite(tau):                   # a mode that does not fade: one piece
+        return 2 ** 62, 0
     overlap = int(math.ceil(taus * tau / dt_s))
     return max(WINDOW_SAMPLES, 4 * overlap), overlap
 
@@ -172,13 +177,7 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     gap_threshold_s : float
         As :class:`.Estimator`.
     window : (int, int), optional
-        ``(window, overlap)`` (samples): evenly sampled runs longer than ``window + overlap``
-        are smoothed window by window, each with ``overlap`` samples more on each side
-        (default :func:`window_samples`). The noise, roughness and gains are the whole run's;
-        the forward filter carries its state from window to window; the backward pass starts
-        with no information at each window's end and the body heave at rest at its start,
-        which decays within the overlap: the numbers differ from one piece by less than 1e-10
-        of each field's RMS (see :data:`WINDOW_OVERLAP_TAUS`).
+        ``(window, overlap)``, samples, for long even runs (default :func:`window_samples`).
 
     Returns
     -------
@@ -210,11 +209,10 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
-        rows = ([col[idx[0]:idx[-1] + 1] for col in columns] if whole
-                else field_columns(idx.size)[1])
+        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
+        rows = [col[src] for col in columns] if whole else field_columns(idx.size)[1]
         rows[Column.DISTANCE][:] = dist[r0:r1]
-        pick = slice(idx[0], idx[-1] + 1) if whole else idx      # a view when whole
-        smoother.run(t_all[r0:r1], q[pick], phi[pick], v_model[r0:r1], rows)
+        smoother.run(t_all[r0:r1], q[src], phi[src], v_model[r0:r1], rows)
         if not whole:
             for col, part in zip(columns, rows):
                 col[idx] = part
@@ -307,11 +305,12 @@ class _Smoother:
     def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
                  out: list, window: int, overlap: int) -> None:
         """An evenly sampled run window by window: rows ``a:b`` (``window`` of them) from the
-        smoother over ``a - overlap : b + overlap`` with the run's gains; the forward filter
-        starts at the state the previous window's pass had there (the run's first window at
-        rest), the backward pass with no information at the window's end; the body heave
-        and the quasi-static LTR start at the window's start; the converged flag counts from
-        the run's start."""
+        smoother over ``a - overlap : b + overlap`` with the run's noise, roughness and gains;
+        the forward filter starts at the state the previous window's pass had there (the
+        run's first window at rest), the backward pass with no information at the window's
+        end; the body heave and the quasi-static LTR start at the window's start; the
+        converged flag counts from the run's start. What the edges change fades within the
+        overlap: ~1e-11 of each field's RMS (:data:`WINDOW_OVERLAP_TAUS`)."""
         m = t.size
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
         for a in range(0, m, window):
