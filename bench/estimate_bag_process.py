@@ -8,7 +8,8 @@
    ``--duration`` s.
 2. The ``estimate_bag`` command (the console script of this interpreter, one BLAS thread)
    runs on each, figures on, ``--repeats`` times per mode; each run's wall time, CPU time
-   (user + system) and peak resident memory (``os.wait4``'s ``ru_maxrss`` of that child).
+   (user + system) and peak resident memory (``/usr/bin/time``'s maximum resident set size,
+   see :func:`run_child`).
 3. Start-up = the median wall time on the 1 s drive; throughput = (samples of the long drive
    - samples of the 1 s drive) / (median wall time on the long drive - that on the 1 s one),
    and the same with CPU times (on a shared machine the wall time waits for the others).
@@ -66,16 +67,24 @@ def command(name: str) -> str:
 
 
 def run_child(argv: list[str]) -> dict:
-    """Run a command; its wall time (s), CPU time (s) and peak RSS (MB) from ``os.wait4``.
+    """Run a command; its wall time (s), CPU time (s) and peak RSS (MB).
+
+    Through ``/usr/bin/time`` when there is one: a child started straight from this process
+    (``vfork``) would inherit this process's peak RSS in its ``ru_maxrss`` (Linux keeps the
+    largest of the address spaces a process had, the parent's included before ``exec``);
+    ``time`` forks it from a small process. Else ``os.wait4``'s figures (then a peak below
+    this process's own is not seen).
 
     Raises
     ------
     RuntimeError
         A non-zero exit (its stderr's end in the message).
     """
-    with tempfile.TemporaryFile() as err:
+    timer = shutil.which('time', path='/usr/bin')
+    with tempfile.TemporaryFile() as err, tempfile.NamedTemporaryFile('r') as report:
+        cmd = ([timer, '-q', '-f', '%M %U %S', '-o', report.name] if timer else []) + argv
         w0 = time.perf_counter()
-        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err,
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err,
                                 env={**os.environ, **ONE_THREAD_ENV})
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - w0
@@ -84,6 +93,10 @@ def run_child(argv: list[str]) -> dict:
             err.seek(0)
             raise RuntimeError(f'{argv[0]} exit {proc.returncode}: '
                                f'{err.read().decode(errors="replace").strip()[-500:]}')
+        if timer:
+            kb, user, system = report.read().split()[-3:]
+            return {'wall_s': wall, 'cpu_s': float(user) + float(system),
+                    'peak_rss_mb': int(kb) / 1024.0}
     return {'wall_s': wall, 'cpu_s': usage.ru_utime + usage.ru_stime,
             'peak_rss_mb': usage.ru_maxrss / 1024.0}
 

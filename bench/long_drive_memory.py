@@ -12,7 +12,7 @@
    (``/suspension/deflections`` and ``/vehicle/twist``, no ground truth, no GNSS) with
    :class:`bagio.BagWriter`. Its own peak RSS is printed.
 2. ``estimate_bag`` runs on it as a process, figures on, once per mode, and on a 1 s drive of
-   the same kind; per run the wall and CPU time and the peak RSS (``os.wait4``), and the
+   the same kind; per run the wall and CPU time and the peak RSS (``/usr/bin/time``), and the
    bytes per added sample.
 
 Numbers go to stdout (Markdown) and, with ``--json``, to a file. A 4-hour bag is ~4.3 GB on
