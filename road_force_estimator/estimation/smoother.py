@@ -27,13 +27,13 @@ from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
 __all__ = ['smooth', 'lti', 'grid_steps', 'window_samples', 'slowest_tau_s', 'LTI_BLOCK',
-           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS']
+           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
 #: Block length of the blocked linear recursion of the offline smoother (:func:`lti`).
 LTI_BLOCK = 128
-#: Evenly sampled runs longer than this (samples; at least four overlaps) are smoothed in
-#: windows of this length (:func:`window_samples`), so that the smoother's temporaries do not
-#: grow with the drive.
+#: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
+#: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
+#: temporaries do not grow with the drive.
 WINDOW_SAMPLES = 2 ** 19
 #: Overlap of the windows on each side, in time constants of the slowest transient a window
 #: edge starts: the smoother's backward pass (the slowest mode of ``A (I - K C)``; the forward
@@ -45,6 +45,11 @@ WINDOW_SAMPLES = 2 ** 19
 #: 2.5e-8 with 8, 3.7e-10 with 12 and 1.4e-11 with 16 time constants (rounding: 1.8e-11 with
 #: 20); the loads within 2e-8 N, the converged flags equal.
 WINDOW_OVERLAP_TAUS = 16.0
+#: By default, runs are smoothed in windows when longer than this many windows with their
+#: overlaps (below, one piece takes less memory than a window's temporaries and the overlaps'
+#: extra work: measured at 0.25 h, 1 kHz, ``bench/long_drive_memory.py``: 670 MB in windows
+#: against 621 MB in one piece).
+WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
@@ -177,7 +182,7 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     gap_threshold_s : float
         As :class:`.Estimator`.
     window : (int, int), optional
-        ``(window, overlap)``, samples, for long even runs (default :func:`window_samples`).
+        ``(window, overlap)``, samples, for even runs longer than both (:func:`window_samples`).
 
     Returns
     -------
@@ -290,7 +295,9 @@ class _Smoother:
             steps = None if uniform else grid_steps(dts, dt)
             window, overlap = self.window or window_samples(
                 dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
-            if uniform and m > window + overlap:
+            # by default only where windows save memory: a run of several windows' work
+            longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
+            if uniform and m > longer:
                 self._windows(g, dt, speed, t, y, out, window, overlap)
                 return
             if uniform:
