@@ -31,8 +31,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import expm
-from scipy.signal import lfilter
 
+from road_force_estimator.core.scipy_signal import signal as _signal
 from road_force_estimator.core.segments import segment_bounds
 
 __all__ = [
@@ -219,6 +219,7 @@ def filtered_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
     eta0 = inv @ np.array([s0, 0.0, s0, 0.0])
     out = np.array([1.0, 0.0, -1.0, 0.0]) @ vec      # Z1 - Z3 in modal coordinates
     rel = np.zeros(slope.size)
+    lfilter = _signal().lfilter
     for j in range(4):
         # a real input gives conjugate modes conjugate responses (LAPACK returns exact
         # conjugate pairs): one of each pair, twice its real part

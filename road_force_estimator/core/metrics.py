@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
-from scipy import signal
+from road_force_estimator.core.scipy_signal import signal as _signal
 
 __all__ = [
     'BAND_SHORT_M', 'BAND_LONG_M', 'BAND_ORDER', 'profile_bandpass', 'ErrorStats',
@@ -91,6 +91,7 @@ def profile_bandpass(distance_m, elevation_m, *, short_m: float = BAND_SHORT_M,
         zu = (np.interp(xu, x, z) if z.ndim == 1 else
               np.column_stack([np.interp(xu, x, z[:, i]) for i in range(z.shape[1])]))
     fs = 1.0 / dx   # samples per metre
+    signal = _signal()
     sos = signal.butter(order, [1.0 / long_m, 1.0 / short_m], btype='bandpass', fs=fs,
                         output='sos')
     padlen = min(zu.shape[0] - 1, int(3 * long_m / dx))

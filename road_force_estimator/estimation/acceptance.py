@@ -315,7 +315,8 @@ def gap_samples(dts: np.ndarray, threshold_s: float, periods: float = GAP_PERIOD
     restart taken as it is); only steps longer than ``threshold_s`` can be gaps, so the mean
     is only evaluated there, one stretch of steps at a time.
     """
-    from scipy import signal
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    signal = _signal()
 
     w = TYPICAL_STEP_WEIGHT
     out = []

@@ -99,7 +99,8 @@ def zero_phase(accel, dt_s: float, w: float, order: int = ZERO_PHASE_ORDER):
         Displacement (m); zeros when there are fewer than 8 samples.
     """
     import numpy as np
-    from scipy import signal
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    signal = _signal()
 
     a = np.asarray(accel, dtype=float)
     if a.size < 8:

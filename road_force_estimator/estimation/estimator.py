@@ -61,10 +61,10 @@ from road_force_estimator.estimation.cores import CORES
 from road_force_estimator.estimation.speed_check import SpeedCheck
 from road_force_estimator.estimation.static_load import StaticLoadTracker
 from road_force_estimator.estimation.outputs import (
-    N_COLUMNS, Column, Estimate, EstimateArrays, EstimatorStatus, arrays_from_table,
-    estimate_from_row, hold_rejected)
+    N_COLUMNS, Column, Estimate, EstimateArrays, EstimatorStatus, estimate_from_row,
+    field_columns, hold_rejected)
 
-__all__ = ['Estimator', 'estimate_batch', 'PROGRESS_BLOCK']
+__all__ = ['Estimator', 'BatchRun', 'estimate_batch', 'PROGRESS_BLOCK']
 
 #: Samples between two calls of the ``progress`` callback of :func:`estimate_batch`.
 PROGRESS_BLOCK = 10_000
@@ -271,6 +271,75 @@ class Estimator:
         return True
 
 
+class BatchRun:
+    """:func:`estimate_batch` block after block: one :class:`Estimator` fed whole arrays.
+
+    :meth:`feed` takes the next block of samples and returns the estimates that became due
+    (with a latency some come with later blocks), :meth:`finish` the rest; the numbers are
+    those of the per-sample path (the same step function, in order), whatever the blocks.
+    Memory: the block's rows only (``(k, N_COLUMNS)`` floats), never the whole drive's.
+    """
+
+    def __init__(self, vehicle: VehicleParameters | None = None,
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
+        self.estimator = Estimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
+        #: accepted samples so far and rows returned so far
+        self.accepted = 0
+        self.returned = 0
+
+    def feed(self, stamps_ns, q_m, roll_rad, speed_mps
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One block of samples (as :func:`estimate_batch`'s arrays).
+
+        Returns
+        -------
+        valid : ndarray of bool, shape (k,)
+            Accepted samples of the block.
+        contradicted : ndarray of bool, shape (k,)
+            Samples whose speed the deflections contradicted (:mod:`.speed_check`).
+        rows : ndarray, shape (j, N_COLUMNS)
+            The estimates that became due, in order: row i is that of accepted sample
+            ``returned + i`` of the whole run (counted before this call).
+        """
+        stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+        est = self.estimator
+        process = est._process
+        ready = est._ready
+        check = est._speed
+        rows: list = []
+        take = rows.append
+        valid: list = []
+        flag = valid.append
+        contradicted: list = []
+        mark = contradicted.append
+        for t, (a, b), p, v in zip(stamps.tolist(), q.tolist(), phi.tolist(), speed.tolist()):
+            before = check.contradicted
+            flag(process(t, a, b, p, v))
+            mark(check.contradicted != before)
+            while ready:
+                take(ready.popleft()[1])
+        valid_arr = np.array(valid, dtype=bool)
+        self.accepted += int(valid_arr.sum())
+        return valid_arr, np.array(contradicted, dtype=bool), self._table(rows)
+
+    def finish(self) -> np.ndarray:
+        """The estimates still held back at the end (latency), as rows (``(j, N_COLUMNS)``)."""
+        est = self.estimator
+        est._finish()
+        rows = [row for _, row in est._ready]
+        est._ready.clear()
+        out = self._table(rows)
+        if self.returned != self.accepted:   # never: one estimate per accepted sample
+            raise RuntimeError(f'{self.returned} estimates for {self.accepted} accepted samples')
+        return out
+
+    def _table(self, rows: list) -> np.ndarray:
+        self.returned += len(rows)
+        return np.fromiter(itertools.chain.from_iterable(rows), dtype=float,
+                           count=len(rows) * N_COLUMNS).reshape(len(rows), N_COLUMNS)
+
+
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                    observer: ObserverParameters | None = None, *,
                    gap_threshold_s: float = GAP_THRESHOLD_S,
@@ -298,46 +367,40 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
         Row k is the estimate *for* sample k, whatever the latency: the per-sample path's
         outputs of :meth:`Estimator.update` followed by :meth:`Estimator.flush`, in order, are
         the rows where ``valid``. Every field per sample, the ``valid`` mask and the final
-        status counters.
+        status counters. Runs block by block (:class:`BatchRun`): the rows go into the
+        fields as they come (about the fields' own size in memory, not a row list's).
     """
     stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
     n = stamps.shape[0]
-    est = Estimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
-    process = est._process
-    ready = est._ready
-    rows = []
-    take = rows.append
-    valid_list = []
-    flag = valid_list.append
-    check = est._speed
-    contradicted = []
-    mark = contradicted.append
-    stamp_list = stamps.tolist()
-    columns = (stamp_list, q.tolist(), phi.tolist(), speed.tolist())
-    block = PROGRESS_BLOCK if progress is not None else max(n, 1)
-    for start in range(0, n, block):
-        for t, (a, b), p, v in zip(*(c[start:start + block] for c in columns)):
-            before = check.contradicted
-            flag(process(t, a, b, p, v))
-            mark(check.contradicted != before)
-            while ready:
-                take(ready.popleft()[1])
+    run = BatchRun(vehicle, observer, gap_threshold_s=gap_threshold_s)
+    fields, columns = field_columns(n)
+    valid = np.zeros(n, dtype=bool)
+    contradicted = np.zeros(n, dtype=bool)
+    accepted = np.empty(n, dtype=np.int64)         # sample index of each accepted sample
+
+    def place(rows: np.ndarray) -> None:
+        at = accepted[run.returned - rows.shape[0]:run.returned]
+        for j, col in enumerate(columns):
+            col[at] = rows[:, j]
+
+    for start in range(0, n, PROGRESS_BLOCK):
+        stop = min(n, start + PROGRESS_BLOCK)
+        ok, contra, rows = run.feed(stamps[start:stop], q[start:stop], phi[start:stop],
+                                    speed[start:stop])
+        valid[start:stop] = ok
+        contradicted[start:stop] = contra
+        new = np.flatnonzero(ok) + start
+        accepted[run.accepted - new.size:run.accepted] = new
+        place(rows)
         if progress is not None:
-            progress(min(block, n - start))
-    est._finish()
-    while ready:
-        take(ready.popleft()[1])
-    valid = np.array(valid_list, dtype=bool)
-    if len(rows) != int(valid.sum()):   # never: one estimate per accepted sample
-        raise RuntimeError(f'{len(rows)} estimates for {int(valid.sum())} accepted samples')
-    table = np.zeros((n, N_COLUMNS))
-    if rows:
-        table[valid] = np.fromiter(itertools.chain.from_iterable(rows), dtype=float,
-                                   count=len(rows) * N_COLUMNS).reshape(len(rows), N_COLUMNS)
+            progress(stop - start)
+    place(run.finish())
+    if run.accepted and run.accepted < n:
         # rejected rows hold the previous row (zeros before the first accepted sample)
         held, src = hold_rejected(valid)
-        table[held] = table[src]
-    out = arrays_from_table(table, output_stamps(stamps), valid, est.status,
-                            np.array(contradicted, dtype=bool))
+        for arr in fields.values():
+            arr[held] = arr[src]
+    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=run.estimator.status,
+                         speed_contradicted=contradicted, **fields)
     out.status.negative_load_samples = out.negative_load_samples()
     return out

@@ -60,9 +60,9 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy import signal
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.scipy_signal import signal as _signal
 import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, check_gap_threshold, output_stamps)
@@ -188,7 +188,7 @@ def auto_cutoff_hz(x, rate_hz: float, *, sigma: float | None = None,
     if not sigma > 0.0:
         return math.inf
     nperseg = int(min(x.size, max(MIN_AUTO_SAMPLES, 2 ** round(math.log2(rate_hz)))))
-    f, p = signal.welch(x, fs=rate_hz, nperseg=nperseg, detrend='linear')
+    f, p = _signal().welch(x, fs=rate_hz, nperseg=nperseg, detrend='linear')
     p = np.convolve(p, np.ones(3) / 3.0, mode='same')
     floor = 2.0 * sigma * sigma / rate_hz
     below = np.nonzero((f > 0.0) & (p < crossing * floor))[0]
@@ -227,6 +227,7 @@ def zero_phase_derivatives(x, dt_s: float, cutoff_hz: float, *,
     n = x.shape[0]
     rate = 1.0 / dt_s
     if n >= MIN_RUN_SAMPLES and cutoff_hz < MAX_CUTOFF_FRACTION * rate:
+        signal = _signal()
         sos = signal.butter(order, cutoff_hz, fs=rate, output='sos')
         padlen = min(n - 1, int(math.ceil(6.0 * rate / cutoff_hz)))
         y = signal.sosfiltfilt(sos, x, axis=0, padtype='odd', padlen=padlen)

@@ -48,6 +48,8 @@ __all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distanc
 LIFT_OFF_FRACTION = 0.05
 #: Floor of the LTR denominator, as a fraction of the static axle load.
 LTR_FLOOR_FRACTION = 0.01
+#: Samples per chunk of the batch quasi-static LTR (:meth:`Reconstruction.add_quasi_static`).
+QUASI_STATIC_CHUNK = 65536
 #: -3 dB frequency of a cascade of two equal first-order lags, per unit pole frequency.
 _CASCADE_3DB = math.sqrt(math.sqrt(2.0) - 1.0)
 
@@ -71,7 +73,8 @@ def tire_deflections(df: np.ndarray, t: np.ndarray, kt, ct) -> np.ndarray:
     """Step 6 over arrays: ``w = u - z_u`` (m, (m, 2)) from ``ct dw + kt w = dF`` (exact, dF
     held), from the dynamic tire forces df (N, (m, 2)) at the times t (s); the first sample
     at its steady state ``dF / kt``."""
-    from scipy.signal import lfilter
+    from road_force_estimator.core.scipy_signal import signal
+    lfilter = signal().lfilter
 
     w = df / kt
     m = t.size
@@ -172,12 +175,17 @@ class Reconstruction:
 
     def add_quasi_static(self, out: list, t: np.ndarray) -> None:
         """The quasi-static LTR column of one run's columns ``out`` (loads filled) at the
-        times t (s): :meth:`quasi_static_ltr` sample by sample from a restart."""
+        times t (s): :meth:`quasi_static_ltr` sample by sample from a restart (in chunks of
+        :data:`QUASI_STATIC_CHUNK` samples: the lists of floats stay small)."""
         self.restart()
-        fn1, fn2 = out[Column.FN1].tolist(), out[Column.FN2].tolist()
-        steps = [0.0] + np.diff(np.asarray(t, dtype=float)).tolist()
+        t = np.asarray(t, dtype=float)
         step = self.quasi_static_ltr
-        out[Column.LTR_QUASI_STATIC][:] = [step(a, b, d) for a, b, d in zip(fn1, fn2, steps)]
+        col, fn1, fn2 = out[Column.LTR_QUASI_STATIC], out[Column.FN1], out[Column.FN2]
+        for k0 in range(0, t.size, QUASI_STATIC_CHUNK):
+            k1 = min(t.size, k0 + QUASI_STATIC_CHUNK)
+            steps = np.diff(t[k0 - 1:k1]).tolist() if k0 else [0.0] + np.diff(t[:k1]).tolist()
+            col[k0:k1] = [step(a, b, d) for a, b, d in zip(fn1[k0:k1].tolist(),
+                                                            fn2[k0:k1].tolist(), steps)]
         self.restart()
 
     def row(self, x: float, q1: float, q2: float, dq1: float, dq2: float, ddq1: float,

@@ -2,7 +2,9 @@
 run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
 from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
-online observer (:mod:`.model_core`).
+online observer (:mod:`.model_core`). Long evenly sampled runs go through in overlapping
+windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
+drive; the numbers are those of one piece to ~1e-11 of each field's RMS.
 """
 from __future__ import annotations
 
@@ -25,10 +27,30 @@ from road_force_estimator.estimation.static_load import track_recording
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
-__all__ = ['smooth', 'lti', 'grid_steps', 'LTI_BLOCK']
+__all__ = ['smooth', 'lti', 'grid_steps', 'window_samples', 'slowest_tau_s', 'LTI_BLOCK',
+           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
 #: Block length of the blocked linear recursion of the offline smoother (:func:`lti`).
 LTI_BLOCK = 128
+#: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
+#: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
+#: temporaries do not grow with the drive.
+WINDOW_SAMPLES = 2 ** 19
+#: Overlap of the windows on each side, in time constants of the slowest transient a window
+#: edge starts: the smoother's backward pass (the slowest mode of ``A (I - K C)``; the forward
+#: pass carries its state from window to window) or the body heave's zero-phase high-pass
+#: (slowest pole ``w_c sin(pi / 8)``, ``w_c = 2 pi v / lambda_c``). Measured
+#: (``python -m bench.offline_windows --duration 240 --window 20``: ISO C, 20 m/s, 1 kHz,
+#: 10 um / 0.1 mrad noise, slowest time constant 8.6 s, the smoother's): the largest
+#: difference from the one-piece smoother, relative to each field's RMS, is 1.3e-6 with 4,
+#: 2.5e-8 with 8, 3.7e-10 with 12 and 1.4e-11 with 16 time constants (rounding: 1.8e-11 with
+#: 20); the loads within 2e-8 N, the converged flags equal.
+WINDOW_OVERLAP_TAUS = 16.0
+#: By default, runs are smoothed in windows when longer than this many windows with their
+#: overlaps (below, one piece takes less memory than a window's temporaries and the overlaps'
+#: extra work: measured at 0.25 h, 1 kHz, ``bench/long_drive_memory.py``: 670 MB in windows
+#: against 621 MB in one piece).
+WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
@@ -115,9 +137,35 @@ def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0) -> np.ndarr
     return k.astype(np.int64)
 
 
+def window_samples(dt_s: float, speed_mps: float, cutoff_wavelength_m: float,
+                   filter_tau_s: float, taus: float = WINDOW_OVERLAP_TAUS) -> tuple[int, int]:
+    """``(window, overlap)`` in samples of a run smoothed in windows.
+
+    The overlap on each side is ``taus`` times the slower of ``filter_tau_s`` (s, the
+    smoother's slowest mode) and the body heave's high-pass time constant
+    ``lambda_c / (2 pi v sin(pi / 8))`` (|v| floored at :data:`.SPEED_FLOOR_MPS`); the window
+    :data:`WINDOW_SAMPLES`, or four overlaps if longer (a mode that does not fade: no
+    windows).
+    """
+    w_c = 2.0 * math.pi * max(abs(speed_mps), SPEED_FLOOR_MPS) / cutoff_wavelength_m
+    tau = max(filter_tau_s, 1.0 / (w_c * math.sin(math.pi / 8.0)))
+    if not math.isfinite(tau):                   # a mode that does not fade: one piece
+        return 2 ** 62, 0
+    overlap = int(math.ceil(taus * tau / dt_s))
+    return max(WINDOW_SAMPLES, 4 * overlap), overlap
+
+
+def slowest_tau_s(g: Gains, dt: float) -> float:
+    """Time constant (s) of the slowest mode of the filter's ``Phi = A (I - K C)`` at dt."""
+    phi = g.transition(dt) @ (np.eye(NX) - g.k @ g.model.c)
+    r = float(np.max(np.abs(np.linalg.eigvals(phi))))
+    return -dt / math.log(r) if 0.0 < r < 1.0 else math.inf
+
+
 def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
            observer: ObserverParameters | None = None, *,
-           gap_threshold_s: float = GAP_THRESHOLD_S) -> EstimateArrays:
+           gap_threshold_s: float = GAP_THRESHOLD_S,
+           window: tuple[int, int] | None = None) -> EstimateArrays:
     """Offline estimate: the model observer's forward filter and its RTS smoother.
 
     The same model, gains and outputs as the online observer (:class:`.ModelCore`, linear
@@ -134,6 +182,8 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     vehicle, observer : parameters (defaults when None); ``observer.latency`` is ignored.
     gap_threshold_s : float
         As :class:`.Estimator`.
+    window : (int, int), optional
+        ``(window, overlap)``, samples, for even runs longer than both (:func:`window_samples`).
 
     Returns
     -------
@@ -151,7 +201,7 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     acc = np.flatnonzero(valid)
     # zero_load: the static loads (the online estimator's numbers), the offset off the readings
     q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
-    smoother = _Smoother(vehicle, observer)
+    smoother = _Smoother(vehicle, observer, window)
     fields, columns = field_columns(n)
     starts = np.flatnonzero(restart[acc]).tolist() + [acc.size]
     # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
@@ -167,10 +217,10 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
-        rows = ([col[idx[0]:idx[-1] + 1] for col in columns] if whole
-                else field_columns(idx.size)[1])
+        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
+        rows = [col[src] for col in columns] if whole else field_columns(idx.size)[1]
         rows[Column.DISTANCE][:] = dist[r0:r1]
-        smoother.run(t_all[r0:r1], q[idx], phi[idx], v_model[r0:r1], rows)
+        smoother.run(t_all[r0:r1], q[src], phi[src], v_model[r0:r1], rows)
         if static is not None:
             smoother.rows.restatic(rows, static[r0:r1], t_all[r0:r1])
         if not whole:
@@ -214,9 +264,11 @@ def _status(cnt: dict, acc: np.ndarray, valid: np.ndarray, contradicted: np.ndar
 class _Smoother:
     """The smoother of :func:`smooth`, run after run (the schedule persists over runs)."""
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
+    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters,
+                 window: tuple[int, int] | None = None) -> None:
         self.vehicle = vehicle
         self.observer = observer
+        self.window = window
         self.schedule = GainSchedule(vehicle, observer)
         self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self.h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h[_SMOOTH_OUTPUTS]
@@ -255,10 +307,17 @@ class _Smoother:
             if m > 8 * NOISE_DIFF_ORDER:
                 for hist in sched.history:
                     hist.clear()
-                sched.statistics(y, dts.tolist())
+                sched.statistics(y, dts)
             g = sched.design(dt, 0)
             uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
             steps = None if uniform else grid_steps(dts, dt)
+            window, overlap = self.window or window_samples(
+                dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
+            # by default only where windows save memory: a run of several windows' work
+            longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
+            if uniform and m > longer:
+                self._windows(g, dt, speed, t, y, out, window, overlap)
+                return
             if uniform:
                 self._uniform(g, dt, y, x0, out)
             elif steps is not None:
@@ -267,6 +326,30 @@ class _Smoother:
             else:
                 self._uneven(g, dts, y, x0, out)
         self._heave(t, dt, speed, out)
+
+    def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
+                 out: list, window: int, overlap: int) -> None:
+        """An evenly sampled run window by window: rows ``a:b`` (``window`` of them) from the
+        smoother over ``a - overlap : b + overlap`` with the run's noise, roughness and gains;
+        the forward filter starts at the state the previous window's pass had there (the
+        run's first window at rest), the backward pass with no information at the window's
+        end; the body heave and the quasi-static LTR start at the window's start; the
+        converged flag counts from the run's start. What the edges change fades within the
+        overlap: ~1e-11 of each field's RMS (:data:`WINDOW_OVERLAP_TAUS`)."""
+        m = t.size
+        x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
+        for a in range(0, m, window):
+            b = min(m, a + window)
+            lo, hi = max(0, a - overlap), min(m, b + overlap)
+            nxt = b - overlap if b < m else None        # where the next window starts
+            cols = field_columns(hi - lo)[1]
+            carried = self._uniform(g, dt, y[lo:hi], x0, cols,
+                                    keep=None if nxt is None else max(0, nxt) - lo)
+            self._heave(t[lo:hi], dt, speed, cols, t[0])
+            for j, col in enumerate(cols):
+                if j != Column.DISTANCE:
+                    out[j][a:b] = col[a - lo:b - lo]
+            x0 = carried
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
                  y: np.ndarray, x0: np.ndarray, out: list) -> None:
@@ -309,13 +392,14 @@ class _Smoother:
         self._outputs(self.h @ xs.T, out)
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
-                 out: list) -> None:
+                 out: list, keep: int | None = None) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
 
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
         x+_(k-1)``. Backward (the adjoint form of the RTS smoother): ``lam_k = Phi^T lam_(k+1)
         + C^T S^-1 nu_k`` with ``Phi = A (I - K C)``, ``lam_m = 0``, and ``x_(k|m) = x+_k +
-        P+ A^T lam_(k+1)``.
+        P+ A^T lam_(k+1)``. ``x0`` is ``x+_0``; with ``keep`` the forward state ``x+_keep`` is
+        returned (where the next window starts).
         """
         m = y.shape[0]
         c = g.model.c
@@ -349,6 +433,7 @@ class _Smoother:
                 lam_next = seq[0]
             xs += lam @ pa_t
             self._outputs(self.h @ xs.T, [col[k0:k1] for col in out])
+        return None if keep is None else xf[keep].copy()
 
     def _outputs(self, o: np.ndarray, out: list) -> None:
         """Rows of the columns ``out`` from the smoothed outputs ``o`` (:data:`_SMOOTH_NAMES`,
@@ -358,9 +443,11 @@ class _Smoother:
         self.rows.columns(out, (q1, q2), (dq1, dq2), (ddq1, ddq2), ph, dph, ddph, ddzs,
                           (ddzu1, ddzu2), (w1, w2), (df1, df2), (fb1, fb2), None)
 
-    def _heave(self, t: np.ndarray, dt: float, speed: float, out: list) -> None:
+    def _heave(self, t: np.ndarray, dt: float, speed: float, out: list,
+               t_start: float | None = None) -> None:
         """The body heave of the whole run (zero phase, from dd z_s) added to the columns;
-        the converged flag. ``dt`` and ``speed``: the run's median step (s) and |speed|."""
+        the converged flag. ``dt`` and ``speed``: the run's median step (s) and |speed|;
+        ``t_start`` the run's first time (s; default ``t[0]``)."""
         m = t.size
         if m >= 8:
             w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
@@ -370,4 +457,4 @@ class _Smoother:
             self.rows.add_heave(out, zs, dzs)
         self.rows.add_quasi_static(out, t)
         settle = self.schedule.settling_time_s(dt)
-        out[Column.CONVERGED][:] = (t - t[0]) >= settle
+        out[Column.CONVERGED][:] = (t - (t[0] if t_start is None else t_start)) >= settle

@@ -9,6 +9,8 @@ import pytest
 from road_force_estimator.core import metrics
 from road_force_estimator.estimation import (
     GAP_THRESHOLD_S, PAIR_FIELDS, SCALAR_FIELDS, Estimate, Estimator, estimate_batch)
+from road_force_estimator.estimation.estimator import BatchRun
+from road_force_estimator.estimation.outputs import FIELD_COLUMNS, N_COLUMNS, Column
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from model_observer_data import to_stamps as _stamps
 
@@ -133,6 +135,41 @@ class TestPaths:
             np.testing.assert_array_equal(per_sample, getattr(batch, name)[valid], name)
         # Rejected samples hold the previous estimate in the batch.
         np.testing.assert_array_equal(batch.wheel_load_n[100], batch.wheel_load_n[99])
+
+    @pytest.mark.parametrize('latency', [0.0, 0.01])
+    def test_blocks_of_any_size_are_the_per_sample_path(self, drive_c, latency):
+        """BatchRun fed in uneven blocks (the streaming path of estimate_bag) returns, in
+        order, exactly the per-sample path's estimates (update, then flush)."""
+        tr = drive_c
+        n = 1500
+        stamps = _stamps(tr.t_s[:n])
+        stamps[900:] += 300_000_000                                         # a gap
+        q = tr.q_m[:n].copy()
+        q[50] = np.nan
+        phi = tr.roll_rad[:n]
+        obs = ObserverParameters(latency_s=latency)
+        est = Estimator(VEHICLE, obs)
+        outs = [est.update(int(stamps[k]), q[k], phi[k], SPEED) for k in range(n)]
+        good = [o for o in outs if o is not None] + est.flush()
+        run = BatchRun(VEHICLE, obs)
+        valid, rows = [], []
+        edges = [0, 1, 8, 341, 899, 900, 1207, n]
+        for a, b in zip(edges[:-1], edges[1:]):
+            ok, _, part = run.feed(stamps[a:b], q[a:b], phi[a:b], np.full(b - a, SPEED))
+            valid.append(ok)
+            rows.append(part)
+        rows.append(run.finish())
+        rows = np.concatenate(rows)
+        assert np.count_nonzero(np.concatenate(valid)) == len(good) == rows.shape[0] == n - 1
+        per_sample = np.zeros((len(good), N_COLUMNS))
+        for name, slots in FIELD_COLUMNS.items():
+            per_sample[:, list(slots)] = np.array([getattr(o, name) for o in good],
+                                                  dtype=float).reshape(len(good), -1)
+        np.testing.assert_array_equal(rows, per_sample)
+        status = run.estimator.status        # the per-sample path counts them as they leave
+        status.negative_load_samples = int(np.count_nonzero(
+            (rows[:, Column.FN1] <= 0.0) | (rows[:, Column.FN2] <= 0.0)))
+        assert status == est.status
 
 
 

@@ -185,3 +185,22 @@ def test_quasi_static_ltr_is_the_low_passed_loads_ratio():
     sine = 0.1 * np.sin(2 * np.pi * 2.0 * t)
     out = np.array([rec.quasi_static_ltr(fc1 * (1 - a), fc2 * (1 + a), 1e-3) for a in sine])
     assert np.abs(out[t > 2.0]).max() == pytest.approx(0.1 / math.sqrt(2), rel=0.01)
+
+
+def test_batch_quasi_static_ltr_in_chunks_is_the_per_sample_one():
+    """add_quasi_static runs the per-sample step in chunks: the same numbers across chunk
+    edges, with uneven steps."""
+    from road_force_estimator.estimation.reconstruction import QUASI_STATIC_CHUNK
+    rng = np.random.default_rng(4)
+    n = 2 * QUASI_STATIC_CHUNK + 17
+    rec = Reconstruction(VehicleParameters(), 2.0)
+    cols = field_columns(n)[1]
+    cols[Column.FN1][:] = 2e4 + 3e3 * rng.standard_normal(n)
+    cols[Column.FN2][:] = 2e4 + 3e3 * rng.standard_normal(n)
+    t = np.cumsum(rng.uniform(0.9e-3, 1.1e-3, n))
+    rec.add_quasi_static(cols, t)
+    rec.restart()
+    steps = np.concatenate([[0.0], np.diff(t)])
+    per_sample = [rec.quasi_static_ltr(a, b, d) for a, b, d in
+                  zip(cols[Column.FN1], cols[Column.FN2], steps)]
+    np.testing.assert_array_equal(cols[Column.LTR_QUASI_STATIC], per_sample)
