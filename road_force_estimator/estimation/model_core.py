@@ -294,7 +294,9 @@ class ModelCore:
             self._first_step(dt)
         sched = self.schedule
         lo, hi = sched.v_band
-        if not (lo <= v <= hi or lo <= -v <= hi):
+        # |v| against the band (the band of the floor level starts at -inf: testing -v
+        # there would keep the floor's gains for any speed once the truck has stopped)
+        if not lo <= (v if v > 0.0 else -v) <= hi:
             sched.set_speed(v)
         if dt != self._m_dt or sched.stale:
             self._select(dt)
