@@ -24,8 +24,8 @@ import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 
-__all__ = ['BAND_HZ', 'SETTLE_S', 'THRESHOLD', 'OK', 'MISMATCH', 'ADVICE', 'moment_std_nm',
-           'residual_ratio', 'verdict', 'assess']
+__all__ = ['BAND_HZ', 'SETTLE_S', 'THRESHOLD', 'OK', 'MISMATCH', 'ADVICE', 'ModelFitMonitor',
+           'moment_std_nm', 'gains_sigma_nm', 'residual_ratio', 'verdict', 'assess']
 
 #: Band of the residual judged (Hz): the body's roll and heave modes.
 BAND_HZ = (0.5, 5.0)
@@ -47,7 +47,6 @@ def moment_std_nm(vehicle: VehicleParameters, observer: ObserverParameters, stat
     the step dt (s) and the speed (m/s)."""
     from dataclasses import replace
 
-    from road_force_estimator.estimation.model import State
     from road_force_estimator.estimation.schedule import GainSchedule, dt_level
 
     fixed = replace(observer, noise_deflection_m=max(float(status.noise_deflection_m), 1e-12),
@@ -56,28 +55,85 @@ def moment_std_nm(vehicle: VehicleParameters, observer: ObserverParameters, stat
     sched = GainSchedule(vehicle, fixed)
     sched.set_speed(float(speed_mps))
     sched.levels['dt'] = dt_level(dt_s)
-    g = sched.design(dt_s, 0)
-    return math.sqrt(max(float(g.p_post[State.M_R, State.M_R]), 0.0))
+    return gains_sigma_nm(sched.design(dt_s, 0))
+
+
+class ModelFitMonitor:
+    """The residual's band RMS, one estimate at a time (the node; :func:`residual_ratio`
+    runs the same steps over arrays).
+
+    The band-pass (second-order Butterworth at :data:`BAND_HZ`, two biquads in transposed
+    direct form II, as :func:`scipy.signal.sosfilt`) is designed at the step to the first
+    estimate after ``skip_s`` and started there (at its residual); from
+    :data:`SETTLE_S` later on its output's squares are summed.
+    """
+
+    def __init__(self, skip_s: float = 2.0) -> None:
+        self.skip_s = float(skip_s)
+        self._t0: float | None = None
+        self._t_last = math.nan
+        self._sos: list | None = None
+        self._zi = [0.0] * 4
+        self._r0 = 0.0
+        self._start = math.inf
+        self._dt = 0.0
+        self.count = 0           #: squares summed
+        self.sum_squares = 0.0   #: (N m)^2
+
+    def update(self, t_s: float, residual_nm: float) -> None:
+        """One estimate: its time (s) and residual (N m)."""
+        last, self._t_last = self._t_last, t_s
+        if self._t0 is None:
+            self._t0 = t_s
+        if t_s - self._t0 < self.skip_s or not math.isfinite(residual_nm):
+            return
+        if self._sos is None:
+            if not t_s - last > 0.0:
+                return
+            from scipy import signal
+            self._dt = t_s - last
+            self._sos = signal.butter(2, BAND_HZ, btype='bandpass', fs=1.0 / self._dt,
+                                      output='sos').tolist()
+            self._r0 = residual_nm
+            self._start = t_s + SETTLE_S
+        x = residual_nm - self._r0
+        zi = self._zi
+        for j, (b0, b1, b2, _, a1, a2) in enumerate(self._sos):
+            z1, z2 = zi[2 * j], zi[2 * j + 1]
+            y = b0 * x + z1
+            zi[2 * j] = b1 * x - a1 * y + z2
+            zi[2 * j + 1] = b2 * x - a2 * y
+            x = y
+        if t_s >= self._start:
+            self.count += 1
+            self.sum_squares += x * x
+
+    def ratio(self, sigma_nm: float) -> float:
+        """Band RMS over ``sigma_nm``; NaN with less than 2 s summed."""
+        if self.count * self._dt < 2.0 or not sigma_nm > 0.0:
+            return math.nan
+        return math.sqrt(self.sum_squares / self.count) / sigma_nm
 
 
 def residual_ratio(t_s, residual_nm, sigma_nm: float, *, skip_s: float = 2.0) -> float:
-    """Band RMS of the residual (N m, at times t_s (s), evenly sampled) from ``skip_s`` on,
-    over ``sigma_nm``; the band-pass starts at the skip and its first :data:`SETTLE_S` are
-    left out; NaN when fewer than 2 s remain."""
+    """Band RMS of the residual (N m, at times t_s (s)) from ``skip_s`` on, over
+    ``sigma_nm`` (:class:`ModelFitMonitor` over the arrays); the
+    band-pass starts at the skip and its first :data:`SETTLE_S` are left out; NaN when fewer
+    than 2 s remain."""
     t = np.asarray(t_s, dtype=float)
     r = np.asarray(residual_nm, dtype=float)
-    if t.size < 16 or not sigma_nm > 0.0:
+    if t.size < 16:
         return math.nan
-    from scipy import signal
+    mon = ModelFitMonitor(skip_s)
+    for tk, rk in zip(t.tolist(), r.tolist()):
+        mon.update(tk, rk)
+    return mon.ratio(sigma_nm)
 
-    dt = float(np.median(np.diff(t)))
-    r = r[(t - t[0]) >= skip_s]
-    settle = int(round(SETTLE_S / dt))       # the band-pass's own start-up
-    if (r.size - settle) * dt < 2.0:
-        return math.nan
-    sos = signal.butter(2, BAND_HZ, btype='bandpass', fs=1.0 / dt, output='sos')
-    band = signal.sosfilt(sos, r - r[0])[settle:]
-    return float(np.sqrt(np.mean(np.square(band))) / sigma_nm)
+
+def gains_sigma_nm(gains) -> float:
+    """``sigma_M`` (N m) of a design (:class:`.gains.Gains`): sqrt(P+[M_r, M_r])."""
+    from road_force_estimator.estimation.model import State
+    return math.sqrt(max(float(gains.p_post[State.M_R, State.M_R]), 0.0))
 
 
 def verdict(ratio: float) -> str:

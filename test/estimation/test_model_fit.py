@@ -75,3 +75,17 @@ def test_residual_ratio_of_white_noise_is_the_band_fraction():
     expected = np.sqrt(2.0 * (np.pi / 4.0) / np.sin(np.pi / 4.0) * (hi - lo) * 1e-3)
     assert model_fit.residual_ratio(t, r, 1.0) == pytest.approx(expected, rel=0.05)
     assert model_fit.verdict(float('nan')) == model_fit.OK
+
+
+def test_the_monitor_is_scipys_band_pass():
+    # reference: scipy.signal.sosfilt of the same design, started at the skip
+    from scipy import signal
+    rng = np.random.default_rng(4)
+    t = np.arange(8000) * 1e-3
+    r = np.cumsum(rng.normal(0.0, 1.0, t.size)) + 50.0 * np.sin(2 * np.pi * 2.0 * t)
+    sos = signal.butter(2, model_fit.BAND_HZ, btype='bandpass', fs=1000.0, output='sos')
+    keep = t >= 2.0
+    band = signal.sosfilt(sos, r[keep] - r[keep][0])
+    settled = t[keep] >= 2.0 + model_fit.SETTLE_S - 1e-9
+    expected = np.sqrt(np.mean(band[settled] ** 2)) / 7.0
+    assert model_fit.residual_ratio(t, r, 7.0) == pytest.approx(expected, rel=1e-9)
