@@ -45,7 +45,7 @@ from road_force_estimator.estimation.differentiator import implicit_step
 from road_force_estimator.estimation.gains import (
     ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NX, SPEED_FLOOR_MPS, continuous_model, rest_state)
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
@@ -137,6 +137,7 @@ class ModelCore:
         self._dts: list = []
         self._x0 = np.zeros(NX)
         self._body_started = False
+        self._slow = 0                    # samples of the block below the speed floor
 
     @property
     def gains(self) -> Gains | None:
@@ -326,6 +327,8 @@ class ModelCore:
                     nxt[_R0:_R0 + 9] = rho
         self._i = i
         self._dts.append(dt)
+        if -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
+            self._slow += 1
         if not self._lag_final and len(self._dts) >= LAG_STEPS:
             self._finalise_lag()
         lag = self.lag
@@ -419,8 +422,9 @@ class ModelCore:
             dts = self._dts[1:]    # the first step led to the block's first sample
         sched = self.schedule
         first_ever = sched.blocks == 0
-        if sched.statistics(y, dts):
+        if sched.statistics(y, dts, self._slow == 0):
             self._t_retuned = self._t
+        self._slow = 0
         if first_ever and first_run_block and sched.stale and len(dts) == i:
             self._replay(dts)
         self._dts = []
