@@ -212,7 +212,8 @@ def build(drive: TruckDrive, duration_s: float) -> tuple[Drive, np.ndarray]:
 
 def files_for(drive: TruckDrive, truth) -> dict[str, Any]:
     """The parameter files of the drive: ``{'nominal', 'stated', 'true'}`` ->
-    VehicleParameters ('stated' only where it differs from 'nominal')."""
+    VehicleParameters, each only where it differs from those before it (the table then says
+    'nominal = true' and so on)."""
     from road_force_estimator.core.parameters import VehicleParameters
     nominal = VehicleParameters()
     ref = drive.truth.get('vehicle.deflection_reference')
@@ -222,9 +223,11 @@ def files_for(drive: TruckDrive, truth) -> dict[str, Any]:
         nominal = replace(nominal, static_load_setting_n=tuple(truth.static_load_n))
     stated = _apply(nominal, {k: list(getattr(truth, _field_of(type(truth), k)))
                               for k in STATED if _field_of(type(truth), k)})
-    out = {'nominal': nominal, 'true': truth}
+    out = {'nominal': nominal}
     if stated != nominal:
         out['stated'] = stated
+    if truth != nominal and truth != stated:
+        out['true'] = truth
     return out
 
 
@@ -302,10 +305,17 @@ def markdown(results: dict[str, Any], duration_s: float) -> str:
             lines.append(f'| {label} | needs {", ".join(r["needs"])} |'
                          + ' |' * (len(METHODS) + 1))
             continue
+        names = list(r.get('files', {}))
         for fname, row in r.get('files', {}).items():
+            same = []     # the files after it, up to the next one present, are the same file
+            for f in FILES[FILES.index(fname) + 1:]:
+                if f in names:
+                    break
+                same.append(f)
+            fname = ' = '.join([fname, *same])
             cells = ' | '.join(f'{_cell(row[n], "load")} / {_cell(row[n], "profile")}'
                                for n, _, _ in METHODS)
-            ratio, word = r['model_fit'].get(fname, [math.nan, 'n/a'])
+            ratio, word = r['model_fit'].get(fname.split(' = ')[0], [math.nan, 'n/a'])
             lines.append(f'| {label} | {fname} | {cells} | {word} ({ratio:.2f}) |')
     lines += ['', f'Cells: load error (% of the true dynamic-load RMS) / profile error (% of '
               f'the 0.5-30 m band RMS); drives of {duration_s:g} s (the stops 34 s), ISO C '
