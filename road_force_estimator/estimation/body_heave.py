@@ -1,21 +1,28 @@
 """Band-limited double integration of the body heave acceleration (MODEL.md step 4).
 
-``z_s = H(s) dd z_s / s^2`` with the high-pass ``H = 1 - G``, ``G = (n w^(n-1) s + w^n) /
-(s + w)^n``, n = :data:`ORDER` = 8: eight Tustin lags ``1/(s + w)`` in cascade on ``dd z_s``
-(states ``y_1..y_8``), and ``z_s = sum_{k=2..8} (k-1) w^(k-2) y_k``,
-``dz_s = sum_{k<8} w^(k-1) y_k - 7 w^7 y_8``. The cutoff ``w = 2 pi max(|v|, SPEED_FLOOR_MPS) /
-lambda_c`` follows the speed. In the band the error is ``|G| ~ n (w / Omega)^(n-1)``: 0.02 %
-at 30 m for the 100 m default (a second-order high-pass's phase lead would cost tens of % of
-the band-passed profile; five lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free
-ISO C drive, eight 0.85 %: ``bench`` scenarios C20-1k-0um and the noisy ones improve too); a
-constant acceleration bias ``b`` settles at ``C(n, 2) b / w^2 = 28 b / w^2``. The price, outside
-the band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; five poles: 1.9) and
-is -3 dB near ``w / 5.9``, and a start takes longer to settle (``~t^7 exp(-w t)``: ~30 s at
-20 m/s for the 100 m default).
+``z_s = H(s) dd z_s / s^2`` with the high-pass ``H = 1 - G``, ``G = (n w^(n-1) s + w^n) / (s +
+w)^n``, n = :data:`ORDER` = 8: eight Tustin lags ``1/(s + w)`` in cascade on ``dd z_s`` (states
+``y_1..y_8``), and ``z_s = sum_{k=2..8} (k-1) w^(k-2) y_k``, ``dz_s = sum_{k<8} w^(k-1) y_k - 7
+w^7 y_8``. The cutoff ``w = 2 pi max(|v|, SPEED_FLOOR_MPS) / lambda_c`` follows the speed;
+standing (``|v| <`` :data:`STANDING_MPS`, the speed check's threshold) the state holds, as a
+filter in distance does. In the band the error is ``|G| ~ n (w / Omega)^(n-1)``: 0.02 % at 30 m
+for the 100 m default (a second-order high-pass's phase lead would cost tens of % of the
+band-passed profile; five lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free ISO C
+drive, eight 0.85 %: ``bench`` scenarios C20-1k-0um and the noisy ones improve too); a constant
+acceleration bias ``b`` settles at ``C(n, 2) b / w^2 = 28 b / w^2``. The price, outside the
+band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; five poles: 1.9) and is -3
+dB near ``w / 5.9``, and a start takes longer to settle (``~t^7 exp(-w t)``: ~30 s at 20 m/s for
+the 100 m default).
 
-The state is a plain tuple ``(dd z_s of the last step, y_1..y_8, z_s, dz_s)`` (``z_s`` and
-``dz_s`` last) so that the per-sample estimators pay one function call. The per-sample path
-imports nothing but ``math``.
+The filter runs in distance: when the cutoff rises with the speed, the states
+``w^(k-2) y_k`` are kept (so ``z_s`` is continuous and ``dz_s`` scales with the speed; when
+it falls the ``y_k`` are, so ``z_s`` shrinks: neither amplifies), and standing it holds.
+At a constant speed nothing of this runs. (C20-stop: profile error 161920 % -> 34 %.)
+
+The state is a plain tuple ``(dd z_s of the last step, its cutoff w (0 = none yet), y_1..y_8,
+z_s, dz_s)`` (``z_s`` and ``dz_s`` last) so that the per-sample estimators pay one function
+call. The per-sample path
+uses nothing but ``math``.
 
 Offline (non-causal) the same band-limiting is done without phase error by
 :func:`zero_phase`: the double integral times ``|H_B|^2``, ``H_B`` the Butterworth high-pass
@@ -25,8 +32,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ['SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed', 'start',
-           'step', 'zero_phase']
+from road_force_estimator.estimation.speed_check import STANDING_MPS
+
+__all__ = ['STANDING_MPS', 'SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed',
+           'start', 'step', 'zero_phase']
 
 #: Speed floor of the cutoff (m/s): w >= 2 pi v_floor / lambda_c.
 SPEED_FLOOR_MPS = 1.0
@@ -44,17 +53,40 @@ def cutoff_per_speed(cutoff_wavelength_m: float) -> float:
 
 def start(accel: float) -> tuple:
     """State of a (re)start: at rest, ``z_s = dz_s = 0``, remembering ``dd z_s``."""
-    return (accel,) + (0.0,) * (ORDER + 2)
+    return (accel, 0.0) + (0.0,) * (ORDER + 2)
 
 
 def step(state: tuple, accel: float, dt: float, v: float, wc_per_speed: float) -> tuple:
     """Advance by ``dt`` (s) with the new acceleration ``accel`` (m/s^2) at speed ``v`` (m/s).
 
     Returns the new state; ``state[-2]`` is ``z_s`` (m) and ``state[-1]`` is ``dz_s`` (m/s).
+    Below :data:`STANDING_MPS` (the truck stands) the state holds: ``z_s`` as it was,
+    ``dz_s = 0``.
     """
-    a_old, y1, y2, y3, y4, y5, y6, y7, y8, _, _ = state
+    a_old, w_old, y1, y2, y3, y4, y5, y6, y7, y8, zs, _ = state
     av = v if v > 0.0 else -v
+    if av < STANDING_MPS:
+        # standing: the filter runs in distance (its cutoff is a wavelength) and no distance
+        # passes, so it holds (run in time, it would forget the body's level: 8.7 mm in
+        # 2.5 s at its 1 m/s floor); z_s held, dz_s = 0, the newest dd z_s remembered
+        return (accel, w_old, y1, y2, y3, y4, y5, y6, y7, y8, zs, 0.0)
     wc = wc_per_speed * (av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS)
+    if wc > w_old > 0.0:
+        # the cutoff rose with the speed: the states in distance, w^(k-2) y_k, are kept
+        # (z_s continuous, dz_s scaled with the speed); with the y_k kept, those built at a
+        # low cutoff would come out times (w / w_old)^6 (1.9 m after pulling away to 20 m/s).
+        # (Slowing down, the y_k are kept: z_s then shrinks, it never grows; kept in
+        # distance it would, by a bias's 1 / w^2)
+        r = w_old / wc
+        y1 /= r
+        y3 *= r
+        r2 = r * r
+        y4 *= r2
+        y5 *= r2 * r
+        r4 = r2 * r2
+        y6 *= r4
+        y7 *= r4 * r
+        y8 *= r4 * r2
     hh = 0.5 * dt
     inv = 1.0 / (1.0 + wc * hh)
     g = (1.0 - wc * hh) * inv
@@ -67,7 +99,7 @@ def step(state: tuple, accel: float, dt: float, v: float, wc_per_speed: float) -
     n6 = g * y6 + hh * (y5 + n5)
     n7 = g * y7 + hh * (y6 + n6)
     n8 = g * y8 + hh * (y7 + n7)
-    return (accel, n1, n2, n3, n4, n5, n6, n7, n8,
+    return (accel, wc, n1, n2, n3, n4, n5, n6, n7, n8,
             n2 + wc * (2.0 * n3 + wc * (3.0 * n4 + wc * (4.0 * n5 + wc * (
                 5.0 * n6 + wc * (6.0 * n7 + wc * 7.0 * n8))))),
             n1 + wc * (n2 + wc * (n3 + wc * (n4 + wc * (n5 + wc * (

@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 __all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'Status', 'text', 'status', 'estimator_message',
-           'estimator_status', 'batch_diagnostics']
+           'estimator_status', 'model_fit_values', 'batch_diagnostics']
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 _NS = 1_000_000_000
@@ -61,13 +61,18 @@ def status(name: str, hardware_id: str, message: str, values: Mapping[str, Any],
 
 
 def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
-                      speed_contradicted: int = 0) -> str:
+                      speed_contradicted: int = 0, model_fit: str = 'ok') -> str:
     """The estimator status' words: 'speed contradicted by the deflections (N samples)',
-    'converging', 'N lift-off samples', 'N restarts' or 'ok' (in that order of precedence)."""
+    'converging', the model-fit advice (:data:`.model_fit.ADVICE`, when ``model_fit`` is
+    'mismatch'), 'N lift-off samples', 'N restarts' or 'ok' (in that order of precedence)."""
+    from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
+
     if speed_contradicted:
         return f'speed contradicted by the deflections ({speed_contradicted} samples)'
     if not converged:
         return 'converging'
+    if model_fit == MISMATCH:
+        return ADVICE
     if lift_off_samples:
         return f'{lift_off_samples} lift-off samples'
     if restarts:
@@ -77,17 +82,24 @@ def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
 
 def estimator_status(name: str, hardware_id: str, values: Mapping[str, Any], *,
                      converged: bool, lift_off_samples: int, restarts: int = 0,
-                     speed_contradicted: int = 0) -> Status:
-    """The estimator's status (speed contradicted, convergence, lift-offs, restarts) with
-    ``values``; WARN unless 'ok'."""
+                     speed_contradicted: int = 0, model_fit: str = 'ok') -> Status:
+    """The estimator's status (speed contradicted, convergence, model fit, lift-offs,
+    restarts) with ``values``; WARN unless 'ok'."""
     return status(name, hardware_id, estimator_message(converged, lift_off_samples, restarts,
-                                                       speed_contradicted), values)
+                                                       speed_contradicted, model_fit), values)
+
+
+def model_fit_values(ratio: float, word: str) -> dict[str, Any]:
+    """The status values of the model-fit diagnostic (:mod:`.model_fit`): ``model_fit``
+    ('ok' | 'mismatch') and ``model_fit_ratio`` (band RMS of the residual over sigma_M)."""
+    return {'model_fit': word, 'model_fit_ratio': float(ratio)}
 
 
 def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.ndarray,
                       lift_off: np.ndarray, ltr: np.ndarray, residual_nm: np.ndarray,
                       totals: Mapping[str, Any], name: str, hardware_id: str,
-                      speed_contradicted: np.ndarray | None = None
+                      speed_contradicted: np.ndarray | None = None,
+                      model_fit: tuple[float, str] | None = None
                       ) -> list[tuple[int, list[Status]]]:
     """The estimator status per second of data time over a batch of estimates.
 
@@ -106,6 +118,9 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
     speed_contradicted : (n,) bool array, optional
         Samples whose standing speed the deflections contradicted: a window with some
         reports ``speed_contradicted_samples`` and WARNs.
+    model_fit : (ratio, 'ok' | 'mismatch'), optional
+        The drive's model-fit verdict (:func:`.model_fit.assess`), reported by every status
+        (:func:`model_fit_values`); 'mismatch' WARNs with the advice to calibrate.
 
     Returns
     -------
@@ -134,11 +149,14 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
         bad_speed = int(np.count_nonzero(contra[a:b]))
         if bad_speed:
             values['speed_contradicted_samples'] = bad_speed
+        if model_fit is not None:
+            values.update(model_fit_values(*model_fit))
         if j == len(bounds) - 1:
             values.update({f'total.{k}': v for k, v in totals.items()})
         out.append((int(stamps[b - 1]), [estimator_status(
             name, hardware_id, values, converged=values['converged'],
-            lift_off_samples=values['lift_off_samples'], speed_contradicted=bad_speed)]))
+            lift_off_samples=values['lift_off_samples'], speed_contradicted=bad_speed,
+            model_fit=values.get('model_fit', 'ok'))]))
     return out
 
 

@@ -45,7 +45,7 @@ from road_force_estimator.estimation.differentiator import implicit_step
 from road_force_estimator.estimation.gains import (
     ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NX, SPEED_FLOOR_MPS, continuous_model, rest_state)
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
@@ -155,6 +155,7 @@ class ModelCore:
         self._dts: list = []
         self._x0 = np.zeros(NX)
         self._body_started = False
+        self._slow = 0                    # samples of the block below the speed floor
 
     @property
     def gains(self) -> Gains | None:
@@ -312,7 +313,9 @@ class ModelCore:
             self._first_step(dt)
         sched = self.schedule
         lo, hi = sched.v_band
-        if not (lo <= v <= hi or lo <= -v <= hi):
+        # |v| against the band (the band of the floor level starts at -inf: testing -v
+        # there would keep the floor's gains for any speed once the truck has stopped)
+        if not lo <= (v if v > 0.0 else -v) <= hi:
             sched.set_speed(v)
         if dt != self._m_dt or sched.stale:
             self._select(dt)
@@ -342,6 +345,8 @@ class ModelCore:
                     nxt[_R0:_R0 + 9] = rho
         self._i = i
         self._dts.append(dt)
+        if -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
+            self._slow += 1
         if not self._lag_final and len(self._dts) >= LAG_STEPS:
             self._finalise_lag()
         lag = self.lag
@@ -435,8 +440,9 @@ class ModelCore:
             dts = self._dts[1:]    # the first step led to the block's first sample
         sched = self.schedule
         first_ever = sched.blocks == 0
-        if sched.statistics(y, dts):
+        if sched.statistics(y, dts, self._slow == 0):
             self._t_retuned = self._t
+        self._slow = 0
         if first_ever and first_run_block and sched.stale and len(dts) == i:
             self._replay(dts)
         self._dts = []

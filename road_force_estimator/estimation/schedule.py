@@ -235,10 +235,11 @@ class GainSchedule:
             self._var_dq[key] = val
         return val
 
-    def statistics(self, y: np.ndarray, dts: list) -> bool:
+    def statistics(self, y: np.ndarray, dts: list, moving: bool = True) -> bool:
         """One block of consecutive measurements y (m, 3), steps dts (m - 1): noise and
         roughness estimates; True when the settling time restarts (see
-        :meth:`requantise_noise`)."""
+        :meth:`requantise_noise`). A block that is not ``moving`` (some sample below the
+        speed floor: the road under the tires barely moves) updates the noise only."""
         if y.shape[0] < 8 * NOISE_DIFF_ORDER or len(dts) != y.shape[0] - 1:
             return False
         self.blocks += 1
@@ -258,7 +259,7 @@ class GainSchedule:
         d1 = (np.diff(y[:, :2], axis=0) * scale).reshape(-1)
         signal_var = (mad_std(d1) ** 2
                       - 2.0 * self.noise_deflection_m ** 2 * float(np.mean(scale ** 2)))
-        per_d = self._var_dq_per_diffusion()
+        per_d = self._var_dq_per_diffusion() if moving else 0.0
         if per_d > 0.0 and math.isfinite(per_d):     # (an undamped model has no stationary
             hg.append(max(signal_var / per_d / road_diffusion(1.0), MIN_ROAD_GD_M3))  # variance)
         if hg and not self.roughness_fixed:

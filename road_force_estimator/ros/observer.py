@@ -34,7 +34,7 @@ from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import Estimator, diagnostics
+from road_force_estimator.estimation import Estimator, diagnostics, model_fit
 from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
@@ -124,6 +124,7 @@ class Observer(Node):
             self.total['rebuilds'] += 1
             self.get_logger().info('parameters changed: estimator rebuilt (it restarts)')
         self.estimator = Estimator(*config)
+        self.fit = model_fit.ModelFitMonitor()    # restarts with the estimator
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
 
@@ -216,6 +217,7 @@ class Observer(Node):
         ex = self.extremes
         ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(est.ltr))
         ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
+        self.fit.update(t * 1e-9, est.residual_nm)
 
     def log_input(self, values: dict, rejected: Counter) -> None:
         """One line when input first arrives (its rate), then only when inputs are rejected."""
@@ -287,10 +289,15 @@ class Observer(Node):
             values['speed_contradicted_samples'] = fresh['speed_contradicted']
         if fresh['negative_loads']:
             values['negative_load_samples'] = fresh['negative_loads']
+        gains = getattr(self.estimator.core, 'gains', None)   # the model's gains in use
+        ratio = self.fit.ratio(model_fit.gains_sigma_nm(gains)) if gains else math.nan
+        word = model_fit.verdict(ratio)
+        values.update(diagnostics.model_fit_values(ratio, word))
         return diagnostics.estimator_status('observer: estimator', self.get_name(), values,
                                             converged=st.converged, lift_off_samples=lifts,
                                             restarts=resets,
-                                            speed_contradicted=fresh['speed_contradicted'])
+                                            speed_contradicted=fresh['speed_contradicted'],
+                                            model_fit=word)
 
     def configuration_status(self) -> diagnostics.Status:
         values = {f'finding.{i}': f for i, f in enumerate(self.findings)}

@@ -145,14 +145,16 @@ def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
                               progress=bar.update)
 
 
-def _diagnostics(est, summary_counts: dict[str, int], mode: str):
-    """One estimator status per second of the drive (data time), the last with the totals."""
+def _diagnostics(est, summary_counts: dict[str, int], mode: str, model_fit=None):
+    """One estimator status per second of the drive (data time), the last with the totals;
+    ``model_fit``: the drive's (ratio, verdict) or None."""
     from road_force_estimator.estimation.diagnostics import batch_diagnostics
 
     per_second = batch_diagnostics(est.stamp_ns, est.valid, est.converged, est.lift_off, est.ltr,
                                    est.residual_nm, summary_counts,
                                    f'{PROG}: estimator ({mode})', PROG,
-                                   speed_contradicted=getattr(est, 'speed_contradicted', None))
+                                   speed_contradicted=getattr(est, 'speed_contradicted', None),
+                                   model_fit=model_fit)
     return [(stamp, [st.as_dict() for st in statuses]) for stamp, statuses in per_second]
 
 
@@ -288,6 +290,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
            observer, options: dict, stages) -> EstimateResult:
     """Write ``folder/bag`` and ``folder/report``; the result names them in ``output``."""
     from road_force_estimator import bagio
+    from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
     from road_force_estimator.report import raw_road, write_report
 
     mode = options['mode']
@@ -307,10 +310,14 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,
               'road_force_estimator.writer_command': PROG}
+    fit = _model_fit(est, drive, vehicle, observer)
+    if fit is not None:
+        extra['model fit'] = (f'{fit[1]} (residual band RMS {fit[0]:.3g} x sigma_M)'
+                              + (f': {ADVICE}' if fit[1] == MISMATCH else ''))
     stages.next('writing the bag')
     written = bagio.write_estimate_bag(
         bag_dir, est, track_width_m=vehicle.track_width_m,
-        diagnostics=_diagnostics(est, counts, mode), custom_data=custom)
+        diagnostics=_diagnostics(est, counts, mode, fit), custom_data=custom)
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
     stages.next('writing the report' + (' and figures' if options['figures'] else ''))
@@ -320,6 +327,17 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     return EstimateResult(summary, output / 'bag', output / 'report', est, written, warnings,
                           drive)
+
+
+def _model_fit(est, drive, vehicle, observer):
+    """The drive's model-fit verdict (:func:`.model_fit.assess`), or None when the method
+    is not the model's or there are too few samples."""
+    from road_force_estimator.estimation.model_fit import assess
+
+    if getattr(est.status, 'method', '') != 'model':
+        return None
+    ratio, word = assess(est, vehicle, observer, drive.speed_mps)
+    return None if not math.isfinite(ratio) else (ratio, word)
 
 
 def _headline(result: EstimateResult, units: str = 'si') -> list[str]:

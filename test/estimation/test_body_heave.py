@@ -77,3 +77,36 @@ def test_zero_phase_rejects_odd_orders_and_passes_short_input():
     with pytest.raises(ValueError, match='order'):
         body_heave.zero_phase(np.zeros(100), DT, W, 3)
     assert np.array_equal(body_heave.zero_phase(np.ones(5), DT, W), np.zeros(5))
+
+
+def _run_speeds(accel: float, speeds: np.ndarray, state=None):
+    wcps = body_heave.cutoff_per_speed(CUTOFF_M)
+    state = body_heave.start(accel) if state is None else state
+    z = np.zeros(speeds.size)
+    for k, v in enumerate(speeds):
+        state = body_heave.step(state, accel, DT, float(v), wcps)
+        z[k] = state[-2]
+    return z, state
+
+
+def test_a_speed_change_never_amplifies_and_standing_holds():
+    # a constant acceleration bias b settles at z_s = C(8, 2) b / w^2 (the final-value
+    # theorem on H / s^2: (1 - G) / s^2 -> C(n, 2) / w^2 at s = 0); at 2 m/s
+    b = 1e-4
+    slow = 2.0
+    w0 = 2.0 * math.pi * slow / CUTOFF_M
+    z, state = _run_speeds(b, np.full(200_000, slow))
+    assert z[-1] == pytest.approx(math.comb(8, 2) * b / w0 ** 2, rel=1e-3)
+    # standing: held exactly
+    z_still, state = _run_speeds(b, np.zeros(5000), state)
+    assert np.all(z_still == z[-1])
+    # pulling away to 20 m/s at once: no jump (kept y_k would give (w / w0)^6 = 1e6 times)
+    # and it settles at the new steady value
+    z_fast, _ = _run_speeds(b, np.full(100_000, SPEED), state)
+    assert abs(z_fast[0] - z[-1]) < 1e-3 * abs(z[-1])
+    assert np.max(np.abs(z_fast)) <= abs(z[-1]) * (1.0 + 1e-9)
+    assert z_fast[-1] == pytest.approx(math.comb(8, 2) * b / W ** 2, rel=1e-3)
+    # slowing down again: z_s does not grow beyond the new (slow) steady value either
+    z_slow, _ = _run_speeds(b, np.full(5000, slow), _run_speeds(b, np.full(100_000, SPEED),
+                                                                state)[1])
+    assert np.max(np.abs(z_slow)) <= abs(z[-1]) * (1.0 + 1e-9)

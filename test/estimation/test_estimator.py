@@ -262,12 +262,16 @@ class TestVaryingSpeed:
         fc = np.array(VEHICLE.static_load_n)
         err = np.abs(est.wheel_load_n[still] - tr.wheel_load_n[still])
         assert err.max() < 0.01 * fc.min()
-        # the profile at the one standing distance: no jump, but NOT held exactly: the body
-        # heave's high-pass runs in time with its 1 m/s floor (0.01 Hz at 100 m), so it
-        # forgets the body's level while standing (measured: 8.7 mm over 2.5 s)
+        # the profile at the one standing distance: no jump; the body heave (a filter in
+        # distance) holds once the speed check trusts the standing speed (here from 7.14 s:
+        # the wheel hop of this abrupt stop contradicts it for ~1 s), so the road moves only
+        # with the suspension settling (measured 1.7 mm; the high-pass run in time at its
+        # 1 m/s floor forgot the body's level: 8.7 mm over 2.5 s)
         assert np.isfinite(est.road_m[still]).all()
-        assert np.ptp(est.road_m[still], axis=0).max() < 1.2e-2
         assert np.abs(np.diff(est.road_m[still], axis=0)).max() < 5e-4   # noise: 0.2 mm
+        held = (tr.t_s >= 7.5) & (tr.t_s <= 9.0)
+        assert np.ptp(est.body_heave_m[held]) == 0.0
+        assert np.ptp(est.road_m[held], axis=0).max() < 2.5e-3
         # per sample and in the batch: the same numbers through the stop
         single = Estimator(VEHICLE, ObserverParameters())
         stamps = _stamps(tr.t_s)
@@ -280,12 +284,9 @@ class TestVaryingSpeed:
         np.testing.assert_array_equal([g.road_m for g in got], ref.road_m)
 
 
-@pytest.mark.xfail(strict=True, reason='issue 19, open: after a 3 s stop the load error stays '
-                   'about twice the constant-speed one (measured 0.32 against 0.16 of the dynamic '
-                   'RMS at 15 m/s) and the roughness estimate is ~47x too high (moment matching '
-                   'at a stop); leaving stopped blocks out of the roughness history fixes the '
-                   'roughness (4.5e-4 m^3) but not the loads (0.40): cause not found yet')
 def test_loads_after_a_stop_are_as_good_as_before():
+    # (issue 19: the gains kept their 1 m/s design after a stop, since the speed band of the
+    # floor level, open below, held every -v; measured now 0.163 against 0.160)
     from road_force_estimator.core.plant import simulate
     from road_force_estimator.core.road import iso8608_profile
     knots = (np.array([0.0, 3.0, 6.0, 9.0, 12.0, 15.0]),

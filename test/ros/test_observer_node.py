@@ -364,3 +364,41 @@ def test_static_loads_from_a_mechanical_zero_are_published_at_10_hz(ros_context)
         np.testing.assert_allclose(values, ref.static_load_n[[index[s] for s in got], side],
                                    rtol=1e-12)
         assert values[-1] == pytest.approx((3500.0 + 450.0) * 9.80665, rel=0.03)
+
+
+@pytest.mark.parametrize('wrong', [False, True])
+def test_model_fit_on_the_estimator_status(ros_context, wrong):
+    # a 6 s ISO C drive (10 um noise) from core.plant, fed to the node's estimate() as the
+    # callbacks do; with every parameter off by 10 % (mixed signs) the status says mismatch
+    from road_force_estimator.core.plant import simulate
+    from road_force_estimator.core.road import iso8608_profile
+    from collections import Counter
+    vehicle = VehicleParameters()
+    tr = simulate(vehicle, iso8608_profile('C', 150.0, seed=7), speed_mps=20.0,
+                  rate_hz=1000.0, duration_s=6.0, tire_envelope_m=0.25)
+    rng = np.random.default_rng(2)
+    q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+    phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+    overrides = []
+    if wrong:
+        overrides = [Parameter('vehicle.sprung_mass', value=4500.0),
+                     Parameter('vehicle.roll_inertia', value=3300.0),
+                     Parameter('vehicle.suspension_stiffness', value=[440000.0, 360000.0]),
+                     Parameter('vehicle.suspension_damping', value=[16500.0, 13500.0]),
+                     Parameter('vehicle.tire_stiffness', value=[900000.0, 1100000.0]),
+                     Parameter('vehicle.unsprung_mass', value=[495.0, 405.0]),
+                     Parameter('vehicle.static_load', value=list(vehicle.static_load_n))]
+    observer = Observer(context=ros_context, parameter_overrides=overrides)
+    try:
+        observer.speed_mps = 20.0
+        for k in range(tr.t_s.size):
+            observer.estimate(T0_NS + k * 1_000_000, (float(q[k, 0]), float(q[k, 1])),
+                              float(phi[k]))
+        st = observer.estimator_status(Counter(), Counter())
+    finally:
+        observer.destroy_node()
+    values = dict(st.values)
+    assert values['model_fit'] == ('mismatch' if wrong else 'ok'), values['model_fit_ratio']
+    assert (st.level == 1) == wrong
+    if wrong:
+        assert 'calibrate_vehicle' in st.message

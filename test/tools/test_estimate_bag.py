@@ -406,3 +406,32 @@ def test_installed_executable(noisy_drive, tmp_path):
     bad = subprocess.run([str(EXE), str(tmp_path / 'nothing'), '--output', str(tmp_path / 'x')],
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 1 and bad.stderr.count('\n') == 1
+
+
+@pytest.mark.parametrize('wrong', [False, True])
+def test_model_fit_in_the_bag_diagnostics_and_the_report(noisy_drive, tmp_path, capsys, wrong):
+    # the drive was simulated with config/road_force_estimator.yaml: that file fits it; every
+    # parameter off by 10 % (mixed signs, static loads as weighed) does not
+    out = tmp_path / 'out'
+    extra = []
+    if wrong:
+        extra = ['-p', 'vehicle.sprung_mass:=5500.0', '-p', 'vehicle.roll_inertia:=2700.0',
+                 '-p', 'vehicle.cg_height_above_roll_axis:=0.88',
+                 '-p', 'vehicle.unsprung_mass:=[405.0, 495.0]',
+                 '-p', 'vehicle.suspension_stiffness:=[440000.0, 360000.0]',
+                 '-p', 'vehicle.suspension_damping:=[13500.0, 16500.0]',
+                 '-p', 'vehicle.tire_stiffness:=[1100000.0, 900000.0]',
+                 '-p', f'vehicle.static_load:=[{VehicleParameters().static_load_n[0]}, '
+                       f'{VehicleParameters().static_load_n[1]}]']
+    code, _, err = run([noisy_drive, '--params-file', PARAMS, '--output', out, '--no-figures',
+                        *extra], capsys)
+    assert code == 0, err
+    diags = [msg for _, _, msg in bagio.iter_messages(out / 'bag', topics=['/diagnostics'])]
+    last = diags[-1].status[0]
+    keys = {kv.key: kv.value for kv in last.values}
+    assert keys['model_fit'] == ('mismatch' if wrong else 'ok')
+    assert (last.level == 1) == wrong
+    if wrong:
+        assert 'calibrate_vehicle' in last.message
+    notes = report_json(out)['notes']
+    assert notes['model fit'].startswith('mismatch' if wrong else 'ok')
