@@ -153,6 +153,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
     from road_force_estimator.core.speed_profile import read_speed_profile
+    from road_force_estimator.core.vehicle_model import SpringOptions
 
     profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
     road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
@@ -166,7 +167,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
     plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                   lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m,
-                  speed_profile=profile)
+                  speed_profile=profile, springs=SpringOptions.from_simulator(sim))
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
@@ -192,8 +193,14 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
         lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
-    sensors = SensorModel.from_simulator(sim)
+    sensors = SensorModel.from_simulator(sim, vehicle)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
+    if sensors.stamp_jitter_s > 0.0:
+        # the samples stay at their true times, their stamps (and those of the sample's truth
+        # and twist) move
+        from road_force_estimator.bagio.drive import DEFAULT_START_STAMP_NS
+        traj.stamps_ns = DEFAULT_START_STAMP_NS + np.round(
+            (traj.t_s + sensors.stamp_offsets_s(traj.t_s.size)) * 1e9).astype(np.int64)
     fixes = None
     if sim.gnss_rate_hz > 0.0:
         period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
