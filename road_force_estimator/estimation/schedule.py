@@ -22,7 +22,7 @@ from scipy import linalg
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.gains import NOISE_FLOOR_M, Gains, design
 from road_force_estimator.estimation.model import (
-    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, NX,
+    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3,
     ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model, road_diffusion, scheduled)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.riccati import van_loan
@@ -215,14 +215,18 @@ class GainSchedule:
             # Without phi (it follows the road's cross level, a random walk: nothing depends on
             # it) and the roll moment (a random walk the road does not drive): the rest is
             # stationary.
-            keep = [j for j in range(NX) if j not in (State.PHI, State.M_R)]
+            # (and a lag state of the roll sensor, which follows phi)
+            slots = model.measured
+            drop = {State.PHI, State.M_R, slots[2]}
+            keep = [j for j in range(model.nx) if j not in drop]
             a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
             with warnings.catch_warnings():   # undamped models: no stationary variance
                 warnings.simplefilter('ignore')
                 p = linalg.solve_discrete_lyapunov(a, q, method='direct')
             d = a - np.eye(len(keep))
             var = d @ p @ d.T + q
-            val = float(0.5 * (var[0, 0] + var[1, 1]))    # q_1, q_2 lead the kept states
+            i1, i2 = keep.index(slots[0]), keep.index(slots[1])   # the measured q_1, q_2
+            val = float(0.5 * (var[i1, i1] + var[i2, i2]))
             self._var_dq[key] = val
         return val
 

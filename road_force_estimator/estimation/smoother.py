@@ -15,8 +15,9 @@ import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
+from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, NY, OUTPUTS, SPEED_FLOOR_MPS, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NY, OUTPUTS, SPEED_FLOOR_MPS, State, continuous_model, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -35,6 +36,9 @@ _SMOOTH_CHUNK = 16384
 _SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
                  'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
 _SMOOTH_OUTPUTS = [OUTPUTS.index(name) for name in _SMOOTH_NAMES]
+#: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
+#: is evaluated on the previous pass's smoothed dq (the first pass: none).
+FRICTION_PASSES = 3
 
 
 class _Powers:
@@ -201,7 +205,18 @@ class _Smoother:
         self.observer = observer
         self.schedule = GainSchedule(vehicle, observer)
         self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
-        self.h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h[_SMOOTH_OUTPUTS]
+        model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
+        self.h = model.h[_SMOOTH_OUTPUTS]
+        self.nx = model.nx
+        #: leaf-spring friction F_f,i (N), or None; the outputs' direct part per newton
+        self.friction = model.friction_n if any(model.friction_n) else None
+        self.fd = None if self.friction is None else model.friction_d[_SMOOTH_OUTPUTS]
+        self._dq = [_SMOOTH_NAMES.index('dq1'), _SMOOTH_NAMES.index('dq2')]
+
+    def _forces(self, o: np.ndarray) -> np.ndarray:
+        """Friction forces (2, m) (N) at the rates of the outputs o (rows _SMOOTH_NAMES)."""
+        ff = np.asarray(self.friction)[:, None]
+        return -ff * np.tanh(o[self._dq] / FRICTION_VELOCITY_MPS)
 
     def fill_status(self, status: EstimatorStatus) -> None:
         sched = self.schedule
@@ -273,64 +288,108 @@ class _Smoother:
         """Uneven steps: the transition of each step (cached), the run's gains."""
         m = y.shape[0]
         c = g.model.c
+        nx = self.nx
         a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
-        xf = np.empty((m, NX))
+        xf = np.empty((m, nx))
         nus = np.empty((m, NY))
         xf[0] = x0
         for k in range(1, m):
             xp = a_steps[k - 1] @ xf[k - 1]
+            if self.friction is not None:   # on the filtered dq (one pass: steps uneven)
+                f1, f2 = self.friction
+                dq1, dq2 = xf[k - 1, State.DQ1], xf[k - 1, State.DQ2]
+                xp = xp + g.friction_input(float(dts[k - 1])) @ np.array(
+                    [-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS),
+                     -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS)])
             nus[k] = y[k] - c @ xp
             xf[k] = xp + g.k @ nus[k]
         cs = c.T @ np.linalg.inv(g.s)
-        ikc_t = (np.eye(NX) - g.k @ c).T
+        ikc_t = (np.eye(nx) - g.k @ c).T
         xs = xf.copy()
-        lam = np.zeros(NX)
+        lam = np.zeros(nx)
         for k in range(m - 1, 0, -1):
             lam = cs @ nus[k] + (ikc_t @ (a_steps[k].T @ lam) if k < m - 1 else 0.0)
             xs[k - 1] = xf[k - 1] + g.p_post @ (a_steps[k - 1].T @ lam)
-        self._outputs(self.h @ xs.T, out)
+        o = self.h @ xs.T
+        if self.friction is not None:
+            o = o + self.fd @ self._forces(o)
+        self._outputs(o, out)
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
                  out: list) -> None:
+        """The steady-state filter and RTS smoother of an evenly sampled run
+        (:meth:`_uniform_pass`); with friction, :data:`FRICTION_PASSES` passes, each with the
+        friction evaluated on the previous pass's smoothed dq (the first without)."""
+        if self.friction is None:
+            self._uniform_pass(g, dt, y, x0, out)
+            return
+        forces = None
+        for _ in range(FRICTION_PASSES - 1):
+            dq = self._uniform_pass(g, dt, y, x0, None, forces)
+            forces = -np.asarray(self.friction)[:, None] * np.tanh(dq / FRICTION_VELOCITY_MPS)
+        self._uniform_pass(g, dt, y, x0, out, forces)
+
+    def _uniform_pass(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
+                      out: list | None, forces: np.ndarray | None = None) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
 
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
         x+_(k-1)``. Backward (the adjoint form of the RTS smoother): ``lam_k = Phi^T lam_(k+1)
         + C^T S^-1 nu_k`` with ``Phi = A (I - K C)``, ``lam_m = 0``, and ``x_(k|m) = x+_k +
-        P+ A^T lam_(k+1)``.
+        P+ A^T lam_(k+1)``. With friction forces f (2, m) (N), the known input
+        ``B_d f_(k-1)`` joins the prediction ``A x+_(k-1)``. ``out`` None: only the smoothed
+        dq (2, m) is returned.
         """
         m = y.shape[0]
         c = g.model.c
-        a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:NX, ROW_X:ROW_X + NX]))
+        nx = self.nx
+        a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
         a_dt = g.transition(dt)
         kt = np.ascontiguousarray(g.k.T)
         ca_t = np.ascontiguousarray((c @ a_dt).T)
-        phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(NX) - g.k @ c)).T))
+        phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
         u_t = np.ascontiguousarray((c.T @ np.linalg.inv(g.s)).T)
         pa_t = np.ascontiguousarray((g.p_post @ a_dt.T).T)
-        xf = np.empty((m, NX))
+        xf = np.empty((m, nx))
         nu = np.empty((m, NY))
         xf[0] = x0
         nu[0] = 0.0
+        fin = None
+        if forces is not None:
+            bd = g.friction_input(dt)
+            fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
         chunk = _SMOOTH_CHUNK
         for k0 in range(1, m, chunk):
             k1 = min(m, k0 + chunk)
-            xf[k0:k1] = lti(a_run, y[k0:k1] @ kt, xf[k0 - 1])
+            drive = y[k0:k1] @ kt
+            if fin is not None:
+                drive += fin[0][k0 - 1:k1 - 1]
+            xf[k0:k1] = lti(a_run, drive, xf[k0 - 1])
             nu[k0:k1] = y[k0:k1] - xf[k0 - 1:k1 - 1] @ ca_t
-        lam_next = np.zeros(NX)                 # lam_(k1+1): lam_m = 0
+            if fin is not None:
+                nu[k0:k1] -= fin[1][k0 - 1:k1 - 1]
+        dq = None if out is not None else np.empty((2, m))
+        lam_next = np.zeros(nx)                 # lam_(k1+1): lam_m = 0
         for k1 in range(m, 0, -chunk):
             k0 = max(0, k1 - chunk)
             xs = xf[k0:k1].copy()
             # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1), from
             # lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
             lo, hi = k0 + 1, min(k1, m - 1)
-            lam = np.zeros((k1 - k0, NX))
+            lam = np.zeros((k1 - k0, nx))
             if hi >= lo:
                 seq = lti(phi_t, (nu[lo:hi + 1] @ u_t)[::-1], lam_next)[::-1]
                 lam[:hi - lo + 1] = seq
                 lam_next = seq[0]
             xs += lam @ pa_t
-            self._outputs(self.h @ xs.T, [col[k0:k1] for col in out])
+            if out is None:
+                dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
+                continue
+            o = self.h @ xs.T
+            if self.friction is not None:
+                o = o + self.fd @ self._forces(o)
+            self._outputs(o, [col[k0:k1] for col in out])
+        return dq
 
     def _outputs(self, o: np.ndarray, out: list) -> None:
         """Rows of the columns ``out`` from the smoothed outputs ``o`` (:data:`_SMOOTH_NAMES`,
