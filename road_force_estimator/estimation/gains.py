@@ -216,7 +216,8 @@ def sm_injection(vehicle: VehicleParameters, nx: int = NX) -> np.ndarray:
 def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
            noise_deflection_m: float, noise_roll_rad: float, road_gd_m3: float,
            lag: int = 0, correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
-           roll_moment_psd: float = ROLL_MOMENT_PSD, key: tuple = ()) -> Gains:
+           roll_moment_psd: float = ROLL_MOMENT_PSD, key: tuple = (),
+           friction_damping_nspm: tuple = (0.0, 0.0)) -> Gains:
     """Discretize the model and design the steady-state Kalman filter and smoothers.
 
     Parameters
@@ -237,6 +238,9 @@ def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
         ``lambda_v`` (m).
     force_psd, roll_moment_psd : float
         Process-noise densities (see :func:`continuous_model`).
+    friction_damping_nspm : (left, right)
+        The leaf-spring friction's equivalent damping (N s/m) in the design (see
+        :func:`continuous_model`).
 
     Returns
     -------
@@ -245,7 +249,8 @@ def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
     s_half = vehicle.half_track_m
     model = continuous_model(vehicle, speed_mps, road_gd_m3,
                              correlation_length_m=correlation_length_m, force_psd=force_psd,
-                             roll_moment_psd=roll_moment_psd)
+                             roll_moment_psd=roll_moment_psd,
+                             friction_damping_nspm=friction_damping_nspm)
     a, q = van_loan(model.a, model.g, model.q, dt_s)
     c = model.c
     sq = max(noise_deflection_m, NOISE_FLOOR_M)

@@ -68,6 +68,13 @@ _dot = np.dot     # (a little faster than the @ operator on small arrays)
 _R0 = ROW_RHO
 
 
+def _dq_rows(g: Gains, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of dq_1, dq_2 of the transition A(dt) (2, nx) and of the friction input
+    B_d(dt) (2, 2)."""
+    rows = [State.DQ1, State.DQ2]
+    return g.transition(dt)[rows], g.friction_input(dt)[rows]
+
+
 class ModelCore:
     """The model-based observer, one accepted sample at a time (a core of :class:`.Estimator`).
 
@@ -116,6 +123,7 @@ class ModelCore:
         # leaf-spring friction, a known input (:mod:`.model`): F_f,i, and the outputs'
         # direct part per newton (rows with a non-zero entry)
         self._ff = model.friction_n if any(model.friction_n) else None
+        self._ceq = (0.0, 0.0)       # its equivalent damping in the gains in use
         if self._ff is not None:
             d = model.friction_d
             self._fd = [(j, float(d[j, 0]), float(d[j, 1])) for j in range(d.shape[0])
@@ -232,6 +240,8 @@ class ModelCore:
         self._m = g.step_matrix(dt)
         if self._ff is not None:
             self._fm = g.friction_step(dt)
+            self._a_dq, self._b_dq = _dq_rows(g, dt)
+            self._ceq = g.model.friction_damping_nspm
         self._m_dt = dt
 
     # -- the run --------------------------------------------------------------------------
@@ -322,9 +332,8 @@ class ModelCore:
         row[y0 + 1] = q2
         row[y0 + 2] = phi
         sv = _dot(self._m, row)
-        if self._ff is not None:        # the friction of x_k = x+_k + T rho_k, held
-            sv += _dot(self._fm, self._friction(row[x0 + State.DQ1] + row[_R0 + 1],
-                                                row[x0 + State.DQ2] + row[_R0 + 4]))
+        if self._ff is not None:        # the friction over the step (of x+_k)
+            sv += _dot(self._fm, self._held_friction(row[x0:y0 - NY], self._a_dq, self._b_dq))
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -455,12 +464,14 @@ class ModelCore:
         self._select(dts[-1])
         g = self.schedule.gains
         x0, y0 = self._x0i, self._y0i
+        if self._ff is not None:
+            self._ceq = g.model.friction_damping_nspm
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
             sv = g.step_matrix(dt) @ buf[j]
             if self._ff is not None:
-                sv += g.friction_step(dt) @ self._friction(buf[j, x0 + State.DQ1],
-                                                           buf[j, x0 + State.DQ2])
+                a_dq, b_dq = _dq_rows(g, dt)
+                sv += g.friction_step(dt) @ self._held_friction(buf[j, x0:y0 - NY], a_dq, b_dq)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         self._t_retuned = 0.0
@@ -479,11 +490,23 @@ class ModelCore:
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
 
+    def _held_friction(self, x: np.ndarray, a_dq: np.ndarray, b_dq: np.ndarray) -> np.ndarray:
+        """The friction forces (N) held over a step from the state x: the mean of those at
+        its start and at its predicted end (Heun's trapezoid: the friction is stiff, a wheel
+        time constant ``m_i v_f / F_f`` of ~3 ms against the 1 ms step). ``a_dq``, ``b_dq``:
+        the dq rows of the transition and of the friction input (:func:`_dq_rows`)."""
+        f0 = self._friction(x[State.DQ1], x[State.DQ2])
+        dq = _dot(a_dq, x) + _dot(b_dq, f0)
+        return 0.5 * (f0 + self._friction(dq[0], dq[1]))
+
     def _friction(self, dq1: float, dq2: float) -> np.ndarray:
-        """The friction forces ``-F_f,i tanh(dq_i / v_f)`` (N) at the rates dq_i (m/s)."""
+        """The known friction input (N) at the rates dq_i (m/s): ``-F_f,i tanh(dq_i / v_f)``
+        less the equivalent damping's share ``-c_eq,i dq_i`` that the gains' linear model
+        carries (:func:`.model.friction_damping`)."""
         f1, f2 = self._ff
-        return np.array([-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS),
-                         -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS)])
+        d1, d2 = self._ceq
+        return np.array([-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS) + d1 * dq1,
+                         -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS) + d2 * dq2])
 
     def _emit(self, stamp: int, meta: tuple, o: list) -> None:
         """The row of the linear outputs o (:data:`.OUTPUTS`; with friction, its direct part at

@@ -211,12 +211,20 @@ class _Smoother:
         #: leaf-spring friction F_f,i (N), or None; the outputs' direct part per newton
         self.friction = model.friction_n if any(model.friction_n) else None
         self.fd = None if self.friction is None else model.friction_d[_SMOOTH_OUTPUTS]
+        self.ceq = np.zeros((2, 1))      # the equivalent damping in the run's gains (N s/m)
         self._dq = [_SMOOTH_NAMES.index('dq1'), _SMOOTH_NAMES.index('dq2')]
 
     def _forces(self, o: np.ndarray) -> np.ndarray:
-        """Friction forces (2, m) (N) at the rates of the outputs o (rows _SMOOTH_NAMES)."""
-        ff = np.asarray(self.friction)[:, None]
-        return -ff * np.tanh(o[self._dq] / FRICTION_VELOCITY_MPS)
+        """The known friction input (2, m) (N) at the rates of the outputs o (rows
+        _SMOOTH_NAMES); see :meth:`_forces_at`."""
+        return self._forces_at(o[self._dq])
+
+    def _forces_at(self, dq: np.ndarray) -> np.ndarray:
+        """The known friction input (N) at the rates dq (2, ...) (m/s): ``-F_f tanh(dq / v_f)``
+        less the equivalent damping's share that the gains carry (as :mod:`.model_core`)."""
+        ff = np.asarray(self.friction).reshape((2,) + (1,) * (np.ndim(dq) - 1))
+        ceq = self.ceq.reshape(ff.shape)
+        return -ff * np.tanh(dq / FRICTION_VELOCITY_MPS) + ceq * dq
 
     def fill_status(self, status: EstimatorStatus) -> None:
         sched = self.schedule
@@ -250,10 +258,13 @@ class _Smoother:
             sched = self.schedule
             sched.set_run(dt, speed)
             if m > 8 * NOISE_DIFF_ORDER:
-                for hist in sched.history:
+                for hist in (*sched.history, sched.dq_history):
                     hist.clear()
                 sched.statistics(y, dts.tolist())
             g = sched.design(dt, 0)
+            if self.friction is not None:   # the outputs of the design's model (its c_eq)
+                self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
+                self.h = g.model.h[_SMOOTH_OUTPUTS]
             uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
             steps = None if uniform else grid_steps(dts, dt)
             if uniform:
@@ -296,11 +307,8 @@ class _Smoother:
         for k in range(1, m):
             xp = a_steps[k - 1] @ xf[k - 1]
             if self.friction is not None:   # on the filtered dq (one pass: steps uneven)
-                f1, f2 = self.friction
-                dq1, dq2 = xf[k - 1, State.DQ1], xf[k - 1, State.DQ2]
-                xp = xp + g.friction_input(float(dts[k - 1])) @ np.array(
-                    [-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS),
-                     -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS)])
+                dq = xf[k - 1, [State.DQ1, State.DQ2]]
+                xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
             nus[k] = y[k] - c @ xp
             xf[k] = xp + g.k @ nus[k]
         cs = c.T @ np.linalg.inv(g.s)
@@ -326,7 +334,11 @@ class _Smoother:
         forces = None
         for _ in range(FRICTION_PASSES - 1):
             dq = self._uniform_pass(g, dt, y, x0, None, forces)
-            forces = -np.asarray(self.friction)[:, None] * np.tanh(dq / FRICTION_VELOCITY_MPS)
+            f = self._forces_at(dq)
+            # held over step k -> k + 1: the mean of the ends (the trapezoid; the friction is
+            # stiff against the step, see .model_core)
+            forces = f.copy()
+            forces[:, :-1] = 0.5 * (f[:, :-1] + f[:, 1:])
         self._uniform_pass(g, dt, y, x0, out, forces)
 
     def _uniform_pass(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
