@@ -312,8 +312,34 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
         return dx, out
 
     a, h = derivative(np.eye(nx))
+    g = _noise_inputs(v, nx)
+    diffusion = road_diffusion(road_gd_m3) * speed
+    qc = np.diag([force_psd, force_psd * s * s, force_psd, force_psd,
+                  diffusion * w_v ** 2, diffusion * w_v ** 2, roll_moment_psd])
+    cm = _measurement(nx, lagged)
+    road_g = g[:, 4:6] * (math.sqrt(speed) * w_v)   # road input of unit diffusion D = 1 m^2/m
+    fb_, fd_ = None, None
+    if any(friction):
+        zero = np.zeros((nx, 2))
+        fb_, fd_ = derivative(zero, np.eye(2))
+    return ContinuousModel(a, g, qc, cm, h, road_g, fb_, fd_, lagged, friction, ceq)
+
+
+def _measurement(nx: int, lagged: tuple) -> np.ndarray:
+    """C (3, nx): q_1, q_2, phi; a lagged sensor measures its lag state."""
+    cm = np.zeros((NY, nx))
+    cm[0, State.Q1] = cm[1, State.Q2] = cm[2, State.PHI] = 1.0
+    for n, j in enumerate(lagged):
+        cm[j] = 0.0
+        cm[j, NX + n] = 1.0
+    return cm
+
+
+def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
+    """G (nx, 7): generalised forces (heave f_s: dd z_s += f_s / M; roll moment f_p; wheel
+    forces f_ui), the road velocities' noise, the roll moment's random walk."""
+    mass, ix, s, m = v.sprung_mass_kg, v.roll_inertia_kgm2, v.half_track_m, v.unsprung_mass_kg
     g = np.zeros((nx, 7))
-    # generalised forces: heave f_s (dd z_s += f_s / M), roll moment f_p, wheel forces f_ui
     g[State.DZ_S, 0] = g[State.DQ1, 0] = g[State.DQ2, 0] = 1.0 / mass
     g[State.DPHI, 1] = 1.0 / ix
     g[State.DQ1, 1], g[State.DQ2, 1] = s / ix, -s / ix
@@ -321,20 +347,7 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
     g[State.DQ2, 3] = -1.0 / m[1]
     g[State.DU1, 4] = g[State.DU2, 5] = 1.0
     g[State.M_R, 6] = 1.0
-    diffusion = road_diffusion(road_gd_m3) * speed
-    qc = np.diag([force_psd, force_psd * s * s, force_psd, force_psd,
-                  diffusion * w_v ** 2, diffusion * w_v ** 2, roll_moment_psd])
-    cm = np.zeros((NY, nx))
-    cm[0, State.Q1] = cm[1, State.Q2] = cm[2, State.PHI] = 1.0
-    for n, j in enumerate(lagged):      # a lagged sensor measures its lag state
-        cm[j] = 0.0
-        cm[j, NX + n] = 1.0
-    road_g = g[:, 4:6] * (math.sqrt(speed) * w_v)   # road input of unit diffusion D = 1 m^2/m
-    fb_, fd_ = None, None
-    if any(friction):
-        zero = np.zeros((nx, 2))
-        fb_, fd_ = derivative(zero, np.eye(2))
-    return ContinuousModel(a, g, qc, cm, h, road_g, fb_, fd_, lagged, friction, ceq)
+    return g
 
 
 #: Equivalent damping of the friction (:func:`friction_damping`): the factor on the

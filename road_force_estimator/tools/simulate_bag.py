@@ -148,7 +148,6 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         ``trajectory`` has ``t_s``, ``distance_m``, ``q_m``, ``roll_rad``, ``wheel_load_n``,
         ``road_m``, ``lateral_accel_mps2`` (arrays per sample) and ``speed_mps``.
     """
-    from road_force_estimator.core.gnss import route
     from road_force_estimator.core.plant import Plant
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
@@ -195,12 +194,19 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
     sensors = SensorModel.from_simulator(sim, vehicle)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
-    if sensors.stamp_jitter_s > 0.0:
-        # the samples stay at their true times, their stamps (and those of the sample's truth
-        # and twist) move
-        from road_force_estimator.bagio.drive import DEFAULT_START_STAMP_NS
-        traj.stamps_ns = DEFAULT_START_STAMP_NS + np.round(
-            (traj.t_s + sensors.stamp_offsets_s(traj.t_s.size)) * 1e9).astype(np.int64)
+    _jitter_stamps(traj, sensors)
+    fixes = _fixes(traj, sim, profile)
+    requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
+    reason = ''
+    if done < requested:
+        reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
+                  f'samples ({traj.t_s[-1]:g} s)')
+    return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def _fixes(traj, sim, profile):
+    """The /fix route of the drive at ``simulator.gnss.rate`` (None at rate 0)."""
+    from road_force_estimator.core.gnss import route
     fixes = None
     if sim.gnss_rate_hz > 0.0:
         period = np.floor(traj.t_s * sim.gnss_rate_hz + 1e-9).astype(np.int64)
@@ -211,12 +217,16 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
                       start_longitude_deg=sim.gnss_start_longitude_deg,
                       heading_deg=sim.gnss_heading_deg,
                       lateral_accel_mps2=traj.lateral_accel_mps2[idx])
-    requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
-    reason = ''
-    if done < requested:
-        reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
-                  f'samples ({traj.t_s[-1]:g} s)')
-    return traj, q_meas, roll_meas, fixes, road, reason
+    return fixes
+
+
+def _jitter_stamps(traj, sensors) -> None:
+    """With ``simulator.stamp_jitter``: the samples stay at their true times, their stamps
+    (and those of the sample's truth and twist) move (``traj.stamps_ns``)."""
+    if sensors.stamp_jitter_s > 0.0:
+        from road_force_estimator.bagio.drive import DEFAULT_START_STAMP_NS
+        traj.stamps_ns = DEFAULT_START_STAMP_NS + np.round(
+            (traj.t_s + sensors.stamp_offsets_s(traj.t_s.size)) * 1e9).astype(np.int64)
 
 
 def main(argv: list[str] | None = None) -> int:
