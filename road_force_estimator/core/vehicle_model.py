@@ -217,12 +217,7 @@ class VehicleModel:
             returning ``(dd z_s, dd phi, dd z_u1, dd z_u2)``; all plain floats, SI units.
         """
         if self.nonlinear_suspension:
-            outputs = self._general_outputs()
-
-            def general(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
-                return outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay)[10:]
-
-            return general
+            return self._general_accelerations()
         (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
         floor1, floor2 = -fc1, -fc2
@@ -287,6 +282,45 @@ class VehicleModel:
                     (f2 - fb2) * inv_m2)
 
         return outputs
+
+    def _general_accelerations(self) -> Callable[..., tuple[float, float, float, float]]:
+        """:meth:`make_accelerations` with friction and nonlinear springs (the arithmetic of
+        :meth:`_general_outputs`; with linear springs the spring force stays inline)."""
+        if self.springs.active:
+            outputs = self._general_outputs()
+
+            def general(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
+                return outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay)[10:]
+
+            return general
+        (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+         fc2) = self._scalars()
+        ff1, ff2 = self._ff
+        floor1, floor2 = -fc1, -fc2
+        sin, cos, tanh = math.sin, math.cos, math.tanh
+        inv_vf = 1.0 / FRICTION_VELOCITY_MPS
+
+        def friction(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
+            sn = sin(ph)
+            sp = s * sn
+            cp = cos(ph)
+            w = s * cp * vp
+            dq1 = vs + w - v1
+            dq2 = vs - w - v2
+            fb1 = -k1 * (zs + sp - z1) - c1 * dq1 - ff1 * tanh(dq1 * inv_vf)
+            fb2 = -k2 * (zs - sp - z2) - c2 * dq2 - ff2 * tanh(dq2 * inv_vf)
+            f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
+            if f1 < floor1:
+                f1 = floor1
+            f2 = kt2 * (u2 - z2) + ct2 * (du2 - v2)
+            if f2 < floor2:
+                f2 = floor2
+            return ((fb1 + fb2) * inv_m,
+                    (s * cp * (fb1 - fb2) + mh * ay * cp + mgh * sn) * inv_ix,
+                    (f1 - fb1) * inv_m1,
+                    (f2 - fb2) * inv_m2)
+
+        return friction
 
     def _general_outputs(self) -> Callable[..., tuple[float, ...]]:
         """:meth:`make_outputs` with the leaf-spring friction ``-F_f tanh(dq / v_f)`` and the

@@ -57,9 +57,11 @@ def reference_rhs(p, springs, road_x, road_z, motion, ay):
     return rhs
 
 
-def test_friction_progressive_springs_bump_stops_and_speed_profile_match_solve_ivp():
+@pytest.mark.parametrize('springs', [SPRINGS, None])
+def test_friction_progressive_springs_bump_stops_and_speed_profile_match_solve_ivp(springs):
     # A 6 cm bump (into the bump stops) and a step, braking from 12 m/s to 3 m/s and on, a
-    # lateral acceleration ramp (the gravity moment and the roll), friction on both sides.
+    # lateral acceleration ramp (the gravity moment and the roll), friction on both sides;
+    # with and without the nonlinear springs (two code paths of the plant).
     knots_t = np.array([0.0, 0.5, 1.0, 1.5])
     knots_v = np.array([12.0, 3.0, 3.0, 10.0])
 
@@ -79,9 +81,10 @@ def test_friction_progressive_springs_bump_stops_and_speed_profile_match_solve_i
     road = add_event(road, 'bump', 'left', 2.0, 0.8, 0.06)
     road = add_event(road, 'step', 'right', 5.0, 0.3, -0.02)
     tr = simulate(TRUCK, road, speed_mps=10.0, rate_hz=1000.0, duration_s=1.5,
-                  speed_profile=(knots_t, knots_v), lateral_acceleration=ay, springs=SPRINGS)
+                  speed_profile=(knots_t, knots_v), lateral_acceleration=ay, springs=springs)
     assert tr.completed
-    rhs = reference_rhs(TRUCK, SPRINGS, road.distance_m, road.elevation_m, motion, ay)
+    rhs = reference_rhs(TRUCK, springs or SpringOptions(), road.distance_m, road.elevation_m,
+                        motion, ay)
     sol = solve_ivp(rhs, (0.0, tr.t_s[-1]), np.zeros(8), t_eval=tr.t_s, method='DOP853',
                     rtol=1e-10, atol=1e-12, max_step=2.5e-4)
     assert sol.status == 0
@@ -92,7 +95,7 @@ def test_friction_progressive_springs_bump_stops_and_speed_profile_match_solve_i
         err = np.max(np.abs(got[:, i] - y[:, i])) / np.max(np.abs(y[:, i]))
         assert err < 1e-4, (i, err)
     # the effects did act: the bump stop engaged, friction saturated
-    assert np.min(tr.q_m[:, 0]) < -SPRINGS.bump_stop_clearance_m
+    assert np.min(tr.q_m[:, 0]) < -SPRINGS.bump_stop_clearance_m or springs is None
     assert np.max(np.abs(tr.dq_mps)) > 10 * V_F
     # and the suspension force reported is the one of the equations
     s = TRUCK.track_width_m / 2
