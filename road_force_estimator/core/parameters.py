@@ -84,6 +84,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('vehicle.deflection_zero_load', 'double_pair', [0.0, 0.0], 'N',
        'sprung load per side [left, right] at which each deflection sensor reads 0 under '
        'zero_load; 0 = the spring unloaded', 0.0, 1e7),
+    _p('vehicle.leaf_spring_friction', 'double_pair', [0.0, 0.0], 'N',
+       'inter-leaf (Coulomb) friction force per spring [left, right], smoothed as '
+       'F_f tanh(dq / v_f) with v_f = 0.01 m/s; 0 = none (plant and observer alike)', 0.0, 1e5),
+    _p('vehicle.sensor_time_constant', 'double_pair', [0.0, 0.0], 's',
+       'first-order lag of the sensors [deflection, roll]; 0 = none (plant and observer '
+       'alike)', 0.0, 0.1),
     _p('observer.lipschitz_deflection', 'double', 3000.0, 'm/s^3',
        'Lipschitz constant L of the deflection differentiators (bound on |dddq|)', 1e-3, 1e9),
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
@@ -146,6 +152,28 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('simulator.speed_scale_error', 'double', 0.0, '',
        'odometer error: the published /vehicle/twist speed is (1 + e) times the true one '
        '(the route and /fix stay true)', -0.2, 0.2),
+    # Plant-only effects (MODEL.md "What the model leaves out"): never told the observer.
+    _p('simulator.spring_progression', 'double', 0.0, '1/m',
+       'progressive springs (plant only): the spring force k q (1 + p max(-q, 0)), the '
+       'stiffness rising by k p per metre of compression; 0 = linear springs', 0.0, 1000.0),
+    _p('simulator.bump_stop_clearance', 'double', 0.05, 'm',
+       'compression from static equilibrium at which the bump stops engage (plant only)',
+       0.001, 1.0),
+    _p('simulator.bump_stop_stiffness', 'double', 0.0, 'N/m',
+       'bump-stop stiffness (plant only): the force k_b (-q - clearance) beyond the '
+       'clearance; 0 = no bump stops', 0.0, 1e9),
+    _p('simulator.sensor_scale_error.deflection', 'double_pair', [0.0, 0.0], '',
+       'relative scale error of the deflection sensors [left, right] (plant only: reading '
+       '(1 + e) q + offset)', -0.5, 0.5),
+    _p('simulator.sensor_scale_error.roll', 'double', 0.0, '',
+       'relative scale error of the roll sensor (plant only)', -0.5, 0.5),
+    _p('simulator.sensor_offset.deflection', 'double_pair', [0.0, 0.0], 'm',
+       'offset of the deflection sensors [left, right] (plant only)', -0.1, 0.1),
+    _p('simulator.sensor_offset.roll', 'double', 0.0, 'rad',
+       'offset of the roll sensor (plant only)', -0.1, 0.1),
+    _p('simulator.stamp_jitter', 'double', 0.0, 's',
+       'stamp jitter (plant only): each stamp moved by a uniform draw in [-j, +j] (the '
+       'samples stay at their true time); below half a sample period; 0 = none', 0.0, 0.01),
 )
 
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
@@ -273,6 +301,10 @@ class VehicleParameters(_FromParameters):
     deflection_reference: str = _param('vehicle.deflection_reference', quiet_default=True)
     deflection_zero_load_n: tuple[float, float] = _param('vehicle.deflection_zero_load',
                                                          quiet_default=True)
+    leaf_spring_friction_n: tuple[float, float] = _param('vehicle.leaf_spring_friction',
+                                                         quiet_default=True)
+    sensor_time_constant_s: tuple[float, float] = _param('vehicle.sensor_time_constant',
+                                                         quiet_default=True)
 
     @property
     def half_track_m(self) -> float:
@@ -341,6 +373,21 @@ class SimulatorParameters(_FromParameters):
     gnss_heading_deg: float = _param('simulator.gnss.heading')
     gnss_noise_m: float = _param('simulator.gnss.noise')
     speed_scale_error: float = _param('simulator.speed_scale_error')
+    spring_progression_per_m: float = _param('simulator.spring_progression')
+    bump_stop_clearance_m: float = _param('simulator.bump_stop_clearance')
+    bump_stop_stiffness_npm: float = _param('simulator.bump_stop_stiffness')
+    sensor_scale_error_deflection: tuple[float, float] = _param(
+        'simulator.sensor_scale_error.deflection')
+    sensor_scale_error_roll: float = _param('simulator.sensor_scale_error.roll')
+    sensor_offset_deflection_m: tuple[float, float] = _param('simulator.sensor_offset.deflection')
+    sensor_offset_roll_rad: float = _param('simulator.sensor_offset.roll')
+    stamp_jitter_s: float = _param('simulator.stamp_jitter')
+
+    def _check(self) -> None:
+        if self.stamp_jitter_s >= 0.5 / self.rate_hz:
+            raise ValueError(f'simulator.stamp_jitter = {self.stamp_jitter_s!r} s must be below '
+                             f'half the sample period ({0.5 / self.rate_hz:g} s at '
+                             f'simulator.rate = {self.rate_hz:g} Hz): stamps would reorder')
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

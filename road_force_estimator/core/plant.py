@@ -23,7 +23,7 @@ import numpy as np
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.core.speed_profile import profile_distance, speed_knots
-from road_force_estimator.core.vehicle_model import VehicleModel
+from road_force_estimator.core.vehicle_model import SpringOptions, VehicleModel
 
 __all__ = ['Plant', 'PlantSample', 'Trajectory', 'simulate', 'default_substeps',
            'MAX_SUBSTEP_S']
@@ -194,6 +194,10 @@ class Plant:
         Distance where the drive starts (default: the road's start).
     tire_envelope_m : float
         Tire enveloping length (m), see :meth:`RoadProfile.enveloped`; 0 = the road as given.
+    springs : SpringOptions, optional
+        Plant-only progressive springs and bump stops (``simulator.spring_progression``,
+        ``simulator.bump_stop_*``); None = linear springs. The leaf-spring friction of
+        ``vehicle.leaf_spring_friction`` acts in every case (:class:`.VehicleModel`).
 
     Notes
     -----
@@ -207,7 +211,8 @@ class Plant:
                  rate_hz: float, substeps: int | None = None,
                  lateral_acceleration: float | Callable[[float], float] | None = None,
                  start_m: float | None = None, tire_envelope_m: float = 0.0,
-                 speed_profile: tuple | None = None) -> None:
+                 speed_profile: tuple | None = None,
+                 springs: SpringOptions | None = None) -> None:
         if not isinstance(road, RoadProfile):
             raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
         speed_mps, rate_hz = float(speed_mps), float(rate_hz)
@@ -215,7 +220,7 @@ class Plant:
             raise ValueError(f'speed_mps = {speed_mps!r} must be > 0 m/s')
         if not (math.isfinite(rate_hz) and rate_hz > 0.0):
             raise ValueError(f'rate_hz = {rate_hz!r} must be > 0 Hz')
-        self.model = VehicleModel(vehicle)
+        self.model = VehicleModel(vehicle, springs)
         self.vehicle = vehicle
         #: The road the tires follow (enveloped when ``tire_envelope_m`` > 0).
         self.road = road.enveloped(tire_envelope_m)
@@ -521,7 +526,8 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
              rate_hz: float, duration_s: float,
              lateral_acceleration: float | Callable[[float], float] | None = None,
              substeps: int | None = None, start_m: float | None = None,
-             tire_envelope_m: float = 0.0, speed_profile: tuple | None = None) -> Trajectory:
+             tire_envelope_m: float = 0.0, speed_profile: tuple | None = None,
+             springs: SpringOptions | None = None) -> Trajectory:
     """Drive ``duration_s`` seconds (or to the end of the road) and return every sample.
 
     Parameters are those of :class:`Plant`, plus ``duration_s`` (s, >= 0). The trajectory
@@ -534,7 +540,8 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
         raise ValueError(f'duration_s = {duration_s!r} must be >= 0 s')
     plant = Plant(vehicle, road, speed_mps=speed_mps, rate_hz=rate_hz, substeps=substeps,
                   lateral_acceleration=lateral_acceleration, start_m=start_m,
-                  tire_envelope_m=tire_envelope_m, speed_profile=speed_profile)
+                  tire_envelope_m=tire_envelope_m, speed_profile=speed_profile,
+                  springs=springs)
     wanted = int(math.floor(duration_s * plant.rate_hz + 1e-9)) + 1
     rows = []
     for _ in range(wanted):

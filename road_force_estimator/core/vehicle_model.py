@@ -35,7 +35,44 @@ import numpy as np
 
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 
-__all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode']
+__all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode', 'SpringOptions',
+           'FRICTION_VELOCITY_MPS', 'friction_force']
+
+#: Smoothing velocity v_f (m/s) of the leaf-spring friction ``-F_f tanh(dq / v_f)``: a fixed
+#: constant (plant and observer alike), small against the suspension rates on a road
+#: (~0.1 m/s RMS on ISO class C at 20 m/s), so the force is Coulomb-like.
+FRICTION_VELOCITY_MPS = 0.01
+
+
+def friction_force(friction_n: float, dq_mps: float) -> float:
+    """The leaf-spring friction force on the body (N, > 0 upward), ``-F_f tanh(dq / v_f)``:
+    it opposes the suspension's extension rate dq (m/s)."""
+    return -friction_n * math.tanh(dq_mps / FRICTION_VELOCITY_MPS)
+
+
+@dataclass(frozen=True)
+class SpringOptions:
+    """Plant-only nonlinear springs (``simulator.spring_progression``, ``simulator.bump_stop_*``).
+
+    The spring force on the body becomes ``-k q (1 + p max(-q, 0))`` (progressive: the
+    stiffness rises by ``k p`` per metre of compression) plus, beyond the clearance d,
+    ``k_b (-q - d)`` (the bump stop, pushing the body up). q from static equilibrium (m).
+    """
+
+    progression_per_m: float = 0.0
+    bump_stop_clearance_m: float = 0.05
+    bump_stop_stiffness_npm: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        """True when the springs differ from the linear ones."""
+        return self.progression_per_m > 0.0 or self.bump_stop_stiffness_npm > 0.0
+
+    @classmethod
+    def from_simulator(cls, sim) -> SpringOptions:
+        """From :class:`.SimulatorParameters`."""
+        return cls(sim.spring_progression_per_m, sim.bump_stop_clearance_m,
+                   sim.bump_stop_stiffness_npm)
 
 
 class State(enum.IntEnum):
@@ -132,7 +169,7 @@ class VehicleModel:
         F_c,i (N).
     """
 
-    def __init__(self, vehicle: VehicleParameters) -> None:
+    def __init__(self, vehicle: VehicleParameters, springs: SpringOptions | None = None) -> None:
         if not isinstance(vehicle, VehicleParameters):
             raise TypeError(f'vehicle must be VehicleParameters, got {type(vehicle).__name__}')
         self.vehicle = vehicle
@@ -148,6 +185,10 @@ class VehicleModel:
         self._kt = np.array(v.tire_stiffness_npm, dtype=np.float64)
         self._ct = np.array(v.tire_damping_nspm, dtype=np.float64)
         self._fc = np.array(self.static_load_n, dtype=np.float64)
+        self._ff = tuple(float(f) for f in v.leaf_spring_friction_n)
+        self.springs = springs if springs is not None else SpringOptions()
+        #: True when friction or nonlinear springs act (the general per-sample closures).
+        self.nonlinear_suspension = self.springs.active or any(f > 0.0 for f in self._ff)
 
     # ----------------------------------------------------------------------------------------
     # Nonlinear model
@@ -175,6 +216,8 @@ class VehicleModel:
             ``f(z_s, phi, z_u1, z_u2, dz_s, dphi, dz_u1, dz_u2, u_1, u_2, du_1, du_2, a_y)``
             returning ``(dd z_s, dd phi, dd z_u1, dd z_u2)``; all plain floats, SI units.
         """
+        if self.nonlinear_suspension:
+            return self._general_accelerations()
         (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
         floor1, floor2 = -fc1, -fc2
@@ -211,6 +254,8 @@ class VehicleModel:
             dd z_s, dd phi, dd z_u1, dd z_u2)`` with the same arithmetic as
             :meth:`make_accelerations`.
         """
+        if self.nonlinear_suspension:
+            return self._general_outputs()
         (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
         sin, cos = math.sin, math.cos
@@ -224,6 +269,88 @@ class VehicleModel:
             dq1, dq2 = vs + w - v1, vs - w - v2
             fb1 = -(k1 * q1 + c1 * dq1)
             fb2 = -(k2 * q2 + c2 * dq2)
+            f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
+            if f1 < -fc1:
+                f1 = -fc1
+            f2 = kt2 * (u2 - z2) + ct2 * (du2 - v2)
+            if f2 < -fc2:
+                f2 = -fc2
+            return (q1, q2, dq1, dq2, fb1, fb2, f1, f2, max(fc1 + f1, 0.0), max(fc2 + f2, 0.0),
+                    (fb1 + fb2) * inv_m,
+                    (s * cp * (fb1 - fb2) + mh * ay * cp + mgh * sn) * inv_ix,
+                    (f1 - fb1) * inv_m1,
+                    (f2 - fb2) * inv_m2)
+
+        return outputs
+
+    def _general_accelerations(self) -> Callable[..., tuple[float, float, float, float]]:
+        """:meth:`make_accelerations` with friction and nonlinear springs (the arithmetic of
+        :meth:`_general_outputs`; with linear springs the spring force stays inline)."""
+        if self.springs.active:
+            outputs = self._general_outputs()
+
+            def general(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
+                return outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay)[10:]
+
+            return general
+        (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+         fc2) = self._scalars()
+        ff1, ff2 = self._ff
+        floor1, floor2 = -fc1, -fc2
+        sin, cos, tanh = math.sin, math.cos, math.tanh
+        inv_vf = 1.0 / FRICTION_VELOCITY_MPS
+
+        def friction(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
+            sn = sin(ph)
+            sp = s * sn
+            cp = cos(ph)
+            w = s * cp * vp
+            dq1 = vs + w - v1
+            dq2 = vs - w - v2
+            fb1 = -k1 * (zs + sp - z1) - c1 * dq1 - ff1 * tanh(dq1 * inv_vf)
+            fb2 = -k2 * (zs - sp - z2) - c2 * dq2 - ff2 * tanh(dq2 * inv_vf)
+            f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
+            if f1 < floor1:
+                f1 = floor1
+            f2 = kt2 * (u2 - z2) + ct2 * (du2 - v2)
+            if f2 < floor2:
+                f2 = floor2
+            return ((fb1 + fb2) * inv_m,
+                    (s * cp * (fb1 - fb2) + mh * ay * cp + mgh * sn) * inv_ix,
+                    (f1 - fb1) * inv_m1,
+                    (f2 - fb2) * inv_m2)
+
+        return friction
+
+    def _general_outputs(self) -> Callable[..., tuple[float, ...]]:
+        """:meth:`make_outputs` with the leaf-spring friction ``-F_f tanh(dq / v_f)`` and the
+        nonlinear springs of :class:`SpringOptions` in the suspension forces."""
+        (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
+         fc2) = self._scalars()
+        ff1, ff2 = self._ff
+        sp_ = self.springs
+        prog, clear, kb = (sp_.progression_per_m, sp_.bump_stop_clearance_m,
+                           sp_.bump_stop_stiffness_npm)
+        sin, cos, tanh = math.sin, math.cos, math.tanh
+        inv_vf = 1.0 / FRICTION_VELOCITY_MPS
+
+        def spring(k, q):
+            f = -k * q
+            if q < 0.0:
+                f -= k * prog * q * -q
+                if q < -clear:
+                    f += kb * (-q - clear)
+            return f
+
+        def outputs(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
+            sn = sin(ph)
+            sp = s * sn
+            cp = cos(ph)
+            w = s * cp * vp
+            q1, q2 = zs + sp - z1, zs - sp - z2
+            dq1, dq2 = vs + w - v1, vs - w - v2
+            fb1 = spring(k1, q1) - c1 * dq1 - ff1 * tanh(dq1 * inv_vf)
+            fb2 = spring(k2, q2) - c2 * dq2 - ff2 * tanh(dq2 * inv_vf)
             f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
             if f1 < -fc1:
                 f1 = -fc1
@@ -266,6 +393,12 @@ class VehicleModel:
         q = zs[..., None] + arm - zu
         dq = vs[..., None] + w - vu
         fb = -(self._k * q + self._c * dq)
+        if self.nonlinear_suspension:
+            sp = self.springs
+            comp = np.maximum(-q, 0.0)
+            fb = (fb + self._k * sp.progression_per_m * q * q * (q < 0.0)
+                  + sp.bump_stop_stiffness_npm * np.maximum(comp - sp.bump_stop_clearance_m, 0.0)
+                  - np.array(self._ff) * np.tanh(dq / FRICTION_VELOCITY_MPS))
         df_free = self._kt * (u - zu) + self._ct * (du - vu)
         lift = df_free < -self._fc
         df = np.maximum(df_free, -self._fc)
@@ -393,9 +526,25 @@ class VehicleModel:
         return {mode.name: mode.frequency_hz for mode in self.modes()}
 
     def max_pole_magnitude(self) -> float:
-        """Largest |lambda| of the linear state matrix (1/s): it bounds the RK4 step."""
+        """Largest |lambda| of the linear state matrix (1/s): it bounds the RK4 step (with
+        friction: at its steepest, a damping of ``F_f / v_f`` more; with nonlinear springs: the
+        stiffness at 10 cm of compression)."""
+        if self.nonlinear_suspension:
+            return _stiffest(self).max_pole_magnitude()
         a, _ = self.linearised().state_matrices()
         return float(np.max(np.abs(np.linalg.eigvals(a))))
+
+
+def _stiffest(model: VehicleModel) -> VehicleModel:
+    """The linear model at the steepest friction slope (a damping of ``F_f / v_f`` more) and
+    the spring stiffness at 10 cm of compression (with the bump stop's)."""
+    v, sp = model.vehicle, model.springs
+    out = VehicleModel(v)
+    bump = sp.bump_stop_stiffness_npm
+    out._k = model._k * (1.0 + 2.0 * 0.1 * sp.progression_per_m) + bump
+    out._c = model._c + np.array(model._ff) / FRICTION_VELOCITY_MPS
+    out.nonlinear_suspension = False
+    return out
 
 
 def _roll_equilibrium(s: float, mh: float, ay: float, du: float, compliance: float) -> float:

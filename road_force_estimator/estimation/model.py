@@ -38,6 +38,17 @@ is the ``spectral radius ~ 1`` a design may show; no load depends on it). The pr
 rebuilt as the estimator's chain does (MODEL.md step 4): ``z_s`` is the band-limited double
 integral of ``dd z_s`` (:mod:`.body_heave`), ``u_i = z_s +- s sin(phi) - q_i + w_i``.
 
+Friction and sensor lag (``vehicle.leaf_spring_friction``, ``vehicle.sensor_time_constant``)
+-------------------------------------------------------------------------------------------
+The leaf-spring friction ``f_i = -F_f,i tanh(dq_i / v_f)`` (:func:`.vehicle_model.
+friction_force`) is added to ``F_bi`` as a known nonlinear input, evaluated on the estimated
+``dq_i`` (the previous sample's estimate in the filter's prediction, held over the step; the
+estimate's own in its outputs): ``dx = A x + B_f f``, outputs ``H x + D_f f``
+(:attr:`ContinuousModel.friction_b`, :attr:`ContinuousModel.friction_d`). A sensor lag is a
+first-order state per lagged channel, ``tau dl_j = y_j - l_j``, appended after ``M_R``
+(:attr:`ContinuousModel.lagged`); the sensors then measure ``l_j`` (``C``), the outputs stay
+those of the unlagged quantities. Without friction and lag the model is the 12 states above.
+
 Road model (the unknown input)
 ------------------------------
 An ISO 8608 road has the displacement PSD ``Gd(n0) (n/n0)^-2``: its slope is white, with the
@@ -105,6 +116,7 @@ __all__ = [
     'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD', 'ROUGHNESS_CORRELATION_M',
     'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
+    'FRICTION_DAMPING_FACTOR', 'DEFAULT_DQ_STD_MPS', 'friction_damping',
 ]
 
 #: Reference spatial frequency of ISO 8608 (cycles/m).
@@ -203,17 +215,39 @@ def road_diffusion(gd_n0_m3: float) -> float:
 class ContinuousModel:
     """``dx = A x dt + G dW`` (``E[dW dW^T] = Q dt``), ``y = C x``, linear outputs ``H x``."""
 
-    a: np.ndarray     #: (12, 12)
-    g: np.ndarray     #: (12, 7): force noise (heave, roll, wheel 1, wheel 2), road 1, 2, moment
+    a: np.ndarray     #: (nx, nx); nx = 12 + the lagged channels
+    g: np.ndarray     #: (nx, 7): force noise (heave, roll, wheel 1, wheel 2), road 1, 2, moment
     q: np.ndarray     #: (7, 7) densities
-    c: np.ndarray     #: (3, 12)
-    h: np.ndarray     #: (21, 12), rows :data:`OUTPUTS`
-    road_g: np.ndarray  #: (12, 2) road-noise input columns (unit density), for moment matching
+    c: np.ndarray     #: (3, nx)
+    h: np.ndarray     #: (21, nx), rows :data:`OUTPUTS`
+    road_g: np.ndarray  #: (nx, 2) road-noise input columns (unit density), for moment matching
+    #: (nx, 2): dx/dt per newton of friction force on side i (added to F_bi)
+    friction_b: np.ndarray | None = None
+    #: (21, 2): the outputs' direct part per newton of friction force
+    friction_d: np.ndarray | None = None
+    #: the lagged channels (0 = q_1, 1 = q_2, 2 = phi), their states at NX, NX + 1, ...
+    lagged: tuple = ()
+    #: the leaf-spring friction F_f,i (N) [left, right]
+    friction_n: tuple = (0.0, 0.0)
+    #: the friction's equivalent damping c_eq,i (N s/m) in the linear part (the known input
+    #: is then the rest, ``-F_f tanh(dq / v_f) + c_eq dq``)
+    friction_damping_nspm: tuple = (0.0, 0.0)
+
+    @property
+    def nx(self) -> int:
+        """Number of states."""
+        return self.a.shape[0]
+
+    @property
+    def measured(self) -> tuple[int, int, int]:
+        """The state measured by each channel (q_1, q_2, phi)."""
+        return tuple(int(np.argmax(row)) for row in self.c)
 
 
 def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: float, *,
                      correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
-                     roll_moment_psd: float = ROLL_MOMENT_PSD) -> ContinuousModel:
+                     roll_moment_psd: float = ROLL_MOMENT_PSD,
+                     friction_damping_nspm: tuple = (0.0, 0.0)) -> ContinuousModel:
     """The augmented roll-plane model of the module notes at one speed and roughness.
 
     Parameters
@@ -227,20 +261,35 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
         ``lambda_v`` (m): the road velocity's correlation length.
     force_psd, roll_moment_psd : float
         Process-noise densities (N^2 s, (N m)^2 / s).
+    friction_damping_nspm : (left, right)
+        With leaf-spring friction: its equivalent damping c_eq,i (N s/m), carried in the linear
+        part (:func:`friction_damping`); the known input is the rest.
     """
     v = vehicle
     mass, ix, s = v.sprung_mass_kg, v.roll_inertia_kgm2, v.half_track_m
     m, k, c = v.unsprung_mass_kg, v.suspension_stiffness_npm, v.suspension_damping_nspm
+    friction = tuple(float(f) for f in v.leaf_spring_friction_n)
+    ceq = tuple(float(d) for d in friction_damping_nspm) if any(friction) else (0.0, 0.0)
+    if any(ceq):      # the friction's equivalent damping in the linear part
+        c = tuple(ci + di for ci, di in zip(c, ceq))
     kt, ct = v.tire_stiffness_npm, v.tire_damping_nspm
     speed = max(abs(float(speed_mps)), SPEED_FLOOR_MPS)
     w_v = 2.0 * math.pi * speed / correlation_length_m
     sig = (1.0, -1.0)
     mgh = mass * GRAVITY_MPS2 * v.cg_height_m     # the gravity moment's stiffness (N m/rad)
+    tau = (v.sensor_time_constant_s[0], v.sensor_time_constant_s[0],
+           v.sensor_time_constant_s[1])
+    lagged = tuple(j for j in range(NY) if tau[j] > 0.0)
+    nx = NX + len(lagged)
+    measured_slot = (State.Q1, State.Q2, State.PHI)
 
-    def derivative(x):
-        # The equations of the module notes, on the columns of x (exactly linear).
+    def derivative(x, f=None):
+        # The equations of the module notes, on the columns of x (exactly linear); f: the
+        # friction forces' columns.
         q, dq = (x[State.Q1], x[State.Q2]), (x[State.DQ1], x[State.DQ2])
         fb = [-(k[i] * q[i] + c[i] * dq[i]) for i in range(2)]
+        if f is not None:
+            fb = [fb[i] + f[i] for i in range(2)]
         ddzs = (fb[0] + fb[1]) / mass
         ddphi = (s * (fb[0] - fb[1]) + mgh * x[State.PHI] + x[State.M_R]) / ix
         dzu = [x[State.DZ_S] + sig[i] * s * x[State.DPHI] - dq[i] for i in range(2)]
@@ -255,14 +304,42 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
         dx[State.DZ_S] = ddzs
         dx[State.W1], dx[State.W2] = dw[0], dw[1]
         dx[State.DU1], dx[State.DU2] = -w_v * du[0], -w_v * du[1]
+        for n, j in enumerate(lagged):      # tau dl = y - l
+            dx[NX + n] = (x[measured_slot[j]] - x[NX + n]) / tau[j]
         out = np.array([q[0], q[1], x[State.PHI], dq[0], dq[1], x[State.DPHI], ddq[0], ddq[1],
                         ddphi, x[State.DZ_S], ddzs, dzu[0], dzu[1], ddzu[0], ddzu[1], w[0],
                         w[1], df[0], df[1], fb[0], fb[1]])
         return dx, out
 
-    a, h = derivative(np.eye(NX))
-    g = np.zeros((NX, 7))
-    # generalised forces: heave f_s (dd z_s += f_s / M), roll moment f_p, wheel forces f_ui
+    a, h = derivative(np.eye(nx))
+    g = _noise_inputs(v, nx)
+    diffusion = road_diffusion(road_gd_m3) * speed
+    qc = np.diag([force_psd, force_psd * s * s, force_psd, force_psd,
+                  diffusion * w_v ** 2, diffusion * w_v ** 2, roll_moment_psd])
+    cm = _measurement(nx, lagged)
+    road_g = g[:, 4:6] * (math.sqrt(speed) * w_v)   # road input of unit diffusion D = 1 m^2/m
+    fb_, fd_ = None, None
+    if any(friction):
+        zero = np.zeros((nx, 2))
+        fb_, fd_ = derivative(zero, np.eye(2))
+    return ContinuousModel(a, g, qc, cm, h, road_g, fb_, fd_, lagged, friction, ceq)
+
+
+def _measurement(nx: int, lagged: tuple) -> np.ndarray:
+    """C (3, nx): q_1, q_2, phi; a lagged sensor measures its lag state."""
+    cm = np.zeros((NY, nx))
+    cm[0, State.Q1] = cm[1, State.Q2] = cm[2, State.PHI] = 1.0
+    for n, j in enumerate(lagged):
+        cm[j] = 0.0
+        cm[j, NX + n] = 1.0
+    return cm
+
+
+def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
+    """G (nx, 7): generalised forces (heave f_s: dd z_s += f_s / M; roll moment f_p; wheel
+    forces f_ui), the road velocities' noise, the roll moment's random walk."""
+    mass, ix, s, m = v.sprung_mass_kg, v.roll_inertia_kgm2, v.half_track_m, v.unsprung_mass_kg
+    g = np.zeros((nx, 7))
     g[State.DZ_S, 0] = g[State.DQ1, 0] = g[State.DQ2, 0] = 1.0 / mass
     g[State.DPHI, 1] = 1.0 / ix
     g[State.DQ1, 1], g[State.DQ2, 1] = s / ix, -s / ix
@@ -270,20 +347,39 @@ def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: f
     g[State.DQ2, 3] = -1.0 / m[1]
     g[State.DU1, 4] = g[State.DU2, 5] = 1.0
     g[State.M_R, 6] = 1.0
-    diffusion = road_diffusion(road_gd_m3) * speed
-    qc = np.diag([force_psd, force_psd * s * s, force_psd, force_psd,
-                  diffusion * w_v ** 2, diffusion * w_v ** 2, roll_moment_psd])
-    cm = np.zeros((NY, NX))
-    cm[0, State.Q1] = cm[1, State.Q2] = cm[2, State.PHI] = 1.0
-    road_g = g[:, 4:6] * (math.sqrt(speed) * w_v)   # road input of unit diffusion D = 1 m^2/m
-    return ContinuousModel(a, g, qc, cm, h, road_g)
+    return g
+
+
+#: Equivalent damping of the friction (:func:`friction_damping`): the factor on the
+#: statistical linearisation, tuned on bench/truck_effects.py (classes A and C, 20 m/s,
+#: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
+#: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
+FRICTION_DAMPING_FACTOR = 1.5
+#: RMS suspension rate (m/s) assumed until the first block of data has been seen.
+DEFAULT_DQ_STD_MPS = 0.05
+
+
+def friction_damping(friction_n, dq_std_mps: float) -> tuple[float, float]:
+    """The friction's equivalent damping c_eq,i (N s/m) at an RMS suspension rate (m/s).
+
+    Statistical linearisation of ``-F_f tanh(dq / v_f)`` over a Gaussian dq of std sigma:
+    ``E[d f / d dq] ~ F_f sqrt(2 / pi) / sqrt(sigma^2 + 2 v_f^2 / pi)`` (``F_f / v_f`` at
+    sigma = 0, ``F_f sqrt(2 / pi) / sigma`` for sigma >> v_f), times
+    :data:`FRICTION_DAMPING_FACTOR`. The gains are designed with it; the friction itself stays
+    the known input, so it changes the gains, not the model.
+    """
+    from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
+    scale = FRICTION_DAMPING_FACTOR * math.sqrt(2.0 / math.pi) / math.sqrt(
+        dq_std_mps ** 2 + 2.0 * v_f ** 2 / math.pi)
+    return tuple(float(f) * scale for f in friction_n)
 
 
 def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> np.ndarray:
     """The state at rest that reproduces a sample (m, m, rad): no acceleration.
 
-    ``q`` and ``phi`` as measured, every rate 0, the tire deflections that give the wheels
-    the body's acceleration (so ``dd q = 0``) and the roll moment that holds the roll still.
+    ``q`` and ``phi`` as measured (lag states too, when the sensors lag), every rate 0, the
+    tire deflections that give the wheels the body's acceleration (so ``dd q = 0``) and the
+    roll moment that holds the roll still.
     """
     v = vehicle
     s = v.half_track_m
@@ -292,7 +388,11 @@ def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> 
     kt1, kt2 = v.tire_stiffness_npm
     fb1, fb2 = -k1 * q1, -k2 * q2
     ddzs = (fb1 + fb2) / v.sprung_mass_kg
-    x = np.zeros(NX)
+    tau = (v.sensor_time_constant_s[0], v.sensor_time_constant_s[0],
+           v.sensor_time_constant_s[1])
+    lag_values = [y for y, t in zip((q1, q2, phi), tau) if t > 0.0]
+    x = np.zeros(NX + len(lag_values))
+    x[NX:] = lag_values
     x[State.Q1], x[State.Q2], x[State.PHI] = q1, q2, phi
     x[State.W1] = (fb1 + m1 * ddzs) / kt1
     x[State.W2] = (fb2 + m2 * ddzs) / kt2

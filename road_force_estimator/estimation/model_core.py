@@ -42,10 +42,11 @@ import numpy as np
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.differentiator import implicit_step
+from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.gains import (
-    ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)
+    ROW_RHO, NY, Gains, row_layout, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, SPEED_FLOOR_MPS, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, SPEED_FLOOR_MPS, State, continuous_model, rest_state)
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
@@ -64,7 +65,14 @@ SM_DEAD_ZONE = 3.0
 SM_NOISE_SCALE = 1e-7
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
-_R0, _X0, _Y0, _ROW = ROW_RHO, ROW_X, ROW_Y, ROW_SIZE
+_R0 = ROW_RHO
+
+
+def _dq_rows(g: Gains, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of dq_1, dq_2 of the transition A(dt) (2, nx) and of the friction input
+    B_d(dt) (2, 2)."""
+    rows = [State.DQ1, State.DQ2]
+    return g.transition(dt)[rows], g.friction_input(dt)[rows]
 
 
 class ModelCore:
@@ -105,7 +113,21 @@ class ModelCore:
         lq, lr = sm_lipschitz(vehicle)
         self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
                         math.sqrt(lr))
-        self._h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h
+        model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
+        self._h = model.h
+        # the buffer row's layout (nx = 12, or more with sensor-lag states) and the slots
+        # the sensors measure
+        _, self._x0i, _, self._y0i, self._row = row_layout(model.nx)
+        self._nx = model.nx
+        self._c_slots = model.measured
+        # leaf-spring friction, a known input (:mod:`.model`): F_f,i, and the outputs'
+        # direct part per newton (rows with a non-zero entry)
+        self._ff = model.friction_n if any(model.friction_n) else None
+        self._ceq = (0.0, 0.0)       # its equivalent damping in the gains in use
+        if self._ff is not None:
+            d = model.friction_d
+            self._fd = [(j, float(d[j, 0]), float(d[j, 1])) for j in range(d.shape[0])
+                        if d[j, 0] != 0.0 or d[j, 1] != 0.0]
         self.schedule = GainSchedule(vehicle, observer)
         self.ready: deque = deque()
         self.reset()
@@ -143,7 +165,7 @@ class ModelCore:
         self._m_dt = -1.0
         self._settle = math.inf
         self._hstate = body_heave.start(0.0)
-        self._buf = np.zeros((0, _ROW))
+        self._buf = np.zeros((0, self._row))
         self._i = 0
         self._block_start = 0
         self._pending: deque = deque()
@@ -153,7 +175,7 @@ class ModelCore:
         self._stepped = False
         self._run_y: list = []
         self._dts: list = []
-        self._x0 = np.zeros(NX)
+        self._x0 = np.zeros(self._nx)
         self._body_started = False
         self._slow = 0                    # samples of the block below the speed floor
 
@@ -235,6 +257,10 @@ class ModelCore:
         if sched.stale or g is None or g.key[0] != lv['dt']:
             g = self._design(dt)
         self._m = g.step_matrix(dt)
+        if self._ff is not None:
+            self._fm = g.friction_step(dt)
+            self._a_dq, self._b_dq = _dq_rows(g, dt)
+            self._ceq = g.model.friction_damping_nspm
         self._m_dt = dt
 
     # -- the run --------------------------------------------------------------------------
@@ -293,10 +319,10 @@ class ModelCore:
         self._first_block = max(FIRST_BLOCK_SAMPLES, self.lag + 1)
         self._lag_final = self.observer.latency_s == 0.0
         if self._buf.shape[0] != cap:
-            self._buf = np.zeros((cap, _ROW))
+            self._buf = np.zeros((cap, self._row))
         else:
             self._buf[0] = 0.0
-        self._buf[0, _X0:_X0 + NX] = self._x0
+        self._buf[0, self._x0i:self._x0i + self._nx] = self._x0
         self._i = 0
         self._block_start = 0
         self._stepped = True
@@ -322,21 +348,25 @@ class ModelCore:
         buf = self._buf
         i = self._i
         row = buf[i]
-        row[_Y0] = q1
-        row[_Y0 + 1] = q2
-        row[_Y0 + 2] = phi
+        x0, y0 = self._x0i, self._y0i
+        row[y0] = q1
+        row[y0 + 1] = q2
+        row[y0 + 2] = phi
         sv = _dot(self._m, row)
+        if self._ff is not None:        # the friction over the step (of x+_k)
+            sv += _dot(self._fm, self._held_friction(row[x0:y0 - NY], self._a_dq, self._b_dq))
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
         i += 1
         nxt = buf[i]
-        nxt[_X0:_Y0] = sv[:_Y0 - _X0]
+        nxt[x0:y0] = sv[:y0 - x0]
         rho = None
         if self._gamma > 0.0:
-            e1 = q1 - s[0]
-            e2 = q2 - s[1]
-            e3 = phi - s[2]
+            c1, c2, c3 = self._c_slots
+            e1 = q1 - s[c1]
+            e2 = q2 - s[c2]
+            e3 = phi - s[c3]
             d1, d2, d3 = self._sm_dead
             # a differentiator at rest with a zero (dead-zoned) input stays at rest
             if not (self._sm_rest and -d1 <= e1 <= d1 and -d2 <= e2 <= d2 and -d3 <= e3 <= d3):
@@ -351,7 +381,7 @@ class ModelCore:
             self._finalise_lag()
         lag = self.lag
         if lag == 0:
-            o = s[_Y0 - _X0:]
+            o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
             self._emit(stamp, meta, o)
@@ -378,7 +408,7 @@ class ModelCore:
         self._set_lag(float(np.median(self._dts[:LAG_STEPS])))
         if self.lag != lag_before:
             cap = self.lag + 1 + BLOCK_SAMPLES
-            buf = np.zeros((cap, _ROW))
+            buf = np.zeros((cap, self._row))
             n = min(self._i + 1, cap)
             buf[:n] = self._buf[self._i + 1 - n:self._i + 1]
             self._i = n - 1
@@ -430,7 +460,7 @@ class ModelCore:
         """
         buf = self._buf
         i = self._i
-        y = buf[self._block_start:i, _Y0:_Y0 + NY]
+        y = buf[self._block_start:i, self._y0i:self._y0i + NY]
         first_run_block = bool(self._run_y)
         if first_run_block:
             y = np.vstack([np.array(self._run_y), y])
@@ -457,9 +487,16 @@ class ModelCore:
         buf = self._buf
         self._select(dts[-1])
         g = self.schedule.gains
+        x0, y0 = self._x0i, self._y0i
+        if self._ff is not None:
+            self._ceq = g.model.friction_damping_nspm
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
-            nxt[_X0:_Y0] = (g.step_matrix(dt) @ buf[j])[:_Y0 - _X0]
+            sv = g.step_matrix(dt) @ buf[j]
+            if self._ff is not None:
+                a_dq, b_dq = _dq_rows(g, dt)
+                sv += g.friction_step(dt) @ self._held_friction(buf[j, x0:y0 - NY], a_dq, b_dq)
+            nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         self._t_retuned = 0.0
         self._m_dt = -1.0
@@ -472,14 +509,37 @@ class ModelCore:
         if avail == n:
             window = self._buf[first:last + 1].reshape(-1)
         else:
-            w = np.zeros((n, _ROW))
+            w = np.zeros((n, self._row))
             w[:avail] = self._buf[first:first + avail]
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
 
+    def _held_friction(self, x: np.ndarray, a_dq: np.ndarray, b_dq: np.ndarray) -> np.ndarray:
+        """The friction forces (N) held over a step from the state x: the mean of those at
+        its start and at its predicted end (Heun's trapezoid: the friction is stiff, a wheel
+        time constant ``m_i v_f / F_f`` of ~3 ms against the 1 ms step). ``a_dq``, ``b_dq``:
+        the dq rows of the transition and of the friction input (:func:`_dq_rows`)."""
+        f0 = self._friction(x[State.DQ1], x[State.DQ2])
+        dq = _dot(a_dq, x) + _dot(b_dq, f0)
+        return 0.5 * (f0 + self._friction(dq[0], dq[1]))
+
+    def _friction(self, dq1: float, dq2: float) -> np.ndarray:
+        """The known friction input (N) at the rates dq_i (m/s): ``-F_f,i tanh(dq_i / v_f)``
+        less the equivalent damping's share ``-c_eq,i dq_i`` that the gains' linear model
+        carries (:func:`.model.friction_damping`)."""
+        f1, f2 = self._ff
+        d1, d2 = self._ceq
+        return np.array([-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS) + d1 * dq1,
+                         -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS) + d2 * dq2])
+
     def _emit(self, stamp: int, meta: tuple, o: list) -> None:
-        """The row of the linear outputs o (:data:`.OUTPUTS`) and the body heave (restarted
-        with each run); appended to ready."""
+        """The row of the linear outputs o (:data:`.OUTPUTS`; with friction, its direct part at
+        the estimate's own dq added) and the body heave (restarted with each run); appended
+        to ready."""
+        if self._ff is not None:
+            f1, f2 = self._friction(o[3], o[4]).tolist()
+            for j, d1, d2 in self._fd:
+                o[j] += d1 * f1 + d2 * f2
         (q1, q2, phi, dq1, dq2, dphi, ddq1, ddq2, ddphi, _, ddzs, _, _, ddzu1, ddzu2, w1, w2,
          df1, df2, fb1, fb2) = o
         x_dist, dt, v, conv = meta

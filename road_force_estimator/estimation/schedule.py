@@ -22,8 +22,9 @@ from scipy import linalg
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.gains import NOISE_FLOOR_M, Gains, design
 from road_force_estimator.estimation.model import (
-    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, NX,
-    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model, road_diffusion, scheduled)
+    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3,
+    DEFAULT_DQ_STD_MPS, ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
+    friction_damping, road_diffusion, scheduled)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.riccati import van_loan
 
@@ -44,6 +45,8 @@ NOISE_LEVEL_RATIO = 2.0 ** 0.25
 ROUGHNESS_LEVEL_RATIO = 2.0 ** 0.5
 SPEED_LEVEL_RATIO = 1.1
 DT_LEVEL_RATIO = 1.1
+#: ... of the RMS suspension rate (with leaf-spring friction only: its equivalent damping).
+DQ_LEVEL_RATIO = 2.0 ** 0.5
 _LOG_DT_RATIO = math.log(DT_LEVEL_RATIO)
 #: A level changes once the estimate is this many levels away from it (hysteresis).
 LEVEL_HYSTERESIS = 0.75
@@ -101,14 +104,19 @@ class GainSchedule:
         self.noise_deflection_m = obs.noise_deflection_m or DEFAULT_NOISE_M
         self.noise_roll_rad = obs.noise_roll_rad or DEFAULT_NOISE_RAD
         self.road_gd_m3 = obs.road_roughness_m3 or DEFAULT_ROAD_GD_M3
+        #: RMS suspension rate (m/s), estimated per block with the roughness (it sets the
+        #: friction's equivalent damping in the designs; only with leaf-spring friction)
+        self.dq_std_mps = DEFAULT_DQ_STD_MPS
+        self.friction = any(self.vehicle.leaf_spring_friction_n)
         self.all_fixed = all(self.noise_fixed) and self.roughness_fixed
         self.blocks = 0                    # statistics blocks seen
         self.design_count = 0              # gain designs (cache misses)
         self.design_failures = 0           # designs that fell back to the default levels
         self.history = (deque(maxlen=HISTORY_BLOCKS), deque(maxlen=HISTORY_BLOCKS),
                         deque(maxlen=ROUGHNESS_HISTORY_BLOCKS))
+        self.dq_history: deque = deque(maxlen=ROUGHNESS_HISTORY_BLOCKS)
         self.levels: dict[str, int | None] = {'nq': None, 'nr': None, 'gd': None,
-                                              'v': None, 'dt': None}
+                                              'v': None, 'dt': None, 'dq': None}
         self.gains: Gains | None = None
         self.stale = True
         self.v_band = (math.inf, -math.inf)
@@ -153,6 +161,10 @@ class GainSchedule:
                               NOISE_LEVEL_RATIO)
         lv['gd'] = requantise(lv['gd'], self.road_gd_m3, ROUGHNESS_LEVEL_RATIO)
         g = self.gains
+        if self.friction:
+            lv['dq'] = requantise(lv['dq'], self.dq_std_mps, DQ_LEVEL_RATIO)
+            if g is not None and g.key[6:] != (lv['dq'],):
+                self.stale = True
         if g is None or g.key[2:5] != (lv['nq'], lv['nr'], lv['gd']):
             self.stale = True
             if None in old or (abs(lv['nq'] - old[0]) > 4 or abs(lv['nr'] - old[1]) > 4
@@ -185,6 +197,8 @@ class GainSchedule:
         the step dt (s) that asked for it, so that a regular stream uses its exact transition."""
         lv = self.levels
         key = (lv['dt'], lv['v'], lv['nq'], lv['nr'], lv['gd'], lag)
+        if self.friction:
+            key += (lv['dq'],)
         g = self._gains.get(key)
         if g is None:
             if len(self._gains) >= MAX_GAINS:
@@ -197,6 +211,9 @@ class GainSchedule:
             kwargs = dict(dt_s=dt, speed_mps=SPEED_LEVEL_RATIO ** lv['v'], lag=lag,
                           correlation_length_m=corr, force_psd=force_psd,
                           roll_moment_psd=moment_psd, key=key)
+            if self.friction:
+                kwargs['friction_damping_nspm'] = friction_damping(
+                    self.vehicle.leaf_spring_friction_n, self.dq_std_mps)
             try:
                 g = design(self.vehicle, noise_deflection_m=noise,
                            noise_roll_rad=self.noise_roll_rad,
@@ -216,22 +233,31 @@ class GainSchedule:
         """Var(q_k - q_{k-1}) per unit road diffusion D at the current dt and speed levels."""
         lv = self.levels
         key = (lv['dt'], lv['v'])
+        extra = {}
+        if self.friction:   # friction damps the motion: its equivalent damping (model notes)
+            key += (lv['dq'],)
+            extra['friction_damping_nspm'] = friction_damping(
+                self.vehicle.leaf_spring_friction_n, DQ_LEVEL_RATIO ** lv['dq'])
         val = self._var_dq.get(key)
         if val is None:
             model = continuous_model(self.vehicle, SPEED_LEVEL_RATIO ** lv['v'], 1.0,
-                                     correlation_length_m=ROUGHNESS_CORRELATION_M)
+                                     correlation_length_m=ROUGHNESS_CORRELATION_M, **extra)
             a, q = van_loan(model.a, model.road_g, np.eye(2), DT_LEVEL_RATIO ** lv['dt'])
             # Without phi (it follows the road's cross level, a random walk: nothing depends on
             # it) and the roll moment (a random walk the road does not drive): the rest is
             # stationary.
-            keep = [j for j in range(NX) if j not in (State.PHI, State.M_R)]
+            # (and a lag state of the roll sensor, which follows phi)
+            slots = model.measured
+            drop = {State.PHI, State.M_R, slots[2]}
+            keep = [j for j in range(model.nx) if j not in drop]
             a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
             with warnings.catch_warnings():   # undamped models: no stationary variance
                 warnings.simplefilter('ignore')
                 p = linalg.solve_discrete_lyapunov(a, q, method='direct')
             d = a - np.eye(len(keep))
             var = d @ p @ d.T + q
-            val = float(0.5 * (var[0, 0] + var[1, 1]))    # q_1, q_2 lead the kept states
+            i1, i2 = keep.index(slots[0]), keep.index(slots[1])   # the measured q_1, q_2
+            val = float(0.5 * (var[i1, i1] + var[i2, i2]))
             self._var_dq[key] = val
         return val
 
@@ -259,6 +285,14 @@ class GainSchedule:
         d1 = (np.diff(y[:, :2], axis=0) * scale).reshape(-1)
         signal_var = (mad_std(d1) ** 2
                       - 2.0 * self.noise_deflection_m ** 2 * float(np.mean(scale ** 2)))
+        if self.friction and moving:   # the RMS rate (not the MAD: friction: dq heavy-tailed)
+            rms2 = float(np.mean(d1 * d1)) - 2.0 * self.noise_deflection_m ** 2 * float(
+                np.mean(scale ** 2))
+            if rms2 > 0.0:
+                self.dq_history.append(math.sqrt(rms2) / dt_mean)
+                self.dq_std_mps = float(np.median(self.dq_history))
+                self.levels['dq'] = requantise(self.levels['dq'], self.dq_std_mps,
+                                               DQ_LEVEL_RATIO)
         per_d = self._var_dq_per_diffusion() if moving else 0.0
         if per_d > 0.0 and math.isfinite(per_d):     # (an undamped model has no stationary
             hg.append(max(signal_var / per_d / road_diffusion(1.0), MIN_ROAD_GD_M3))  # variance)

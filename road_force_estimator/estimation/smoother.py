@@ -17,8 +17,9 @@ import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
+from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, NY, OUTPUTS, SPEED_FLOOR_MPS, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NY, OUTPUTS, SPEED_FLOOR_MPS, State, continuous_model, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -58,6 +59,9 @@ _SMOOTH_CHUNK = 16384
 _SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
                  'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
 _SMOOTH_OUTPUTS = [OUTPUTS.index(name) for name in _SMOOTH_NAMES]
+#: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
+#: is evaluated on the previous pass's smoothed dq (the first pass: none).
+FRICTION_PASSES = 3
 
 
 class _Powers:
@@ -157,7 +161,7 @@ def window_samples(dt_s: float, speed_mps: float, cutoff_wavelength_m: float,
 
 def slowest_tau_s(g: Gains, dt: float) -> float:
     """Time constant (s) of the slowest mode of the filter's ``Phi = A (I - K C)`` at dt."""
-    phi = g.transition(dt) @ (np.eye(NX) - g.k @ g.model.c)
+    phi = g.transition(dt) @ (np.eye(g.k.shape[0]) - g.k @ g.model.c)
     r = float(np.max(np.abs(np.linalg.eigvals(phi))))
     return -dt / math.log(r) if 0.0 < r < 1.0 else math.inf
 
@@ -271,7 +275,26 @@ class _Smoother:
         self.window = window
         self.schedule = GainSchedule(vehicle, observer)
         self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
-        self.h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h[_SMOOTH_OUTPUTS]
+        model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
+        self.h = model.h[_SMOOTH_OUTPUTS]
+        self.nx = model.nx
+        #: leaf-spring friction F_f,i (N), or None; the outputs' direct part per newton
+        self.friction = model.friction_n if any(model.friction_n) else None
+        self.fd = None if self.friction is None else model.friction_d[_SMOOTH_OUTPUTS]
+        self.ceq = np.zeros((2, 1))      # the equivalent damping in the run's gains (N s/m)
+        self._dq = [_SMOOTH_NAMES.index('dq1'), _SMOOTH_NAMES.index('dq2')]
+
+    def _forces(self, o: np.ndarray) -> np.ndarray:
+        """The known friction input (2, m) (N) at the rates of the outputs o (rows
+        _SMOOTH_NAMES); see :meth:`_forces_at`."""
+        return self._forces_at(o[self._dq])
+
+    def _forces_at(self, dq: np.ndarray) -> np.ndarray:
+        """The known friction input (N) at the rates dq (2, ...) (m/s): ``-F_f tanh(dq / v_f)``
+        less the equivalent damping's share that the gains carry (as :mod:`.model_core`)."""
+        ff = np.asarray(self.friction).reshape((2,) + (1,) * (np.ndim(dq) - 1))
+        ceq = self.ceq.reshape(ff.shape)
+        return -ff * np.tanh(dq / FRICTION_VELOCITY_MPS) + ceq * dq
 
     def fill_status(self, status: EstimatorStatus) -> None:
         sched = self.schedule
@@ -305,10 +328,13 @@ class _Smoother:
             sched = self.schedule
             sched.set_run(dt, speed)
             if m > 8 * NOISE_DIFF_ORDER:
-                for hist in sched.history:
+                for hist in (*sched.history, sched.dq_history):
                     hist.clear()
                 sched.statistics(y, dts)
             g = sched.design(dt, 0)
+            if self.friction is not None:   # the outputs of the design's model (its c_eq)
+                self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
+                self.h = g.model.h[_SMOOTH_OUTPUTS]
             uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
             steps = None if uniform else grid_steps(dts, dt)
             window, overlap = self.window or window_samples(
@@ -374,65 +400,112 @@ class _Smoother:
         """Uneven steps: the transition of each step (cached), the run's gains."""
         m = y.shape[0]
         c = g.model.c
+        nx = self.nx
         a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
-        xf = np.empty((m, NX))
+        xf = np.empty((m, nx))
         nus = np.empty((m, NY))
         xf[0] = x0
         for k in range(1, m):
             xp = a_steps[k - 1] @ xf[k - 1]
+            if self.friction is not None:   # on the filtered dq (one pass: steps uneven)
+                dq = xf[k - 1, [State.DQ1, State.DQ2]]
+                xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
             nus[k] = y[k] - c @ xp
             xf[k] = xp + g.k @ nus[k]
         cs = c.T @ np.linalg.inv(g.s)
-        ikc_t = (np.eye(NX) - g.k @ c).T
+        ikc_t = (np.eye(nx) - g.k @ c).T
         xs = xf.copy()
-        lam = np.zeros(NX)
+        lam = np.zeros(nx)
         for k in range(m - 1, 0, -1):
             lam = cs @ nus[k] + (ikc_t @ (a_steps[k].T @ lam) if k < m - 1 else 0.0)
             xs[k - 1] = xf[k - 1] + g.p_post @ (a_steps[k - 1].T @ lam)
-        self._outputs(self.h @ xs.T, out)
+        o = self.h @ xs.T
+        if self.friction is not None:
+            o = o + self.fd @ self._forces(o)
+        self._outputs(o, out)
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
                  out: list, keep: int | None = None) -> np.ndarray | None:
+        """The steady-state filter and RTS smoother of an evenly sampled run
+        (:meth:`_uniform_pass`); with friction, :data:`FRICTION_PASSES` passes, each with the
+        friction evaluated on the previous pass's smoothed dq (the first without). With
+        ``keep`` the forward state ``x+_keep`` is returned (where the next window starts)."""
+        if self.friction is None:
+            return self._uniform_pass(g, dt, y, x0, out, keep=keep)
+        forces = None
+        for _ in range(FRICTION_PASSES - 1):
+            dq = self._uniform_pass(g, dt, y, x0, None, forces)
+            f = self._forces_at(dq)
+            # held over step k -> k + 1: the mean of the ends (the trapezoid; the friction is
+            # stiff against the step, see .model_core)
+            forces = f.copy()
+            forces[:, :-1] = 0.5 * (f[:, :-1] + f[:, 1:])
+        return self._uniform_pass(g, dt, y, x0, out, forces, keep)
+
+    def _uniform_pass(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
+                      out: list | None, forces: np.ndarray | None = None,
+                      keep: int | None = None) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
 
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
         x+_(k-1)``. Backward (the adjoint form of the RTS smoother): ``lam_k = Phi^T lam_(k+1)
         + C^T S^-1 nu_k`` with ``Phi = A (I - K C)``, ``lam_m = 0``, and ``x_(k|m) = x+_k +
-        P+ A^T lam_(k+1)``. ``x0`` is ``x+_0``; with ``keep`` the forward state ``x+_keep`` is
-        returned (where the next window starts).
+        P+ A^T lam_(k+1)``. ``x0`` is ``x+_0``. With friction forces f (2, m) (N), the known
+        input ``B_d f_(k-1)`` joins the prediction ``A x+_(k-1)``. ``out`` None: only the
+        smoothed dq (2, m) is returned; else, with ``keep``, the forward state ``x+_keep``
+        (where the next window starts).
         """
         m = y.shape[0]
         c = g.model.c
-        a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:NX, ROW_X:ROW_X + NX]))
+        nx = self.nx
+        a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
         a_dt = g.transition(dt)
         kt = np.ascontiguousarray(g.k.T)
         ca_t = np.ascontiguousarray((c @ a_dt).T)
-        phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(NX) - g.k @ c)).T))
+        phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
         u_t = np.ascontiguousarray((c.T @ np.linalg.inv(g.s)).T)
         pa_t = np.ascontiguousarray((g.p_post @ a_dt.T).T)
-        xf = np.empty((m, NX))
+        xf = np.empty((m, nx))
         nu = np.empty((m, NY))
         xf[0] = x0
         nu[0] = 0.0
+        fin = None
+        if forces is not None:
+            bd = g.friction_input(dt)
+            fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
         chunk = _SMOOTH_CHUNK
         for k0 in range(1, m, chunk):
             k1 = min(m, k0 + chunk)
-            xf[k0:k1] = lti(a_run, y[k0:k1] @ kt, xf[k0 - 1])
+            drive = y[k0:k1] @ kt
+            if fin is not None:
+                drive += fin[0][k0 - 1:k1 - 1]
+            xf[k0:k1] = lti(a_run, drive, xf[k0 - 1])
             nu[k0:k1] = y[k0:k1] - xf[k0 - 1:k1 - 1] @ ca_t
-        lam_next = np.zeros(NX)                 # lam_(k1+1): lam_m = 0
+            if fin is not None:
+                nu[k0:k1] -= fin[1][k0 - 1:k1 - 1]
+        dq = None if out is not None else np.empty((2, m))
+        lam_next = np.zeros(nx)                 # lam_(k1+1): lam_m = 0
         for k1 in range(m, 0, -chunk):
             k0 = max(0, k1 - chunk)
             xs = xf[k0:k1].copy()
             # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1), from
             # lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
             lo, hi = k0 + 1, min(k1, m - 1)
-            lam = np.zeros((k1 - k0, NX))
+            lam = np.zeros((k1 - k0, nx))
             if hi >= lo:
                 seq = lti(phi_t, (nu[lo:hi + 1] @ u_t)[::-1], lam_next)[::-1]
                 lam[:hi - lo + 1] = seq
                 lam_next = seq[0]
             xs += lam @ pa_t
-            self._outputs(self.h @ xs.T, [col[k0:k1] for col in out])
+            if out is None:
+                dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
+                continue
+            o = self.h @ xs.T
+            if self.friction is not None:
+                o = o + self.fd @ self._forces(o)
+            self._outputs(o, [col[k0:k1] for col in out])
+        if out is None:
+            return dq
         return None if keep is None else xf[keep].copy()
 
     def _outputs(self, o: np.ndarray, out: list) -> None:

@@ -16,6 +16,7 @@ from geometry_msgs.msg import PointStamped
 
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.core.road_stream import RoadStream
+from road_force_estimator.core.vehicle_model import SpringOptions
 from road_force_estimator.interfaces import LPA
 from road_force_estimator.ros.messages import reliable_qos
 
@@ -76,7 +77,8 @@ class LiveRoad:
             return None
         try:
             plant = Plant(self.vehicle, profile, speed_mps=self.sim.speed_mps,
-                          rate_hz=self.sim.rate_hz, tire_envelope_m=envelope)
+                          rate_hz=self.sim.rate_hz, tire_envelope_m=envelope,
+                          springs=SpringOptions.from_simulator(self.sim))
         except ValueError as exc:
             if stream.closed:
                 self.ended = f'the profile on {LPA[0]}, {LPA[1]} cannot be driven: {exc}'

@@ -47,6 +47,7 @@ from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
     ParameterError, ParameterGuard, local_spec, specs_with_prefix)
 from road_force_estimator.core.sensors import SensorModel
+from road_force_estimator.core.vehicle_model import SpringOptions
 
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
 SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
@@ -85,7 +86,9 @@ class PlantSimulator(Node):
             self.build_plant(vehicle, sim)
             self.last_index = min(self.last_index, self.plant.last_sample_index)
         self.wait_since = None         # when the drive began waiting for the live road
-        self.measure = SensorModel.from_simulator(sim, vehicle).sampler()
+        sensors = SensorModel.from_simulator(sim, vehicle)
+        self.measure = sensors.sampler()
+        self.stamp_offset = sensors.stamp_sampler()     # stamp jitter (s), simulator.*
         self.half_track_m = vehicle.half_track_m
         self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
         self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,
@@ -124,7 +127,7 @@ class PlantSimulator(Node):
             self.road = road_from_source(sim.road, length_m=length)
             self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                                tire_envelope_m=sim.tire_envelope_length_m,
-                               speed_profile=profile)
+                               speed_profile=profile, springs=SpringOptions.from_simulator(sim))
         except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None
@@ -190,6 +193,9 @@ class PlantSimulator(Node):
 
     def publish(self, sample, stamp_ns: int) -> None:
         q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
+        jitter = self.stamp_offset()
+        if jitter:      # the sample at its true time, its stamp moved (simulator.stamp_jitter)
+            stamp_ns += int(round(jitter * 1e9))
         load_l, load_r, road_l, road_r = self.reliable
         self.twist_pub.publish(twist_msg(stamp_ns, self.speed_at(sample.t_s) * self.odometer))
         self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))

@@ -159,6 +159,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.sensors import SensorModel
     from road_force_estimator.core.speed_profile import read_speed_profile
+    from road_force_estimator.core.vehicle_model import SpringOptions
 
     profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
     road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
@@ -172,7 +173,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
     plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                   lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m,
-                  speed_profile=profile)
+                  speed_profile=profile, springs=SpringOptions.from_simulator(sim))
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
@@ -201,12 +202,22 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     sensors = SensorModel.from_simulator(sim, vehicle)
     q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
     fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
+    _jitter_stamps(traj, sensors)
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
     reason = ''
     if done < requested:
         reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
                   f'samples ({traj.t_s[-1]:g} s)')
     return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def _jitter_stamps(traj, sensors) -> None:
+    """With ``simulator.stamp_jitter``: the samples stay at their true times, their stamps
+    (and those of the sample's truth and twist) move (``traj.stamps_ns``)."""
+    if sensors.stamp_jitter_s > 0.0:
+        from road_force_estimator.bagio.drive import DEFAULT_START_STAMP_NS
+        traj.stamps_ns = DEFAULT_START_STAMP_NS + np.round(
+            (traj.t_s + sensors.stamp_offsets_s(traj.t_s.size)) * 1e9).astype(np.int64)
 
 
 def _fixes(traj, sim, profile):
@@ -276,7 +287,11 @@ def _main(args: argparse.Namespace) -> int:
 #: Effects that came later, off by default: recorded in ``custom_data`` only when set, so a drive
 #: simulated without them is the very bag it was before (rosbag2 keeps the metadata in the
 #: MCAP file too).
-_RECORDED_WHEN_SET = ('simulator.gnss.noise', 'simulator.speed_scale_error')
+_RECORDED_WHEN_SET = ('simulator.gnss.noise', 'simulator.speed_scale_error',
+                      'simulator.spring_progression', 'simulator.bump_stop_clearance',
+                      'simulator.bump_stop_stiffness', 'simulator.sensor_scale_error.deflection',
+                      'simulator.sensor_scale_error.roll', 'simulator.sensor_offset.deflection',
+                      'simulator.sensor_offset.roll', 'simulator.stamp_jitter')
 
 
 def _recorded_parameters(used: dict) -> dict:

@@ -249,3 +249,38 @@ def test_speed_profile_brakes_stops_and_pulls_away(tmp_path, capsys):
     meridian = WGS84_A * (1 - WGS84_E2) / (1 - WGS84_E2 * np.sin(lat) ** 2) ** 1.5
     travelled = np.radians(f.latitude_deg[-1] - f.latitude_deg[0]) * meridian
     assert travelled == pytest.approx(17.5, rel=1e-3)
+
+
+def test_truck_effects_reach_the_bag(tmp_path, capsys):
+    # Friction and bump stops in the plant, a 3 ms deflection lag, a scale error and an offset
+    # on the roll, stamp jitter: the bag against the plant and the sensor model run here.
+    code, _, err = run(['--road', 'iso8608:C:seed=4', '--speed', 15, '--rate', 500,
+                        '--duration', 2, '--seed', 8, '--output', tmp_path / 'd',
+                        '-p', 'vehicle.leaf_spring_friction:=[1500.0, 1000.0]',
+                        '-p', 'vehicle.sensor_time_constant:=[0.003, 0.0]',
+                        '-p', 'simulator.bump_stop_stiffness:=2e6',
+                        '-p', 'simulator.bump_stop_clearance:=0.005',
+                        '-p', 'simulator.sensor_scale_error.roll:=0.02',
+                        '-p', 'simulator.sensor_offset.roll:=0.001',
+                        '-p', 'simulator.stamp_jitter:=5e-5'], capsys)
+    assert code == 0, err
+    d = bagio.read_drive_bag(tmp_path / 'd')
+    from road_force_estimator.core.vehicle_model import SpringOptions
+    vehicle = VehicleParameters(leaf_spring_friction_n=(1500.0, 1000.0),
+                                sensor_time_constant_s=(0.003, 0.0))
+    road = iso8608_profile('C', 15 * 2 + 2 * 0.25 + 1.0, seed=4)
+    tr = simulate(vehicle, road, speed_mps=15.0, rate_hz=500.0, duration_s=2.0,
+                  tire_envelope_m=0.25, springs=SpringOptions(0.0, 0.005, 2e6))
+    sensor = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=8,
+                         time_constant_s=(0.003, 0.0), rate_hz=500.0,
+                         scale_error=(0.0, 0.0, 0.02), offset=(0.0, 0.0, 0.001),
+                         stamp_jitter_s=5e-5)
+    q, phi = sensor.measure(tr.q_m, tr.roll_rad)
+    np.testing.assert_array_equal(d.q_m, q)
+    np.testing.assert_array_equal(d.roll_rad, phi)
+    np.testing.assert_array_equal(d.truth.wheel_load_n, tr.wheel_load_n)
+    # the stamps moved by the documented draws (within +-50 us), the samples did not
+    expect = np.round((tr.t_s + sensor.stamp_offsets_s(tr.t_s.size)) * 1e9).astype(np.int64)
+    np.testing.assert_array_equal(d.stamps_ns - d.stamps_ns[0] + expect[0], expect)
+    offsets_ns = expect - np.round(tr.t_s * 1e9).astype(np.int64)
+    assert np.max(np.abs(offsets_ns)) <= 50_000 and np.std(offsets_ns) > 20_000
