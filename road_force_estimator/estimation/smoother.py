@@ -16,7 +16,8 @@ from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, NY, OUTPUTS, SPEED_FLOOR_MPS, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NX, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS,
+    continuous_model, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -226,6 +227,7 @@ class _Smoother:
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
         h = self.h
         dt = speed = 0.0
+        steps = None
         if m == 1:
             self._outputs((h @ x0)[:, None], out)
         else:
@@ -245,10 +247,40 @@ class _Smoother:
                 self._uniform(g, dt, y, x0, out)
             elif steps is not None:
                 self._bridged(g, dt, speed, t, steps, y, x0, out)
-                return
             else:
                 self._uneven(g, dts, y, x0, out)
-        self._heave(t, dt, speed, out)
+        if steps is None:
+            self._heave(t, dt, speed, out)
+        if m > 1:
+            self._profile(dt, speed, dts, uniform, steps, y, x0, out)
+
+    def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
+                 steps: np.ndarray | None, y: np.ndarray, x0: np.ndarray, out: list) -> None:
+        """The road columns of a run from the profile smoother (issue 21): the same model and
+        data through the smoother with the profile's tuning (:meth:`.GainSchedule.
+        profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
+        with the body heave's zero-phase integral at the profile's cutoff
+        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``). Only
+        ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run` made them."""
+        g = self.schedule.profile_design(dt, 'offline')
+        pos = None
+        if steps is not None:               # completed on the grid, as :meth:`_bridged`
+            pos = np.concatenate([[0], np.cumsum(steps)])
+            grid = np.arange(int(pos[-1]) + 1)
+            y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
+        cols = field_columns(y.shape[0])[1]
+        if uniform or steps is not None:
+            self._uniform(g, dt, y, x0, cols)
+        else:
+            self._uneven(g, dts, y, x0, cols)
+        zs = 0.0
+        if y.shape[0] >= 8:
+            w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
+                   / (PROFILE_CUTOFF_RATIO * self.observer.profile_cutoff_wavelength_m))
+            zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
+        for j in (Column.U1, Column.U2):
+            u = cols[j] + zs
+            out[j][:] = u if pos is None else u[pos]
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
                  y: np.ndarray, x0: np.ndarray, out: list) -> None:
