@@ -45,7 +45,8 @@ from road_force_estimator.estimation.differentiator import implicit_step
 from road_force_estimator.estimation.gains import (
     ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NX, PROFILE_CUTOFF_RATIO, continuous_model, rest_state)
+from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
@@ -101,6 +102,8 @@ class ModelCore:
         self.observer = observer
         self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
+        self._wc_road = self._wc_per_speed / PROFILE_CUTOFF_RATIO
+        self._s = vehicle.half_track_m
         self.sm_gain = float(observer.sliding_mode_gain)
         lq, lr = sm_lipschitz(vehicle)
         self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
@@ -137,6 +140,10 @@ class ModelCore:
         self._dts: list = []
         self._x0 = np.zeros(NX)
         self._body_started = False
+        self._prow = np.zeros(_ROW)        # the profile filter's row: [0, x+, 0, y]
+        self._pm = None                    # its step matrix (zero latency only)
+        self._road_state = body_heave.start(0.0)
+        self._road_started = False
 
     @property
     def gains(self) -> Gains | None:
@@ -217,6 +224,8 @@ class ModelCore:
             g = self._design(dt)
         self._m = g.step_matrix(dt)
         self._m_dt = dt
+        if self.lag == 0:
+            self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
 
     # -- the run --------------------------------------------------------------------------
     def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
@@ -253,10 +262,14 @@ class ModelCore:
         self._run_y = [(q1, q2, phi)]
         self._dts = []
         self._body_started = False
+        self._road_started = False
+        self._prow[:] = 0.0
+        self._prow[_X0:_X0 + NX] = x
         if self.observer.latency_s > 0.0:
             self._pending.append((stamp, meta))
         else:
-            self._emit(stamp, meta, (self._h @ x).tolist())
+            o = (self._h @ x).tolist()
+            self._emit(stamp, meta, o, o)
 
     def _set_lag(self, dt: float) -> None:
         """The lag N = round(latency / dt) (samples) for a typical step dt (s)."""
@@ -331,7 +344,14 @@ class ModelCore:
             o = s[_Y0 - _X0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
-            self._emit(stamp, meta, o)
+            # the profile filter (issue 21): the same data, the profile's gains
+            prow = self._prow
+            prow[_Y0] = q1
+            prow[_Y0 + 1] = q2
+            prow[_Y0 + 2] = phi
+            sp = _dot(self._pm, prow)
+            prow[_X0:_Y0] = sp[:_Y0 - _X0]
+            self._emit(stamp, meta, o, sp[_Y0 - _X0:].tolist())
         else:
             pending = self._pending
             pending.append((stamp, meta))
@@ -437,6 +457,14 @@ class ModelCore:
             nxt = buf[j + 1]
             nxt[_X0:_Y0] = (g.step_matrix(dt) @ buf[j])[:_Y0 - _X0]
             nxt[_R0:_R0 + 9] = 0.0
+        if self.lag == 0:      # the profile filter too, with its gains of the new levels
+            pg = self.schedule.profile_design(dts[-1], 'online')
+            prow = self._prow
+            prow[:] = 0.0
+            prow[_X0:_X0 + NX] = self._x0
+            for j, dt in enumerate(dts):
+                prow[_Y0:_Y0 + NY] = buf[j, _Y0:_Y0 + NY]
+                prow[_X0:_Y0] = (pg.step_matrix(dt) @ prow)[:_Y0 - _X0]
         self._t_retuned = 0.0
         self._m_dt = -1.0
 
@@ -453,9 +481,10 @@ class ModelCore:
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
 
-    def _emit(self, stamp: int, meta: tuple, o: list) -> None:
+    def _emit(self, stamp: int, meta: tuple, o: list, op: list | None = None) -> None:
         """The row of the linear outputs o (:data:`.OUTPUTS`) and the body heave (restarted
-        with each run); appended to ready."""
+        with each run); appended to ready. With the profile filter's outputs ``op`` (zero
+        latency), the road is :meth:`_road`'s."""
         (q1, q2, phi, dq1, dq2, dphi, ddq1, ddq2, ddphi, _, ddzs, _, _, ddzu1, ddzu2, w1, w2,
          df1, df2, fb1, fb2) = o
         x_dist, dt, v, conv = meta
@@ -469,8 +498,29 @@ class ModelCore:
             self._rows.restart()
         row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
                              ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt)
+        if op is not None:
+            row = self._road(row, op, dt, v)
         self.last_row = row
         self.ready.append((stamp, row))
+
+    def _road(self, row: tuple, op: list, dt: float, v: float) -> tuple:
+        """``row`` with the road of the profile filter's outputs ``op`` (:data:`.OUTPUTS`):
+        ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body acceleration's band-limited
+        double integral at the profile's cutoff (:data:`.model.PROFILE_CUTOFF_RATIO` x
+        ``observer.profile_cutoff_wavelength``; restarted with each run)."""
+        ddzs = op[10]
+        if self._road_started:
+            h = self._road_state = body_heave.step(self._road_state, ddzs, dt, v,
+                                                   self._wc_road)
+            zs = h[-2]
+        else:
+            zs = 0.0
+            self._road_state = body_heave.start(ddzs)
+            self._road_started = True
+        ssin = self._s * math.sin(op[2])
+        u1 = zs + ssin - op[0] + op[15]
+        u2 = zs - ssin - op[1] + op[16]
+        return row[:Column.U1] + (u1, u2) + row[Column.U2 + 1:]
 
     def finish(self) -> bool:
         """Finalize every pending sample of the run (end of data, or before a restart);
