@@ -105,7 +105,8 @@ __all__ = [
     'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD', 'ROUGHNESS_CORRELATION_M',
     'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
     'PROFILE_CUTOFF_RATIO', 'PROFILE_ONLINE_GD_RATIO', 'PROFILE_ONLINE_ROLL_MOMENT_PSD',
-    'PROFILE_OFFLINE_FORCE_PSD', 'PROFILE_OFFLINE_ROLL_MOMENT_PSD', 'profile_scheduled',
+    'PROFILE_OFFLINE_FORCE_PSD', 'PROFILE_OFFLINE_ROLL_MOMENT_PSD', 'PROFILE_OFFLINE_GD_RATIO',
+    'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
 ]
 
@@ -168,6 +169,7 @@ PROFILE_ONLINE_ROLL_MOMENT_PSD = 1e5
 #: profile smoother.
 PROFILE_OFFLINE_FORCE_PSD = 1e-3
 PROFILE_OFFLINE_ROLL_MOMENT_PSD = 1e6
+PROFILE_OFFLINE_GD_RATIO = 1.0
 #: The profile's long-wave cutoff (m) is this many times ``observer.profile_cutoff_wavelength``
 #: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
 #: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
@@ -227,7 +229,7 @@ def profile_scheduled(noise_deflection_m: float, mode: str):
         return force, corr, gd * PROFILE_ONLINE_GD_RATIO, min(moment,
                                                                PROFILE_ONLINE_ROLL_MOMENT_PSD)
     if mode == 'offline':
-        return (min(force, PROFILE_OFFLINE_FORCE_PSD), corr, gd,
+        return (min(force, PROFILE_OFFLINE_FORCE_PSD), corr, gd * PROFILE_OFFLINE_GD_RATIO,
                 min(moment, PROFILE_OFFLINE_ROLL_MOMENT_PSD))
     raise ValueError(f"mode = {mode!r}: 'online' or 'offline'")
 

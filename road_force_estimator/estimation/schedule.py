@@ -23,8 +23,8 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation.gains import NOISE_FLOOR_M, Gains, design
 from road_force_estimator.estimation.model import (
     DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, NX,
-    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model, profile_scheduled, road_diffusion,
-    scheduled)
+    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model, profile_scheduled,
+    road_diffusion, scheduled)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.riccati import van_loan
 

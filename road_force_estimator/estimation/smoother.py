@@ -260,8 +260,9 @@ class _Smoother:
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
         profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
         with the body heave's zero-phase integral at the profile's cutoff
-        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``). Only
-        ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run` made them."""
+        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``); where
+        the distance stands still (``out``'s distance column) the road is held. Only ``U1``,
+        ``U2`` of ``out`` change; arguments as :meth:`run` made them."""
         g = self.schedule.profile_design(dt, 'offline')
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
@@ -278,9 +279,17 @@ class _Smoother:
             w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
                    / (PROFILE_CUTOFF_RATIO * self.observer.profile_cutoff_wavelength_m))
             zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
+        standing = np.diff(out[Column.DISTANCE]) == 0.0
         for j in (Column.U1, Column.U2):
             u = cols[j] + zs
-            out[j][:] = u if pos is None else u[pos]
+            u = u if pos is None else u[pos]
+            if standing.any():
+                # standing, the road under the tires does not change: what the estimate does
+                # then (the body heave's drift, integrated in time) is no road
+                du = np.diff(u)
+                du[standing] = 0.0
+                u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
+            out[j][:] = u
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
                  y: np.ndarray, x0: np.ndarray, out: list) -> None:
