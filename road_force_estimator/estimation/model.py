@@ -105,6 +105,7 @@ __all__ = [
     'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD', 'ROUGHNESS_CORRELATION_M',
     'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
     'PROFILE_CUTOFF_RATIO', 'PROFILE_ONLINE_GD_RATIO', 'PROFILE_ONLINE_ROLL_MOMENT_PSD',
+    'PROFILE_ONLINE_CORRELATION_M',
     'PROFILE_OFFLINE_FORCE_PSD', 'PROFILE_OFFLINE_ROLL_MOMENT_PSD', 'PROFILE_OFFLINE_GD_RATIO',
     'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
@@ -165,6 +166,11 @@ MIN_ROAD_GD_M3 = 4e-6
 #: largest roll-moment density ((N m)^2 / s).
 PROFILE_ONLINE_GD_RATIO = 30.0
 PROFILE_ONLINE_ROLL_MOMENT_PSD = 1e5
+#: The zero-latency profile filter's road correlation length (m) at the levels of
+#: SCHEDULE_NOISE_M (log-log in between, as :func:`scheduled`): the load's but without noise,
+#: where the road wants a slower road velocity (D20-1k-0um 0.645 % -> 0.634 %, C20-1k-0um
+#: 0.148 -> 0.157; kf-model: 0.637 and 0.162).
+PROFILE_ONLINE_CORRELATION_M = (15.0, 0.8, 0.566)
 #: Largest force-noise density (N^2 s) and roll-moment density ((N m)^2 / s) of the offline
 #: profile smoother.
 PROFILE_OFFLINE_FORCE_PSD = 1e-3
@@ -226,6 +232,9 @@ def profile_scheduled(noise_deflection_m: float, mode: str):
     say."""
     force, corr, gd, moment = scheduled(noise_deflection_m, roll_moment=True)
     if mode == 'online':
+        x = math.log(max(noise_deflection_m, SCHEDULE_NOISE_M[0]))
+        corr = math.exp(float(np.interp(x, [math.log(v) for v in SCHEDULE_NOISE_M],
+                                        [math.log(v) for v in PROFILE_ONLINE_CORRELATION_M])))
         return force, corr, gd * PROFILE_ONLINE_GD_RATIO, min(moment,
                                                                PROFILE_ONLINE_ROLL_MOMENT_PSD)
     if mode == 'offline':
