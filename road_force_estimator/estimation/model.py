@@ -36,7 +36,11 @@ unobservable integrator and the Riccati equation is well posed down to tiny nois
 mode, body and road rising together, is seen only through the road model's mean reversion: it
 is the ``spectral radius ~ 1`` a design may show; no load depends on it). The profile is
 rebuilt as the estimator's chain does (MODEL.md step 4): ``z_s`` is the band-limited double
-integral of ``dd z_s`` (:mod:`.body_heave`), ``u_i = z_s +- s sin(phi) - q_i + w_i``.
+integral of ``dd z_s`` (:mod:`.body_heave`), ``u_i = z_s +- s sin(phi) - q_i + w_i``; but from
+the states of a second filter on the same model and data, tuned for the road (the PROFILE_*
+constants, :func:`profile_scheduled`: at zero latency and offline; with a latency the load
+filter's states), and with its own long-wave cutoff (:data:`PROFILE_CUTOFF_RATIO`); the body
+heave published stays the load filter's at ``observer.profile_cutoff_wavelength``.
 
 Road model (the unknown input)
 ------------------------------

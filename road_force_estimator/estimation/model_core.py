@@ -31,6 +31,16 @@ the outputs through ``H`` in one product per sample. At a gap or the end of the 
 (:meth:`ModelCore.finish`) the pending samples get the same correction from the innovations
 that did arrive (the exact smoother of the shorter window). The outputs become the row of
 :mod:`.reconstruction` (body heave: :mod:`.body_heave`, restarted with each run).
+
+Profile
+-------
+With no lag the road is not the load filter's: a second steady-state Kalman filter on the
+same model runs beside it on the same measurements, with the profile's gains
+(:meth:`.GainSchedule.profile_design`, ``'online'``: the same noise and roughness estimates,
+a rougher road assumed, so less lag; no sliding mode), and the road of its states
+(:meth:`ModelCore._road`, its own body-heave integral at the profile's long-wave cutoff)
+replaces the row's ``U1``, ``U2``. The loads and every other column are the load filter's.
+With a lag (``observer.latency`` > 0) the road stays the load filter's.
 """
 from __future__ import annotations
 

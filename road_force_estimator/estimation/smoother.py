@@ -2,7 +2,8 @@
 run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
 from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
-online observer (:mod:`.model_core`).
+online observer (:mod:`.model_core`); the road of a second pass of the same smoother with the
+profile's tuning (:meth:`_Smoother._profile`).
 """
 from __future__ import annotations
 
