@@ -93,3 +93,28 @@ class TestProfileFilter:
 class _Truth:
     def __init__(self, drive, n):
         self.wheel_load_n = np.asarray(drive.wheel_load_n)[:n]
+
+
+def test_offline_road_held_while_standing():
+    # a stop (the plant's speed profile; the recorded speed is the plant's): standing, the
+    # road under the tires does not change, and the offline road says so; moving, it moves
+    from road_force_estimator.core.plant import simulate
+    from road_force_estimator.core.road import iso8608_profile
+    from road_force_estimator.core.sensors import SensorModel
+    from road_force_estimator.estimation.speed_check import PROBATION_S
+
+    profile = ((0.0, 1.0, 5.0, 7.0, 11.0, 12.0), (20.0, 20.0, 0.0, 0.0, 20.0, 20.0))
+    drive = simulate(VEHICLE, iso8608_profile('C', 200.0, seed=4), speed_mps=20.0,
+                     rate_hz=500.0, duration_s=12.0, speed_profile=profile)
+    q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=3).measure(
+        drive.q_m, drive.roll_rad)
+    speed = np.interp(drive.t_s, *profile)
+    est = smooth(to_stamps(drive.t_s), q, phi, speed, VEHICLE, ObserverParameters())
+    road = np.asarray(est.road_m)
+    # (the model keeps the last trusted speed for PROBATION_S after the speed reads standing)
+    standing = np.flatnonzero((speed[1:] == 0.0) & (speed[:-1] == 0.0)) + 1
+    standing = standing[standing >= standing[0] + int(PROBATION_S * 500) + 1]
+    assert standing.size > 500
+    np.testing.assert_array_equal(road[standing], np.broadcast_to(road[standing[0] - 1],
+                                                                  road[standing].shape))
+    assert np.all(np.abs(np.diff(road[:400], axis=0)).max(axis=0) > 1e-4)
