@@ -154,6 +154,8 @@ class ModelCore:
         self._pm = None                    # its step matrix (zero latency only)
         self._road_state = body_heave.start(0.0)
         self._road_started = False
+        self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, speed), unheld
+        self._road_off = (0.0, 0.0)                # what standing added to the road (m)
 
     @property
     def gains(self) -> Gains | None:
@@ -517,7 +519,8 @@ class ModelCore:
         """``row`` with the road of the profile filter's outputs ``op`` (:data:`.OUTPUTS`):
         ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body acceleration's band-limited
         double integral at the profile's cutoff (:data:`.model.PROFILE_CUTOFF_RATIO` x
-        ``observer.profile_cutoff_wavelength``; restarted with each run)."""
+        ``observer.profile_cutoff_wavelength``; restarted with each run); held where the
+        model's speed ``v`` (m/s) is 0, as the smoother's."""
         ddzs = op[10]
         if self._road_started:
             h = self._road_state = body_heave.step(self._road_state, ddzs, dt, v,
@@ -527,10 +530,21 @@ class ModelCore:
             zs = 0.0
             self._road_state = body_heave.start(ddzs)
             self._road_started = True
+            self._road_prev = (0.0, 0.0, math.nan)
+            self._road_off = (0.0, 0.0)
         ssin = self._s * math.sin(op[2])
         u1 = zs + ssin - op[0] + op[15]
         u2 = zs - ssin - op[1] + op[16]
-        return row[:Column.U1] + (u1, u2) + row[Column.U2 + 1:]
+        p1, p2, pv = self._road_prev
+        self._road_prev = (u1, u2, v)
+        o1, o2 = self._road_off
+        if v == 0.0 and pv == 0.0:
+            # standing (the model's speed 0), the road under the tires does not change: what
+            # the estimate does then (the body heave's drift) is no road
+            o1 += u1 - p1
+            o2 += u2 - p2
+            self._road_off = (o1, o2)
+        return row[:Column.U1] + (u1 - o1, u2 - o2) + row[Column.U2 + 1:]
 
     def finish(self) -> bool:
         """Finalize every pending sample of the run (end of data, or before a restart);
