@@ -55,7 +55,7 @@ from road_force_estimator.estimation.differentiator import implicit_step
 from road_force_estimator.estimation.gains import (
     ROW_RHO, ROW_SIZE, ROW_X, ROW_Y, NY, Gains, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NX, PROFILE_CUTOFF_RATIO, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NX, PROFILE_ONLINE_CUTOFF_RATIO, continuous_model, rest_state)
 from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
@@ -112,7 +112,8 @@ class ModelCore:
         self.observer = observer
         self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
-        self._wc_road = self._wc_per_speed / PROFILE_CUTOFF_RATIO
+        self._wc_road = self._wc_per_speed / PROFILE_ONLINE_CUTOFF_RATIO
+        self._road_floor = PROFILE_ONLINE_CUTOFF_RATIO * body_heave.SPEED_FLOOR_MPS
         self._s = vehicle.half_track_m
         self.sm_gain = float(observer.sliding_mode_gain)
         lq, lr = sm_lipschitz(vehicle)
@@ -154,7 +155,7 @@ class ModelCore:
         self._pm = None                    # its step matrix (zero latency only)
         self._road_state = body_heave.start(0.0)
         self._road_started = False
-        self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, speed), unheld
+        self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
         self._road_off = (0.0, 0.0)                # what standing added to the road (m)
 
     @property
@@ -518,13 +519,16 @@ class ModelCore:
     def _road(self, row: tuple, op: list, dt: float, v: float) -> tuple:
         """``row`` with the road of the profile filter's outputs ``op`` (:data:`.OUTPUTS`):
         ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body acceleration's band-limited
-        double integral at the profile's cutoff (:data:`.model.PROFILE_CUTOFF_RATIO` x
-        ``observer.profile_cutoff_wavelength``; restarted with each run); held where the
-        model's speed ``v`` (m/s) is 0, as the smoother's."""
+        double integral at the profile's cutoff (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x
+        ``observer.profile_cutoff_wavelength``, the speed floored at that ratio times
+        :data:`.body_heave.SPEED_FLOOR_MPS`; restarted with each run); held at a stop (the
+        distance stands still, the model's speed ``v`` (m/s) below that floor)."""
         ddzs = op[10]
         if self._road_started:
-            h = self._road_state = body_heave.step(self._road_state, ddzs, dt, v,
-                                                   self._wc_road)
+            av = v if v > 0.0 else -v
+            h = self._road_state = body_heave.step(
+                self._road_state, ddzs, dt, av if av > self._road_floor else self._road_floor,
+                self._wc_road)
             zs = h[-2]
         else:
             zs = 0.0
@@ -535,12 +539,16 @@ class ModelCore:
         ssin = self._s * math.sin(op[2])
         u1 = zs + ssin - op[0] + op[15]
         u2 = zs - ssin - op[1] + op[16]
-        p1, p2, pv = self._road_prev
-        self._road_prev = (u1, u2, v)
+        p1, p2, px = self._road_prev
+        x = row[Column.DISTANCE]
+        self._road_prev = (u1, u2, x)
         o1, o2 = self._road_off
-        if v == 0.0 and pv == 0.0:
-            # standing (the model's speed 0), the road under the tires does not change: what
-            # the estimate does then (the body heave's drift) is no road
+        if x == px and -body_heave.SPEED_FLOOR_MPS < v < body_heave.SPEED_FLOOR_MPS:
+            # a stop: the distance stands still and the model's speed is below the body
+            # heave's floor (a dropped-out speed that the deflections contradict keeps the
+            # last trusted one, :mod:`.speed_check`); the road at one distance is one value:
+            # what the estimate does then (the body heave's drift, or the integral's memory
+            # of the rate before the stop) is no road
             o1 += u1 - p1
             o2 += u2 - p2
             self._road_off = (o1, o2)
