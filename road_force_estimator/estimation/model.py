@@ -184,13 +184,12 @@ PROFILE_OFFLINE_GD_RATIO = 1.0
 #: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
 #: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
 #: amplitude is ten times that at 10 m; the body heave's 100 m cutoff alone cost 0.34 % of
-#: profile error on the noise-free C20-1k-0um: 0.0071 % at 3 km, 0.0041 % at 10 km). Longer
-#: cutoffs let the double integral's low-frequency error wander further: over 480 m of ISO C
-#: (test_speed_check; true road within 5 cm) the largest |u| is 0.05 m at 1 x, 0.52 m at
-#: 30 x, 1.16 m at 100 x; and on a short run (120 m after a stale stretch, the zero-phase
-#: filter's edges) 0.1 m at 1 x, 2.4 m at 10 x, 6.6 m at 30 x. Until the long waves have a
-#: better home (a model state with a leak, as the kf-model peers), 1.
-PROFILE_CUTOFF_RATIO = 1.0
+#: profile error on the noise-free C20-1k-0um: 0.0041 % at 10 km). Longer cutoffs let the
+#: double integral's low-frequency error and the zero-phase filter's edges wander further (on
+#: a 120 m run after a stale stretch, test_speed_check, true road within 5 cm: 6.6 m at 30 x),
+#: so the smoother takes the run's least-squares cubic off (:mod:`.smoother`): then 0.05 m, and
+#: C20-1k-0um 0.0039 %.
+PROFILE_CUTOFF_RATIO = 100.0
 #: The same for the zero-latency profile, whose causal integral follows the speed with a floor
 #: of this ratio times the body heave's (1 m/s; never below the body heave's cutoff frequency
 #: at its floor). The causal integral wanders further than the zero-phase one (largest |u| on

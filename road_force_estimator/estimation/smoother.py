@@ -33,6 +33,9 @@ LTI_BLOCK = 128
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
+#: Degree of the polynomial taken off the profile's body heave over each run (see
+#: :meth:`_Smoother._profile`).
+PROFILE_DETREND_DEGREE = 3
 #: The outputs (:data:`.OUTPUTS`) the offline rows need, in this order.
 _SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
                  'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
@@ -262,7 +265,8 @@ class _Smoother:
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
         profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
         with the body heave's zero-phase integral at the profile's cutoff
-        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``); where
+        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``, less its
+        cubic over the run, :data:`PROFILE_DETREND_DEGREE`); where
         the model's speed ``v`` (m/s) is 0 the road is held. Only ``U1``, ``U2`` of ``out``
         change; arguments as :meth:`run` made them."""
         g = self.schedule.profile_design(dt, 'offline')
@@ -286,6 +290,13 @@ class _Smoother:
             w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
                    / (ratio * self.observer.profile_cutoff_wavelength_m))
             zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
+            if ratio > 1.0:
+                # a cutoff longer than the run leaves the filter's edge transients and the
+                # double integral's wander as a smooth curve over the whole run (metres on a
+                # 120 m run at 10 km): the least-squares cubic of the run goes (waves of the
+                # run's length, which no band-passed figure sees)
+                tt = np.linspace(-1.0, 1.0, zs.size)
+                zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
         # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
         # contradict keeps the last trusted speed, :mod:`.speed_check`)
         standing = (v[1:] == 0.0) & (v[:-1] == 0.0)

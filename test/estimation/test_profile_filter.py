@@ -46,9 +46,9 @@ class TestProfileFilter:
         mask = (x >= x[0] + 30.0) & (x <= x[-1] - 30.0)
         ours = _band_pct(est.road_m, drive, mask)
         theirs = _band_pct(_load_filter_road(est), drive, mask)
-        # measured: 0.927 % against 0.939 % (on 8 s both are limited by the body heave's
-        # 100 m cutoff, model.PROFILE_CUTOFF_RATIO; the profile smoother's gain is in IRI)
-        assert ours < theirs
+        # measured: 0.44 % against 0.94 % (the body heave's 100 m cutoff; the profile's is
+        # model.PROFILE_CUTOFF_RATIO times longer)
+        assert ours < 0.6 * theirs
         assert ours < 1.0
 
     def test_loads_do_not_see_the_profile_filter(self, drive, noisy):
