@@ -173,7 +173,7 @@ PROFILE_ONLINE_GD_RATIO = 30.0
 #: The zero-latency profile filter's road correlation length (m) at the levels of
 #: SCHEDULE_NOISE_M (log-log in between, as :func:`scheduled`): the load's but without noise,
 #: where the road wants a slower road velocity (D20-1k-0um 0.645 % -> 0.634 %, C20-1k-0um
-#: 0.148 -> 0.157; kf-model: 0.637 and 0.162).
+#: 0.148 -> 0.157; kf-model: 0.637 and 0.162; measured with a 10 x cutoff, see below).
 PROFILE_ONLINE_CORRELATION_M = (15.0, 0.8, 0.566)
 #: Largest force-noise density (N^2 s) and roll-moment density ((N m)^2 / s) of the offline
 #: profile smoother.
