@@ -31,6 +31,16 @@ the outputs through ``H`` in one product per sample. At a gap or the end of the 
 (:meth:`ModelCore.finish`) the pending samples get the same correction from the innovations
 that did arrive (the exact smoother of the shorter window). The outputs become the row of
 :mod:`.reconstruction` (body heave: :mod:`.body_heave`, restarted with each run).
+
+Profile
+-------
+With no lag the road is not the load filter's: a second steady-state Kalman filter on the
+same model runs beside it on the same measurements, with the profile's gains
+(:meth:`.GainSchedule.profile_design`, ``'online'``: the same noise and roughness estimates,
+a rougher road assumed, so less lag; no sliding mode), and the road of its states
+(:meth:`ModelCore._road`, its own body-heave integral at the profile's long-wave cutoff)
+replaces the row's ``U1``, ``U2``. The loads and every other column are the load filter's.
+With a lag (``observer.latency`` > 0) the road stays the load filter's.
 """
 from __future__ import annotations
 
@@ -46,7 +56,9 @@ from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.gains import (
     ROW_RHO, NY, Gains, row_layout, sm_lipschitz)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, SPEED_FLOOR_MPS, State, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, PROFILE_ONLINE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
+    continuous_model, rest_state)
+from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
@@ -109,6 +121,9 @@ class ModelCore:
         self.observer = observer
         self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
+        self._wc_road = self._wc_per_speed / PROFILE_ONLINE_CUTOFF_RATIO
+        self._road_floor = PROFILE_ONLINE_CUTOFF_RATIO * body_heave.SPEED_FLOOR_MPS
+        self._s = vehicle.half_track_m
         self.sm_gain = float(observer.sliding_mode_gain)
         lq, lr = sm_lipschitz(vehicle)
         self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
@@ -178,6 +193,12 @@ class ModelCore:
         self._x0 = np.zeros(self._nx)
         self._body_started = False
         self._slow = 0                    # samples of the block below the speed floor
+        self._prow = np.zeros(self._row)        # the profile filter's row: [0, x+, 0, y]
+        self._pm = None                    # its step matrix (zero latency only)
+        self._road_state = body_heave.start(0.0)
+        self._road_started = False
+        self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
+        self._road_off = (0.0, 0.0)                # what standing added to the road (m)
 
     @property
     def gains(self) -> Gains | None:
@@ -262,6 +283,8 @@ class ModelCore:
             self._a_dq, self._b_dq = _dq_rows(g, dt)
             self._ceq = g.model.friction_damping_nspm
         self._m_dt = dt
+        if self._profile_on:
+            self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
 
     # -- the run --------------------------------------------------------------------------
     def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
@@ -298,10 +321,20 @@ class ModelCore:
         self._run_y = [(q1, q2, phi)]
         self._dts = []
         self._body_started = False
+        self._road_started = False
+        self._prow[:] = 0.0
+        self._prow[self._x0i:self._x0i + self._nx] = x
         if self.observer.latency_s > 0.0:
             self._pending.append((stamp, meta))
         else:
-            self._emit(stamp, meta, (self._h @ x).tolist())
+            o = (self._h @ x).tolist()
+            self._emit(stamp, meta, o, o if self._profile_on else None)
+
+    @property
+    def _profile_on(self) -> bool:
+        """The zero-latency profile filter runs: no latency, and no friction (whose known
+        input it does not carry: then the road is the load filter's)."""
+        return self.lag == 0 and self._ff is None
 
     def _set_lag(self, dt: float) -> None:
         """The lag N = round(latency / dt) (samples) for a typical step dt (s)."""
@@ -384,7 +417,8 @@ class ModelCore:
             o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
-            self._emit(stamp, meta, o)
+            self._emit(stamp, meta, o, self._profile_step(q1, q2, phi) if self._profile_on
+                       else None)
         else:
             pending = self._pending
             pending.append((stamp, meta))
@@ -399,6 +433,18 @@ class ModelCore:
         if i + 1 == buf.shape[0] or (sched.blocks == 0 and i == self._first_block):
             self._compact()
         return True
+
+    def _profile_step(self, q1: float, q2: float, phi: float) -> list:
+        """One step of the zero-latency profile filter (issue 21: the same data, the
+        profile's gains): its outputs (:data:`.OUTPUTS`)."""
+        x0, y0 = self._x0i, self._y0i
+        prow = self._prow
+        prow[y0] = q1
+        prow[y0 + 1] = q2
+        prow[y0 + 2] = phi
+        sp = _dot(self._pm, prow)
+        prow[x0:y0] = sp[:y0 - x0]
+        return sp[y0 - x0:].tolist()
 
     def _finalise_lag(self) -> None:
         """The lag from the median of the run's first steps; the buffer is resized if needed
@@ -498,6 +544,14 @@ class ModelCore:
                 sv += g.friction_step(dt) @ self._held_friction(buf[j, x0:y0 - NY], a_dq, b_dq)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
+        if self._profile_on:      # the profile filter too, with its gains of the new levels
+            pg = self.schedule.profile_design(dts[-1], 'online')
+            prow = self._prow
+            prow[:] = 0.0
+            prow[x0:x0 + self._nx] = self._x0
+            for j, dt in enumerate(dts):
+                prow[y0:y0 + NY] = buf[j, y0:y0 + NY]
+                prow[x0:y0] = (pg.step_matrix(dt) @ prow)[:y0 - x0]
         self._t_retuned = 0.0
         self._m_dt = -1.0
 
@@ -532,10 +586,10 @@ class ModelCore:
         return np.array([-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS) + d1 * dq1,
                          -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS) + d2 * dq2])
 
-    def _emit(self, stamp: int, meta: tuple, o: list) -> None:
-        """The row of the linear outputs o (:data:`.OUTPUTS`; with friction, its direct part at
-        the estimate's own dq added) and the body heave (restarted with each run); appended
-        to ready."""
+    def _emit(self, stamp: int, meta: tuple, o: list, op: list | None = None) -> None:
+        """The row of the linear outputs o (:data:`.OUTPUTS`) and the body heave (restarted
+        with each run); appended to ready. With the profile filter's outputs ``op`` (zero
+        latency), the road is :meth:`_road`'s."""
         if self._ff is not None:
             f1, f2 = self._friction(o[3], o[4]).tolist()
             for j, d1, d2 in self._fd:
@@ -553,8 +607,48 @@ class ModelCore:
             self._rows.restart()
         row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
                              ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt)
+        if op is not None:
+            row = self._road(row, op, dt, v)
         self.last_row = row
         self.ready.append((stamp, row))
+
+    def _road(self, row: tuple, op: list, dt: float, v: float) -> tuple:
+        """``row`` with the road of the profile filter's outputs ``op`` (:data:`.OUTPUTS`):
+        ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body acceleration's band-limited
+        double integral at the profile's cutoff (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x
+        ``observer.profile_cutoff_wavelength``, the speed floored at that ratio times
+        :data:`.body_heave.SPEED_FLOOR_MPS`; restarted with each run); held at a stop (the
+        distance stands still, the model's speed ``v`` (m/s) below that floor)."""
+        ddzs = op[10]
+        if self._road_started:
+            av = v if v > 0.0 else -v
+            h = self._road_state = body_heave.step(
+                self._road_state, ddzs, dt, av if av > self._road_floor else self._road_floor,
+                self._wc_road)
+            zs = h[-2]
+        else:
+            zs = 0.0
+            self._road_state = body_heave.start(ddzs)
+            self._road_started = True
+            self._road_prev = (0.0, 0.0, math.nan)
+            self._road_off = (0.0, 0.0)
+        ssin = self._s * math.sin(op[2])
+        u1 = zs + ssin - op[0] + op[15]
+        u2 = zs - ssin - op[1] + op[16]
+        p1, p2, px = self._road_prev
+        x = row[Column.DISTANCE]
+        self._road_prev = (u1, u2, x)
+        o1, o2 = self._road_off
+        if x == px and -body_heave.SPEED_FLOOR_MPS < v < body_heave.SPEED_FLOOR_MPS:
+            # a stop: the distance stands still and the model's speed is below the body
+            # heave's floor (a dropped-out speed that the deflections contradict keeps the
+            # last trusted one, :mod:`.speed_check`); the road at one distance is one value:
+            # what the estimate does then (the body heave's drift, or the integral's memory
+            # of the rate before the stop) is no road
+            o1 += u1 - p1
+            o2 += u2 - p2
+            self._road_off = (o1, o2)
+        return row[:Column.U1] + (u1 - o1, u2 - o2) + row[Column.U2 + 1:]
 
     def finish(self) -> bool:
         """Finalize every pending sample of the run (end of data, or before a restart);

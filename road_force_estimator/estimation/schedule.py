@@ -22,9 +22,9 @@ from scipy import linalg
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.gains import NOISE_FLOOR_M, Gains, design
 from road_force_estimator.estimation.model import (
-    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3,
-    DEFAULT_DQ_STD_MPS, ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
-    friction_damping, road_diffusion, scheduled)
+    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, DEFAULT_DQ_STD_MPS,
+    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
+    friction_damping, profile_scheduled, road_diffusion, scheduled)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.riccati import van_loan
 
@@ -93,6 +93,7 @@ class GainSchedule:
         self.vehicle = vehicle
         self.observer = observer
         self._gains: dict[tuple, Gains] = {}
+        self._profile_gains: dict[tuple, Gains] = {}
         self._var_dq: dict[tuple, float] = {}
         self.reset()
 
@@ -111,6 +112,7 @@ class GainSchedule:
         self.all_fixed = all(self.noise_fixed) and self.roughness_fixed
         self.blocks = 0                    # statistics blocks seen
         self.design_count = 0              # gain designs (cache misses)
+        self.profile_design_count = 0      # ... of the profile filter
         self.design_failures = 0           # designs that fell back to the default levels
         self.history = (deque(maxlen=HISTORY_BLOCKS), deque(maxlen=HISTORY_BLOCKS),
                         deque(maxlen=ROUGHNESS_HISTORY_BLOCKS))
@@ -195,17 +197,35 @@ class GainSchedule:
     def design(self, dt: float, lag: int) -> Gains:
         """The gains of the current levels and the lag N (cached); a new design is made at
         the step dt (s) that asked for it, so that a regular stream uses its exact transition."""
+        g = self._design(dt, lag, '')
+        self.gains = g
+        self.stale = False
+        return g
+
+    def profile_design(self, dt: float, mode: str) -> Gains:
+        """The profile filter's gains (no lag) at the current levels (cached, as
+        :meth:`design`; the gains in use stay): :func:`.model.profile_scheduled` of ``mode``
+        (``'online'`` or ``'offline'``)."""
+        return self._design(dt, 0, mode)
+
+    def _design(self, dt: float, lag: int, mode: str) -> Gains:
+        """The gains of the current levels, the lag and the tuning ``mode`` ('' = the load's,
+        else the profile's), cached."""
         lv = self.levels
         key = (lv['dt'], lv['v'], lv['nq'], lv['nr'], lv['gd'], lag)
         if self.friction:
             key += (lv['dq'],)
-        g = self._gains.get(key)
+        if mode:
+            key += (mode,)
+        cache = self._profile_gains if mode else self._gains    # (apart: the load's cache
+        g = cache.get(key)                                      # misses stay as they were)
         if g is None:
-            if len(self._gains) >= MAX_GAINS:
-                self._gains.clear()
+            if len(cache) >= MAX_GAINS:
+                cache.clear()
             # the levels decide when to design; a design uses the estimates of that moment
             noise = max(self.noise_deflection_m, NOISE_FLOOR_M)
-            force_psd, corr, gd_factor, moment_psd = scheduled(noise, roll_moment=True)
+            force_psd, corr, gd_factor, moment_psd = (
+                profile_scheduled(noise, mode) if mode else scheduled(noise, roll_moment=True))
             if self.observer.road_correlation_length_m > 0.0:
                 corr = self.observer.road_correlation_length_m
             kwargs = dict(dt_s=dt, speed_mps=SPEED_LEVEL_RATIO ** lv['v'], lag=lag,
@@ -223,10 +243,11 @@ class GainSchedule:
                 g = design(self.vehicle, noise_deflection_m=DEFAULT_NOISE_M,
                            noise_roll_rad=DEFAULT_NOISE_RAD, road_gd_m3=DEFAULT_ROAD_GD_M3,
                            **kwargs)
-            self._gains[key] = g
-            self.design_count += 1
-        self.gains = g
-        self.stale = False
+            cache[key] = g
+            if mode:
+                self.profile_design_count += 1
+            else:
+                self.design_count += 1
         return g
 
     def _var_dq_per_diffusion(self) -> float:

@@ -4,7 +4,9 @@ inverse of the ill-conditioned a-priori covariance), with the noise and roughnes
 from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
 online observer (:mod:`.model_core`). Long evenly sampled runs go through in overlapping
 windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
-drive; the numbers are those of one piece to ~1e-11 of each field's RMS.
+drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
+from a second pass of the same smoother with the profile's tuning (:meth:`_Smoother.
+_profile`; not for windowed runs, whose road is the load filter's).
 """
 from __future__ import annotations
 
@@ -19,7 +21,8 @@ from road_force_estimator.estimation.acceptance import (
 from road_force_estimator.estimation.gains import ROW_X, Gains
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, NY, OUTPUTS, SPEED_FLOOR_MPS, State, continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
+    continuous_model, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -55,6 +58,9 @@ WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
+#: Degree of the polynomial taken off the profile's body heave over each run (see
+#: :meth:`_Smoother._profile`).
+PROFILE_DETREND_DEGREE = 3
 #: The outputs (:data:`.OUTPUTS`) the offline rows need, in this order.
 _SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
                  'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
@@ -319,6 +325,7 @@ class _Smoother:
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
         h = self.h
         dt = speed = 0.0
+        steps = None
         if m == 1:
             self._outputs((h @ x0)[:, None], out)
         else:
@@ -348,10 +355,65 @@ class _Smoother:
                 self._uniform(g, dt, y, x0, out)
             elif steps is not None:
                 self._bridged(g, dt, speed, t, steps, y, x0, out)
-                return
             else:
                 self._uneven(g, dts, y, x0, out)
-        self._heave(t, dt, speed, out)
+        if steps is None:
+            self._heave(t, dt, speed, out)
+        if m > 1:
+            self._profile(dt, speed, dts, uniform, steps, y, v, x0, out)
+
+    def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
+                 steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
+                 out: list) -> None:
+        """The road columns of a run from the profile smoother (issue 21): the same model and
+        data through the smoother with the profile's tuning (:meth:`.GainSchedule.
+        profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
+        with the body heave's zero-phase integral at the profile's cutoff
+        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``, less its
+        cubic over the run, :data:`PROFILE_DETREND_DEGREE`); where
+        the model's speed ``v`` (m/s) is 0 the road is held. Only ``U1``, ``U2`` of ``out``
+        change; arguments as :meth:`run` made them."""
+        g = self.schedule.profile_design(dt, 'offline')
+        pos = None
+        if steps is not None:               # completed on the grid, as :meth:`_bridged`
+            pos = np.concatenate([[0], np.cumsum(steps)])
+            grid = np.arange(int(pos[-1]) + 1)
+            y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
+        cols = field_columns(y.shape[0])[1]
+        if uniform or steps is not None:
+            self._uniform(g, dt, y, x0, cols)
+        else:
+            self._uneven(g, dts, y, x0, cols)
+        zs = 0.0
+        if y.shape[0] >= 8:
+            # one cutoff in time for the run: the profile's where the speed is steady; where
+            # it is not (a stop), the body heave's, as the long one lets the drift of the slow
+            # stretches into the profile (C20-stop: 164 % against 55 %; 62.6 % before)
+            steady = float(np.percentile(np.abs(v), 5.0)) >= 0.5 * speed
+            ratio = PROFILE_CUTOFF_RATIO if steady else 1.0
+            w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
+                   / (ratio * self.observer.profile_cutoff_wavelength_m))
+            zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
+            if ratio > 1.0:
+                # a cutoff longer than the run leaves the filter's edge transients and the
+                # double integral's wander as a smooth curve over the whole run (metres on a
+                # 120 m run at 10 km): the least-squares cubic of the run goes (waves of the
+                # run's length, which no band-passed figure sees)
+                tt = np.linspace(-1.0, 1.0, zs.size)
+                zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
+        # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
+        # contradict keeps the last trusted speed, :mod:`.speed_check`)
+        standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
+        for j in (Column.U1, Column.U2):
+            u = cols[j] + zs
+            u = u if pos is None else u[pos]
+            if standing.any():
+                # standing, the road under the tires does not change: what the estimate does
+                # then (the body heave's drift, integrated in time) is no road
+                du = np.diff(u)
+                du[standing] = 0.0
+                u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
+            out[j][:] = u
 
     def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
                  out: list, window: int, overlap: int) -> None:
