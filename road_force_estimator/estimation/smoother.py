@@ -6,7 +6,7 @@ online observer (:mod:`.model_core`). Long evenly sampled runs go through in ove
 windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
 drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
 from a second pass of the same smoother with the profile's tuning (:meth:`_Smoother.
-_profile`; not for windowed runs, whose road is the load filter's).
+_profile`, over the whole run: windowed runs too).
 """
 from __future__ import annotations
 
@@ -350,6 +350,8 @@ class _Smoother:
             longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
             if uniform and m > longer:
                 self._windows(g, dt, speed, t, y, out, window, overlap)
+                # the road: the profile pass over the whole run, as in one piece
+                self._profile(dt, speed, dts, uniform, steps, y, v, x0, out)
                 return
             if uniform:
                 self._uniform(g, dt, y, x0, out)
