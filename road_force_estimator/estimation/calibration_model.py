@@ -19,7 +19,14 @@ them, add one row per side or channel to :data:`SLOTS`.
 Simulation: the linear plant, started at its equilibrium on the road under the first sample
 (as :mod:`road_force_estimator.core.plant` starts), is integrated exactly in modal coordinates
 with the road linear in time between samples (first-order hold), one
-:func:`scipy.signal.lfilter` per mode.
+:func:`scipy.signal.lfilter` per mode. The fit is that of the simulator's nonlinear plant
+(:func:`road_force_estimator.core.plant.simulate`: the roll kinematics ``sin(phi)``,
+``cos(phi)``, the gravity moment ``M g h sin(phi)``, the tire's lift-off, the road linearly
+interpolated in distance under the RK4 stages): :func:`plant_defect` is what that plant's
+outputs differ by from the linear simulation on the same road, added to the linear model (a
+defect correction, updated as the parameters move). On a class C road with 10 mrad of roll the
+defect is 2-4 um and 4 urad RMS, below 5 Hz: a bias of many standard errors on a 60 s drive
+if left out.
 """
 from __future__ import annotations
 
@@ -31,10 +38,12 @@ from scipy import signal
 
 # The core API the calibration uses (one place, for the lead to re-point).
 from road_force_estimator.core.parameters import SPECS, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.core.vehicle_model import VehicleModel
 
 __all__ = ['Slot', 'SLOTS', 'CHANNELS', 'vehicle_with', 'LinearPlant', 'linear_plant',
-           'simulate_outputs', 'slot_value', 'free_response']
+           'simulate_outputs', 'slot_value', 'free_response', 'plant_outputs', 'plant_defect']
 
 #: Measured channels, in order: deflections left, right (m), roll (rad).
 CHANNELS = ('left_suspension', 'right_suspension', 'roll')
@@ -214,7 +223,6 @@ def model_outputs(vehicle: VehicleParameters, road_m: np.ndarray, road_rate_mps:
     return simulate_outputs(linear_plant(vehicle), road_m, road_rate_mps, dt_s)
 
 
-
 def free_response(plant: LinearPlant, t_s: np.ndarray) -> np.ndarray:
     """The outputs' response to every initial state, as real columns.
 
@@ -239,3 +247,50 @@ def free_response(plant: LinearPlant, t_s: np.ndarray) -> np.ndarray:
         if lam[j].imag > 0.0:
             cols.append(z.imag)
     return np.stack(cols, axis=2)
+
+
+
+def plant_outputs(vehicle: VehicleParameters, road: RoadProfile, start_m: float,
+                  speed_mps: np.ndarray, dt_s: float) -> np.ndarray:
+    """The simulator's nonlinear plant (:func:`road_force_estimator.core.plant.simulate`) over
+    ``road`` (already enveloped), from its equilibrium at ``start_m`` (m).
+
+    Parameters
+    ----------
+    speed_mps : ndarray (n,)
+        Speed at the samples (m/s, >= 0; linear between them, as the plant's speed profile).
+    dt_s : float
+        Sample period (s).
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        (q_1, q_2, phi) at the samples (m, m, rad); rows past the end of the road are NaN.
+    """
+    n = int(speed_mps.size)
+    v = np.asarray(speed_mps, dtype=float)
+    constant = bool(np.all(v == v[0]))
+    profile = None if constant else (np.arange(n) * dt_s, np.maximum(v, 0.0))
+    traj = simulate(vehicle, road, speed_mps=float(max(np.mean(v), 1e-3)), rate_hz=1.0 / dt_s,
+                    duration_s=(n - 1) * dt_s, start_m=start_m, speed_profile=profile)
+    out = np.full((n, 3), np.nan)
+    m = min(n, len(traj))
+    out[:m, :2] = traj.q_m[:m]
+    out[:m, 2] = traj.roll_rad[:m]
+    return out
+
+
+def plant_defect(vehicle: VehicleParameters, road: RoadProfile, start_m: float,
+                 speed_mps: np.ndarray, dt_s: float, road_m: np.ndarray,
+                 road_rate_mps: np.ndarray, every: int) -> np.ndarray:
+    """What the nonlinear plant's outputs differ by from the linear simulation (n, 3).
+
+    Both start at the same equilibrium; the linear one on ``road_m``, ``road_rate_mps`` (the
+    fit's road input, ``every`` points per sample, :func:`simulate_outputs`), the plant on
+    ``road`` from ``start_m`` at ``speed_mps`` (:func:`plant_outputs`). Zero past the road's
+    end (never reached inside a fit's overlap).
+    """
+    plant = plant_outputs(vehicle, road, start_m, speed_mps, dt_s)
+    linear = simulate_outputs(linear_plant(vehicle), road_m, road_rate_mps, dt_s / every,
+                              every=every)
+    return np.nan_to_num(plant - linear, nan=0.0)

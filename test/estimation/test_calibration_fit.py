@@ -1,10 +1,10 @@
-"""The calibration's drive grid, survey check and interval covariance."""
+"""The calibration's drive grid and survey check."""
 import numpy as np
 import pytest
 
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.estimation.calibration_fit import (
-    CalibrationError, check_survey, drive_grid, score_covariance)
+    CalibrationError, check_survey, drive_grid)
 
 
 def test_grid_keeps_missing_rows_and_integrates_the_speed():
@@ -30,14 +30,3 @@ def test_survey_gap_is_named():
     with pytest.raises(CalibrationError, match=r'gap of 5\.\d+ m at 49\.90 m'):
         check_survey(RoadProfile(x, np.zeros(x.size)))
     check_survey(RoadProfile(np.arange(0.0, 10.0, 0.1), np.zeros(100)))
-
-
-def test_long_run_covariance_is_the_bartlett_sum():
-    g = np.random.default_rng(2).standard_normal((300, 3))
-    lags = 4
-    want = g.T @ g
-    for k in range(1, lags + 1):
-        c = g[:-k].T @ g[k:]
-        want += (1.0 - k / (lags + 1.0)) * (c + c.T)
-    assert np.allclose(score_covariance(g, lags), want)
-    assert np.allclose(score_covariance(g, 0), g.T @ g)
