@@ -239,6 +239,8 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
     problem = FitProblem(setup['grid'], setup['road'], nominal, setup['alignment'], free, fixed,
                        setup['k0'], setup['k1'], setup['warm'])
     theta = start_vector(problem, previous)
+    if problem.plant_only:
+        problem.update_defect(theta)        # their Jacobian columns come from the plant
     dead = structural(problem, theta)
     if dead:
         auto |= dead

@@ -160,6 +160,10 @@ class FitProblem:
         step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
         self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
         self.defect = np.zeros((k1 - k0, 3))
+        # Plant-only slots: the defect's derivative (n, 3, k) at their log values ``defect_at``.
+        self.plant_only = [s for s in free if s.plant_only]
+        self.defect_jac = np.zeros((k1 - k0, 3, len(self.plant_only)))
+        self.defect_at = np.zeros(len(self.plant_only))
         self.plant_road = RoadProfile(road.distance_m, road.elevation_m - self.datum_m)
 
     def unpack(self, theta: np.ndarray) -> tuple[dict, tuple[float, float]]:
@@ -213,6 +217,9 @@ class FitProblem:
         w2 = 1.0 / self.sigma ** 2
         nb = basis.shape[2]
         forced = forced + self.defect
+        if self.plant_only:
+            moved = [math.log(values[s] / self.nominal_values[s]) for s in self.plant_only]
+            forced = forced + self.defect_jac @ (np.array(moved) - self.defect_at)
         target = (self.full_measured - forced) / self.sigma            # NaN where not used
         target[~self.used] = 0.0
         normal = np.zeros((nb + 3, nb + 3))
@@ -232,16 +239,28 @@ class FitProblem:
         return full, coef, normal
 
     def update_defect(self, theta: np.ndarray) -> None:
-        """The plant's defect (:func:`~.calibration_model.plant_defect`) at ``theta``."""
+        """The plant's defect (:func:`~.calibration_model.plant_defect`) at ``theta``, and for
+        each plant-only slot its derivative (forward difference of 1e-4 in log value: one more
+        plant run each), with which the defect is extrapolated linearly in those slots."""
         values, fine = self.unpack(theta)
         a = self.alignment
         scale = a.scale + fine[1]
         start = a.offset_m + fine[0] + scale * float(self.grid.distance_m[self.k0])
         u, du = self.road_input(fine)
         self._road, self._road_key = (u, du), fine
-        self.defect = plant_defect(vehicle_with(self.nominal, values), self.plant_road, start,
-                                   scale * self.grid.speed_mps[self.k0:self.k1],
-                                   self.grid.dt_s, u, du, self.substeps)
+
+        def defect(vals):
+            return plant_defect(vehicle_with(self.nominal, vals), self.plant_road, start,
+                                scale * self.grid.speed_mps[self.k0:self.k1], self.grid.dt_s,
+                                u, du, self.substeps)
+
+        self.defect = defect(values)
+        step = 1e-4
+        for j, slot in enumerate(self.plant_only):
+            self.defect_at[j] = math.log(values[slot] / self.nominal_values[slot])
+            bumped = dict(values)
+            bumped[slot] = values[slot] * math.exp(step)
+            self.defect_jac[:, :, j] = (defect(bumped) - self.defect) / step
 
     def outputs(self, theta: np.ndarray) -> np.ndarray:
         """Model outputs (best start and offsets) over the whole overlap, (k1 - k0, 3)."""

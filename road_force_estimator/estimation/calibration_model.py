@@ -12,9 +12,13 @@ damping rates, forces) all scale with the one force factor the kinematics cannot
 "Calibration"); ``'geometry'`` values (the CG height) and ``'time'`` values (a sensor time
 constant) do not; ``'offset'`` values are the sensor offsets (m, m, rad) and ``'alignment'``
 the fine start offset (m) and odometer scale refined by the fit. Positive physical values are
-fitted as ``log(value / nominal)``. To free ``vehicle.leaf_spring_friction`` (kind
-``'scale'``) or ``vehicle.sensor_time_constant`` (kind ``'time'``) once the core model has
-them, add one row per side or channel to :data:`SLOTS`.
+fitted as ``log(value / nominal)``. ``vehicle.leaf_spring_friction`` (kind ``'scale'``) and
+``vehicle.sensor_time_constant`` (kind ``'time'``) are in :data:`OPTIONAL`: they join
+:data:`SLOTS` (one row per side) as soon as :data:`road_force_estimator.core.parameters.SPECS`
+has them, as ``plant_only`` slots: the linear model does not see them, the plant does (its
+defect's derivative is their Jacobian column, :meth:`.calibration_fit.FitProblem.update_defect`),
+so freeing them needs the plant's support only. A nominal value of zero (no friction, no lag)
+is not fitted (log scale): give a positive nominal to fit one.
 
 Simulation: the linear plant, started at its equilibrium on the road under the first sample
 (as :mod:`road_force_estimator.core.plant` starts), is integrated exactly in modal coordinates
@@ -42,8 +46,9 @@ from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.core.vehicle_model import VehicleModel
 
-__all__ = ['Slot', 'SLOTS', 'CHANNELS', 'vehicle_with', 'LinearPlant', 'linear_plant',
-           'simulate_outputs', 'slot_value', 'free_response', 'plant_outputs', 'plant_defect']
+__all__ = ['Slot', 'SLOTS', 'OPTIONAL', 'optional_slots', 'CHANNELS', 'vehicle_with',
+           'LinearPlant', 'linear_plant', 'simulate_outputs', 'slot_value', 'free_response',
+           'plant_outputs', 'plant_defect']
 
 #: Measured channels, in order: deflections left, right (m), roll (rad).
 CHANNELS = ('left_suspension', 'right_suspension', 'roll')
@@ -56,13 +61,15 @@ class Slot:
     ``name`` is the parameter (``vehicle.*``) or a pseudo-name (``sensor.offset.*``,
     ``alignment.*``); ``index`` 0/1 picks a side of a pair (None for a scalar); ``kind`` is
     ``'scale'``, ``'geometry'``, ``'time'``, ``'offset'`` or ``'alignment'``; ``unit`` for
-    reports.
+    reports; ``plant_only``: the linear model does not depend on it (its effect, and its
+    Jacobian column, come from the plant's defect).
     """
 
     name: str
     index: int | None
     kind: str
     unit: str
+    plant_only: bool = False
 
     @property
     def label(self) -> str:
@@ -81,8 +88,27 @@ def _pair(name: str, kind: str, unit: str) -> tuple[Slot, Slot]:
     return Slot(name, 0, kind, unit), Slot(name, 1, kind, unit)
 
 
-#: Every number the fit can free. Future rows: ``*_pair('vehicle.leaf_spring_friction',
-#: 'scale', 'N')`` and ``*_pair('vehicle.sensor_time_constant', 'time', 's')``.
+#: Parameters of the plant the linear model lacks: (name, kind, unit); fitted once
+#: core.parameters' table has them (``double`` one slot, ``double_pair`` one per side).
+OPTIONAL: tuple[tuple[str, str, str], ...] = (
+    ('vehicle.leaf_spring_friction', 'scale', 'N'),
+    ('vehicle.sensor_time_constant', 'time', 's'),
+)
+
+
+def optional_slots(specs=SPECS) -> tuple[Slot, ...]:
+    """The :data:`OPTIONAL` parameters that ``specs`` has, as ``plant_only`` slots."""
+    out: list[Slot] = []
+    for name, kind, unit in OPTIONAL:
+        spec = specs.get(name)
+        if spec is None:
+            continue
+        indices = (0, 1) if spec.kind == 'double_pair' else (None,)
+        out += [Slot(name, i, kind, unit, plant_only=True) for i in indices]
+    return tuple(out)
+
+
+#: Every number the fit can free.
 SLOTS: tuple[Slot, ...] = (
     Slot('vehicle.sprung_mass', None, 'scale', 'kg'),
     Slot('vehicle.roll_inertia', None, 'scale', 'kg m^2'),
@@ -91,6 +117,7 @@ SLOTS: tuple[Slot, ...] = (
     *_pair('vehicle.suspension_stiffness', 'scale', 'N/m'),
     *_pair('vehicle.suspension_damping', 'scale', 'N s/m'),
     *_pair('vehicle.tire_stiffness', 'scale', 'N/m'),
+    *optional_slots(),
     Slot('sensor.offset.left_suspension', None, 'offset', 'm'),
     Slot('sensor.offset.right_suspension', None, 'offset', 'm'),
     Slot('sensor.offset.roll', None, 'offset', 'rad'),
