@@ -11,7 +11,9 @@ parameters, and returns a :class:`CalibrationResult`:
    (:func:`~road_force_estimator.estimation.estimator.estimate_batch`, nominal parameters)
    against the survey's: start offset and odometer scale.
 3. Identification: an output-error fit (:func:`scipy.optimize.least_squares`, time domain) of
-   the linear plant of :mod:`.calibration_model` driven by the aligned survey under the tire
+   the simulator's plant (:mod:`.calibration_model`: the linear model plus the nonlinear
+   plant's defect, updated between solves until the parameters stop moving; first the linear
+   model alone on the correlation's alignment) driven by the aligned survey under the tire
    envelope, to the measured deflections and roll; free: the vehicle parameters of
    :data:`~.calibration_model.SLOTS` not held, the sensor offsets, and a fine alignment. Each
    channel is weighted by its noise level (a first pass with the signal RMS, then the
