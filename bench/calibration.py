@@ -1,8 +1,8 @@
 """Issue 20's benchmark: calibrate a truck unlike the defaults from one drive over a surveyed
 road, validate it on a drive over a road the calibration never saw.
 
-    python -m bench.calibration [--repeats N] [--rate HZ] [--quick] [--no-offline]
-                                [--frequency-domain]
+    python -m bench.calibration [--repeats N] [--jobs J] [--rate HZ] [--duration S] [--quick]
+                                [--no-offline] [--frequency-domain]
 
 Per seeded repeat: a truck with every parameter but the track width off the defaults by
 10-40 % (random signs; the track width is measured, held), driven at 20 m/s with the
@@ -19,11 +19,19 @@ drive, for the comparison of the two identifications (accuracy and time).
 
 Targets (issue 20): every freed parameter within 5 % (masses, stiffnesses, tire rates within
 3 %), inside its 95 % interval on >= 90 % of repeats; validation errors with the calibrated
-file <= 1.1 x those with the true file.
+file <= 1.1 x those with the true file; a 60 s drive at 1 kHz calibrated in under 2 minutes.
+The summary gives, per road and parameter, the worst error and the coverage over the repeats
+(default 10; ``--jobs`` runs repeats in parallel processes), the pooled coverage with its
+Wilson 95 % interval, the validation ratios per mode (worst over repeats, load and profile)
+with the nominal file's beside them, the calibration times, and one PASS / FAIL line per
+target. Note on the coverage target: with exactly honest 95 % intervals a parameter is inside
+on at least 9 of 10 repeats with a probability of 0.91 only, so over 22 parameter rows some
+row at 8/10 is expected; the pooled coverage is the sharper check.
 """
 from __future__ import annotations
 
 import argparse
+from concurrent.futures import ProcessPoolExecutor
 import math
 from pathlib import Path
 import sys
@@ -157,29 +165,37 @@ def _errors(values: dict, truck) -> dict:
     return {s.label: 100.0 * (values[s] / slot_value(truck, s) - 1.0) for s in PHYSICAL}
 
 
+MODES = ('zero latency', '10 ms', 'offline')
+#: Within 3 % (the issue): masses, inertia, stiffnesses and tire rates; 5 % for the others.
+TIGHT = ('vehicle.sprung_mass', 'vehicle.roll_inertia', 'vehicle.unsprung_mass',
+         'vehicle.suspension_stiffness', 'vehicle.tire_stiffness')
+
+
 def one_case(name, road, truck, seed, args, validation):
-    """Calibrate from one drive over ``road``; the parameter rows and the validation errors."""
+    """Calibrate from one drive over ``road``; the parameter rows and the validation errors
+    of the calibrated file (``validation``: the drive and the modes)."""
     rng = np.random.default_rng(seed + 1000)
     start = road.start_m + ENVELOPE + rng.uniform(20.0, 45.0)
     length = road.end_m - start - 2.0
     duration = min(args.duration, length / SPEED - 0.5)
     traj, stamps, q, roll = drive(truck, road, start_m=start, duration_s=duration,
                                   rate_hz=args.rate, seed=seed)
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.process_time()
     result = calibrate(stamps, q, roll, np.full(stamps.size, SPEED / ODOMETER), road,
                        VehicleParameters(),
                        options=CalibrationOptions(static_load_n=truck.static_load_n))
-    seconds = time.perf_counter() - clock
+    seconds, cpu = time.perf_counter() - clock, time.process_time() - cpu
     rows = []
     for e in result.parameters:
         if e.slot.physical:
             truth = slot_value(truck, e.slot)
             rows.append((e.slot.label, e.status, 100.0 * (e.value / truth - 1.0),
-                         e.low <= truth <= e.high))
-    out = {'name': name, 'seconds': seconds, 'duration_s': duration, 'rows': rows,
+                         e.low <= truth <= e.high, 100.0 * e.std / e.value))
+    out = {'name': name, 'seconds': seconds, 'cpu_s': cpu, 'duration_s': duration, 'rows': rows,
            'alignment': (result.alignment.offset_m + result.fine_alignment[0] - start,
                          result.alignment.scale + result.fine_alignment[1] - ODOMETER,
-                         result.alignment.correlation)}
+                         result.alignment.correlation),
+           'window_s': result.covariance_window_s, 'noise': result.noise.tolist()}
     if args.frequency_domain:
         try:
             values, fsec = frequency_fit(result, stamps, q, roll, road, VehicleParameters(),
@@ -187,85 +203,159 @@ def one_case(name, road, truck, seed, args, validation):
             out['frequency'] = (_errors(values, truck), fsec)
         except (ValueError, np.linalg.LinAlgError) as exc:
             print(f'(frequency-domain fit failed: {exc})')
-    modes = ['zero latency', '10 ms'] + ([] if args.no_offline else ['offline'])
-    vt, vs, vq, vr = validation
-    out['validation'] = {label: _validate(v, vt, vs, vq, vr, truck.static_load_n, modes)
-                         for label, v in
-                         (('calibrated', result.vehicle), ('true', truck),
-                          ('nominal', VehicleParameters()))}
+    out['validation'] = {'calibrated': _validate(result.vehicle, *validation, truck.static_load_n,
+                                                 args.modes)}
     return out
+
+
+def one_repeat(r: int, args) -> list[dict]:
+    """Repeat ``r``: a truck, its validation drive, a calibration over each road."""
+    roads = [('ISO 8608 C', road_from_source('iso8608:C:seed=11', length_m=1400.0)),
+             ('profile_1.txt', road_from_source(profile_1()))]
+    third = road_from_source('iso8608:C:seed=12', length_m=600.0)
+    truck = random_truck(100 + r)
+    traj, stamps, q, roll = drive(truck, third, start_m=third.start_m + ENVELOPE,
+                                  duration_s=20.0, rate_hz=args.rate, seed=500 + r)
+    validation = (traj, stamps, q, roll)
+    reference = {label: _validate(v, *validation, truck.static_load_n, args.modes)
+                 for label, v in (('true', truck), ('nominal', VehicleParameters()))}
+    cases = []
+    for k, (name, road) in enumerate(roads):
+        out = one_case(name, road, truck, 10 * r + k, args, validation)
+        out['validation'].update(reference)
+        out['repeat'] = r
+        cases.append(out)
+    return cases
 
 
 def _print_case(out):
     off, scale, rho = out['alignment']
-    print(f"\n### {out['name']}: {out['duration_s']:.0f} s drive calibrated in "
-          f"{out['seconds']:.1f} s; alignment error {off * 100:+.1f} cm, odometer "
-          f"{scale:+.1e}, correlation {rho:.2f}")
+    print(f"\n### repeat {out['repeat']}, {out['name']}: {out['duration_s']:.0f} s drive "
+          f"calibrated in {out['seconds']:.1f} s ({out['cpu_s']:.1f} s CPU); alignment error "
+          f"{off * 100:+.1f} cm, odometer {scale:+.1e}, correlation {rho:.2f}; residual noise "
+          + ', '.join(f'{n:.2e}' for n in out['noise'])
+          + f"; covariance window {out['window_s'] * 1e3:.0f} ms")
     freq = out.get('frequency')
-    print('| parameter | status | error % | in 95 % CI |' + (' freq. fit error % |' if freq
-                                                           else ''))
-    print('|---|---|---|---|' + ('---|' if freq else ''))
-    for label, status, err, inside in out['rows']:
+    print('| parameter | status | error % | std % | in 95 % CI |'
+          + (' freq. fit error % |' if freq else ''))
+    print('|---|---|---|---|---|' + ('---|' if freq else ''))
+    for label, status, err, inside, std in out['rows']:
         extra = f' {freq[0][label]:+.3f} |' if freq else ''
-        print(f'| {label} | {status} | {err:+.3f} | {"yes" if inside else "NO"} |{extra}')
+        print(f'| {label} | {status} | {err:+.4f} | {std:.4f} | {"yes" if inside else "NO"} |'
+              f'{extra}')
     if freq:
         print(f'(frequency-domain fit: {freq[1]:.1f} s)')
-    print('| validation | ' + ' | '.join(f'{m} load % / profile %'
-                                         for m in out['validation']['true']) + ' |')
-    print('|---|' + '---|' * len(out['validation']['true']))
-    for label, modes in out['validation'].items():
-        print(f'| {label} | ' + ' | '.join(f'{a:.2f} / {b:.2f}' for a, b in modes.values())
+    modes = list(out['validation']['true'])
+    print('| validation | ' + ' | '.join(f'{m} load % / profile %' for m in modes) + ' |')
+    print('|---|' + '---|' * len(modes))
+    for label, errs in out['validation'].items():
+        print(f'| {label} | ' + ' | '.join(f'{a:.2f} / {b:.2f}' for a, b in errs.values())
               + ' |')
 
 
-def _summary(cases):
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a proportion k / n."""
+    if n == 0:
+        return math.nan, math.nan
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def _summary_road(mine: list[dict]) -> dict:
+    """Worst errors, coverage and validation ratios of one road's cases; the target checks."""
+    n = len(mine)
+    worst, inside = {}, {}
+    for c in mine:
+        for label, status, err, ok, _ in c['rows']:
+            if status in ('fitted', 'scale'):
+                worst[label] = max(worst.get(label, 0.0), abs(err))
+                inside[label] = inside.get(label, 0) + int(ok)
+    print(f'\n{mine[0]["name"]}: worst |error| % and coverage of the 95 % CI over {n} repeats')
+    print('| parameter | worst error % | target % | in 95 % CI |')
+    print('|---|---|---|---|')
+    ok_err = ok_cov = True
+    for label in worst:
+        limit = 3.0 if label.split('[')[0] in TIGHT else 5.0
+        ok_err &= worst[label] <= limit
+        ok_cov &= inside[label] >= 0.9 * n
+        print(f'| {label} | {worst[label]:.4f} | {limit:g} | {inside[label]}/{n} |')
+    k, total = sum(inside.values()), n * len(inside)
+    lo, hi = wilson(k, total)
+    print(f'pooled coverage {k}/{total} = {100 * k / max(total, 1):.1f} % (Wilson 95 %: '
+          f'{100 * lo:.1f}-{100 * hi:.1f} %)')
+    ratios_ok = True
+    print('| validation, worst over repeats | ' + ' | '.join(
+        f'{m}: calibrated / true, load / profile | nominal / true' for m in
+        mine[0]['validation']['true']) + ' |')
+    print('|---|' + '---|---|' * len(mine[0]['validation']['true']))
+    cells = []
+    for mode in mine[0]['validation']['true']:
+        ratio = [[c['validation'][k][mode][i] / c['validation']['true'][mode][i]
+                  for c in mine] for k in ('calibrated', 'nominal') for i in (0, 1)]
+        ratios_ok &= max(ratio[0]) <= 1.1 and max(ratio[1]) <= 1.1
+        cells.append(f'{max(ratio[0]):.3f} / {max(ratio[1]):.3f} | '
+                     f'{max(ratio[2]):.2f} / {max(ratio[3]):.2f}')
+    print('| ratio | ' + ' | '.join(cells) + ' |')
+    return {'errors': ok_err, 'coverage': ok_cov, 'validation': ratios_ok,
+            'pooled': (k, total)}
+
+
+def _summary(cases: list[dict], rate_hz: float) -> None:
     print('\n## Summary over repeats')
-    for name in sorted({c['name'] for c in cases}):
+    checks = {name: _summary_road([c for c in cases if c['name'] == name])
+              for name in dict.fromkeys(c['name'] for c in cases)}
+    timed = [c['seconds'] for c in cases if c['duration_s'] >= 59.0]
+    for name in checks:
         mine = [c for c in cases if c['name'] == name]
-        worst = {}
-        inside = {}
-        for c in mine:
-            for label, status, err, ok in c['rows']:
-                if status in ('fitted', 'scale'):
-                    worst[label] = max(worst.get(label, 0.0), abs(err))
-                    inside[label] = inside.get(label, 0) + int(ok)
-        print(f'\n{name}: worst |error| % and coverage of the 95 % CI over {len(mine)} '
-              'repeats')
-        for label in worst:
-            print(f'  {label:40s} {worst[label]:7.3f} %  {inside[label]}/{len(mine)}')
-        for mode in mine[0]['validation']['true']:
-            ratio = [c['validation']['calibrated'][mode][0] / c['validation']['true'][mode][0]
-                     for c in mine]
-            print(f'  validation {mode}: load error calibrated / true = '
-                  + ', '.join(f'{r:.3f}' for r in ratio))
+        print(f"\ncalibration time, {name} ({mine[0]['duration_s']:.0f} s drive): median "
+              f"{np.median([c['seconds'] for c in mine]):.1f} s, max "
+              f"{max(c['seconds'] for c in mine):.1f} s wall; median "
+              f"{np.median([c['cpu_s'] for c in mine]):.1f} s CPU (this process)")
+    print('\n## Targets')
+    for name, check in checks.items():
+        for key, text in (('errors', 'every freed parameter within 5 % (masses, stiffnesses, '
+                                      'tire rates 3 %)'),
+                          ('coverage', 'each inside its 95 % interval on >= 90 % of repeats'),
+                          ('validation', 'validation errors <= 1.1 x those with the true '
+                                         'parameters in every mode')):
+            print(f'{"PASS" if check[key] else "FAIL"}  {name}: {text}')
+    if timed:
+        print(f'{"PASS" if max(timed) < 120.0 else "FAIL"}  a 60 s drive at {rate_hz:g} Hz '
+              f'calibrates in < 2 min: max {max(timed):.1f} s over {len(timed)}')
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog='bench.calibration', description=__doc__.split('\n')[0])
-    p.add_argument('--repeats', type=int, default=3)
+    p.add_argument('--repeats', type=int, default=10)
+    p.add_argument('--jobs', type=int, default=1, help='repeats run in parallel processes')
     p.add_argument('--rate', type=float, default=1000.0)
     p.add_argument('--duration', type=float, default=60.0, help='longest calibration drive')
-    p.add_argument('--quick', action='store_true', help='200 Hz, 20 s, one repeat')
+    p.add_argument('--quick', action='store_true', help='200 Hz, 20 s, two repeats')
     p.add_argument('--no-offline', action='store_true')
     p.add_argument('--frequency-domain', action='store_true')
     args = p.parse_args(argv)
     if args.quick:
-        args.rate, args.duration, args.repeats = 200.0, 20.0, 1
-    roads = [('ISO 8608 C', road_from_source('iso8608:C:seed=11', length_m=1400.0)),
-             ('profile_1.txt', road_from_source(profile_1()))]
-    third = road_from_source('iso8608:C:seed=12', length_m=600.0)
+        args.rate, args.duration, args.repeats = 200.0, 20.0, 2
+    args.modes = [m for m in MODES if not (args.no_offline and m == 'offline')]
+    print(f'bench.calibration: {args.repeats} repeats at {args.rate:g} Hz, drives up to '
+          f'{args.duration:g} s')
     cases = []
-    for r in range(args.repeats):
-        truck = random_truck(100 + r)
-        traj, stamps, q, roll = drive(truck, third, start_m=third.start_m + ENVELOPE,
-                                      duration_s=20.0, rate_hz=args.rate, seed=500 + r)
-        validation = (traj, stamps, q, roll)
-        for name, road in roads:
-            out = one_case(name, road, truck, 10 * r + len(cases), args, validation)
-            _print_case(out)
-            cases.append(out)
+    if args.jobs > 1:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            for found in pool.map(one_repeat, range(args.repeats), [args] * args.repeats):
+                for out in found:
+                    _print_case(out)
+                cases += found
+                sys.stdout.flush()
+    else:
+        for r in range(args.repeats):
+            for out in one_repeat(r, args):
+                _print_case(out)
+                cases.append(out)
             sys.stdout.flush()
-    _summary(cases)
+    _summary(cases, args.rate)
     return 0
 
 

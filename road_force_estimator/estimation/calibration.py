@@ -11,7 +11,9 @@ parameters, and returns a :class:`CalibrationResult`:
    (:func:`~road_force_estimator.estimation.estimator.estimate_batch`, nominal parameters)
    against the survey's: start offset and odometer scale.
 3. Identification: an output-error fit (:func:`scipy.optimize.least_squares`, time domain) of
-   the linear plant of :mod:`.calibration_model` driven by the aligned survey under the tire
+   the simulator's plant (:mod:`.calibration_model`: the linear model plus the nonlinear
+   plant's defect, updated between solves until the parameters stop moving; first the linear
+   model alone on the correlation's alignment) driven by the aligned survey under the tire
    envelope, to the measured deflections and roll; free: the vehicle parameters of
    :data:`~.calibration_model.SLOTS` not held, the sensor offsets, and a fine alignment. Each
    channel is weighted by its noise level (a first pass with the signal RMS, then the
@@ -25,9 +27,10 @@ parameters, and returns a :class:`CalibrationResult`:
    stiffnesses and damping rates are known only up to that factor; their ratios are fitted).
 5. Parameters the data cannot tell apart (a rank-deficient Jacobian, or a 95 % interval wider
    than +-50 %) are held at their nominal values, named, and the fit repeated.
-6. 95 % intervals from the sandwich covariance with the Newey-West long-run covariance of the
-   scores over :data:`HAC_WINDOW_S` (white residuals: the Gauss-Newton covariance; a model
-   error, coloured, widens them).
+6. 95 % intervals from the sandwich covariance with the residuals' own auto- and
+   cross-covariance (:mod:`.calibration_covariance`: Bartlett lag window by Politis' rule, at
+   most :data:`HAC_WINDOW_S`): white residuals give the Gauss-Newton covariance; a model
+   error, coloured, widens them.
 """
 from __future__ import annotations
 
@@ -47,8 +50,10 @@ from road_force_estimator.estimation.calibration_alignment import (
     Alignment, AlignmentError, align)
 from road_force_estimator.estimation.calibration_fit import (
     FINE_OFFSET_M, FINE_SCALE, MIN_DISTANCE_M, MIN_DURATION_S, CalibrationError, DriveGrid,
-    FitProblem, check_survey, covariance, drive_grid, effective_fraction, solve_without,
-    start_vector, solve, structural, too_short)
+    FitProblem, check_survey, drive_grid, solve_without, solve_with_plant, start_vector,
+    structural, too_short)
+from road_force_estimator.estimation.calibration_covariance import (
+    covariance, effective_fraction)
 from road_force_estimator.estimation.calibration_model import (
     CHANNELS, SLOTS, Slot, slot_value, vehicle_with)
 
@@ -59,7 +64,7 @@ __all__ = ['CalibrationError', 'AlignmentError', 'CalibrationOptions', 'Paramete
 #: A 95 % interval wider than this relative half-width: not identified (held).
 MAX_RELATIVE_HALF_WIDTH = 0.5
 Z95 = 1.959963984540054
-#: Lag window of the intervals' long-run score covariance (s): the slowest mode's period.
+#: Longest lag window of the intervals' noise covariance (s): the slowest mode's period.
 HAC_WINDOW_S = 1.0
 
 
@@ -132,6 +137,7 @@ class CalibrationResult:
     timings_s: dict = field(default_factory=dict)
     rejected_samples: int = 0
     nfev: int = 0
+    covariance_window_s: float = 0.0
 
     def values(self) -> dict[str, object]:
         """The calibrated ``vehicle.*`` values by name (pairs as lists)."""
@@ -235,23 +241,19 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
     problem = FitProblem(setup['grid'], setup['road'], nominal, setup['alignment'], free, fixed,
                        setup['k0'], setup['k1'], setup['warm'])
     theta = start_vector(problem, previous)
+    if problem.plant_only:
+        problem.update_defect(theta)        # their Jacobian columns come from the plant
     dead = structural(problem, theta)
     if dead:
         auto |= dead
         return _round(setup, auto, previous, sigma, progress)
     if previous is None:
-        # First the vehicle alone on the correlation's alignment (the fine alignment trades
-        # against the parameters far from the optimum), then everything.
+        # First the vehicle alone on the correlation's alignment with the linear model (the
+        # fine alignment trades against the parameters far from the optimum), then everything
+        # with the plant.
         fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment']
         theta = solve_without(problem, theta, fixed_align, progress)
-    if sigma is None:
-        result = solve(problem, theta, progress)
-        res = result.fun.reshape(-1, 3) * problem.sigma
-        floor = 1e-6 * problem.sigma
-        sigma = np.maximum(np.sqrt(np.mean(res ** 2, axis=0)), floor)
-        theta = result.x
-    problem.sigma = sigma
-    result = solve(problem, theta, progress)
+    result, sigma = solve_with_plant(problem, theta, progress, sigma)
     return problem, result, sigma
 
 
@@ -467,7 +469,7 @@ def _rounds(setup, options, clock, grid, tick) -> CalibrationResult:
     for _ in range(max(1, options.max_rounds)):
         problem, result, sigma = _round(setup, auto, previous, sigma, lambda: tick(0.01))
         nfev += problem.calls
-        cov, deficient = covariance(result, lags=int(round(HAC_WINDOW_S / grid.dt_s)))
+        cov, deficient, lags = covariance(result, int(round(HAC_WINDOW_S / grid.dt_s)))
         scaled = {s for s in SLOTS if s.kind == 'scale'
                   and (s in problem.free or s == scale.reference)}
         bad = _unidentified(problem, scale, result, cov, deficient, scaled)
@@ -494,6 +496,7 @@ def _rounds(setup, options, clock, grid, tick) -> CalibrationResult:
                               - grid.distance_m[setup['k0'] + setup['warm']]),
         dt_s=grid.dt_s, t_s=(setup['k0'] + rows) * grid.dt_s, measured=problem.measured,
         fitted=fitted, rejected_samples=grid.rejected, nfev=nfev,
+        covariance_window_s=lags * grid.dt_s,
         timings_s={'alignment': clock['alignment'] - clock['start'],
                    'fit': clock['fit'] - clock['alignment'],
                    'total': clock['fit'] - clock['start']})

@@ -1,11 +1,15 @@
 """The calibration's output-error problem: the drive on its sample grid, the residuals of the
-linear plant against it, the solver, the rank test and the covariance (used by
-:mod:`.calibration`, see there).
+plant against it, the solver and the rank test (used by :mod:`.calibration`, see there; the
+covariance is :mod:`.calibration_covariance`).
 
 The residuals (:class:`FitProblem`) are those of a variable-projection fit: for each vector of
 nonlinear parameters (log vehicle values, the fine alignment) the initial state and the sensor
 offsets, on which the outputs depend linearly, are solved by linear least squares, so that the
 fit needs no warm-up and the true start (never at rest on a real drive) does not bias it.
+The model is the simulator's nonlinear plant: the linear simulation plus the plant's defect
+(:func:`~.calibration_model.plant_defect`, :meth:`FitProblem.update_defect`), held fixed
+within a solve and updated between solves until the parameters stop moving
+(:func:`solve_with_plant`).
 """
 from __future__ import annotations
 
@@ -19,12 +23,15 @@ from scipy import linalg, optimize
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.estimation.calibration_alignment import Alignment
+from road_force_estimator.estimation.calibration_covariance import RANK_TOLERANCE
 from road_force_estimator.estimation.calibration_model import (
-    Slot, free_response, linear_plant, log_bounds, simulate_outputs, slot_value, vehicle_with)
+    Slot, free_response, linear_plant, log_bounds, plant_defect, simulate_outputs, slot_value,
+    vehicle_with)
 
 __all__ = ['CalibrationError', 'DriveGrid', 'drive_grid', 'check_survey', 'too_short',
-           'FitProblem', 'start_vector', 'solve', 'solve_without', 'structural',
-           'effective_fraction', 'covariance', 'score_covariance', 'MIN_DURATION_S',
+           'FitProblem', 'start_vector', 'solve', 'solve_without', 'solve_with_plant',
+           'structural',
+           'MIN_DURATION_S',
            'MIN_DISTANCE_M', 'SURVEY_GAP_M', 'RANK_TOLERANCE', 'FINE_OFFSET_M', 'FINE_SCALE',
            'SUBSTEP_M']
 
@@ -34,13 +41,19 @@ MIN_DURATION_S = 5.0
 MIN_DISTANCE_M = 100.0
 #: A survey step longer than this (and than 20 median steps) is a gap (m).
 SURVEY_GAP_M = 1.0
-#: Jacobian columns whose pivoted-QR diagonal is below this (relative) are rank-deficient.
-RANK_TOLERANCE = 1e-7
 #: Fine alignment range of the fit around the correlation's result (m, relative scale).
 FINE_OFFSET_M = 0.5
 FINE_SCALE = 1e-3
-#: Longest road step between two points of the simulation (m): samples are subdivided.
-SUBSTEP_M = 0.02
+#: Longest road step between two points of the linear simulation (m): samples are subdivided.
+#: Its road's first-order hold in time differs from the plant's (linear in distance under the
+#: RK4 stages): the plant's defect takes that up too, so this only sets how well the linear
+#: model's Jacobian stands for the plant's (the tire envelope of 0.25 m leaves little
+#: above the 5 cm sampling).
+SUBSTEP_M = 0.05
+#: Plant-defect updates stop when no log parameter moves by more than this...
+DEFECT_TOLERANCE = 1e-7
+#: ... or after this many.
+MAX_DEFECT_UPDATES = 4
 
 
 class CalibrationError(ValueError):
@@ -146,6 +159,12 @@ class FitProblem:
         self.calls = 0
         step = float(np.max(np.abs(grid.speed_mps[k0:k1]))) * alignment.scale * grid.dt_s
         self.substeps = max(1, int(math.ceil(step / SUBSTEP_M)))
+        self.defect = np.zeros((k1 - k0, 3))
+        # Plant-only slots: the defect's derivative (n, 3, k) at their log values ``defect_at``.
+        self.plant_only = [s for s in free if s.plant_only]
+        self.defect_jac = np.zeros((k1 - k0, 3, len(self.plant_only)))
+        self.defect_at = np.zeros(len(self.plant_only))
+        self.plant_road = RoadProfile(road.distance_m, road.elevation_m - self.datum_m)
 
     def unpack(self, theta: np.ndarray) -> tuple[dict, tuple[float, float]]:
         """(physical slot values, (fine offset m, fine scale))."""
@@ -197,6 +216,10 @@ class FitProblem:
         used = self.used[:head]
         w2 = 1.0 / self.sigma ** 2
         nb = basis.shape[2]
+        forced = forced + self.defect
+        if self.plant_only:
+            moved = [math.log(values[s] / self.nominal_values[s]) for s in self.plant_only]
+            forced = forced + self.defect_jac @ (np.array(moved) - self.defect_at)
         target = (self.full_measured - forced) / self.sigma            # NaN where not used
         target[~self.used] = 0.0
         normal = np.zeros((nb + 3, nb + 3))
@@ -214,6 +237,30 @@ class FitProblem:
         full = forced + coef[nb:]
         full[:head] += (basis * self.sigma[None, :, None]) @ coef[:nb]
         return full, coef, normal
+
+    def update_defect(self, theta: np.ndarray) -> None:
+        """The plant's defect (:func:`~.calibration_model.plant_defect`) at ``theta``, and for
+        each plant-only slot its derivative (forward difference of 1e-4 in log value: one more
+        plant run each), with which the defect is extrapolated linearly in those slots."""
+        values, fine = self.unpack(theta)
+        a = self.alignment
+        scale = a.scale + fine[1]
+        start = a.offset_m + fine[0] + scale * float(self.grid.distance_m[self.k0])
+        u, du = self.road_input(fine)
+        self._road, self._road_key = (u, du), fine
+
+        def defect(vals):
+            return plant_defect(vehicle_with(self.nominal, vals), self.plant_road, start,
+                                scale * self.grid.speed_mps[self.k0:self.k1], self.grid.dt_s,
+                                u, du, self.substeps)
+
+        self.defect = defect(values)
+        step = 1e-4
+        for j, slot in enumerate(self.plant_only):
+            self.defect_at[j] = math.log(values[slot] / self.nominal_values[slot])
+            bumped = dict(values)
+            bumped[slot] = values[slot] * math.exp(step)
+            self.defect_jac[:, :, j] = (defect(bumped) - self.defect) / step
 
     def outputs(self, theta: np.ndarray) -> np.ndarray:
         """Model outputs (best start and offsets) over the whole overlap, (k1 - k0, 3)."""
@@ -262,6 +309,35 @@ def solve(problem: FitProblem, theta0: np.ndarray, progress) -> optimize.Optimiz
                                   max_nfev=100 * (len(theta0) + 1))
 
 
+def solve_with_plant(problem: FitProblem, theta: np.ndarray, progress,
+                     sigma: np.ndarray | None = None):
+    """:func:`solve` with the plant's defect and the noise levels updated at each result.
+
+    Each pass: the defect at ``theta`` (:meth:`FitProblem.update_defect`), the channel weights
+    ``sigma`` (the previous pass's residual RMS; the problem's own at first, unless given),
+    a solve. Stops when no entry of ``theta`` moves by more than :data:`DEFECT_TOLERANCE` and
+    the noise levels by less than 1 % (at most :data:`MAX_DEFECT_UPDATES` passes).
+
+    Returns
+    -------
+    (result, sigma): the last solve and the noise levels of its residuals (per channel).
+    """
+    if sigma is not None:
+        problem.sigma = sigma
+    for _ in range(MAX_DEFECT_UPDATES):
+        problem.update_defect(theta)
+        result = solve(problem, theta, progress)
+        res = result.fun.reshape(-1, 3) * problem.sigma
+        new = np.maximum(np.sqrt(np.mean(res ** 2, axis=0)), 1e-6 * problem.sigma)
+        moved = float(np.max(np.abs(result.x - theta))) if theta.size else 0.0
+        steady = bool(np.all(np.abs(new / problem.sigma - 1.0) < 0.01))
+        theta = result.x
+        if moved <= DEFECT_TOLERANCE and steady:
+            break
+        problem.sigma = new
+    return result, problem.sigma
+
+
 def structural(problem: FitProblem, theta: np.ndarray) -> set[Slot]:
     """Physical slots whose Jacobian column is zero or in the span of the others (at the
     start): the model does not depend on them, or only through a combination of others."""
@@ -299,68 +375,3 @@ def solve_without(problem: FitProblem, theta: np.ndarray, held: list[int], progr
     sub.unpack = lambda t: problem.unpack(expand(t))
     result = solve(sub, theta[keep], progress)
     return expand(result.x)
-
-
-def effective_fraction(res: np.ndarray, channels: int = 3) -> float:
-    """n_eff / n of the residuals from their autocorrelation (Bartlett, lags up to 200)."""
-    r = res.reshape(-1, channels)
-    worst = 1.0
-    for c in range(channels):
-        x = r[:, c] - r[:, c].mean()
-        n = x.size
-        if n < 10 or not np.any(x):
-            continue
-        spec = np.fft.rfft(x, 2 * n)
-        acf = np.fft.irfft(spec * np.conj(spec))[:min(200, n // 4)]
-        rho = acf / acf[0]
-        cut = np.argmax(rho < 0.05) if np.any(rho < 0.05) else rho.size
-        tau = 1.0 + 2.0 * float(np.sum(rho[1:cut]))
-        worst = min(worst, 1.0 / max(tau, 1.0))
-    return worst
-
-
-def score_covariance(scores: np.ndarray, lags: int) -> np.ndarray:
-    """Newey-West (Bartlett) long-run covariance of per-sample scores (m, p) up to ``lags``."""
-    m, p = scores.shape
-    lags = int(max(0, min(lags, m - 1)))
-    n = 1 << int(math.ceil(math.log2(2 * m)))
-    weights = np.zeros(n)
-    k = np.arange(lags + 1)
-    weights[k] = 1.0 - k / (lags + 1.0)
-    weights[n - k[1:]] = weights[k[1:]]
-    kernel = np.fft.fft(weights).real
-    spec = np.fft.fft(scores, n, axis=0)
-    return (np.conj(spec).T @ (spec * kernel[:, None])).real / n
-
-
-def covariance(result: optimize.OptimizeResult,
-               lags: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(covariance of theta, rank-deficient column flags) from the final Jacobian.
-
-    The covariance is the sandwich ``(J'J)^-1 S (J'J)^-1`` with ``S`` the Newey-West
-    long-run covariance of the per-sample scores ``J_k' r_k`` over ``lags`` samples: white
-    residuals give the Gauss-Newton ``s^2 (J'J)^-1``; coloured ones (a model error, a lag the
-    model lacks) widen the intervals as they should.
-    """
-    jac = np.asarray(result.jac)
-    m, p = jac.shape
-    norms = np.linalg.norm(jac, axis=0)
-    safe = np.where(norms > 0.0, norms, 1.0)
-    _, r, piv = linalg.qr(jac / safe, mode='economic', pivoting=True)
-    diag = np.abs(np.diag(r))
-    deficient = np.zeros(p, bool)
-    deficient[piv[diag < RANK_TOLERANCE * max(diag[0], 1e-300)]] = True
-    deficient |= norms == 0.0
-    cov = np.full((p, p), np.nan)
-    ok = ~deficient
-    if np.any(ok):
-        jn = jac[:, ok] / safe[ok]
-        inv = np.linalg.pinv(jn.T @ jn)
-        dof = m / max(m - int(ok.sum()), 1)
-        scores = (jn * result.fun[:, None]).reshape(m // 3, 3, -1).sum(axis=1)
-        middle = score_covariance(scores, lags) * dof
-        cov[np.ix_(ok, ok)] = (inv @ middle @ inv) / np.outer(safe[ok], safe[ok])
-    return cov, deficient
-
-
-# --------------------------------------------------------------------------------------------

@@ -17,6 +17,10 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
+# The APIs the report uses (one place, for the lead to re-point).
+from road_force_estimator.core.parameters import SPECS
+from road_force_estimator.estimation.calibration_model import OPTIONAL
+
 __all__ = ['write_report', 'report_dict', 'markdown']
 
 _CHANNEL_NAMES = ('left deflection (m)', 'right deflection (m)', 'roll (rad)')
@@ -40,11 +44,20 @@ def report_dict(result, *, drive: str = '', profile: str = '', output: str = '')
         'used_distance_m': result.used_distance_m, 'sample_period_s': result.dt_s,
         'rejected_samples': result.rejected_samples, 'function_evaluations': result.nfev,
         'timings_s': result.timings_s,
-        'extending': 'vehicle.leaf_spring_friction and vehicle.sensor_time_constant are not '
-                     'fitted yet: the core model does not carry them; each is one row per '
-                     'side of calibration_model.SLOTS once it does. The sensor offsets are '
-                     'reported, not written: no parameter carries them yet',
+        'extending': _extending(),
+        'covariance': 'sandwich with the auto- and cross-covariance of the residuals '
+                      '(Bartlett window by the rule of Politis 2003)',
+        'covariance_window_s': result.covariance_window_s,
     }
+
+
+def _extending() -> str:
+    """What the fit could free and does not (the optional parameters the core lacks)."""
+    missing = [name for name, _, _ in OPTIONAL if name not in SPECS]
+    text = ('; '.join(missing) + ': not in the parameter table, not fitted (freed as soon as '
+            'the core has them). ') if missing else ''
+    return text + 'The sensor offsets are reported, not written: no parameter carries them yet'
+
 
 
 def _number(x: float, digits: int = 6) -> str:

@@ -213,7 +213,9 @@ def _run(args) -> tuple[object, Path, list[str]]:
                          profile=str(args.profile), output=str(output),
                          figures=not args.no_figures)
     notes = [f'{len(result.parameters)} numbers, {result.used_samples} samples '
-             f'({result.rejected_samples} missing or rejected)']
+             f'({result.rejected_samples} missing or rejected'
+             + (f'; {drive.rejected_total} messages rejected by the reader, calibrated on the '
+                'good ones' if drive.rejected_total else '') + ')']
     return result, output, notes + [str(f) for f in files[:1]]
 
 

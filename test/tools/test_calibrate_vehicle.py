@@ -165,3 +165,42 @@ def test_drive_with_missing_samples_calibrates_on_the_good_ones(files, capsys):
                     speed_mps=20.0, ground_truth=False, overwrite=True)
     assert _run(files, '--no-figures', drive='holes', output='h.yaml') == 0
     assert '(10 missing or rejected)' in capsys.readouterr().err
+
+
+def _copy_with_nan_deflections(src, dst, bad):
+    """The bag ``src`` again with the deflection messages of index ``bad`` set to NaN (the
+    rosbags writer: ours refuses non-finite values)."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(src) as reader, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store)
+                 for c in reader.connections}
+        k = 0
+        for conn, t, data in reader.messages():
+            if conn.topic == '/suspension/deflections':
+                if k in bad:
+                    msg = store.deserialize_cdr(data, conn.msgtype)
+                    msg.position = np.full(len(msg.position), np.nan)
+                    data = store.serialize_cdr(msg, conn.msgtype)
+                k += 1
+            w.write(conns[conn.id], t, data)
+
+
+def test_drive_with_rejected_samples_calibrates_on_the_good_ones(files, calibrated, capsys):
+    """Deflections the reader rejects (non-finite) are left out; the fit is unchanged."""
+    _copy_with_nan_deflections(files / 'drive', files / 'nans', set(range(800, 812)))
+    capsys.readouterr()
+    path, truck = calibrated
+    left, right = truck.static_load_n
+    assert _run(files, '--params-file', str(files / 'nominal.yaml'), '--static-load',
+                str(left), str(right), '--hold', 'vehicle.track_width', '--no-figures',
+                '-p', 'vehicle.sprung_mass:=5500.0', drive='nans', output='nans.yaml') == 0
+    err = capsys.readouterr().err
+    assert '(12 missing or rejected; 12 messages rejected by the reader' in err
+    vehicle = VehicleParameters.from_parameters(load_params_file(files / 'nans.yaml'))
+    # as the clean drive's calibration (test_output_round_trips_with_every_key_and_the_fit)
+    assert vehicle.sprung_mass_kg == pytest.approx(truck.sprung_mass_kg, rel=2e-3)
+    assert vehicle.suspension_stiffness_npm == pytest.approx(truck.suspension_stiffness_npm,
+                                                             rel=2e-3)
