@@ -272,13 +272,14 @@ class _FromParameters:
                   if 'param' in f.metadata and f.metadata['param'] in values}
         return cls(**kwargs)
 
-    def to_parameters(self) -> dict[str, Any]:
-        """Dotted names to values (pairs as lists, as in a parameter file)."""
+    def to_parameters(self, *, every: bool = False) -> dict[str, Any]:
+        """Dotted names to values (pairs as lists, as in a parameter file); the ``quiet_default``
+        ones at their defaults only with ``every``."""
         out = {}
         for f in fields(self):
             if 'param' in f.metadata:
                 v = getattr(self, f.name)
-                if f.metadata.get('quiet_default') and v == f.default:
+                if not every and f.metadata.get('quiet_default') and v == f.default:
                     continue
                 out[f.metadata['param']] = list(v) if isinstance(v, tuple) else v
         return out

@@ -128,7 +128,7 @@ SLOTS: tuple[Slot, ...] = (
 
 def slot_value(vehicle: VehicleParameters, slot: Slot) -> float:
     """The value of a physical slot in ``vehicle`` (SI)."""
-    value = vehicle.to_parameters()[slot.name]
+    value = vehicle.to_parameters(every=True)[slot.name]
     return float(value if slot.index is None else value[slot.index])
 
 
@@ -140,7 +140,7 @@ def vehicle_with(vehicle: VehicleParameters, values: dict[Slot, float]) -> Vehic
     ValueError
         A value outside the parameter's range (the message names it).
     """
-    params = vehicle.to_parameters()
+    params = vehicle.to_parameters(every=True)
     for slot, value in values.items():
         if slot.index is None:
             params[slot.name] = float(value)
