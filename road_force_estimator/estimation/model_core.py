@@ -622,9 +622,10 @@ class ModelCore:
         ddzs = op[10]
         if self._road_started:
             av = v if v > 0.0 else -v
-            h = self._road_state = body_heave.step(
-                self._road_state, ddzs, dt, av if av > self._road_floor else self._road_floor,
-                self._wc_road)
+            if body_heave.STANDING_MPS <= av < self._road_floor:
+                av = self._road_floor       # (standing, below STANDING_MPS, it holds)
+            h = self._road_state = body_heave.step(self._road_state, ddzs, dt, av,
+                                                   self._wc_road)
             zs = h[-2]
         else:
             zs = 0.0
