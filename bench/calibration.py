@@ -187,7 +187,7 @@ def one_case(name, road, truck, seed, args, validation):
     seconds, cpu = time.perf_counter() - clock, time.process_time() - cpu
     rows = []
     for e in result.parameters:
-        if e.slot.physical:
+        if e.slot.physical and e.status != 'fixed':   # (friction / lag absent: not freed)
             truth = slot_value(truck, e.slot)
             rows.append((e.slot.label, e.status, 100.0 * (e.value / truth - 1.0),
                          e.low <= truth <= e.high, 100.0 * e.std / e.value))

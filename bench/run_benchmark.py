@@ -1120,10 +1120,12 @@ def readme_section(out: dict[str, Any], scenarios, methods: list[Method], tuned:
     lines = ['## Results', '',
              f'Every figure below comes from one run of `{COMMAND}` (from a fresh clone, after '
              f'`scripts/setup`; {wall_s / 60:.1f} minutes on 2 cores), which prints and writes '
-             'the full tables: 16 scenarios (ISO 8608 classes A-D, 10-30 m/s, 200-1000 Hz, 0-50 '
-             'um of noise, +-10 % parameter errors, a pothole, a lateral step, the measured '
-             'profile_1) and, per scenario and method, the load, profile, IRI per 100 m, LTR and '
-             'convergence figures. The peers run in the same process on the same data.', '',
+             f'the full tables: {len(scenarios)} scenarios (ISO 8608 classes A-D, 10-30 m/s, '
+             '200-1000 Hz, 0-50 um of noise, +-10 % parameter errors, a pothole, a lateral '
+             'step, the measured profile_1, a speed dropout, a stop, a jointed concrete road) '
+             'and, per scenario and method, the load, profile, IRI per 100 m, the IRI-filtered '
+             'cross correlation, LTR and convergence figures. The peers run in the same process '
+             'on the same data.', '',
              'Headline, ISO 8608 class C at 20 m/s and 1 kHz, with 10 um of deflection noise '
              '(0.1 mrad of roll) and without: vertical-load RMS error in % of the true '
              'dynamic-load RMS and band-passed (0.5-30 m) profile RMS error in % of the band '

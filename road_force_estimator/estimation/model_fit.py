@@ -69,6 +69,10 @@ class ModelFitMonitor:
     """
 
     def __init__(self, skip_s: float = 2.0) -> None:
+        from road_force_estimator.core.scipy_signal import signal
+        # imported here, at the node's start (or rebuild), not in a message callback: the
+        # first import of scipy.signal takes 0.5-3 s and stalled the observer's inputs once
+        self._signal = signal()
         self.skip_s = float(skip_s)
         self._t0: float | None = None
         self._t_last = math.nan
@@ -90,9 +94,8 @@ class ModelFitMonitor:
         if self._sos is None:
             if not t_s - last > 0.0:
                 return
-            from scipy import signal
             self._dt = t_s - last
-            self._sos = signal.butter(2, BAND_HZ, btype='bandpass', fs=1.0 / self._dt,
+            self._sos = self._signal.butter(2, BAND_HZ, btype='bandpass', fs=1.0 / self._dt,
                                       output='sos').tolist()
             self._r0 = residual_nm
             self._start = t_s + SETTLE_S
