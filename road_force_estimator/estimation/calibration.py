@@ -256,7 +256,8 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
         # First the vehicle alone on the correlation's alignment with the linear model (the
         # fine alignment trades against the parameters far from the optimum), then everything
         # with the plant.
-        fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment']
+        # (The plant-only slots wait too: the linear model does not see them.)
+        fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment' or s.plant_only]
         theta = solve_without(problem, theta, fixed_align, progress)
     result, sigma = solve_with_plant(problem, theta, progress, sigma)
     return problem, result, sigma

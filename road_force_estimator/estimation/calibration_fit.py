@@ -52,8 +52,10 @@ FINE_SCALE = 1e-3
 SUBSTEP_M = 0.05
 #: Plant-defect updates stop when no log parameter moves by more than this...
 DEFECT_TOLERANCE = 1e-7
-#: ... or after this many.
+#: ... or after this many (:data:`PLANT_ONLY_UPDATES` with plant-only slots free, which a
+#: least squares on the plant itself then finishes, :func:`_polish`).
 MAX_DEFECT_UPDATES = 4
+PLANT_ONLY_UPDATES = 2
 
 
 class CalibrationError(ValueError):
@@ -332,7 +334,7 @@ def solve_with_plant(problem: FitProblem, theta: np.ndarray, progress,
     """
     if sigma is not None:
         problem.sigma = sigma
-    for _ in range(MAX_DEFECT_UPDATES):
+    for _ in range(PLANT_ONLY_UPDATES if problem.plant_only else MAX_DEFECT_UPDATES):
         problem.update_defect(theta)
         result = solve(problem, theta, progress)
         res = result.fun.reshape(-1, 3) * problem.sigma
