@@ -70,7 +70,8 @@ def test_noise_free_drive_recovers_friction_and_lags(road):
     assert len(effects) == 4
     for label, e in effects.items():
         truth = slot_value(TRUCK, e.slot)
-        # measured: below 1e-6 relative (the plant's own least squares converges)
+        # measured: below 1e-6 relative (the plant's own least squares converges; before it,
+        # with the defect updates alone, 0.3 % on the masses and 16-24 % on the lags)
         assert e.status == 'fitted', label
         assert e.value == pytest.approx(truth, rel=1e-4), label
     for e in result.parameters:
@@ -82,8 +83,9 @@ def test_ten_micron_drive_recovers_friction_and_lags_within_their_intervals(road
     result = _calibrate(road, _drive(road, 1e-5))
     for label, e in _effects(result).items():
         truth = slot_value(TRUCK, e.slot)
-        # measured: friction within 0.1 %, lags within 0.5 % (half-widths 0.4 % and 6-9 %)
-        assert e.value == pytest.approx(truth, rel=0.03 if e.slot.name == LAG else 0.01), label
+        # measured: friction +0.08 % / 0.00 % (95 % half-widths 0.2 %), lags +1.1 % / +2.4 %
+        # (half-widths 2.7 % / 4.8 %)
+        assert e.value == pytest.approx(truth, rel=0.05 if e.slot.name == LAG else 0.01), label
         assert e.low <= truth <= e.high, label
     for e in result.parameters:
         if e.slot.physical and e.slot.name not in (FRICTION, LAG):
