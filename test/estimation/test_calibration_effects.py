@@ -65,7 +65,7 @@ def _effects(result):
 
 
 def test_noise_free_drive_recovers_friction_and_lags(road):
-    result = _calibrate(road, _drive(road, 0.0))
+    result = _calibrate(road, _drive(road, 0.0, duration_s=6.0))
     effects = _effects(result)
     assert len(effects) == 4
     for label, e in effects.items():
