@@ -55,7 +55,7 @@ from road_force_estimator.estimation.calibration_fit import (
 from road_force_estimator.estimation.calibration_covariance import (
     covariance, effective_fraction)
 from road_force_estimator.estimation.calibration_model import (
-    CHANNELS, SLOTS, Slot, slot_value, vehicle_with)
+    CHANNELS, SLOTS, Slot, freed_start, slot_value, vehicle_with)
 
 __all__ = ['CalibrationError', 'AlignmentError', 'CalibrationOptions', 'ParameterEstimate',
            'CalibrationResult', 'calibrate', 'MIN_DURATION_S', 'MIN_DISTANCE_M',
@@ -77,7 +77,11 @@ class CalibrationOptions:
     ``tire_envelope_m``: the envelope the plant's tire follows; ``start_offset_m``: the
     expected survey distance at the drive's start, searched +- ``search_m``; ``scale_error``:
     the odometer scale searched in 1 +- it; ``min_correlation``: the alignment's threshold;
-    ``warm_up_s``: time not fitted at the start of the overlap.
+    ``warm_up_s``: time not fitted at the start of the overlap; ``free``: names of
+    :data:`~.calibration_model.OPTIONAL` parameters (leaf-spring friction, sensor lag) to fit
+    even where the nominal value is 0 (they start from
+    :data:`~.calibration_model.FREE_START`, reported as their nominal); without it a 0 stays
+    'fixed'.
     """
 
     static_load_n: tuple[float, float] | None = None
@@ -89,6 +93,7 @@ class CalibrationOptions:
     min_correlation: float = 0.5
     warm_up_s: float = 0.0
     max_rounds: int = 3
+    free: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -251,7 +256,8 @@ def _round(setup: dict, auto: set[Slot], previous, sigma, progress):
         # First the vehicle alone on the correlation's alignment with the linear model (the
         # fine alignment trades against the parameters far from the optimum), then everything
         # with the plant.
-        fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment']
+        # (The plant-only slots wait too: the linear model does not see them.)
+        fixed_align = [i for i, s in enumerate(free) if s.kind == 'alignment' or s.plant_only]
         theta = solve_without(problem, theta, fixed_align, progress)
     result, sigma = solve_with_plant(problem, theta, progress, sigma)
     return problem, result, sigma
@@ -446,6 +452,11 @@ def calibrate(stamps_ns, q_m, roll_rad, speed_mps, survey: RoadProfile,
             progress(done[0], stage)
 
     hold = _check_hold(options.hold)
+    if options.free:
+        try:
+            nominal = freed_start(nominal, options.free - hold)
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
     check_survey(survey)
     grid = drive_grid(stamps_ns, q_m, roll_rad, speed_mps)
     too_short('the drive is', np.count_nonzero(grid.good) * grid.dt_s,

@@ -44,9 +44,11 @@ from scipy import signal
 from road_force_estimator.core.parameters import SPECS, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import RoadProfile
+from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.core.vehicle_model import VehicleModel
 
-__all__ = ['Slot', 'SLOTS', 'OPTIONAL', 'optional_slots', 'CHANNELS', 'vehicle_with',
+__all__ = ['Slot', 'SLOTS', 'OPTIONAL', 'FREE_START', 'optional_slots', 'freed_start',
+           'CHANNELS', 'vehicle_with',
            'LinearPlant', 'linear_plant', 'simulate_outputs', 'slot_value', 'free_response',
            'plant_outputs', 'plant_defect']
 
@@ -94,6 +96,15 @@ OPTIONAL: tuple[tuple[str, str, str], ...] = (
     ('vehicle.leaf_spring_friction', 'scale', 'N'),
     ('vehicle.sensor_time_constant', 'time', 's'),
 )
+
+
+#: Start values of the :data:`OPTIONAL` parameters freed from a nominal 0 on request
+#: (``CalibrationOptions.free``, ``calibrate_vehicle --free``): the log-scale fit reaches
+#: a factor of 10 either way (:func:`log_bounds`): 50-5000 N of friction, 0.2-20 ms of lag.
+FREE_START: dict[str, float] = {
+    'vehicle.leaf_spring_friction': 500.0,
+    'vehicle.sensor_time_constant': 2e-3,
+}
 
 
 def optional_slots(specs=SPECS) -> tuple[Slot, ...]:
@@ -149,6 +160,24 @@ def vehicle_with(vehicle: VehicleParameters, values: dict[Slot, float]) -> Vehic
             pair[slot.index] = float(value)
             params[slot.name] = pair
     return VehicleParameters.from_parameters(params)
+
+
+def freed_start(vehicle: VehicleParameters, names) -> VehicleParameters:
+    """``vehicle`` with each side of the :data:`OPTIONAL` parameters ``names`` that is 0 set to
+    its :data:`FREE_START` value (a nominal 0 is not fitted in log scale); others unchanged.
+
+    Raises
+    ------
+    ValueError
+        A name that is not one of :data:`OPTIONAL` (the message lists them).
+    """
+    unknown = sorted(set(names) - set(FREE_START))
+    if unknown:
+        raise ValueError(f'--free {unknown[0]}: only {", ".join(FREE_START)} can be freed '
+                         '(the other parameters are free unless held)')
+    values = {s: FREE_START[s.name] for s in SLOTS
+              if s.name in names and s.plant_only and slot_value(vehicle, s) <= 0.0}
+    return vehicle_with(vehicle, values) if values else vehicle
 
 
 def log_bounds(slot: Slot, nominal: float, span: float = math.log(10.0)) -> tuple[float, float]:
@@ -280,7 +309,8 @@ def free_response(plant: LinearPlant, t_s: np.ndarray) -> np.ndarray:
 def plant_outputs(vehicle: VehicleParameters, road: RoadProfile, start_m: float,
                   speed_mps: np.ndarray, dt_s: float) -> np.ndarray:
     """The simulator's nonlinear plant (:func:`road_force_estimator.core.plant.simulate`) over
-    ``road`` (already enveloped), from its equilibrium at ``start_m`` (m).
+    ``road`` (already enveloped), from its equilibrium at ``start_m`` (m), read through the
+    sensors' lag (``vehicle.sensor_time_constant``, :class:`.SensorModel`; none at 0).
 
     Parameters
     ----------
@@ -302,8 +332,14 @@ def plant_outputs(vehicle: VehicleParameters, road: RoadProfile, start_m: float,
                     duration_s=(n - 1) * dt_s, start_m=start_m, speed_profile=profile)
     out = np.full((n, 3), np.nan)
     m = min(n, len(traj))
-    out[:m, :2] = traj.q_m[:m]
-    out[:m, 2] = traj.roll_rad[:m]
+    q, roll = traj.q_m[:m], traj.roll_rad[:m]
+    if max(vehicle.sensor_time_constant_s) > 0.0:
+        # The sensors' first-order lag (vehicle.sensor_time_constant), noise-free: the
+        # simulator's own sensor model (core.sensors), started at the first reading.
+        q, roll = SensorModel(time_constant_s=vehicle.sensor_time_constant_s,
+                              rate_hz=1.0 / dt_s).measure(q, roll)
+    out[:m, :2] = q
+    out[:m, 2] = roll
     return out
 
 

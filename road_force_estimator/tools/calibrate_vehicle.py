@@ -1,7 +1,7 @@
 """`calibrate_vehicle`: the truck's parameters from a drive over a surveyed road.
 
     calibrate_vehicle DRIVE --profile SOURCE [--static-load LEFT RIGHT] [--params-file FILE]
-                      [--hold NAME...] [-p NAME:=VALUE]... --output FILE
+                      [--hold NAME...] [--free NAME...] [-p NAME:=VALUE]... --output FILE
                       [--start-offset M] [--search-range M] [--min-correlation R]
                       [--no-figures] [--force] [--no-progress]
 
@@ -12,6 +12,9 @@ spec such as ``iso8608:C:seed=1``, :func:`road_force_estimator.core.road.road_fr
 without it the mean tire stiffness is held at its nominal value and the report says that the
 masses are known only up to a factor. ``--hold`` keeps parameters (e.g.
 ``vehicle.track_width``) at the values of the parameter file; ``-p`` overrides the file.
+``vehicle.leaf_spring_friction`` and ``vehicle.sensor_time_constant`` are fitted when the
+file's value is > 0; a 0 stays fixed (reported 'fixed') unless ``--free NAME`` asks: then the
+fit starts from 500 N per side / 2 ms (reaching 50-5000 N / 0.2-20 ms), reported as nominal.
 The survey is followed under the tire envelope ``simulator.tire_envelope_length``.
 
 Writes FILE, a ``/**: ros__parameters:`` parameter file with every key of the input file (the
@@ -66,6 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--params-file', metavar='FILE', help='nominal parameters (ROS 2 file)')
     p.add_argument('--hold', nargs='+', action='extend', default=[], metavar='NAME',
                    help='parameters kept at their nominal values (e.g. vehicle.track_width)')
+    p.add_argument('--free', nargs='+', action='extend', default=[], metavar='NAME',
+                   help='fit vehicle.leaf_spring_friction and/or vehicle.sensor_time_constant '
+                        "even where the file's value is 0 (from 500 N / 2 ms; without it a 0 "
+                        'stays fixed)')
     p.add_argument('-p', dest='overrides', action='append', default=[], metavar='NAME:=VALUE',
                    help='override a parameter of the file (repeatable)')
     p.add_argument('--output', '-o', required=True, metavar='FILE',
@@ -191,7 +198,8 @@ def _run(args) -> tuple[object, Path, list[str]]:
     survey = _survey(args.profile)
     options = CalibrationOptions(
         static_load_n=tuple(args.static_load) if args.static_load else None,
-        hold=frozenset(args.hold), tire_envelope_m=sim.tire_envelope_length_m,
+        hold=frozenset(args.hold), free=frozenset(args.free),
+        tire_envelope_m=sim.tire_envelope_length_m,
         start_offset_m=args.start_offset, search_m=args.search_range,
         min_correlation=args.min_correlation)
     with tqdm(total=100, desc=PROG, unit='%', file=sys.stderr, leave=False,

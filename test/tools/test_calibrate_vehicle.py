@@ -151,6 +151,9 @@ def test_bad_inputs_one_line_each(files, capsys):
     line = _one_line_error(capsys, _run(files, drive='short', output='s.yaml'))
     assert 'too short' in line and 'at least' in line
     assert calibrate_vehicle.main(['x', '--output', 'y']) == 2                 # no --profile
+    capsys.readouterr()
+    line = _one_line_error(capsys, _run(files, '--free', 'vehicle.sprung_mass', output='f.yaml'))
+    assert '--free vehicle.sprung_mass' in line and 'vehicle.leaf_spring_friction' in line
 
 
 def test_drive_with_missing_samples_calibrates_on_the_good_ones(files, capsys):
