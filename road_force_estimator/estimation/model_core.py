@@ -176,6 +176,7 @@ class ModelCore:
         self.last_row: tuple | None = None    # the newest finalized row
         self.last_converged = False           # converged flag of the newest sample
         self.lag = 0
+        self._profile = self._profile_on
         self._gamma = 0.0
         self._m_dt = -1.0
         self._settle = math.inf
@@ -298,7 +299,9 @@ class ModelCore:
             self._restart(stamp, q1, q2, phi, (x, dt, v, False))
             self.last_converged = False
             return True
-        conv = self.converged()
+        sched = self.schedule       # (converged(), inline: once per sample)
+        conv = self._t - self._t_retuned >= self._settle and (sched.blocks > 0
+                                                              or sched.all_fixed)
         if not self._advance(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
             return False
         self.last_converged = conv
@@ -333,7 +336,8 @@ class ModelCore:
     @property
     def _profile_on(self) -> bool:
         """The zero-latency profile filter runs: no latency, and no friction (whose known
-        input it does not carry: then the road is the load filter's)."""
+        input it does not carry: then the road is the load filter's); kept in ``_profile``
+        for the per-sample step."""
         return self.lag == 0 and self._ff is None
 
     def _set_lag(self, dt: float) -> None:
@@ -342,6 +346,7 @@ class ModelCore:
         lag = int(round(latency / dt)) if latency > 0.0 else 0
         if lag != self.lag:
             self.lag = lag
+            self._profile = self._profile_on
             self.schedule.invalidate()
 
     def _first_step(self, dt: float) -> None:
@@ -417,7 +422,7 @@ class ModelCore:
             o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
-            self._emit(stamp, meta, o, self._profile_step(q1, q2, phi) if self._profile_on
+            self._emit(stamp, meta, o, self._profile_step(q1, q2, phi) if self._profile
                        else None)
         else:
             pending = self._pending
@@ -599,26 +604,27 @@ class ModelCore:
         x_dist, dt, v, conv = meta
         if self._body_started:
             h = self._hstate = body_heave.step(self._hstate, ddzs, dt, v, self._wc_per_speed)
-            zs, dzs = h[-2], h[-1]
+            zs = h[-2]
+            dzs = h[-1]
         else:
             zs = dzs = 0.0
             self._hstate = body_heave.start(ddzs)
             self._body_started = True
             self._rows.restart()
         row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
-                             ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt)
-        if op is not None:
-            row = self._road(row, op, dt, v)
+                             ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt,
+                             None if op is None else self._road(op, dt, v, x_dist))
         self.last_row = row
         self.ready.append((stamp, row))
 
-    def _road(self, row: tuple, op: list, dt: float, v: float) -> tuple:
-        """``row`` with the road of the profile filter's outputs ``op`` (:data:`.OUTPUTS`):
-        ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body acceleration's band-limited
-        double integral at the profile's cutoff (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x
-        ``observer.profile_cutoff_wavelength``, the speed floored at that ratio times
-        :data:`.body_heave.SPEED_FLOOR_MPS`; restarted with each run); held at a stop (the
-        distance stands still, the model's speed ``v`` (m/s) below that floor)."""
+    def _road(self, op: list, dt: float, v: float, x: float) -> tuple[float, float]:
+        """The road ``(u_1, u_2)`` (m) at distance ``x`` (m) from the profile filter's outputs
+        ``op`` (:data:`.OUTPUTS`): ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body
+        acceleration's band-limited double integral at the profile's cutoff
+        (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
+        the speed floored at that ratio times :data:`.body_heave.SPEED_FLOOR_MPS`; restarted
+        with each run); held at a stop (the distance stands still, the model's speed ``v``
+        (m/s) below that floor)."""
         ddzs = op[10]
         if self._road_started:
             av = v if v > 0.0 else -v
@@ -637,7 +643,6 @@ class ModelCore:
         u1 = zs + ssin - op[0] + op[15]
         u2 = zs - ssin - op[1] + op[16]
         p1, p2, px = self._road_prev
-        x = row[Column.DISTANCE]
         self._road_prev = (u1, u2, x)
         o1, o2 = self._road_off
         if x == px and -body_heave.SPEED_FLOOR_MPS < v < body_heave.SPEED_FLOOR_MPS:
@@ -649,7 +654,7 @@ class ModelCore:
             o1 += u1 - p1
             o2 += u2 - p2
             self._road_off = (o1, o2)
-        return row[:Column.U1] + (u1 - o1, u2 - o2) + row[Column.U2 + 1:]
+        return u1 - o1, u2 - o2
 
     def finish(self) -> bool:
         """Finalize every pending sample of the run (end of data, or before a restart);

@@ -191,9 +191,12 @@ class Reconstruction:
     def row(self, x: float, q1: float, q2: float, dq1: float, dq2: float, ddq1: float,
             ddq2: float, phi: float, dphi: float, ddphi: float, zs: float, dzs: float,
             ddzs: float, ddzu1: float, ddzu2: float, w1: float, w2: float, df1: float,
-            df2: float, fb1: float, fb2: float, conv: bool, dt: float = 0.0) -> tuple:
+            df2: float, fb1: float, fb2: float, conv: bool, dt: float = 0.0,
+            road: tuple[float, float] | None = None) -> tuple:
         """The output row (slots :class:`.Column`) of one sample (SI, see the module notes);
-        ``dt`` (s): the step since the previous row of the run (see :meth:`restart`)."""
+        ``dt`` (s): the step since the previous row of the run (see :meth:`restart`);
+        ``road``: ``(u_1, u_2)`` (m) estimated otherwise (the model's profile filter), else
+        ``z_ui + w_i``."""
         s, ix, fc1, fc2, lift1, lift2, ltr_floor = self._c
         cphi = math.cos(phi)
         sphi = math.sin(phi)
@@ -207,8 +210,9 @@ class Reconstruction:
             fn1 = 0.0
         if fn2 < 0.0:
             fn2 = 0.0
+        u1, u2 = (zu1 + w1, zu2 + w2) if road is None else road
         return (x, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs, ddzs, zu1, zu2,
-                dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, zu1 + w1, zu2 + w2, df1, df2,
+                dzs + srate - dq1, dzs - srate - dq2, ddzu1, ddzu2, u1, u2, df1, df2,
                 fn1, fn2, load_transfer_ratio(fn1, fn2, ltr_floor),
                 ix * ddphi - s * cphi * (fb1 - fb2) - self.mgh * sphi, fn1 <= lift1,
                 fn2 <= lift2, conv, self.quasi_static_ltr(fn1, fn2, dt), fc1, fc2)
