@@ -58,7 +58,6 @@ from road_force_estimator.estimation.gains import (
 from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, PROFILE_ONLINE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
     continuous_model, rest_state)
-from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 

@@ -176,17 +176,60 @@ class Reconstruction:
     def add_quasi_static(self, out: list, t: np.ndarray) -> None:
         """The quasi-static LTR column of one run's columns ``out`` (loads filled) at the
         times t (s): :meth:`quasi_static_ltr` sample by sample from a restart (in chunks of
-        :data:`QUASI_STATIC_CHUNK` samples: the lists of floats stay small)."""
+        :data:`QUASI_STATIC_CHUNK` samples: the lists of floats stay small), its steps
+        written out in one loop (the same operations in the same order: the same numbers,
+        at less than half the time of a call per sample)."""
         self.restart()
         t = np.asarray(t, dtype=float)
-        step = self.quasi_static_ltr
         col, fn1, fn2 = out[Column.LTR_QUASI_STATIC], out[Column.FN1], out[Column.FN2]
         for k0 in range(0, t.size, QUASI_STATIC_CHUNK):
             k1 = min(t.size, k0 + QUASI_STATIC_CHUNK)
             steps = np.diff(t[k0 - 1:k1]).tolist() if k0 else [0.0] + np.diff(t[:k1]).tolist()
-            col[k0:k1] = [step(a, b, d) for a, b, d in zip(fn1[k0:k1].tolist(),
-                                                            fn2[k0:k1].tolist(), steps)]
+            col[k0:k1] = self._quasi_static_run(fn1[k0:k1].tolist(), fn2[k0:k1].tolist(),
+                                                steps)
         self.restart()
+
+    def _quasi_static_run(self, fn1: list, fn2: list, steps: list) -> list:
+        """:meth:`quasi_static_ltr` over lists of loads (N) and steps (s), in order."""
+        rate = self.rollover_rate
+        floor = self.ltr_floor_n
+        isfinite = math.isfinite
+        exp = math.exp
+        st = self._qs
+        last_dt, e = self._qs_e
+        out = []
+        put = out.append
+        if st is not None:
+            s0, s1, s2, s3 = st
+        for a, b, dt in zip(fn1, fn2, steps):
+            if not a > 0.0:
+                a = 0.0
+            if not b > 0.0:
+                b = 0.0
+            if not isfinite(a + b):
+                put(math.nan)
+                continue
+            if st is None:
+                st = True
+                s0 = s1 = a
+                s2 = s3 = b
+            else:
+                if last_dt != dt:
+                    last_dt = dt
+                    e = exp(-dt * rate)
+                g = 1.0 - e
+                s0 = e * s0 + g * a
+                s1 = e * s1 + g * s0
+                s2 = e * s2 + g * b
+                s3 = e * s3 + g * s2
+            # load_transfer_ratio(s1, s3, floor), written out
+            p = s1 if s1 > 0.0 else 0.0
+            q = s3 if s3 > 0.0 else 0.0
+            den = p + q
+            put((q - p) / (den if den > floor else floor))
+        self._qs = (s0, s1, s2, s3) if st is not None else None
+        self._qs_e = (last_dt, e)
+        return out
 
     def row(self, x: float, q1: float, q2: float, dq1: float, dq2: float, ddq1: float,
             ddq2: float, phi: float, dphi: float, ddphi: float, zs: float, dzs: float,
