@@ -122,14 +122,41 @@ def residual_ratio(t_s, residual_nm, sigma_nm: float, *, skip_s: float = 2.0) ->
     """Band RMS of the residual (N m, at times t_s (s)) from ``skip_s`` on, over
     ``sigma_nm`` (:class:`ModelFitMonitor` over the arrays); the
     band-pass starts at the skip and its first :data:`SETTLE_S` are left out; NaN when fewer
-    than 2 s remain."""
+    than 2 s remain.
+
+    The monitor's steps, vectorised with the same numbers: the samples it takes (past the
+    skip, finite), the one it designs the band-pass at (the first of them whose step from the
+    sample before is > 0), the biquads by :func:`scipy.signal.sosfilt` (the monitor's
+    transposed direct form II, operation for operation) and the squares summed in order
+    (``np.add.accumulate``: no pairwise summation).
+    """
     t = np.asarray(t_s, dtype=float)
     r = np.asarray(residual_nm, dtype=float)
     if t.size < 16:
         return math.nan
     mon = ModelFitMonitor(skip_s)
-    for tk, rk in zip(t.tolist(), r.tolist()):
-        mon.update(tk, rk)
+    taken = ~(t - t[0] < mon.skip_s) & np.isfinite(r)
+    taken[0] = False                  # the monitor's first step has no step before it
+    step_ok = np.zeros(t.size, dtype=bool)
+    step_ok[1:] = t[1:] - t[:-1] > 0.0
+    first = np.flatnonzero(taken & step_ok)
+    if first.size == 0:
+        return math.nan
+    d = int(first[0])
+    for k in range(d + 1):            # the monitor up to its design (a few samples)
+        mon.update(float(t[k]), float(r[k]))
+    rest = np.flatnonzero(taken[d + 1:]) + d + 1
+    if rest.size:
+        x = r[rest] - mon._r0
+        zi = np.array(mon._zi, dtype=float).reshape(-1, 2)
+        y, zf = mon._signal.sosfilt(np.array(mon._sos), x, zi=zi)
+        mon._zi = zf.reshape(-1).tolist()
+        late = t[rest] >= mon._start
+        sq = y[late] * y[late]
+        if sq.size:
+            mon.count += int(sq.size)
+            mon.sum_squares = float(np.add.accumulate(np.concatenate(
+                [[mon.sum_squares], sq]))[-1])
     return mon.ratio(sigma_nm)
 
 
