@@ -21,7 +21,8 @@ __all__ = [
     'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'segment_length',
     'add_force',
     'add_no_progress', 'add_overrides', 'add_units', 'parameter_values',
-    'load_estimator_parameters', 'PROGRESS_MIN_SAMPLES', 'sample_progress', 'command_line',
+    'load_estimator_parameters', 'PROGRESS_MIN_SAMPLES', 'NullBar', 'progress_bar',
+    'sample_progress', 'command_line',
 ]
 
 #: Estimation modes of estimate_bag and estimate_fleet.
@@ -193,10 +194,41 @@ def command_line(prog: str) -> str:
     return ' '.join(shlex.quote(a) for a in [prog, *_ARGV])
 
 
+class NullBar:
+    """A progress bar that shows nothing (tqdm's interface as the commands use it): what
+    :func:`progress_bar` gives when no bar would be shown, without importing tqdm."""
+
+    n = 0
+
+    def update(self, n: int = 1) -> None:
+        """Nothing."""
+
+    def set_description_str(self, desc: str) -> None:
+        """Nothing."""
+
+    def close(self) -> None:
+        """Nothing."""
+
+    def __enter__(self) -> 'NullBar':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+
+def progress_bar(enabled: bool, **kwargs):
+    """A tqdm bar on stderr (``kwargs``: tqdm's), or a :class:`NullBar` when not ``enabled``
+    or stderr is not a terminal (where tqdm would disable itself): tqdm imported only for a
+    bar that shows."""
+    isatty = getattr(sys.stderr, 'isatty', None)
+    if not enabled or not (isatty is not None and isatty()):
+        return NullBar()
+    from tqdm import tqdm
+    return tqdm(file=sys.stderr, **kwargs)
+
+
 def sample_progress(total: int, enabled: bool, desc: str):
     """A tqdm progress bar over ``total`` samples on stderr (disabled when not ``enabled`` or
     under :data:`PROGRESS_MIN_SAMPLES` samples; tqdm's own choice off a terminal)."""
-    from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit='sample', unit_scale=True, file=sys.stderr,
-                mininterval=0.5, leave=False,
-                disable=(not enabled or total < PROGRESS_MIN_SAMPLES) or None)
+    return progress_bar(enabled and total >= PROGRESS_MIN_SAMPLES, total=total, desc=desc,
+                        unit='sample', unit_scale=True, mininterval=0.5, leave=False)

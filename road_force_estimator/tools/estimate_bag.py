@@ -111,10 +111,8 @@ class _Stages:
     NAMES = ('read', 'estimate', 'write bag', 'report')
 
     def __init__(self, enabled: bool) -> None:
-        from tqdm import tqdm
-        self.bar = tqdm(total=len(self.NAMES), desc=PROG, file=sys.stderr, leave=False,
-                        bar_format='{desc} ({n}/{total} stages done)',
-                        disable=None if enabled else True)
+        self.bar = cli.progress_bar(enabled, total=len(self.NAMES), desc=PROG, leave=False,
+                                    bar_format='{desc} ({n}/{total} stages done)')
         self.started = False
 
     def next(self, name: str) -> None:
