@@ -195,6 +195,9 @@ class ModelCore:
         self._slow = 0                    # samples of the block below the speed floor
         self._prow = np.zeros(self._row)        # the profile filter's row: [0, x+, 0, y]
         self._pm = None                    # its step matrix (zero latency only)
+        # the step products' buffers (:meth:`_select`) and views of their state and outputs
+        self._sv = self._sv_x = np.empty(0)
+        self._sp = self._sp_x = self._sp_o = np.empty(0)
         self._road_state = body_heave.start(0.0)
         self._road_started = False
         self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
@@ -278,6 +281,9 @@ class ModelCore:
         if sched.stale or g is None or g.key[0] != lv['dt']:
             g = self._design(dt)
         self._m = g.step_matrix(dt)
+        if self._sv.shape[0] != self._m.shape[0]:    # the product's buffer (and its state)
+            self._sv = np.empty(self._m.shape[0])
+            self._sv_x = self._sv[:self._y0i - self._x0i]
         if self._ff is not None:
             self._fm = g.friction_step(dt)
             self._a_dq, self._b_dq = _dq_rows(g, dt)
@@ -285,6 +291,10 @@ class ModelCore:
         self._m_dt = dt
         if self._profile_on:
             self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
+            if self._sp.shape[0] != self._pm.shape[0]:
+                self._sp = np.empty(self._pm.shape[0])
+                self._sp_x = self._sp[:self._y0i - self._x0i]
+                self._sp_o = self._sp[self._y0i - self._x0i:]
 
     # -- the run --------------------------------------------------------------------------
     def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
@@ -389,7 +399,7 @@ class ModelCore:
         row[y0] = q1
         row[y0 + 1] = q2
         row[y0 + 2] = phi
-        sv = _dot(self._m, row)
+        sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
         if self._ff is not None:        # the friction over the step (of x+_k)
             sv += _dot(self._fm, self._held_friction(row[x0:y0 - NY], self._a_dq, self._b_dq))
         s = sv.tolist()
@@ -397,7 +407,7 @@ class ModelCore:
             return False
         i += 1
         nxt = buf[i]
-        nxt[x0:y0] = sv[:y0 - x0]
+        nxt[x0:y0] = self._sv_x
         rho = None
         if self._gamma > 0.0:
             c1, c2, c3 = self._c_slots
@@ -446,9 +456,9 @@ class ModelCore:
         prow[y0] = q1
         prow[y0 + 1] = q2
         prow[y0 + 2] = phi
-        sp = _dot(self._pm, prow)
-        prow[x0:y0] = sp[:y0 - x0]
-        return sp[y0 - x0:].tolist()
+        _dot(self._pm, prow, out=self._sp)
+        prow[x0:y0] = self._sp_x
+        return self._sp_o.tolist()
 
     def _finalise_lag(self) -> None:
         """The lag from the median of the run's first steps; the buffer is resized if needed
