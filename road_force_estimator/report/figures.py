@@ -336,11 +336,20 @@ def envelope(x: np.ndarray, y: np.ndarray, columns: int = ENVELOPE_COLUMNS
     if x.size <= 2 * columns or x[-1] <= x[0]:
         return x, y, y
     edges = np.linspace(x[0], x[-1], columns + 1)
-    b = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, columns - 1)
     lo = np.full(columns, np.inf)
     hi = np.full(columns, -np.inf)
-    np.minimum.at(lo, b, y)
-    np.maximum.at(hi, b, y)
+    if np.all(x[1:] >= x[:-1]):
+        # sorted (time, or distance along the drive): each bin is one stretch of samples,
+        # reduced in one pass (ufunc.at, per sample, costs ~10x more)
+        starts = np.searchsorted(x, edges[1:-1], side='left')    # bin j: x >= edges[j]
+        bounds = np.concatenate([[0], starts, [x.size]])
+        full = np.flatnonzero(bounds[1:] > bounds[:-1])
+        lo[full] = np.minimum.reduceat(y, bounds[full])
+        hi[full] = np.maximum.reduceat(y, bounds[full])
+    else:
+        b = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, columns - 1)
+        np.minimum.at(lo, b, y)
+        np.maximum.at(hi, b, y)
     empty = ~np.isfinite(lo)
     lo[empty] = hi[empty] = np.nan
     return 0.5 * (edges[:-1] + edges[1:]), lo, hi
