@@ -102,10 +102,11 @@ def measure(duration_s: float, repeats: int) -> dict:
     n = len(stamps)
     args = (stamps.tolist(), q.tolist(), phi.tolist(), speed.tolist())
 
-    est = Estimator()
+    made: list = []
 
-    def per_sample() -> None:
-        est.reset()
+    def per_sample() -> None:      # a fresh estimator, as the batch path's (its designs)
+        est = Estimator()
+        made.append(est)
         update = est.update
         for t, qq, p, v in zip(*args):
             update(t, qq, p, v)
@@ -113,7 +114,7 @@ def measure(duration_s: float, repeats: int) -> dict:
     doc = {'samples': n, 'repeats': repeats}
     doc['update_us'] = _best(per_sample, repeats) / n * 1e6
     doc['batch_us'] = _best(lambda: estimate_batch(stamps, q, phi, speed), repeats) / n * 1e6
-    core = est.core
+    core = made[-1].core
     y = [(a, b, p) for (a, b), p in zip(args[1], args[2])]
     dt = float(core.gains.dt_s)
     doc['floor_us'] = _best(_floor_loop(core, y, dt, float(speed[-1])), repeats) / n * 1e6
