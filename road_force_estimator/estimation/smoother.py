@@ -372,9 +372,11 @@ class _Smoother:
         profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
         with the body heave's zero-phase integral at the profile's cutoff
         (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``, less its
-        cubic over the run, :data:`PROFILE_DETREND_DEGREE`); where
-        the model's speed ``v`` (m/s) is 0 the road is held. Only ``U1``, ``U2`` of ``out``
-        change; arguments as :meth:`run` made them."""
+        cubic over the run, :data:`PROFILE_DETREND_DEGREE`): in time when the speed is steady
+        (:func:`.body_heave.zero_phase`), else in distance with the rate corrected where the
+        truck stands (:func:`.body_heave.in_distance`); where the model's speed ``v`` (m/s) is
+        0 the road is held. Only ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run`
+        made them."""
         g = self.schedule.profile_design(dt, 'offline')
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
@@ -387,22 +389,27 @@ class _Smoother:
         else:
             self._uneven(g, dts, y, x0, cols)
         zs = 0.0
-        if y.shape[0] >= 8:
-            # one cutoff in time for the run: the profile's where the speed is steady; where
-            # it is not (a stop), the body heave's, as the long one lets the drift of the slow
-            # stretches into the profile (C20-stop: 164 % against 55 %; 62.6 % before)
-            steady = float(np.percentile(np.abs(v), 5.0)) >= 0.5 * speed
-            ratio = PROFILE_CUTOFF_RATIO if steady else 1.0
-            w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
-                   / (ratio * self.observer.profile_cutoff_wavelength_m))
+        wavelength = PROFILE_CUTOFF_RATIO * self.observer.profile_cutoff_wavelength_m
+        if y.shape[0] >= 8 and float(np.percentile(np.abs(v), 5.0)) < 0.5 * speed:
+            # the speed is not steady (a stop): the body heave integrated in time, its rate
+            # corrected where the truck stands, its long waves taken off in distance (run in
+            # time with one cutoff, the slow stretches lost their metre waves: C20-stop 55.4 %,
+            # now 0.72 %; kf-model-rts 4.17 %)
+            vg = v if pos is None else np.interp(np.arange(y.shape[0]), pos, v)
+            tg = (dt * np.arange(vg.size) if uniform or pos is not None else
+                  np.concatenate([[0.0], np.cumsum(dts)]))
+            zs = body_heave.in_distance(
+                cols[Column.DDZS], tg, vg, wavelength,
+                level=0.5 * (cols[Column.U1] + cols[Column.U2]), degree=PROFILE_DETREND_DEGREE)
+        elif y.shape[0] >= 8:
+            # steady: one cutoff in time for the run; a cutoff longer than the run leaves the
+            # filter's edge transients and the double integral's wander as a smooth curve over
+            # the whole run (metres on a 120 m run at 10 km): the least-squares cubic of the
+            # run goes (waves of the run's length, which no band-passed figure sees)
+            w_c = 2.0 * math.pi * max(speed, SPEED_FLOOR_MPS) / wavelength
             zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
-            if ratio > 1.0:
-                # a cutoff longer than the run leaves the filter's edge transients and the
-                # double integral's wander as a smooth curve over the whole run (metres on a
-                # 120 m run at 10 km): the least-squares cubic of the run goes (waves of the
-                # run's length, which no band-passed figure sees)
-                tt = np.linspace(-1.0, 1.0, zs.size)
-                zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
+            tt = np.linspace(-1.0, 1.0, zs.size)
+            zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
         # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
         # contradict keeps the last trusted speed, :mod:`.speed_check`)
         standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
