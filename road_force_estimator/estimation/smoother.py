@@ -22,7 +22,7 @@ from road_force_estimator.estimation.gains import ROW_X, Gains
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
-    continuous_model, rest_state)
+    continuous_model, offline_roll_moment_psd, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -377,7 +377,9 @@ class _Smoother:
         truck stands (:func:`.body_heave.in_distance`); where the model's speed ``v`` (m/s) is
         0 the road is held. Only ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run`
         made them."""
-        g = self.schedule.profile_design(dt, 'offline')
+        # the roll moment as slow as the load pass's roll residual says it is
+        g = self.schedule.profile_design(
+            dt, 'offline', offline_roll_moment_psd(out[Column.RESIDUAL], dt))
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
             pos = np.concatenate([[0], np.cumsum(steps)])
