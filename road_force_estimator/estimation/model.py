@@ -198,7 +198,7 @@ PROFILE_OFFLINE_GD_RATIO = 1.0
 #: PROFILE_OFFLINE_ROLL_MOMENT_PSD: a straight drive's roll moment hardly moves, and a slow
 #: one keeps the roll sensor's noise out of ``s sin(phi)`` (offline profile / IRI per 100 m
 #: at 1e4 against 1e6: C10-1k-10um 0.131 / 0.0062 % against 0.147 / 0.0198, C20-1k-50um
-#: 1.73 / 0.055 against 1.77 / 0.064; kf-model-rts 0.147 / 0.0195 and 1.75 / 0.060), while a
+#: 1.73 / 0.055 against 1.77 / 0.064; kf-model-rts 0.1465 / 0.0195 and 1.75 / 0.060), while a
 #: lateral-acceleration step needs the fast one (C20-lateral profile 1.12 % at 1e4, 0.515 at
 #: 1e6, the peer 0.516).
 PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD = 1e4
