@@ -390,28 +390,7 @@ class _Smoother:
             self._uniform(g, dt, y, x0, cols)
         else:
             self._uneven(g, dts, y, x0, cols)
-        zs = 0.0
-        wavelength = PROFILE_CUTOFF_RATIO * self.observer.profile_cutoff_wavelength_m
-        if y.shape[0] >= 8 and float(np.percentile(np.abs(v), 5.0)) < 0.5 * speed:
-            # the speed is not steady (a stop): the body heave integrated in time, its rate
-            # corrected where the truck stands, its long waves taken off in distance (run in
-            # time with one cutoff, the slow stretches lost their metre waves: C20-stop 55.4 %,
-            # now 0.72 %; kf-model-rts 4.17 %)
-            vg = v if pos is None else np.interp(np.arange(y.shape[0]), pos, v)
-            tg = (dt * np.arange(vg.size) if uniform or pos is not None else
-                  np.concatenate([[0.0], np.cumsum(dts)]))
-            zs = body_heave.in_distance(
-                cols[Column.DDZS], tg, vg, wavelength,
-                level=0.5 * (cols[Column.U1] + cols[Column.U2]), degree=PROFILE_DETREND_DEGREE)
-        elif y.shape[0] >= 8:
-            # steady: one cutoff in time for the run; a cutoff longer than the run leaves the
-            # filter's edge transients and the double integral's wander as a smooth curve over
-            # the whole run (metres on a 120 m run at 10 km): the least-squares cubic of the
-            # run goes (waves of the run's length, which no band-passed figure sees)
-            w_c = 2.0 * math.pi * max(speed, SPEED_FLOOR_MPS) / wavelength
-            zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
-            tt = np.linspace(-1.0, 1.0, zs.size)
-            zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
+        zs = self._profile_heave(cols, dt, speed, dts, uniform, pos, v)
         # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
         # contradict keeps the last trusted speed, :mod:`.speed_check`)
         standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
@@ -425,6 +404,19 @@ class _Smoother:
                 du[standing] = 0.0
                 u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
             out[j][:] = u
+
+    def _profile_heave(self, cols: list, dt: float, speed: float, dts: np.ndarray,
+                       uniform: bool, pos: np.ndarray | None, v: np.ndarray):
+        """The profile's body heave (m) from the profile pass's columns ``cols`` (on the grid
+        ``pos`` when not None): :func:`.body_heave.offline_profile`."""
+        m = cols[Column.DDZS].size
+        vg = v if pos is None else np.interp(np.arange(m), pos, v)
+        tg = (dt * np.arange(m) if uniform or pos is not None else
+              np.concatenate([[0.0], np.cumsum(dts)]))
+        return body_heave.offline_profile(
+            cols[Column.DDZS], 0.5 * (cols[Column.U1] + cols[Column.U2]), tg, vg, dt,
+            speed, self.observer.profile_cutoff_wavelength_m,
+            PROFILE_CUTOFF_RATIO, PROFILE_DETREND_DEGREE)
 
     def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
                  out: list, window: int, overlap: int) -> None:

@@ -157,3 +157,11 @@ def test_in_distance_over_a_stop_is_the_closed_form():
     # metre waves of the slow stretches (measured 16 %)
     old = body_heave.zero_phase(accel, DT, W)
     assert metrics.profile_errors(x, old, z_true, mask=judged).rms > 30.0 * band.rms
+
+
+def test_rest_stretches_count_the_stops_long_enough():
+    v = np.full(400, 10.0)
+    v[50:150] = 0.0                        # a stop of 100 samples
+    v[300:305] = 0.0                       # too short to correct the rate with
+    assert body_heave.rest_stretches(v) == 1
+    assert body_heave.rest_stretches(np.full(400, 10.0)) == 0
