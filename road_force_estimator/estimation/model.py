@@ -122,6 +122,7 @@ __all__ = [
     'PROFILE_CUTOFF_RATIO', 'PROFILE_ONLINE_CUTOFF_RATIO', 'PROFILE_ONLINE_GD_RATIO',
     'PROFILE_ONLINE_CORRELATION_M',
     'PROFILE_OFFLINE_FORCE_PSD', 'PROFILE_OFFLINE_ROLL_MOMENT_PSD', 'PROFILE_OFFLINE_GD_RATIO',
+    'PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD', 'ROLL_MOMENT_BLOCK_S', 'offline_roll_moment_psd',
     'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
     'FRICTION_DAMPING_FACTOR', 'DEFAULT_DQ_STD_MPS', 'friction_damping',
@@ -192,6 +193,17 @@ PROFILE_ONLINE_CORRELATION_M = (15.0, 0.8, 0.566)
 PROFILE_OFFLINE_FORCE_PSD = 1e-3
 PROFILE_OFFLINE_ROLL_MOMENT_PSD = 1e6
 PROFILE_OFFLINE_GD_RATIO = 1.0
+#: The offline profile smoother's roll-moment density is the one the run's roll residual
+#: shows (:func:`offline_roll_moment_psd`), within this floor and
+#: PROFILE_OFFLINE_ROLL_MOMENT_PSD: a straight drive's roll moment hardly moves, and a slow
+#: one keeps the roll sensor's noise out of ``s sin(phi)`` (offline profile / IRI per 100 m
+#: at 1e4 against 1e6: C10-1k-10um 0.131 / 0.0062 % against 0.147 / 0.0198, C20-1k-50um
+#: 1.73 / 0.055 against 1.77 / 0.064; kf-model-rts 0.1465 / 0.0195 and 1.75 / 0.060), while a
+#: lateral-acceleration step needs the fast one (C20-lateral profile 1.12 % at 1e4, 0.515 at
+#: 1e6, the peer 0.516).
+PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD = 1e4
+#: Block (s) and the run's first and last blocks skipped (start-up) of that estimate.
+ROLL_MOMENT_BLOCK_S = 1.0
 #: The profile's long-wave cutoff (m) is this many times ``observer.profile_cutoff_wavelength``
 #: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
 #: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
@@ -267,6 +279,23 @@ def profile_scheduled(noise_deflection_m: float, mode: str):
         return (min(force, PROFILE_OFFLINE_FORCE_PSD), corr, gd * PROFILE_OFFLINE_GD_RATIO,
                 min(moment, PROFILE_OFFLINE_ROLL_MOMENT_PSD))
     raise ValueError(f"mode = {mode!r}: 'online' or 'offline'")
+
+
+def offline_roll_moment_psd(residual_nm, dt_s: float) -> float:
+    """The random-walk density ((N m)^2 / s) of the unknown roll moment that a run's roll
+    residual (MODEL.md step 9, ``M h a_y cos(phi)`` under a lateral acceleration; N m,
+    evenly sampled at dt_s s) shows: 3 / 2 of the mean square change of its means over blocks
+    of :data:`ROLL_MOMENT_BLOCK_S` per block (a random walk of density q changes its block
+    means by ``2 q T / 3`` in the mean square; the first two blocks and the last skipped), within
+    [:data:`PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD`, :data:`PROFILE_OFFLINE_ROLL_MOMENT_PSD`];
+    the upper end when fewer than four blocks are left or the residual is not finite."""
+    r = np.asarray(residual_nm, dtype=float)
+    nb = max(1, int(round(ROLL_MOMENT_BLOCK_S / dt_s)))
+    blocks = r[:r.size // nb * nb].reshape(-1, nb).mean(axis=1)[2:-1]
+    if blocks.size < 4 or not np.all(np.isfinite(blocks)):
+        return PROFILE_OFFLINE_ROLL_MOMENT_PSD
+    psd = 1.5 * float(np.mean(np.square(np.diff(blocks)))) / ROLL_MOMENT_BLOCK_S
+    return min(max(psd, PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD), PROFILE_OFFLINE_ROLL_MOMENT_PSD)
 
 
 def road_diffusion(gd_n0_m3: float) -> float:

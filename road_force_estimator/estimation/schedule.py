@@ -202,21 +202,26 @@ class GainSchedule:
         self.stale = False
         return g
 
-    def profile_design(self, dt: float, mode: str) -> Gains:
+    def profile_design(self, dt: float, mode: str,
+                       roll_moment_psd: float | None = None) -> Gains:
         """The profile filter's gains (no lag) at the current levels (cached, as
         :meth:`design`; the gains in use stay): :func:`.model.profile_scheduled` of ``mode``
-        (``'online'`` or ``'offline'``)."""
-        return self._design(dt, 0, mode)
+        (``'online'`` or ``'offline'``), with its roll-moment density replaced by
+        ``roll_moment_psd`` ((N m)^2 / s) when given."""
+        return self._design(dt, 0, mode, roll_moment_psd)
 
-    def _design(self, dt: float, lag: int, mode: str) -> Gains:
+    def _design(self, dt: float, lag: int, mode: str,
+                roll_moment_psd: float | None = None) -> Gains:
         """The gains of the current levels, the lag and the tuning ``mode`` ('' = the load's,
-        else the profile's), cached."""
+        else the profile's; its roll-moment density ``roll_moment_psd`` if given), cached."""
         lv = self.levels
         key = (lv['dt'], lv['v'], lv['nq'], lv['nr'], lv['gd'], lag)
         if self.friction:
             key += (lv['dq'],)
         if mode:
             key += (mode,)
+        if roll_moment_psd is not None:
+            key += (roll_moment_psd,)
         cache = self._profile_gains if mode else self._gains    # (apart: the load's cache
         g = cache.get(key)                                      # misses stay as they were)
         if g is None:
@@ -226,6 +231,8 @@ class GainSchedule:
             noise = max(self.noise_deflection_m, NOISE_FLOOR_M)
             force_psd, corr, gd_factor, moment_psd = (
                 profile_scheduled(noise, mode) if mode else scheduled(noise, roll_moment=True))
+            if roll_moment_psd is not None:
+                moment_psd = roll_moment_psd
             if self.observer.road_correlation_length_m > 0.0:
                 corr = self.observer.road_correlation_length_m
             kwargs = dict(dt_s=dt, speed_mps=SPEED_LEVEL_RATIO ** lv['v'], lag=lag,

@@ -22,7 +22,7 @@ from road_force_estimator.estimation.gains import ROW_X, Gains
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
-    continuous_model, rest_state)
+    continuous_model, offline_roll_moment_psd, rest_state)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -372,10 +372,14 @@ class _Smoother:
         profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
         with the body heave's zero-phase integral at the profile's cutoff
         (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``, less its
-        cubic over the run, :data:`PROFILE_DETREND_DEGREE`); where
-        the model's speed ``v`` (m/s) is 0 the road is held. Only ``U1``, ``U2`` of ``out``
-        change; arguments as :meth:`run` made them."""
-        g = self.schedule.profile_design(dt, 'offline')
+        cubic over the run, :data:`PROFILE_DETREND_DEGREE`): in time when the speed is steady
+        (:func:`.body_heave.zero_phase`), else in distance with the rate corrected where the
+        truck stands (:func:`.body_heave.in_distance`); where the model's speed ``v`` (m/s) is
+        0 the road is held. Only ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run`
+        made them."""
+        # the roll moment as slow as the load pass's roll residual says it is
+        g = self.schedule.profile_design(
+            dt, 'offline', offline_roll_moment_psd(out[Column.RESIDUAL], dt))
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
             pos = np.concatenate([[0], np.cumsum(steps)])
@@ -386,23 +390,7 @@ class _Smoother:
             self._uniform(g, dt, y, x0, cols)
         else:
             self._uneven(g, dts, y, x0, cols)
-        zs = 0.0
-        if y.shape[0] >= 8:
-            # one cutoff in time for the run: the profile's where the speed is steady; where
-            # it is not (a stop), the body heave's, as the long one lets the drift of the slow
-            # stretches into the profile (C20-stop: 164 % against 55 %; 62.6 % before)
-            steady = float(np.percentile(np.abs(v), 5.0)) >= 0.5 * speed
-            ratio = PROFILE_CUTOFF_RATIO if steady else 1.0
-            w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
-                   / (ratio * self.observer.profile_cutoff_wavelength_m))
-            zs = body_heave.zero_phase(cols[Column.DDZS], dt, w_c)
-            if ratio > 1.0:
-                # a cutoff longer than the run leaves the filter's edge transients and the
-                # double integral's wander as a smooth curve over the whole run (metres on a
-                # 120 m run at 10 km): the least-squares cubic of the run goes (waves of the
-                # run's length, which no band-passed figure sees)
-                tt = np.linspace(-1.0, 1.0, zs.size)
-                zs = zs - np.polyval(np.polyfit(tt, zs, PROFILE_DETREND_DEGREE), tt)
+        zs = self._profile_heave(cols, dt, speed, dts, uniform, pos, v)
         # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
         # contradict keeps the last trusted speed, :mod:`.speed_check`)
         standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
@@ -416,6 +404,19 @@ class _Smoother:
                 du[standing] = 0.0
                 u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
             out[j][:] = u
+
+    def _profile_heave(self, cols: list, dt: float, speed: float, dts: np.ndarray,
+                       uniform: bool, pos: np.ndarray | None, v: np.ndarray):
+        """The profile's body heave (m) from the profile pass's columns ``cols`` (on the grid
+        ``pos`` when not None): :func:`.body_heave.offline_profile`."""
+        m = cols[Column.DDZS].size
+        vg = v if pos is None else np.interp(np.arange(m), pos, v)
+        tg = (dt * np.arange(m) if uniform or pos is not None else
+              np.concatenate([[0.0], np.cumsum(dts)]))
+        return body_heave.offline_profile(
+            cols[Column.DDZS], 0.5 * (cols[Column.U1] + cols[Column.U2]), tg, vg, dt,
+            speed, self.observer.profile_cutoff_wavelength_m,
+            PROFILE_CUTOFF_RATIO, PROFILE_DETREND_DEGREE)
 
     def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
                  out: list, window: int, overlap: int) -> None:

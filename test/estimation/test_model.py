@@ -1,6 +1,8 @@
 """The roll-plane model of the observer (estimation/model.py): its equations against the plant
 helper's linearised model (``VehicleModel.linearised``)."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -50,3 +52,22 @@ class TestModel:
             np.testing.assert_allclose(out[[OUTPUTS.index('df1'), OUTPUTS.index('df2')]],
                                        df, rtol=1e-12)
 
+
+
+def test_offline_roll_moment_density_from_the_residual():
+    # a random walk of known density (plus white noise, which block means average out) is
+    # read back; a straight drive's residual (noise only) gives the floor, a lateral step the
+    # load tuning's fast roll moment (the offline profile smoother's, issue 21)
+    from road_force_estimator.estimation import model as mdl
+
+    rng = np.random.default_rng(3)
+    dt, n = 1e-3, 200_000
+    q = 1e5
+    walk = np.cumsum(rng.normal(0.0, math.sqrt(q * dt), n))
+    got = mdl.offline_roll_moment_psd(walk + rng.normal(0.0, 50.0, n), dt)
+    assert got == pytest.approx(q, rel=0.25)
+    assert mdl.offline_roll_moment_psd(rng.normal(0.0, 50.0, n), dt) == (
+        mdl.PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD)
+    step = np.where(np.arange(n) > n // 2, 2e4, 0.0)          # M h a_y of a 3 m/s^2 step
+    assert mdl.offline_roll_moment_psd(step, dt) == mdl.PROFILE_OFFLINE_ROLL_MOMENT_PSD
+    assert mdl.offline_roll_moment_psd(walk[:3000], dt) == mdl.PROFILE_OFFLINE_ROLL_MOMENT_PSD
