@@ -18,10 +18,13 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, CdrReader, message_template
+from road_force_estimator.bagio import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
 from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
 
-__all__ = ['Wire', 'deserialize']
+__all__ = ['Wire', 'OUTPUTS', 'deserialize']
+
+#: The topics of :attr:`Wire.outputs`' messages, in its order (one of each per estimate).
+OUTPUTS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES)
 
 
 class Wire:
@@ -44,6 +47,10 @@ class Wire:
     states : CdrEncoder
         ``/observer/states`` (JointState of :data:`.interfaces.STATE_JOINTS`): positions,
         then velocities.
+    outputs : CdrEncoderGroup
+        The seven messages of one estimate at once, in :data:`OUTPUTS`' order (the bytes of
+        the encoders above): 24 numbers, F_1, F_2; x, +T/2, z_1; x, -T/2, z_2; LTR; LTR,
+        quasi-static LTR, 0; six positions, six velocities.
     """
 
     def __init__(self) -> None:
@@ -61,6 +68,8 @@ class Wire:
         self.states = CdrEncoder(api.JOINT_STATE, message_template(
             api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
             ['position', 'velocity'])
+        self.outputs = CdrEncoderGroup([*self.loads, self.road, self.road, self.ltr,
+                                        self.load_transfer, self.states])
 
     def read_deflections(self, data: bytes) -> tuple[int, tuple[float, float], float]:
         """:func:`.read_deflections` of the JointState in ``data``: read straight from the
