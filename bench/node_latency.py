@@ -64,6 +64,7 @@ from road_force_estimator.ros.messages import reliable_qos, sensor_qos
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 MAX_MEDIAN_S = 0.005
+STAMP0_NS = 1_700_000_000 * 10**9
 STAMP = struct.Struct('<iI')   # header.stamp, right after the 4-byte CDR encapsulation header
 OUTPUTS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES)  # states last
 
@@ -151,6 +152,7 @@ class Driver(Node):
         self.twist = self.create_publisher(message_class(api.TWIST_STAMPED), api.TWIST,
                                            reliable_qos())
         self.encoders = input_encoders()
+        self.next_stamp_ns = STAMP0_NS
         self.sent: dict[int, int] = {}
         self.latency_ns: list[int] = []
         self.create_subscription(message_class(api.JOINT_STATE), api.STATES,
@@ -163,8 +165,9 @@ class Driver(Node):
             self.latency_ns.append(now - sent)
 
 
-def run(executor, driver: Driver, rate_hz: float, seconds: float, stamp0_ns: int) -> dict:
-    """Publish at ``rate_hz`` for ``seconds``; wait for the outputs; the figures."""
+def run(executor, driver: Driver, rate_hz: float, seconds: float) -> dict:
+    """Publish at ``rate_hz`` for ``seconds``; wait for the outputs; the figures. The stamps
+    go on from the last run's, one period on (no gap: the estimator does not restart)."""
     driver.sent.clear()
     driver.latency_ns.clear()
     n = int(rate_hz * seconds)
@@ -175,14 +178,16 @@ def run(executor, driver: Driver, rate_hz: float, seconds: float, stamp0_ns: int
         due = start + int(k * period_ns)
         while (left := due - time.perf_counter_ns()) > 0:  # take outputs while waiting
             executor.spin_once(timeout_sec=left * 1e-9)
-        stamp = stamp0_ns + int(k * period_ns)
-        data = deflections.encode(stamp, (2e-3 * math.sin(2 * math.pi * 2.0 * k / rate_hz), 0.0,
-                                          1e-3 * math.sin(2 * math.pi * 1.0 * k / rate_hz)))
+        stamp = driver.next_stamp_ns + int(k * period_ns)
+        t = (stamp - STAMP0_NS) * 1e-9
+        data = deflections.encode(stamp, (2e-3 * math.sin(2 * math.pi * 2.0 * t), 0.0,
+                                          1e-3 * math.sin(2 * math.pi * 1.0 * t)))
         speed = twist.encode(stamp, (20.0,))
         driver.sent[stamp] = time.perf_counter_ns()
         driver.twist.publish(speed)  # as the plant_simulator: every sample
         driver.deflections.publish(data)
     sent_s = (time.perf_counter_ns() - start) * 1e-9
+    driver.next_stamp_ns += int(n * period_ns)
     deadline = time.monotonic() + 2.0
     while driver.sent and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.01)
@@ -199,7 +204,7 @@ def measure(executor, driver: Driver, pid: int, args) -> dict:
     runs = []
     for i in range(args.repeats):
         cpu0, wall0 = sum(proc.cpu_times()[:2]), time.monotonic()
-        r = run(executor, driver, args.rate, args.seconds, STAMP0 + (2 + i) * 10**11)
+        r = run(executor, driver, args.rate, args.seconds)
         cpu = (sum(proc.cpu_times()[:2]) - cpu0) / (time.monotonic() - wall0)
         r['observer_cpu_percent_of_one_core'] = 100.0 * cpu
         runs.append(r)
@@ -217,9 +222,8 @@ def measure(executor, driver: Driver, pid: int, args) -> dict:
 def sweep(executor, driver: Driver, args) -> dict:
     """Rising rates: the highest up to which every output came and the median stayed low."""
     sustained, failed, rows = None, False, []
-    t0 = STAMP0 + (3 + args.repeats) * 10**11
     for i, rate in enumerate(float(r) for r in args.sweep.split(',') if r):
-        r = run(executor, driver, rate, args.sweep_seconds, t0 + i * 10**11)
+        r = run(executor, driver, rate, args.sweep_seconds)
         rows.append(r)
         ok = r['lost'] == 0 and r['median_ms'] < MAX_MEDIAN_S * 1e3
         print(f"  sweep {rate:g} Hz (achieved {r['achieved_rate_hz']:.0f} Hz): lost "
@@ -282,9 +286,6 @@ def measure_plant(rate_hz: float, seconds: float) -> dict:
             'received_in_time': in_time, 'received': len(got), 'cpu_percent_of_one_core': cpu}
 
 
-STAMP0 = 1_700_000_000 * 10**9
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--rate', type=float, default=1000.0)
@@ -329,7 +330,7 @@ def measure_node(args) -> dict:
         while (driver.deflections.get_subscription_count() == 0
                or driver.twist.get_subscription_count() == 0) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        run(executor, driver, args.rate, 1.0, STAMP0)  # warm-up
+        run(executor, driver, args.rate, 1.0)  # warm-up
         results.update(measure(executor, driver, child.pid, args))
         results.update(sweep(executor, driver, args))
     finally:

@@ -21,7 +21,7 @@ from road_force_estimator import interfaces as api
 from road_force_estimator.bagio import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
 from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
 
-__all__ = ['Wire', 'OUTPUTS', 'deserialize']
+__all__ = ['Wire', 'OUTPUTS', 'SimulatorWire', 'deserialize']
 
 #: The topics of :attr:`Wire.outputs`' messages, in its order (one of each per estimate).
 OUTPUTS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES)
@@ -87,6 +87,34 @@ class Wire:
         if fast is not None and math.isfinite(fast[1][0]):
             return fast[0], fast[1][0]
         return read_twist(deserialize(data, TwistStamped))
+
+
+class SimulatorWire:
+    """Encoders of the plant_simulator's messages of every sample (the bytes rmw sends for
+    :func:`.messages.deflections_msg`, :func:`.messages.twist_msg`, :func:`.messages.wrench_msg`
+    and :func:`.messages.road_point_msg`: test_wire).
+
+    Attributes
+    ----------
+    deflections : CdrEncoder
+        ``/suspension/deflections``: ``position`` = q_1, q_2 (m), phi (rad).
+    twist : CdrEncoder
+        ``/vehicle/twist``: ``twist.linear.x`` (m/s).
+    loads : list of CdrEncoder
+        ``/ground_truth/wheel_load/left|right``: ``wrench.force.z`` (N).
+    road : CdrEncoder
+        ``/ground_truth/road_profile/left|right``: ``point.x, y, z`` (m).
+    """
+
+    def __init__(self) -> None:
+        self.deflections = CdrEncoder(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
+        self.twist = CdrEncoder(api.TWIST_STAMPED, message_template(
+            api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
+        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
+                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
+        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                               ['point.x', 'point.y', 'point.z'])
 
 
 def deserialize(data: bytes, msg_type):

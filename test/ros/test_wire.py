@@ -16,7 +16,7 @@ from road_force_estimator.bagio import CdrEncoder, cdr_layout, message_template
 from road_force_estimator.ros.messages import (
     MessageRejected, deflections_msg, float64_msg, read_deflections, read_twist, reliable_qos,
     road_point_msg, states_msg, twist_msg, wrench_msg)
-from road_force_estimator.ros.wire import Wire
+from road_force_estimator.ros.wire import SimulatorWire, Wire
 from ros_helpers import spin_until
 
 EXTREMES = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, -1e300,
@@ -87,6 +87,22 @@ def test_outputs_are_todays_bytes():
     # Negative zero stays negative zero.
     data = wire.ltr.encode(None, (-0.0,))
     assert math.copysign(1.0, deserialize_message(data, Float64).data) == -1.0
+
+
+def test_simulator_messages_are_todays_bytes():
+    """The plant_simulator's per-sample messages: the bytes of the messages.py objects."""
+    wire = SimulatorWire()
+    for stamp, v in samples(200, seed=5):
+        pairs = [(api.JOINT_STATE, deflections_msg(stamp, v[0:2], v[2]),
+                  wire.deflections.encode(stamp, v[0:3])),
+                 (api.TWIST_STAMPED, twist_msg(stamp, v[3]), wire.twist.encode(stamp, v[3:4]))]
+        pairs += [(api.WRENCH, wrench_msg(stamp, frame, load), encoder.encode(stamp, (load,)))
+                  for encoder, frame, load in zip(wire.loads, api.WHEEL_FRAMES, v[4:6])]
+        pairs.append((api.POINT, road_point_msg(stamp, v[6], v[7], v[8]),
+                      wire.road.encode(stamp, v[6:9])))
+        for msgtype, msg, data in pairs:
+            assert_same_bytes(msgtype, data, serialize_message(msg))
+            assert deserialize_message(data, type(msg)) == msg
 
 
 def test_rmw_sends_the_same_bytes(ros_context):
