@@ -16,7 +16,10 @@ a wall clock), min and median over ``--repeats`` blocks of ``--samples``:
 - callbacks, publish a no-op: the same with rclpy's publish replaced (the node's Python and
   the estimator);
 - estimator.update: the numeric core alone, on the same inputs;
-- publish_raw: one rclpy publish of a serialized ``/observer/states`` (rclpy, rmw, DDS).
+- publish_raw: one rclpy publish of a serialized ``/observer/states`` (rclpy, rmw, DDS);
+- plant_simulator sample: its plant's step and its six publishes of one sample (the
+  plant_simulator node made in this process once the observer is gone: the cost of each
+  sample its timer publishes).
 
 The node's own Python is the second figure less the third; rclpy's share the first less
 the second.
@@ -37,9 +40,10 @@ from rclpy.node import Node
 from bench.node_latency import input_encoders
 from road_force_estimator import interfaces as api
 from road_force_estimator.ros.bag_recorder import message_class
-from road_force_estimator.ros.messages import reliable_qos
+from road_force_estimator.ros.messages import topic_qos
 
-TOPICS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES, *api.STATIC_LOAD)
+TOPICS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES, *api.STATIC_LOAD,
+          api.DEFLECTIONS, api.TWIST, *api.TRUE_LOAD, *api.TRUE_ROAD)
 T0_NS = 1_700_000_000 * 10**9
 
 
@@ -50,7 +54,7 @@ def serve_subscriber(seconds: float) -> int:
     node = Node('node_cost_sink')
     for topic in TOPICS:
         node.create_subscription(message_class(api.TOPIC_TYPES[topic]), topic, lambda d: None,
-                                 reliable_qos(10000), raw=True)
+                                 topic_qos(topic, 10000), raw=True)
     executor = EventsExecutor()
     executor.add_node(node)
     end = time.monotonic() + seconds
@@ -102,9 +106,24 @@ def main(argv=None) -> int:
         report(observer, Estimator, args)
     finally:
         child.kill()
-        observer.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def plant_sample_us(args) -> tuple[float, float]:
+    """(min, median) thread CPU time (us) of one plant_simulator sample: step and publish."""
+    from rclpy.parameter import Parameter
+
+    from road_force_estimator.ros.plant_simulator import PlantSimulator
+    plant = PlantSimulator(parameter_overrides=[Parameter('simulator.duration', value=120.0)])
+    try:
+        def sample(k):
+            plant.publish(plant.plant.step(), T0_NS + k * 10**6)
+
+        return per_sample_us(sample, lambda r: range(r * args.samples, (r + 1) * args.samples),
+                             args.repeats)
+    finally:
+        plant.destroy_node()
 
 
 def report(observer, estimator_class, args) -> None:
@@ -144,6 +163,8 @@ def report(observer, estimator_class, args) -> None:
     raw = observer.states_pub.handle.publish_raw
     rows.append(('publish_raw (/observer/states)', per_sample_us(
         lambda _: raw(states), lambda r: range(n), args.repeats)))
+    observer.destroy_node()   # the plant's inputs go to the child alone
+    rows.append(('plant_simulator sample', plant_sample_us(args)))
     for name, (low, mid) in rows:
         print(f'{name:32s} min {low:7.2f} us   median {mid:7.2f} us per sample')
     (cb, _), (py, _), (core, _) = rows[0][1], rows[1][1], rows[2][1]
