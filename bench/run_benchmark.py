@@ -503,7 +503,7 @@ def node_latency(*, seconds: float = 10.0, timeout_s: float = 240.0) -> dict[str
     with tempfile.TemporaryDirectory(prefix='run_benchmark_node_') as tmp:
         path = Path(tmp) / 'node.json'
         cmd = [sys.executable, str(script), '--rate', '1000', '--seconds', f'{seconds:g}',
-               '--sweep', '1000,2000,4000,8000', '--sweep-seconds', '2', '--json', str(path)]
+               '--sweep', '1000,2000,5000,8000', '--sweep-seconds', '2', '--json', str(path)]
         try:
             proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True,
                                   timeout=timeout_s)

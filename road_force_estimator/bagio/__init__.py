@@ -32,7 +32,7 @@ from road_force_estimator.bagio.estimates import (
     diagnostic_array,
     write_estimate_bag,
 )
-from road_force_estimator.bagio.live import CdrEncoder, CdrReader
+from road_force_estimator.bagio.live import CdrEncoder, CdrEncoderGroup, CdrReader
 from road_force_estimator.bagio.lpa import DEFAULT_SURVEY_SPEED_MPS, read_lpa_bag, write_lpa_bag
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS,
@@ -63,7 +63,7 @@ __all__ = [
     'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'write_lpa_bag', 'road_from_source',
     'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag', 'TYPESTORE', 'CdrLayout',
     'cdr_layout', 'encode_columns', 'decode_columns', 'stamps_to_ns', 'ns_to_stamps',
-    'CdrEncoder', 'CdrReader',
+    'CdrEncoder', 'CdrEncoderGroup', 'CdrReader',
     'message_class', 'message_template', 'stamp_columns', 'DEFAULT_START_STAMP_NS',
     'DEFAULT_TRACK_WIDTH_M', 'DEFAULT_SURVEY_SPEED_MPS', 'ROSBAG2_VERSION', 'SENSOR_DATA_QOS',
     'RELIABLE_QOS',

@@ -15,6 +15,7 @@ the same numbers and strings, but its padding is uninitialised and its buffer ma
 """
 from __future__ import annotations
 
+from operator import itemgetter
 import struct
 from typing import Sequence
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from road_force_estimator.bagio.cdr import NS_PER_S, TYPESTORE, cdr_layout
 
-__all__ = ['CdrEncoder', 'CdrReader']
+__all__ = ['CdrEncoder', 'CdrEncoderGroup', 'CdrReader']
 
 _STAMP = struct.Struct('<iI')
 _STAMP_OFFSET = 4  # header.stamp is the first field: right after the encapsulation header
@@ -74,6 +75,7 @@ class CdrEncoder:
         self.count = sum(k for _, _, k in self.regions)
         self.stamped = _stamped(self.layout)
         self._packer, self._consts, self._order = self._plan()
+        self._pick = itemgetter(*self._order)
 
     def _plan(self) -> tuple[struct.Struct, tuple[bytes, ...], tuple[int, ...]]:
         """One :class:`struct.Struct` for the whole message: the template's bytes between
@@ -111,8 +113,44 @@ class CdrEncoder:
         if len(values) != self.count:
             raise ValueError(f'{self.layout.msgtype}: {len(values)} numbers for {self.count}')
         stamp = divmod(int(stamp_ns), NS_PER_S) if self.stamped else (0, 0)
-        args = self._consts + stamp + tuple(values)
-        return self._packer.pack(*[args[i] for i in self._order])
+        return self._packer.pack(*self._pick(self._consts + stamp + tuple(values)))
+
+
+class CdrEncoderGroup:
+    """Several messages of one stamp (the encoders' messages, in order) serialized with one
+    :meth:`struct.Struct.pack`: each the bytes its :meth:`CdrEncoder.encode` gives.
+
+    Parameters
+    ----------
+    encoders : sequence of CdrEncoder
+        The messages; :meth:`encode` takes their values one after the other.
+    """
+
+    def __init__(self, encoders: Sequence[CdrEncoder]) -> None:
+        self.encoders = tuple(encoders)
+        self.count = sum(e.count for e in self.encoders)
+        n_consts = sum(len(e._consts) for e in self.encoders)
+        fmt, order, spans, c0, v0, pos = ['<'], [], [], 0, n_consts + 2, 0
+        for e in self.encoders:
+            fmt.append(e._packer.format[1:])   # '<': no alignment, so formats concatenate
+            k = len(e._consts)
+            order += [c0 + i if i < k else n_consts + i - k if i < k + 2 else v0 + i - k - 2
+                      for i in e._order]
+            spans.append((pos, pos + e._packer.size))
+            c0, v0, pos = c0 + k, v0 + e.count, pos + e._packer.size
+        self._packer = struct.Struct(''.join(fmt))
+        self._consts = tuple(c for e in self.encoders for c in e._consts)
+        self._pick = itemgetter(*order)
+        self.spans = tuple(spans)
+
+    def encode(self, stamp_ns: int, values: Sequence[float]) -> list[bytes]:
+        """The messages with stamp ``stamp_ns`` (ns; ignored by a type without a header) and
+        ``values`` (:attr:`count` numbers: the first encoder's, then the next's, ...)."""
+        if len(values) != self.count:
+            raise ValueError(f'{len(values)} numbers for {self.count}')
+        data = self._packer.pack(*self._pick(
+            self._consts + divmod(int(stamp_ns), NS_PER_S) + tuple(values)))
+        return [data[a:b] for a, b in self.spans]
 
 
 class CdrReader:

@@ -34,7 +34,7 @@ from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import Estimator, diagnostics, model_fit
+from road_force_estimator.estimation import GAP_THRESHOLD_S, Estimator, diagnostics, model_fit
 from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
@@ -57,6 +57,7 @@ ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m'
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
 FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
+GAP_NS = round(GAP_THRESHOLD_S * 1e9)
 
 
 def build(values):
@@ -103,6 +104,11 @@ class Observer(Node):
         self.load_transfer_pub = self.create_publisher(Vector3Stamped, api.LOAD_TRANSFER,
                                                        reliable_qos())
         self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
+        # Per estimate: rclpy's publish of serialized bytes without Publisher.publish's
+        # Python (its type check and handle guard: 1.5-2 us a call); in wire.OUTPUTS' order.
+        self.send = [pub.handle.publish_raw for pub in (
+            *self.load_pubs, *self.road_pubs, self.ltr_pub, self.load_transfer_pub,
+            self.states_pub)]
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
         self.wire = Wire()
@@ -124,7 +130,10 @@ class Observer(Node):
             self.total['rebuilds'] += 1
             self.get_logger().info('parameters changed: estimator rebuilt (it restarts)')
         self.estimator = Estimator(*config)
+        # observer.latency > 0: an accepted sample may give no estimate yet (held back)
+        self.holds_back = config[1].latency_s > 0.0
         self.fit = model_fit.ModelFitMonitor()    # restarts with the estimator
+        self.fit_stamp_ns = None                  # stamp of the last estimate it took
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
 
@@ -181,10 +190,15 @@ class Observer(Node):
             self.period['missed'] += periods - 1
 
     def estimate(self, stamp_ns: int, q_m, roll_rad: float) -> None:
-        accepted = self.estimator.status.accepted
-        est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
-        if self.estimator.status.accepted > accepted:
-            self.count_missed(stamp_ns)
+        if self.holds_back:   # accepted or not: the core's count says (a held-back estimate)
+            accepted = self.estimator.status.accepted
+            est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
+            if self.estimator.status.accepted > accepted:
+                self.count_missed(stamp_ns)
+        else:  # no latency: an accepted sample gives its estimate at once, a rejected none
+            est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
+            if est is not None:
+                self.count_missed(stamp_ns)
         if est is not None:  # None: rejected by the core (counted), or held back (latency)
             self.publish(est)
 
@@ -192,32 +206,38 @@ class Observer(Node):
         """The seven output messages of one estimate, stamped with its sample's stamp, and
         the static loads once per :data:`.interfaces.STATIC_LOAD_PERIOD_NS`."""
         (f1, f2), (u1, u2), s = est.wheel_load_n, est.road_m, self.half_track_m
-        position = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m)
-        velocity = (*est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
-        if not math.isfinite(f1 + f2 + u1 + u2 + est.ltr + est.ltr_quasi_static
-                             + est.distance_m + sum(position) + sum(velocity)):
+        x, ltr, ltr_qs = est.distance_m, est.ltr, est.ltr_quasi_static
+        states = (*est.q_m, est.roll_rad, est.body_heave_m, *est.wheel_heave_m,
+                  *est.dq, est.droll, est.body_heave_rate, *est.wheel_heave_rate)
+        if not math.isfinite(f1 + f2 + u1 + u2 + ltr + ltr_qs + x + sum(states)):
             self.reject('nonfinite_output', f'non-finite estimate at {est.stamp_ns} ns')
             return
-        t, wire = est.stamp_ns, self.wire
-        for pub, encoder, load in zip(self.load_pubs, wire.loads, (f1, f2)):
-            pub.publish(encoder.encode(t, (load,)))
-        for pub, y, road in zip(self.road_pubs, (s, -s), (u1, u2)):
-            pub.publish(wire.road.encode(t, (est.distance_m, y, road)))
-        self.ltr_pub.publish(wire.ltr.encode(None, (est.ltr,)))
-        self.load_transfer_pub.publish(wire.load_transfer.encode(
-            t, (est.ltr, est.ltr_quasi_static, 0.0)))
-        self.states_pub.publish(wire.states.encode(t, position + velocity))
+        t = est.stamp_ns
+        for send, data in zip(self.send, self.wire.outputs.encode(
+                t, (f1, f2, x, s, u1, x, -s, u2, ltr, ltr, ltr_qs, 0.0, *states))):
+            send(data)
         if api.static_load_due(t, self.static_stamp_ns) and math.isfinite(
                 sum(est.static_load_n)):
             self.static_stamp_ns = t
-            for pub, encoder, load in zip(self.static_pubs, wire.loads, est.static_load_n):
+            for pub, encoder, load in zip(self.static_pubs, self.wire.loads,
+                                          est.static_load_n):
                 pub.publish(encoder.encode(t, (load,)))
-        self.period['published'] += 1
-        self.period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
-        ex = self.extremes
-        ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(est.ltr))
+        period, ex = self.period, self.extremes
+        period['published'] += 1
+        period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
+        ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(ltr))
         ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
-        self.fit.update(t * 1e-9, est.residual_nm)
+        self.update_fit(t, est.residual_nm)
+
+    def update_fit(self, stamp_ns: int, residual_nm: float) -> None:
+        """The model-fit monitor takes the estimate; after a step of
+        :data:`.acceptance.GAP_THRESHOLD_S` or more in the stamps (a gap: the core restarts
+        there) it restarts too: its band-pass, designed at its first step after the skip,
+        cannot be designed at such a step (its band's top would pass half the rate)."""
+        last, self.fit_stamp_ns = self.fit_stamp_ns, stamp_ns
+        if last is not None and stamp_ns - last >= GAP_NS:
+            self.fit = model_fit.ModelFitMonitor()
+        self.fit.update(stamp_ns * 1e-9, residual_nm)
 
     def log_input(self, values: dict, rejected: Counter) -> None:
         """One line when input first arrives (its rate), then only when inputs are rejected."""

@@ -35,8 +35,7 @@ from road_force_estimator import interfaces as api
 from road_force_estimator.core.gnss import FixNoise, route
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.ros.messages import (
-    deflections_msg, diagnostic_status, ns_to_stamp, reliable_qos, road_point_msg, sensor_qos,
-    twist_msg, wrench_msg)
+    diagnostic_status, ns_to_stamp, reliable_qos, sensor_qos)
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
@@ -46,6 +45,7 @@ from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
     ParameterError, ParameterGuard, local_spec, specs_with_prefix)
+from road_force_estimator.ros.wire import SimulatorWire
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.core.vehicle_model import SpringOptions
 
@@ -106,6 +106,7 @@ class PlantSimulator(Node):
                     sim.gnss_heading_deg)  # (fix index, t_s, lat, lon, heading) of the last fix
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
+        self.wire = SimulatorWire()   # the messages of every sample as CDR bytes
         self.k = 0                     # next sample index
         self.start_ns = self.start_wall = None
         self.created_wall = time.monotonic()
@@ -197,13 +198,16 @@ class PlantSimulator(Node):
         if jitter:      # the sample at its true time, its stamp moved (simulator.stamp_jitter)
             stamp_ns += int(round(jitter * 1e9))
         load_l, load_r, road_l, road_r = self.reliable
-        self.twist_pub.publish(twist_msg(stamp_ns, self.speed_at(sample.t_s) * self.odometer))
-        self.deflections_pub.publish(deflections_msg(stamp_ns, q_meas, roll_meas))
-        for pub, frame, load in zip((load_l, load_r), api.WHEEL_FRAMES, sample.wheel_load_n):
-            pub.publish(wrench_msg(stamp_ns, frame, load))
+        wire, x = self.wire, float(sample.distance_m)
+        self.twist_pub.publish(wire.twist.encode(stamp_ns, (
+            float(self.speed_at(sample.t_s) * self.odometer),)))
+        self.deflections_pub.publish(wire.deflections.encode(stamp_ns, (
+            float(q_meas[0]), float(q_meas[1]), float(roll_meas))))
+        for pub, encoder, load in zip((load_l, load_r), wire.loads, sample.wheel_load_n):
+            pub.publish(encoder.encode(stamp_ns, (float(load),)))
         for pub, y, road in zip((road_l, road_r), (self.half_track_m, -self.half_track_m),
                                 sample.road_m):
-            pub.publish(road_point_msg(stamp_ns, sample.distance_m, y, road))
+            pub.publish(wire.road.encode(stamp_ns, (x, float(y), float(road))))
         if self.fix_pub is not None and int(sample.t_s * self.sim.gnss_rate_hz) > self.fix[0]:
             self.publish_fix(sample.t_s, stamp_ns)
 

@@ -18,10 +18,13 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, CdrReader, message_template
+from road_force_estimator.bagio import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
 from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
 
-__all__ = ['Wire', 'deserialize']
+__all__ = ['Wire', 'OUTPUTS', 'SimulatorWire', 'deserialize']
+
+#: The topics of :attr:`Wire.outputs`' messages, in its order (one of each per estimate).
+OUTPUTS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES)
 
 
 class Wire:
@@ -44,6 +47,10 @@ class Wire:
     states : CdrEncoder
         ``/observer/states`` (JointState of :data:`.interfaces.STATE_JOINTS`): positions,
         then velocities.
+    outputs : CdrEncoderGroup
+        The seven messages of one estimate at once, in :data:`OUTPUTS`' order (the bytes of
+        the encoders above): 24 numbers, F_1, F_2; x, +T/2, z_1; x, -T/2, z_2; LTR; LTR,
+        quasi-static LTR, 0; six positions, six velocities.
     """
 
     def __init__(self) -> None:
@@ -61,6 +68,8 @@ class Wire:
         self.states = CdrEncoder(api.JOINT_STATE, message_template(
             api.JOINT_STATE, api.BASE_FRAME, api.STATE_JOINTS, velocity=True),
             ['position', 'velocity'])
+        self.outputs = CdrEncoderGroup([*self.loads, self.road, self.road, self.ltr,
+                                        self.load_transfer, self.states])
 
     def read_deflections(self, data: bytes) -> tuple[int, tuple[float, float], float]:
         """:func:`.read_deflections` of the JointState in ``data``: read straight from the
@@ -78,6 +87,34 @@ class Wire:
         if fast is not None and math.isfinite(fast[1][0]):
             return fast[0], fast[1][0]
         return read_twist(deserialize(data, TwistStamped))
+
+
+class SimulatorWire:
+    """Encoders of the plant_simulator's messages of every sample (the bytes rmw sends for
+    :func:`.messages.deflections_msg`, :func:`.messages.twist_msg`, :func:`.messages.wrench_msg`
+    and :func:`.messages.road_point_msg`: test_wire).
+
+    Attributes
+    ----------
+    deflections : CdrEncoder
+        ``/suspension/deflections``: ``position`` = q_1, q_2 (m), phi (rad).
+    twist : CdrEncoder
+        ``/vehicle/twist``: ``twist.linear.x`` (m/s).
+    loads : list of CdrEncoder
+        ``/ground_truth/wheel_load/left|right``: ``wrench.force.z`` (N).
+    road : CdrEncoder
+        ``/ground_truth/road_profile/left|right``: ``point.x, y, z`` (m).
+    """
+
+    def __init__(self) -> None:
+        self.deflections = CdrEncoder(api.JOINT_STATE, message_template(
+            api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
+        self.twist = CdrEncoder(api.TWIST_STAMPED, message_template(
+            api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
+        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
+                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
+        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                               ['point.x', 'point.y', 'point.z'])
 
 
 def deserialize(data: bytes, msg_type):

@@ -14,9 +14,9 @@ from std_msgs.msg import Float64
 from road_force_estimator import interfaces as api
 from road_force_estimator.bagio import CdrEncoder, cdr_layout, message_template
 from road_force_estimator.ros.messages import (
-    MessageRejected, deflections_msg, float64_msg, read_deflections, read_twist, reliable_qos,
-    road_point_msg, states_msg, twist_msg, wrench_msg)
-from road_force_estimator.ros.wire import Wire
+    MessageRejected, deflections_msg, float64_msg, load_transfer_msg, read_deflections,
+    read_twist, reliable_qos, road_point_msg, states_msg, twist_msg, wrench_msg)
+from road_force_estimator.ros.wire import OUTPUTS, SimulatorWire, Wire
 from ros_helpers import spin_until
 
 EXTREMES = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, -1e300,
@@ -87,6 +87,40 @@ def test_outputs_are_todays_bytes():
     # Negative zero stays negative zero.
     data = wire.ltr.encode(None, (-0.0,))
     assert math.copysign(1.0, deserialize_message(data, Float64).data) == -1.0
+
+
+def test_the_seven_outputs_at_once_are_todays_bytes():
+    """Wire.outputs (one struct for the seven messages of an estimate): each message the
+    bytes of the object messages.py builds, in wire.OUTPUTS' order."""
+    wire, rng = Wire(), np.random.default_rng(13)
+    for stamp, _ in samples(300, seed=13):
+        f1, f2, x, s, u1, u2, ltr, lqs, *states = numbers(rng, 20)
+        want = [wrench_msg(stamp, api.WHEEL_FRAMES[0], f1),
+                wrench_msg(stamp, api.WHEEL_FRAMES[1], f2),
+                road_point_msg(stamp, x, s, u1), road_point_msg(stamp, x, -s, u2),
+                float64_msg(ltr), load_transfer_msg(stamp, ltr, lqs),
+                states_msg(stamp, states[:6], states[6:])]
+        got = wire.outputs.encode(stamp, (f1, f2, x, s, u1, x, -s, u2, ltr, ltr, lqs, 0.0,
+                                          *states))
+        assert len(got) == len(want) == len(OUTPUTS)
+        for topic, data, msg in zip(OUTPUTS, got, want):
+            assert_same_bytes(api.TOPIC_TYPES[topic], data, serialize_message(msg))
+
+
+def test_simulator_messages_are_todays_bytes():
+    """The plant_simulator's per-sample messages: the bytes of the messages.py objects."""
+    wire = SimulatorWire()
+    for stamp, v in samples(200, seed=5):
+        pairs = [(api.JOINT_STATE, deflections_msg(stamp, v[0:2], v[2]),
+                  wire.deflections.encode(stamp, v[0:3])),
+                 (api.TWIST_STAMPED, twist_msg(stamp, v[3]), wire.twist.encode(stamp, v[3:4]))]
+        pairs += [(api.WRENCH, wrench_msg(stamp, frame, load), encoder.encode(stamp, (load,)))
+                  for encoder, frame, load in zip(wire.loads, api.WHEEL_FRAMES, v[4:6])]
+        pairs.append((api.POINT, road_point_msg(stamp, v[6], v[7], v[8]),
+                      wire.road.encode(stamp, v[6:9])))
+        for msgtype, msg, data in pairs:
+            assert_same_bytes(msgtype, data, serialize_message(msg))
+            assert deserialize_message(data, type(msg)) == msg
 
 
 def test_rmw_sends_the_same_bytes(ros_context):
