@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
 
 __all__ = ['BAND_HZ', 'SETTLE_S', 'THRESHOLD', 'OK', 'MISMATCH', 'ADVICE', 'ModelFitMonitor',
            'moment_std_nm', 'gains_sigma_nm', 'residual_ratio', 'verdict', 'assess']
@@ -64,8 +65,10 @@ class ModelFitMonitor:
 
     The band-pass (second-order Butterworth at :data:`BAND_HZ`, two biquads in transposed
     direct form II, as :func:`scipy.signal.sosfilt`) is designed at the step to the first
-    estimate after ``skip_s`` and started there (at its residual); from
-    :data:`SETTLE_S` later on its output's squares are summed.
+    estimate after ``skip_s`` that is not a gap (a step under :data:`.GAP_THRESHOLD_S`: the
+    band's top stays under half the rate) and started there (at its residual); from
+    :data:`SETTLE_S` later on its output's squares are summed. After a gap (the core
+    restarts there) the band-pass starts again the same way; the sums go on.
     """
 
     def __init__(self, skip_s: float = 2.0) -> None:
@@ -91,14 +94,16 @@ class ModelFitMonitor:
             self._t0 = t_s
         if t_s - self._t0 < self.skip_s or not math.isfinite(residual_nm):
             return
+        step = t_s - last
         if self._sos is None:
-            if not t_s - last > 0.0:
+            if not 0.0 < step < GAP_THRESHOLD_S:
                 return
-            self._dt = t_s - last
+            self._dt = step
             self._sos = self._signal.butter(2, BAND_HZ, btype='bandpass', fs=1.0 / self._dt,
                                       output='sos').tolist()
-            self._r0 = residual_nm
-            self._start = t_s + SETTLE_S
+            self._restart(t_s, residual_nm)
+        elif not step < GAP_THRESHOLD_S:
+            self._restart(t_s, residual_nm)
         x = residual_nm - self._r0
         zi = self._zi
         for j, (b0, b1, b2, _, a1, a2) in enumerate(self._sos):
@@ -110,6 +115,12 @@ class ModelFitMonitor:
         if t_s >= self._start:
             self.count += 1
             self.sum_squares += x * x
+
+    def _restart(self, t_s: float, residual_nm: float) -> None:
+        """The band-pass from rest at this estimate; its squares summed from SETTLE_S on."""
+        self._zi = [0.0] * 4
+        self._r0 = residual_nm
+        self._start = t_s + SETTLE_S
 
     def ratio(self, sigma_nm: float) -> float:
         """Band RMS over ``sigma_nm``; NaN with less than 2 s summed."""
@@ -126,9 +137,9 @@ def residual_ratio(t_s, residual_nm, sigma_nm: float, *, skip_s: float = 2.0) ->
 
     The monitor's steps, vectorised with the same numbers: the samples it takes (past the
     skip, finite), the one it designs the band-pass at (the first of them whose step from the
-    sample before is > 0), the biquads by :func:`scipy.signal.sosfilt` (the monitor's
-    transposed direct form II, operation for operation) and the squares summed in order
-    (``np.add.accumulate``: no pairwise summation).
+    sample before is > 0 and not a gap), the restarts at gaps, the biquads by
+    :func:`scipy.signal.sosfilt` (the monitor's transposed direct form II, operation for
+    operation) and the squares summed in order (``np.add.accumulate``: no pairwise sum).
     """
     t = np.asarray(t_s, dtype=float)
     r = np.asarray(residual_nm, dtype=float)
@@ -137,8 +148,9 @@ def residual_ratio(t_s, residual_nm, sigma_nm: float, *, skip_s: float = 2.0) ->
     mon = ModelFitMonitor(skip_s)
     taken = ~(t - t[0] < mon.skip_s) & np.isfinite(r)
     taken[0] = False                  # the monitor's first step has no step before it
-    step_ok = np.zeros(t.size, dtype=bool)
-    step_ok[1:] = t[1:] - t[:-1] > 0.0
+    step = np.full(t.size, math.nan)
+    step[1:] = t[1:] - t[:-1]
+    step_ok = (step > 0.0) & (step < GAP_THRESHOLD_S)
     first = np.flatnonzero(taken & step_ok)
     if first.size == 0:
         return math.nan
@@ -146,18 +158,28 @@ def residual_ratio(t_s, residual_nm, sigma_nm: float, *, skip_s: float = 2.0) ->
     for k in range(d + 1):            # the monitor up to its design (a few samples)
         mon.update(float(t[k]), float(r[k]))
     rest = np.flatnonzero(taken[d + 1:]) + d + 1
-    if rest.size:
-        x = r[rest] - mon._r0
-        zi = np.array(mon._zi, dtype=float).reshape(-1, 2)
-        y, zf = mon._signal.sosfilt(np.array(mon._sos), x, zi=zi)
-        mon._zi = zf.reshape(-1).tolist()
-        late = t[rest] >= mon._start
-        sq = y[late] * y[late]
-        if sq.size:
-            mon.count += int(sq.size)
-            mon.sum_squares = float(np.add.accumulate(np.concatenate(
-                [[mon.sum_squares], sq]))[-1])
+    gaps = np.flatnonzero(~(step[rest] < GAP_THRESHOLD_S))   # the monitor restarts there
+    for piece in np.split(rest, gaps):
+        if piece.size == 0:
+            continue
+        if not step[piece[0]] < GAP_THRESHOLD_S:
+            mon._restart(float(t[piece[0]]), float(r[piece[0]]))
+        _filter_piece(mon, t[piece], r[piece])
     return mon.ratio(sigma_nm)
+
+
+def _filter_piece(mon: ModelFitMonitor, t, r) -> None:
+    """The monitor's steps over a stretch without a gap (its band-pass designed)."""
+    x = r - mon._r0
+    zi = np.array(mon._zi, dtype=float).reshape(-1, 2)
+    y, zf = mon._signal.sosfilt(np.array(mon._sos), x, zi=zi)
+    mon._zi = zf.reshape(-1).tolist()
+    late = t >= mon._start
+    sq = y[late] * y[late]
+    if sq.size:
+        mon.count += int(sq.size)
+        mon.sum_squares = float(np.add.accumulate(np.concatenate(
+            [[mon.sum_squares], sq]))[-1])
 
 
 def gains_sigma_nm(gains) -> float:

@@ -34,7 +34,7 @@ from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import GAP_THRESHOLD_S, Estimator, diagnostics, model_fit
+from road_force_estimator.estimation import Estimator, diagnostics, model_fit
 from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
@@ -57,7 +57,6 @@ ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m'
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
 FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
-GAP_NS = round(GAP_THRESHOLD_S * 1e9)
 
 
 def build(values):
@@ -133,7 +132,6 @@ class Observer(Node):
         # observer.latency > 0: an accepted sample may give no estimate yet (held back)
         self.holds_back = config[1].latency_s > 0.0
         self.fit = model_fit.ModelFitMonitor()    # restarts with the estimator
-        self.fit_stamp_ns = None                  # stamp of the last estimate it took
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
 
@@ -227,17 +225,7 @@ class Observer(Node):
         period['lift_offs'] += est.lift_off[0] or est.lift_off[1]
         ex['max_abs_ltr'] = max(ex['max_abs_ltr'], abs(ltr))
         ex['max_abs_residual_nm'] = max(ex['max_abs_residual_nm'], abs(est.residual_nm))
-        self.update_fit(t, est.residual_nm)
-
-    def update_fit(self, stamp_ns: int, residual_nm: float) -> None:
-        """The model-fit monitor takes the estimate; after a step of
-        :data:`.acceptance.GAP_THRESHOLD_S` or more in the stamps (a gap: the core restarts
-        there) it restarts too: its band-pass, designed at its first step after the skip,
-        cannot be designed at such a step (its band's top would pass half the rate)."""
-        last, self.fit_stamp_ns = self.fit_stamp_ns, stamp_ns
-        if last is not None and stamp_ns - last >= GAP_NS:
-            self.fit = model_fit.ModelFitMonitor()
-        self.fit.update(stamp_ns * 1e-9, residual_nm)
+        self.fit.update(t * 1e-9, est.residual_nm)
 
     def log_input(self, values: dict, rejected: Counter) -> None:
         """One line when input first arrives (its rate), then only when inputs are rejected."""

@@ -106,8 +106,30 @@ def test_residual_ratio_is_the_monitor_sample_by_sample_to_the_bit():
             r[rng.integers(0, n, 30)] = np.nan
         if trial % 7 == 0:
             r[:n // 2] = np.inf
+        if trial % 6 == 1:            # gaps (the core restarts): one mid-drive, one at 2 s
+            t[n // 2:] += 0.3
+            t[np.searchsorted(t, t[0] + 2.0):] += 0.5
         mon = model_fit.ModelFitMonitor()
         for tk, rk in zip(t.tolist(), r.tolist()):
             mon.update(tk, rk)
         want, got = mon.ratio(3.0), model_fit.residual_ratio(t, r, 3.0)
         assert (np.isnan(want) and np.isnan(got)) or want == got, (trial, want, got)
+
+
+def test_a_gap_restarts_the_band_pass_and_the_sums_go_on():
+    # reference: scipy's band-pass run apart on the two stretches around a 0.5 s gap (the
+    # first designed at the skip), each from its first residual, squares from SETTLE_S on;
+    # a gap where the band-pass would be designed (0.6 s after 1.9 s) is not designed at
+    from scipy import signal
+    rng = np.random.default_rng(6)
+    t = np.arange(12000) * 1e-3
+    t[1900:] += 0.6
+    t[7000:] += 0.5
+    r = np.cumsum(rng.normal(0.0, 1.0, t.size)) + 30.0 * np.sin(2 * np.pi * 1.5 * t)
+    sos = signal.butter(2, model_fit.BAND_HZ, btype='bandpass', fs=1000.0, output='sos')
+    squares = []
+    for piece in (slice(1901, 7000), slice(7000, None)):
+        band = signal.sosfilt(sos, r[piece] - r[piece][0])
+        squares.append(band[t[piece] >= t[piece][0] + model_fit.SETTLE_S - 1e-9] ** 2)
+    expected = np.sqrt(np.mean(np.concatenate(squares))) / 5.0
+    assert model_fit.residual_ratio(t, r, 5.0) == pytest.approx(expected, rel=1e-9)
