@@ -407,7 +407,7 @@ def test_model_fit_on_the_estimator_status(ros_context, wrong):
 def test_a_gap_where_the_model_fit_starts_is_taken_and_publishing_goes_on(rig):
     # The model-fit monitor designs its band-pass at its first step after 2 s: a 0.6 s gap
     # there (a step its band cannot be designed at) once stopped the node; the monitor now
-    # restarts with the core at a gap.
+    # designs at the first step that is not a gap, and restarts its band-pass at gaps.
     observer, feeder, collector, executor = rig
     ks = [*range(1900), *range(2500, 2700)]
     for i, k in enumerate(ks):
