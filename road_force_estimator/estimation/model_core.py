@@ -60,6 +60,7 @@ from road_force_estimator.estimation.model import (
     continuous_model, rest_state)
 from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction
+from road_force_estimator.estimation.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
 __all__ = ['BLOCK_SAMPLES', 'FIRST_BLOCK_SAMPLES', 'LAG_STEPS', 'SM_DEAD_ZONE',
@@ -199,6 +200,8 @@ class ModelCore:
         self._road_started = False
         self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
         self._road_off = (0.0, 0.0)                # what standing added to the road (m)
+        self._clock: float | None = None           # the sample clock's step (s), or None
+        self._raw_dts: list = []                   # the stamps' steps of the block (s)
 
     @property
     def gains(self) -> Gains | None:
@@ -298,6 +301,11 @@ class ModelCore:
             self._restart(stamp, q1, q2, phi, (x, dt, v, False))
             self.last_converged = False
             return True
+        self._raw_dts.append(dt)
+        clock = self._clock      # a regular clock under jittered stamps (.sample_clock)
+        if clock is not None and -JITTER_MAX_FRACTION * clock <= dt - clock <= (
+                JITTER_MAX_FRACTION * clock):
+            dt = clock
         conv = self.converged()
         if not self._advance(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
             return False
@@ -518,6 +526,8 @@ class ModelCore:
         first_ever = sched.blocks == 0
         if sched.statistics(y, dts, self._slow == 0):
             self._t_retuned = self._t
+        self._clock = clock_step(self._raw_dts)
+        self._raw_dts = []
         self._slow = 0
         if first_ever and first_run_block and sched.stale and len(dts) == i:
             self._replay(dts)
