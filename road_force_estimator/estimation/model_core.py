@@ -395,7 +395,7 @@ class ModelCore:
         row[y0 + 2] = phi
         sv = _dot(self._m, row)
         if self._ff is not None:        # the friction over the step (of x+_k)
-            sv += _dot(self._fm, self._held_friction(row[x0:y0 - NY], self._a_dq, self._b_dq))
+            sv = self._friction_update(sv, row[x0:y0 - NY], self._fm, self._a_dq, self._b_dq)
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -551,7 +551,8 @@ class ModelCore:
             sv = g.step_matrix(dt) @ buf[j]
             if self._ff is not None:
                 a_dq, b_dq = _dq_rows(g, dt)
-                sv += g.friction_step(dt) @ self._held_friction(buf[j, x0:y0 - NY], a_dq, b_dq)
+                sv = self._friction_update(sv, buf[j, x0:y0 - NY], g.friction_step(dt), a_dq,
+                                           b_dq)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels
@@ -577,6 +578,20 @@ class ModelCore:
             w[:avail] = self._buf[first:first + avail]
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
+
+    def _friction_update(self, sv: np.ndarray, x: np.ndarray, fm: np.ndarray, a_dq: np.ndarray,
+                         b_dq: np.ndarray) -> np.ndarray:
+        """The step's result ``sv`` (the step matrix times the row, no friction) with the
+        friction held over the step from x+_k = ``x``: first with the friction of
+        :meth:`_held_friction` (its end rate predicted), then once more with the end rate of
+        that update's x+_(k+1), which the new measurement has corrected (an iterated update:
+        bench/truck_effects.py, class C / A, 1.5 kN: load error 17.32 -> 17.24 % / 23.97 ->
+        23.56 % at zero latency, 3.97 -> 3.74 % / 8.59 -> 8.02 % at 10 ms; a second iteration
+        changes nothing). ``fm``: :meth:`.Gains.friction_step`; ``a_dq``, ``b_dq``:
+        :func:`_dq_rows`."""
+        first = sv + _dot(fm, self._held_friction(x, a_dq, b_dq))
+        f0 = self._friction(x[State.DQ1], x[State.DQ2])
+        return sv + _dot(fm, 0.5 * (f0 + self._friction(first[State.DQ1], first[State.DQ2])))
 
     def _held_friction(self, x: np.ndarray, a_dq: np.ndarray, b_dq: np.ndarray) -> np.ndarray:
         """The friction forces (N) held over a step from the state x: the mean of those at
