@@ -22,6 +22,11 @@ injection changes no figure at the precision the benchmark prints; fed back into
 recursion (instead of cascaded) it was unstable, and without the noise weighting it added 1 %
 (dead zone 3 sigma) to 100 % (no dead zone) to the load error on the 10 um drive.
 
+Stamps
+------
+Each step uses its stamps' dt, but for stamps jittered about a regular sample clock
+(:mod:`.sample_clock`, detected per block): from the next block on, the clock's step.
+
 Latency
 -------
 ``observer.latency`` = T: each estimate is that of the sample N = round(T / dt) steps back
@@ -581,14 +586,10 @@ class ModelCore:
 
     def _friction_update(self, sv: np.ndarray, x: np.ndarray, fm: np.ndarray, a_dq: np.ndarray,
                          b_dq: np.ndarray) -> np.ndarray:
-        """The step's result ``sv`` (the step matrix times the row, no friction) with the
-        friction held over the step from x+_k = ``x``: first with the friction of
-        :meth:`_held_friction` (its end rate predicted), then once more with the end rate of
-        that update's x+_(k+1), which the new measurement has corrected (an iterated update:
-        bench/truck_effects.py, class C / A, 1.5 kN: load error 17.32 -> 17.24 % / 23.97 ->
-        23.56 % at zero latency, 3.97 -> 3.74 % / 8.59 -> 8.02 % at 10 ms; a second iteration
-        changes nothing). ``fm``: :meth:`.Gains.friction_step`; ``a_dq``, ``b_dq``:
-        :func:`_dq_rows`."""
+        """``sv`` (the step without friction) with the friction held over the step from
+        x+_k = ``x``: that of :meth:`_held_friction` (end rate predicted), then once more with
+        the end rate of that update's x+_(k+1) (one iterated update; README, "Friction").
+        ``fm``: :meth:`.Gains.friction_step`; ``a_dq``, ``b_dq``: :func:`_dq_rows`."""
         first = sv + _dot(fm, self._held_friction(x, a_dq, b_dq))
         f0 = self._friction(x[State.DQ1], x[State.DQ2])
         return sv + _dot(fm, 0.5 * (f0 + self._friction(first[State.DQ1], first[State.DQ2])))

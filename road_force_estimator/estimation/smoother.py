@@ -1,10 +1,11 @@
 """The model observer offline: its forward filter and Rauch-Tung-Striebel smoother over each
 run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
-from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
-online observer (:mod:`.model_core`). Long evenly sampled runs go through in overlapping
-windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
-drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
+from the whole run first (:class:`.GainSchedule`; a run with a stop: from its samples at
+speed, and its gains per stretch of speed, :mod:`.run_speed`); the same model, gains and
+outputs as the online observer (:mod:`.model_core`). Long evenly sampled runs go through in
+overlapping windows (:func:`window_samples`), so that the smoother's own memory does not grow
+with the drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
 from a second pass of the same smoother with the profile's tuning (:meth:`_Smoother.
 _profile`, over the whole run: windowed runs too).
 """
