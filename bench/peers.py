@@ -613,6 +613,11 @@ class RollPlaneKalman:
     (noise-free data, a floor of ~1e-10 m), the floor is raised tenfold until it can (at most
     :data:`MAX_NOISE_FLOOR_M`); :attr:`noise_floor_m` is the floor used.
 
+    Sensor lag: where the file states one (``vehicle.sensor_time_constant`` [deflection, roll],
+    s), each lagged channel has a first-order lag state ``tau dl_j = y_j - l_j`` that its
+    sensor measures (as the observer's model, but built here independently): the filter of
+    the same information.
+
     The model is discretized exactly at the sample step (matrix exponential; Van Loan for the
     process noise) for one (mean) speed.
     """
@@ -676,7 +681,6 @@ class RollPlaneKalman:
             a[5, idist] = 1.0 / vehicle.roll_inertia_kgm2
             g[idist, 6] = 1.0
             qc[6, 6] = roll_moment_psd
-        a_d, q_d = van_loan(a, g, qc, dt_s)
         cm = np.zeros((3, nx))
         cm[0:2, 0:4] = d
         cm[2, 1] = 1.0
@@ -687,6 +691,9 @@ class RollPlaneKalman:
             scale[idu:idu + 2] = 1e-1
         if n_dist:
             scale[idist] = 1e3
+        a, g, cm, scale = _with_sensor_lag(a, g, cm, scale, vehicle.sensor_time_constant_s)
+        nx = a.shape[0]
+        a_d, q_d = van_loan(a, g, qc, dt_s)
         #: measurement-noise floor actually used (raised x10 while the Riccati equation is too
         #: ill-conditioned to solve in double precision, as a user would)
         self.noise_floor_m = noise_floor_m
@@ -718,13 +725,16 @@ class RollPlaneKalman:
         self.h_body_accel = hb
 
     def prior(self, y0: np.ndarray) -> np.ndarray:
-        """Prior mean from the first measurement: static equilibrium, body heave 0."""
+        """Prior mean from the first measurement: static equilibrium, body heave 0 (a lagged
+        sensor's state: its reading)."""
         x0 = np.zeros(self.nx)
         s = self.vehicle.half_track_m
         x0[1] = y0[2]
         x0[2] = s * y0[2] - y0[0]
         x0[3] = -s * y0[2] - y0[1]
         x0[self.iu:self.iu + 2] = x0[2:4]
+        lagged = [j for j, tau in enumerate(_channel_lags(self.vehicle)) if tau > 0.0]
+        x0[self.nx - len(lagged):] = [y0[j] for j in lagged]
         return x0
 
     def outputs(self, x: np.ndarray, t_s, speed, latency_samples: int,
@@ -749,6 +759,35 @@ class RollPlaneKalman:
             road += (zs_4 - zs)[:, None]
         return PeerResult(wheel_load, road, _ltr(wheel_load), _distance(t_s, speed),
                           latency_samples, {'states': x})
+
+
+def _channel_lags(vehicle: VehicleParameters) -> tuple[float, float, float]:
+    """The first-order lag (s) of each channel (q_1, q_2, phi): ``vehicle.sensor_time_constant``
+    [deflection, roll]."""
+    tau = tuple(getattr(vehicle, 'sensor_time_constant_s', (0.0, 0.0)))
+    return float(tau[0]), float(tau[0]), float(tau[1])
+
+
+def _with_sensor_lag(a, g, cm, scale, time_constant_s):
+    """The model with a first-order lag state per lagged channel, ``tau dl_j = C_j x - l_j``
+    (no process noise: the sensor's own dynamics), appended; the sensor then measures
+    ``l_j``. ``time_constant_s``: [deflection, roll] (s); unchanged where both are 0."""
+    tau = (float(time_constant_s[0]), float(time_constant_s[0]), float(time_constant_s[1]))
+    lagged = [j for j in range(3) if tau[j] > 0.0]
+    if not lagged:
+        return a, g, cm, scale
+    nx, n = a.shape[0], len(lagged)
+    a2 = np.zeros((nx + n, nx + n))
+    a2[:nx, :nx] = a
+    c2 = np.zeros((3, nx + n))
+    c2[:, :nx] = cm
+    for i, j in enumerate(lagged):
+        a2[nx + i, :nx] = cm[j] / tau[j]
+        a2[nx + i, nx + i] = -1.0 / tau[j]
+        c2[j] = 0.0
+        c2[j, nx + i] = 1.0
+    g2 = np.vstack([g, np.zeros((n, g.shape[1]))])
+    return a2, g2, c2, np.concatenate([scale, np.full(n, 1e-2)])
 
 
 def _kf_model_states(t_s, q_m, roll_rad, speed_mps, vehicle, tuning):

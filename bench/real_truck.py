@@ -32,10 +32,11 @@ parameters). Columns: our observer at zero latency, 10 ms (``observer.latency``)
 (what ``estimate_bag --mode offline`` runs), the sliding-mode ablation
 (``observer.sliding_mode_gain = 0``, zero latency), the peers ``kf-model``,
 ``kf-model-lag10ms``, ``kf-model-rts`` (settings of ``bench/tuned_peers.json``) given the same
-file (deflections read from the mechanical zero: taken back to the file's equilibrium, its
-static loads, which the peers cannot estimate); load error in % of the true dynamic-load RMS,
-profile error in % of the 0.5-30 m band (:func:`bench.scenarios.score`); the model-fit verdict
-(:mod:`.estimation.model_fit`) of the zero-latency run.
+file (a sensor lag the file states: their model's lag states, :class:`bench.peers.
+RollPlaneKalman`; deflections read from the mechanical zero: taken back to the file's
+equilibrium, its static loads, which the peers cannot estimate); load error in % of the true
+dynamic-load RMS, profile error in % of the 0.5-30 m band (:func:`bench.scenarios.score`); the
+model-fit verdict (:mod:`.estimation.model_fit`) of the zero-latency run.
 """
 from __future__ import annotations
 

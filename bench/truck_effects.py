@@ -34,6 +34,11 @@ DRIVES = (
     ('A friction 1.5 kN', 'A', FRICTION, FRICTION),
 )
 MODES = ('online', '10 ms', 'offline')
+#: The model-based Kalman peers (bench.peers, settings of bench/tuned_peers.json) in the same
+#: modes, given the same file: where it states a sensor lag their model carries the lag state
+#: (the linear filter of the same information), the friction they cannot.
+PEER_MODES = (('online', 'kf-model'), ('10 ms', 'kf-model-lag10ms'),
+              ('offline', 'kf-model-rts'))
 
 
 def build(road_class: str, truck: VehicleParameters, duration_s: float, index: int):
@@ -82,10 +87,28 @@ def errors(drive, vehicle: VehicleParameters) -> dict[str, float]:
     return out
 
 
+def peer_errors(drive, vehicle: VehicleParameters) -> dict[str, float]:
+    """Load error (% of the dynamic RMS) per mode of the Kalman peers given ``vehicle``."""
+    from bench import peers, tune
+    from bench.scenarios import ROLL_NOISE_PER_DEFLECTION, score
+
+    tuned = tune.load_tuned(tune.TUNED_PATH)
+    noise = drive.scenario.noise_deflection_m
+    out = {}
+    for mode, name in PEER_MODES:
+        res = peers.call_peer(name, drive.t_s, drive.q_m, drive.roll_rad, drive.speed_mps,
+                              vehicle, tune.settings_for(tuned, name, noise),
+                              noise_deflection_m=noise,
+                              noise_roll_rad=ROLL_NOISE_PER_DEFLECTION * noise)
+        out[mode] = score(replace(drive, vehicle_observer=vehicle), res)['load_rms_pct_dyn']
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--duration', type=float, default=20.0, help='seconds per drive')
     parser.add_argument('--only', nargs='*', default=None, help='drive names to run')
+    parser.add_argument('--no-peers', action='store_true', help='without the Kalman peers')
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     rows, matched = [], {}
@@ -97,23 +120,38 @@ def main(argv: list[str] | None = None) -> int:
                                                             ('stated', stated)]
         for label, vehicle in files:
             err = errors(drive, vehicle)
+            peer = None if args.no_peers else peer_errors(drive, vehicle)
             if truck is NOMINAL:
-                matched[road] = err
-            rows.append((name, label, road, err))
-            print(f'.. {name} / {label}: ' + ', '.join(f'{m} {err[m]:.2f} %' for m in MODES),
+                matched[road] = (err, peer)
+            rows.append((name, label, road, err, peer))
+            print(f'.. {name} / {label}: ' + ', '.join(f'{m} {err[m]:.2f} %' for m in MODES)
+                  + ('' if peer is None else ' (peers: ' + ', '.join(
+                      f'{m} {peer[m]:.2f} %' for m in MODES) + ')'),
                   file=sys.stderr, flush=True)
-    print('| drive | file | ' + ' | '.join(f'{m} (% dyn)' for m in MODES)
-          + ' | ratio to matched (online / 10 ms / offline) |')
-    print('|---|---|' + '---|' * len(MODES) + '---|')
-    for name, label, road, err in rows:
-        ref = matched.get(road)
-        ratio = ' / '.join(f'{err[m] / ref[m]:.2f}' for m in MODES) if ref else ''
-        print(f'| {name} | {label} | ' + ' | '.join(f'{err[m]:.2f}' for m in MODES)
-              + f' | {ratio} |')
+    print(_table(rows, matched, not args.no_peers))
     print(f'\n({time.perf_counter() - t0:.0f} s; target: "stated" within 1.25 x matched in '
-          'every mode)')
+          'every mode; peers: kf-model / kf-model-lag10ms / kf-model-rts given the same file)')
     return 0
 
+
+def _table(rows: list, matched: dict, with_peers: bool) -> str:
+    """The Markdown table: ours per mode and its ratio to the matched drive [the peers'
+    too, each to its own matched drive]."""
+    head = '| drive | file | ' + ' | '.join(f'{m} (% dyn)' for m in MODES) + \
+        ' | ratio to matched (online / 10 ms / offline) |'
+    if with_peers:
+        head += ' peers (% dyn) | peer ratio to matched |'
+    lines = [head, '|---|---|' + '---|' * (len(MODES) + 1) + ('---|---|' if with_peers else '')]
+    for name, label, road, err, peer in rows:
+        ref, pref = matched.get(road, (None, None))
+        ratio = ' / '.join(f'{err[m] / ref[m]:.2f}' for m in MODES) if ref else ''
+        line = (f'| {name} | {label} | ' + ' | '.join(f'{err[m]:.2f}' for m in MODES)
+                + f' | {ratio} |')
+        if with_peers:
+            pr = ' / '.join(f'{peer[m] / pref[m]:.2f}' for m in MODES) if pref else ''
+            line += ' ' + ' / '.join(f'{peer[m]:.2f}' for m in MODES) + f' | {pr} |'
+        lines.append(line)
+    return '\n'.join(lines)
 
 if __name__ == '__main__':
     sys.exit(main())

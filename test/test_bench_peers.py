@@ -82,6 +82,31 @@ class TestRollPlaneModel:
                                                        kt[1] * (x[9] - zu2)])
 
 
+    def test_sensor_lag_states(self):
+        # a file that states a sensor lag: one first-order state per lagged channel
+        # (tau dl/dt = y - l), measured in place of the channel; it feeds nothing back, so the
+        # discrete transition is block triangular: the truck's block unchanged, the lag's
+        # diagonal exp(-dt / tau)
+        from dataclasses import replace
+        tau = (0.003, 0.002)
+        vehicle = replace(VehicleParameters(), sensor_time_constant_s=tau)
+        plain = peers.RollPlaneKalman(VehicleParameters(), DT, SPEED)
+        model = peers.RollPlaneKalman(vehicle, DT, SPEED)
+        n = plain.nx
+        assert model.nx == n + 3
+        a = model.kf.a
+        np.testing.assert_allclose(np.diag(a)[n:], np.exp(-DT / np.array([tau[0], tau[0],
+                                                                          tau[1]])),
+                                   rtol=1e-12)
+        np.testing.assert_allclose(a[:n, :n], plain.kf.a, rtol=1e-12, atol=1e-15)
+        assert not a[:n, n:].any()                   # the sensors do not move the truck
+        c = model.kf.c
+        np.testing.assert_array_equal(c[:, n:], np.eye(3))
+        assert not c[:, :n].any()
+        x0 = model.prior(np.array([0.01, -0.02, 0.003]))
+        np.testing.assert_allclose(x0[n:], [0.01, -0.02, 0.003])
+
+
 class TestKalmanOnItsOwnModel:
     @pytest.fixture(scope='class')
     @staticmethod

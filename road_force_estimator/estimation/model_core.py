@@ -22,6 +22,11 @@ injection changes no figure at the precision the benchmark prints; fed back into
 recursion (instead of cascaded) it was unstable, and without the noise weighting it added 1 %
 (dead zone 3 sigma) to 100 % (no dead zone) to the load error on the 10 um drive.
 
+Stamps
+------
+Each step uses its stamps' dt, but for stamps jittered about a regular sample clock
+(:mod:`.sample_clock`, detected per block): from the next block on, the clock's step.
+
 Latency
 -------
 ``observer.latency`` = T: each estimate is that of the sample N = round(T / dt) steps back
@@ -59,6 +64,7 @@ from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, PROFILE_ONLINE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
     continuous_model, rest_state)
 from road_force_estimator.estimation.reconstruction import Reconstruction
+from road_force_estimator.estimation.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
 
 __all__ = ['BLOCK_SAMPLES', 'FIRST_BLOCK_SAMPLES', 'LAG_STEPS', 'SM_DEAD_ZONE',
@@ -202,6 +208,8 @@ class ModelCore:
         self._road_started = False
         self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
         self._road_off = (0.0, 0.0)                # what standing added to the road (m)
+        self._clock: float | None = None           # the sample clock's step (s), or None
+        self._raw_dts: list = []                   # the stamps' steps of the block (s)
 
     @property
     def gains(self) -> Gains | None:
@@ -308,6 +316,11 @@ class ModelCore:
             self._restart(stamp, q1, q2, phi, (x, dt, v, False))
             self.last_converged = False
             return True
+        self._raw_dts.append(dt)
+        clock = self._clock      # a regular clock under jittered stamps (.sample_clock)
+        if clock is not None and -JITTER_MAX_FRACTION * clock <= dt - clock <= (
+                JITTER_MAX_FRACTION * clock):
+            dt = clock
         sched = self.schedule       # (converged(), inline: once per sample)
         conv = self._t - self._t_retuned >= self._settle and (sched.blocks > 0
                                                               or sched.all_fixed)
@@ -401,7 +414,7 @@ class ModelCore:
         row[y0 + 2] = phi
         sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
         if self._ff is not None:        # the friction over the step (of x+_k)
-            sv += _dot(self._fm, self._held_friction(row[x0:y0 - NY], self._a_dq, self._b_dq))
+            sv = self._friction_update(sv, row[x0:y0 - NY], self._fm, self._a_dq, self._b_dq)
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -532,6 +545,8 @@ class ModelCore:
         first_ever = sched.blocks == 0
         if sched.statistics(y, dts, self._slow == 0):
             self._t_retuned = self._t
+        self._clock = clock_step(self._raw_dts)
+        self._raw_dts = []
         self._slow = 0
         if first_ever and first_run_block and sched.stale and len(dts) == i:
             self._replay(dts)
@@ -555,7 +570,8 @@ class ModelCore:
             sv = g.step_matrix(dt) @ buf[j]
             if self._ff is not None:
                 a_dq, b_dq = _dq_rows(g, dt)
-                sv += g.friction_step(dt) @ self._held_friction(buf[j, x0:y0 - NY], a_dq, b_dq)
+                sv = self._friction_update(sv, buf[j, x0:y0 - NY], g.friction_step(dt), a_dq,
+                                           b_dq)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels
@@ -581,6 +597,16 @@ class ModelCore:
             w[:avail] = self._buf[first:first + avail]
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
+
+    def _friction_update(self, sv: np.ndarray, x: np.ndarray, fm: np.ndarray, a_dq: np.ndarray,
+                         b_dq: np.ndarray) -> np.ndarray:
+        """``sv`` (the step without friction) with the friction held over the step from
+        x+_k = ``x``: that of :meth:`_held_friction` (end rate predicted), then once more with
+        the end rate of that update's x+_(k+1) (one iterated update; README, "Friction").
+        ``fm``: :meth:`.Gains.friction_step`; ``a_dq``, ``b_dq``: :func:`_dq_rows`."""
+        first = sv + _dot(fm, self._held_friction(x, a_dq, b_dq))
+        f0 = self._friction(x[State.DQ1], x[State.DQ2])
+        return sv + _dot(fm, 0.5 * (f0 + self._friction(first[State.DQ1], first[State.DQ2])))
 
     def _held_friction(self, x: np.ndarray, a_dq: np.ndarray, b_dq: np.ndarray) -> np.ndarray:
         """The friction forces (N) held over a step from the state x: the mean of those at

@@ -1,10 +1,11 @@
 """The model observer offline: its forward filter and Rauch-Tung-Striebel smoother over each
 run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
-from the whole run first (:class:`.GainSchedule`); the same model, gains and outputs as the
-online observer (:mod:`.model_core`). Long evenly sampled runs go through in overlapping
-windows (:func:`window_samples`), so that the smoother's own memory does not grow with the
-drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
+from the whole run first (:class:`.GainSchedule`; a run with a stop: from its samples at
+speed, and its gains per stretch of speed, :mod:`.run_speed`); the same model, gains and
+outputs as the online observer (:mod:`.model_core`). Long evenly sampled runs go through in
+overlapping windows (:func:`window_samples`), so that the smoother's own memory does not grow
+with the drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
 from a second pass of the same smoother with the profile's tuning (:meth:`_Smoother.
 _profile`, over the whole run: windowed runs too).
 """
@@ -28,6 +29,7 @@ from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
 from road_force_estimator.estimation.static_load import track_recording
+from road_force_estimator.estimation.run_speed import run_statistics, speed_segments
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
@@ -337,7 +339,7 @@ class _Smoother:
             if m > 8 * NOISE_DIFF_ORDER:
                 for hist in (*sched.history, sched.dq_history):
                     hist.clear()
-                sched.statistics(y, dts)
+                run_statistics(sched, y, dts, v, speed)
             g = sched.design(dt, 0)
             if self.friction is not None:   # the outputs of the design's model (its c_eq)
                 self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
@@ -354,7 +356,7 @@ class _Smoother:
                 self._profile(dt, speed, dts, uniform, steps, y, v, x0, out)
                 return
             if uniform:
-                self._uniform(g, dt, y, x0, out)
+                self._uniform(g, dt, y, x0, out, segments=speed_segments(sched, dt, v, speed))
             elif steps is not None:
                 self._bridged(g, dt, speed, t, steps, y, x0, out)
             else:
@@ -490,24 +492,27 @@ class _Smoother:
         self._outputs(o, out)
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
-                 out: list, keep: int | None = None) -> np.ndarray | None:
+                 out: list, keep: int | None = None, segments: list | None = None
+                 ) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run
         (:meth:`_uniform_pass`); with friction, :data:`FRICTION_PASSES` passes, each with the
         friction evaluated on the previous pass's smoothed dq (the first without). With
-        ``keep`` the forward state ``x+_keep`` is returned (where the next window starts)."""
+        ``keep`` the forward state ``x+_keep`` is returned (where the next window starts);
+        ``segments`` (:func:`.run_speed.speed_segments`): the gains per stretch of speed."""
+        segs = segments or [(0, y.shape[0], g)]
         if self.friction is None:
-            return self._uniform_pass(g, dt, y, x0, out, keep=keep)
+            return self._uniform_pass(segs, dt, y, x0, out, keep=keep)
         forces = None
         for _ in range(FRICTION_PASSES - 1):
-            dq = self._uniform_pass(g, dt, y, x0, None, forces)
+            dq = self._uniform_pass(segs, dt, y, x0, None, forces)
             f = self._forces_at(dq)
             # held over step k -> k + 1: the mean of the ends (the trapezoid; the friction is
             # stiff against the step, see .model_core)
             forces = f.copy()
             forces[:, :-1] = 0.5 * (f[:, :-1] + f[:, 1:])
-        return self._uniform_pass(g, dt, y, x0, out, forces, keep)
+        return self._uniform_pass(segs, dt, y, x0, out, forces, keep)
 
-    def _uniform_pass(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
+    def _uniform_pass(self, segs: list, dt: float, y: np.ndarray, x0: np.ndarray,
                       out: list | None, forces: np.ndarray | None = None,
                       keep: int | None = None) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
@@ -515,12 +520,59 @@ class _Smoother:
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
         x+_(k-1)``. Backward (the adjoint form of the RTS smoother): ``lam_k = Phi^T lam_(k+1)
         + C^T S^-1 nu_k`` with ``Phi = A (I - K C)``, ``lam_m = 0``, and ``x_(k|m) = x+_k +
-        P+ A^T lam_(k+1)``. ``x0`` is ``x+_0``. With friction forces f (2, m) (N), the known
-        input ``B_d f_(k-1)`` joins the prediction ``A x+_(k-1)``. ``out`` None: only the
-        smoothed dq (2, m) is returned; else, with ``keep``, the forward state ``x+_keep``
-        (where the next window starts).
+        P+ A^T lam_(k+1)``. ``segs``: ``(start, end, gains)`` stretches of the run (one: the
+        run's gains), each step with the matrices of its sample's stretch. ``x0`` is ``x+_0``.
+        With friction forces f (2, m) (N), the known input ``B_d f_(k-1)`` joins the
+        prediction ``A x+_(k-1)``. ``out`` None: only the smoothed dq (2, m) is returned; else,
+        with ``keep``, the forward state ``x+_keep`` (where the next window starts).
         """
         m = y.shape[0]
+        mats = [self._pass_matrices(g, dt, forces) for _, _, g in segs]
+        xf = np.empty((m, self.nx))
+        nu = np.empty((m, NY))
+        xf[0] = x0
+        nu[0] = 0.0
+        chunk = _SMOOTH_CHUNK
+        for (s0, s1, _), (a_run, kt, ca_t, _, _, _, fin) in zip(segs, mats):
+            for k0 in range(max(1, s0), s1, chunk):
+                k1 = min(s1, k0 + chunk)
+                drive = y[k0:k1] @ kt
+                if fin is not None:
+                    drive += fin[0][k0 - 1:k1 - 1]
+                xf[k0:k1] = lti(a_run, drive, xf[k0 - 1])
+                nu[k0:k1] = y[k0:k1] - xf[k0 - 1:k1 - 1] @ ca_t
+                if fin is not None:
+                    nu[k0:k1] -= fin[1][k0 - 1:k1 - 1]
+        dq = None if out is not None else np.empty((2, m))
+        lam_next = np.zeros(self.nx)            # lam_(k1+1): lam_m = 0
+        for (s0, s1, _), (_, _, _, phi_t, u_t, pa_t, _) in zip(segs[::-1], mats[::-1]):
+            for k1 in range(s1, s0, -chunk):
+                k0 = max(s0, k1 - chunk)
+                xs = xf[k0:k1].copy()
+                # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1),
+                # from lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
+                lo, hi = k0 + 1, min(k1, m - 1)
+                lam = np.zeros((k1 - k0, self.nx))
+                if hi >= lo:
+                    seq = lti(phi_t, (nu[lo:hi + 1] @ u_t)[::-1], lam_next)[::-1]
+                    lam[:hi - lo + 1] = seq
+                    lam_next = seq[0]
+                xs += lam @ pa_t
+                if out is None:
+                    dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
+                    continue
+                o = self.h @ xs.T
+                if self.friction is not None:
+                    o = o + self.fd @ self._forces(o)
+                self._outputs(o, [col[k0:k1] for col in out])
+        if out is None:
+            return dq
+        return None if keep is None else xf[keep].copy()
+
+    def _pass_matrices(self, g: Gains, dt: float, forces: np.ndarray | None) -> tuple:
+        """What :meth:`_uniform_pass` needs of the gains g at the step dt (s): the forward
+        ``(I - K C) A`` (its powers), ``K^T``, ``(C A)^T``, the backward ``Phi^T`` (powers),
+        ``(C^T S^-1)^T``, ``(P+ A^T)^T`` and the friction forces' parts (or None)."""
         c = g.model.c
         nx = self.nx
         a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
@@ -530,48 +582,11 @@ class _Smoother:
         phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
         u_t = np.ascontiguousarray((c.T @ np.linalg.inv(g.s)).T)
         pa_t = np.ascontiguousarray((g.p_post @ a_dt.T).T)
-        xf = np.empty((m, nx))
-        nu = np.empty((m, NY))
-        xf[0] = x0
-        nu[0] = 0.0
         fin = None
         if forces is not None:
             bd = g.friction_input(dt)
             fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
-        chunk = _SMOOTH_CHUNK
-        for k0 in range(1, m, chunk):
-            k1 = min(m, k0 + chunk)
-            drive = y[k0:k1] @ kt
-            if fin is not None:
-                drive += fin[0][k0 - 1:k1 - 1]
-            xf[k0:k1] = lti(a_run, drive, xf[k0 - 1])
-            nu[k0:k1] = y[k0:k1] - xf[k0 - 1:k1 - 1] @ ca_t
-            if fin is not None:
-                nu[k0:k1] -= fin[1][k0 - 1:k1 - 1]
-        dq = None if out is not None else np.empty((2, m))
-        lam_next = np.zeros(nx)                 # lam_(k1+1): lam_m = 0
-        for k1 in range(m, 0, -chunk):
-            k0 = max(0, k1 - chunk)
-            xs = xf[k0:k1].copy()
-            # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1), from
-            # lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
-            lo, hi = k0 + 1, min(k1, m - 1)
-            lam = np.zeros((k1 - k0, nx))
-            if hi >= lo:
-                seq = lti(phi_t, (nu[lo:hi + 1] @ u_t)[::-1], lam_next)[::-1]
-                lam[:hi - lo + 1] = seq
-                lam_next = seq[0]
-            xs += lam @ pa_t
-            if out is None:
-                dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
-                continue
-            o = self.h @ xs.T
-            if self.friction is not None:
-                o = o + self.fd @ self._forces(o)
-            self._outputs(o, [col[k0:k1] for col in out])
-        if out is None:
-            return dq
-        return None if keep is None else xf[keep].copy()
+        return a_run, kt, ca_t, phi_t, u_t, pa_t, fin
 
     def _outputs(self, o: np.ndarray, out: list) -> None:
         """Rows of the columns ``out`` from the smoothed outputs ``o`` (:data:`_SMOOTH_NAMES`,
