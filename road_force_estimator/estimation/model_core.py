@@ -420,7 +420,7 @@ class ModelCore:
             return False
         i += 1
         nxt = buf[i]
-        nxt[x0:y0] = self._sv_x
+        nxt[x0:y0] = self._sv_x if sv is self._sv else sv[:y0 - x0]   # (friction: a new array)
         rho = None
         if self._gamma > 0.0:
             c1, c2, c3 = self._c_slots
