@@ -48,12 +48,15 @@ _FIELDS = {DEFLECTIONS: _STAMP + ('position', 'velocity', 'effort'),
 
 @dataclass
 class InputBlock:
-    """Accepted samples in order: stamps (ns), q (m, (k, 2)), roll (rad), speed (m/s)."""
+    """Accepted samples in order: stamps (ns), q (m, (k, 2)), roll (rad), speed (m/s; before
+    the first twist its speed) and ``early`` (those samples: :attr:`.Drive.speed_mps` has NaN
+    there)."""
 
     stamps_ns: np.ndarray
     q_m: np.ndarray
     roll_rad: np.ndarray
     speed_mps: np.ndarray
+    early: np.ndarray | None = None
 
 
 def streamable(path: str | Path) -> int:
@@ -222,4 +225,4 @@ class DriveBlocks:
         nxt = stamps[k] if k < stamps.size else s[-1]
         keep = max(0, int(np.searchsorted(self._twist_ns, nxt, side='right')) - 1)
         self._twist_ns, self._twist_v = self._twist_ns[keep:], self._twist_v[keep:]
-        return InputBlock(s, q[:k], roll[:k], speed)
+        return InputBlock(s, q[:k], roll[:k], speed, early)
