@@ -37,7 +37,7 @@ from road_force_estimator.interfaces import (
 __all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveBlocks', 'streamable']
 
 #: Default samples per block (deflection messages gathered before a block is decoded).
-BLOCK_SAMPLES = 1 << 18
+BLOCK_SAMPLES = 1 << 16
 
 _STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
 _WANTED = {DEFLECTIONS: JOINT_STATE, TWIST: TWIST_STAMPED, FIX: NAVSATFIX}

@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, output_stamps
-from road_force_estimator.estimation.estimator import BatchRun
+from road_force_estimator.estimation.acceptance import (
+    GAP_THRESHOLD_S, batch_inputs, output_stamps)
+from road_force_estimator.estimation.estimator import PROGRESS_BLOCK, BatchRun
 from road_force_estimator.estimation.outputs import N_COLUMNS, EstimateArrays, arrays_from_table
 
 __all__ = ['OnlineStream']
@@ -46,13 +47,17 @@ class OnlineStream:
         return st
 
     def feed(self, stamps_ns, q_m, roll_rad, speed_mps) -> list[EstimateArrays]:
-        """One block of samples (as :meth:`.BatchRun.feed`); the complete pieces."""
-        ok, contra, rows = self.run.feed(stamps_ns, q_m, roll_rad, speed_mps)
-        self._stamps.append(output_stamps(stamps_ns))
-        self._valid.append(ok)
-        self._contra.append(contra)
-        if rows.shape[0]:
-            self._rows.append(rows)
+        """One block of samples (as :meth:`.BatchRun.feed`); the complete pieces. The run is
+        fed :data:`.PROGRESS_BLOCK` samples at a time (its row list stays small)."""
+        stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+        for a in range(0, stamps.shape[0], PROGRESS_BLOCK):
+            b = a + PROGRESS_BLOCK
+            ok, contra, rows = self.run.feed(stamps[a:b], q[a:b], phi[a:b], speed[a:b])
+            self._valid.append(ok)
+            self._contra.append(contra)
+            if rows.shape[0]:
+                self._rows.append(rows)
+        self._stamps.append(output_stamps(stamps))
         return self._emit(final=False)
 
     def finish(self) -> list[EstimateArrays]:
