@@ -175,6 +175,7 @@ class StreamedSummary:
         self.inputs = 0
         self.converged = 0
         self.first_converged_ns: int | None = None
+        self.last_converged_ns: int | None = None
         self.t0_ns: int | None = None
         self.last_ns: int | None = None
         self.first_stamp: int | None = None
@@ -212,8 +213,10 @@ class StreamedSummary:
         self.last_ns = int(stamps[-1])
         conv = piece.converged[rows]
         self.converged += int(np.count_nonzero(conv))
-        if self.first_converged_ns is None and conv.any():
-            self.first_converged_ns = int(stamps[np.argmax(conv)])
+        if conv.any():
+            if self.first_converged_ns is None:
+                self.first_converged_ns = int(stamps[np.argmax(conv)])
+            self.last_converged_ns = int(stamps[conv.size - 1 - np.argmax(conv[::-1])])
         x = piece.distance_m[rows]
         if self.x_first is None:
             self.x_first = float(x[0])

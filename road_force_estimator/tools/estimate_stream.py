@@ -10,8 +10,9 @@ block (:class:`~.estimation.stream_run.OnlineStream`, bit-identical to one piece
 causal), its messages written at once (:class:`~.bagio.estimate_stream.EstimateBagStream`),
 the diagnostics per second, the model fit and the report's accumulators
 (:class:`~.report.streamed.StreamedSummary`) fed with it. The bag's messages, ``segments.csv``
-and ``report.json`` are those of the one-piece path (test_estimate_stream); the figures are
-not drawn (a note in the report says so).
+and ``report.json`` are those of the one-piece path (test_estimate_stream); the detail
+figures too (:mod:`.stream_figures`), the profile and overview figures show the detail window
+only (a note in the report says so).
 """
 from __future__ import annotations
 
@@ -28,8 +29,9 @@ __all__ = ['STREAM_MIN_SAMPLES', 'use_stream', 'run_stream']
 #: Drives of at least this many deflection messages (metadata.yaml) are estimated block by
 #: block (about 35 min at 1 kHz; below it one piece takes less than ~1 GB).
 STREAM_MIN_SAMPLES = 1 << 21
-#: The note in the report of a streamed drive.
-NO_FIGURES_NOTE = 'figures not drawn (a drive estimated block by block)'
+#: The note in the report of a streamed drive with figures.
+FIGURES_NOTE = ('figures: the profile and overview show the detail window (a drive '
+                'estimated block by block)')
 
 
 def use_stream(input_path: Path, mode: str, reference, observer,
@@ -152,7 +154,9 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     from road_force_estimator.bagio.estimate_stream import EstimateBagStream
     from road_force_estimator.estimation.stream_run import OnlineStream
     from road_force_estimator.report.streamed import StreamedSummary
+    from road_force_estimator.report.figures import DEFAULT_WINDOW_S
     from road_force_estimator.tools import estimate_bag as eb
+    from road_force_estimator.tools.stream_figures import Snapshots, draw
 
     mode = options['mode']
     bag_dir, report_dir = folder / 'bag', folder / 'report'
@@ -168,9 +172,12 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     summary = StreamedSummary(options['segment_length_m'], with_stamps=_has_fixes(input_path))
     diag, fit = _DiagnosticWindows(), _ModelFit()
     speeds: list[np.ndarray] = []
+    snapshots = Snapshots(DEFAULT_WINDOW_S) if options['figures'] else None
     stages.next(f'estimating ({mode}) and writing the bag, block by block')
     try:
-        for block in reader:
+        for i, block in enumerate(reader):
+            if snapshots is not None:
+                snapshots.keep(i, block.stamps_ns[0], stream, summary)
             raw = np.where(block.early, np.nan, block.speed_mps)
             speeds.append(raw)
             for piece in stream.feed(block.stamps_ns, block.q_m, block.roll_rad,
@@ -219,13 +226,22 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
     if options['figures']:
-        extra[NO_FIGURES_NOTE] = 1
-    stages.next('writing the report')
+        extra[FIGURES_NOTE] = 1
+    stages.next('writing the report' + (' and figures' if options['figures'] else ''))
     drive = SimpleNamespace(messages=reader.messages, rejected=reader.rejected,
                             issues=tuple(reader.issues), fixes=reader.fixes,
                             custom_data=reader.custom_data, noted=reader.noted)
+    def figures(segments: dict, doc: dict) -> list[str]:
+        if snapshots is None:
+            return []
+        from road_force_estimator.report.folder import _static_line
+        name = input_path.name
+        return draw(report_dir, input_path, reader.block_samples, snapshots, summary, segments,
+                    f'{name} ({mode})' if name else mode, options['units'],
+                    _static_line(doc, vehicle))
+
     doc = _write_report(report_dir, summary, status, drive, vehicle, observer, extra,
-                        input_path.name, options)
+                        input_path.name, options, figures)
     warnings = [f'{input_path}: {issue}' for issue in reader.issues]
     return eb.EstimateResult(doc, output / 'bag', output / 'report', None, written, warnings,
                              drive)
@@ -255,18 +271,20 @@ def _consume(piece, speeds: list, bag, summary, diag, fit) -> None:
 
 
 def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: dict,
-                  input_name: str, options: dict) -> dict[str, Any]:
-    """``report.md``, ``segments.csv`` and ``report.json`` (as :func:`.report.write_report`,
-    without figures) from the accumulators."""
+                  input_name: str, options: dict, figures) -> dict[str, Any]:
+    """``report.md``, ``segments.csv``, ``report.json`` and the figures
+    (``figures(segments, summary)`` draws them) as :func:`.report.write_report`, from the
+    accumulators."""
     from road_force_estimator.report.folder import _json_safe, write_segments_csv
     from road_force_estimator.report.markdown import write_markdown
 
     folder.mkdir(parents=True, exist_ok=True)
     summary, segments = _summary(acc, status, drive, vehicle, observer, extra, input_name,
                                  options)
-    summary['figures'] = []
+    names = figures(segments, summary)
+    summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
-    write_markdown(folder / 'report.md', summary, segments, [])
+    write_markdown(folder / 'report.md', summary, segments, names)
     (folder / 'report.json').write_text(json.dumps(_json_safe(summary), indent=2) + '\n')
     return summary
 

@@ -151,3 +151,18 @@ def test_a_streamed_drive_without_twist_is_refused(tmp_path, monkeypatch, capsys
     err = capsys.readouterr().err
     assert code == 1 and 'speed' in err and err.count('\n') == 1
     assert not (tmp_path / 'o' / 'bag').exists()
+
+
+def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
+    """The detail figures come from the estimator resumed at a snapshot before the window:
+    the same pictures as in one piece; the profile and overview show the window only."""
+    one = estimate_bag.run(drive, tmp_path / 'one', segment_length_m=10.0)
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
+    streamed = estimate_bag.run(drive, tmp_path / 'str', segment_length_m=10.0)
+    assert streamed.summary['figures'] == one.summary['figures']
+    assert len(one.summary['figures']) == 6
+    for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
+        assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
+            (tmp_path / 'str' / 'report' / name).read_bytes(), name
+    assert estimate_stream.FIGURES_NOTE in streamed.summary['notes']
