@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from road_force_estimator.core.iri_chunks import segment_iri
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, _coordinate_columns, _coverage, _iri_columns,
-    segment_bounds)
+    MIN_COVERAGE, SEGMENT_COLUMNS, _coordinate_columns, _coverage, segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
 
@@ -36,9 +36,10 @@ __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
 class GrowingArray:
     """A column that grows by appends (capacity doubling); :meth:`array` is a view."""
 
-    def __init__(self, dtype=float, width: int | None = None) -> None:
+    def __init__(self, dtype=float, width: int | None = None, capacity: int = 1024) -> None:
+        """``capacity``: rows reserved (pages untouched until written cost no memory)."""
         self.shape = () if width is None else (width,)
-        self.data = np.empty((1024,) + self.shape, dtype)
+        self.data = np.empty((max(int(capacity), 1024),) + self.shape, dtype)
         self.size = 0
 
     def append(self, values: np.ndarray) -> None:
@@ -168,9 +169,11 @@ class SegmentAccumulator:
 class StreamedSummary:
     """What :func:`.summary.summarize` reports of a drive, from consecutive pieces."""
 
-    def __init__(self, segment_length_m: float, with_stamps: bool = False) -> None:
+    def __init__(self, segment_length_m: float, with_stamps: bool = False,
+                 capacity: int = 0) -> None:
         """``with_stamps``: keep the stamps of the samples that advance too (8 bytes a
-        sample), for the segments' coordinates (a drive with ``/fix``)."""
+        sample), for the segments' coordinates (a drive with ``/fix``); ``capacity``: the
+        samples expected (the columns reserved at once, never copied as they grow)."""
         self.segments = SegmentAccumulator(segment_length_m)
         self.inputs = 0
         self.converged = 0
@@ -189,11 +192,11 @@ class StreamedSummary:
         self.contra_samples = 0
         self.spans: list[list[int]] = []
         self._contra_open = False
-        self.x_up = GrowingArray()
-        self.road_up = GrowingArray(width=2)
-        self.stamps = GrowingArray(np.int64)
-        self.stamps_up = GrowingArray(np.int64) if with_stamps else None
-        self.speed = GrowingArray()
+        self.x_up = GrowingArray(capacity=capacity)
+        self.road_up = GrowingArray(width=2, capacity=capacity)
+        self.stamps = GrowingArray(np.int64, capacity=capacity)
+        self.stamps_up = GrowingArray(np.int64, capacity=capacity) if with_stamps else None
+        self.speed = GrowingArray(capacity=capacity)
 
     def add(self, piece, speed_mps: np.ndarray) -> None:
         """One piece of estimates and the recorded speed of its samples (m/s)."""
@@ -282,8 +285,7 @@ class StreamedSummary:
                                         'end_m': edges[1:].copy()}
         counts = cols.pop('count')
         table.update(cols)
-        from road_force_estimator.report.summary import _iri_hook
-        table.update(_iri_columns(x, edges, self.road_up.array(), None, _iri_hook))
+        table.update(self._iri(x, edges))
         sparse = _coverage(x, edges) < MIN_COVERAGE
         for name in table:
             if name.endswith('_m_per_km'):
@@ -297,14 +299,42 @@ class StreamedSummary:
             fixes.longitude_deg if have else None))
         return {name: table[name] for name in SEGMENT_COLUMNS}
 
+    def _iri(self, x: np.ndarray, edges: np.ndarray) -> dict[str, np.ndarray]:
+        """The IRI columns (:func:`.core.iri_chunks.segment_iri` per track: NaN where the
+        profile is too short, as :func:`.summary._iri_hook`); the intervals per segment kept
+        for :meth:`whole_iri`."""
+        k = edges.size - 1
+        road = self.road_up.array()
+        out = {f'true_iri_{name}_m_per_km': np.full(k, np.nan) for name in ('left', 'right')}
+        self._counts = None
+        for side, name in ((0, 'left'), (1, 'right')):
+            try:
+                values, self._counts = segment_iri(x, road[:, side], edges)
+            except ValueError:
+                values = np.full(k, np.nan)
+            out[f'iri_{name}_m_per_km'] = np.asarray(values, dtype=float)
+        return out
+
     def whole_iri(self, segments: dict) -> list[float] | None:
-        """:func:`.summary._whole_from_segments` of the estimated profile."""
-        from road_force_estimator.report.summary import _whole_from_segments
+        """:func:`.summary._whole_from_segments` of the estimated profile (the intervals per
+        segment from :meth:`segment_table`)."""
+        from road_force_estimator.report.summary import _whole_from_segments, _whole_iri
 
         x = self.x_up.array()
         if x.size < 2:
             return None
-        return _whole_from_segments(x, self.road_up.array(), segments, 'iri')
+        z = self.road_up.array()
+        start = segments.get('start_m')
+        counts = getattr(self, '_counts', None)
+        if (counts is None or start is None or len(start) == 0
+                or not np.isfinite(z).all()):
+            return _whole_from_segments(x, z, segments, 'iri')
+        values = np.column_stack([segments['iri_left_m_per_km'],
+                                  segments['iri_right_m_per_km']])
+        used = (counts > 0) & np.isfinite(values).all(axis=1)
+        if not used.any():
+            return _whole_iri(x, z) if np.isfinite(values).all() else None
+        return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
 
     def speed_stats(self) -> dict[str, float] | None:
         v = self.speed.array()

@@ -150,7 +150,7 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
         As the one-piece path: no usable sample or speed, no sample estimated.
     """
     from road_force_estimator.bagio import BagReadError
-    from road_force_estimator.bagio.drive_blocks import BLOCK_SAMPLES, DriveBlocks
+    from road_force_estimator.bagio.drive_blocks import BLOCK_SAMPLES, DriveBlocks, streamable
     from road_force_estimator.bagio.estimate_stream import EstimateBagStream
     from road_force_estimator.estimation.stream_run import OnlineStream
     from road_force_estimator.report.streamed import StreamedSummary
@@ -169,7 +169,8 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     custom = {'road_force_estimator.mode': mode, 'road_force_estimator.input': input_path.name,
               'road_force_estimator.writer_command': eb.PROG}
     bag = EstimateBagStream(bag_dir, track_width_m=vehicle.track_width_m, custom_data=custom)
-    summary = StreamedSummary(options['segment_length_m'], with_stamps=_has_fixes(input_path))
+    summary = StreamedSummary(options['segment_length_m'], with_stamps=_has_fixes(input_path),
+                              capacity=streamable(input_path))
     diag, fit = _DiagnosticWindows(), _ModelFit()
     speeds: list[np.ndarray] = []
     snapshots = Snapshots(DEFAULT_WINDOW_S) if options['figures'] else None
