@@ -196,6 +196,8 @@ class StreamedSummary:
         self.road_up = GrowingArray(width=2, capacity=capacity)
         self.stamps = GrowingArray(np.int64, capacity=capacity)
         self.stamps_up = GrowingArray(np.int64, capacity=capacity) if with_stamps else None
+        #: the distance of every accepted sample (with_stamps: for the fleet's polylines)
+        self.x_valid = GrowingArray(capacity=capacity) if with_stamps else None
         self.speed = GrowingArray(capacity=capacity)
 
     def add(self, piece, speed_mps: np.ndarray) -> None:
@@ -230,6 +232,8 @@ class StreamedSummary:
         self.max_abs_ltr = max(self.max_abs_ltr, float(np.max(np.abs(piece.ltr[rows]))))
         self.static_final = [float(v) for v in piece.static_load_n[rows[-1]]]
         self.stamps.append(stamps)
+        if self.x_valid is not None:
+            self.x_valid.append(x)
         self.speed.append(np.asarray(speed_mps, dtype=float)[rows])
         before = np.concatenate([[self.x_max], np.maximum.accumulate(x)[:-1]])
         before = np.maximum(before, self.x_max)
@@ -335,6 +339,18 @@ class StreamedSummary:
         if not used.any():
             return _whole_iri(x, z) if np.isfinite(values).all() else None
         return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
+
+    def track(self):
+        """What ``estimate_fleet`` maps distance to stamp with (``valid``, ``stamp_ns``,
+        ``distance_m`` of the accepted samples; empty without ``with_stamps``)."""
+        from types import SimpleNamespace
+
+        if self.x_valid is None:
+            return SimpleNamespace(valid=np.zeros(0, bool), stamp_ns=np.zeros(0, np.int64),
+                                   distance_m=np.zeros(0))
+        x = self.x_valid.array()
+        return SimpleNamespace(valid=np.ones(x.size, bool), stamp_ns=self.stamps.array(),
+                               distance_m=x)
 
     def speed_stats(self) -> dict[str, float] | None:
         v = self.speed.array()

@@ -142,7 +142,9 @@ class _ModelFit:
 def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
                options: dict, stages, progress: bool = False, block_samples: int | None = None):
     """Estimate the drive block by block and write ``folder/bag`` and ``folder/report``;
-    the :class:`~.estimate_bag.EstimateResult` (its ``estimates`` None: never held whole).
+    the :class:`~.estimate_bag.EstimateResult` (its ``estimates``: never held whole, only the
+    stamps and distances of the accepted samples for ``estimate_fleet``'s polylines when the
+    drive has ``/fix``, :meth:`.StreamedSummary.track`).
 
     Raises
     ------
@@ -244,8 +246,8 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     doc = _write_report(report_dir, summary, status, drive, vehicle, observer, extra,
                         input_path.name, options, figures)
     warnings = [f'{input_path}: {issue}' for issue in reader.issues]
-    return eb.EstimateResult(doc, output / 'bag', output / 'report', None, written, warnings,
-                             drive)
+    return eb.EstimateResult(doc, output / 'bag', output / 'report', summary.track(), written,
+                             warnings, drive)
 
 
 def _has_fixes(input_path: Path) -> bool:
