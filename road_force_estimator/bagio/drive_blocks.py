@@ -29,7 +29,7 @@ from road_force_estimator.bagio.checks import Rejects, read_joint_state, read_sc
 from road_force_estimator.bagio.errors import BagReadError
 from road_force_estimator.bagio.mcap_scan import Block
 from road_force_estimator.bagio.reader import (
-    USE_MESSAGE_INDEX, _raw_batches, _TopicReader, bag_custom_data, bag_files)
+    USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
 from road_force_estimator.interfaces import (
     DEFLECTION_JOINTS, DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
     TWIST_STAMPED)
@@ -115,21 +115,21 @@ class DriveBlocks:
         return sum(sum(r.values()) for r in self.rejected.values())
 
     def __iter__(self) -> Iterator[InputBlock]:
-        from road_force_estimator.bagio.drive import _read_fixes
+        from road_force_estimator.bagio.drive import read_fixes
 
         seen: dict = {}
-        readers: dict[str, _TopicReader] = {}
+        readers: dict[str, TopicReader] = {}
         fix_reader = None
-        for batch in _raw_batches(self.path, _WANTED, self.issues, seen,
+        for batch in raw_batches(self.path, _WANTED, self.issues, seen,
                                   indexed=USE_MESSAGE_INDEX):
             for topic, add in self._parts(batch):
                 if topic == FIX:
                     if fix_reader is None:
-                        fix_reader = _TopicReader(NAVSATFIX, seen[FIX].msgtype, _FIELDS[FIX])
+                        fix_reader = TopicReader(NAVSATFIX, seen[FIX].msgtype, _FIELDS[FIX])
                     add(fix_reader)
                     continue
                 if topic not in readers:
-                    readers[topic] = _TopicReader(_WANTED[topic], seen[topic].msgtype,
+                    readers[topic] = TopicReader(_WANTED[topic], seen[topic].msgtype,
                                                   _FIELDS[topic])
                 add(readers[topic])
             deflections = readers.get(DEFLECTIONS)
@@ -147,7 +147,7 @@ class DriveBlocks:
                                + (f' ({self.issues[0]})' if self.issues else ''))
         if fix_reader is not None:
             self.messages[FIX] = fix_reader.count
-            self.fixes, self.noted = _read_fixes(fix_reader.columns(FIX), self.rejects)
+            self.fixes, self.noted = read_fixes(fix_reader.columns(FIX), self.rejects)
         rest = self._release(final=True)
         if rest is not None:
             yield rest

@@ -19,7 +19,7 @@ import numpy as np
 
 from road_force_estimator.bagio.cdr import ColumnRows, LazyColumns
 from road_force_estimator.bagio.estimates import (
-    _diagnostic_streams, _estimate_streams, _EstimateColumns)
+    diagnostic_streams, estimate_streams, EstimateColumns)
 from road_force_estimator.bagio.messages import (
     DEFAULT_TRACK_WIDTH_M, message_template, stamp_columns)
 from road_force_estimator.bagio.writer import BagWriter
@@ -52,7 +52,7 @@ class EstimateBagStream:
 
     def write(self, piece) -> None:
         """Write one piece's messages (rows not valid or not finite are left out, counted)."""
-        est = _EstimateColumns.of(piece)
+        est = EstimateColumns.of(piece)
         rows = est.valid & est.finite
         index = None if rows.all() else np.flatnonzero(rows)
         s = est.stamp_ns if index is None else est.stamp_ns[index]
@@ -62,7 +62,7 @@ class EstimateBagStream:
         self.counts['written'] += int(s.size)
         self.counts['invalid'] += int(np.count_nonzero(~est.valid))
         self.counts['nonfinite'] += int(np.count_nonzero(est.valid & ~est.finite))
-        streams = _estimate_streams(replace(est, static_load=None), s, stamp_columns(s), index,
+        streams = estimate_streams(replace(est, static_load=None), s, stamp_columns(s), index,
                                     self.half)
         if est.static_load is not None:
             streams += self._static(est, s, index)
@@ -100,7 +100,7 @@ class EstimateBagStream:
     def close(self, diagnostics: Iterable[tuple[int, Any]] = ()) -> dict[str, int]:
         """Write the ``/diagnostics`` messages and close the bag; the counts of
         :func:`.write_estimate_bag` (``written``, ``invalid``, ``nonfinite``)."""
-        streams = _diagnostic_streams(diagnostics)
+        streams = diagnostic_streams(diagnostics)
         if not self._declared:
             for topic in _TOPICS:
                 self.bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))

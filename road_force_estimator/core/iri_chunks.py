@@ -30,7 +30,7 @@ def _uniform_step(x: np.ndarray) -> float | None:
         return None
     span = x[-1] - x[0]
     mean_step = span / (x.size - 1)
-    tol = iri_mod._UNIFORM_RTOL * max(mean_step, abs(x[-1]))
+    tol = iri_mod.UNIFORM_RTOL * max(mean_step, abs(x[-1]))
     for a in range(0, x.size - 1, CHUNK):
         steps = np.diff(x[a:a + CHUNK + 1])
         if np.any(steps <= 0.0) or not np.all(np.abs(steps - mean_step) <= tol):
@@ -66,7 +66,7 @@ def segment_iri(x: np.ndarray, z: np.ndarray, edges: np.ndarray
         raise ValueError(f'profile length {x[-1] - x[0]:.3g} m: IRI needs at least '
                          f'{iri_mod.INIT_LENGTH_M:g} m (the initialisation length)')
     s0 = (h[i11] - h[0]) / iri_mod.INIT_LENGTH_M
-    st, pr = iri_mod._transition(dx)
+    st, pr = iri_mod.transition(dx)
     lam, vec = np.linalg.eig(st)
     inv = np.linalg.inv(vec)
     beta = inv @ pr

@@ -28,7 +28,7 @@ import numpy as np
 
 from road_force_estimator.core.iri_chunks import segment_iri
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, _coordinate_columns, _coverage, segment_bounds)
+    MIN_COVERAGE, SEGMENT_COLUMNS, coordinate_columns, coverage, segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
 
@@ -290,14 +290,14 @@ class StreamedSummary:
         counts = cols.pop('count')
         table.update(cols)
         table.update(self._iri(x, edges))
-        sparse = _coverage(x, edges) < MIN_COVERAGE
+        sparse = coverage(x, edges) < MIN_COVERAGE
         for name in table:
             if name.endswith('_m_per_km'):
                 table[name] = np.where(sparse, np.nan, table[name])
             elif name not in ('start_m', 'end_m', 'lift_offs'):
                 table[name] = np.where(counts == 0, np.nan, table[name])
         have = fixes is not None and self.stamps_up is not None
-        table.update(_coordinate_columns(
+        table.update(coordinate_columns(
             x, edges, self.stamps_up.array() if have else None,
             fixes.stamps_ns if have else None, fixes.latitude_deg if have else None,
             fixes.longitude_deg if have else None))
@@ -320,9 +320,9 @@ class StreamedSummary:
         return out
 
     def whole_iri(self, segments: dict) -> list[float] | None:
-        """:func:`.summary._whole_from_segments` of the estimated profile (the intervals per
+        """:func:`.summary.whole_from_segments` of the estimated profile (the intervals per
         segment from :meth:`segment_table`)."""
-        from road_force_estimator.report.summary import _whole_from_segments, _whole_iri
+        from road_force_estimator.report.summary import whole_from_segments, whole_iri
 
         x = self.x_up.array()
         if x.size < 2:
@@ -332,12 +332,12 @@ class StreamedSummary:
         counts = getattr(self, '_counts', None)
         if (counts is None or start is None or len(start) == 0
                 or not np.isfinite(z).all()):
-            return _whole_from_segments(x, z, segments, 'iri')
+            return whole_from_segments(x, z, segments, 'iri')
         values = np.column_stack([segments['iri_left_m_per_km'],
                                   segments['iri_right_m_per_km']])
         used = (counts > 0) & np.isfinite(values).all(axis=1)
         if not used.any():
-            return _whole_iri(x, z) if np.isfinite(values).all() else None
+            return whole_iri(x, z) if np.isfinite(values).all() else None
         return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
 
     def track(self):

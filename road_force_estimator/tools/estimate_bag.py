@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import math
 from pathlib import Path
 import sys
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -231,8 +232,9 @@ def _writer(input_path: Path, output: Path, vehicle, observer, options: dict, pr
     from road_force_estimator.tools import estimate_stream
 
     if estimate_stream.use_stream(input_path, options['mode'], options['reference'], observer):
+        api = SimpleNamespace(prog=PROG, error=InputError, result=EstimateResult)
         return lambda folder: estimate_stream.run_stream(
-            folder, output, input_path, vehicle, observer, options, stages, progress)
+            folder, output, input_path, vehicle, observer, options, stages, api, progress)
     drive, est, extra = _estimate(input_path, vehicle, observer, options['mode'], progress,
                                   stages)
     return lambda folder: _write(folder, output, input_path, drive, est, extra, vehicle,

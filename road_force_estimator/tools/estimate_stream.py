@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+import sys
 from types import SimpleNamespace
 from typing import Any
 
@@ -140,114 +141,166 @@ class _ModelFit:
 
 
 def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
-               options: dict, stages, progress: bool = False, block_samples: int | None = None):
-    """Estimate the drive block by block and write ``folder/bag`` and ``folder/report``;
-    the :class:`~.estimate_bag.EstimateResult` (its ``estimates``: never held whole, only the
-    stamps and distances of the accepted samples for ``estimate_fleet``'s polylines when the
-    drive has ``/fix``, :meth:`.StreamedSummary.track`).
+               options: dict, stages, api, progress: bool = False,
+               block_samples: int | None = None):
+    """Estimate the drive block by block and write ``folder/bag`` and ``folder/report``.
+
+    ``api``: estimate_bag's ``PROG``, ``InputError`` and ``EstimateResult`` (attributes
+    ``prog``, ``error``, ``result``). Returns the ``EstimateResult``; its ``estimates`` are
+    never held whole: only the stamps and distances of the accepted samples for
+    ``estimate_fleet``'s polylines when the drive has ``/fix``
+    (:meth:`.StreamedSummary.track`).
 
     Raises
     ------
-    InputError
+    api.error
         As the one-piece path: no usable sample or speed, no sample estimated.
     """
-    from road_force_estimator.bagio import BagReadError
-    from road_force_estimator.bagio.drive_blocks import BLOCK_SAMPLES, DriveBlocks, streamable
-    from road_force_estimator.bagio.estimate_stream import EstimateBagStream
-    from road_force_estimator.estimation.stream_run import OnlineStream
-    from road_force_estimator.report.streamed import StreamedSummary
-    from road_force_estimator.report.figures import DEFAULT_WINDOW_S
-    from road_force_estimator.tools import estimate_bag as eb
-    from road_force_estimator.tools.stream_figures import Snapshots, draw
-
-    mode = options['mode']
-    bag_dir, report_dir = folder / 'bag', folder / 'report'
-    for p in (bag_dir, report_dir):
+    for p in (folder / 'bag', folder / 'report'):
         if p.exists():
-            raise eb.InputError(f'{p} exists (use --force to replace it)')
+            raise api.error(f'{p} exists (use --force to replace it)')
     folder.mkdir(parents=True, exist_ok=True)
-    reader = DriveBlocks(input_path, block_samples or BLOCK_SAMPLES)
-    stream = OnlineStream(vehicle, observer)
-    custom = {'road_force_estimator.mode': mode, 'road_force_estimator.input': input_path.name,
-              'road_force_estimator.writer_command': eb.PROG}
-    bag = EstimateBagStream(bag_dir, track_width_m=vehicle.track_width_m, custom_data=custom)
-    summary = StreamedSummary(options['segment_length_m'], with_stamps=_has_fixes(input_path),
-                              capacity=streamable(input_path))
-    diag, fit = _DiagnosticWindows(), _ModelFit()
-    speeds: list[np.ndarray] = []
-    snapshots = Snapshots(DEFAULT_WINDOW_S) if options['figures'] else None
-    stages.next(f'estimating ({mode}) and writing the bag, block by block')
-    try:
-        for i, block in enumerate(reader):
-            if snapshots is not None:
-                snapshots.keep(i, block.stamps_ns[0], stream, summary)
-            raw = np.where(block.early, np.nan, block.speed_mps)
-            speeds.append(raw)
-            for piece in stream.feed(block.stamps_ns, block.q_m, block.roll_rad,
-                                     block.speed_mps):
-                _consume(piece, speeds, bag, summary, diag, fit)
-            if progress:
-                print(f'{eb.PROG}: {summary.inputs} samples', end='\r', flush=True)
-        for piece in stream.finish():
-            _consume(piece, speeds, bag, summary, diag, fit)
-    except BagReadError as err:
-        bag.abort()
-        raise eb.InputError(str(err)) from None
-    except BaseException:
-        bag.abort()
-        raise
-    status = stream.status
-    n = summary.inputs
-    problem = None
-    if n == 0:
-        problem = (f'{input_path}: no usable /suspension/deflections message'
-                   + (f' ({reader.issues[0]})' if reader.issues else ''))
-    elif reader.twists == 0:
-        problem = 'no usable /vehicle/twist message: the speed is unknown'
-    elif status.accepted == 0:
-        problem = (f'{input_path}: no sample could be estimated: all {n} samples rejected '
-                   f'({status.rejected_range} out of range, {status.rejected_nonfinite} '
-                   f'non-finite, {status.rejected_time} with a bad stamp)')
-    if problem:
-        bag.abort()
-        raise eb.InputError(problem)
-    extra: dict[str, Any] = {}
-    if observer.distance_source == 'gnss':
-        extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
-    if reader.early:
-        extra['samples before the first twist (given its speed)'] = reader.early
-    counts = {'samples': n, 'estimated': int(status.accepted),
-              'rejected_by_reader': int(reader.rejected_total),
-              'rejected_by_estimator': int(status.rejected), 'resets': int(status.resets)}
-    verdict = fit.result(summary, status, vehicle, observer)
-    if verdict is not None:
-        from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
-        extra['model fit'] = (f'{verdict[1]} (residual band RMS {verdict[0]:.3g} x sigma_M)'
-                              + (f': {ADVICE}' if verdict[1] == MISMATCH else ''))
-    written = bag.close(diag.statuses(counts, f'{eb.PROG}: estimator ({mode})', eb.PROG,
-                                      verdict))
-    if written.get('nonfinite'):
-        extra['estimates not written (non-finite)'] = written['nonfinite']
-    if options['figures']:
-        extra[FIGURES_NOTE] = 1
+    run = _StreamRun(folder, input_path, vehicle, observer, options, api, block_samples)
+    stages.next(f'estimating ({options["mode"]}) and writing the bag, block by block')
+    run.estimate(progress)
+    extra, written = run.close_bag()
     stages.next('writing the report' + (' and figures' if options['figures'] else ''))
-    drive = SimpleNamespace(messages=reader.messages, rejected=reader.rejected,
-                            issues=tuple(reader.issues), fixes=reader.fixes,
-                            custom_data=reader.custom_data, noted=reader.noted)
-    def figures(segments: dict, doc: dict) -> list[str]:
-        if snapshots is None:
-            return []
-        from road_force_estimator.report.folder import _static_line
-        name = input_path.name
-        return draw(report_dir, input_path, reader.block_samples, snapshots, summary, segments,
-                    f'{name} ({mode})' if name else mode, options['units'],
-                    _static_line(doc, vehicle))
+    doc = _write_report(folder / 'report', run.summary, run.stream.status, run.drive(),
+                        vehicle, observer, extra, input_path.name, options, run.figures)
+    warnings = [f'{input_path}: {issue}' for issue in run.reader.issues]
+    return api.result(doc, output / 'bag', output / 'report', run.summary.track(), written,
+                      warnings, run.drive())
 
-    doc = _write_report(report_dir, summary, status, drive, vehicle, observer, extra,
-                        input_path.name, options, figures)
-    warnings = [f'{input_path}: {issue}' for issue in reader.issues]
-    return eb.EstimateResult(doc, output / 'bag', output / 'report', summary.track(), written,
-                             warnings, drive)
+
+class _StreamRun:
+    """The state of :func:`run_stream`: the reader, the estimator, the bag, the
+    accumulators."""
+
+    def __init__(self, folder: Path, input_path: Path, vehicle, observer, options: dict, api,
+                 block_samples: int | None) -> None:
+        from road_force_estimator.bagio.drive_blocks import (
+            BLOCK_SAMPLES, DriveBlocks, streamable)
+        from road_force_estimator.bagio.estimate_stream import EstimateBagStream
+        from road_force_estimator.estimation.stream_run import OnlineStream
+        from road_force_estimator.report.figures import DEFAULT_WINDOW_S
+        from road_force_estimator.report.streamed import StreamedSummary
+        from road_force_estimator.tools.stream_figures import Snapshots
+
+        self.folder, self.input_path, self.api = folder, input_path, api
+        self.vehicle, self.observer, self.options = vehicle, observer, options
+        self.reader = DriveBlocks(input_path, block_samples or BLOCK_SAMPLES)
+        self.stream = OnlineStream(vehicle, observer)
+        custom = {'road_force_estimator.mode': options['mode'],
+                  'road_force_estimator.input': input_path.name,
+                  'road_force_estimator.writer_command': api.prog}
+        self.bag = EstimateBagStream(folder / 'bag', track_width_m=vehicle.track_width_m,
+                                     custom_data=custom)
+        self.summary = StreamedSummary(options['segment_length_m'],
+                                       with_stamps=_has_fixes(input_path),
+                                       capacity=streamable(input_path))
+        self.diag, self.fit = _DiagnosticWindows(), _ModelFit()
+        self.speeds: list[np.ndarray] = []
+        self.snapshots = Snapshots(DEFAULT_WINDOW_S) if options['figures'] else None
+
+    def estimate(self, progress: bool) -> None:
+        """Every block through the estimator, the pieces to the bag and the accumulators;
+        the bag aborted (and the error raised) when the input is bad."""
+        from road_force_estimator.bagio import BagReadError
+
+        progress = progress and sys.stderr.isatty()
+        try:
+            for i, block in enumerate(self.reader):
+                if self.snapshots is not None:
+                    self.snapshots.keep(i, block.stamps_ns[0], self.stream, self.summary)
+                self.speeds.append(np.where(block.early, np.nan, block.speed_mps))
+                for piece in self.stream.feed(block.stamps_ns, block.q_m, block.roll_rad,
+                                              block.speed_mps):
+                    self._consume(piece)
+                if progress:
+                    print(f'{self.api.prog}: {self.summary.inputs} samples', end='\r',
+                          flush=True, file=sys.stderr)
+            for piece in self.stream.finish():
+                self._consume(piece)
+            problem = self._problem()
+        except BagReadError as err:
+            self.bag.abort()
+            raise self.api.error(str(err)) from None
+        except BaseException:
+            self.bag.abort()
+            raise
+        if problem:
+            self.bag.abort()
+            raise self.api.error(problem)
+
+    def _consume(self, piece) -> None:
+        """One piece of estimates to the bag, the report's accumulators, the diagnostics and
+        the model fit (with the recorded speeds of its samples)."""
+        m = len(piece.stamp_ns)
+        v = np.concatenate(self.speeds) if len(self.speeds) > 1 else self.speeds[0]
+        self.speeds[:] = [v[m:]]
+        self.bag.write(piece)
+        self.summary.add(piece, v[:m])
+        self.diag.add(piece)
+        self.fit.add(piece)
+
+    def _problem(self) -> str | None:
+        """Why nothing can be estimated (the one-piece path's reasons), or None."""
+        status, n, reader = self.stream.status, self.summary.inputs, self.reader
+        if n == 0:
+            return (f'{self.input_path}: no usable /suspension/deflections message'
+                    + (f' ({reader.issues[0]})' if reader.issues else ''))
+        if reader.twists == 0:
+            return 'no usable /vehicle/twist message: the speed is unknown'
+        if status.accepted == 0:
+            return (f'{self.input_path}: no sample could be estimated: all {n} samples '
+                    f'rejected ({status.rejected_range} out of range, '
+                    f'{status.rejected_nonfinite} non-finite, {status.rejected_time} with a '
+                    'bad stamp)')
+        return None
+
+    def close_bag(self) -> tuple[dict[str, Any], dict[str, int]]:
+        """The notes for the report and the bag's counts, once its diagnostics are written."""
+        from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
+
+        status, reader, prog = self.stream.status, self.reader, self.api.prog
+        extra: dict[str, Any] = {}
+        if self.observer.distance_source == 'gnss':
+            extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
+        if reader.early:
+            extra['samples before the first twist (given its speed)'] = reader.early
+        counts = {'samples': self.summary.inputs, 'estimated': int(status.accepted),
+                  'rejected_by_reader': int(reader.rejected_total),
+                  'rejected_by_estimator': int(status.rejected), 'resets': int(status.resets)}
+        verdict = self.fit.result(self.summary, status, self.vehicle, self.observer)
+        if verdict is not None:
+            extra['model fit'] = (f'{verdict[1]} (residual band RMS {verdict[0]:.3g} x '
+                                  'sigma_M)' + (f': {ADVICE}' if verdict[1] == MISMATCH else ''))
+        written = self.bag.close(self.diag.statuses(
+            counts, f'{prog}: estimator ({self.options["mode"]})', prog, verdict))
+        if written.get('nonfinite'):
+            extra['estimates not written (non-finite)'] = written['nonfinite']
+        if self.options['figures']:
+            extra[FIGURES_NOTE] = 1
+        return extra, written
+
+    def drive(self) -> SimpleNamespace:
+        """What the report reads of the drive (as :class:`.bagio.Drive`, without arrays)."""
+        r = self.reader
+        return SimpleNamespace(messages=r.messages, rejected=r.rejected, issues=tuple(r.issues),
+                               fixes=r.fixes, custom_data=r.custom_data, noted=r.noted)
+
+    def figures(self, segments: dict, doc: dict) -> list[str]:
+        """The figures (:func:`.stream_figures.draw`) of the report ``doc``."""
+        from road_force_estimator.report.folder import static_line
+        from road_force_estimator.tools.stream_figures import draw
+
+        if self.snapshots is None:
+            return []
+        name, mode = self.input_path.name, self.options['mode']
+        return draw(self.folder / 'report', self.input_path, self.reader.block_samples,
+                    self.snapshots, self.summary, segments,
+                    f'{name} ({mode})' if name else mode, self.options['units'],
+                    static_line(doc, self.vehicle))
 
 
 def _has_fixes(input_path: Path) -> bool:
@@ -261,24 +314,12 @@ def _has_fixes(input_path: Path) -> bool:
                (info.get('topics_with_message_count') or []))
 
 
-def _consume(piece, speeds: list, bag, summary, diag, fit) -> None:
-    """One piece of estimates to the bag, the report's accumulators, the diagnostics and the
-    model fit; ``speeds``: the recorded speeds of the samples not yet consumed."""
-    m = len(piece.stamp_ns)
-    v = np.concatenate(speeds) if len(speeds) > 1 else speeds[0]
-    speeds[:] = [v[m:]]
-    bag.write(piece)
-    summary.add(piece, v[:m])
-    diag.add(piece)
-    fit.add(piece)
-
-
 def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: dict,
                   input_name: str, options: dict, figures) -> dict[str, Any]:
     """``report.md``, ``segments.csv``, ``report.json`` and the figures
     (``figures(segments, summary)`` draws them) as :func:`.report.write_report`, from the
     accumulators."""
-    from road_force_estimator.report.folder import _json_safe, write_segments_csv
+    from road_force_estimator.report.folder import json_safe, write_segments_csv
     from road_force_estimator.report.markdown import write_markdown
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -288,7 +329,7 @@ def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: di
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)
-    (folder / 'report.json').write_text(json.dumps(_json_safe(summary), indent=2) + '\n')
+    (folder / 'report.json').write_text(json.dumps(json_safe(summary), indent=2) + '\n')
     return summary
 
 
@@ -297,9 +338,9 @@ def _summary(acc, st, drive, vehicle, observer, extra: dict, input_name: str,
     """:func:`.summary.summarize`'s ``(summary, segments)`` of a streamed drive."""
     from road_force_estimator import __version__
     from road_force_estimator.report.summary import (
-        _convergence_summary, _notes, _rejections, _segment_counts)
+        convergence_summary, notes, rejections, segment_counts)
 
-    rejected = _rejections(drive, st)
+    rejected = rejections(drive, st)
     t_s = (0.0 if acc.t0_ns is None else (acc.last_ns - acc.t0_ns) * 1e-9)
     judged = 'converged' if acc.converged or acc.t0_ns is None else 'settling time'
     run_info = options.get('run_info') or {}
@@ -332,12 +373,12 @@ def _summary(acc, st, drive, vehicle, observer, extra: dict, input_name: str,
                 'static_load_n': [float(v) for v in vehicle.static_load_n]},
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
-    summary.update(_notes(SimpleNamespace(), extra))
+    summary.update(notes(SimpleNamespace(), extra))
     summary.update(acc.speed_findings())
     summary['accuracy'] = None
     segments = acc.segment_table(drive.fixes)
-    summary.update(_segment_counts(segments))
+    summary.update(segment_counts(segments))
     summary['iri_m_per_km'] = {'estimated': acc.whole_iri(segments), 'true': None,
                                'raw': None, 'reference': None}
-    summary['convergence'] = _convergence_summary(summary)
+    summary['convergence'] = convergence_summary(summary)
     return summary, segments
