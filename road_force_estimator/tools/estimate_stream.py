@@ -2,8 +2,9 @@
 (issue 21).
 
 Used by :func:`.estimate_bag.run` for a drive bag whose metadata lists at least
-:data:`STREAM_MIN_SAMPLES` deflection messages and no ground truth, when no reference
-profile is given (:func:`use_stream`); shorter drives go through in one piece (their outputs
+:data:`STREAM_MIN_SAMPLES` deflection messages (fewer in a Dask worker with a memory limit:
+:func:`stream_threshold`) and no ground truth, when no reference profile is given
+(:func:`use_stream`); shorter drives go through in one piece (their outputs
 unchanged, byte for byte). The blocks: the bag read :data:`~.bagio.drive_blocks.BLOCK_SAMPLES`
 samples at a time (:class:`~.bagio.drive_blocks.DriveBlocks`), the online estimate of each
 block (:class:`~.estimation.stream_run.OnlineStream`, bit-identical to one piece: the chain is
@@ -35,12 +36,42 @@ FIGURES_NOTE = ('figures: the profile and overview show the detail window (a dri
                 'estimated block by block)')
 
 
+#: What a sample costs the one-piece path at its peak, figures on (bytes; measured 545
+#: offline and ~720 online, ``bench/long_drive_memory.py``), rounded up.
+ONE_PIECE_BYTES_PER_SAMPLE = 1000
+
+
+def worker_memory_limit() -> float | None:
+    """The memory limit (bytes) of the Dask worker this runs in (``estimate_fleet``), None
+    outside one or without a limit."""
+    if 'distributed' not in sys.modules:
+        return None
+    try:
+        from distributed import get_worker
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return None
+    limit = getattr(getattr(worker, 'memory_manager', None), 'memory_limit', None)
+    return float(limit) if limit else None
+
+
+def stream_threshold() -> int:
+    """Deflection messages from which a drive is streamed: :data:`STREAM_MIN_SAMPLES`, less
+    in a Dask worker whose memory limit one piece would pass half of
+    (:data:`ONE_PIECE_BYTES_PER_SAMPLE` a sample)."""
+    limit = worker_memory_limit()
+    if limit is None:
+        return STREAM_MIN_SAMPLES
+    return max(1, min(STREAM_MIN_SAMPLES, int(0.5 * limit / ONE_PIECE_BYTES_PER_SAMPLE)))
+
+
 def use_stream(input_path: Path, mode: str, reference, observer,
                min_samples: int | None = None) -> bool:
-    """Whether :func:`run_stream` estimates this drive (see the module notes)."""
+    """Whether :func:`run_stream` estimates this drive (see the module notes);
+    ``min_samples``: instead of :func:`stream_threshold`."""
     from road_force_estimator.bagio.drive_blocks import streamable
 
-    limit = STREAM_MIN_SAMPLES if min_samples is None else min_samples
+    limit = stream_threshold() if min_samples is None else min_samples
     if mode != 'online' or reference is not None:
         return False
     return streamable(input_path) >= limit

@@ -1,6 +1,6 @@
 """An estimate_fleet worker under a Dask memory limit on a drive that does not fit it in one
-piece (issue 21): the drive goes block by block (tools.estimate_stream) and the worker stays
-under the limit."""
+piece (issue 21): the worker's limit makes the drive go block by block
+(tools.estimate_stream.stream_threshold) and the worker stays under the limit."""
 import resource
 
 import pytest
@@ -15,9 +15,9 @@ LIMIT_MB = 400
 HOURS = 0.15
 
 
-def _stream_everything():
+def _threshold():
     from road_force_estimator.tools import estimate_stream
-    estimate_stream.STREAM_MIN_SAMPLES = 1          # the worker streams this short drive
+    return estimate_stream.stream_threshold()
 
 
 def _peak_mb():
@@ -35,7 +35,7 @@ def test_worker_stays_under_its_memory_limit(tmp_path):
                                        dashboard_address=None)
     try:
         with distributed.Client(cluster, set_as_default=False) as client:
-            client.run(_stream_everything)
+            thresholds = [client.submit(_threshold, pure=False).result()]   # in a task
             task = DriveTask('long', str(tmp_path / 'long'), str(tmp_path / 'fleet'),
                              VehicleParameters(), ObserverParameters(),
                              {'mode': 'online', 'segment_length_m': 100.0, 'figures': True,
@@ -44,6 +44,7 @@ def test_worker_stays_under_its_memory_limit(tmp_path):
             peaks = list(client.run(_peak_mb).values())
     finally:
         cluster.close()
+    assert thresholds == [int(0.5 * LIMIT_MB * 1e6 / 1000)] and thresholds[0] < n
     assert outcome.status == 'processed', outcome.reason
     assert len(outcome.table['start_m']) == int(n / 1000 * 20 / 100)
     assert peaks and max(peaks) < 0.95 * LIMIT_MB, peaks
