@@ -95,7 +95,7 @@ def _samples(bag: Path) -> int:
     return streamable(bag)
 
 
-def measure(hours: float, piece_s: float, modes, folder: Path, drive: Path | None = None
+def measure(hours: float, piece_s: float | None, modes, folder: Path, drive: Path | None = None
             ) -> dict:
     """Make the drives (``drive``: the long one given), run the command (see the module
     notes)."""
@@ -108,6 +108,7 @@ def measure(hours: float, piece_s: float, modes, folder: Path, drive: Path | Non
         long_bag = Path(drive)
         n = _samples(long_bag)
         hours = (n - 1) / RATE_HZ / 3600.0
+        piece_s = None                            # made before: not known here
     made_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     simulate(short_bag, 1.0)
     size = sum(p.stat().st_size for p in long_bag.iterdir())
@@ -127,8 +128,10 @@ def measure(hours: float, piece_s: float, modes, folder: Path, drive: Path | Non
 def markdown(doc: dict) -> list[str]:
     lines = [f'# estimate_bag on a long drive: `{doc["command"]}`', '',
              f'{doc["hours"]:g} h at 1 kHz = {doc["samples"]:,} samples, '
-             f'{doc["bag_bytes"] / 1e9:.2f} GB of bag, made in pieces of {doc["piece_s"]:g} s '
-             f'with a peak RSS of {doc["making_peak_rss_mb"]:.0f} MB; figures on '
+             f'{doc["bag_bytes"] / 1e9:.2f} GB of bag, '
+             + (f'made in pieces of {doc["piece_s"]:g} s with a peak RSS of '
+                f'{doc["making_peak_rss_mb"]:.0f} MB' if doc.get('piece_s') is not None
+                else 'made before (--drive)') + '; figures on '
              '(drives of at least 2^21 samples are estimated block by block in online mode: '
              '`tools/estimate_stream.py`).', '',
              '| mode | peak RSS (MB), long drive | peak RSS (MB), 1 s drive | added B/sample '
