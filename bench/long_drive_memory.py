@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.long_drive_memory [--hours 4] [--piece 300]
                                                 [--modes offline online] [--keep DIR]
-                                                [--json FILE]
+                                                [--drive BAG] [--json FILE]
 
 1. Makes the drive bag in bounded memory: the plant (:func:`core.plant.simulate`, ISO 8608
    class C, seed 1, 20 m/s, 1 kHz) drives one piece of ``--piece`` seconds; the drive is that
@@ -13,7 +13,7 @@
    :class:`bagio.BagWriter`. Its own peak RSS is printed.
 2. ``estimate_bag`` runs on it as a process, figures on, once per mode, and on a 1 s drive of
    the same kind; per run the wall and CPU time and the peak RSS (``/usr/bin/time``), and the
-   bytes per added sample.
+   bytes per added sample. ``--drive BAG`` takes a long drive made before (``--keep``) instead.
 
 Numbers go to stdout (Markdown) and, with ``--json``, to a file. A 4-hour bag is ~4.3 GB on
 disk (``--keep`` puts it in a folder of your choice; default: the system temp folder).
@@ -44,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--modes', nargs='+', choices=('offline', 'online'),
                    default=['offline', 'online'])
     p.add_argument('--keep', metavar='DIR', help='make (and keep) the bags in DIR')
+    p.add_argument('--drive', metavar='BAG',
+                   help='a long drive made before (by this command with --keep): not made again')
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
     return p
 
@@ -86,12 +88,27 @@ def make_drive(bag: Path, hours: float, piece_s: float) -> int:
     return total
 
 
-def measure(hours: float, piece_s: float, modes, folder: Path) -> dict:
-    """Make the drives, run the command (see the module notes)."""
+def _samples(bag: Path) -> int:
+    """The deflection messages a bag's metadata lists."""
+    from road_force_estimator.bagio.drive_blocks import streamable
+
+    return streamable(bag)
+
+
+def measure(hours: float, piece_s: float | None, modes, folder: Path, drive: Path | None = None
+            ) -> dict:
+    """Make the drives (``drive``: the long one given), run the command (see the module
+    notes)."""
     long_bag, short_bag = folder / 'long_drive', folder / 'drive_1s'
-    for p in (long_bag, short_bag):
-        shutil.rmtree(p, ignore_errors=True)
-    n = make_drive(long_bag, hours, piece_s)
+    shutil.rmtree(short_bag, ignore_errors=True)
+    if drive is None:
+        shutil.rmtree(long_bag, ignore_errors=True)
+        n = make_drive(long_bag, hours, piece_s)
+    else:
+        long_bag = Path(drive)
+        n = _samples(long_bag)
+        hours = (n - 1) / RATE_HZ / 3600.0
+        piece_s = None                            # made before: not known here
     made_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     simulate(short_bag, 1.0)
     size = sum(p.stat().st_size for p in long_bag.iterdir())
@@ -111,8 +128,12 @@ def measure(hours: float, piece_s: float, modes, folder: Path) -> dict:
 def markdown(doc: dict) -> list[str]:
     lines = [f'# estimate_bag on a long drive: `{doc["command"]}`', '',
              f'{doc["hours"]:g} h at 1 kHz = {doc["samples"]:,} samples, '
-             f'{doc["bag_bytes"] / 1e9:.2f} GB of bag, made in pieces of {doc["piece_s"]:g} s '
-             f'with a peak RSS of {doc["making_peak_rss_mb"]:.0f} MB; figures on.', '',
+             f'{doc["bag_bytes"] / 1e9:.2f} GB of bag, '
+             + (f'made in pieces of {doc["piece_s"]:g} s with a peak RSS of '
+                f'{doc["making_peak_rss_mb"]:.0f} MB' if doc.get('piece_s') is not None
+                else 'made before (--drive)') + '; figures on '
+             '(drives of at least 2^21 samples are estimated block by block in online mode: '
+             '`tools/estimate_stream.py`).', '',
              '| mode | peak RSS (MB), long drive | peak RSS (MB), 1 s drive | added B/sample '
              '| wall (s) | CPU (s) | samples per CPU s |', '|---|---|---|---|---|---|---|']
     for mode, m in doc['modes'].items():
@@ -128,10 +149,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.keep:
         folder = Path(args.keep)
         folder.mkdir(parents=True, exist_ok=True)
-        doc = measure(args.hours, args.piece, args.modes, folder)
+        doc = measure(args.hours, args.piece, args.modes, folder, args.drive)
     else:
         with tempfile.TemporaryDirectory(prefix='long_drive_memory_') as tmp:
-            doc = measure(args.hours, args.piece, args.modes, Path(tmp))
+            doc = measure(args.hours, args.piece, args.modes, Path(tmp), args.drive)
     doc['command'] = ('python -m bench.long_drive_memory '
                       + ' '.join(argv if argv is not None else sys.argv[1:])).strip()
     print('\n'.join(markdown(doc)))

@@ -29,20 +29,23 @@ class Rejects:
 
 
 def accept_in_order(stamps: np.ndarray, ok: np.ndarray, topic: str,
-                     rejects: Rejects) -> np.ndarray:
+                     rejects: Rejects, floor: int | None = None) -> np.ndarray:
     """Keep the messages (file order) whose stamp exceeds every earlier accepted one.
 
     A stamp equal to the latest accepted is a duplicate, a smaller one goes backwards; both
-    are dropped and counted. Returns the mask of accepted messages.
+    are dropped and counted. ``floor``: the latest stamp accepted before these messages (a
+    bag read block by block, :mod:`.drive_blocks`). Returns the mask of accepted messages.
     """
-    if ok.all() and bool(np.all(stamps[1:] > stamps[:-1])):
+    if ok.all() and bool(np.all(stamps[1:] > stamps[:-1])) and (
+            floor is None or stamps.size == 0 or stamps[0] > floor):
         return ok.copy()                        # the usual case: nothing to drop
     idx = np.flatnonzero(ok)
     s = stamps[idx]
     if s.size == 0:
         return np.zeros_like(ok)
-    prev = np.maximum.accumulate(s)
-    before = np.concatenate([[np.iinfo(np.int64).min], prev[:-1]])
+    start = np.iinfo(np.int64).min if floor is None else int(floor)
+    prev = np.maximum(np.maximum.accumulate(s), start)
+    before = np.concatenate([[start], prev[:-1]])
     keep = s > before
     rejects.add(topic, 'duplicate_stamp', np.count_nonzero(s == before))
     rejects.add(topic, 'backwards_stamp', np.count_nonzero(s < before))
@@ -89,21 +92,23 @@ def read_points(cols: TopicColumns, rejects: Rejects):
     return stamps, xyz[:, 0], xyz[:, 1], xyz[:, 2]
 
 
-def read_scalar(cols: TopicColumns, path: str, rejects: Rejects):
-    """(stamps, values) of the accepted messages' number field ``path``, file order."""
+def read_scalar(cols: TopicColumns, path: str, rejects: Rejects, floor: int | None = None):
+    """(stamps, values) of the accepted messages' number field ``path``, file order
+    (``floor``: as :func:`accept_in_order`)."""
     stamps, ok = basic_checks(cols, rejects)
     values, _ = cols.column(path)
     finite = np.isfinite(values)
     rejects.add(cols.topic, 'nonfinite', np.count_nonzero(ok & ~finite))
-    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects)
+    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects, floor)
     if keep.all():
         return stamps, values
     return stamps[keep], values[keep]
 
 
 def read_joint_state(cols: TopicColumns, names: Sequence[str], rejects: Rejects,
-                      *, velocity: bool = False):
-    """(stamps, position (m, k)[, velocity]) of accepted JointStates, mapped by name."""
+                      *, velocity: bool = False, floor: int | None = None):
+    """(stamps, position (m, k)[, velocity]) of accepted JointStates, mapped by name
+    (``floor``: as :func:`accept_in_order`)."""
     stamps, ok = basic_checks(cols, rejects)
     k = len(names)
     n = cols.count
@@ -147,7 +152,7 @@ def read_joint_state(cols: TopicColumns, names: Sequence[str], rejects: Rejects,
     ok &= mapped
     finite = _finite_rows(pos) & (_finite_rows(vel) if velocity else True)
     rejects.add(cols.topic, 'nonfinite', np.count_nonzero(ok & ~finite))
-    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects)
+    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects, floor)
     if keep.all():
         return (stamps, pos, vel) if velocity else (stamps, pos)
     if velocity:

@@ -431,4 +431,6 @@ def _read_fixes(c, rejects: Rejects) -> tuple[Fixes, dict[str, dict[str, int]]]:
     return Fixes(s[keep], lat[keep], lon[keep], alt[keep]), noted
 
 
-
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+read_fixes = _read_fixes

@@ -262,3 +262,10 @@ def _diagnostic_streams(diagnostics: Iterable[tuple[int, Any]]) -> list:
             for d in diagnostics]
     return [(DIAGNOSTICS, [int(d[0]) for d in diagnostics],
              [TYPESTORE.serialize_cdr(msg, DIAGNOSTIC_ARRAY) for msg in msgs])]
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+EstimateColumns = _EstimateColumns
+estimate_streams = _estimate_streams
+diagnostic_streams = _diagnostic_streams

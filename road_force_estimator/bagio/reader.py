@@ -437,3 +437,9 @@ def read_topic_columns(path: str | Path, topics: Mapping[str, str], *,
         for topic, log in logs.items():
             reader(topic).add_messages(log, datas[topic])
     return {topic: reader(topic).columns(topic) for topic in topics if topic in seen}
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+raw_batches = _raw_batches
+TopicReader = _TopicReader

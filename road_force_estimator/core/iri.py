@@ -358,3 +358,9 @@ def iri_table(distance_m: np.ndarray, elevation_m: np.ndarray, *,
         'iri_left_m_per_km': values[:, 0],
         'iri_right_m_per_km': values[:, 1],
     }
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+UNIFORM_RTOL = _UNIFORM_RTOL
+transition = _transition

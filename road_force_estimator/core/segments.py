@@ -253,3 +253,9 @@ def _beyond_fixes(lat: np.ndarray, lon: np.ndarray, edges: np.ndarray, edge_ns: 
         along = (edges[sel] - fx[near]) / span
         lat[sel] = flat[near] + along * (flat[near] - flat[far])
         lon[sel] = flon[near] + along * (flon[near] - flon[far])
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+coordinate_columns = _coordinate_columns
+coverage = _coverage

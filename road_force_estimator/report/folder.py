@@ -129,3 +129,9 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
     write_markdown(folder / 'report.md', summary, segments, names)
     (folder / 'report.json').write_text(json.dumps(_json_safe(summary), indent=2) + '\n')
     return summary
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+json_safe = _json_safe
+static_line = _static_line

@@ -449,3 +449,13 @@ def _optional(est, name: str, rows) -> np.ndarray | None:
     """The estimate's field ``name`` at ``rows`` (None for estimates without it)."""
     values = getattr(est, name, None)
     return None if values is None else np.asarray(values)[rows]
+
+
+#: Public names of the helpers above, for the block-by-block path of issue 21
+#: (:mod:`road_force_estimator.tools.estimate_stream`).
+whole_from_segments = _whole_from_segments
+whole_iri = _whole_iri
+convergence_summary = _convergence_summary
+notes = _notes
+rejections = _rejections
+segment_counts = _segment_counts

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import math
 from pathlib import Path
 import sys
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -209,19 +210,33 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
                                         force=force and standalone, inputs=[input_path])
     target.check()
     stages = _Stages(progress)
+    options = dict(mode=mode, reference=reference, reference_offset_m=reference_offset_m,
+                   segment_length_m=segment_length_m, figures=figures, units=units,
+                   run_info=run_info)
     try:
-        drive, est, extra = _estimate(input_path, vehicle, observer, mode, progress, stages)
-        options = dict(mode=mode, reference=reference, reference_offset_m=reference_offset_m,
-                       segment_length_m=segment_length_m, figures=figures, units=units,
-                       run_info=run_info)
+        write = _writer(input_path, output, vehicle, observer, options, progress, stages)
         if not standalone:
-            return _write(output, output, input_path, drive, est, extra, vehicle, observer,
-                          options, stages)
+            return write(output)
         with target.staged() as stage:
-            return _write(stage, output, input_path, drive, est, extra, vehicle, observer,
-                          options, stages)
+            return write(stage)
     finally:
         stages.close()
+
+
+def _writer(input_path: Path, output: Path, vehicle, observer, options: dict, progress: bool,
+            stages):
+    """``write(folder) -> EstimateResult``: a long drive block by block
+    (:mod:`.estimate_stream`), else estimated in one piece now and written by :func:`_write`."""
+    from road_force_estimator.tools import estimate_stream
+
+    if estimate_stream.use_stream(input_path, options['mode'], options['reference'], observer):
+        api = SimpleNamespace(prog=PROG, error=InputError, result=EstimateResult)
+        return lambda folder: estimate_stream.run_stream(
+            folder, output, input_path, vehicle, observer, options, stages, api, progress)
+    drive, est, extra = _estimate(input_path, vehicle, observer, options['mode'], progress,
+                                  stages)
+    return lambda folder: _write(folder, output, input_path, drive, est, extra, vehicle,
+                                 observer, options, stages)
 
 
 def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, stages):

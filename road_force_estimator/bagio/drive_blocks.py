@@ -1,0 +1,228 @@
+"""A drive bag read block by block: the estimator's inputs in bounded memory (issue 21).
+
+:func:`read_drive_bag` holds the whole drive; :class:`DriveBlocks` yields it in blocks of
+about ``block_samples`` accepted ``/suspension/deflections`` samples with their speed, and
+ends with the counts that :class:`.Drive` carries. The same checks, in the same order, give
+the same samples, speeds and counts (test_drive_blocks):
+
+- each block's messages go through :func:`.checks.read_joint_state` /
+  :func:`.checks.read_scalar` with the latest stamp accepted before it as the floor, so that a
+  duplicate or backward stamp across blocks is dropped and counted as in one piece;
+- a sample's speed is that of the latest accepted twist stamped at or before it; a sample is
+  handed out once a twist stamped at or after it has been accepted (no later twist can then
+  change it), the rest at the end; samples before the first twist take its speed (as
+  ``estimate_bag`` does: :func:`~road_force_estimator.tools.estimate_bag.drive_speed`) and
+  are counted (:attr:`DriveBlocks.early`);
+- ``/fix`` (a few per second) is gathered whole and read as :func:`read_drive_bag` does.
+
+Ground truth topics are not read here (:func:`streamable` says whether a bag has any).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from road_force_estimator.bagio.checks import Rejects, read_joint_state, read_scalar
+from road_force_estimator.bagio.errors import BagReadError
+from road_force_estimator.bagio.mcap_scan import Block
+from road_force_estimator.bagio.reader import (
+    USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
+from road_force_estimator.interfaces import (
+    DEFLECTION_JOINTS, DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
+    TWIST_STAMPED)
+
+__all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveBlocks', 'streamable']
+
+#: Default samples per block (deflection messages gathered before a block is decoded).
+BLOCK_SAMPLES = 1 << 16
+
+_STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
+_WANTED = {DEFLECTIONS: JOINT_STATE, TWIST: TWIST_STAMPED, FIX: NAVSATFIX}
+_FIELDS = {DEFLECTIONS: _STAMP + ('position', 'velocity', 'effort'),
+           TWIST: _STAMP + ('twist.linear.x',),
+           FIX: _STAMP + ('latitude', 'longitude', 'altitude', 'status.status')}
+
+
+@dataclass
+class InputBlock:
+    """Accepted samples in order: stamps (ns), q (m, (k, 2)), roll (rad), speed (m/s; before
+    the first twist its speed) and ``early`` (those samples: :attr:`.Drive.speed_mps` has NaN
+    there)."""
+
+    stamps_ns: np.ndarray
+    q_m: np.ndarray
+    roll_rad: np.ndarray
+    speed_mps: np.ndarray
+    early: np.ndarray | None = None
+
+
+def streamable(path: str | Path) -> int:
+    """The ``/suspension/deflections`` messages metadata.yaml lists for a bag without ground
+    truth topics; 0 when it has truth, or no usable metadata (then read it whole)."""
+    try:
+        _, info, issues = bag_files(Path(path))
+    except BagReadError:
+        return 0
+    if issues or not isinstance(info, dict):
+        return 0
+    count = 0
+    truth = set(TRUE_LOAD) | set(TRUE_ROAD)
+    for entry in info.get('topics_with_message_count') or []:
+        meta = (entry or {}).get('topic_metadata') or {}
+        name = meta.get('name')
+        if name in truth:
+            return 0
+        if name == DEFLECTIONS:
+            count = int(entry.get('message_count') or 0)
+    return count
+
+
+class DriveBlocks:
+    """Iterate over a drive bag's accepted samples, block by block (see the module notes).
+
+    After the iteration: :attr:`messages`, :attr:`rejected` (as :class:`.Drive`),
+    :attr:`issues`, :attr:`custom_data`, :attr:`fixes`, :attr:`noted`, :attr:`twists`
+    (accepted twists), :attr:`first_speed` and :attr:`early`.
+    """
+
+    def __init__(self, path: str | Path, block_samples: int = BLOCK_SAMPLES) -> None:
+        self.path = Path(path)
+        self.block_samples = int(block_samples)
+        self.rejects = Rejects()
+        self.issues: list[str] = []
+        self.messages: dict[str, int] = {}
+        self.fixes = None
+        self.noted: dict = {}
+        self.custom_data = bag_custom_data(self.path)
+        self.twists = 0
+        self.first_speed: float | None = None
+        self.early = 0
+        self.seen_deflections = False
+        self._last = {DEFLECTIONS: None, TWIST: None}
+        self._twist_ns = np.zeros(0, np.int64)      # the twists a pending sample may need
+        self._twist_v = np.zeros(0)
+        self._pending: list[InputBlock] = []
+
+    @property
+    def rejected(self) -> dict[str, dict[str, int]]:
+        return self.rejects.counts
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(sum(r.values()) for r in self.rejected.values())
+
+    def __iter__(self) -> Iterator[InputBlock]:
+        from road_force_estimator.bagio.drive import read_fixes
+
+        seen: dict = {}
+        readers: dict[str, TopicReader] = {}
+        fix_reader = None
+        for batch in raw_batches(self.path, _WANTED, self.issues, seen,
+                                  indexed=USE_MESSAGE_INDEX):
+            for topic, add in self._parts(batch):
+                if topic == FIX:
+                    if fix_reader is None:
+                        fix_reader = TopicReader(NAVSATFIX, seen[FIX].msgtype, _FIELDS[FIX])
+                    add(fix_reader)
+                    continue
+                if topic not in readers:
+                    readers[topic] = TopicReader(_WANTED[topic], seen[topic].msgtype,
+                                                  _FIELDS[topic])
+                add(readers[topic])
+            deflections = readers.get(DEFLECTIONS)
+            if deflections is not None and deflections.count >= self.block_samples:
+                block = self._decode(readers, seen)
+                readers = {}
+                if block is not None:
+                    yield block
+        if readers:
+            block = self._decode(readers, seen)
+            if block is not None:
+                yield block
+        if DEFLECTIONS not in seen:
+            raise BagReadError(f'{self.path}: no {DEFLECTIONS} topic'
+                               + (f' ({self.issues[0]})' if self.issues else ''))
+        if fix_reader is not None:
+            self.messages[FIX] = fix_reader.count
+            self.fixes, self.noted = read_fixes(fix_reader.columns(FIX), self.rejects)
+        rest = self._release(final=True)
+        if rest is not None:
+            yield rest
+
+    @staticmethod
+    def _parts(batch: list):
+        """``(topic, add(reader))`` of one batch of the scan (blocks or messages)."""
+        if isinstance(batch[0], Block):
+            for block in batch:
+                yield block.topic, (lambda r, b=block: r.add_block(b))
+            return
+        logs: dict[str, list] = {}
+        datas: dict[str, list] = {}
+        for channel, log_ns, data in batch:
+            logs.setdefault(channel.topic, []).append(log_ns)
+            datas.setdefault(channel.topic, []).append(data)
+        for topic, log in logs.items():
+            yield topic, (lambda r, a=log, d=datas[topic]: r.add_messages(a, d))
+
+    def _decode(self, readers: dict, seen: dict) -> InputBlock | None:
+        """Check one block's messages; the samples whose speed is known now (or None)."""
+        for topic, reader in readers.items():
+            self.messages[topic] = self.messages.get(topic, 0) + reader.count
+        if TWIST in readers:
+            s, v = read_scalar(readers[TWIST].columns(TWIST), 'twist.linear.x', self.rejects,
+                               self._last[TWIST])
+            if s.size:
+                self._last[TWIST] = int(s[-1])
+                if self.first_speed is None:
+                    self.first_speed = float(v[0])
+                self.twists += int(s.size)
+                self._twist_ns = np.concatenate([self._twist_ns, s])
+                self._twist_v = np.concatenate([self._twist_v, v])
+        if DEFLECTIONS in readers:
+            self.seen_deflections = True
+            s, pos = read_joint_state(readers[DEFLECTIONS].columns(DEFLECTIONS),
+                                      DEFLECTION_JOINTS, self.rejects,
+                                      floor=self._last[DEFLECTIONS])
+            if s.size:
+                self._last[DEFLECTIONS] = int(s[-1])
+                self._pending.append(InputBlock(s, pos[:, :2].copy(), pos[:, 2].copy(),
+                                                np.zeros(0)))
+        return self._release(final=False)
+
+    def _release(self, final: bool) -> InputBlock | None:
+        """The pending samples stamped at or before the latest twist (all when ``final``),
+        with their held speed; None when there are none."""
+        if not self._pending:
+            return None
+        stamps = np.concatenate([b.stamps_ns for b in self._pending])
+        last = self._last[TWIST]
+        if final:
+            k = stamps.size
+        elif last is None:
+            k = 0
+        else:
+            k = int(np.searchsorted(stamps, last, side='right'))
+        if k == 0:
+            return None
+        q = np.concatenate([b.q_m for b in self._pending])
+        roll = np.concatenate([b.roll_rad for b in self._pending])
+        self._pending = ([InputBlock(stamps[k:], q[k:], roll[k:], np.zeros(0))]
+                         if k < stamps.size else [])
+        s = stamps[:k]
+        held = np.searchsorted(self._twist_ns, s, side='right') - 1
+        if self._twist_v.size:
+            speed = np.where(held >= 0, self._twist_v[np.clip(held, 0, None)], np.nan)
+        else:
+            speed = np.full(k, np.nan)
+        early = ~np.isfinite(speed)
+        if self.first_speed is not None and early.any():
+            speed[early] = self.first_speed
+            self.early += int(np.count_nonzero(early))
+        # keep only the twists a later sample may still need (the last one at or before it)
+        nxt = stamps[k] if k < stamps.size else s[-1]
+        keep = max(0, int(np.searchsorted(self._twist_ns, nxt, side='right')) - 1)
+        self._twist_ns, self._twist_v = self._twist_ns[keep:], self._twist_v[keep:]
+        return InputBlock(s, q[:k], roll[:k], speed, early)

@@ -1,0 +1,360 @@
+"""The report of a drive estimated piece by piece (issue 21): the numbers of
+:func:`.summary.summarize` and the segment table of :func:`.summary.drive_segments`, from
+accumulators fed with consecutive pieces of estimates (:class:`StreamedSummary`).
+
+What each number needs of the whole drive is kept, and only that:
+
+- per segment of :func:`~road_force_estimator.core.segments.segment_table`, its sums (in
+  sample order, as ``np.bincount`` adds them in one piece: each piece's sums start from the
+  previous ones), peaks, maxima and lift-off events, on the grid ``arange(x0, ., L)``; the
+  last full segment also as continued by the remainder, for when the remainder is merged
+  into it;
+- the travelled distance and the road of the samples that advance (16 + 8 bytes a sample),
+  for the IRI per segment and the coverage (the quarter-car runs over the whole profile at
+  its mean spacing, which only the whole drive gives);
+- the stamps and speeds of the accepted samples (16 bytes a sample), for the mean and the
+  medians of :func:`~.drive_info.run_description` and the model fit.
+
+Ground truth, a reference profile and GNSS coordinates are not handled here (the caller
+reads such drives in one piece). The numbers equal the one-piece report's
+(test_estimate_stream).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from road_force_estimator.core.iri_chunks import segment_iri
+from road_force_estimator.core.segments import (
+    MIN_COVERAGE, SEGMENT_COLUMNS, coordinate_columns, coverage, segment_bounds)
+
+__all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
+
+
+class GrowingArray:
+    """A column that grows by appends (capacity doubling); :meth:`array` is a view."""
+
+    def __init__(self, dtype=float, width: int | None = None, capacity: int = 1024) -> None:
+        """``capacity``: rows reserved (pages untouched until written cost no memory)."""
+        self.shape = () if width is None else (width,)
+        self.data = np.empty((max(int(capacity), 1024),) + self.shape, dtype)
+        self.size = 0
+
+    def append(self, values: np.ndarray) -> None:
+        k = len(values)
+        if self.size + k > self.data.shape[0]:
+            grown = np.empty((max(2 * self.data.shape[0], self.size + k),) + self.shape,
+                             self.data.dtype)
+            grown[:self.size] = self.data[:self.size]
+            self.data = grown
+        self.data[self.size:self.size + k] = values
+        self.size += k
+
+    def array(self) -> np.ndarray:
+        return self.data[:self.size]
+
+
+def _seq_bins(acc: np.ndarray, idx: np.ndarray, w: np.ndarray, lo: int) -> None:
+    """``acc[j] += w[idx == j]`` in sample order from ``acc``'s values (bins from ``lo``)."""
+    hi = int(idx[-1]) + 1
+    sums = np.bincount(np.concatenate([np.arange(lo, hi), idx]) - lo,
+                       np.concatenate([acc[lo:hi], w]), minlength=hi - lo)
+    acc[lo:hi] = sums
+
+
+class SegmentAccumulator:
+    """The per-segment load columns of :func:`.segment_table`, piece by piece."""
+
+    SUMS = ('total0', 'square0', 'total1', 'square1', 'static0', 'static1')
+    MAXES = ('peak0', 'peak1', 'ltr', 'quasi')
+
+    def __init__(self, segment_length_m: float) -> None:
+        self.length = float(segment_length_m)
+        self.x0: float | None = None
+        self.grid = np.zeros(0)
+        self.n = 0                                   # bins allocated
+        self.acc: dict[str, np.ndarray] = {}
+        self.cont: dict[str, float] = {}             # the last bin continued from the one before
+        self.cont_count = 0
+        self.cont_bin = -1
+        self.last_lifted = np.zeros(2, bool)
+
+    def _bins(self, x: np.ndarray) -> np.ndarray:
+        if self.x0 is None:
+            self.x0 = float(x[0])
+        top = float(x[-1])
+        if self.grid.size == 0 or self.grid[-1] <= top:
+            span = max(top - self.x0, 0.0)
+            self.grid = np.arange(self.x0, self.x0 + 2.0 * span + 4.0 * self.length,
+                                  self.length, dtype=float)
+        idx = np.searchsorted(self.grid, x, side='right') - 1
+        need = int(idx[-1]) + 2
+        if need > self.n:
+            m = max(need, 2 * self.n, 64)
+            for name in self.SUMS + ('count', 'lifts'):
+                old = self.acc.get(name, np.zeros(0))
+                self.acc[name] = np.concatenate([old, np.zeros(m - old.size)])
+            for name in self.MAXES:
+                old = self.acc.get(name, np.zeros(0))
+                self.acc[name] = np.concatenate([old, np.full(m - old.size, np.nan)])
+            self.n = m
+        return idx
+
+    def add(self, x, load, ltr, lift_off, quasi, static) -> None:
+        """Samples that advance, in order: distance (m), loads (k, 2), LTR, lift-off (k, 2),
+        quasi-static LTR, static loads (k, 2)."""
+        if len(x) == 0:
+            return
+        idx = self._bins(np.asarray(x, dtype=float))
+        lo = int(idx[0])
+        weights = {'total0': load[:, 0], 'square0': load[:, 0] * load[:, 0],
+                   'total1': load[:, 1], 'square1': load[:, 1] * load[:, 1],
+                   'static0': static[:, 0], 'static1': static[:, 1]}
+        last = int(idx[-1])
+        tail = idx == last
+        for name, w in weights.items():
+            w = np.asarray(w, dtype=float)
+            _seq_bins(self.acc[name], idx, w, lo)
+            start = (self.cont[name] if last == self.cont_bin
+                     else (self.acc[name][last - 1] if last > 0 else 0.0))
+            self.cont[name] = float(np.cumsum(np.concatenate([[start], w[tail]]))[-1])
+        self.acc['count'][lo:last + 1] += np.bincount(idx - lo, minlength=last + 1 - lo)
+        for name, w in (('peak0', load[:, 0]), ('peak1', load[:, 1]), ('ltr', np.abs(ltr)),
+                        ('quasi', np.abs(quasi))):
+            np.fmax.at(self.acc[name], idx, w)
+        lifted = np.asarray(lift_off, dtype=bool)
+        before = np.vstack([self.last_lifted[None, :], lifted[:-1]])
+        starts = (lifted & ~before).sum(axis=1)
+        self.acc['lifts'][lo:last + 1] += np.bincount(idx - lo, starts, minlength=last + 1 - lo)
+        self.last_lifted = lifted[-1].copy()
+        self.cont_bin = last
+
+    def table(self, x_end: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """``(edges, load columns)`` of the drive ending at ``x_end`` (as
+        :func:`.segment_table`: the remainder merged when shorter than half a segment)."""
+        edges = segment_bounds(self.x0, x_end, self.length)
+        k = edges.size - 1
+        a = {name: v[:k].copy() for name, v in self.acc.items()}
+        m = np.arange(self.x0, x_end, self.length).size   # bins of the unmerged edges
+        if m > k:                                         # the remainder merged into k - 1
+            for name in self.SUMS:
+                a[name][k - 1] = (self.cont[name] if self.cont_bin == m - 1
+                                  else self.acc[name][k - 1])
+            for name in ('count', 'lifts'):
+                a[name][k - 1] += self.acc[name][m - 1]
+            for name in self.MAXES:
+                a[name][k - 1] = np.fmax(a[name][k - 1], self.acc[name][m - 1])
+        return edges, self._columns(a, k)
+
+    @staticmethod
+    def _columns(a: dict, k: int) -> dict[str, np.ndarray]:
+        counts = a['count']
+        out: dict[str, np.ndarray] = {}
+        for side, name in ((0, 'left'), (1, 'right')):
+            with np.errstate(invalid='ignore', divide='ignore'):
+                mean = a[f'total{side}'] / counts
+                std = np.sqrt(np.maximum(a[f'square{side}'] / counts - mean * mean, 0.0))
+                out[f'dlc_{name}'] = np.where(counts > 1, std / mean, np.nan)
+                out[f'static_load_{name}_n'] = a[f'static{side}'] / counts
+            out[f'peak_load_{name}_n'] = a[f'peak{side}']
+        out['max_abs_ltr'] = a['ltr']
+        out['lift_offs'] = a['lifts'].astype(np.int64)
+        out['max_abs_ltr_quasi_static'] = a['quasi']
+        out['count'] = counts.astype(np.int64)
+        return out
+
+
+class StreamedSummary:
+    """What :func:`.summary.summarize` reports of a drive, from consecutive pieces."""
+
+    def __init__(self, segment_length_m: float, with_stamps: bool = False,
+                 capacity: int = 0) -> None:
+        """``with_stamps``: keep the stamps of the samples that advance too (8 bytes a
+        sample), for the segments' coordinates (a drive with ``/fix``); ``capacity``: the
+        samples expected (the columns reserved at once, never copied as they grow)."""
+        self.segments = SegmentAccumulator(segment_length_m)
+        self.inputs = 0
+        self.converged = 0
+        self.first_converged_ns: int | None = None
+        self.last_converged_ns: int | None = None
+        self.t0_ns: int | None = None
+        self.last_ns: int | None = None
+        self.first_stamp: int | None = None
+        self.x_first: float | None = None
+        self.x_last = 0.0
+        self.x_max = -math.inf
+        self.lift_off_samples = 0
+        self.negative_load_samples = 0
+        self.max_abs_ltr = 0.0
+        self.static_final = None
+        self.contra_samples = 0
+        self.spans: list[list[int]] = []
+        self._contra_open = False
+        self.x_up = GrowingArray(capacity=capacity)
+        self.road_up = GrowingArray(width=2, capacity=capacity)
+        self.stamps = GrowingArray(np.int64, capacity=capacity)
+        self.stamps_up = GrowingArray(np.int64, capacity=capacity) if with_stamps else None
+        #: the distance of every accepted sample (with_stamps: for the fleet's polylines)
+        self.x_valid = GrowingArray(capacity=capacity) if with_stamps else None
+        self.speed = GrowingArray(capacity=capacity)
+
+    def add(self, piece, speed_mps: np.ndarray) -> None:
+        """One piece of estimates and the recorded speed of its samples (m/s)."""
+        n = len(piece.stamp_ns)
+        if n == 0:
+            return
+        if self.first_stamp is None:
+            self.first_stamp = int(piece.stamp_ns[0])
+        self.inputs += n
+        self._contradicted(piece)
+        rows = np.flatnonzero(piece.valid)
+        if rows.size == 0:
+            return
+        stamps = piece.stamp_ns[rows]
+        if self.t0_ns is None:
+            self.t0_ns = int(stamps[0])
+        self.last_ns = int(stamps[-1])
+        conv = piece.converged[rows]
+        self.converged += int(np.count_nonzero(conv))
+        if conv.any():
+            if self.first_converged_ns is None:
+                self.first_converged_ns = int(stamps[np.argmax(conv)])
+            self.last_converged_ns = int(stamps[conv.size - 1 - np.argmax(conv[::-1])])
+        x = piece.distance_m[rows]
+        if self.x_first is None:
+            self.x_first = float(x[0])
+        self.x_last = float(x[-1])
+        self.lift_off_samples += int(np.count_nonzero(piece.lift_off[rows].any(axis=1)))
+        self.negative_load_samples += int(np.count_nonzero(
+            piece.load_clipped[rows].any(axis=1)))
+        self.max_abs_ltr = max(self.max_abs_ltr, float(np.max(np.abs(piece.ltr[rows]))))
+        self.static_final = [float(v) for v in piece.static_load_n[rows[-1]]]
+        self.stamps.append(stamps)
+        if self.x_valid is not None:
+            self.x_valid.append(x)
+        self.speed.append(np.asarray(speed_mps, dtype=float)[rows])
+        before = np.concatenate([[self.x_max], np.maximum.accumulate(x)[:-1]])
+        before = np.maximum(before, self.x_max)
+        up = x > before
+        self.x_max = max(self.x_max, float(np.max(x)))
+        r = rows[up]
+        self.x_up.append(x[up])
+        if self.stamps_up is not None:
+            self.stamps_up.append(stamps[up])
+        self.road_up.append(piece.road_m[r])
+        self.segments.add(x[up], piece.wheel_load_n[r], piece.ltr[r], piece.lift_off[r],
+                          piece.ltr_quasi_static[r], piece.static_load_n[r])
+
+    def _contradicted(self, piece) -> None:
+        flags = np.asarray(piece.speed_contradicted, bool)
+        self.contra_samples += int(np.count_nonzero(flags))
+        if not flags.any() and not self._contra_open:
+            return
+        f = np.concatenate([[self._contra_open], flags]).astype(np.int8)
+        d = np.diff(f)
+        s = piece.stamp_ns
+        for i in np.flatnonzero(d != 0).tolist():
+            if d[i] == 1:
+                self.spans.append([int(s[i]), int(s[i])])
+            else:
+                self.spans[-1][1] = int(s[i - 1]) if i else self.spans[-1][1]
+        if flags[-1]:
+            self.spans[-1][1] = int(s[-1])
+        self._contra_open = bool(flags[-1])
+
+    # -- the whole drive's numbers ----------------------------------------------------------
+    def speed_findings(self) -> dict[str, Any]:
+        if not self.contra_samples:
+            return {}
+        t0 = self.first_stamp
+        return {'speed_contradicted': {
+            'samples': self.contra_samples,
+            'spans_s': [[round((a - t0) * 1e-9, 3), round((b - t0) * 1e-9, 3)]
+                        for a, b in self.spans]}}
+
+    def segment_table(self, fixes=None) -> dict[str, np.ndarray]:
+        """:func:`.summary.drive_segments` of the drive (no truth); coordinates from
+        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept."""
+        x = self.x_up.array()
+        empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
+        if x.size < 2:
+            return empty
+        try:
+            edges, cols = self.segments.table(float(x[-1]))
+        except ValueError:
+            return empty
+        table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(),
+                                        'end_m': edges[1:].copy()}
+        counts = cols.pop('count')
+        table.update(cols)
+        table.update(self._iri(x, edges))
+        sparse = coverage(x, edges) < MIN_COVERAGE
+        for name in table:
+            if name.endswith('_m_per_km'):
+                table[name] = np.where(sparse, np.nan, table[name])
+            elif name not in ('start_m', 'end_m', 'lift_offs'):
+                table[name] = np.where(counts == 0, np.nan, table[name])
+        have = fixes is not None and self.stamps_up is not None
+        table.update(coordinate_columns(
+            x, edges, self.stamps_up.array() if have else None,
+            fixes.stamps_ns if have else None, fixes.latitude_deg if have else None,
+            fixes.longitude_deg if have else None))
+        return {name: table[name] for name in SEGMENT_COLUMNS}
+
+    def _iri(self, x: np.ndarray, edges: np.ndarray) -> dict[str, np.ndarray]:
+        """The IRI columns (:func:`.core.iri_chunks.segment_iri` per track: NaN where the
+        profile is too short, as :func:`.summary._iri_hook`); the intervals per segment kept
+        for :meth:`whole_iri`."""
+        k = edges.size - 1
+        road = self.road_up.array()
+        out = {f'true_iri_{name}_m_per_km': np.full(k, np.nan) for name in ('left', 'right')}
+        self._counts = None
+        for side, name in ((0, 'left'), (1, 'right')):
+            try:
+                values, self._counts = segment_iri(x, road[:, side], edges)
+            except ValueError:
+                values = np.full(k, np.nan)
+            out[f'iri_{name}_m_per_km'] = np.asarray(values, dtype=float)
+        return out
+
+    def whole_iri(self, segments: dict) -> list[float] | None:
+        """:func:`.summary.whole_from_segments` of the estimated profile (the intervals per
+        segment from :meth:`segment_table`)."""
+        from road_force_estimator.report.summary import whole_from_segments, whole_iri
+
+        x = self.x_up.array()
+        if x.size < 2:
+            return None
+        z = self.road_up.array()
+        start = segments.get('start_m')
+        counts = getattr(self, '_counts', None)
+        if (counts is None or start is None or len(start) == 0
+                or not np.isfinite(z).all()):
+            return whole_from_segments(x, z, segments, 'iri')
+        values = np.column_stack([segments['iri_left_m_per_km'],
+                                  segments['iri_right_m_per_km']])
+        used = (counts > 0) & np.isfinite(values).all(axis=1)
+        if not used.any():
+            return whole_iri(x, z) if np.isfinite(values).all() else None
+        return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
+
+    def track(self):
+        """What ``estimate_fleet`` maps distance to stamp with (``valid``, ``stamp_ns``,
+        ``distance_m`` of the accepted samples; empty without ``with_stamps``)."""
+        from types import SimpleNamespace
+
+        if self.x_valid is None:
+            return SimpleNamespace(valid=np.zeros(0, bool), stamp_ns=np.zeros(0, np.int64),
+                                   distance_m=np.zeros(0))
+        x = self.x_valid.array()
+        return SimpleNamespace(valid=np.ones(x.size, bool), stamp_ns=self.stamps.array(),
+                               distance_m=x)
+
+    def speed_stats(self) -> dict[str, float] | None:
+        v = self.speed.array()
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return None
+        return {'mean': float(np.mean(v)), 'min': float(np.min(v)), 'max': float(np.max(v))}

@@ -1,0 +1,76 @@
+"""The drive bag read block by block (bagio.drive_blocks) against read_drive_bag in one piece."""
+import numpy as np
+import pytest
+
+from bag_samples import joint_state, twist
+from road_force_estimator import bagio
+from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
+from road_force_estimator.bagio.mcap_file import McapFile
+from road_force_estimator.tools.estimate_bag import drive_speed
+
+NAMES = ['left_suspension', 'right_suspension', 'roll']
+
+
+def _messy_bag(path, monkeypatch):
+    """Rejections of every kind, twists before, between and after the deflections, and
+    small chunks (a block boundary between any two messages)."""
+    monkeypatch.setattr(McapFile, 'CHUNK_BYTES', 256)
+    rng = np.random.default_rng(3)
+    items = []
+    for k in range(1, 120):
+        s = 10 * k
+        p = [0.01 * rng.standard_normal(), 0.01 * rng.standard_normal(), 0.001 * k]
+        kind = k % 13
+        if kind == 3:
+            s -= 15                                   # backwards
+        elif kind == 5:
+            s -= 10                                   # duplicate
+        elif kind == 7:
+            p[1] = np.nan                              # nonfinite
+        names = NAMES[:2] if kind == 11 else NAMES     # missing name
+        items.append(('/suspension/deflections', s, joint_state(s, names, p, [])))
+        if k % 4 == 0 or k in (31, 32):
+            ts = s + (7 if k % 8 == 0 else -3)
+            if k == 48:
+                ts = s - 300                           # a backwards twist
+            items.append(('/vehicle/twist', ts, twist(ts, 5.0 + 0.1 * k)))
+    items.insert(5, ('/vehicle/twist', 30, twist(30, 4.0)))        # after some samples
+    items.insert(9, ('/vehicle/twist', 30, twist(30, 4.5)))        # duplicate twist
+    with bagio.BagWriter(path) as bag:
+        bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState', 'sensor_data')
+        bag.add_topic('/vehicle/twist', 'geometry_msgs/msg/TwistStamped', 'sensor_data')
+        for topic, s, msg in items:
+            bag.write(topic, s, msg)
+
+
+@pytest.mark.parametrize('block', [1, 2, 3, 7, 1000])
+def test_blocks_equal_one_piece(tmp_path, monkeypatch, block):
+    _messy_bag(tmp_path / 'b', monkeypatch)
+    whole = bagio.read_drive_bag(tmp_path / 'b')
+    speed, early = drive_speed(whole)
+    assert early > 0 and whole.rejected_total > 10
+    reader = DriveBlocks(tmp_path / 'b', block)
+    parts = list(reader)
+    if block < 10:
+        assert len(parts) > 5
+    for name, ref in (('stamps_ns', whole.stamps_ns), ('q_m', whole.q_m),
+                      ('roll_rad', whole.roll_rad), ('speed_mps', speed)):
+        got = np.concatenate([getattr(p, name) for p in parts])
+        np.testing.assert_array_equal(got, ref)
+    assert reader.rejected == whole.rejected
+    assert reader.messages == whole.messages
+    assert reader.early == early
+    assert reader.twists == len(whole.twist_stamps_ns)
+    assert list(reader.issues) == list(whole.issues)
+
+
+def test_streamable_needs_metadata_without_truth(tmp_path, monkeypatch):
+    _messy_bag(tmp_path / 'b', monkeypatch)
+    assert streamable(tmp_path / 'b') == 119
+    with bagio.BagWriter(tmp_path / 'c') as bag:
+        bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState', 'sensor_data')
+        bag.add_topic('/ground_truth/wheel_load/left', 'geometry_msgs/msg/WrenchStamped')
+        bag.write('/suspension/deflections', 1, joint_state(1, NAMES, [0.0, 0.0, 0.0], []))
+    assert streamable(tmp_path / 'c') == 0
+    assert streamable(tmp_path / 'missing') == 0
+

@@ -1,0 +1,172 @@
+"""estimate_bag on a drive estimated block by block (tools.estimate_stream, issue 21) against
+the one-piece path on the same bag: the same messages in the estimate bag (read with the
+mcap library), the same segments.csv, report.json and report.md."""
+import dataclasses
+import json
+
+from mcap.reader import make_reader
+import numpy as np
+import pytest
+
+from road_force_estimator.bagio import TYPESTORE, BagWriter, drive_blocks
+from road_force_estimator.bagio.mcap_file import McapFile
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.interfaces import DEFLECTION_JOINTS
+from road_force_estimator.tools import estimate_bag, estimate_stream
+
+BASE = 1_700_000_000 * 10**9
+
+
+T = TYPESTORE.types
+
+
+def header(stamp_ns, frame):
+    sec, nsec = divmod(int(stamp_ns), 10**9)
+    return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+        sec=sec, nanosec=nsec), frame_id=frame)
+
+
+def joint_state(stamp_ns, q, roll):
+    return T['sensor_msgs/msg/JointState'](
+        header=header(stamp_ns, 'base_link'), name=list(DEFLECTION_JOINTS),
+        position=np.array([q[0], q[1], roll]), velocity=np.zeros(0), effort=np.zeros(0))
+
+
+def twist(stamp_ns, v):
+    vec = T['geometry_msgs/msg/Vector3']
+    return T['geometry_msgs/msg/TwistStamped'](
+        header=header(stamp_ns, 'base_link'),
+        twist=T['geometry_msgs/msg/Twist'](linear=vec(x=v, y=0.0, z=0.0),
+                                           angular=vec(x=0.0, y=0.0, z=0.0)))
+
+
+def navsatfix(stamp_ns, lat, lon):
+    return T['sensor_msgs/msg/NavSatFix'](
+        header=header(stamp_ns, 'gnss'),
+        status=T['sensor_msgs/msg/NavSatStatus'](status=0, service=1),
+        latitude=lat, longitude=lon, altitude=0.0, position_covariance=np.zeros(9),
+        position_covariance_type=0)
+
+
+@pytest.fixture(scope='module')
+def drive(tmp_path_factory):
+    """4 s at 1 kHz of a simulated drive with defects (NaN, duplicate and backward stamps,
+    samples before the first twist, a 0.2 s gap, a lift-off-free road), a twist at 100 Hz,
+    GNSS at 10 Hz; small chunks."""
+    tr = simulate(VehicleParameters(), iso8608_profile('C', 120.0, seed=4), speed_mps=20.0,
+                  rate_hz=1000.0, duration_s=4.0, tire_envelope_m=0.25)
+    stamps = BASE + np.round(tr.t_s * 1e9).astype(np.int64)
+    stamps[2500:] += 200_000_000
+    rng = np.random.default_rng(5)
+    q = tr.q_m + 1e-5 * rng.standard_normal(tr.q_m.shape)
+    folder = tmp_path_factory.mktemp('drive') / 'd'
+    old = McapFile.CHUNK_BYTES
+    McapFile.CHUNK_BYTES = 1 << 13
+    try:
+        with BagWriter(folder) as bag:
+            for topic, kind in (('/vehicle/twist', 'geometry_msgs/msg/TwistStamped'),
+                                ('/suspension/deflections', 'sensor_msgs/msg/JointState'),
+                                ('/fix', 'sensor_msgs/msg/NavSatFix')):
+                bag.add_topic(topic, kind, 'sensor_data')
+            for k, s in enumerate(stamps.tolist()):
+                if k >= 30 and k % 10 == 0:
+                    bag.write('/vehicle/twist', s, twist(s, 20.0 + 0.01 * (k % 7)))
+                if k % 100 == 0:
+                    bag.write('/fix', s, navsatfix(s, 48.1 + 1.8e-4 * k * 1e-3, 11.5))
+                qk = (np.nan, q[k, 1]) if k in (40, 41, 1700) else q[k]
+                bag.write('/suspension/deflections', s, joint_state(s, qk, tr.roll_rad[k]))
+                if k in (900, 2000):
+                    bag.write('/suspension/deflections', s, joint_state(s, 1.01 * q[k], 0.0))
+                if k == 1200:
+                    b = int(stamps[k - 5])
+                    bag.write('/suspension/deflections', s, joint_state(b, q[k], 0.0))
+    finally:
+        McapFile.CHUNK_BYTES = old
+    return folder
+
+
+def messages(bag):
+    out = {}
+    for f in sorted(bag.glob('*.mcap')):
+        with open(f, 'rb') as fh:
+            for _, channel, msg in make_reader(fh).iter_messages(log_time_order=True):
+                out.setdefault(channel.topic, []).append((msg.log_time, msg.data))
+    return out
+
+
+@pytest.mark.parametrize('latency_s, segment_m, block', [
+    (0.0, 6.5, 700), (0.01, 7.0, 333), (0.0, 100.0, 1 << 16)])
+def test_streamed_equals_one_piece(drive, tmp_path, monkeypatch, latency_s, segment_m, block):
+    observer = dataclasses.replace(ObserverParameters(), latency_s=latency_s)
+    kw = dict(observer=observer, segment_length_m=segment_m, figures=False)
+    one = estimate_bag.run(drive, tmp_path / 'one', **kw)
+    assert one.estimates is not None
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
+    streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
+    track = streamed.estimates                            # never held whole
+    assert not hasattr(track, 'wheel_load_n')
+    rows = np.flatnonzero(one.estimates.valid)
+    np.testing.assert_array_equal(track.stamp_ns, one.estimates.stamp_ns[rows])
+    np.testing.assert_array_equal(track.distance_m, one.estimates.distance_m[rows])
+    a, b = messages(tmp_path / 'one' / 'bag'), messages(tmp_path / 'str' / 'bag')
+    assert sorted(a) == sorted(b)
+    for topic in a:
+        assert a[topic] == b[topic], topic
+    for name in ('segments.csv', 'report.md'):
+        assert (tmp_path / 'one' / 'report' / name).read_text() == \
+            (tmp_path / 'str' / 'report' / name).read_text(), name
+    ja = json.loads((tmp_path / 'one' / 'report' / 'report.json').read_text())
+    jb = json.loads((tmp_path / 'str' / 'report' / 'report.json').read_text())
+    assert ja == jb
+    assert ja['rejected']['/suspension/deflections'] == {
+        'backwards_stamp': 1, 'duplicate_stamp': 2, 'nonfinite': 3}
+    assert ja['notes']['samples before the first twist (given its speed)'] == 30
+    assert ja['segments'] >= (8 if segment_m < 10 else 1)
+    assert np.isfinite(ja['iri_m_per_km']['estimated']).all()
+    assert ja['fixes'] == 41
+    rows = (tmp_path / 'str' / 'report' / 'segments.csv').read_text().splitlines()
+    assert 'nan' not in rows[1].split(',')[12]                # start_lat from the fixes
+    assert written(tmp_path / 'one') == written(tmp_path / 'str')
+
+
+def written(folder):
+    marker = json.loads((folder / '.written-by-road-force-estimator.json').read_text())
+    return [f for f in marker['files'] if not f.endswith('.mcap')]
+
+
+def test_short_drives_stay_in_one_piece(drive, tmp_path):
+    """Below STREAM_MIN_SAMPLES (and with a reference or offline) one piece, as before."""
+    assert not estimate_stream.use_stream(drive, 'online', None, ObserverParameters())
+    assert estimate_stream.use_stream(drive, 'online', None, ObserverParameters(), 1)
+    assert not estimate_stream.use_stream(drive, 'online', object(), ObserverParameters(), 1)
+
+
+def test_a_streamed_drive_without_twist_is_refused(tmp_path, monkeypatch, capsys):
+    folder = tmp_path / 'notwist'
+    with BagWriter(folder) as bag:
+        bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState')
+        for k in range(20):
+            bag.write('/suspension/deflections', k, joint_state(k, (0.0, 0.0), 0.0))
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    code = estimate_bag.main([str(folder), '--output', str(tmp_path / 'o'), '--no-progress'])
+    err = capsys.readouterr().err
+    assert code == 1 and 'speed' in err and err.count('\n') == 1
+    assert not (tmp_path / 'o' / 'bag').exists()
+
+
+def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
+    """The detail figures come from the estimator resumed at a snapshot before the window:
+    the same pictures as in one piece; the profile and overview show the window only."""
+    one = estimate_bag.run(drive, tmp_path / 'one', segment_length_m=10.0)
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
+    streamed = estimate_bag.run(drive, tmp_path / 'str', segment_length_m=10.0)
+    assert streamed.summary['figures'] == one.summary['figures']
+    assert len(one.summary['figures']) == 6
+    for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
+        assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
+            (tmp_path / 'str' / 'report' / name).read_bytes(), name
+    assert estimate_stream.FIGURES_NOTE in streamed.summary['notes']
