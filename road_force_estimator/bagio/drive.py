@@ -399,7 +399,7 @@ def read_drive_bag(path: str | Path) -> Drive:
             s, x, _, z = read_points(cols[TRUE_ROAD[side]], rejects)
             parts['road_' + key] = (s, z)
             parts['x_' + key] = (s, x)
-    fixes, noted = _read_fixes(cols[FIX], rejects) if FIX in cols else (None, {})
+    fixes, noted = read_fixes(cols[FIX], rejects) if FIX in cols else (None, {})
     return Drive(
         stamps_ns=stamps, q_m=pos[:, :2].copy(), roll_rad=pos[:, 2].copy(), speed_mps=speed,
         twist_stamps_ns=twist_ns, twist_speed_mps=twist_v, truth=_union_truth(parts),
@@ -411,7 +411,7 @@ def read_drive_bag(path: str | Path) -> Drive:
 _STATUS_NO_FIX, _STATUS_UNKNOWN = -1, -2
 
 
-def _read_fixes(c, rejects: Rejects) -> tuple[Fixes, dict[str, dict[str, int]]]:
+def read_fixes(c, rejects: Rejects) -> tuple[Fixes, dict[str, dict[str, int]]]:
     """The accepted fixes and the caveats counted: a non-finite position and status -1
     (NO_FIX, or any other negative but -2) are rejected; status -2 (UNKNOWN) with a finite
     position is kept and counted as ``fix_status_unknown``."""
@@ -429,8 +429,3 @@ def _read_fixes(c, rejects: Rejects) -> tuple[Fixes, dict[str, dict[str, int]]]:
     kept_unknown = int(np.count_nonzero(keep & unknown))
     noted = {FIX: {'fix_status_unknown': kept_unknown}} if kept_unknown else {}
     return Fixes(s[keep], lat[keep], lon[keep], alt[keep]), noted
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-read_fixes = _read_fixes

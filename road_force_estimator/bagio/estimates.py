@@ -94,7 +94,7 @@ def _stamped_header(stamp_ns: int, frame_id: str):
 
 
 @dataclass
-class _EstimateColumns:
+class EstimateColumns:
     """The columns of a batch of estimates that the bag carries, shaped, and which rows are
     valid and finite."""
 
@@ -111,7 +111,7 @@ class _EstimateColumns:
     finite: np.ndarray
 
     @classmethod
-    def of(cls, e) -> _EstimateColumns:
+    def of(cls, e) -> EstimateColumns:
         """The columns of ``e`` (an :class:`EstimateArrays` or alike), checked for shape."""
         stamps = np.asarray(e.stamp_ns, dtype=np.int64).reshape(-1)
         n = stamps.size
@@ -182,7 +182,7 @@ def write_estimate_bag(path: str | Path, estimates, *,
         ``{'written': rows written, 'invalid': rows not valid, 'nonfinite': rows with a
         non-finite value}``.
     """
-    est = _EstimateColumns.of(estimates)
+    est = EstimateColumns.of(estimates)
     rows = est.valid & est.finite
     # The rows written are read a block at a time by the writer (no copies of whole columns).
     index = None if rows.all() else np.flatnonzero(rows)
@@ -194,8 +194,8 @@ def write_estimate_bag(path: str | Path, estimates, *,
     custom.update(custom_data or {})
     stamp_cols = stamp_columns(s)
     with BagWriter(path, overwrite=overwrite, custom_data=custom) as bag:
-        streams = _estimate_streams(est, s, stamp_cols, index, 0.5 * float(track_width_m))
-        streams += _diagnostic_streams(diagnostics)
+        streams = estimate_streams(est, s, stamp_cols, index, 0.5 * float(track_width_m))
+        streams += diagnostic_streams(diagnostics)
         for topic, _, _ in streams:
             bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
         bag.write_rows(streams)
@@ -203,7 +203,7 @@ def write_estimate_bag(path: str | Path, estimates, *,
             'nonfinite': int(np.count_nonzero(est.valid & ~est.finite))}
 
 
-def _estimate_streams(est: _EstimateColumns, s: np.ndarray, stamp_cols: dict,
+def estimate_streams(est: EstimateColumns, s: np.ndarray, stamp_cols: dict,
                       index: np.ndarray | None, half: float) -> list:
     """The streams of the rows ``index`` (all when None), stamped ``s`` (header stamp columns
     ``stamp_cols``): wheel loads, road points (y = +-``half``), load transfer ratio, observer
@@ -235,7 +235,7 @@ def _estimate_streams(est: _EstimateColumns, s: np.ndarray, stamp_cols: dict,
     return streams
 
 
-def _static_streams(est: _EstimateColumns, s: np.ndarray, index: np.ndarray | None) -> list:
+def _static_streams(est: EstimateColumns, s: np.ndarray, index: np.ndarray | None) -> list:
     """The /wheel_load/static/* streams: the rows written (``index``, all when None, stamped
     ``s``) that open a period of STATIC_LOAD_PERIOD_NS, as the observer node publishes them."""
     period = s // STATIC_LOAD_PERIOD_NS
@@ -253,7 +253,7 @@ def _static_streams(est: _EstimateColumns, s: np.ndarray, index: np.ndarray | No
     return streams
 
 
-def _diagnostic_streams(diagnostics: Iterable[tuple[int, Any]]) -> list:
+def diagnostic_streams(diagnostics: Iterable[tuple[int, Any]]) -> list:
     """The /diagnostics stream (none without diagnostics), serialized message by message."""
     diagnostics = list(diagnostics)
     if not diagnostics:
@@ -262,10 +262,3 @@ def _diagnostic_streams(diagnostics: Iterable[tuple[int, Any]]) -> list:
             for d in diagnostics]
     return [(DIAGNOSTICS, [int(d[0]) for d in diagnostics],
              [TYPESTORE.serialize_cdr(msg, DIAGNOSTIC_ARRAY) for msg in msgs])]
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-EstimateColumns = _EstimateColumns
-estimate_streams = _estimate_streams
-diagnostic_streams = _diagnostic_streams

@@ -149,7 +149,7 @@ def bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
     return files, info, issues
 
 
-def _raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],
+def raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],
                  channels_seen: dict[str, Channel] | None = None, *, indexed: bool = False,
                  ) -> Iterator[list]:
     """Lists of wanted ``(channel, log_ns, payload)`` of every file of a bag, file order
@@ -175,7 +175,7 @@ def _raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],
 def _raw_messages(path: Path, topics: Iterable[str] | None, issues: list[str],
                   channels_seen: dict[str, Channel] | None = None,
                   ) -> Iterator[tuple[Channel, int, bytes]]:
-    for batch in _raw_batches(path, topics, issues, channels_seen):
+    for batch in raw_batches(path, topics, issues, channels_seen):
         yield from batch
 
 
@@ -353,7 +353,7 @@ class TopicColumns:
         return stamps_to_ns(sec, nsec), valid
 
 
-class _TopicReader:
+class TopicReader:
     """Gathers one topic's messages (file order) and decodes them as they come."""
 
     def __init__(self, expected: str, recorded: str,
@@ -413,16 +413,16 @@ def read_topic_columns(path: str | Path, topics: Mapping[str, str], *,
     """
     sink = issues if issues is not None else []
     seen: dict[str, Channel] = {}
-    readers: dict[str, _TopicReader] = {}
+    readers: dict[str, TopicReader] = {}
 
-    def reader(topic: str) -> _TopicReader:
+    def reader(topic: str) -> TopicReader:
         found = readers.get(topic)
         if found is None:
-            found = readers[topic] = _TopicReader(topics[topic], seen[topic].msgtype,
+            found = readers[topic] = TopicReader(topics[topic], seen[topic].msgtype,
                                                   (fields or {}).get(topic))
         return found
 
-    for batch in _raw_batches(Path(path), topics, sink, seen, indexed=USE_MESSAGE_INDEX):
+    for batch in raw_batches(Path(path), topics, sink, seen, indexed=USE_MESSAGE_INDEX):
         if isinstance(batch[0], Block):
             for block in batch:
                 reader(block.topic).add_block(block)
@@ -437,9 +437,3 @@ def read_topic_columns(path: str | Path, topics: Mapping[str, str], *,
         for topic, log in logs.items():
             reader(topic).add_messages(log, datas[topic])
     return {topic: reader(topic).columns(topic) for topic in topics if topic in seen}
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-raw_batches = _raw_batches
-TopicReader = _TopicReader

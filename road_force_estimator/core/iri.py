@@ -53,7 +53,7 @@ BASE_LENGTH_M = 0.25
 #: Length over which the initial slope is taken (m).
 INIT_LENGTH_M = 11.0
 #: Relative tolerance on the sample spacing for a profile to count as evenly spaced.
-_UNIFORM_RTOL = 1e-6
+UNIFORM_RTOL = 1e-6
 
 
 def golden_car_matrices() -> tuple[np.ndarray, np.ndarray]:
@@ -73,7 +73,7 @@ def golden_car_matrices() -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
-def _transition(dx_m: float) -> tuple[np.ndarray, np.ndarray]:
+def transition(dx_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation over one sample interval: (ST, PR)."""
     a, b = golden_car_matrices()
     st = expm(a * (dx_m / IRI_SPEED_MPS))
@@ -133,7 +133,7 @@ def _evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
     steps = np.diff(x)
     span = x[-1] - x[0]
     mean_step = span / (x.size - 1)
-    uniform = np.all(np.abs(steps - mean_step) <= _UNIFORM_RTOL * max(mean_step, abs(x[-1])))
+    uniform = np.all(np.abs(steps - mean_step) <= UNIFORM_RTOL * max(mean_step, abs(x[-1])))
     if dx_m is None and uniform:
         return x, z, float(mean_step)
     if dx_m is None:
@@ -211,7 +211,7 @@ def filtered_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,
                          f'{INIT_LENGTH_M:g} m (the initialisation length)')
     slope = (h[k:] - h[:-k]) / (k * dx)
     s0 = (h[i11] - h[0]) / INIT_LENGTH_M
-    st, pr = _transition(dx)
+    st, pr = transition(dx)
     # Modal form: ST = V diag(lam) V^-1; eta = V^-1 Z; eta_{i+1} = lam eta_i + beta s_i.
     lam, vec = np.linalg.eig(st)
     inv = np.linalg.inv(vec)
@@ -358,9 +358,3 @@ def iri_table(distance_m: np.ndarray, elevation_m: np.ndarray, *,
         'iri_left_m_per_km': values[:, 0],
         'iri_right_m_per_km': values[:, 1],
     }
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-UNIFORM_RTOL = _UNIFORM_RTOL
-transition = _transition

@@ -123,13 +123,13 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
     table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
     counts = segment_samples(x, edges)
-    sparse = _coverage(px, edges) < MIN_COVERAGE
+    sparse = coverage(px, edges) < MIN_COVERAGE
     for name in table:
         if name.endswith('_m_per_km'):
             table[name] = np.where(sparse, np.nan, table[name])
         elif name not in ('start_m', 'end_m', 'lift_offs'):
             table[name] = np.where(counts == 0, np.nan, table[name])
-    table.update(_coordinate_columns(x, edges, stamps_ns, fix_stamps_ns, fix_latitude_deg,
+    table.update(coordinate_columns(x, edges, stamps_ns, fix_stamps_ns, fix_latitude_deg,
                                      fix_longitude_deg))
     return {name: table[name] for name in SEGMENT_COLUMNS}
 
@@ -152,7 +152,7 @@ def max_step(distance_m: np.ndarray) -> float:
     return max(0.5, 10.0 * float(np.median(dx))) if dx.size else 0.5
 
 
-def _coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+def coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Fraction of each segment's length spanned by sample spacings up to :func:`max_step`."""
     dx = np.diff(x)
     good = (dx <= max_step(x)) & (dx > 0)
@@ -215,7 +215,7 @@ def _iri_columns(px: np.ndarray, edges: np.ndarray, profile_m, true_profile_m,
     return table
 
 
-def _coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_ns,
+def coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_ns,
                         fix_latitude_deg, fix_longitude_deg) -> dict[str, np.ndarray]:
     """Latitude and longitude (deg) of each segment's ends, NaN without fixes."""
     k = edges.size - 1
@@ -253,9 +253,3 @@ def _beyond_fixes(lat: np.ndarray, lon: np.ndarray, edges: np.ndarray, edge_ns: 
         along = (edges[sel] - fx[near]) / span
         lat[sel] = flat[near] + along * (flat[near] - flat[far])
         lon[sel] = flon[near] + along * (flon[near] - flon[far])
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-coordinate_columns = _coordinate_columns
-coverage = _coverage

@@ -291,7 +291,7 @@ class ModelCore:
         self._m = g.step_matrix(dt)
         if self._sv.shape[0] != self._m.shape[0]:    # the product's buffer (and its state)
             self._sv = np.empty(self._m.shape[0])
-            self._sv_x = self._sv[:self._y0i - self._x0i]
+            self._buffer_views()
         if self._ff is not None:
             self._fm = g.friction_step(dt)
             self._a_dq, self._b_dq = _dq_rows(g, dt)
@@ -301,8 +301,25 @@ class ModelCore:
             self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
             if self._sp.shape[0] != self._pm.shape[0]:
                 self._sp = np.empty(self._pm.shape[0])
-                self._sp_x = self._sp[:self._y0i - self._x0i]
-                self._sp_o = self._sp[self._y0i - self._x0i:]
+                self._buffer_views()
+
+    def _buffer_views(self) -> None:
+        """The views of the step products' buffers: their state and outputs parts."""
+        n = self._y0i - self._x0i
+        self._sv_x = self._sv[:n]
+        self._sp_x, self._sp_o = self._sp[:n], self._sp[n:]
+
+    def __getstate__(self) -> dict:
+        """Pickled (a streamed run's snapshot) without the buffers' views: a pickled view
+        is a copy of its own, no longer the buffer the products write into."""
+        state = self.__dict__.copy()
+        for name in ('_sv_x', '_sp_x', '_sp_o'):
+            state.pop(name, None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._buffer_views()
 
     # -- the run --------------------------------------------------------------------------
     def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,

@@ -78,11 +78,11 @@ def write_segments_csv(path: str | Path, segments: dict[str, np.ndarray]) -> Non
                         for c in SEGMENT_COLUMNS])
 
 
-def _json_safe(obj):
+def json_safe(obj):
     if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
+        return [json_safe(v) for v in obj]
     if isinstance(obj, (np.bool_, bool)):
         return bool(obj)
     if isinstance(obj, (np.integer,)):
@@ -93,7 +93,7 @@ def _json_safe(obj):
     return obj
 
 
-def _static_line(summary: dict[str, Any], vehicle: VehicleParameters | None
+def static_line(summary: dict[str, Any], vehicle: VehicleParameters | None
                  ) -> tuple[float, float]:
     """The static loads drawn in the load figures: the configured ones, or the estimate at
     the end of the drive under zero_load (MODEL.md "Measurements")."""
@@ -123,15 +123,9 @@ def write_report(folder: str | Path, est, drive=None, vehicle: VehicleParameters
     if figures:
         names = write_figures(folder, est, al, drive, segments=segments,
                               title=f'{input_name} ({mode})' if input_name else mode,
-                              units=units, static_load_n=_static_line(summary, vehicle))
+                              units=units, static_load_n=static_line(summary, vehicle))
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)
-    (folder / 'report.json').write_text(json.dumps(_json_safe(summary), indent=2) + '\n')
+    (folder / 'report.json').write_text(json.dumps(json_safe(summary), indent=2) + '\n')
     return summary
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-json_safe = _json_safe
-static_line = _static_line

@@ -194,7 +194,7 @@ def drive_segments(est, al: Aligned, drive=None, *,
     return table
 
 
-def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
+def whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
     if z is None or not np.isfinite(z).all():
         return None
     try:
@@ -203,24 +203,24 @@ def _whole_iri(x: np.ndarray, z: np.ndarray | None) -> list[float] | None:
         return None
 
 
-def _whole_from_segments(x: np.ndarray, z: np.ndarray | None, segments: dict,
+def whole_from_segments(x: np.ndarray, z: np.ndarray | None, segments: dict,
                          prefix: str) -> list[float] | None:
     """Whole-drive IRI of a profile (left, right) from its per-segment IRI (columns
     ``{prefix}_left/right_m_per_km``; one quarter-car run instead of two): the mean over the
     segments weighted by their slope intervals (:func:`~.iri.interval_counts`); computed
-    afresh (:func:`_whole_iri`) when the segments do not give it."""
+    afresh (:func:`whole_iri`) when the segments do not give it."""
     start, end = segments.get('start_m'), segments.get('end_m')
     if z is None or start is None or len(start) == 0 or not np.isfinite(z).all():
-        return _whole_iri(x, z)
+        return whole_iri(x, z)
     try:
         counts = iri_mod.interval_counts(x, np.concatenate([start, end[-1:]]))
     except ValueError:
-        return _whole_iri(x, z)
+        return whole_iri(x, z)
     values = np.column_stack([segments[f'{prefix}_left_m_per_km'],
                               segments[f'{prefix}_right_m_per_km']])
     used = (counts > 0) & np.isfinite(values).all(axis=1)
     if not used.any():
-        return _whole_iri(x, z) if np.isfinite(values).all() else None
+        return whole_iri(x, z) if np.isfinite(values).all() else None
     # Segments without data (a gap) are left out, never averaged as zero.
     return _floats(values[used].T @ counts[used] / counts[used].sum())
 
@@ -267,7 +267,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     observer = ObserverParameters() if observer is None else observer
     al = align(est, drive, reference, reference_offset_m)
     st = est.status
-    rejected = _rejections(drive, st)
+    rejected = rejections(drive, st)
     conv_rows = np.flatnonzero(al.reported_converged)
     summary: dict[str, Any] = {
         'input': input_name,
@@ -295,15 +295,15 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'run': drive_info.run_description(drive, est, vehicle, observer, mode, run_info),
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
-    summary.update(_notes(est, extra))
+    summary.update(notes(est, extra))
     summary.update(_odometer_summary(est))
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
     _add_correlation(summary['accuracy'], est, al, drive, segments, segment_length_m)
-    summary.update(_segment_counts(segments))
+    summary.update(segment_counts(segments))
     summary['iri_m_per_km'] = _drive_iri(est, al, segments, drive, raw_road)
-    summary['convergence'] = _convergence_summary(summary)
+    summary['convergence'] = convergence_summary(summary)
     return summary, segments, al
 
 
@@ -325,7 +325,7 @@ def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segmen
     acc.update(correlation_figures(est, al, drive, edges, segment_length_m=segment_length_m))
 
 
-def _notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
+def notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
     """``notes`` (the caller's extra counts) and ``offline`` (the noise and cut-offs the
     offline mode estimated), when there are any."""
     out: dict[str, Any] = {'notes': dict(extra)} if extra else {}
@@ -335,7 +335,7 @@ def _notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:
     return out
 
 
-def _segment_counts(segments: dict[str, np.ndarray]) -> dict[str, int]:
+def segment_counts(segments: dict[str, np.ndarray]) -> dict[str, int]:
     """Segments; those without data (no sample: a gap) and those without IRI."""
     return {'segments': int(len(segments['start_m'])),
             'segments_without_data': int(np.count_nonzero(
@@ -373,7 +373,7 @@ def _negative_loads(est, al: Aligned) -> int:
     return int(np.count_nonzero(below[al.rows].any(axis=1))) if al.rows.size else 0
 
 
-def _convergence_summary(s: dict[str, Any]) -> dict[str, Any]:
+def convergence_summary(s: dict[str, Any]) -> dict[str, Any]:
     """The one convergence figure of the report: measured against the truth when there is
     one (:func:`convergence`), else the estimator's own (its first converged sample)."""
     acc = s.get('accuracy') or {}
@@ -402,7 +402,7 @@ def _speed_findings(est) -> dict[str, Any]:
     return out
 
 
-def _rejections(drive, st) -> dict[str, dict[str, int]]:
+def rejections(drive, st) -> dict[str, dict[str, int]]:
     """Rejected samples by topic and reason: the reader's (``drive.rejected``), then the
     estimator's (``'estimator'``), zero counts left out."""
     rejected: dict[str, dict[str, int]] = {}
@@ -429,13 +429,13 @@ def _drive_iri(est, al: Aligned, segments: dict, drive=None, raw_road=None
     reference = None
     if np.count_nonzero(up) >= 2:
         x = al.x_m[up]
-        iri_est = _whole_from_segments(x, al.pick(est, 'road_m')[up], segments, 'iri')
+        iri_est = whole_from_segments(x, al.pick(est, 'road_m')[up], segments, 'iri')
         own = drive_info.true_profile_iri(drive, al, raw_road) if drive is not None else None
         if own is not None:
             iri_true, raw = own['enveloped'], own['raw']
             reference = 'enveloped'
         elif al.profile_truth is not None:
-            iri_true = _whole_from_segments(x, al.profile_truth[up], segments, 'true_iri')
+            iri_true = whole_from_segments(x, al.profile_truth[up], segments, 'true_iri')
             reference = 'truth' if al.true_road_m is not None else 'reference profile'
     return {'estimated': iri_est, 'true': iri_true, 'raw': raw, 'reference': reference}
 
@@ -449,13 +449,3 @@ def _optional(est, name: str, rows) -> np.ndarray | None:
     """The estimate's field ``name`` at ``rows`` (None for estimates without it)."""
     values = getattr(est, name, None)
     return None if values is None else np.asarray(values)[rows]
-
-
-#: Public names of the helpers above, for the block-by-block path of issue 21
-#: (:mod:`road_force_estimator.tools.estimate_stream`).
-whole_from_segments = _whole_from_segments
-whole_iri = _whole_iri
-convergence_summary = _convergence_summary
-notes = _notes
-rejections = _rejections
-segment_counts = _segment_counts

@@ -95,12 +95,12 @@ from road_force_estimator import bagio
 from road_force_estimator.bagio import reader
 folder = Path(sys.argv[1])
 (mcap,) = folder.glob('*.mcap')
-add = reader._TopicReader.add_block
+add = reader.TopicReader.add_block
 def cut_then_add(self, block):
     if mcap.stat().st_size > 100000:      # another process cuts the file under the reader
         subprocess.run(['truncate', '-s', '90000', str(mcap)], check=True)
     add(self, block)
-reader._TopicReader.add_block = cut_then_add
+reader.TopicReader.add_block = cut_then_add
 try:
     bagio.read_drive_bag(folder)
 except bagio.BagReadError as err:
