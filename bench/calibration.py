@@ -14,8 +14,9 @@ is validated on a drive over a third road (ISO 8608 class C, another seed, 20 s)
 ``estimate_batch`` (zero latency and 10 ms) and ``estimate_offline``: load and profile
 errors (% of the dynamic-load RMS, % of the band-passed profile RMS) with the calibrated,
 the true and the nominal parameters. ``--frequency-domain`` also fits the transfer functions
-(Welch cross-spectra of the aligned survey and the measurements, 0.3-40 Hz) from the same
-drive, for the comparison of the two identifications (accuracy and time).
+(:func:`bench.calibration_frequency.frequency_fit`: its own alignment, H1 with Welch's
+averaging, coherence-weighted least squares over 0.5-30 Hz) to the same drive, for the
+comparison of the two identifications (accuracy and time).
 
 ``--payload`` (issue 20's real-truck case): the file calibrated from the empty truck's ISO
 drive also estimates a drive of the same truck with a 40 % payload (sprung mass and roll
@@ -48,7 +49,7 @@ import sys
 import time
 
 import numpy as np
-from scipy import optimize, signal, stats
+from scipy import stats
 
 from road_force_estimator.core.metrics import load_errors, profile_errors
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
@@ -56,10 +57,11 @@ from road_force_estimator.core.plant import simulate
 from road_force_estimator.bagio import road_from_source
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
-from road_force_estimator.estimation.calibration_model import (
-    SLOTS, linear_plant, slot_value, vehicle_with)
+from road_force_estimator.estimation.calibration_model import SLOTS, slot_value, vehicle_with
 from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.estimation.offline import estimate_offline
+
+from bench.calibration_frequency import frequency_fit
 
 REPO = Path(__file__).resolve().parents[1]
 SPEED = 20.0
@@ -116,63 +118,9 @@ def _validate(vehicle, traj, stamps, q, roll, truth_static, modes) -> dict:
     return out
 
 
-def frequency_fit(result, stamps, q, roll, road, nominal, static) -> tuple[dict, float]:
-    """The transfer-function fit on the same drive: (values by slot, seconds)."""
-    clock = time.perf_counter()
-    a = result.alignment
-    t = (stamps - stamps[0]) * 1e-9
-    x = a.offset_m + result.fine_alignment[0] + (a.scale + result.fine_alignment[1]) * (
-        SPEED / ODOMETER * t)
-    env = road.enveloped(ENVELOPE)
-    inside = (x > env.start_m) & (x < env.end_m)
-    u = env.elevation_at(x[inside])
-    y = np.column_stack([q[inside], roll[inside]])
-    fs = 1.0 / float(np.median(np.diff(t)))
-    nper = int(min(u.shape[0] // 4, 4 * fs))
-    one_track = np.allclose(u[:, 0], u[:, 1])   # one input: the summed transfer function
-    if one_track:
-        u = u[:, :1]
-    k = u.shape[1]
-    f, _ = signal.csd(u[:, 0], u[:, 0], fs=fs, nperseg=nper)
-    suu = np.array([[signal.csd(u[:, i], u[:, j], fs=fs, nperseg=nper)[1] for j in range(k)]
-                    for i in range(k)])                    # (k, k, nf): S_ij = E[u_i* u_j]
-    syu = np.array([[signal.csd(u[:, j], y[:, c], fs=fs, nperseg=nper)[1] for j in range(k)]
-                    for c in range(3)])                    # (3, k, nf)
-    band = (f > 0.3) & (f < min(40.0, 0.4 * fs))
-    h_est = np.einsum('cjf,jif->cif', syu[:, :, band],
-                      np.linalg.inv(suu[:, :, band].transpose(2, 0, 1)).transpose(1, 2, 0))
-    w = 2.0 * math.pi * f[band]
-    free = [s for s in PHYSICAL if s.name != 'vehicle.cg_height_above_roll_axis'
-            and not (s.name == 'vehicle.tire_stiffness' and s.index == 0)]
-    fixed = {s: slot_value(nominal, s) for s in PHYSICAL if s not in free}
-    weight = 1.0 / (np.abs(h_est) + 1e-3 * np.max(np.abs(h_est), axis=2, keepdims=True))
-
-    def model(theta):
-        values = dict(fixed)
-        values.update({s: slot_value(nominal, s) * math.exp(v) for s, v in zip(free, theta)})
-        plant = linear_plant(vehicle_with(nominal, values))
-        b = plant.inputs[:, :2]
-        h = np.einsum('cm,mi,mf->cif', plant.outputs, b,
-                      1.0 / (1j * w[None, :] - plant.eig[:, None]))
-        return values, (h.sum(axis=1, keepdims=True) if one_track else h)
-
-    def residuals(theta):
-        diff = (model(theta)[1] - h_est) * weight
-        return np.concatenate([diff.real.ravel(), diff.imag.ravel()])
-
-    span = math.log(10.0)
-    sol = optimize.least_squares(residuals, np.zeros(len(free)), method='trf', x_scale='jac',
-                                 bounds=(-span, span))
-    values = model(sol.x)[0]
-    masses = sum(v for s, v in values.items()
-                 if s.name in ('vehicle.sprung_mass', 'vehicle.unsprung_mass'))
-    factor = (static[0] + static[1]) / 9.80665 / masses
-    scaled = {s: (v * factor if s.kind == 'scale' else v) for s, v in values.items()}
-    return scaled, time.perf_counter() - clock
-
-
 def _errors(values: dict, truck) -> dict:
-    return {s.label: 100.0 * (values[s] / slot_value(truck, s) - 1.0) for s in PHYSICAL}
+    return {s.label: 100.0 * (values[s] / slot_value(truck, s) - 1.0) for s in PHYSICAL
+            if slot_value(truck, s) > 0.0}
 
 
 MODES = ('zero latency', '10 ms', 'offline')
@@ -211,9 +159,9 @@ def one_case(name, road, truck, seed, args, validation):
            'window_s': result.covariance_window_s, 'noise': result.noise.tolist()}
     if args.frequency_domain:
         try:
-            values, fsec = frequency_fit(result, stamps, q, roll, road, VehicleParameters(),
-                                         truck.static_load_n)
-            out['frequency'] = (_errors(values, truck), fsec)
+            values, info = frequency_fit(stamps, q, roll, np.full(stamps.size, SPEED / ODOMETER),
+                                         road, VehicleParameters(), truck.static_load_n)
+            out['frequency'] = (_errors(values, truck), info['seconds'])
         except (ValueError, np.linalg.LinAlgError) as exc:
             print(f'(frequency-domain fit failed: {exc})')
     out['vehicle'] = result.vehicle
