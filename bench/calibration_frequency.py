@@ -113,7 +113,7 @@ def drive_alignment(stamps, q, roll, speed, road, nominal):
 def frequency_fit(stamps, q, roll, speed, survey, nominal: VehicleParameters,
                   static_load_n, *, nperseg_s: float = 16.0, band=(0.5, 30.0)):
     """The transfer-function fit of one drive: (values by slot, info dict); module notes."""
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.process_time()
     road = survey.enveloped(ENVELOPE)
     alignment, distance = drive_alignment(stamps, q, roll, speed, road, nominal)
     x = alignment.survey_m(distance)
@@ -157,7 +157,8 @@ def frequency_fit(stamps, q, roll, speed, survey, nominal: VehicleParameters,
     factor = (static_load_n[0] + static_load_n[1]) / GRAVITY_MPS2 / masses
     scaled = {s: (val * factor if s.kind == 'scale' else val) for s, val in values.items()}
     chi2 = float(np.sum(sol.fun ** 2)) / max(sol.fun.size - sol.x.size, 1)
-    return scaled, {'seconds': time.perf_counter() - clock, 'delay_m': float(sol.x[-1]),
+    return scaled, {'seconds': time.perf_counter() - clock,
+                    'cpu_s': time.process_time() - cpu, 'delay_m': float(sol.x[-1]),
                     'alignment': alignment, 'chi2': chi2, 'bins': int(w.size),
                     'segments': segments, 'coherence_min': float(np.min(coherence)),
                     'free': [s.label for s in free], 'nfev': int(sol.nfev)}
@@ -215,7 +216,8 @@ def main(argv=None) -> int:
         values, info = frequency_fit(*data, road, VehicleParameters(), truck.static_load_n,
                                      nperseg_s=args.nperseg_s, band=tuple(args.band))
         found = {'frequency': (values, info['seconds'])}
-        print(f"repeat {r}, {name}: frequency fit {info['seconds']:.1f} s, {info['bins']} bins"
+        print(f"repeat {r}, {name}: frequency fit {info['seconds']:.1f} s ({info['cpu_s']:.1f} s "
+              f"CPU), {info['bins']} bins"
               f" x {info['segments']} segments, min coherence {info['coherence_min']:.3f}, "
               f"chi2/dof {info['chi2']:.2f}, delay {100 * info['delay_m']:+.1f} cm")
         if args.time_domain:
@@ -237,11 +239,13 @@ def _time_domain(data, road, truck, friction_n):
     """The time-domain calibration of one drive: (values by slot, seconds)."""
     from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
     free = frozenset({'vehicle.leaf_spring_friction'}) if friction_n > 0.0 else frozenset()
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.process_time()
     result = calibrate(*data, road, VehicleParameters(),
                        options=CalibrationOptions(static_load_n=truck.static_load_n, free=free))
     values = {e.slot: e.value for e in result.parameters if e.slot.physical}
-    return values, time.perf_counter() - clock
+    seconds = time.perf_counter() - clock
+    print(f'  time-domain calibration {seconds:.1f} s ({time.process_time() - cpu:.1f} s CPU)')
+    return values, seconds
 
 
 def _print_table(table, times) -> None:
