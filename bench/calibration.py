@@ -1,8 +1,8 @@
 """Issue 20's benchmark: calibrate a truck unlike the defaults from one drive over a surveyed
 road, validate it on a drive over a road the calibration never saw.
 
-    python -m bench.calibration [--repeats N] [--jobs J] [--rate HZ] [--duration S] [--quick]
-                                [--no-offline] [--frequency-domain] [--payload]
+    python -m bench.calibration [--repeats N] [--first R] [--jobs J] [--rate HZ] [--duration S]
+                                [--quick] [--no-offline] [--frequency-domain] [--payload]
 
 Per seeded repeat: a truck with every parameter but the track width off the defaults by
 10-40 % (random signs; the track width is measured, held), driven at 20 m/s with the
@@ -238,13 +238,13 @@ def _print_case(out):
           + ', '.join(f'{n:.2e}' for n in out['noise'])
           + f"; covariance window {out['window_s'] * 1e3:.0f} ms")
     freq = out.get('frequency')
-    print('| parameter | status | error % | std % | in 95 % CI |'
+    print('| parameter | status | error % | std % | error / std | in 95 % CI |'
           + (' freq. fit error % |' if freq else ''))
-    print('|---|---|---|---|---|' + ('---|' if freq else ''))
-    for label, status, err, inside, std, _ in out['rows']:
+    print('|---|---|---|---|---|---|' + ('---|' if freq else ''))
+    for label, status, err, inside, std, z in out['rows']:
         extra = f' {freq[0][label]:+.3f} |' if freq else ''
-        print(f'| {label} | {status} | {err:+.4f} | {std:.4f} | {"yes" if inside else "NO"} |'
-              f'{extra}')
+        print(f'| {label} | {status} | {err:+.4f} | {std:.4f} | {z:+.2f} | '
+              f'{"yes" if inside else "NO"} |{extra}')
     if freq:
         print(f'(frequency-domain fit: {freq[1]:.1f} s)')
     if 'payload' in out:
@@ -378,6 +378,9 @@ def _summary(cases: list[dict], rate_hz: float) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog='bench.calibration', description=__doc__.split('\n')[0])
     p.add_argument('--repeats', type=int, default=10)
+    p.add_argument('--first', type=int, default=0,
+                   help='first repeat (seed) index: the repeats are deterministic, so runs of '
+                        'disjoint ranges add up')
     p.add_argument('--jobs', type=int, default=1, help='repeats run in parallel processes')
     p.add_argument('--rate', type=float, default=1000.0)
     p.add_argument('--duration', type=float, default=60.0, help='longest calibration drive')
@@ -394,18 +397,20 @@ def main(argv=None) -> int:
         args.rate, args.duration = 200.0, 20.0
         args.repeats = 2 if args.repeats == p.get_default('repeats') else args.repeats
     args.modes = [m for m in MODES if not (args.no_offline and m == 'offline')]
-    print(f'bench.calibration: {args.repeats} repeats at {args.rate:g} Hz, drives up to '
+    print(f'bench.calibration: {args.repeats} repeats ({args.first}..'
+          f'{args.first + args.repeats - 1}) at {args.rate:g} Hz, drives up to '
           f'{args.duration:g} s')
     cases = []
+    repeats = range(args.first, args.first + args.repeats)
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
-            for found in pool.map(one_repeat, range(args.repeats), [args] * args.repeats):
+            for found in pool.map(one_repeat, repeats, [args] * args.repeats):
                 for out in found:
                     _print_case(out)
                 cases += found
                 sys.stdout.flush()
     else:
-        for r in range(args.repeats):
+        for r in repeats:
             for out in one_repeat(r, args):
                 _print_case(out)
                 cases.append(out)
