@@ -207,3 +207,17 @@ def test_drive_with_rejected_samples_calibrates_on_the_good_ones(files, calibrat
     assert vehicle.sprung_mass_kg == pytest.approx(truck.sprung_mass_kg, rel=2e-3)
     assert vehicle.suspension_stiffness_npm == pytest.approx(truck.suspension_stiffness_npm,
                                                              rel=2e-3)
+
+
+def test_a_held_fitted_parameter_is_written_unchanged(files, capsys):
+    """--hold of a parameter the fit frees otherwise: the output has the input file's value
+    (not the truth's 3900, not a fit) and the report names it held."""
+    assert _run(files, '--params-file', str(files / 'nominal.yaml'), '--hold',
+                'vehicle.roll_inertia', '--no-figures', output='held.yaml') == 0
+    capsys.readouterr()
+    doc = read_params_document(files / 'held.yaml')
+    assert doc['/**']['ros__parameters']['vehicle']['roll_inertia'] == 3000.0
+    report = json.loads((files / 'held_report' / 'calibration.json').read_text())
+    rows = {p['name']: p for p in report['parameters']}
+    assert rows['vehicle.roll_inertia']['status'] == 'held'
+    assert rows['vehicle.sprung_mass']['status'] == 'fitted'
