@@ -26,7 +26,7 @@ import numpy as np
 from road_force_estimator.core.gnss import positions_at
 
 __all__ = ['SEGMENT_COLUMNS', 'MIN_COVERAGE', 'segment_bounds', 'segment_table',
-           'segment_samples', 'max_step']
+           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coordinate_columns']
 
 #: A segment's IRI needs samples over this fraction of its length.
 MIN_COVERAGE = 0.9
@@ -123,12 +123,7 @@ def segment_table(distance_m: np.ndarray, wheel_load_n: np.ndarray, ltr: np.ndar
     px = x if profile_distance_m is None else np.asarray(profile_distance_m, dtype=float)
     table.update(_iri_columns(px, edges, profile_m, true_profile_m, iri_segments))
     counts = segment_samples(x, edges)
-    sparse = coverage(px, edges) < MIN_COVERAGE
-    for name in table:
-        if name.endswith('_m_per_km'):
-            table[name] = np.where(sparse, np.nan, table[name])
-        elif name not in ('start_m', 'end_m', 'lift_offs'):
-            table[name] = np.where(counts == 0, np.nan, table[name])
+    blank_empty(table, coverage(px, edges) < MIN_COVERAGE, counts)
     table.update(coordinate_columns(x, edges, stamps_ns, fix_stamps_ns, fix_latitude_deg,
                                      fix_longitude_deg))
     return {name: table[name] for name in SEGMENT_COLUMNS}
@@ -150,6 +145,16 @@ def max_step(distance_m: np.ndarray) -> float:
     dx = np.diff(np.asarray(distance_m, dtype=float))
     dx = dx[dx > 0]
     return max(0.5, 10.0 * float(np.median(dx))) if dx.size else 0.5
+
+
+def blank_empty(table: dict, sparse: np.ndarray, counts: np.ndarray) -> None:
+    """NaN, in place, where a segment cannot say: its IRI columns where the profile covers
+    too little of it (``sparse``), its other figures where it has no sample (``counts``)."""
+    for name in table:
+        if name.endswith('_m_per_km'):
+            table[name] = np.where(sparse, np.nan, table[name])
+        elif name not in ('start_m', 'end_m', 'lift_offs'):
+            table[name] = np.where(counts == 0, np.nan, table[name])
 
 
 def coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 
 from road_force_estimator.core.iri_chunks import segment_iri
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, coordinate_columns, coverage, segment_bounds)
+    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage, segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
 
@@ -290,12 +290,7 @@ class StreamedSummary:
         counts = cols.pop('count')
         table.update(cols)
         table.update(self._iri(x, edges))
-        sparse = coverage(x, edges) < MIN_COVERAGE
-        for name in table:
-            if name.endswith('_m_per_km'):
-                table[name] = np.where(sparse, np.nan, table[name])
-            elif name not in ('start_m', 'end_m', 'lift_offs'):
-                table[name] = np.where(counts == 0, np.nan, table[name])
+        blank_empty(table, coverage(x, edges) < MIN_COVERAGE, counts)
         have = fixes is not None and self.stamps_up is not None
         table.update(coordinate_columns(
             x, edges, self.stamps_up.array() if have else None,

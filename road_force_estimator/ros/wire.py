@@ -58,10 +58,7 @@ class Wire:
             api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
         self.twist = CdrReader(api.TWIST_STAMPED, message_template(
             api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
-        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
-                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
-        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
-                               ['point.x', 'point.y', 'point.z'])
+        self.loads, self.road = _load_and_road_encoders()
         self.ltr = CdrEncoder(api.FLOAT64, message_template(api.FLOAT64), ['data'])
         self.load_transfer = CdrEncoder(api.VECTOR3_STAMPED, message_template(
             api.VECTOR3_STAMPED, api.BASE_FRAME), ['vector.x', 'vector.y', 'vector.z'])
@@ -111,10 +108,16 @@ class SimulatorWire:
             api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position'])
         self.twist = CdrEncoder(api.TWIST_STAMPED, message_template(
             api.TWIST_STAMPED, api.BASE_FRAME), ['twist.linear.x'])
-        self.loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame),
-                                 ['wrench.force.z']) for frame in api.WHEEL_FRAMES]
-        self.road = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
-                               ['point.x', 'point.y', 'point.z'])
+        self.loads, self.road = _load_and_road_encoders()
+
+
+def _load_and_road_encoders() -> tuple[list, CdrEncoder]:
+    """The per-wheel WrenchStamped encoders (``wrench.force.z``, N) and the PointStamped
+    one (``point.x, y, z``, m): the observer's and the simulator's alike."""
+    loads = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, frame), ['wrench.force.z'])
+             for frame in api.WHEEL_FRAMES]
+    return loads, CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                             ['point.x', 'point.y', 'point.z'])
 
 
 def deserialize(data: bytes, msg_type):
