@@ -62,7 +62,7 @@ def _floor_loop(core, y: list, dt: float, v: float):
     sv, sp = np.empty(m.shape[0]), np.empty(mp.shape[0])
     sv_x, sp_x, sp_o = sv[:y0 - x0], sp[:y0 - x0], sp[y0 - x0:]
     dot, step = np.dot, body_heave.step
-    wc, wr = core._wc_per_speed, core._wc_road
+    wc, wr = core._wc_per_speed, core._road.wc
 
     def run() -> None:
         h = hr = body_heave.start(0.0)

@@ -43,7 +43,7 @@ With no lag the road is not the load filter's: a second steady-state Kalman filt
 same model runs beside it on the same measurements, with the profile's gains
 (:meth:`.GainSchedule.profile_design`, ``'online'``: the same noise and roughness estimates,
 a rougher road assumed, so less lag; no sliding mode), and the road of its states
-(:meth:`ModelCore._road`, its own body-heave integral at the profile's long-wave cutoff)
+(:class:`.model_road.OnlineRoad`, its own body-heave integral at the profile's long-wave cutoff)
 replaces the row's ``U1``, ``U2``. The loads and every other column are the load filter's.
 With a lag (``observer.latency`` > 0) the road stays the load filter's.
 """
@@ -56,13 +56,13 @@ import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 import road_force_estimator.estimation.body_heave as body_heave
-from road_force_estimator.estimation.differentiator import implicit_step
-from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.gains import (
-    ROW_RHO, NY, Gains, row_layout, sm_lipschitz)
+    ROW_RHO, NY, Gains, row_layout)
 from road_force_estimator.estimation.model import (
-    DEFAULT_ROAD_GD_M3, PROFILE_ONLINE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
-    continuous_model, rest_state)
+    DEFAULT_ROAD_GD_M3, SPEED_FLOOR_MPS, continuous_model, rest_state)
+from road_force_estimator.estimation.model_friction import KnownFriction
+from road_force_estimator.estimation.model_road import OnlineRoad
+from road_force_estimator.estimation.model_sliding import SlidingMode
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.schedule import MIN_SETTLE_S, GainSchedule, dt_level
@@ -83,13 +83,6 @@ SM_NOISE_SCALE = 1e-7
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
 _R0 = ROW_RHO
-
-
-def _dq_rows(g: Gains, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of dq_1, dq_2 of the transition A(dt) (2, nx) and of the friction input
-    B_d(dt) (2, 2)."""
-    rows = [State.DQ1, State.DQ2]
-    return g.transition(dt)[rows], g.friction_input(dt)[rows]
 
 
 class ModelCore:
@@ -126,13 +119,9 @@ class ModelCore:
         self.observer = observer
         self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
         self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
-        self._wc_road = self._wc_per_speed / PROFILE_ONLINE_CUTOFF_RATIO
-        self._road_floor = PROFILE_ONLINE_CUTOFF_RATIO * body_heave.SPEED_FLOOR_MPS
-        self._s = vehicle.half_track_m
+        # the profile filter's road (:mod:`.model_road`)
+        self._road = OnlineRoad(self._wc_per_speed, vehicle.half_track_m)
         self.sm_gain = float(observer.sliding_mode_gain)
-        lq, lr = sm_lipschitz(vehicle)
-        self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
-                        math.sqrt(lr))
         model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
         self._h = model.h
         # the buffer row's layout (nx = 12, or more with sensor-lag states) and the slots
@@ -140,14 +129,8 @@ class ModelCore:
         _, self._x0i, _, self._y0i, self._row = row_layout(model.nx)
         self._nx = model.nx
         self._c_slots = model.measured
-        # leaf-spring friction, a known input (:mod:`.model`): F_f,i, and the outputs'
-        # direct part per newton (rows with a non-zero entry)
-        self._ff = model.friction_n if any(model.friction_n) else None
-        self._ceq = (0.0, 0.0)       # its equivalent damping in the gains in use
-        if self._ff is not None:
-            d = model.friction_d
-            self._fd = [(j, float(d[j, 0]), float(d[j, 1])) for j in range(d.shape[0])
-                        if d[j, 0] != 0.0 or d[j, 1] != 0.0]
+        # leaf-spring friction, a known input (:mod:`.model_friction`), or None
+        self._fr = KnownFriction(model) if any(model.friction_n) else None
         self.schedule = GainSchedule(vehicle, observer)
         self.ready: deque = deque()
         self.reset()
@@ -160,9 +143,7 @@ class ModelCore:
         state, the run and the noise estimates go on."""
         self.vehicle = vehicle
         self._rows.set_vehicle(vehicle)
-        lq, lr = sm_lipschitz(vehicle)
-        self._sm_lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0),
-                        math.sqrt(lr))
+        self._slide.set_vehicle(vehicle)
         self._h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h
         self.schedule.set_vehicle(vehicle)
         self._m_dt = -1.0
@@ -182,7 +163,7 @@ class ModelCore:
         self.last_converged = False           # converged flag of the newest sample
         self.lag = 0
         self._profile = self._profile_on
-        self._gamma = 0.0
+        self._slide = SlidingMode(self.vehicle)   # (:mod:`.model_sliding`, off until designed)
         self._m_dt = -1.0
         self._settle = math.inf
         self._hstate = body_heave.start(0.0)
@@ -190,8 +171,6 @@ class ModelCore:
         self._i = 0
         self._block_start = 0
         self._pending: deque = deque()
-        self._sm = [0.0] * 12
-        self._sm_rest = True
         self._running = False
         self._stepped = False
         self._run_y: list = []
@@ -204,10 +183,7 @@ class ModelCore:
         # the step products' buffers (:meth:`_select`) and views of their state and outputs
         self._sv = self._sv_x = np.empty(0)
         self._sp = self._sp_x = self._sp_o = np.empty(0)
-        self._road_state = body_heave.start(0.0)
-        self._road_started = False
-        self._road_prev = (0.0, 0.0, math.nan)     # the last (u_1, u_2, distance), unheld
-        self._road_off = (0.0, 0.0)                # what standing added to the road (m)
+        self._road.restart()
         self._clock: float | None = None           # the sample clock's step (s), or None
         self._raw_dts: list = []                   # the stamps' steps of the block (s)
 
@@ -270,12 +246,8 @@ class ModelCore:
         sliding mode takes from them."""
         g = self.schedule.design(dt, self.lag)
         self._m_dt = -1.0
-        self._gamma = self.sm_gain / (1.0 + (g.noise_deflection_m / SM_NOISE_SCALE) ** 2)
-        lq, lq13, lq12, lr, lr13, lr12 = self._sm_lip
-        dead = [SM_DEAD_ZONE * float(e) for e in g.post_error_std]
-        self._sm_ch = ((dead[0], lq, lq13, lq12), (dead[1], lq, lq13, lq12),
-                       (dead[2], lr, lr13, lr12))
-        self._sm_dead = tuple(dead)
+        self._slide.set_gains(self.sm_gain / (1.0 + (g.noise_deflection_m / SM_NOISE_SCALE) ** 2),
+                              [SM_DEAD_ZONE * float(e) for e in g.post_error_std])
         self._ht = g.out[:, _R0:_R0 + 9].copy()     # H T: outputs of rho
         self._settle = max(g.settle_s, 20.0 * g.dt_s, MIN_SETTLE_S)
         return g
@@ -292,10 +264,8 @@ class ModelCore:
         if self._sv.shape[0] != self._m.shape[0]:    # the product's buffer (and its state)
             self._sv = np.empty(self._m.shape[0])
             self._buffer_views()
-        if self._ff is not None:
-            self._fm = g.friction_step(dt)
-            self._a_dq, self._b_dq = _dq_rows(g, dt)
-            self._ceq = g.model.friction_damping_nspm
+        if self._fr is not None:
+            self._fr.select(g, dt)
         self._m_dt = dt
         if self._profile_on:
             self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
@@ -357,13 +327,12 @@ class ModelCore:
         self._t_retuned = 0.0
         self._running = True
         self._stepped = False
-        self._sm = [0.0] * 12
-        self._sm_rest = True
+        self._slide.restart()
         self._pending.clear()
         self._run_y = [(q1, q2, phi)]
         self._dts = []
         self._body_started = False
-        self._road_started = False
+        self._road.restart()
         self._prow[:] = 0.0
         self._prow[self._x0i:self._x0i + self._nx] = x
         if self.observer.latency_s > 0.0:
@@ -377,7 +346,7 @@ class ModelCore:
         """The zero-latency profile filter runs: no latency, and no friction (whose known
         input it does not carry: then the road is the load filter's); kept in ``_profile``
         for the per-sample step."""
-        return self.lag == 0 and self._ff is None
+        return self.lag == 0 and self._fr is None
 
     def _set_lag(self, dt: float) -> None:
         """The lag N = round(latency / dt) (samples) for a typical step dt (s)."""
@@ -430,8 +399,9 @@ class ModelCore:
         row[y0 + 1] = q2
         row[y0 + 2] = phi
         sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
-        if self._ff is not None:        # the friction over the step (of x+_k)
-            sv = self._friction_update(sv, row[x0:y0 - NY], self._fm, self._a_dq, self._b_dq)
+        fr = self._fr
+        if fr is not None:        # the friction over the step (of x+_k)
+            sv = fr.update(sv, row[x0:y0 - NY])
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -439,17 +409,12 @@ class ModelCore:
         nxt = buf[i]
         nxt[x0:y0] = self._sv_x if sv is self._sv else sv[:y0 - x0]   # (friction: a new array)
         rho = None
-        if self._gamma > 0.0:
+        slide = self._slide
+        if slide.gamma > 0.0:       # the sliding mode on the output errors
             c1, c2, c3 = self._c_slots
-            e1 = q1 - s[c1]
-            e2 = q2 - s[c2]
-            e3 = phi - s[c3]
-            d1, d2, d3 = self._sm_dead
-            # a differentiator at rest with a zero (dead-zoned) input stays at rest
-            if not (self._sm_rest and -d1 <= e1 <= d1 and -d2 <= e2 <= d2 and -d3 <= e3 <= d3):
-                rho = self._sliding(e1, e2, e3, dt)
-                if rho is not None:
-                    nxt[_R0:_R0 + 9] = rho
+            rho = slide.inject(q1 - s[c1], q2 - s[c2], phi - s[c3], dt)
+            if rho is not None:
+                nxt[_R0:_R0 + 9] = rho
         self._i = i
         self._dts.append(dt)
         if -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
@@ -506,41 +471,6 @@ class ModelCore:
             self._first_block = max(FIRST_BLOCK_SAMPLES, self.lag + 1)
             self._select(self._dts[-1])
 
-    def _sliding(self, e1: float, e2: float, e3: float, dt: float) -> list | None:
-        """Sliding-mode differentiators on the dead-zoned output errors; ``gamma rho`` (9), or
-        None when every channel rests at zero (a differentiator at rest with a zero input stays
-        at rest: that step is skipped; one within 1e-3 of its dead zone of rest is put there).
-        """
-        st = self._sm
-        active = False
-        out = [0.0] * 9
-        gm = self._gamma
-        for ch, e in enumerate((e1, e2, e3)):
-            dz, lip, lip13, lip12 = self._sm_ch[ch]
-            f = e - dz if e > dz else (e + dz if e < -dz else 0.0)
-            j = 4 * ch
-            z0 = st[j]
-            z1 = st[j + 1]
-            z2 = st[j + 2]
-            if f == 0.0:
-                if z0 == 0.0 and z1 == 0.0 and z2 == 0.0:
-                    continue
-                if (abs(z0) + dt * (abs(z1) + dt * abs(z2))) < 1e-3 * dz:
-                    st[j] = st[j + 1] = st[j + 2] = st[j + 3] = 0.0
-                    continue
-            z0, z1, z2 = implicit_step(z0, z1, z2, st[j + 3], f, dt, lip, lip13, lip12)
-            st[j] = z0
-            st[j + 1] = z1
-            st[j + 2] = z2
-            st[j + 3] = f
-            k = 3 * ch
-            out[k] = gm * z0
-            out[k + 1] = gm * z1
-            out[k + 2] = gm * z2
-            active = True
-        self._sm_rest = not any(st)
-        return out if active else None
-
     def _compact(self) -> None:
         """Run the block statistics; move the last lag + 1 rows to the front.
 
@@ -580,15 +510,13 @@ class ModelCore:
         self._select(dts[-1])
         g = self.schedule.gains
         x0, y0 = self._x0i, self._y0i
-        if self._ff is not None:
-            self._ceq = g.model.friction_damping_nspm
+        fr = self._fr
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
             sv = g.step_matrix(dt) @ buf[j]
-            if self._ff is not None:
-                a_dq, b_dq = _dq_rows(g, dt)
-                sv = self._friction_update(sv, buf[j, x0:y0 - NY], g.friction_step(dt), a_dq,
-                                           b_dq)
+            if fr is not None:
+                fr.select(g, dt)
+                sv = fr.update(sv, buf[j, x0:y0 - NY])
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels
@@ -615,42 +543,13 @@ class ModelCore:
             window = w.reshape(-1)
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
 
-    def _friction_update(self, sv: np.ndarray, x: np.ndarray, fm: np.ndarray, a_dq: np.ndarray,
-                         b_dq: np.ndarray) -> np.ndarray:
-        """``sv`` (the step without friction) with the friction held over the step from
-        x+_k = ``x``: that of :meth:`_held_friction` (end rate predicted), then once more with
-        the end rate of that update's x+_(k+1) (one iterated update; README, "Friction").
-        ``fm``: :meth:`.Gains.friction_step`; ``a_dq``, ``b_dq``: :func:`_dq_rows`."""
-        first = sv + _dot(fm, self._held_friction(x, a_dq, b_dq))
-        f0 = self._friction(x[State.DQ1], x[State.DQ2])
-        return sv + _dot(fm, 0.5 * (f0 + self._friction(first[State.DQ1], first[State.DQ2])))
-
-    def _held_friction(self, x: np.ndarray, a_dq: np.ndarray, b_dq: np.ndarray) -> np.ndarray:
-        """The friction forces (N) held over a step from the state x: the mean of those at
-        its start and at its predicted end (Heun's trapezoid: the friction is stiff, a wheel
-        time constant ``m_i v_f / F_f`` of ~3 ms against the 1 ms step). ``a_dq``, ``b_dq``:
-        the dq rows of the transition and of the friction input (:func:`_dq_rows`)."""
-        f0 = self._friction(x[State.DQ1], x[State.DQ2])
-        dq = _dot(a_dq, x) + _dot(b_dq, f0)
-        return 0.5 * (f0 + self._friction(dq[0], dq[1]))
-
-    def _friction(self, dq1: float, dq2: float) -> np.ndarray:
-        """The known friction input (N) at the rates dq_i (m/s): ``-F_f,i tanh(dq_i / v_f)``
-        less the equivalent damping's share ``-c_eq,i dq_i`` that the gains' linear model
-        carries (:func:`.model.friction_damping`)."""
-        f1, f2 = self._ff
-        d1, d2 = self._ceq
-        return np.array([-f1 * math.tanh(dq1 / FRICTION_VELOCITY_MPS) + d1 * dq1,
-                         -f2 * math.tanh(dq2 / FRICTION_VELOCITY_MPS) + d2 * dq2])
-
     def _emit(self, stamp: int, meta: tuple, o: list, op: list | None = None) -> None:
         """The row of the linear outputs o (:data:`.OUTPUTS`) and the body heave (restarted
         with each run); appended to ready. With the profile filter's outputs ``op`` (zero
-        latency), the road is :meth:`_road`'s."""
-        if self._ff is not None:
-            f1, f2 = self._friction(o[3], o[4]).tolist()
-            for j, d1, d2 in self._fd:
-                o[j] += d1 * f1 + d2 * f2
+        latency), the road is :class:`.OnlineRoad`'s."""
+        fr = self._fr
+        if fr is not None:
+            fr.add_direct(o)
         (q1, q2, phi, dq1, dq2, dphi, ddq1, ddq2, ddphi, _, ddzs, _, _, ddzu1, ddzu2, w1, w2,
          df1, df2, fb1, fb2) = o
         x_dist, dt, v, conv = meta
@@ -665,48 +564,9 @@ class ModelCore:
             self._rows.restart()
         row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
                              ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt,
-                             None if op is None else self._road(op, dt, v, x_dist))
+                             None if op is None else self._road.road(op, dt, v, x_dist))
         self.last_row = row
         self.ready.append((stamp, row))
-
-    def _road(self, op: list, dt: float, v: float, x: float) -> tuple[float, float]:
-        """The road ``(u_1, u_2)`` (m) at distance ``x`` (m) from the profile filter's outputs
-        ``op`` (:data:`.OUTPUTS`): ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body
-        acceleration's band-limited double integral at the profile's cutoff
-        (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
-        the speed floored at that ratio times :data:`.body_heave.SPEED_FLOOR_MPS`; restarted
-        with each run); held at a stop (the distance stands still, the model's speed ``v``
-        (m/s) below that floor)."""
-        ddzs = op[10]
-        if self._road_started:
-            av = v if v > 0.0 else -v
-            if body_heave.STANDING_MPS <= av < self._road_floor:
-                av = self._road_floor       # (standing, below STANDING_MPS, it holds)
-            h = self._road_state = body_heave.step(self._road_state, ddzs, dt, av,
-                                                   self._wc_road)
-            zs = h[-2]
-        else:
-            zs = 0.0
-            self._road_state = body_heave.start(ddzs)
-            self._road_started = True
-            self._road_prev = (0.0, 0.0, math.nan)
-            self._road_off = (0.0, 0.0)
-        ssin = self._s * math.sin(op[2])
-        u1 = zs + ssin - op[0] + op[15]
-        u2 = zs - ssin - op[1] + op[16]
-        p1, p2, px = self._road_prev
-        self._road_prev = (u1, u2, x)
-        o1, o2 = self._road_off
-        if x == px and -body_heave.SPEED_FLOOR_MPS < v < body_heave.SPEED_FLOOR_MPS:
-            # a stop: the distance stands still and the model's speed is below the body
-            # heave's floor (a dropped-out speed that the deflections contradict keeps the
-            # last trusted one, :mod:`.speed_check`); the road at one distance is one value:
-            # what the estimate does then (the body heave's drift, or the integral's memory
-            # of the rate before the stop) is no road
-            o1 += u1 - p1
-            o2 += u2 - p2
-            self._road_off = (o1, o2)
-        return u1 - o1, u2 - o2
 
     def finish(self) -> bool:
         """Finalize every pending sample of the run (end of data, or before a restart);

@@ -20,6 +20,7 @@ import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
+from road_force_estimator.estimation.lti import Powers, lti
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
@@ -33,11 +34,9 @@ from road_force_estimator.estimation.run_speed import run_statistics, speed_segm
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
-__all__ = ['smooth', 'lti', 'grid_steps', 'window_samples', 'slowest_tau_s', 'LTI_BLOCK',
-           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
+__all__ = ['smooth', 'grid_steps', 'window_samples', 'slowest_tau_s', 'WINDOW_SAMPLES',
+           'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
-#: Block length of the blocked linear recursion of the offline smoother (:func:`lti`).
-LTI_BLOCK = 128
 #: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
 #: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
 #: temporaries do not grow with the drive.
@@ -70,73 +69,6 @@ _SMOOTH_OUTPUTS = [OUTPUTS.index(name) for name in _SMOOTH_NAMES]
 #: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
 #: is evaluated on the previous pass's smoothed dq (the first pass: none).
 FRICTION_PASSES = 3
-
-
-class _Powers:
-    """``F^1 .. F^B`` of a matrix (B = :data:`LTI_BLOCK`) as one (nx, B nx) matrix
-    (``[i, (j, k)] = F^(j+1)[k, i]``), and the same for ``F^B`` (made when first needed):
-    what :func:`lti` needs per matrix, computed once per matrix, not per call."""
-
-    def __init__(self, f: np.ndarray) -> None:
-        nx = f.shape[0]
-        block = LTI_BLOCK
-        powers = np.empty((block, nx, nx))
-        powers[0] = f
-        for j in range(1, block):
-            powers[j] = f @ powers[j - 1]
-        self.f = f
-        self.ft = np.ascontiguousarray(f.T)
-        self.stack = np.ascontiguousarray(powers.transpose(2, 0, 1).reshape(nx, block * nx))
-        self.last = powers[-1].copy()
-        self._next: _Powers | None = None
-
-    @property
-    def next(self) -> _Powers:
-        if self._next is None:
-            self._next = _Powers(self.last)
-        return self._next
-
-
-def lti(f: np.ndarray | _Powers, drive: np.ndarray, x_init: np.ndarray) -> np.ndarray:
-    """``x_k = F x_{k-1} + drive_k`` (k = 0..m-1, ``x_{-1} = x_init``); (m, nx).
-
-    Blocked, in real arithmetic: the samples are cut into blocks of ``LTI_BLOCK``; the
-    zero-state response inside every block is advanced for all blocks at once (one small
-    matrix product per position in the block), the states between blocks follow from the
-    blocks' end values (``s_b = F^B s_(b-1) + y_b``: the same recursion, solved the same way
-    when there are many blocks), and each block adds ``F^(j+1)`` times its start state. The
-    result equals the sample-by-sample recursion up to rounding (F stable: errors do not grow;
-    measured ~1e-13 relative to each state's range, where the complex Schur basis gave 1e-7).
-    ``f`` may be given as its :class:`_Powers` (for many calls with one matrix).
-    """
-    m, nx = drive.shape
-    block = LTI_BLOCK
-    x_init = np.asarray(x_init, dtype=float)
-    nb = m // block
-    if nb < 2:
-        out = np.empty((m, nx))
-        x = x_init
-        ft = f.ft if isinstance(f, _Powers) else f.T
-        for k in range(m):
-            x = x @ ft + drive[k]
-            out[k] = x
-        return out
-    pw = f if isinstance(f, _Powers) else _Powers(f)
-    out = np.empty((m, nx))
-    head = out[:nb * block]
-    head[...] = drive[:nb * block]
-    d = head.reshape(nb, block, nx)                            # a view: blocks of rows
-    ft = pw.ft
-    for j in range(1, block):                                  # zero-state response
-        d[:, j] += d[:, j - 1] @ ft
-    starts = np.empty((nb, nx))                                # state before each block
-    starts[0] = x_init
-    starts[1:] = lti(pw.next if nb - 1 >= 2 * block else pw.last, d[:-1, -1], x_init)
-    # x[b, j] = y[b, j] + F^(j+1) start_b, one product
-    d += (starts @ pw.stack).reshape(nb, block, nx)
-    if nb * block < m:                                         # the last, partial block
-        out[nb * block:] = lti(pw, drive[nb * block:], head[-1])
-    return out
 
 
 def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0) -> np.ndarray | None:
@@ -575,11 +507,11 @@ class _Smoother:
         ``(C^T S^-1)^T``, ``(P+ A^T)^T`` and the friction forces' parts (or None)."""
         c = g.model.c
         nx = self.nx
-        a_run = _Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
+        a_run = Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
         a_dt = g.transition(dt)
         kt = np.ascontiguousarray(g.k.T)
         ca_t = np.ascontiguousarray((c @ a_dt).T)
-        phi_t = _Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
+        phi_t = Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
         u_t = np.ascontiguousarray((c.T @ np.linalg.inv(g.s)).T)
         pa_t = np.ascontiguousarray((g.p_post @ a_dt.T).T)
         fin = None

@@ -12,7 +12,7 @@ from road_force_estimator.estimation import estimate_batch, smooth
 from road_force_estimator.estimation.gains import design
 from road_force_estimator.estimation.model import OUTPUTS, rest_state, scheduled
 from road_force_estimator.estimation.schedule import SPEED_LEVEL_RATIO
-from road_force_estimator.estimation.smoother import LTI_BLOCK, lti
+from road_force_estimator.estimation.lti import LTI_BLOCK, lti
 
 
 class TestOffline:
