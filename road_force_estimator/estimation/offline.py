@@ -493,7 +493,7 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     fit = None
     fused = observer.distance_source == 'gnss' and fixes is not None
     if fused:
-        speed_mps, fit = _fused_speed(stamps_ns, speed_mps, fixes)
+        speed_mps, fit = fused_speed(stamps_ns, speed_mps, fixes)
     if observer.discretization == 'model':
         est = smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
                      gap_threshold_s=gap_threshold_s)
@@ -505,7 +505,7 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     return est
 
 
-def _fused_speed(stamps_ns, speed_mps, fixes):
+def fused_speed(stamps_ns, speed_mps, fixes):
     """``(speed times the odometer scale, the fit)``; the speed as given when the fixes do
     not make a fit (None) or one to use (its ``problem`` says why)."""
     from road_force_estimator.estimation import odometer

@@ -121,11 +121,15 @@ class Reconstruction:
         self.ltr_floor_n = LTR_FLOOR_FRACTION * (fc1 + fc2)
         self._c = (self.s, self.ix, fc1, fc2) + self.lift_off_n + (self.ltr_floor_n,)
 
-    def restatic(self, out: list, static_n: np.ndarray, t: np.ndarray) -> None:
+    def restatic(self, out: list, static_n: np.ndarray, t: np.ndarray,
+                 t_prev: float | None = None) -> None:
         """The columns of one run ``out`` (:meth:`columns` and :meth:`add_quasi_static`
         done) again with per-sample static loads ``static_n`` (N, (m, 2)) at the times t (s):
         the loads, LTR, lift-off flags and the quasi-static LTR (restarted at the run's
-        start), as :meth:`row` gives them sample by sample with :meth:`set_static`."""
+        start), as :meth:`row` gives them sample by sample with :meth:`set_static`. ``t_prev``
+        (s): the time of the run's previous sample when these rows continue the rows of the
+        last call (the low-pass goes on from there: a run in pieces gives the numbers of one
+        piece); None at a run's start."""
         fc1, fc2 = static_n[:, 0], static_n[:, 1]
         fn1 = np.maximum(fc1 + out[Column.DF1], 0.0)
         fn2 = np.maximum(fc2 + out[Column.DF2], 0.0)
@@ -136,9 +140,11 @@ class Reconstruction:
                        (C.LIFT_OFF2, fn2 <= LIFT_OFF_FRACTION * fc2),
                        (C.STATIC_LOAD1, fc1), (C.STATIC_LOAD2, fc2)):
             out[j][:] = col
-        self.restart()
+        t = np.asarray(t, dtype=float)
+        if t_prev is None:
+            self.restart()
         floor = self.ltr_floor_n
-        steps = [0.0] + np.diff(np.asarray(t, dtype=float)).tolist()
+        steps = [0.0 if t_prev is None else float(t[0] - t_prev)] + np.diff(t).tolist()
         qs = []
         for a, b, f1, f2, d in zip(fn1.tolist(), fn2.tolist(), fc1.tolist(), fc2.tolist(),
                                    steps):
@@ -146,7 +152,6 @@ class Reconstruction:
             qs.append(self.quasi_static_ltr(a, b, d))
         out[Column.LTR_QUASI_STATIC][:] = qs
         self.ltr_floor_n = floor
-        self.restart()
 
     def restart(self) -> None:
         """A new run: the quasi-static LTR's low-pass starts again at the next sample."""

@@ -6,12 +6,14 @@ speed, and its gains per stretch of speed, :mod:`.run_speed`); the same model, g
 outputs as the online observer (:mod:`.model_core`). Long evenly sampled runs go through in
 overlapping windows (:func:`window_samples`), so that the smoother's own memory does not grow
 with the drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
-from a second pass of the same smoother with the profile's tuning (:meth:`_Smoother.
+from a second pass of the same smoother with the profile's tuning (:meth:`Smoother.
 _profile`, over the whole run: windowed runs too).
 """
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
+from typing import Iterator
 
 import numpy as np
 
@@ -20,7 +22,7 @@ import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.gains import ROW_X, Gains
-from road_force_estimator.estimation.lti import Powers, lti
+from road_force_estimator.estimation.lti import Powers
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
 from road_force_estimator.estimation.model import (
     DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
@@ -31,11 +33,13 @@ from road_force_estimator.estimation.outputs import (
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
 from road_force_estimator.estimation.static_load import track_recording
 from road_force_estimator.estimation.run_speed import run_statistics, speed_segments
+from road_force_estimator.estimation.rts_pass import smoothed_chunks
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
-__all__ = ['smooth', 'grid_steps', 'window_samples', 'slowest_tau_s', 'WINDOW_SAMPLES',
-           'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
+__all__ = ['smooth', 'prepare', 'smoothed_rows', 'Smoother', 'fill_status', 'last_row',
+           'LAST_ROW_FIELDS', 'KeptColumns', 'rows_of', 'grid_steps', 'window_samples',
+           'slowest_tau_s', 'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
 #: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
 #: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
@@ -60,7 +64,7 @@ WINDOWED_RUNS = 4
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
 #: Degree of the polynomial taken off the profile's body heave over each run (see
-#: :meth:`_Smoother._profile`).
+#: :meth:`Smoother._profile`).
 PROFILE_DETREND_DEGREE = 3
 #: The outputs (:data:`.OUTPUTS`) the offline rows need, in this order.
 _SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
@@ -69,6 +73,29 @@ _SMOOTH_OUTPUTS = [OUTPUTS.index(name) for name in _SMOOTH_NAMES]
 #: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
 #: is evaluated on the previous pass's smoothed dq (the first pass: none).
 FRICTION_PASSES = 3
+
+
+class KeptColumns:
+    """The columns (slots :class:`.Column`) of m rows of which only ``keep`` are held whole,
+    the rest scratch rows of one chunk: what a pass that needs a few columns of a long run
+    writes into (:meth:`rows`), in memory that does not grow with the run but by those."""
+
+    def __init__(self, m: int, keep, chunk: int = _SMOOTH_CHUNK) -> None:
+        self.kept = {int(j): np.zeros(m) for j in keep}
+        self.scratch = field_columns(chunk)[1]
+
+    def rows(self, k0: int, k1: int) -> list:
+        """The columns of rows ``k0:k1`` (at most one chunk of them)."""
+        return [self.kept[j][k0:k1] if j in self.kept else col[:k1 - k0]
+                for j, col in enumerate(self.scratch)]
+
+    def __getitem__(self, j: int) -> np.ndarray:
+        return self.kept[int(j)]
+
+
+def _rows(out, k0: int, k1: int) -> list:
+    """Rows ``k0:k1`` of the columns ``out`` (a list of arrays or :class:`KeptColumns`)."""
+    return out.rows(k0, k1) if isinstance(out, KeptColumns) else [col[k0:k1] for col in out]
 
 
 def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0) -> np.ndarray | None:
@@ -137,75 +164,146 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         status counts what the estimator would count (and carries the noise and roughness
         used).
     """
-    vehicle = VehicleParameters() if vehicle is None else vehicle
-    observer = ObserverParameters() if observer is None else observer
-    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
-    n = stamps.shape[0]
-    valid, restart, stamp_int, cnt = accept_arrays(stamps, q, phi, speed, gap_threshold_s)
-    acc = np.flatnonzero(valid)
-    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
-    q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
-    smoother = _Smoother(vehicle, observer, window)
-    fields, columns = field_columns(n)
-    starts = np.flatnonzero(restart[acc]).tolist() + [acc.size]
-    # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
-    # ~0.2 us, enough to make an even sample step look uneven
-    t_all = (stamp_int[acc] - (stamp_int[acc[0]] if acc.size else 0)) * 1e-9
-    v_all = speed[acc]
-    # distance over all accepted samples, continued across gaps
-    dist = distance_m(np.diff(t_all), v_all)
-    # the model's speed: the recorded one unless the deflections contradict it
-    steps = np.zeros(acc.size)
-    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
-    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
-    for r0, r1 in zip(starts[:-1], starts[1:]):
-        idx = acc[r0:r1]
-        whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
-        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
-        rows = [col[src] for col in columns] if whole else field_columns(idx.size)[1]
-        rows[Column.DISTANCE][:] = dist[r0:r1]
-        smoother.run(t_all[r0:r1], q[src], phi[src], v_model[r0:r1], rows)
-        if static is not None:
-            smoother.rows.restatic(rows, static[r0:r1], t_all[r0:r1])
-        if not whole:
-            for col, part in zip(columns, rows):
-                col[idx] = part
-    status = _status(cnt, acc, valid, contradicted, stamp_int, fields, smoother)
-    flags = np.zeros(n, bool)
-    flags[acc] = contradicted
-    out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=status,
+    prep = prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                   gap_threshold_s=gap_threshold_s)
+    smoother = Smoother(prep.vehicle, prep.observer, window)
+    fields, columns = field_columns(prep.n)
+    for idx, part in smoothed_rows(prep, smoother, columns):
+        if idx is not None:                     # (None: written in place)
+            for col, values in zip(columns, part):
+                col[idx] = values
+    acc, valid = prep.acc, prep.valid
+    if acc.size and acc.size < valid.size:          # rejected rows hold the previous row
+        held, src = hold_rejected(valid)
+        for arr in fields.values():
+            arr[held] = arr[src]
+    status = EstimatorStatus(**prep.counts)
+    fill_status(status, acc.size, prep.contradicted, prep.last_stamp_ns,
+                last_row(fields, acc[-1]) if acc.size else None, smoother)
+    flags = np.zeros(prep.n, bool)
+    flags[acc] = prep.contradicted
+    out = EstimateArrays(stamp_ns=prep.stamps_out, valid=valid, status=status,
                          speed_contradicted=flags, **fields)
     status.negative_load_samples = out.negative_load_samples()
     return out
 
 
-def _status(cnt: dict, acc: np.ndarray, valid: np.ndarray, contradicted: np.ndarray,
-            stamp_int: np.ndarray, fields: dict, smoother: _Smoother) -> EstimatorStatus:
-    """The status of :func:`smooth` (the estimator's counts, the last accepted sample's
-    flags, the smoother's levels and vehicle); rejected rows of ``fields`` take the previous
-    row."""
-    status = EstimatorStatus(**cnt)
-    status.accepted = int(acc.size)
+def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
+            observer: ObserverParameters | None = None, *,
+            gap_threshold_s: float = GAP_THRESHOLD_S) -> SimpleNamespace:
+    """What :func:`smooth` takes of a whole recording before its runs: the estimator's
+    rejections and gap rule (:func:`.accept_arrays`), the static loads under ``zero_load``
+    (:func:`.track_recording`: the offset off the readings, the vehicle of the last estimate),
+    the distance (continued across gaps) and the model's speed (the recorded one unless the
+    deflections contradict it, :func:`.check_arrays`). Attributes: ``n``, ``stamps_out``,
+    ``valid``, ``counts``, ``acc`` (the accepted rows), ``last_stamp_ns``, ``q``, ``phi``, ``y``
+    (the (n, 3) array of both when ``q`` and ``phi`` are its views, else None),
+    ``static`` (N, (acc.size, 2), or None), ``vehicle``, ``observer``, ``t`` (s from the first
+    accepted stamp, per accepted sample), ``dist`` (m), ``v_model`` (m/s), ``contradicted``,
+    ``starts`` (each run's first index into ``acc``, then ``acc.size``)."""
+    vehicle = VehicleParameters() if vehicle is None else vehicle
+    observer = ObserverParameters() if observer is None else observer
+    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+    valid, restart, stamp_int, cnt = accept_arrays(stamps, q, phi, speed, gap_threshold_s)
+    acc = np.flatnonzero(valid)
+    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
+    q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
+    # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
+    # ~0.2 us, enough to make an even sample step look uneven
+    t_all = (stamp_int[acc] - (stamp_int[acc[0]] if acc.size else 0)) * 1e-9
+    v_all = speed[acc]
+    steps = np.zeros(acc.size)
+    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
+    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
+    del steps
+    return SimpleNamespace(
+        n=stamps.shape[0], stamps_out=stamps if stamps.dtype == np.int64 else
+        output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
+        last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
+        y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
+        dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
+        starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
+
+
+def rows_of(column, a: int, b: int) -> np.ndarray:
+    """Rows ``a:b`` of an array or of a :class:`.core.spill.SpillColumn`."""
+    return column[a:b] if isinstance(column, np.ndarray) else column.read(a, b)
+
+
+def _joined(q: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+    """The (n, 3) array ``[q_1, q_2, phi]`` whose views ``q`` and ``phi`` are (the offline
+    stream's inputs: the measurements are not copied again), else None."""
+    base = q.base
+    if (base is None or phi.base is not base or base.ndim != 2 or base.shape[1] != 3
+            or base.dtype != np.float64 or not base.flags.c_contiguous
+            or q.shape[0] > base.shape[0]):
+        return None
+    start = base.__array_interface__['data'][0]
+    if (q.__array_interface__['data'][0] != start or q.strides != base.strides
+            or phi.__array_interface__['data'][0] != start + 16):
+        return None
+    return base[:q.shape[0]]
+
+
+def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | None = None
+                  ) -> Iterator[tuple[np.ndarray | slice | None, list]]:
+    """The smoothed rows of a recording (:func:`prepare`) in order, ``(rows, columns)``:
+    ``rows`` the input rows (indices or a slice) and ``columns`` (slots :class:`.Column`) their
+    estimates, the distance and the static loads (:meth:`.Reconstruction.restatic`) in.
+    With ``columns`` (the recording's, each (n,)) a run without a rejected sample inside is
+    written into them directly, and comes as ``(None, columns of its rows)``."""
+    acc, starts, t_all = prep.acc, prep.starts, prep.t
+    restat = Reconstruction(smoother.vehicle, prep.observer.rollover_cutoff_frequency_hz)
+    for r0, r1 in zip(starts[:-1], starts[1:]):
+        idx = acc[r0:r1]
+        whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
+        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
+        direct = [col[src] for col in columns] if whole and columns is not None else None
+        t = t_all[r0:r1]
+        y = prep.y[src] if whole and prep.y is not None else None
+        for a, b, part in smoother.pieces(t, prep.q[src], prep.phi[src],
+                                          prep.v_model[r0:r1], direct, y):
+            part[Column.DISTANCE][:] = rows_of(prep.dist, r0 + a, r0 + b)
+            if prep.static is not None:
+                restat.restatic(part, prep.static[r0 + a:r0 + b], t[a:b],
+                                None if a == 0 else float(t[a - 1]))
+            if part is direct:
+                yield None, part
+            elif whole:
+                yield slice(idx[a], idx[b - 1] + 1), part
+            else:
+                yield idx[a:b], part
+
+
+def last_row(fields: dict, row: int) -> dict:
+    """What the status takes of the last accepted row ``row`` of the fields (or a piece's)."""
+    return {name: fields[name][row] for name in LAST_ROW_FIELDS}
+
+
+#: The fields of the last accepted row that the status reports (:func:`fill_status`).
+LAST_ROW_FIELDS = ('residual_nm', 'lift_off', 'converged', 'static_load_n')
+
+
+def fill_status(status: EstimatorStatus, accepted: int, contradicted: np.ndarray,
+                last_stamp_ns: int | None, last: dict | None, smoother: Smoother) -> None:
+    """The status of :func:`smooth` (``status`` made from the estimator's counts): the
+    accepted and contradicted counts, the last accepted sample's stamp and flags (``last``,
+    :func:`last_row`; None without one), the smoother's levels and vehicle."""
+    status.accepted = int(accepted)
     status.speed_contradicted = int(np.count_nonzero(contradicted))
     vehicle = smoother.vehicle
     status.sprung_mass_kg = vehicle.sprung_mass_kg
     status.static_load_n = vehicle.static_load_n
-    if acc.size:
-        if acc.size < valid.size:                   # rejected rows hold the previous row
-            held, src = hold_rejected(valid)
-            for arr in fields.values():
-                arr[held] = arr[src]
-        last = acc[-1]
-        status.last_stamp_ns = int(stamp_int[last])
-        status.last_residual_nm = float(fields['residual_nm'][last])
-        status.lift_off = tuple(bool(b) for b in fields['lift_off'][last])
-        status.converged = bool(fields['converged'][last])
-        status.static_load_n = tuple(float(f) for f in fields['static_load_n'][last])
+    if last is not None:
+        status.last_stamp_ns = int(last_stamp_ns)
+        status.last_residual_nm = float(last['residual_nm'])
+        status.lift_off = tuple(bool(b) for b in last['lift_off'])
+        status.converged = bool(last['converged'])
+        status.static_load_n = tuple(float(f) for f in last['static_load_n'])
     smoother.fill_status(status)
-    return status
 
 
-class _Smoother:
+class Smoother:
     """The smoother of :func:`smooth`, run after run (the schedule persists over runs)."""
 
     def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters,
@@ -245,62 +343,98 @@ class _Smoother:
         status.statistics_blocks = sched.blocks
         status.gain_designs = sched.design_count
 
-    def run(self, t: np.ndarray, q: np.ndarray, phi: np.ndarray, v: np.ndarray,
-            out: list) -> None:
-        """Fill ``out`` (the columns of the rows, each (m,), slots :class:`.Column`; the
-        distance is the caller's) with the estimates of one run (see :func:`smooth`).
+    def pieces(self, t: np.ndarray, q: np.ndarray, phi: np.ndarray, v: np.ndarray,
+               out: list | None = None, y: np.ndarray | None = None
+               ) -> Iterator[tuple[int, int, list]]:
+        """The estimates of one run (see :func:`smooth`) as ``(a, b, columns of rows a:b)``
+        (slots :class:`.Column`; the distance is the caller's), in order.
 
-        Evenly sampled runs go through in chunks of :data:`_SMOOTH_CHUNK` samples (the
-        forward filter chunk after chunk, then the smoother backwards), so that the
-        temporaries stay in the cache; the body heave, which needs the whole run, comes last.
+        A long evenly sampled run (:func:`window_samples`) comes window by window
+        (:meth:`_windowed`: its rows are never held whole); any other run in one piece, in
+        the columns ``out`` (each (m,)) when given. Evenly sampled runs go through in chunks of
+        :data:`_SMOOTH_CHUNK` samples (the forward filter chunk after chunk, then the
+        smoother backwards: :func:`.rts_pass.smoothed_chunks`); the body heave and the road,
+        which need the whole run, come last. ``y``: ``[q, phi]`` as one (m, 3) array, if the
+        caller has it.
         """
         m = t.size
-        y = np.column_stack([q, phi])
+        y = np.column_stack([q, phi]) if y is None else y
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
-        h = self.h
-        dt = speed = 0.0
-        steps = None
         if m == 1:
-            self._outputs((h @ x0)[:, None], out)
+            out = field_columns(1)[1] if out is None else out
+            self._outputs((self.h @ x0)[:, None], out)
+            self._heave(t, 0.0, 0.0, out)
+            yield 0, 1, out
+            return
+        run = self._design_run(t, y, v)
+        if run.windowed:
+            yield from self._windowed(run, t, y, v, x0)
+            return
+        out = field_columns(m)[1] if out is None else out
+        g, dt, speed, dts, steps = run.gains, run.dt, run.speed, run.dts, run.steps
+        if run.uniform:
+            self._uniform(g, dt, y, x0, out,
+                          segments=speed_segments(self.schedule, dt, v, speed))
+        elif steps is not None:
+            self._bridged(g, dt, speed, t, steps, y, x0, out)
         else:
-            dts = np.diff(t)
-            dt = float(np.median(dts))
-            speed = float(np.median(np.abs(v)))
-            sched = self.schedule
-            sched.set_run(dt, speed)
-            if m > 8 * NOISE_DIFF_ORDER:
-                for hist in (*sched.history, sched.dq_history):
-                    hist.clear()
-                run_statistics(sched, y, dts, v, speed)
-            g = sched.design(dt, 0)
-            if self.friction is not None:   # the outputs of the design's model (its c_eq)
-                self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
-                self.h = g.model.h[_SMOOTH_OUTPUTS]
-            uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
-            steps = None if uniform else grid_steps(dts, dt)
-            window, overlap = self.window or window_samples(
-                dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
-            # by default only where windows save memory: a run of several windows' work
-            longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
-            if uniform and m > longer:
-                self._windows(g, dt, speed, t, y, out, window, overlap)
-                # the road: the profile pass over the whole run, as in one piece
-                self._profile(dt, speed, dts, uniform, steps, y, v, x0, out)
-                return
-            if uniform:
-                self._uniform(g, dt, y, x0, out, segments=speed_segments(sched, dt, v, speed))
-            elif steps is not None:
-                self._bridged(g, dt, speed, t, steps, y, x0, out)
-            else:
-                self._uneven(g, dts, y, x0, out)
+            self._uneven(g, dts, y, x0, out)
         if steps is None:
             self._heave(t, dt, speed, out)
-        if m > 1:
-            self._profile(dt, speed, dts, uniform, steps, y, v, x0, out)
+        road = self._profile(dt, speed, dts, run.uniform, steps, y, v, x0,
+                             offline_roll_moment_psd(out[Column.RESIDUAL], dt))
+        out[Column.U1][:], out[Column.U2][:] = road
+        yield 0, m, out
+
+    def _design_run(self, t: np.ndarray, y: np.ndarray, v: np.ndarray) -> SimpleNamespace:
+        """A run's statistics (:func:`.run_speed.run_statistics`), its design and how it is
+        smoothed: ``gains``, ``dt`` and ``speed`` (the medians of its steps, s, and |v|, m/s),
+        ``dts`` its steps, ``uniform``, ``steps`` (:func:`grid_steps` or None), ``window``,
+        ``overlap`` and ``windowed`` (in windows: by default only where they save memory, a
+        run of several windows' work)."""
+        m = t.size
+        dts = np.diff(t)
+        dt = float(np.median(dts))
+        speed = float(np.median(np.abs(v)))
+        sched = self.schedule
+        sched.set_run(dt, speed)
+        if m > 8 * NOISE_DIFF_ORDER:
+            for hist in (*sched.history, sched.dq_history):
+                hist.clear()
+            run_statistics(sched, y, dts, v, speed)
+        g = sched.design(dt, 0)
+        if self.friction is not None:   # the outputs of the design's model (its c_eq)
+            self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
+            self.h = g.model.h[_SMOOTH_OUTPUTS]
+        uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
+        window, overlap = self.window or window_samples(
+            dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
+        longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
+        return SimpleNamespace(gains=g, dt=dt, speed=speed, dts=dts, uniform=uniform,
+                               steps=None if uniform else grid_steps(dts, dt), window=window,
+                               overlap=overlap, windowed=uniform and m > longer)
+
+    def _windowed(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray, v: np.ndarray,
+                  x0: np.ndarray) -> Iterator[tuple[int, int, list]]:
+        """A long evenly sampled run window by window (:meth:`_windows`): the load pass once
+        for its roll residual (the profile pass's roll moment), the road from the profile
+        pass over the whole run (:meth:`_profile`), then the load pass again (the same
+        windows, the same bits), each window's rows with the road put in."""
+        residual = np.empty(t.size)
+        for a, b, rows in self._windows(run, t, y, (Column.RESIDUAL,)):
+            residual[a:b] = rows[Column.RESIDUAL]
+        run.dts = None                             # an even run's profile does not need them
+        psd = offline_roll_moment_psd(residual, run.dt)
+        del residual
+        road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd)
+        for a, b, rows in self._windows(run, t, y):
+            rows[Column.U1][:] = road[0][a:b]
+            rows[Column.U2][:] = road[1][a:b]
+            yield a, b, rows
 
     def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
                  steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
-                 out: list) -> None:
+                 roll_moment_psd: float) -> tuple[np.ndarray, np.ndarray]:
         """The road columns of a run from the profile smoother (issue 21): the same model and
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
         profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
@@ -309,25 +443,28 @@ class _Smoother:
         cubic over the run, :data:`PROFILE_DETREND_DEGREE`): in time when the speed is steady
         (:func:`.body_heave.zero_phase`), else in distance with the rate corrected where the
         truck stands (:func:`.body_heave.in_distance`); where the model's speed ``v`` (m/s) is
-        0 the road is held. Only ``U1``, ``U2`` of ``out`` change; arguments as :meth:`run`
-        made them."""
+        0 the road is held. Returns the road ``(u_1, u_2)`` (m) of the run's samples;
+        ``roll_moment_psd`` ((N m)^2 / s) is what the load pass's roll residual shows
+        (:func:`.model.offline_roll_moment_psd`), the other arguments as :meth:`pieces` made
+        them."""
         # the roll moment as slow as the load pass's roll residual says it is
-        g = self.schedule.profile_design(
-            dt, 'offline', offline_roll_moment_psd(out[Column.RESIDUAL], dt))
+        g = self.schedule.profile_design(dt, 'offline', roll_moment_psd)
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
             pos = np.concatenate([[0], np.cumsum(steps)])
             grid = np.arange(int(pos[-1]) + 1)
             y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
-        cols = field_columns(y.shape[0])[1]
-        if uniform or steps is not None:
+        if uniform or steps is not None:        # only the road's columns held whole
+            cols = KeptColumns(y.shape[0], (Column.U1, Column.U2, Column.DDZS))
             self._uniform(g, dt, y, x0, cols)
         else:
+            cols = field_columns(y.shape[0])[1]
             self._uneven(g, dts, y, x0, cols)
         zs = self._profile_heave(cols, dt, speed, dts, uniform, pos, v)
         # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
         # contradict keeps the last trusted speed, :mod:`.speed_check`)
         standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
+        road = []
         for j in (Column.U1, Column.U2):
             u = cols[j] + zs
             u = u if pos is None else u[pos]
@@ -337,7 +474,8 @@ class _Smoother:
                 du = np.diff(u)
                 du[standing] = 0.0
                 u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
-            out[j][:] = u
+            road.append(u)
+        return road[0], road[1]
 
     def _profile_heave(self, cols: list, dt: float, speed: float, dts: np.ndarray,
                        uniform: bool, pos: np.ndarray | None, v: np.ndarray):
@@ -352,28 +490,32 @@ class _Smoother:
             speed, self.observer.profile_cutoff_wavelength_m,
             PROFILE_CUTOFF_RATIO, PROFILE_DETREND_DEGREE)
 
-    def _windows(self, g: Gains, dt: float, speed: float, t: np.ndarray, y: np.ndarray,
-                 out: list, window: int, overlap: int) -> None:
-        """An evenly sampled run window by window: rows ``a:b`` (``window`` of them) from the
-        smoother over ``a - overlap : b + overlap`` with the run's noise, roughness and gains;
-        the forward filter starts at the state the previous window's pass had there (the
-        run's first window at rest), the backward pass with no information at the window's
-        end; the body heave and the quasi-static LTR start at the window's start; the
-        converged flag counts from the run's start. What the edges change fades within the
-        overlap: ~1e-11 of each field's RMS (:data:`WINDOW_OVERLAP_TAUS`)."""
+    def _windows(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray,
+                 keep: tuple | None = None) -> Iterator[tuple[int, int, list | dict]]:
+        """An evenly sampled run window by window, ``(a, b, columns of rows a:b)``: rows
+        ``a:b`` (``run.window`` of them) from the smoother over ``a - overlap : b + overlap``
+        with the run's noise, roughness and gains (``run``: :meth:`_design_run`); the forward
+        filter starts at the state the previous window's pass had there (the run's first
+        window at rest), the backward pass with no information at the window's end; the body
+        heave and the quasi-static LTR start at the window's start; the converged flag counts
+        from the run's start. What the edges change fades within the overlap: ~1e-11 of each
+        field's RMS (:data:`WINDOW_OVERLAP_TAUS`). With ``keep`` (slots) only those columns,
+        as a dict, without the body heave."""
         m = t.size
+        g, dt, window, overlap = run.gains, run.dt, run.window, run.overlap
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
         for a in range(0, m, window):
             b = min(m, a + window)
             lo, hi = max(0, a - overlap), min(m, b + overlap)
             nxt = b - overlap if b < m else None        # where the next window starts
-            cols = field_columns(hi - lo)[1]
+            cols = field_columns(hi - lo)[1] if keep is None else KeptColumns(hi - lo, keep)
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
                                     keep=None if nxt is None else max(0, nxt) - lo)
-            self._heave(t[lo:hi], dt, speed, cols, t[0])
-            for j, col in enumerate(cols):
-                if j != Column.DISTANCE:
-                    out[j][a:b] = col[a - lo:b - lo]
+            if keep is None:
+                self._heave(t[lo:hi], dt, run.speed, cols, t[0])
+                yield a, b, [col[a - lo:b - lo] for col in cols]
+            else:
+                yield a, b, {j: cols[j][a - lo:b - lo] for j in keep}
             x0 = carried
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
@@ -460,46 +602,21 @@ class _Smoother:
         """
         m = y.shape[0]
         mats = [self._pass_matrices(g, dt, forces) for _, _, g in segs]
-        xf = np.empty((m, self.nx))
-        nu = np.empty((m, NY))
-        xf[0] = x0
-        nu[0] = 0.0
-        chunk = _SMOOTH_CHUNK
-        for (s0, s1, _), (a_run, kt, ca_t, _, _, _, fin) in zip(segs, mats):
-            for k0 in range(max(1, s0), s1, chunk):
-                k1 = min(s1, k0 + chunk)
-                drive = y[k0:k1] @ kt
-                if fin is not None:
-                    drive += fin[0][k0 - 1:k1 - 1]
-                xf[k0:k1] = lti(a_run, drive, xf[k0 - 1])
-                nu[k0:k1] = y[k0:k1] - xf[k0 - 1:k1 - 1] @ ca_t
-                if fin is not None:
-                    nu[k0:k1] -= fin[1][k0 - 1:k1 - 1]
         dq = None if out is not None else np.empty((2, m))
-        lam_next = np.zeros(self.nx)            # lam_(k1+1): lam_m = 0
-        for (s0, s1, _), (_, _, _, phi_t, u_t, pa_t, _) in zip(segs[::-1], mats[::-1]):
-            for k1 in range(s1, s0, -chunk):
-                k0 = max(s0, k1 - chunk)
-                xs = xf[k0:k1].copy()
-                # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1),
-                # from lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
-                lo, hi = k0 + 1, min(k1, m - 1)
-                lam = np.zeros((k1 - k0, self.nx))
-                if hi >= lo:
-                    seq = lti(phi_t, (nu[lo:hi + 1] @ u_t)[::-1], lam_next)[::-1]
-                    lam[:hi - lo + 1] = seq
-                    lam_next = seq[0]
-                xs += lam @ pa_t
-                if out is None:
-                    dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
-                    continue
+        fwd = None
+        for k0, k1, xs in smoothed_chunks(segs, mats, y, x0, _SMOOTH_CHUNK):
+            if k0 < 0:
+                fwd = xs
+            elif out is None:
+                dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
+            else:
                 o = self.h @ xs.T
                 if self.friction is not None:
                     o = o + self.fd @ self._forces(o)
-                self._outputs(o, [col[k0:k1] for col in out])
+                self._outputs(o, _rows(out, k0, k1))
         if out is None:
             return dq
-        return None if keep is None else xf[keep].copy()
+        return None if keep is None else fwd.states(keep, keep + 1)[0][0]
 
     def _pass_matrices(self, g: Gains, dt: float, forces: np.ndarray | None) -> tuple:
         """What :meth:`_uniform_pass` needs of the gains g at the step dt (s): the forward

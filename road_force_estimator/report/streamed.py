@@ -170,10 +170,13 @@ class StreamedSummary:
     """What :func:`.summary.summarize` reports of a drive, from consecutive pieces."""
 
     def __init__(self, segment_length_m: float, with_stamps: bool = False,
-                 capacity: int = 0) -> None:
+                 capacity: int = 0, spill=None) -> None:
         """``with_stamps``: keep the stamps of the samples that advance too (8 bytes a
         sample), for the segments' coordinates (a drive with ``/fix``); ``capacity``: the
-        samples expected (the columns reserved at once, never copied as they grow)."""
+        samples expected (the columns reserved at once, never copied as they grow);
+        ``spill``: a folder where the per-sample columns (distance, profile, stamps, speed:
+        32-48 bytes a sample) wait in temporary files until the end of the drive
+        (:class:`.core.spill.SpillColumn`) instead of memory."""
         self.segments = SegmentAccumulator(segment_length_m)
         self.inputs = 0
         self.converged = 0
@@ -192,13 +195,21 @@ class StreamedSummary:
         self.contra_samples = 0
         self.spans: list[list[int]] = []
         self._contra_open = False
-        self.x_up = GrowingArray(capacity=capacity)
-        self.road_up = GrowingArray(width=2, capacity=capacity)
-        self.stamps = GrowingArray(np.int64, capacity=capacity)
-        self.stamps_up = GrowingArray(np.int64, capacity=capacity) if with_stamps else None
+        if spill is None:
+            def column(dtype=float, width=None):
+                return GrowingArray(dtype, width, capacity=capacity)
+        else:
+            from road_force_estimator.core.spill import SpillColumn
+
+            def column(dtype=float, width=None):
+                return SpillColumn(dtype, width, spill)
+        self.x_up = column()
+        self.road_up = column(width=2)
+        self.stamps = column(np.int64)
+        self.stamps_up = column(np.int64) if with_stamps else None
         #: the distance of every accepted sample (with_stamps: for the fleet's polylines)
-        self.x_valid = GrowingArray(capacity=capacity) if with_stamps else None
-        self.speed = GrowingArray(capacity=capacity)
+        self.x_valid = column() if with_stamps else None
+        self.speed = column()
 
     def add(self, piece, speed_mps: np.ndarray) -> None:
         """One piece of estimates and the recorded speed of its samples (m/s)."""

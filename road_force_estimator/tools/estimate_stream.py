@@ -72,8 +72,10 @@ def use_stream(input_path: Path, mode: str, reference, observer,
     from road_force_estimator.bagio.drive_blocks import streamable
 
     limit = stream_threshold() if min_samples is None else min_samples
-    if mode != 'online' or reference is not None:
+    if reference is not None or mode not in ('online', 'offline'):
         return False
+    if mode == 'offline' and observer.discretization != 'model':
+        return False                # the differentiators' zero-phase chain: one piece
     return streamable(input_path) >= limit
 
 
@@ -196,7 +198,7 @@ def run_stream(folder: Path, output: Path, input_path: Path, vehicle, observer,
     run.estimate(progress)
     extra, written = run.close_bag()
     stages.next('writing the report' + (' and figures' if options['figures'] else ''))
-    doc = _write_report(folder / 'report', run.summary, run.stream.status, run.drive(),
+    doc = _write_report(folder / 'report', run.summary, run.stream, run.drive(),
                         vehicle, observer, extra, input_path.name, options, run.figures)
     warnings = [f'{input_path}: {issue}' for issue in run.reader.issues]
     return api.result(doc, output / 'bag', output / 'report', run.summary.track(), written,
@@ -212,15 +214,20 @@ class _StreamRun:
         from road_force_estimator.bagio.drive_blocks import (
             BLOCK_SAMPLES, DriveBlocks, streamable)
         from road_force_estimator.bagio.estimate_stream import EstimateBagStream
+        from road_force_estimator.estimation.offline_stream import OfflineStream
         from road_force_estimator.estimation.stream_run import OnlineStream
         from road_force_estimator.report.figures import DEFAULT_WINDOW_S
         from road_force_estimator.report.streamed import StreamedSummary
-        from road_force_estimator.tools.stream_figures import Snapshots
+        from road_force_estimator.tools.stream_figures import OfflineWindow, Snapshots
 
         self.folder, self.input_path, self.api = folder, input_path, api
         self.vehicle, self.observer, self.options = vehicle, observer, options
         self.reader = DriveBlocks(input_path, block_samples or BLOCK_SAMPLES)
-        self.stream = OnlineStream(vehicle, observer)
+        self.offline = options['mode'] == 'offline'
+        # offline, the columns needed only piece by piece wait in files in the output folder
+        self.stream = (OfflineStream(vehicle, observer, capacity=streamable(input_path),
+                                     spill=folder)
+                       if self.offline else OnlineStream(vehicle, observer))
         custom = {'road_force_estimator.mode': options['mode'],
                   'road_force_estimator.input': input_path.name,
                   'road_force_estimator.writer_command': api.prog}
@@ -228,10 +235,14 @@ class _StreamRun:
                                      custom_data=custom)
         self.summary = StreamedSummary(options['segment_length_m'],
                                        with_stamps=_has_fixes(input_path),
-                                       capacity=streamable(input_path))
+                                       capacity=streamable(input_path), spill=folder)
         self.diag, self.fit = _DiagnosticWindows(), _ModelFit()
-        self.speeds: list[np.ndarray] = []
-        self.snapshots = Snapshots(DEFAULT_WINDOW_S) if options['figures'] else None
+        self.speeds = _Queue(folder if self.offline else None)
+        self.snapshots = self.window = None
+        if options['figures'] and self.offline:
+            self.window = OfflineWindow(DEFAULT_WINDOW_S, self.stream)
+        elif options['figures']:
+            self.snapshots = Snapshots(DEFAULT_WINDOW_S)
 
     def estimate(self, progress: bool) -> None:
         """Every block through the estimator, the pieces to the bag and the accumulators;
@@ -250,7 +261,9 @@ class _StreamRun:
                 if progress:
                     print(f'{self.api.prog}: {self.summary.inputs} samples', end='\r',
                           flush=True, file=sys.stderr)
-            for piece in self.stream.finish():
+            rest = (self.stream.finish(self.reader.fixes) if self.offline
+                    else self.stream.finish())
+            for piece in rest:
                 self._consume(piece)
             problem = self._problem()
         except BagReadError as err:
@@ -267,12 +280,13 @@ class _StreamRun:
         """One piece of estimates to the bag, the report's accumulators, the diagnostics and
         the model fit (with the recorded speeds of its samples)."""
         m = len(piece.stamp_ns)
-        v = np.concatenate(self.speeds) if len(self.speeds) > 1 else self.speeds[0]
-        self.speeds[:] = [v[m:]]
+        v = self.speeds.take(m)
         self.bag.write(piece)
-        self.summary.add(piece, v[:m])
+        self.summary.add(piece, v)
         self.diag.add(piece)
         self.fit.add(piece)
+        if self.window is not None:
+            self.window.keep(piece, self.summary)
 
     def _problem(self) -> str | None:
         """Why nothing can be estimated (the one-piece path's reasons), or None."""
@@ -295,13 +309,17 @@ class _StreamRun:
 
         status, reader, prog = self.stream.status, self.reader, self.api.prog
         extra: dict[str, Any] = {}
-        if self.observer.distance_source == 'gnss':
+        if self.observer.distance_source == 'gnss' and not self.offline:
             extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
         if reader.early:
             extra['samples before the first twist (given its speed)'] = reader.early
         counts = {'samples': self.summary.inputs, 'estimated': int(status.accepted),
                   'rejected_by_reader': int(reader.rejected_total),
                   'rejected_by_estimator': int(status.rejected), 'resets': int(status.resets)}
+        fit = getattr(self.stream, 'odometer', None)  # observer.distance_source = gnss, offline
+        if fit is not None and not fit.problem:
+            counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
+                          odometer_fixes_rejected=fit.rejected)
         verdict = self.fit.result(self.summary, status, self.vehicle, self.observer)
         if verdict is not None:
             extra['model fit'] = (f'{verdict[1]} (residual band RMS {verdict[0]:.3g} x '
@@ -325,13 +343,57 @@ class _StreamRun:
         from road_force_estimator.report.folder import static_line
         from road_force_estimator.tools.stream_figures import draw
 
-        if self.snapshots is None:
+        keeper = self.window if self.offline else self.snapshots
+        if keeper is None:
             return []
         name, mode = self.input_path.name, self.options['mode']
         return draw(self.folder / 'report', self.input_path, self.reader.block_samples,
-                    self.snapshots, self.summary, segments,
+                    keeper, self.summary, segments,
                     f'{name} ({mode})' if name else mode, self.options['units'],
-                    static_line(doc, self.vehicle))
+                    static_line(doc, self.vehicle), self._rerun)
+
+    def _rerun(self):
+        """A new stream of this drive's estimates (the offline detail window's fallback:
+        :class:`.stream_figures.OfflineWindow`): the blocks read again, its pieces."""
+        from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
+        from road_force_estimator.estimation.offline_stream import OfflineStream
+
+        reader = DriveBlocks(self.input_path, self.reader.block_samples)
+        stream = OfflineStream(self.vehicle, self.observer,
+                               capacity=streamable(self.input_path))
+        for block in reader:
+            stream.feed(block.stamps_ns, block.q_m, block.roll_rad, block.speed_mps)
+        return stream.finish(reader.fixes)
+
+
+class _Queue:
+    """The recorded speeds of the samples read and not yet estimated, first in first out:
+    in memory (online: a block or two), or in a temporary file in ``spill`` (offline: the
+    whole drive is read before its first estimate)."""
+
+    def __init__(self, spill=None) -> None:
+        self.parts: list[np.ndarray] = []
+        self.file = None
+        self.done = 0
+        if spill is not None:
+            from road_force_estimator.core.spill import SpillColumn
+
+            self.file = SpillColumn(float, None, spill)
+
+    def append(self, values: np.ndarray) -> None:
+        if self.file is not None:
+            self.file.append(values)
+        else:
+            self.parts.append(values)
+
+    def take(self, m: int) -> np.ndarray:
+        """The next m values."""
+        if self.file is not None:
+            self.done += m
+            return self.file.read(self.done - m, self.done)
+        v = np.concatenate(self.parts) if len(self.parts) > 1 else self.parts[0]
+        self.parts[:] = [v[m:]]
+        return v[:m]
 
 
 def _has_fixes(input_path: Path) -> bool:
@@ -345,7 +407,7 @@ def _has_fixes(input_path: Path) -> bool:
                (info.get('topics_with_message_count') or []))
 
 
-def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: dict,
+def _write_report(folder: Path, acc, stream, drive, vehicle, observer, extra: dict,
                   input_name: str, options: dict, figures) -> dict[str, Any]:
     """``report.md``, ``segments.csv``, ``report.json`` and the figures
     (``figures(segments, summary)`` draws them) as :func:`.report.write_report`, from the
@@ -354,7 +416,7 @@ def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: di
     from road_force_estimator.report.markdown import write_markdown
 
     folder.mkdir(parents=True, exist_ok=True)
-    summary, segments = _summary(acc, status, drive, vehicle, observer, extra, input_name,
+    summary, segments = _summary(acc, stream, drive, vehicle, observer, extra, input_name,
                                  options)
     names = figures(segments, summary)
     summary['figures'] = names
@@ -364,13 +426,15 @@ def _write_report(folder: Path, acc, status, drive, vehicle, observer, extra: di
     return summary
 
 
-def _summary(acc, st, drive, vehicle, observer, extra: dict, input_name: str,
+def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str,
              options: dict) -> tuple[dict[str, Any], dict]:
-    """:func:`.summary.summarize`'s ``(summary, segments)`` of a streamed drive."""
+    """:func:`.summary.summarize`'s ``(summary, segments)`` of a streamed drive (``stream``:
+    its :class:`.OnlineStream` or :class:`.OfflineStream`)."""
     from road_force_estimator import __version__
     from road_force_estimator.report.summary import (
         convergence_summary, notes, rejections, segment_counts)
 
+    st = stream.status
     rejected = rejections(drive, st)
     t_s = (0.0 if acc.t0_ns is None else (acc.last_ns - acc.t0_ns) * 1e-9)
     judged = 'converged' if acc.converged or acc.t0_ns is None else 'settling time'
@@ -405,6 +469,8 @@ def _summary(acc, st, drive, vehicle, observer, extra: dict, input_name: str,
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(notes(SimpleNamespace(), extra))
+    if getattr(stream, 'fused', False):           # observer.distance_source = gnss, offline
+        summary['odometer'] = stream.odometer.as_dict() if stream.odometer is not None else None
     summary.update(acc.speed_findings())
     summary['accuracy'] = None
     segments = acc.segment_table(drive.fixes)

@@ -9,21 +9,48 @@ estimator resumes from the snapshot before the window, over the blocks read agai
 figures are drawn from the estimates of the window's samples (the same numbers as in one
 piece: the chain is causal). The profile and overview figures then show the window's
 profile (band-passed over the window) with the segments of the whole drive.
+
+Offline (:class:`.OfflineStream`) the pieces come only once the whole drive is read, and the
+smoother cannot resume: :class:`OfflineWindow` keeps the pieces within the window predicted
+with the drive's last estimated stamp as the end of its converged stretch (the smoother's
+flag only rises within a run), and the figures are drawn from them when the final window is
+that one; else the drive is estimated again for them (the same numbers).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import pickle
 from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ['Snapshots', 'window_bounds', 'draw']
+__all__ = ['Snapshots', 'OfflineWindow', 'Window', 'window_bounds', 'draw']
 
 
-def window_bounds(acc, length_s: float) -> tuple[int, int] | None:
-    """``(first, last)`` stamps (ns) of the detail window that :func:`.figures._window` picks
-    on the whole drive (from the accumulators ``acc``: :class:`~.report.streamed.
-    StreamedSummary`), None without one."""
+@dataclass(frozen=True)
+class Window:
+    """A detail window as :func:`.figures._window` picks it: the samples whose time
+    ``(stamp - t0_ns) * 1e-9`` (s, the same float expression) lies in ``[start_s, end_s]``."""
+
+    t0_ns: int
+    start_s: float
+    end_s: float
+
+    def inside(self, stamps_ns) -> np.ndarray:
+        """Which stamps (ns) are in the window (bool)."""
+        t = (np.asarray(stamps_ns) - self.t0_ns) * 1e-9
+        return (t >= self.start_s) & (t <= self.end_s)
+
+    @property
+    def ns(self) -> tuple[int, int]:
+        """Stamps (ns) just outside the window on either side."""
+        return (self.t0_ns + int(np.floor(self.start_s * 1e9)) - 1,
+                self.t0_ns + int(np.ceil(self.end_s * 1e9)) + 1)
+
+
+def window_bounds(acc, length_s: float) -> Window | None:
+    """The detail window that :func:`.figures._window` picks on the whole drive (from the
+    accumulators ``acc``: :class:`~.report.streamed.StreamedSummary`), None without one."""
     if acc.t0_ns is None or acc.last_ns == acc.t0_ns:
         return None
     if acc.first_converged_ns is not None:
@@ -32,8 +59,7 @@ def window_bounds(acc, length_s: float) -> tuple[int, int] | None:
     else:
         lo, hi = 0.0, (acc.last_ns - acc.t0_ns) * 1e-9
     start = lo + max(0.0, (hi - lo - length_s)) / 3.0
-    return acc.t0_ns + int(np.floor(start * 1e9)), acc.t0_ns + int(np.ceil(
-        (start + length_s) * 1e9))
+    return Window(int(acc.t0_ns), start, start + length_s)
 
 
 class Snapshots:
@@ -48,7 +74,7 @@ class Snapshots:
         bounds = window_bounds(acc, self.length_s)
         if bounds is None:
             return
-        while len(self.items) > 1 and self.items[1][1] <= bounds[0]:
+        while len(self.items) > 1 and self.items[1][1] <= bounds.ns[0]:
             self.items.pop(0)
 
     def resume(self, first_ns: int):
@@ -60,15 +86,57 @@ class Snapshots:
         return best[0], pickle.loads(best[2])
 
 
-def _window_pieces(reader, index: int, stream, bounds: tuple[int, int]):
-    """Estimates and inputs of the samples stamped within ``bounds`` (ns), the estimator
-    resumed at block ``index`` of ``reader`` (read again from the start)."""
-    lo, hi = bounds
+class OfflineWindow:
+    """The offline detail window's pieces (see the module notes): :meth:`keep` each piece once
+    the accumulators ``acc`` (:class:`~.report.streamed.StreamedSummary`) have it; ``stream``
+    the :class:`.OfflineStream` (its ``last_stamp_ns``)."""
+
+    def __init__(self, length_s: float, stream) -> None:
+        self.length_s, self.stream = length_s, stream
+        self.bounds: Window | None = None
+        self.pieces: list = []
+
+    def keep(self, piece, acc) -> None:
+        end = self.stream.last_stamp_ns
+        first = acc.first_converged_ns
+        guess = SimpleNamespace(t0_ns=acc.t0_ns, last_ns=end, first_converged_ns=first,
+                                last_converged_ns=None if first is None else end)
+        bounds = window_bounds(guess, self.length_s)
+        if bounds != self.bounds:
+            self.bounds = bounds
+            self.pieces = [p for p in self.pieces if _inside(p, bounds).any()]
+        if bounds is not None and _inside(piece, bounds).any():
+            self.pieces.append(piece)
+
+
+def _inside(piece, bounds: Window | None) -> np.ndarray:
+    """Which rows of a piece are in the window ``bounds``."""
+    if bounds is None:
+        return np.zeros(len(piece.stamp_ns), bool)
+    return bounds.inside(piece.stamp_ns)
+
+
+def _window_inputs(reader, bounds: Window) -> list:
+    """The inputs ``(q, roll)`` of the samples in the window ``bounds``, per block."""
+    inputs = []
+    for block in reader:
+        inside = bounds.inside(block.stamps_ns)
+        if inside.any():
+            inputs.append((block.q_m[inside], block.roll_rad[inside]))
+        if block.stamps_ns.size and block.stamps_ns[-1] > bounds.ns[1]:
+            break
+    return inputs
+
+
+def _window_pieces(reader, index: int, stream, bounds: Window):
+    """Estimates and inputs of the samples in the window ``bounds``, the estimator resumed
+    at block ``index`` of ``reader`` (read again from the start)."""
+    hi = bounds.ns[1]
     pieces, inputs = [], []
     for i, block in enumerate(reader):
         if i < index:
             continue
-        inside = (block.stamps_ns >= lo) & (block.stamps_ns <= hi)
+        inside = bounds.inside(block.stamps_ns)
         if inside.any():
             inputs.append((block.q_m[inside], block.roll_rad[inside]))
         pieces += stream.feed(block.stamps_ns, block.q_m, block.roll_rad, block.speed_mps)
@@ -79,14 +147,13 @@ def _window_pieces(reader, index: int, stream, bounds: tuple[int, int]):
     return pieces, inputs
 
 
-def _select(pieces: list, bounds: tuple[int, int]):
-    """One :class:`EstimateArrays` of the pieces' samples within ``bounds``."""
+def _select(pieces: list, bounds: Window):
+    """One :class:`EstimateArrays` of the pieces' samples in the window ``bounds``."""
     from road_force_estimator.estimation.outputs import FIELD_COLUMNS, EstimateArrays
 
-    lo, hi = bounds
     parts = []
     for p in pieces:
-        m = (p.stamp_ns >= lo) & (p.stamp_ns <= hi)
+        m = bounds.inside(p.stamp_ns)
         if m.any():
             parts.append((p, m))
     if not parts:
@@ -97,19 +164,28 @@ def _select(pieces: list, bounds: tuple[int, int]):
     return EstimateArrays(status=parts[-1][0].status, **fields)
 
 
-def draw(folder, input_path, block_samples: int, snapshots: Snapshots, acc, segments: dict,
-         title: str, units: str, static_load_n) -> list[str]:
-    """The figures' file names written into ``folder`` (none without a window)."""
+def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
+         title: str, units: str, static_load_n, rerun=None) -> list[str]:
+    """The figures' file names written into ``folder`` (none without a window). ``keeper``:
+    the :class:`Snapshots` of an online drive or the :class:`OfflineWindow` of an offline
+    one (``rerun()``: the drive's pieces again, when its guess missed)."""
     from road_force_estimator.bagio.drive_blocks import DriveBlocks
     from road_force_estimator.report.alignment import align
     from road_force_estimator.report.figures import DEFAULT_WINDOW_S, write_figures
 
     bounds = window_bounds(acc, DEFAULT_WINDOW_S)
-    if bounds is None or not snapshots.items:
+    if bounds is None:
         return []
-    index, stream = snapshots.resume(bounds[0])
-    pieces, inputs = _window_pieces(DriveBlocks(input_path, block_samples), index, stream,
-                                    bounds)
+    if isinstance(keeper, OfflineWindow):
+        pieces = (keeper.pieces if keeper.bounds == bounds else
+                  [p for p in rerun() if _inside(p, bounds).any()])
+        inputs = _window_inputs(DriveBlocks(input_path, block_samples), bounds)
+    elif keeper.items:
+        index, stream = keeper.resume(bounds.ns[0])
+        pieces, inputs = _window_pieces(DriveBlocks(input_path, block_samples), index,
+                                        stream, bounds)
+    else:
+        return []
     est = _select(pieces, bounds)
     if est is None or np.count_nonzero(est.valid) < 2:
         return []

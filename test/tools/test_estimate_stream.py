@@ -14,7 +14,8 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.interfaces import DEFLECTION_JOINTS
-from road_force_estimator.tools import estimate_bag, estimate_stream
+from road_force_estimator.estimation import smoother
+from road_force_estimator.tools import estimate_bag, estimate_stream, stream_figures
 
 BASE = 1_700_000_000 * 10**9
 
@@ -106,6 +107,12 @@ def test_streamed_equals_one_piece(drive, tmp_path, monkeypatch, latency_s, segm
     monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
     streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
+    assert_same_outputs(one, streamed, tmp_path)
+
+
+def assert_same_outputs(one, streamed, tmp_path):
+    """The streamed run's bag messages (mcap library), report files and marker are the
+    one-piece run's."""
     track = streamed.estimates                            # never held whole
     assert not hasattr(track, 'wheel_load_n')
     rows = np.flatnonzero(one.estimates.valid)
@@ -124,7 +131,7 @@ def test_streamed_equals_one_piece(drive, tmp_path, monkeypatch, latency_s, segm
     assert ja['rejected']['/suspension/deflections'] == {
         'backwards_stamp': 1, 'duplicate_stamp': 2, 'nonfinite': 3}
     assert ja['notes']['samples before the first twist (given its speed)'] == 30
-    assert ja['segments'] >= (8 if segment_m < 10 else 1)
+    assert ja['segments'] >= (8 if ja['segment_length_m'] < 10 else 1)
     assert np.isfinite(ja['iri_m_per_km']['estimated']).all()
     assert ja['fixes'] == 41
     rows = (tmp_path / 'str' / 'report' / 'segments.csv').read_text().splitlines()
@@ -137,11 +144,43 @@ def written(folder):
     return [f for f in marker['files'] if not f.endswith('.mcap')]
 
 
+def small_windows(monkeypatch, window=700, overlap=300):
+    """The offline smoother's runs in windows of ``window`` samples (overlap ``overlap``),
+    in one piece and streamed alike."""
+    monkeypatch.setattr(smoother, 'window_samples', lambda *a, **k: (window, overlap))
+    monkeypatch.setattr(smoother, 'WINDOWED_RUNS', 1)
+
+
+@pytest.mark.parametrize('windows, segment_m, block, gnss', [
+    (True, 6.5, 700, False), (False, 7.0, 333, False), (True, 100.0, 1 << 16, True)])
+def test_streamed_offline_equals_one_piece(drive, tmp_path, monkeypatch, windows, segment_m,
+                                           block, gnss):
+    """Offline (the model's smoother): the streamed drive's rows come run by run and, in
+    windows, window by window (smoother.smoothed_rows, as smooth): the same bytes."""
+    if windows:
+        small_windows(monkeypatch)
+    observer = dataclasses.replace(ObserverParameters(),
+                                   distance_source='gnss' if gnss else 'speed')
+    kw = dict(observer=observer, segment_length_m=segment_m, figures=False, mode='offline')
+    one = estimate_bag.run(drive, tmp_path / 'one', **kw)
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
+    streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
+    assert_same_outputs(one, streamed, tmp_path)
+    assert ('odometer' in streamed.summary) == gnss
+
+
 def test_short_drives_stay_in_one_piece(drive, tmp_path):
-    """Below STREAM_MIN_SAMPLES (and with a reference or offline) one piece, as before."""
-    assert not estimate_stream.use_stream(drive, 'online', None, ObserverParameters())
-    assert estimate_stream.use_stream(drive, 'online', None, ObserverParameters(), 1)
-    assert not estimate_stream.use_stream(drive, 'online', object(), ObserverParameters(), 1)
+    """Below STREAM_MIN_SAMPLES (and with a reference, or offline with a differentiator
+    scheme) one piece, as before."""
+    obs = ObserverParameters()
+    assert not estimate_stream.use_stream(drive, 'online', None, obs)
+    assert not estimate_stream.use_stream(drive, 'offline', None, obs)
+    assert estimate_stream.use_stream(drive, 'online', None, obs, 1)
+    assert estimate_stream.use_stream(drive, 'offline', None, obs, 1)
+    assert not estimate_stream.use_stream(drive, 'online', object(), obs, 1)
+    implicit = dataclasses.replace(obs, discretization='implicit')
+    assert not estimate_stream.use_stream(drive, 'offline', None, implicit, 1)
 
 
 def test_a_streamed_drive_without_twist_is_refused(tmp_path, monkeypatch, capsys):
@@ -170,3 +209,23 @@ def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
         assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
             (tmp_path / 'str' / 'report' / name).read_bytes(), name
     assert estimate_stream.FIGURES_NOTE in streamed.summary['notes']
+
+
+@pytest.mark.parametrize('guess', [True, False])
+def test_streamed_offline_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch, guess):
+    """Offline the detail window's pieces are kept as they pass (OfflineWindow's guess of
+    the window), or, when the guess missed, the drive is estimated again: the same
+    pictures as in one piece either way."""
+    small_windows(monkeypatch, 900, 300)
+    kw = dict(segment_length_m=10.0, mode='offline')
+    one = estimate_bag.run(drive, tmp_path / 'one', **kw)
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
+    if not guess:           # a wrong guess of the drive's end: the window estimated again
+        monkeypatch.setattr(stream_figures.OfflineWindow, 'keep', lambda self, p, a: None)
+    streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
+    assert streamed.summary['figures'] == one.summary['figures']
+    assert len(one.summary['figures']) == 6
+    for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
+        assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
+            (tmp_path / 'str' / 'report' / name).read_bytes(), name

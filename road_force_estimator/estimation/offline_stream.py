@@ -1,0 +1,198 @@
+"""The offline estimate of a long drive handed out piece by piece, as :func:`.offline.
+estimate_recording` gives it in one piece (issue 21: memory that does not grow with the drive
+but by a few whole-run arrays).
+
+The model observer's smoother (:mod:`.smoother`) needs the whole run before its first row
+(its noise and roughness statistics, the profile pass over the whole run), so
+:meth:`OfflineStream.feed` only gathers the inputs (40 bytes a sample) and
+:meth:`OfflineStream.finish` yields the estimates: :func:`.smoother.prepare` and
+:func:`.smoother.smoothed_rows`, the same functions :func:`.smoother.smooth` runs, with a
+long run's rows coming window by window (:meth:`.smoother.Smoother.pieces`) and never held
+whole. Pieces of at most :data:`PIECE_ROWS` consecutive input rows; a rejected sample holds
+the previous row (zeros before the first accepted one). Concatenated, the pieces are
+:func:`.smoother.smooth`'s arrays bit for bit (test_offline_stream); the windows' own
+difference from a smoother over the whole run in one go is ~1e-11 of each field's RMS
+(:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m bench.offline_windows``).
+
+Only the model's smoother (``observer.discretization: model``, the default) streams; the
+differentiator schemes' zero-phase chain (:func:`.offline.estimate_offline`) is one piece.
+"""
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
+from road_force_estimator.estimation.outputs import (
+    N_COLUMNS, EstimateArrays, EstimatorStatus, arrays_from_table)
+from road_force_estimator.estimation.smoother import (
+    LAST_ROW_FIELDS, Smoother, fill_status, prepare, rows_of, smoothed_rows)
+
+__all__ = ['PIECE_ROWS', 'OfflineStream']
+
+#: Most input rows of a piece handed out.
+PIECE_ROWS = 1 << 16
+
+
+class OfflineStream:
+    """:func:`.offline.estimate_recording` (model smoother) over blocks of samples.
+
+    :meth:`feed` gathers a block (returns no piece: the smoother needs the whole drive),
+    :meth:`finish` yields the pieces; :attr:`status` is the estimate's (complete once
+    :meth:`finish` is exhausted, with ``negative_load_samples`` over every piece), and
+    :attr:`odometer` the GNSS fit when the distance is fused (``observer.distance_source:
+    gnss`` and ``fixes`` given to :meth:`finish`).
+    """
+
+    def __init__(self, vehicle: VehicleParameters | None = None,
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S, capacity: int = 0,
+                 window: tuple[int, int] | None = None, spill=None) -> None:
+        self.vehicle = VehicleParameters() if vehicle is None else vehicle
+        self.observer = ObserverParameters() if observer is None else observer
+        if self.observer.discretization != 'model':
+            raise ValueError('OfflineStream: only the model smoother streams '
+                             f'(observer.discretization = {self.observer.discretization!r})')
+        self.gap_threshold_s = gap_threshold_s
+        self.window = window
+        #: a folder (or True: the system's temporary folder) for the per-sample columns
+        #: needed only piece by piece (:class:`.core.spill.SpillColumn`); None: in memory
+        self.spill = spill
+        self._n = 0
+        self._buf = _Inputs(max(int(capacity), 1))
+        self.status = EstimatorStatus()
+        self.odometer = None
+        self.fused = False
+        #: the last accepted stamp (ns; None before :meth:`finish` or without one)
+        self.last_stamp_ns: int | None = None
+
+    def feed(self, stamps_ns, q_m, roll_rad, speed_mps) -> list[EstimateArrays]:
+        """One block of samples (stamps ns, q (k, 2) m, roll rad, speed m/s); no piece."""
+        self._buf.append(stamps_ns, q_m, roll_rad, speed_mps)
+        return []
+
+    def finish(self, fixes=None) -> Iterator[EstimateArrays]:
+        """The estimates, piece after piece, in input order (see the module notes)."""
+        stamps, q, phi, v = self._buf.arrays()
+        self._buf = None
+        if self.observer.distance_source == 'gnss' and fixes is not None:
+            from road_force_estimator.estimation.offline import fused_speed
+
+            self.fused = True
+            v, self.odometer = fused_speed(stamps, v, fixes)
+        prep = prepare(stamps, q, phi, v, self.vehicle, self.observer,
+                       gap_threshold_s=self.gap_threshold_s)
+        del stamps, q, phi, v
+        self.last_stamp_ns = prep.last_stamp_ns
+        if self.spill:            # needed only piece by piece: out of memory until then
+            prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
+                prep.stamps_out, self.spill)
+        smoother = Smoother(prep.vehicle, prep.observer, self.window)
+        self.status = EstimatorStatus(**prep.counts)
+        out = _Pieces(prep, self.status)
+        for rows, part in smoothed_rows(prep, smoother):
+            k = part[0].shape[0]
+            for a in range(0, k, PIECE_ROWS):        # a run in one piece: its rows in pieces
+                b = min(k, a + PIECE_ROWS)
+                end = rows.start + b if isinstance(rows, slice) else int(rows[b - 1]) + 1
+                yield from out.emit(end, np.column_stack([col[a:b] for col in part]))
+            del part
+        yield from out.emit(prep.n, np.zeros((0, N_COLUMNS)))
+        acc = prep.acc
+        fill_status(self.status, acc.size, prep.contradicted, prep.last_stamp_ns,
+                    out.last_accepted, smoother)
+        self.status.negative_load_samples = out.negative_load_samples
+
+
+def _spilled(column: np.ndarray, spill):
+    """``column`` moved into a :class:`.core.spill.SpillColumn` (in ``spill``, a folder, or
+    the system's temporary folder for True)."""
+    from road_force_estimator.core.spill import SpillColumn
+
+    out = SpillColumn(column.dtype, None if column.ndim == 1 else column.shape[1],
+                      None if spill is True else spill)
+    for a in range(0, column.shape[0], 1 << 20):
+        out.append(column[a:a + (1 << 20)])
+    return out
+
+
+class _Inputs:
+    """Growable input columns (doubling, trimmed by :meth:`arrays`): the stamps, the
+    measurements ``[q_1, q_2, phi]`` as one (n, 3) array (the smoother's, not copied
+    again), the speeds."""
+
+    def __init__(self, capacity: int) -> None:
+        self.n = 0
+        self.cols = [np.empty(capacity, np.int64), np.empty((capacity, 3)), np.empty(capacity)]
+
+    def append(self, stamps_ns, q_m, roll_rad, speed_mps) -> None:
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        k = stamps.shape[0]
+        if self.n + k > self.cols[0].shape[0]:
+            size = max(2 * self.cols[0].shape[0], self.n + k)
+            self.cols = [np.concatenate([c[:self.n], np.empty((size - self.n,) + c.shape[1:],
+                                                              c.dtype)]) for c in self.cols]
+        rows = slice(self.n, self.n + k)
+        self.cols[0][rows] = stamps
+        self.cols[1][rows, :2] = np.asarray(q_m, dtype=float)
+        self.cols[1][rows, 2] = np.asarray(roll_rad, dtype=float)
+        self.cols[2][rows] = np.broadcast_to(np.asarray(speed_mps, dtype=float), (k,))
+        self.n += k
+
+    def arrays(self) -> list[np.ndarray]:
+        """stamps (n,), q (n, 2), phi (n,), speed (n,): q and phi views of one array."""
+        cols = self.cols
+        self.cols = []
+        stamps, y, v = (c[:self.n] for c in cols)    # views (no copy of a long drive)
+        return [stamps, y[:, :2], y[:, 2], v]
+
+
+class _Pieces:
+    """The rows of :func:`.smoother.smoothed_rows` as pieces of input rows: accepted rows in
+    order, rejected ones holding the previous row (zeros before the first)."""
+
+    def __init__(self, prep, status: EstimatorStatus) -> None:
+        self.prep, self.status = prep, status
+        self.row = 0                      # the next input row
+        self.done = 0                     # accepted rows handed out
+        self.held = np.zeros(N_COLUMNS)   # the row a rejected sample holds
+        self.last_accepted: dict | None = None
+        self.negative_load_samples = 0
+
+    def emit(self, end: int, accepted: np.ndarray) -> Iterator[EstimateArrays]:
+        """Input rows ``self.row:end``, whose accepted ones are the rows ``accepted``
+        (k, :data:`.N_COLUMNS`), as pieces."""
+        p0, prep = self.row, self.prep
+        if end <= p0:
+            return
+        first = p0 + int(np.argmax(prep.valid[p0:end])) if accepted.shape[0] else end
+        if first - p0 > PIECE_ROWS:       # a long stretch of rejected rows: pieces of its own
+            for a in range(p0, first, PIECE_ROWS):
+                yield from self.emit(min(first, a + PIECE_ROWS), accepted[:0])
+            p0 = self.row
+        ok = prep.valid[p0:end]
+        k = accepted.shape[0]
+        table = np.empty((end - p0, N_COLUMNS))
+        table[ok] = accepted
+        if k < end - p0:                  # rejected rows: the last accepted row before them
+            src = np.where(ok, np.arange(end - p0), -1)
+            np.maximum.accumulate(src, out=src)
+            rej = ~ok
+            table[rej & (src >= 0)] = table[src[rej & (src >= 0)]]
+            table[rej & (src < 0)] = self.held
+        self.held = table[-1].copy()
+        flags = np.zeros(end - p0, bool)
+        flags[ok] = prep.contradicted[self.done:self.done + k]
+        self.row, self.done = end, self.done + k
+        for a in range(0, end - p0, PIECE_ROWS):
+            b = min(end - p0, a + PIECE_ROWS)
+            piece = arrays_from_table(table[a:b], rows_of(prep.stamps_out, p0 + a, p0 + b),
+                                      ok[a:b], self.status, flags[a:b])
+            self.negative_load_samples += piece.negative_load_samples()
+            rows = np.flatnonzero(piece.valid)
+            if rows.size:
+                self.last_accepted = {name: getattr(piece, name)[rows[-1]]
+                                      for name in LAST_ROW_FIELDS}
+            yield piece

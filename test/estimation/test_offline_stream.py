@@ -1,0 +1,168 @@
+"""The offline estimate piece by piece (estimation.offline_stream) against smooth() in one
+piece, the chunked RTS pass (estimation.rts_pass) against the textbook sample loop, and the
+static loads' rows in pieces (Reconstruction.restatic) against one call."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.core.sensors import SensorModel
+from road_force_estimator.estimation import offline_stream
+from road_force_estimator.estimation.lti import Powers
+from road_force_estimator.estimation.offline_stream import OfflineStream
+from road_force_estimator.estimation.outputs import FIELD_COLUMNS, Column, field_columns
+from road_force_estimator.estimation.reconstruction import Reconstruction
+from road_force_estimator.estimation.rts_pass import smoothed_chunks
+from road_force_estimator.estimation.smoother import smooth
+
+VEHICLE = VehicleParameters()
+BASE = 1_700_000_000 * 10**9
+#: braking to a stop, standing, pulling away (t s, v m/s)
+STOP = ([0.0, 2.0, 4.0, 6.0, 8.0, 10.0], [20.0, 20.0, 0.0, 0.0, 20.0, 20.0])
+
+
+def _drive(vehicle, duration_s=10.0, profile=None, seed=3):
+    road = iso8608_profile('C', 20.0 * duration_s + 60.0, seed=seed)
+    d = simulate(vehicle, road, speed_mps=20.0, rate_hz=1000.0, duration_s=duration_s,
+                 tire_envelope_m=0.25, **({'speed_profile': profile} if profile else {}))
+    q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5).measure(
+        d.q_m, d.roll_rad)
+    t = np.asarray(d.t_s)
+    v = np.interp(t, *profile) if profile else np.full(t.size, 20.0)
+    q = np.array(q) + np.asarray(vehicle.deflection_offset_m)
+    return BASE + np.round(t * 1e9).astype(np.int64), q, np.array(phi), v
+
+
+def _defects(stamps, q):
+    """Rejected samples (one before the first accepted), a duplicate stamp, a 0.4 s gap."""
+    q, stamps = q.copy(), stamps.copy()
+    q[[0, 100, 5000], 0] = np.nan
+    stamps[200] = stamps[199]
+    stamps[6000:] += 400_000_000
+    return stamps, q
+
+
+CASES = {
+    'plain': (VEHICLE, None, False),
+    'defects': (VEHICLE, None, True),
+    'zero_load': (dataclasses.replace(VEHICLE, deflection_reference='zero_load'), None, True),
+    'friction': (dataclasses.replace(VEHICLE, leaf_spring_friction_n=(1500.0, 1500.0)), None,
+                 False),
+    'stop': (VEHICLE, STOP, False),
+}
+
+
+@pytest.mark.parametrize('case', list(CASES))
+@pytest.mark.parametrize('window', [None, (1500, 700)])
+def test_pieces_equal_one_piece(case, window, monkeypatch):
+    """Concatenated, the pieces are smooth()'s arrays bit for bit, whether the runs are in
+    one piece or in windows (each window's rows handed out as it comes), with the inputs
+    fed in blocks; the status too."""
+    vehicle, profile, defects = CASES[case]
+    stamps, q, phi, v = _drive(vehicle, 8.0 if case == 'friction' else 10.0, profile)
+    if defects:
+        stamps, q = _defects(stamps, q)
+    observer = ObserverParameters()
+    monkeypatch.setattr(offline_stream, 'PIECE_ROWS', 1000)
+    whole = smooth(stamps, q, phi, v, vehicle, observer, window=window)
+    stream = OfflineStream(vehicle, observer, window=window, capacity=100)
+    for a in range(0, stamps.size, 777):
+        assert stream.feed(stamps[a:a + 777], q[a:a + 777], phi[a:a + 777],
+                           v[a:a + 777]) == []
+    pieces = list(stream.finish())
+    assert len(pieces) >= 8 and max(len(p.stamp_ns) for p in pieces) <= 1000
+    for name in ['stamp_ns', 'valid', 'speed_contradicted', *FIELD_COLUMNS]:
+        got = np.concatenate([getattr(p, name) for p in pieces])
+        np.testing.assert_array_equal(got, getattr(whole, name), err_msg=name)
+    assert dataclasses.asdict(stream.status) == dataclasses.asdict(whole.status)
+    assert stream.last_stamp_ns == whole.status.last_stamp_ns
+
+
+def test_a_long_stretch_of_rejected_samples_comes_in_pieces(monkeypatch):
+    """2500 rejected samples between two runs: pieces of at most PIECE_ROWS rows, holding
+    the last accepted row, as smooth()."""
+    stamps, q, phi, v = _drive(VEHICLE, 6.0)
+    q[2000:4500] = np.nan
+    monkeypatch.setattr(offline_stream, 'PIECE_ROWS', 600)
+    whole = smooth(stamps, q, phi, v, VEHICLE)
+    stream = OfflineStream(VEHICLE)
+    stream.feed(stamps, q, phi, v)
+    pieces = list(stream.finish())
+    assert max(len(p.stamp_ns) for p in pieces) <= 600
+    got = np.concatenate([p.wheel_load_n for p in pieces])
+    np.testing.assert_array_equal(got, whole.wheel_load_n)
+    np.testing.assert_array_equal(got[3000], whole.wheel_load_n[1999])
+
+
+def test_a_differentiator_scheme_does_not_stream():
+    with pytest.raises(ValueError, match='model smoother'):
+        OfflineStream(VEHICLE, dataclasses.replace(ObserverParameters(),
+                                                   discretization='implicit'))
+
+
+def test_chunked_rts_pass_is_the_sample_loop():
+    """smoothed_chunks (forward states kept per chunk, recomputed backwards) against the
+    steady-state filter and the adjoint-form RTS smoother written out sample by sample, on
+    two stretches with their own matrices and chunks that do not divide them."""
+    rng = np.random.default_rng(4)
+    nx, ny, m = 4, 2, 1000
+    segs, mats = [(0, 430, None), (430, m, None)], []
+    for _ in segs:
+        a = np.diag(rng.uniform(0.5, 0.9, nx)) + 0.02 * rng.standard_normal((nx, nx))
+        c = rng.standard_normal((ny, nx))
+        k = 0.02 * rng.standard_normal((nx, ny))
+        assert max(abs(np.linalg.eigvals((np.eye(nx) - k @ c) @ a))) < 0.97   # stable
+        p_post = np.eye(nx) + 0.1 * np.ones((nx, nx))
+        s_inv = np.linalg.inv(np.eye(ny) * 2.0 + 0.1)
+        mats.append(dict(a=a, c=c, k=k, p=p_post, s_inv=s_inv))
+    y = rng.standard_normal((m, ny))
+    x0 = rng.standard_normal(nx)
+    packed = [(Powers((np.eye(nx) - d['k'] @ d['c']) @ d['a']), d['k'].T, (d['c'] @ d['a']).T,
+               Powers((d['a'] @ (np.eye(nx) - d['k'] @ d['c'])).T), (d['c'].T @ d['s_inv']).T,
+               (d['p'] @ d['a'].T).T, None) for d in mats]
+    got = np.empty((m, nx))
+    for k0, k1, xs in smoothed_chunks(segs, packed, y, x0, 97):
+        if k0 >= 0:
+            got[k0:k1] = xs
+    # the textbook loop: forwards, stretch j's matrices for the steps into its samples
+    which = np.searchsorted([s for s, _, _ in segs], np.arange(m), side='right') - 1
+    xf, nu = np.empty((m, nx)), np.zeros((m, ny))
+    xf[0] = x0
+    for i in range(1, m):
+        d = mats[which[i]]
+        xp = d['a'] @ xf[i - 1]
+        nu[i] = y[i] - d['c'] @ xp
+        xf[i] = xp + d['k'] @ nu[i]
+    # backwards, row k - 1 (and the lam_k it takes) with row k - 1's stretch
+    want, lam = xf.copy(), np.zeros(nx)
+    for i in range(m - 1, 0, -1):
+        d = mats[which[i - 1]]
+        lam = d['c'].T @ d['s_inv'] @ nu[i] + (
+            (np.eye(nx) - d['k'] @ d['c']).T @ (d['a'].T @ lam) if i < m - 1 else 0.0)
+        want[i - 1] = xf[i - 1] + d['p'] @ (d['a'].T @ lam)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * np.abs(want).max())
+
+
+def test_restatic_in_pieces_is_one_call():
+    """The static loads' rows of a run in pieces (t_prev given) equal one call's, the
+    quasi-static LTR's low-pass going on across the pieces."""
+    rng = np.random.default_rng(1)
+    m = 3000
+    t = np.arange(m) * 1e-3
+    cols = field_columns(m)[1]
+    cols[Column.DF1][:] = 3000.0 * rng.standard_normal(m)
+    cols[Column.DF2][:] = 3000.0 * rng.standard_normal(m)
+    static = 30000.0 + 500.0 * rng.standard_normal((m, 2)).cumsum(axis=0) / 50.0
+    one = [c.copy() for c in cols]
+    Reconstruction(VEHICLE).restatic(one, static, t)
+    rec = Reconstruction(VEHICLE)
+    parts = [c.copy() for c in cols]
+    for a, b in ((0, 700), (700, 701), (701, 2000), (2000, m)):
+        part = [c[a:b] for c in parts]
+        rec.restatic(part, static[a:b], t[a:b], None if a == 0 else float(t[a - 1]))
+    for j in (Column.FN1, Column.FN2, Column.LTR, Column.LTR_QUASI_STATIC, Column.LIFT_OFF1,
+              Column.STATIC_LOAD2):
+        np.testing.assert_array_equal(parts[j], one[j], err_msg=str(j))
