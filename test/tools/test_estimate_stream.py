@@ -229,3 +229,23 @@ def test_streamed_offline_detail_figures_equal_one_piece(drive, tmp_path, monkey
     for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
         assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
             (tmp_path / 'str' / 'report' / name).read_bytes(), name
+
+
+def test_a_full_disk_while_spilling_leaves_nothing(drive, tmp_path, monkeypatch, capsys):
+    """Offline, the columns that wait for the end go to temporary files in the output
+    folder (core.spill): a full disk there is one line, exit 1, and nothing left behind."""
+    import errno
+
+    from road_force_estimator.core import spill
+
+    def full(self, rows):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(spill.SpillColumn, 'append', full)
+    out = tmp_path / 'o'
+    code = estimate_bag.main([str(drive), '--output', str(out), '--mode', 'offline',
+                              '--no-progress', '--no-figures'])
+    err = capsys.readouterr().err
+    assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
+    assert not out.exists() or not any(out.iterdir())
