@@ -132,7 +132,7 @@ def markdown(doc: dict) -> list[str]:
              + (f'made in pieces of {doc["piece_s"]:g} s with a peak RSS of '
                 f'{doc["making_peak_rss_mb"]:.0f} MB' if doc.get('piece_s') is not None
                 else 'made before (--drive)') + '; figures on '
-             '(drives of at least 2^21 samples are estimated block by block in online mode: '
+             '(drives of at least 2^21 samples are estimated block by block, both modes: '
              '`tools/estimate_stream.py`).', '',
              '| mode | peak RSS (MB), long drive | peak RSS (MB), 1 s drive | added B/sample '
              '| wall (s) | CPU (s) | samples per CPU s |', '|---|---|---|---|---|---|---|']

@@ -34,6 +34,7 @@ from road_force_estimator.estimation.reconstruction import Reconstruction, dista
 from road_force_estimator.estimation.static_load import track_recording
 from road_force_estimator.estimation.run_speed import run_statistics, speed_segments
 from road_force_estimator.estimation.rts_pass import smoothed_chunks
+from road_force_estimator.estimation.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.schedule import GainSchedule
 from road_force_estimator.estimation.speed_check import check_arrays
 
@@ -98,11 +99,12 @@ def _rows(out, k0: int, k1: int) -> list:
     return out.rows(k0, k1) if isinstance(out, KeptColumns) else [col[k0:k1] for col in out]
 
 
-def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0) -> np.ndarray | None:
+def grid_steps(dts: np.ndarray, dt: float, *, max_fill: float = 4.0,
+               tol: float = 1e-3) -> np.ndarray | None:
     """The steps ``dts`` (s) as whole numbers of grid steps dt (s), when each is one to
-    within 1e-3 dt and the grid has at most ``max_fill`` times as many points; else None."""
+    within ``tol`` dt and the grid has at most ``max_fill`` times as many points; else None."""
     k = np.rint(dts / dt)
-    if (k.size == 0 or np.min(k) < 1.0 or np.max(np.abs(dts - k * dt)) > 1e-3 * dt
+    if (k.size == 0 or np.min(k) < 1.0 or np.max(np.abs(dts - k * dt)) > tol * dt
             or np.sum(k) > max_fill * k.size):
         return None
     return k.astype(np.int64)
@@ -223,6 +225,23 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
         y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
         dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
         starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
+
+
+def _clock_grid(dts: np.ndarray, dt: float) -> tuple[float, bool, np.ndarray | None]:
+    """``(dt, uniform, steps)`` of a run whose steps ``dts`` (s) are not whole numbers of
+    their median ``dt``: on the regular clock under jittered stamps when there is one
+    (:func:`.sample_clock.clock_step`: each step a whole number of its periods to within
+    :data:`.sample_clock.JITTER_MAX_FRACTION`; the samples are where the clock put them, as
+    the online observer steps), else ``(dt, False, None)`` (uneven: step by step). Without
+    it, a long jittered drive would go through the step-by-step path: a transition per
+    sample (1.2 kB each: 17 GB over 4 hours at 1 kHz)."""
+    clock = clock_step(dts)
+    steps = None if clock is None else grid_steps(dts, clock, tol=JITTER_MAX_FRACTION)
+    if steps is None:
+        return dt, False, None
+    if np.all(steps == 1):
+        return clock, True, None
+    return clock, False, steps
 
 
 def rows_of(column, a: int, b: int) -> np.ndarray:
@@ -402,17 +421,20 @@ class Smoother:
             for hist in (*sched.history, sched.dq_history):
                 hist.clear()
             run_statistics(sched, y, dts, v, speed)
+        uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
+        steps = None if uniform else grid_steps(dts, dt)
+        if not uniform and steps is None:
+            dt, uniform, steps = _clock_grid(dts, dt)
         g = sched.design(dt, 0)
         if self.friction is not None:   # the outputs of the design's model (its c_eq)
             self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
             self.h = g.model.h[_SMOOTH_OUTPUTS]
-        uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
         window, overlap = self.window or window_samples(
             dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
         longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
         return SimpleNamespace(gains=g, dt=dt, speed=speed, dts=dts, uniform=uniform,
-                               steps=None if uniform else grid_steps(dts, dt), window=window,
-                               overlap=overlap, windowed=uniform and m > longer)
+                               steps=steps, window=window, overlap=overlap,
+                               windowed=uniform and m > longer)
 
     def _windowed(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray, v: np.ndarray,
                   x0: np.ndarray) -> Iterator[tuple[int, int, list]]:

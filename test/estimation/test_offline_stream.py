@@ -166,3 +166,28 @@ def test_restatic_in_pieces_is_one_call():
     for j in (Column.FN1, Column.FN2, Column.LTR, Column.LTR_QUASI_STATIC, Column.LIFT_OFF1,
               Column.STATIC_LOAD2):
         np.testing.assert_array_equal(parts[j], one[j], err_msg=str(j))
+
+
+def test_jittered_stamps_are_smoothed_on_their_clock(monkeypatch):
+    """Stamps scattered +-50 us about a regular 1 kHz clock (the samples on it, as
+    simulator.stamp_jitter makes them), one sample lost: the smoother runs on the clock's
+    grid (never step by step, which keeps a transition per sample), and its loads are those
+    of the regular stamps to within 1 % of their RMS (measured 0.2 %: the noise statistics
+    see the stamps' steps); in windows too."""
+    from road_force_estimator.estimation import smoother as sm
+
+    stamps, q, phi, v = _drive(VEHICLE, 8.0)
+    rng = np.random.default_rng(9)
+    jittered = stamps + np.round(rng.uniform(-5e4, 5e4, stamps.size)).astype(np.int64)
+    keep = np.ones(stamps.size, bool)
+    keep[3000] = False
+    regular = smooth(stamps[keep], q[keep], phi[keep], v[keep], VEHICLE)
+
+    def step_by_step(*args, **kwargs):
+        raise AssertionError('smoothed step by step')
+
+    monkeypatch.setattr(sm.Smoother, '_uneven', step_by_step)
+    for window in (None, (1500, 700)):
+        est = smooth(jittered[keep], q[keep], phi[keep], v[keep], VEHICLE, window=window)
+        f, g = est.tire_force_dynamic_n, regular.tire_force_dynamic_n
+        assert np.sqrt(np.mean((f - g) ** 2)) < 1e-2 * np.sqrt(np.mean(g ** 2))
