@@ -20,7 +20,8 @@ from road_force_estimator.estimation.schedule import (
     SPEED_LEVEL_RATIO, GainSchedule, requantise)
 from road_force_estimator.estimation.model import SPEED_FLOOR_MPS
 
-__all__ = ['MOVING_SPEED_FRACTION', 'unsteady', 'run_statistics', 'speed_segments']
+__all__ = ['MOVING_SPEED_FRACTION', 'unsteady', 'run_statistics', 'speed_segments',
+           'level_segments']
 
 #: Samples slower than this fraction of a run's design speed (its median |v|) make the run
 #: unsteady: they are left out of its statistics and its gains follow the speed.
@@ -66,6 +67,12 @@ def speed_segments(sched: GainSchedule, dt: float, v: np.ndarray, speed: float
     """
     if unsteady(v, speed) is None:
         return None
+    return level_segments(sched, dt, v)
+
+
+def level_segments(sched: GainSchedule, dt: float, v: np.ndarray) -> list:
+    """:func:`speed_segments` of samples of an unsteady run (a window of one: its levels
+    from the window's first sample, the hysteresis going on from there)."""
     av = np.maximum(np.abs(np.asarray(v, dtype=float)), SPEED_FLOOR_MPS)
     levels = np.empty(av.size, dtype=np.int64)
     level = None

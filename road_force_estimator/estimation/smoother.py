@@ -32,7 +32,8 @@ from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
 from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
 from road_force_estimator.estimation.static_load import track_recording
-from road_force_estimator.estimation.run_speed import run_statistics, speed_segments
+from road_force_estimator.estimation.run_speed import (
+    level_segments, run_statistics, speed_segments, unsteady)
 from road_force_estimator.estimation.rts_pass import smoothed_chunks
 from road_force_estimator.estimation.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.schedule import GainSchedule
@@ -434,7 +435,8 @@ class Smoother:
         longer = window + overlap if self.window else WINDOWED_RUNS * (window + 2 * overlap)
         return SimpleNamespace(gains=g, dt=dt, speed=speed, dts=dts, uniform=uniform,
                                steps=steps, window=window, overlap=overlap,
-                               windowed=uniform and m > longer)
+                               windowed=uniform and m > longer,
+                               unsteady=unsteady(v, speed) is not None)
 
     def _windowed(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray, v: np.ndarray,
                   x0: np.ndarray) -> Iterator[tuple[int, int, list]]:
@@ -443,13 +445,13 @@ class Smoother:
         pass over the whole run (:meth:`_profile`), then the load pass again (the same
         windows, the same bits), each window's rows with the road put in."""
         residual = np.empty(t.size)
-        for a, b, rows in self._windows(run, t, y, (Column.RESIDUAL,)):
+        for a, b, rows in self._windows(run, t, y, v, (Column.RESIDUAL,)):
             residual[a:b] = rows[Column.RESIDUAL]
         run.dts = None                             # an even run's profile does not need them
         psd = offline_roll_moment_psd(residual, run.dt)
         del residual
         road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd)
-        for a, b, rows in self._windows(run, t, y):
+        for a, b, rows in self._windows(run, t, y, v):
             rows[Column.U1][:] = road[0][a:b]
             rows[Column.U2][:] = road[1][a:b]
             yield a, b, rows
@@ -512,7 +514,7 @@ class Smoother:
             speed, self.observer.profile_cutoff_wavelength_m,
             PROFILE_CUTOFF_RATIO, PROFILE_DETREND_DEGREE)
 
-    def _windows(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray,
+    def _windows(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray, v: np.ndarray,
                  keep: tuple | None = None) -> Iterator[tuple[int, int, list | dict]]:
         """An evenly sampled run window by window, ``(a, b, columns of rows a:b)``: rows
         ``a:b`` (``run.window`` of them) from the smoother over ``a - overlap : b + overlap``
@@ -521,8 +523,11 @@ class Smoother:
         window at rest), the backward pass with no information at the window's end; the body
         heave and the quasi-static LTR start at the window's start; the converged flag counts
         from the run's start. What the edges change fades within the overlap: ~1e-11 of each
-        field's RMS (:data:`WINDOW_OVERLAP_TAUS`). With ``keep`` (slots) only those columns,
-        as a dict, without the body heave."""
+        field's RMS (:data:`WINDOW_OVERLAP_TAUS`). An unsteady run (a stop) takes its gains
+        per stretch of speed in each window (:func:`.run_speed.level_segments`, the levels from
+        the window's first sample on: the overlap covers their start). With ``keep`` (slots)
+        only those columns, as a dict, without the body heave; ``v`` the model's speeds
+        (m/s)."""
         m = t.size
         g, dt, window, overlap = run.gains, run.dt, run.window, run.overlap
         x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
@@ -531,8 +536,10 @@ class Smoother:
             lo, hi = max(0, a - overlap), min(m, b + overlap)
             nxt = b - overlap if b < m else None        # where the next window starts
             cols = field_columns(hi - lo)[1] if keep is None else KeptColumns(hi - lo, keep)
+            segs = level_segments(self.schedule, dt, v[lo:hi]) if run.unsteady else None
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
-                                    keep=None if nxt is None else max(0, nxt) - lo)
+                                    keep=None if nxt is None else max(0, nxt) - lo,
+                                    segments=segs)
             if keep is None:
                 self._heave(t[lo:hi], dt, run.speed, cols, t[0])
                 yield a, b, [col[a - lo:b - lo] for col in cols]
