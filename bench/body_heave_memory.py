@@ -67,7 +67,7 @@ def measure(case: str, n: int, impl: str, traced: bool) -> dict:
     """One measurement in this process (see the module notes); bytes."""
     mod, name = impl.split(':')
     fn = getattr(importlib.import_module(mod), name)
-    warm = inputs(case, 4000)
+    warm = inputs(case, 400_000)                 # long enough for the same path
     fn(*warm, DT, 20.0, 100.0, 100.0, 3)         # imports (scipy.signal) out of the way
     args = inputs(case, n)
     if traced:

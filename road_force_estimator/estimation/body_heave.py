@@ -305,14 +305,16 @@ def rest_stretches(v_mps) -> int:
 
 
 def _rest_correction(t, z, standing, level):
-    """The rate error (m/s) of a double integral ``z`` (m) at the times t (s) from the
-    standing steps: over each stretch of them (at least :data:`MIN_REST_SAMPLES` samples)
-    ``z + level`` (``level`` None: 0) is constant but for the integral's error, fitted there
-    by a quadratic in time; its derivative is the error there, linear in time between stretches
-    (a constant acceleration bias), before the first and after the last going on with the
-    acceleration bias fitted on it (held constant there, a bias the whole drive long, as the
-    profile pass's under ``zero_load`` while its offset settles, made a kink of the rate at the
-    stop: bench real_truck (f) 207 / 229 %, now 27 / 8.8 %). None without such a stretch."""
+    """The knots ``(kt, kc, bias)`` of the rate error (m/s) of a double integral ``z`` (m) at
+    the times t (s) from the standing steps (:func:`_rest_rate` makes the error of them): over
+    each stretch of them (at least :data:`MIN_REST_SAMPLES` samples) ``z + level`` (``level``
+    None: 0) is constant but for the integral's error, fitted there by a quadratic in time; its
+    derivative is the error there (``kc`` at the stretch's times ``kt``), linear in time between
+    stretches (a constant acceleration bias), before the first and after the last going on with
+    the acceleration bias fitted on it (``bias``, m/s^2; held constant there, a bias the whole
+    drive long, as the profile pass's under ``zero_load`` while its offset settles, made a kink
+    of the rate at the stop: bench real_truck (f) 207 / 229 %, now 27 / 8.8 %). None without
+    such a stretch."""
     import numpy as np
 
     knots_t, knots_c, bias = [], [], []
@@ -326,7 +328,15 @@ def _rest_correction(t, z, standing, level):
         bias.append(2.0 * p[0] / (scale * scale))    # the acceleration bias there (m/s^2)
     if not knots_t:
         return None
-    kt, kc = np.concatenate(knots_t), np.concatenate(knots_c)
+    return np.concatenate(knots_t), np.concatenate(knots_c), bias
+
+
+def _rest_rate(t, knots):
+    """The rate error (m/s) at the times ``t`` (s; any piece of the run's) of the knots of
+    :func:`_rest_correction`."""
+    import numpy as np
+
+    kt, kc, bias = knots
     c = np.interp(t, kt, kc)
     # before the first stretch and after the last the bias goes on as fitted there (between
     # two the rate's linear interpolation is a constant bias too); in place in c
@@ -335,6 +345,34 @@ def _rest_correction(t, z, standing, level):
         np.multiply(c, bias[k], out=c, where=side)
         np.add(c, kc[k], out=c, where=side)
     return c
+
+
+def _compact(z, keep):
+    """Move ``z[keep]`` (keep: bool) to the front of ``z`` in place, chunk by chunk; returns
+    how many and a copy of the others (for :func:`_expand`)."""
+    others = z[~keep]
+    n = 0
+    for i, j in _chunks(z.size):
+        part = z[i:j][keep[i:j]]
+        z[n:n + part.size] = part
+        n += part.size
+    return n, others
+
+
+def _expand(z, keep, n: int, others) -> None:
+    """Undo :func:`_compact` (``n, others`` its result) in place, chunk by chunk from the end."""
+    import numpy as np
+
+    n_others = others.size
+    for i, j in _chunks(z.size, backward=True):
+        k = keep[i:j]
+        c = int(np.count_nonzero(k))
+        kept = z[n - c:n].copy()
+        seg = z[i:j]
+        seg[k] = kept
+        seg[~k] = others[n_others - (k.size - c):n_others]
+        n -= c
+        n_others -= k.size - c
 
 
 def _cumtrapz_parts(y, t, absolute: bool = False):
@@ -390,7 +428,8 @@ def in_distance(accel, t_s, v_mps, wavelength_m: float, *, level=None, degree: i
     ``order`` per pass) at ``wavelength_m``; the trend so removed is interpolated back onto the
     samples (the short waves stay those of the samples). A filter run in time with one cutoff
     removes, through the slow stretches, waves of a few metres (``v / f_c``): this one's cutoff
-    is a wavelength everywhere. Extra memory: at most four whole-run float64 arrays.
+    is a wavelength everywhere. Extra memory: three whole-run float64 arrays (the result
+    included) and small ones.
 
     Parameters
     ----------
@@ -427,10 +466,10 @@ def in_distance(accel, t_s, v_mps, wavelength_m: float, *, level=None, degree: i
     z = _cumtrapz(vel, t)
     if standing.any():
         lev = None if level is None else np.asarray(level, dtype=float)
-        c = _rest_correction(t, z, standing, lev)
-        if c is not None:
-            vel -= c
-            del c
+        knots = _rest_correction(t, z, standing, lev)
+        if knots is not None:
+            for i, j in _chunks(a.size):
+                vel[i:j] -= _rest_rate(t[i:j], knots)
             _cumtrapz(vel, t, out=z)
     del vel, standing
     return _detrend_in_distance(z, t, v, wavelength_m, degree, order)
@@ -457,14 +496,16 @@ def _detrend_in_distance(z, t, v, wavelength_m: float, degree: int, order: int):
         part = x[up]
         xm[n:n + part.size] = part
         n += part.size
-    zm = z[moving]
-    del moving
+    n, others = _compact(z, moving)                 # z[moving] in front, in place
+    zm = z[:n]
     h = float(np.median(np.diff(xm), overwrite_input=True))
     num = max(8, int(math.ceil(x_end / h)) + 1)
     zg = np.empty(num)                               # z on the grid linspace(0, x_end, num)
     for i, j in _chunks(num):
         zg[i:j] = np.interp(_linspace_part(0.0, x_end, num, i, j), xm, zm)
     del xm, zm
+    _expand(z, moving, n, others)
+    del moving, others
     coef = None
     if degree >= 0:
         coef = polynomial_fit(zg, degree)
@@ -500,7 +541,7 @@ def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
     the rate with: :func:`zero_phase` at ``cutoff_wavelength_m`` (the long one lets the drift
     of the slow stretches into the profile: C20-stop 164 % against 55 %). ``accel`` (m/s^2),
     ``level`` (m), times ``t_s`` (s), speeds ``v_mps`` (m/s): (m,); ``dt_s`` the run's step
-    (s). Extra memory: one whole-run float64 array steady (the result), four with a stop.
+    (s). Extra memory: one whole-run float64 array steady (the result), three with a stop.
     """
     import numpy as np
 
