@@ -244,7 +244,8 @@ def polynomial_fit(z, degree: int):
     instead of an (m, degree + 1) Vandermonde matrix and its copies (~80 bytes a sample).
 
     Its values (:func:`polynomial_values`) differ from ``np.polyval(np.polyfit(tt, z, degree),
-    tt)`` by FIT_ERROR of z's RMS (random data, m = 5 .. 3.6 M, degree 0 .. 5).
+    tt)`` by at most 1.3e-14 of z's RMS (random data, m = 5 .. 3.6 M, degree 0 .. 5; 2.2e-15 on
+    :func:`zero_phase`'s output over 3.6 M samples: bench.body_heave_bits).
     """
     import numpy as np
 
@@ -265,9 +266,13 @@ def polynomial_fit(z, degree: int):
 
 def polynomial_values(coef, m: int, i: int = 0, j: int | None = None):
     """The polynomial of Legendre coefficients ``coef`` (:func:`polynomial_fit`) on
-    ``linspace(-1, 1, m)[i:j]``."""
+    ``linspace(-1, 1, m)[i:j]``; each value the same bits whatever the piece."""
     j = m if j is None else j
-    return coef @ _legendre(_linspace_part(-1.0, 1.0, m, i, j), coef.size - 1)
+    p = _legendre(_linspace_part(-1.0, 1.0, m, i, j), coef.size - 1)
+    out = coef[0] * p[0]
+    for k in range(1, coef.size):              # elementwise (a matrix product's rounding
+        out += coef[k] * p[k]                  # would depend on the piece)
+    return out
 
 
 def subtract_polynomial(z, degree: int):
