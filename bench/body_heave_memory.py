@@ -8,7 +8,8 @@ Two runs at dt = 1 ms, ``cutoff_wavelength_m=100, ratio=100, degree=3, speed_mps
 * ``steady``: 20 m/s throughout, the acceleration white noise (1 m/s^2) plus a 0.5 Hz sine of
   0.1 m/s^2 (the steady path: :func:`.zero_phase` and the run's polynomial);
 * ``stop``: the same acceleration, 20 m/s with two stops of 10 s at exactly 0 m/s (at 1/3 and
-  2/3 of the run), each between ramps of 120 s (the stop path: :func:`.in_distance`).
+  2/3 of the run), each between ramps of 1/30 of the run (120 s at 3.6 M samples; the stop
+  path: :func:`.in_distance`).
 
 ``level`` is white noise (1 mm). Each case runs in a fresh process twice: once under
 ``tracemalloc`` (peak traced beyond what was traced before the call, the result included), once
@@ -44,7 +45,7 @@ def inputs(case: str, n: int, seed: int = 1) -> tuple:
     level *= 1e-3
     v = np.full(n, 20.0)
     if case == 'stop':
-        ramp, rest = 120.0, 10.0
+        ramp, rest = n * DT / 30.0, 10.0             # ramps of 1/30 of the run: 120 s
         for c in (t[-1] / 3.0, 2.0 * t[-1] / 3.0):
             a = np.searchsorted(t, c - rest / 2.0 - ramp)
             b = np.searchsorted(t, c + rest / 2.0 + ramp)
