@@ -36,7 +36,8 @@ from road_force_estimator.estimation.speed_check import STANDING_MPS
 
 __all__ = ['STANDING_MPS', 'SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed',
            'start', 'step', 'zero_phase', 'in_distance', 'rest_stretches',
-           'offline_profile', 'MIN_REST_SAMPLES']
+           'offline_profile', 'MIN_REST_SAMPLES', 'CHUNK', 'polynomial_fit',
+           'polynomial_values', 'subtract_polynomial']
 
 #: Speed floor of the cutoff (m/s): w >= 2 pi v_floor / lambda_c.
 SPEED_FLOOR_MPS = 1.0
@@ -107,13 +108,62 @@ def step(state: tuple, accel: float, dt: float, v: float, wc_per_speed: float) -
                 n6 + wc * (n7 - 7.0 * wc * n8)))))))
 
 
+#: Samples per chunk of the whole-run steps done piecewise (a float64 chunk: 512 kB), so that
+#: a run of hours (14.4 M samples at 1 kHz in 4 h: 115 MB per float64 array) needs no
+#: whole-run temporaries there.
+CHUNK = 1 << 16
+
+
+def _chunks(m: int, backward: bool = False):
+    """``(i, j)`` of the :data:`CHUNK`-long pieces of ``range(m)``, in order (or backward)."""
+    starts = range(0, m, CHUNK)
+    for i in (reversed(starts) if backward else starts):
+        yield i, min(m, i + CHUNK)
+
+
+def _sosfilt_chunks(sos, src, dst, zi, backward: bool = False) -> None:
+    """``scipy.signal.sosfilt(sos, src, zi=zi)`` (over ``src[::-1]``, the result reversed,
+    when ``backward``) into ``dst`` (may be ``src``), chunk after chunk with the state carried:
+    the same bits, no whole-run copy."""
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    sosfilt = _signal().sosfilt
+
+    for i, j in _chunks(src.size, backward):
+        if backward:
+            dst[i:j][::-1], zi = sosfilt(sos, src[i:j][::-1], zi=zi)
+        else:
+            dst[i:j], zi = sosfilt(sos, src[i:j], zi=zi)
+
+
+def _sosfiltfilt(sos, x):
+    """``scipy.signal.sosfiltfilt(sos, x)`` (1-D, its default odd padding), the same bits and
+    errors, with one whole-run array (the padded one; the result is a view of it)."""
+    import numpy as np
+    from road_force_estimator.core.scipy_signal import signal as _signal
+
+    ntaps = 2 * sos.shape[0] + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
+    edge = 3 * ntaps
+    if x.size <= edge:
+        raise ValueError('The length of the input vector x must be greater than padlen, '
+                         f'which is {edge}.')
+    ext = np.empty(x.size + 2 * edge)
+    np.subtract(2 * x[:1], x[edge:0:-1], out=ext[:edge])
+    ext[edge:-edge] = x
+    np.subtract(2 * x[-1:], x[-2:-(edge + 2):-1], out=ext[-edge:])
+    zi = _signal().sosfilt_zi(sos)
+    _sosfilt_chunks(sos, ext, ext, zi * ext[:1])
+    _sosfilt_chunks(sos, ext, ext, zi * ext[-1:], backward=True)
+    return ext[edge:-edge]
+
+
 def zero_phase(accel, dt_s: float, w: float, order: int = ZERO_PHASE_ORDER):
     """Band-limited double integral of an evenly sampled acceleration, without phase error.
 
     ``z = -|H_B(j Omega)|^2 a / Omega^2``: ``s^(n-2) / D(s)`` run forward and ``s^n / D(s)``
     backward (D the Butterworth denominator of even order n at ``w`` rad/s; bilinear at the
     sample rate, in second-order sections, each pass started in its steady state for the first
-    / last value). A constant acceleration gives zero.
+    / last value). A constant acceleration gives zero. Both passes run in chunks in the result
+    (one whole-run array).
 
     Parameters
     ----------
@@ -142,15 +192,96 @@ def zero_phase(accel, dt_s: float, w: float, order: int = ZERO_PHASE_ORDER):
         raise ValueError(f'order = {order!r}: must be an even integer >= 2')
     fs = 1.0 / dt_s
     _, poles, _ = signal.butter(order, w, btype='high', analog=True, output='zpk')
-    out = a
-    for n_zeros, reverse in ((order - 2, False), (order, True)):
+    out = np.empty(a.shape)
+    for n_zeros, backward in ((order - 2, False), (order, True)):
         z, p, k = signal.bilinear_zpk(np.zeros(n_zeros), poles, 1.0, fs)
         sos = signal.zpk2sos(z, p, k)
-        x = out[::-1] if reverse else out
-        y, _ = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])
-        out = y[::-1] if reverse else y
-    return np.ascontiguousarray(out)
+        src = out if backward else a
+        zi = signal.sosfilt_zi(sos) * src[-1 if backward else 0]
+        _sosfilt_chunks(sos, src, out, zi, backward)
+    return out
 
+
+def _linspace_part(start: float, stop: float, num: int, i: int, j: int):
+    """``np.linspace(start, stop, num)[i:j]`` bit for bit without the whole array (numpy's
+    ``k * step + start``, the last point ``stop``)."""
+    import numpy as np
+
+    if num < 2:
+        return np.linspace(start, stop, num)[i:j]
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    y = np.arange(i, j, dtype=float)
+    if step == 0:                                    # numpy's way for denormal steps
+        y /= div
+        y *= delta
+    else:
+        y *= step
+    y += start
+    if j == num and j > i:
+        y[-1] = stop
+    return y
+
+
+def _legendre(tt, degree: int):
+    """The Legendre polynomials ``P_0 .. P_degree`` at ``tt``: (degree + 1, tt.size)."""
+    import numpy as np
+
+    p = np.empty((degree + 1, tt.size))
+    p[0] = 1.0
+    if degree >= 1:
+        p[1] = tt
+    for k in range(1, degree):
+        p[k + 1] = ((2 * k + 1) * tt * p[k] - k * p[k - 1]) / (k + 1)
+    return p
+
+
+def polynomial_fit(z, degree: int):
+    """Legendre coefficients (degree + 1,) of the least-squares polynomial of degree ``degree``
+    of ``z`` (m,) on ``tt = linspace(-1, 1, m)`` (``np.polyfit(tt, z, degree)``'s), from sums
+    over chunks (the basis' Gram matrix and its dot products with z, solved as a small system)
+    instead of an (m, degree + 1) Vandermonde matrix and its copies (~80 bytes a sample).
+
+    Its values (:func:`polynomial_values`) differ from ``np.polyval(np.polyfit(tt, z, degree),
+    tt)`` by at most 1.3e-14 of z's RMS (random data, m = 5 .. 3.6 M, degree 0 .. 5; 2.2e-15 on
+    :func:`zero_phase`'s output over 3.6 M samples: bench.body_heave_bits).
+    """
+    import numpy as np
+
+    if degree < 0:
+        raise ValueError('expected deg >= 0')
+    z = np.asarray(z, dtype=float)
+    m = z.size
+    gram = np.zeros((degree + 1, degree + 1))
+    dot = np.zeros(degree + 1)
+    for i, j in _chunks(m):
+        p = _legendre(_linspace_part(-1.0, 1.0, m, i, j), degree)
+        gram += p @ p.T
+        dot += p @ z[i:j]
+    if m > degree:
+        return np.linalg.solve(gram, dot)
+    return np.linalg.lstsq(gram, dot, rcond=None)[0]       # interpolates: any solution
+
+
+def polynomial_values(coef, m: int, i: int = 0, j: int | None = None):
+    """The polynomial of Legendre coefficients ``coef`` (:func:`polynomial_fit`) on
+    ``linspace(-1, 1, m)[i:j]``; each value the same bits whatever the piece."""
+    j = m if j is None else j
+    p = _legendre(_linspace_part(-1.0, 1.0, m, i, j), coef.size - 1)
+    out = coef[0] * p[0]
+    for k in range(1, coef.size):              # elementwise (a matrix product's rounding
+        out += coef[k] * p[k]                  # would depend on the piece)
+    return out
+
+
+def subtract_polynomial(z, degree: int):
+    """``z`` (m,) less its least-squares polynomial (:func:`polynomial_fit`), in place and in
+    chunks; returns ``z``."""
+    coef = polynomial_fit(z, degree)
+    for i, j in _chunks(z.size):
+        z[i:j] -= polynomial_values(coef, z.size, i, j)
+    return z
 
 #: Fewest samples of a standing stretch whose body motion corrects the integrated rate
 #: (:func:`in_distance`).
@@ -179,14 +310,16 @@ def rest_stretches(v_mps) -> int:
 
 
 def _rest_correction(t, z, standing, level):
-    """The rate error (m/s) of a double integral ``z`` (m) at the times t (s) from the
-    standing steps: over each stretch of them (at least :data:`MIN_REST_SAMPLES` samples)
-    ``z + level`` is constant but for the integral's error, fitted there by a quadratic in
-    time; its derivative is the error there, linear in time between stretches (a constant
-    acceleration bias), before the first and after the last going on with the acceleration
-    bias fitted on it (held constant there, a bias the whole drive long, as the profile pass's
-    under ``zero_load`` while its offset settles, made a kink of the rate at the stop: bench
-    real_truck (f) 207 / 229 %, now 27 / 8.8 %). None without such a stretch."""
+    """The knots ``(kt, kc, bias)`` of the rate error (m/s) of a double integral ``z`` (m) at
+    the times t (s) from the standing steps (:func:`_rest_rate` makes the error of them): over
+    each stretch of them (at least :data:`MIN_REST_SAMPLES` samples) ``z + level`` (``level``
+    None: 0) is constant but for the integral's error, fitted there by a quadratic in time; its
+    derivative is the error there (``kc`` at the stretch's times ``kt``), linear in time between
+    stretches (a constant acceleration bias), before the first and after the last going on with
+    the acceleration bias fitted on it (``bias``, m/s^2; held constant there, a bias the whole
+    drive long, as the profile pass's under ``zero_load`` while its offset settles, made a kink
+    of the rate at the stop: bench real_truck (f) 207 / 229 %, now 27 / 8.8 %). None without
+    such a stretch."""
     import numpy as np
 
     knots_t, knots_c, bias = [], [], []
@@ -194,18 +327,92 @@ def _rest_correction(t, z, standing, level):
         rows = slice(s0, s1 + 1)                     # the samples at both ends of its steps
         tt = t[rows] - t[s0]
         scale = max(float(tt[-1]), 1e-9)
-        p = np.polyfit(tt / scale, z[rows] + level[rows], 2)
+        p = np.polyfit(tt / scale, z[rows] + (0.0 if level is None else level[rows]), 2)
         knots_t.append(t[rows])
         knots_c.append((p[1] + 2.0 * p[0] * tt / scale) / scale)
         bias.append(2.0 * p[0] / (scale * scale))    # the acceleration bias there (m/s^2)
     if not knots_t:
         return None
-    kt, kc = np.concatenate(knots_t), np.concatenate(knots_c)
+    return np.concatenate(knots_t), np.concatenate(knots_c), bias
+
+
+def _rest_rate(t, knots):
+    """The rate error (m/s) at the times ``t`` (s; any piece of the run's) of the knots of
+    :func:`_rest_correction`."""
+    import numpy as np
+
+    kt, kc, bias = knots
     c = np.interp(t, kt, kc)
     # before the first stretch and after the last the bias goes on as fitted there (between
-    # two the rate's linear interpolation is a constant bias too)
-    c = np.where(t < kt[0], kc[0] + bias[0] * (t - kt[0]), c)
-    return np.where(t > kt[-1], kc[-1] + bias[-1] * (t - kt[-1]), c)
+    # two the rate's linear interpolation is a constant bias too); in place in c
+    for side, k in ((t < kt[0], 0), (t > kt[-1], -1)):
+        np.subtract(t, kt[k], out=c, where=side)
+        np.multiply(c, bias[k], out=c, where=side)
+        np.add(c, kc[k], out=c, where=side)
+    return c
+
+
+def _compact(z, keep):
+    """Move ``z[keep]`` (keep: bool) to the front of ``z`` in place, chunk by chunk; returns
+    how many and a copy of the others (for :func:`_expand`)."""
+    others = z[~keep]
+    n = 0
+    for i, j in _chunks(z.size):
+        part = z[i:j][keep[i:j]]
+        z[n:n + part.size] = part
+        n += part.size
+    return n, others
+
+
+def _expand(z, keep, n: int, others) -> None:
+    """Undo :func:`_compact` (``n, others`` its result) in place, chunk by chunk from the end."""
+    import numpy as np
+
+    n_others = others.size
+    for i, j in _chunks(z.size, backward=True):
+        k = keep[i:j]
+        c = int(np.count_nonzero(k))
+        kept = z[n - c:n].copy()
+        seg = z[i:j]
+        seg[k] = kept
+        seg[~k] = others[n_others - (k.size - c):n_others]
+        n -= c
+        n_others -= k.size - c
+
+
+def _cumtrapz_parts(y, t, absolute: bool = False):
+    """``(i, j, c, up)`` chunk after chunk: ``c`` is ``[0, cumsum(0.5 (y[1:] + y[:-1])
+    diff(t))][i:j]`` (of ``|y|`` when ``absolute``) bit for bit (the sum carried from chunk to
+    chunk), ``up`` whether the step ending at each sample is > 0 (True at sample 0)."""
+    import numpy as np
+
+    carry = 0.0
+    for i, j in _chunks(y.size):
+        k = max(i, 1)                                # the steps ending at k .. j - 1
+        y0, y1 = y[k - 1:j - 1], y[k:j]
+        d = np.abs(y1) + np.abs(y0) if absolute else y1 + y0
+        d *= 0.5
+        d *= t[k:j] - t[k - 1:j - 1]
+        c = np.empty(j - i)
+        up = np.empty(j - i, dtype=bool)
+        np.greater(d, 0.0, out=up[k - i:])
+        if i == 0:
+            c[0], up[0] = 0.0, True
+        elif d.size:
+            d[0] += carry
+        np.cumsum(d, out=c[k - i:])
+        carry = c[-1]
+        yield i, j, c, up
+
+
+def _cumtrapz(y, t, out=None):
+    """``[0, cumsum(0.5 (y[1:] + y[:-1]) diff(t))]`` bit for bit, into ``out`` if given."""
+    import numpy as np
+
+    out = np.empty(y.size) if out is None else out
+    for i, j, c, _ in _cumtrapz_parts(y, t):
+        out[i:j] = c
+    return out
 
 
 def in_distance(accel, t_s, v_mps, wavelength_m: float, *, level=None, degree: int = 3,
@@ -222,11 +429,12 @@ def in_distance(accel, t_s, v_mps, wavelength_m: float, *, level=None, degree: i
     with the acceleration bias fitted on the first / last stretch before / after them, taken
     off the rate. What the double integral leaves at long waves is then taken off in distance: on
     an even grid of ``x = integral |v| dt``, its least-squares polynomial of degree ``degree``
-    in x and the zero-phase Butterworth high-pass ``|H_B|^2`` (order ``order`` per pass) at
-    ``wavelength_m``; the trend so removed is interpolated back onto the samples (the short
-    waves stay those of the samples). A filter run in time with one cutoff removes, through
-    the slow stretches, waves of a few metres (``v / f_c``): this one's cutoff is a
-    wavelength everywhere.
+    in x (:func:`polynomial_fit`) and the zero-phase Butterworth high-pass ``|H_B|^2`` (order
+    ``order`` per pass) at ``wavelength_m``; the trend so removed is interpolated back onto the
+    samples (the short waves stay those of the samples). A filter run in time with one cutoff
+    removes, through the slow stretches, waves of a few metres (``v / f_c``): this one's cutoff
+    is a wavelength everywhere. Extra memory: three whole-run float64 arrays (the result
+    included) and small ones.
 
     Parameters
     ----------
@@ -251,42 +459,75 @@ def in_distance(accel, t_s, v_mps, wavelength_m: float, *, level=None, degree: i
         ``z_s`` (m); zeros when there are fewer than 8 samples.
     """
     import numpy as np
-    from road_force_estimator.core.scipy_signal import signal as _signal
 
     a = np.asarray(accel, dtype=float)
     t = np.asarray(t_s, dtype=float)
-    v = np.abs(np.asarray(v_mps, dtype=float))
+    v = np.asarray(v_mps, dtype=float)
     if a.size < 8:
         return np.zeros_like(a)
-    dt = np.diff(t)
-    standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
-    vel = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * dt)])
-    z = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
+    standing = v[1:] == 0.0
+    standing &= v[:-1] == 0.0
+    vel = _cumtrapz(a, t)
+    z = _cumtrapz(vel, t)
     if standing.any():
-        lev = np.zeros_like(a) if level is None else np.asarray(level, dtype=float)
-        c = _rest_correction(t, z, standing, lev)
-        if c is not None:
-            vel = vel - c
-            z = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
-    dx = 0.5 * (v[1:] + v[:-1]) * dt
-    x = np.concatenate([[0.0], np.cumsum(dx)])
-    moving = np.concatenate([[True], dx > 0.0])
-    xm, zm = x[moving], z[moving]
-    if xm.size < 8 or not xm[-1] > 0.0:
-        return z - np.mean(z)
-    h = float(np.median(np.diff(xm)))
-    grid = np.linspace(0.0, xm[-1], max(8, int(math.ceil(xm[-1] / h)) + 1))
-    zg = np.interp(grid, xm, zm)
-    trend = np.zeros_like(zg)
+        lev = None if level is None else np.asarray(level, dtype=float)
+        knots = _rest_correction(t, z, standing, lev)
+        if knots is not None:
+            for i, j in _chunks(a.size):
+                vel[i:j] -= _rest_rate(t[i:j], knots)
+            _cumtrapz(vel, t, out=z)
+    del vel, standing
+    return _detrend_in_distance(z, t, v, wavelength_m, degree, order)
+
+
+def _detrend_in_distance(z, t, v, wavelength_m: float, degree: int, order: int):
+    """``z`` (m) less its long waves in distance (:func:`in_distance`), in place; ``t`` (s),
+    ``v`` (m/s). The distance is made chunk by chunk where needed (three times)."""
+    import numpy as np
+    from road_force_estimator.core.scipy_signal import signal as _signal
+
+    moving = np.empty(z.size, dtype=bool)
+    x_end = 0.0                                      # the distance at the last moving sample
+    for i, j, x, up in _cumtrapz_parts(v, t, absolute=True):
+        moving[i:j] = up
+        if up.any():
+            x_end = x[np.flatnonzero(up)[-1]]
+    n_moving = int(np.count_nonzero(moving))
+    if n_moving < 8 or not x_end > 0.0:
+        z -= np.mean(z)
+        return z
+    xm, n = np.empty(n_moving), 0
+    for i, j, x, up in _cumtrapz_parts(v, t, absolute=True):
+        part = x[up]
+        xm[n:n + part.size] = part
+        n += part.size
+    n, others = _compact(z, moving)                 # z[moving] in front, in place
+    zm = z[:n]
+    h = float(np.median(np.diff(xm), overwrite_input=True))
+    num = max(8, int(math.ceil(x_end / h)) + 1)
+    zg = np.empty(num)                               # z on the grid linspace(0, x_end, num)
+    for i, j in _chunks(num):
+        zg[i:j] = np.interp(_linspace_part(0.0, x_end, num, i, j), xm, zm)
+    del xm, zm
+    _expand(z, moving, n, others)
+    del moving, others
+    coef = None
     if degree >= 0:
-        tt = np.linspace(-1.0, 1.0, grid.size)
-        trend = np.polyval(np.polyfit(tt, zg, degree), tt)
-    signal = _signal()
-    sos = signal.butter(order, 2.0 * (grid[1] - grid[0]) / wavelength_m, btype='high',
-                        output='sos')
-    rest = zg - trend
-    trend = trend + (rest - signal.sosfiltfilt(sos, rest))
-    return z - np.interp(x, grid, trend)
+        coef = polynomial_fit(zg, degree)
+        for i, j in _chunks(num):
+            zg[i:j] -= polynomial_values(coef, num, i, j)
+    g01 = _linspace_part(0.0, x_end, num, 0, 2)
+    sos = _signal().butter(order, 2.0 * (g01[1] - g01[0]) / wavelength_m, btype='high',
+                           output='sos')
+    low = _sosfiltfilt(sos, zg)                      # zg is the rest; the trend into zg
+    for i, j in _chunks(num):
+        p = 0.0 if coef is None else polynomial_values(coef, num, i, j)
+        zg[i:j] = p + (zg[i:j] - low[i:j])
+    del low
+    grid = np.linspace(0.0, x_end, num)
+    for i, j, x, _ in _cumtrapz_parts(v, t, absolute=True):
+        z[i:j] -= np.interp(x, grid, zg)
+    return z
 
 
 def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
@@ -296,16 +537,16 @@ def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
     Steady speed (the 5th percentile of ``|v|`` at least half of ``speed_mps``, the run's
     median |v|, floored at :data:`SPEED_FLOOR_MPS` for the cutoffs): :func:`zero_phase` at
     ``ratio x cutoff_wavelength_m`` at that speed, less the run's least-squares polynomial of
-    degree ``degree`` (a cutoff longer than the run leaves the filter's edge transients and
-    the double integral's wander as a smooth curve over the whole run: metres on a 120 m run
-    at 10 km; waves of the run's length, which no band-passed figure sees). A stop
-    (:func:`rest_stretches`): :func:`in_distance` at that wavelength with ``level`` (run in
-    time with one cutoff, the slow stretches lost their metre waves: C20-stop 55.4 %, now
-    0.88 %; kf-model-rts 4.17 %). A speed that changes without a stop to correct the rate
-    with: :func:`zero_phase` at ``cutoff_wavelength_m`` (the long one lets the drift of the
-    slow stretches into the profile: C20-stop 164 % against 55 %). ``accel`` (m/s^2),
-    ``level`` (m), times ``t_s``
-    (s), speeds ``v_mps`` (m/s): (m,); ``dt_s`` the run's step (s).
+    degree ``degree`` (:func:`subtract_polynomial`; a cutoff longer than the run leaves the
+    filter's edge transients and the double integral's wander as a smooth curve over the whole
+    run: metres on a 120 m run at 10 km; waves of the run's length, which no band-passed figure
+    sees). A stop (:func:`rest_stretches`): :func:`in_distance` at that wavelength with
+    ``level`` (run in time with one cutoff, the slow stretches lost their metre waves: C20-stop
+    55.4 %, now 0.88 %; kf-model-rts 4.17 %). A speed that changes without a stop to correct
+    the rate with: :func:`zero_phase` at ``cutoff_wavelength_m`` (the long one lets the drift
+    of the slow stretches into the profile: C20-stop 164 % against 55 %). ``accel`` (m/s^2),
+    ``level`` (m), times ``t_s`` (s), speeds ``v_mps`` (m/s): (m,); ``dt_s`` the run's step
+    (s). Extra memory: one whole-run float64 array steady (the result), three with a stop.
     """
     import numpy as np
 
@@ -314,12 +555,10 @@ def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
         return 0.0
     v = np.asarray(v_mps, dtype=float)
     wavelength = ratio * cutoff_wavelength_m
-    steady = float(np.percentile(np.abs(v), 5.0)) >= 0.5 * speed_mps
+    steady = float(np.percentile(np.abs(v), 5.0, overwrite_input=True)) >= 0.5 * speed_mps
     if not steady and rest_stretches(v):
         return in_distance(a, t_s, v, wavelength, level=level, degree=degree)
     speed = max(speed_mps, SPEED_FLOOR_MPS)
     if not steady:
         return zero_phase(a, dt_s, 2.0 * math.pi * speed / cutoff_wavelength_m)
-    zs = zero_phase(a, dt_s, 2.0 * math.pi * speed / wavelength)
-    tt = np.linspace(-1.0, 1.0, zs.size)
-    return zs - np.polyval(np.polyfit(tt, zs, degree), tt)
+    return subtract_polynomial(zero_phase(a, dt_s, 2.0 * math.pi * speed / wavelength), degree)
