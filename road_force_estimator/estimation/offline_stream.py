@@ -60,13 +60,17 @@ class OfflineStream:
         #: a folder (or True: the system's temporary folder) for the per-sample columns
         #: needed only piece by piece (:class:`.core.spill.SpillColumn`); None: in memory
         self.spill = spill
-        self._n = 0
         self._buf = _Inputs(max(int(capacity), 1))
         self.status = EstimatorStatus()
         self.odometer = None
         self.fused = False
         #: the last accepted stamp (ns; None before :meth:`finish` or without one)
         self.last_stamp_ns: int | None = None
+
+    @property
+    def fed(self) -> int:
+        """Samples fed so far."""
+        return self._buf.n if self._buf is not None else 0
 
     def feed(self, stamps_ns, q_m, roll_rad, speed_mps) -> list[EstimateArrays]:
         """One block of samples (stamps ns, q (k, 2) m, roll rad, speed m/s); no piece."""

@@ -259,7 +259,9 @@ class _StreamRun:
                                               block.speed_mps):
                     self._consume(piece)
                 if progress:
-                    print(f'{self.api.prog}: {self.summary.inputs} samples', end='\r',
+                    done = (f'{self.stream.fed} samples read' if self.offline
+                            else f'{self.summary.inputs} samples')
+                    print(f'{self.api.prog}: {done}', end='\r',
                           flush=True, file=sys.stderr)
             rest = (self.stream.finish(self.reader.fixes) if self.offline
                     else self.stream.finish())
