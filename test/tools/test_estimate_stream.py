@@ -249,3 +249,29 @@ def test_a_full_disk_while_spilling_leaves_nothing(drive, tmp_path, monkeypatch,
     err = capsys.readouterr().err
     assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
     assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_a_cut_bag_streams_as_one_piece(drive, tmp_path, monkeypatch, mode):
+    """A bag cut off at 60 % of its file (a recorder that lost power; metadata.yaml still
+    lists every message): both paths read it up to the break, say so once, and write the
+    same estimates and report."""
+    import shutil
+
+    cut = tmp_path / 'cut'
+    shutil.copytree(drive, cut)
+    (mcap,) = cut.glob('*.mcap')
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:int(0.6 * len(data))])
+    kw = dict(segment_length_m=10.0, figures=False, mode=mode)
+    one = estimate_bag.run(cut, tmp_path / 'one', **kw)
+    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
+    streamed = estimate_bag.run(cut, tmp_path / 'str', **kw)
+    assert 0 < one.summary['samples']['input'] < 3000
+    assert one.warnings and one.warnings == streamed.warnings
+    a, b = messages(tmp_path / 'one' / 'bag'), messages(tmp_path / 'str' / 'bag')
+    assert sorted(a) == sorted(b) and all(a[t] == b[t] for t in a)
+    ja = json.loads((tmp_path / 'one' / 'report' / 'report.json').read_text())
+    jb = json.loads((tmp_path / 'str' / 'report' / 'report.json').read_text())
+    assert ja == jb
