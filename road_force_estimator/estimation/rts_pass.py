@@ -4,8 +4,9 @@ does not grow with the run (issue 21): :func:`smoothed_chunks`.
 The forward filter keeps only the state before each chunk (:class:`ForwardPass`); when the
 backward pass reaches a chunk, the chunk's filtered states and innovations are computed again
 from that state, with the same products on the same rows, so the bits are those the forward
-pass had (test_offline_stream). The price: the forward recursion runs twice; the gain: a run's
-forward states (8 nx bytes a sample) and innovations (24) are never held whole, so the profile
+pass had (test_offline_stream). The price: the forward recursion runs twice on a long run (the
+last :data:`CACHE_BYTES` of chunks are kept); the gain: a run's forward states (8 nx bytes a
+sample) and innovations (24) are never held whole, so the profile
 pass (:meth:`.smoother.Smoother._profile`), which cannot be windowed (its slowest mode is
 ~720 s), runs over a 4-hour drive.
 
@@ -22,8 +23,9 @@ from road_force_estimator.estimation.lti import lti
 
 __all__ = ['ForwardPass', 'smoothed_chunks']
 
-#: Recomputed forward chunks kept (a backward chunk spans at most two forward chunks).
-_CACHE_CHUNKS = 3
+#: Bytes of forward chunks kept (at least three: a backward chunk spans at most two forward
+#: chunks): a run of up to ~0.5 M samples is never recomputed (as fast as holding it whole).
+CACHE_BYTES = 64 << 20
 
 
 class ForwardPass:
@@ -72,7 +74,8 @@ class ForwardPass:
     def _keep(self, c: int, xf: np.ndarray, nu: np.ndarray) -> None:
         self._cache[c] = (xf, nu)
         self._cache.move_to_end(c)
-        while len(self._cache) > _CACHE_CHUNKS:
+        limit = max(3, CACHE_BYTES // max(1, xf.nbytes + nu.nbytes))
+        while len(self._cache) > limit:
             self._cache.popitem(last=False)
 
     def _chunk(self, c: int) -> tuple[np.ndarray, np.ndarray]:
