@@ -234,8 +234,9 @@ def _clock_grid(dts: np.ndarray, dt: float) -> tuple[float, bool, np.ndarray | N
     (:func:`.sample_clock.clock_step`: each step a whole number of its periods to within
     :data:`.sample_clock.JITTER_MAX_FRACTION`; the samples are where the clock put them, as
     the online observer steps), else ``(dt, False, None)`` (uneven: step by step). Without
-    it, a long jittered drive would go through the step-by-step path: a transition per
-    sample (1.2 kB each: 17 GB over 4 hours at 1 kHz)."""
+    it, a jittered drive went through the step-by-step path: a Python loop per sample with
+    the run's forward states held whole (~120 bytes a sample), 1.61 s of CPU against 0.50 s
+    on the clock's grid for a 30 s drive at 1 kHz (about 13 minutes for 4 hours)."""
     clock = clock_step(dts)
     steps = None if clock is None else grid_steps(dts, clock, tol=JITTER_MAX_FRACTION)
     if steps is None:
