@@ -10,9 +10,11 @@ The model observer's smoother (:mod:`.smoother`) needs the whole run before its 
 long run's rows coming window by window (:meth:`.smoother.Smoother.pieces`) and never held
 whole. Pieces of at most :data:`PIECE_ROWS` consecutive input rows; a rejected sample holds
 the previous row (zeros before the first accepted one). Concatenated, the pieces are
-:func:`.smoother.smooth`'s arrays bit for bit (test_offline_stream); the windows' own
-difference from a smoother over the whole run in one go is ~1e-11 of each field's RMS
-(:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m bench.offline_windows``).
+:func:`.smoother.smooth`'s arrays bit for bit with the same windows (test_offline_stream);
+with ``eager`` (``estimate_bag``'s stream) a run goes in windows once it is longer than one
+window and its overlap (~11 min at 1 kHz; :func:`.smoother.smooth` by default from ~55 min),
+and the windows' own difference from a smoother over the whole run in one go is ~1e-11 of
+each field's RMS (:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m bench.offline_windows``).
 
 Only the model's smoother (``observer.discretization: model``, the default) streams; the
 differentiator schemes' zero-phase chain (:func:`.offline.estimate_offline`) is one piece.
@@ -49,7 +51,8 @@ class OfflineStream:
     def __init__(self, vehicle: VehicleParameters | None = None,
                  observer: ObserverParameters | None = None, *,
                  gap_threshold_s: float = GAP_THRESHOLD_S, capacity: int = 0,
-                 window: tuple[int, int] | None = None, spill=None) -> None:
+                 window: tuple[int, int] | None = None, spill=None,
+                 eager: bool = False) -> None:
         self.vehicle = VehicleParameters() if vehicle is None else vehicle
         self.observer = ObserverParameters() if observer is None else observer
         if self.observer.discretization != 'model':
@@ -57,6 +60,8 @@ class OfflineStream:
                              f'(observer.discretization = {self.observer.discretization!r})')
         self.gap_threshold_s = gap_threshold_s
         self.window = window
+        #: windows for every run longer than one (:class:`.smoother.Smoother`'s ``eager``)
+        self.eager = eager
         #: a folder (or True: the system's temporary folder) for the per-sample columns
         #: needed only piece by piece (:class:`.core.spill.SpillColumn`); None: in memory
         self.spill = spill
@@ -93,7 +98,7 @@ class OfflineStream:
         if self.spill:            # needed only piece by piece: out of memory until then
             prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
                 prep.stamps_out, self.spill)
-        smoother = Smoother(prep.vehicle, prep.observer, self.window)
+        smoother = Smoother(prep.vehicle, prep.observer, self.window, eager=self.eager)
         self.status = EstimatorStatus(**prep.counts)
         out = _Pieces(prep, self.status)
         for rows, part in smoothed_rows(prep, smoother):

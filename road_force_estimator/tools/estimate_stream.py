@@ -226,7 +226,7 @@ class _StreamRun:
         self.offline = options['mode'] == 'offline'
         # offline, the columns needed only piece by piece wait in files in the output folder
         self.stream = (OfflineStream(vehicle, observer, capacity=streamable(input_path),
-                                     spill=folder)
+                                     spill=folder, eager=True)
                        if self.offline else OnlineStream(vehicle, observer))
         custom = {'road_force_estimator.mode': options['mode'],
                   'road_force_estimator.input': input_path.name,
@@ -361,7 +361,7 @@ class _StreamRun:
         from road_force_estimator.estimation.offline_stream import OfflineStream
 
         reader = DriveBlocks(self.input_path, self.reader.block_samples)
-        stream = OfflineStream(self.vehicle, self.observer,
+        stream = OfflineStream(self.vehicle, self.observer, eager=True,
                                capacity=streamable(self.input_path))
         for block in reader:
             stream.feed(block.stamps_ns, block.q_m, block.roll_rad, block.speed_mps)

@@ -202,3 +202,19 @@ def test_a_stop_in_windows_takes_the_gains_of_its_speed():
     win = smooth(stamps, q, phi, v, VEHICLE, window=(2500, 1200))
     f, g = win.tire_force_dynamic_n, one.tire_force_dynamic_n
     assert np.sqrt(np.mean((f - g) ** 2)) < 1e-3 * np.sqrt(np.mean(g ** 2))
+
+
+def test_eager_windows_are_the_explicit_windows(monkeypatch):
+    """``eager`` (estimate_bag's stream): every run longer than a window and its overlap goes
+    in windows of window_samples's size, as smooth() with those windows given; smooth()
+    by default keeps such a run whole (shorter than WINDOWED_RUNS windows' work)."""
+    from road_force_estimator.estimation import smoother as sm
+
+    monkeypatch.setattr(sm, 'window_samples', lambda *a, **k: (1500, 700))
+    stamps, q, phi, v = _drive(VEHICLE, 10.0)
+    stream = OfflineStream(VEHICLE, eager=True)
+    stream.feed(stamps, q, phi, v)
+    got = np.concatenate([p.wheel_load_n for p in stream.finish()])
+    np.testing.assert_array_equal(got, smooth(stamps, q, phi, v, VEHICLE,
+                                              window=(1500, 700)).wheel_load_n)
+    assert not np.array_equal(got, smooth(stamps, q, phi, v, VEHICLE).wheel_load_n)
