@@ -6,14 +6,18 @@ Used by :func:`.estimate_bag.run` for a drive bag whose metadata lists at least
 :func:`stream_threshold`) and no ground truth, when no reference profile is given
 (:func:`use_stream`); shorter drives go through in one piece (their outputs
 unchanged, byte for byte). The blocks: the bag read :data:`~.bagio.drive_blocks.BLOCK_SAMPLES`
-samples at a time (:class:`~.bagio.drive_blocks.DriveBlocks`), the online estimate of each
+samples at a time (:class:`~.bagio.drive_blocks.DriveBlocks`); online the estimate of each
 block (:class:`~.estimation.stream_run.OnlineStream`, bit-identical to one piece: the chain is
-causal), its messages written at once (:class:`~.bagio.estimate_stream.EstimateBagStream`),
+causal), offline (the model's smoother) the drive gathered and its estimate handed out piece
+by piece (:class:`~.estimation.offline_stream.OfflineStream`: runs longer than ~11 min at
+1 kHz in windows, ~1e-11 of one piece; the differentiator schemes' offline chain stays one
+piece); the pieces' messages written at once (:class:`~.bagio.estimate_stream.EstimateBagStream`),
 the diagnostics per second, the model fit and the report's accumulators
 (:class:`~.report.streamed.StreamedSummary`) fed with it. The bag's messages, ``segments.csv``
 and ``report.json`` are those of the one-piece path (test_estimate_stream); the detail
 figures too (:mod:`.stream_figures`), the profile and overview figures show the detail window
-only (a note in the report says so).
+only (a note in the report says so). The per-sample columns needed only at the end (or, offline,
+piece by piece) wait in unnamed temporary files in the output folder (:mod:`.core.spill`).
 """
 from __future__ import annotations
 
