@@ -220,8 +220,7 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
     contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
     del steps
     return SimpleNamespace(
-        n=stamps.shape[0], stamps_out=stamps if stamps.dtype == np.int64 else
-        output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
+        n=stamps.shape[0], stamps_out=output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
         last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
         y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
         dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
