@@ -17,33 +17,26 @@ from road_force_estimator.interfaces import DEFLECTION_JOINTS
 from road_force_estimator.estimation import smoother
 from road_force_estimator.tools import estimate_bag, estimate_stream, stream_figures
 
+import bag_samples
+
 BASE = 1_700_000_000 * 10**9
 
 
-T = TYPESTORE.types
-
-
-def header(stamp_ns, frame):
-    sec, nsec = divmod(int(stamp_ns), 10**9)
-    return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
-        sec=sec, nanosec=nsec), frame_id=frame)
-
-
 def joint_state(stamp_ns, q, roll):
-    return T['sensor_msgs/msg/JointState'](
-        header=header(stamp_ns, 'base_link'), name=list(DEFLECTION_JOINTS),
-        position=np.array([q[0], q[1], roll]), velocity=np.zeros(0), effort=np.zeros(0))
+    """A /suspension/deflections message (:mod:`bag_samples`)."""
+    return bag_samples.joint_state(int(stamp_ns), DEFLECTION_JOINTS, [q[0], q[1], roll])
 
 
 def twist(stamp_ns, v):
-    vec = T['geometry_msgs/msg/Vector3']
-    return T['geometry_msgs/msg/TwistStamped'](
-        header=header(stamp_ns, 'base_link'),
-        twist=T['geometry_msgs/msg/Twist'](linear=vec(x=v, y=0.0, z=0.0),
-                                           angular=vec(x=0.0, y=0.0, z=0.0)))
+    return bag_samples.twist(int(stamp_ns), v)
+
+
+def header(stamp_ns, frame):
+    return bag_samples.header(int(stamp_ns), frame)
 
 
 def navsatfix(stamp_ns, lat, lon):
+    T = TYPESTORE.types
     return T['sensor_msgs/msg/NavSatFix'](
         header=header(stamp_ns, 'gnss'),
         status=T['sensor_msgs/msg/NavSatStatus'](status=0, service=1),

@@ -1,4 +1,4 @@
-"""Messages and drives shared by the bag tests of test/bagio (rosbags objects, Jazzy store)."""
+"""Messages and drives shared by the bag tests (test/bagio, test/tools; rosbags, Jazzy)."""
 import json
 import os
 from pathlib import Path
