@@ -62,8 +62,8 @@ class OfflineStream:
         self.window = window
         #: windows for every run longer than one (:class:`.smoother.Smoother`'s ``eager``)
         self.eager = eager
-        #: a folder (or True: the system's temporary folder) for the per-sample columns
-        #: needed only piece by piece (:class:`.core.spill.SpillColumn`); None: in memory
+        #: a folder for the per-sample columns needed only piece by piece
+        #: (:class:`.core.spill.SpillColumn`); None: in memory
         self.spill = spill
         self._buf = _Inputs(max(int(capacity), 1))
         self.status = EstimatorStatus()
@@ -116,12 +116,10 @@ class OfflineStream:
 
 
 def _spilled(column: np.ndarray, spill):
-    """``column`` moved into a :class:`.core.spill.SpillColumn` (in ``spill``, a folder, or
-    the system's temporary folder for True)."""
+    """``column`` moved into a :class:`.core.spill.SpillColumn` in the folder ``spill``."""
     from road_force_estimator.core.spill import SpillColumn
 
-    out = SpillColumn(column.dtype, None if column.ndim == 1 else column.shape[1],
-                      None if spill is True else spill)
+    out = SpillColumn(column.dtype, None if column.ndim == 1 else column.shape[1], spill)
     for a in range(0, column.shape[0], 1 << 20):
         out.append(column[a:a + (1 << 20)])
     return out
