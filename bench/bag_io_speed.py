@@ -21,7 +21,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from road_force_estimator import bagio, interfaces
-from road_force_estimator.bagio import TYPESTORE
+from road_force_estimator.serde import TYPESTORE
 
 
 def fake_drive(n: int, rate_hz: float = 500.0, speed: float = 20.0):

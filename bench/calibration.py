@@ -62,10 +62,10 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.bagio import road_from_source
 from road_force_estimator.core.sensors import SensorModel
-from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
-from road_force_estimator.estimation.calibration_model import SLOTS, slot_value, vehicle_with
+from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
+from road_force_estimator.calibration.model import SLOTS, slot_value, vehicle_with
 from road_force_estimator.estimation import estimate_batch
-from road_force_estimator.estimation.offline import estimate_offline
+from road_force_estimator.estimation.chain.zero_phase import estimate_offline
 
 from bench.calibration_frequency import frequency_fit
 

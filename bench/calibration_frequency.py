@@ -7,14 +7,14 @@ functions, on the drives of :mod:`bench.calibration` (same seeds: the same truck
 
 ``--friction N``: the trucks have a leaf-spring friction of N per side (what no linear
 transfer function has); ``--time-domain``: the time-domain calibration
-(:func:`~road_force_estimator.estimation.calibration.calibrate`, the friction freed with
+(:func:`~road_force_estimator.calibration.calibrate.calibrate`, the friction freed with
 ``--friction``) of the same drives beside, errors and time.
 
 Per drive, from the data only (no truth, nothing from the time-domain fit):
 
-1. Alignment as :func:`~road_force_estimator.estimation.calibration.calibrate` does it: the
+1. Alignment as :func:`~road_force_estimator.calibration.calibrate.calibrate` does it: the
    observer's profile (nominal parameters) cross-correlated with the enveloped survey
-   (:func:`~road_force_estimator.estimation.calibration_alignment.align`).
+   (:func:`~road_force_estimator.calibration.alignment.align`).
 2. The H1 estimate ``H = S_yu S_uu^-1`` of the transfer functions road (left, right; one input
    on a single-track survey) -> (q_1, q_2, phi), Welch's averaging (Hann, ``--nperseg-s`` s
    segments, half overlap), and each output's residual spectrum
@@ -28,7 +28,7 @@ Per drive, from the data only (no truth, nothing from the time-domain fit):
    in the time-domain fit, then fixed by the static load), and a pure delay (the fine
    alignment: a position error of ``d`` m delays the road by ``d / v``). The model is
    ``C (i w - A)^-1 (B_u + i w B_du)`` of
-   :func:`~road_force_estimator.estimation.calibration_model.linear_plant`: the linearised
+   :func:`~road_force_estimator.calibration.model.linear_plant`: the linearised
    plant, without the roll's sin / cos, the gravity moment's nonlinearity, the tire's
    lift-off, friction or a sensor lag (what the time-domain fit carries through the plant's
    defect).
@@ -51,8 +51,8 @@ from road_force_estimator.bagio import road_from_source
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.estimation import estimate_batch
-from road_force_estimator.estimation.calibration_alignment import align
-from road_force_estimator.estimation.calibration_model import (
+from road_force_estimator.calibration.alignment import align
+from road_force_estimator.calibration.model import (
     SLOTS, linear_plant, slot_value, vehicle_with)
 
 PHYSICAL = [s for s in SLOTS if s.physical]
@@ -237,7 +237,7 @@ def main(argv=None) -> int:
 
 def _time_domain(data, road, truck, friction_n):
     """The time-domain calibration of one drive: (values by slot, seconds)."""
-    from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
+    from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
     free = frozenset({'vehicle.leaf_spring_friction'}) if friction_n > 0.0 else frozenset()
     clock, cpu = time.perf_counter(), time.process_time()
     result = calibrate(*data, road, VehicleParameters(),

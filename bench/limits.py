@@ -56,7 +56,7 @@ def _drive_with_plant(name: str):
 def design_grid(drive) -> list[tuple[str, float, int]]:
     """Zero-latency load error (%) and gain designs with the default and a finer grid."""
     from bench import scenarios as sc
-    from road_force_estimator.estimation import schedule as mo
+    from road_force_estimator.estimation.observer import schedule as mo
     from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 

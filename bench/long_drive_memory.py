@@ -54,7 +54,7 @@ def make_drive(bag: Path, hours: float, piece_s: float) -> int:
     """Write the long drive of the module notes into ``bag``; the samples written."""
     from road_force_estimator.bagio import BagWriter
     from road_force_estimator.bagio.drive import _measurement_streams
-    from road_force_estimator.bagio.messages import DEFAULT_START_STAMP_NS, stamp_columns
+    from road_force_estimator.serde.messages import DEFAULT_START_STAMP_NS, stamp_columns
     from road_force_estimator.core.parameters import VehicleParameters
     from road_force_estimator.core.plant import simulate as plant
     from road_force_estimator.core.road import iso8608_profile

@@ -58,7 +58,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, message_template
+from road_force_estimator.serde import CdrEncoder, message_template
 from road_force_estimator.ros.bag_recorder import message_class
 from road_force_estimator.ros.messages import reliable_qos, sensor_qos
 

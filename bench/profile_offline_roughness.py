@@ -4,9 +4,9 @@ factor, between that drive's IRI and the profile elsewhere.
     .venv/bin/python -m bench.profile_offline_roughness [--factors 1 0.5 0.25]
                                                        [--scenarios C20-200-10um ...]
 
-The offline profile pass (:meth:`road_force_estimator.estimation.smoother.Smoother._profile`)
+The offline profile pass (:meth:`~.smoothing.smoother.Smoother._profile`)
 designs its smoother for the load pass's roughness times
-:data:`~road_force_estimator.estimation.model.PROFILE_OFFLINE_GD_RATIO` (1 by default).
+:data:`~road_force_estimator.estimation.models.front_axle.PROFILE_OFFLINE_GD_RATIO` (1 by default).
 ``--factors`` multiply that ratio. Per factor the benchmark's scenarios run (as
 :mod:`bench.run_benchmark` builds them) for ``ours-offline`` and once for ``kf-model-rts`` (the
 target's peer; it does not depend on the factor); the command prints, per scenario, the
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     from bench import tune
     from bench.run_benchmark import METHODS
     from bench.scenarios import build_drive, scenario_by_name, score
-    from road_force_estimator.estimation import model
+    from road_force_estimator.estimation.models import front_axle as model
 
     tuned = tune.load_tuned()
     default = model.PROFILE_OFFLINE_GD_RATIO

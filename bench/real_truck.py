@@ -260,7 +260,7 @@ def run_drive(drive: TruckDrive, duration_s: float, tuned: dict[str, Any], log=N
     """Every file x every column on one drive: ``{'files': {file: {column: figures}},
     'model_fit': {file: [ratio, verdict]}, 'seconds': s}`` or ``{'needs': [names]}``."""
     from road_force_estimator.core.parameters import ObserverParameters
-    from road_force_estimator.estimation.model_fit import assess
+    from road_force_estimator.estimation.fit_check import assess
     need = missing(drive)
     if need:
         return {'needs': need}

@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     p.add_argument('--duration', type=float, default=10.0, metavar='S')
     args = p.parse_args(argv)
     from road_force_estimator.core.parameters import ObserverParameters
-    import road_force_estimator.estimation.model_core as core
+    import road_force_estimator.estimation.observer.online as core
     from road_force_estimator.estimation import estimate_batch
     from bench.run_benchmark import per_sample
     from bench.scenarios import score

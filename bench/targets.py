@@ -226,7 +226,7 @@ def tune_schedule(noise_levels=(0.0, 10e-6, 50e-6), log=print) -> dict:
     noise range while they are tried; a grid (:data:`TUNE_GRID`) then a pattern search in log
     space (factor 2, down to 1.1), as :mod:`bench.tune` does for the peers.
     """
-    import road_force_estimator.estimation.model as mo
+    import road_force_estimator.estimation.models.front_axle as mo
     from road_force_estimator.estimation import estimate_batch
     from road_force_estimator.core.parameters import ObserverParameters
 

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from road_force_estimator import bagio
+from road_force_estimator import serde
 
-T = bagio.TYPESTORE.types
+T = serde.TYPESTORE.types
 BASE_NS = bagio.DEFAULT_START_STAMP_NS
 
 

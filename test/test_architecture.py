@@ -19,12 +19,16 @@ ALLOWED = {
     'interfaces': set(),
     'core': set(),
     'estimation': {'core'},
-    'bagio': {'interfaces', 'core', 'estimation'},
-    'report': {'interfaces', 'core', 'estimation'},
-    'ros': {'interfaces', 'core', 'estimation', 'bagio'},
-    'tools': {'interfaces', 'core', 'estimation', 'bagio', 'report'},
+    'calibration': {'core', 'estimation'},
+    'serde': {'interfaces'},
+    'bagio': {'interfaces', 'core', 'estimation', 'serde'},
+    'report': {'interfaces', 'core', 'estimation', 'calibration'},
+    'ros': {'interfaces', 'core', 'estimation', 'serde', 'bagio'},
+    'tools': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report'},
 }
 BAG_LIBRARIES = {'rosbags', 'mcap', 'mcap_ros2'}
+#: The concerns that may import the bag libraries: the codec (rosbags' typestore) and the bags.
+BAG_CONCERNS = {'serde', 'bagio'}
 ROS_LIBRARIES = {'rclpy', 'builtin_interfaces', 'std_msgs', 'sensor_msgs', 'geometry_msgs',
                  'diagnostic_msgs', 'rosgraph_msgs', 'rcl_interfaces', 'rosidl_runtime_py'}
 
@@ -125,8 +129,9 @@ class Package:
             if target and target != self.name and self.concern(target) not in allowed:
                 bad.append(f'line {line}: {name} ({self.concern(target)}/ is not below '
                            f'{concern}/)')
-            if root in BAG_LIBRARIES and concern != 'bagio':
-                bad.append(f'line {line}: {name} (only bagio/ reads or writes bags)')
+            if root in BAG_LIBRARIES and concern not in BAG_CONCERNS:
+                bad.append(f'line {line}: {name} (only serde/ and bagio/ use the bag '
+                           'libraries)')
             if root in ROS_LIBRARIES and concern != 'ros':
                 bad.append(f'line {line}: {name} (only ros/ imports the ROS client libraries)')
         return bad
@@ -201,7 +206,7 @@ def test_the_checks_see_each_kind_of_violation(tmp_path):
     assert pkg.cycle() in (['pkg.core.a', 'pkg.estimation.b', 'pkg.core.a'],
                            ['pkg.estimation.b', 'pkg.core.a', 'pkg.estimation.b'])
     assert any('estimation/ is not below core/' in e for e in pkg.layering_errors('pkg.core.a'))
-    assert any('only bagio/' in e for e in pkg.layering_errors('pkg.estimation.b'))
+    assert any('only serde/ and bagio/' in e for e in pkg.layering_errors('pkg.estimation.b'))
     assert pkg.layering_errors('pkg.ros.c') == []
     assert pkg.private_uses('pkg.estimation.b') == ['line 2: _hidden from pkg.core.a']
     assert pkg.private_uses('pkg.ros.c') == ['line 3: mod._secret']

@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from road_force_estimator.bagio.cdr import NS_PER_S, ColumnRows
+from road_force_estimator.serde.cdr import NS_PER_S, ColumnRows
 from road_force_estimator.bagio.checks import (
     Rejects,
     accept_in_order,
@@ -22,7 +22,7 @@ from road_force_estimator.bagio.checks import (
     read_scalar,
 )
 from road_force_estimator.bagio.errors import BagReadError
-from road_force_estimator.bagio.messages import (
+from road_force_estimator.serde.messages import (
     DEFAULT_START_STAMP_NS,
     DEFAULT_TRACK_WIDTH_M,
     check_finite,

@@ -17,10 +17,10 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from road_force_estimator.bagio.cdr import ColumnRows, LazyColumns
+from road_force_estimator.serde.cdr import ColumnRows, LazyColumns
 from road_force_estimator.bagio.estimates import (
     diagnostic_streams, estimate_streams, EstimateColumns)
-from road_force_estimator.bagio.messages import (
+from road_force_estimator.serde.messages import (
     DEFAULT_TRACK_WIDTH_M, message_template, stamp_columns)
 from road_force_estimator.bagio.writer import BagWriter
 from road_force_estimator.interfaces import (

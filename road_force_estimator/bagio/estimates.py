@@ -14,8 +14,8 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from road_force_estimator.bagio.cdr import TYPESTORE, ColumnRows, LazyColumns, ns_to_stamps
-from road_force_estimator.bagio.messages import (
+from road_force_estimator.serde.cdr import TYPESTORE, ColumnRows, LazyColumns, ns_to_stamps
+from road_force_estimator.serde.messages import (
     DEFAULT_TRACK_WIDTH_M,
     message_class,
     message_template,

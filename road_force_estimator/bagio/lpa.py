@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from road_force_estimator.bagio.cdr import NS_PER_S
+from road_force_estimator.serde.cdr import NS_PER_S
 from road_force_estimator.bagio.checks import Rejects, accept_in_order, read_points
 from road_force_estimator.bagio.errors import BagReadError
-from road_force_estimator.bagio.messages import (
+from road_force_estimator.serde.messages import (
     DEFAULT_START_STAMP_NS,
     DEFAULT_TRACK_WIDTH_M,
     check_finite,

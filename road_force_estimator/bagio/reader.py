@@ -23,7 +23,7 @@ import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 import yaml
 
-from road_force_estimator.bagio.cdr import (
+from road_force_estimator.serde.cdr import (
     NS_PER_S,
     TYPESTORE,
     ColumnDecoder,

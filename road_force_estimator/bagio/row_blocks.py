@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from road_force_estimator.bagio.cdr import ColumnRows
+from road_force_estimator.serde.cdr import ColumnRows
 from road_force_estimator.bagio.mcap_file import RECORD_HEAD, RECORD_LEAD, McapFile
 
 __all__ = ['aligned_streams', 'write_interleaved']

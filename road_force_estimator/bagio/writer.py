@@ -24,7 +24,7 @@ from rosbags.interfaces import (
 )
 import yaml
 
-from road_force_estimator.bagio.cdr import TYPESTORE, CdrLayout, ColumnRows, cdr_layout
+from road_force_estimator.serde.cdr import TYPESTORE, CdrLayout, ColumnRows, cdr_layout
 from road_force_estimator.bagio.errors import BagWriteError
 from road_force_estimator.bagio.mcap_file import McapFile
 from road_force_estimator.bagio.row_blocks import write_interleaved

@@ -8,16 +8,17 @@ zero-phase chain :func:`estimate_offline`. Results: :class:`Estimate`, :class:`E
 """
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, batch_inputs
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
-from road_force_estimator.estimation.cores import CORES, Core
-from road_force_estimator.estimation.differentiator import SCHEMES
+from road_force_estimator.estimation.methods import CORES, Core
+from road_force_estimator.estimation.chain.differentiator import SCHEMES
 from road_force_estimator.estimation.estimator import PROGRESS_BLOCK, Estimator, estimate_batch
-from road_force_estimator.estimation.offline import (
-    OfflineEstimateArrays, RunInfo, estimate_offline, estimate_recording)
+from road_force_estimator.estimation.chain.zero_phase import (
+    OfflineEstimateArrays, RunInfo, estimate_offline)
+from road_force_estimator.estimation.offline import estimate_recording
 from road_force_estimator.estimation.outputs import (
     FIELD_COLUMNS, PAIR_FIELDS, SCALAR_FIELDS, Column, Estimate, EstimateArrays,
     EstimatorStatus)
 from road_force_estimator.estimation.reconstruction import LIFT_OFF_FRACTION, LTR_FLOOR_FRACTION
-from road_force_estimator.estimation.smoother import smooth
+from road_force_estimator.estimation.smoothing.smoother import smooth
 
 __all__ = [
     'Estimator', 'estimate_batch', 'estimate_recording', 'estimate_offline', 'smooth',

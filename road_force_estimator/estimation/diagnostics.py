@@ -65,7 +65,7 @@ def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
     """The estimator status' words: 'speed contradicted by the deflections (N samples)',
     'converging', the model-fit advice (:data:`.model_fit.ADVICE`, when ``model_fit`` is
     'mismatch'), 'N lift-off samples', 'N restarts' or 'ok' (in that order of precedence)."""
-    from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
+    from road_force_estimator.estimation.fit_check import ADVICE, MISMATCH
 
     if speed_contradicted:
         return f'speed contradicted by the deflections ({speed_contradicted} samples)'

@@ -57,7 +57,7 @@ import numpy as np
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, SampleGate, batch_inputs, check_gap_threshold, output_stamps)
-from road_force_estimator.estimation.cores import CORES
+from road_force_estimator.estimation.methods import CORES
 from road_force_estimator.estimation.speed_check import SpeedCheck
 from road_force_estimator.estimation.static_load import StaticLoadTracker
 from road_force_estimator.estimation.outputs import (

@@ -29,7 +29,7 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, EstimateArrays, EstimatorStatus, arrays_from_table)
-from road_force_estimator.estimation.smoother import (
+from road_force_estimator.estimation.smoothing.smoother import (
     LAST_ROW_FIELDS, Smoother, fill_status, prepare, rows_of, smoothed_rows)
 
 __all__ = ['PIECE_ROWS', 'OfflineStream']

@@ -16,7 +16,7 @@ module's, per sample (:meth:`Reconstruction.row`) and over arrays
    lift-off; ``dF_i`` keeps the unclipped value, and :attr:`.EstimateArrays.load_clipped`
    / ``negative_load_samples`` count them) is published as 0; ``LTR = (F_n2 - F_n1) /
    (F_n1 + F_n2)`` (right minus left) of those loads, so ``|LTR| <= 1``; the denominator
-   floored at :data:`LTR_FLOOR_FRACTION` of the static sum (:mod:`.load_transfer`). The
+   floored at :data:`LTR_FLOOR_FRACTION` of the static sum (:func:`load_transfer_ratio`). The
    quasi-static LTR for rollover warnings: the same ratio of the loads low-passed below the
    wheel-hop band, causal: two first-order lags in cascade (critically damped, -3 dB at
    ``observer.rollover_cutoff_frequency``, exact for loads held over each step), restarted
@@ -38,11 +38,10 @@ import math
 import numpy as np
 
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
-from road_force_estimator.estimation.load_transfer import load_transfer_ratio, load_transfer_ratios
 from road_force_estimator.estimation.outputs import Column
 
 __all__ = ['LIFT_OFF_FRACTION', 'LTR_FLOOR_FRACTION', 'Reconstruction', 'distance_m',
-           'tire_decay', 'tire_deflections']
+           'tire_decay', 'tire_deflections', 'load_transfer_ratio', 'load_transfer_ratios']
 
 #: Lift-off flag when the estimated load is at most this fraction of the static load.
 LIFT_OFF_FRACTION = 0.05
@@ -52,6 +51,28 @@ LTR_FLOOR_FRACTION = 0.01
 QUASI_STATIC_CHUNK = 65536
 #: -3 dB frequency of a cascade of two equal first-order lags, per unit pole frequency.
 _CASCADE_3DB = math.sqrt(math.sqrt(2.0) - 1.0)
+
+
+def load_transfer_ratio(fn1_n: float, fn2_n: float, floor_n: float) -> float:
+    """LTR = (F_n2 - F_n1) / (F_n1 + F_n2) of one sample (MODEL.md step 8; right minus left)
+    from the left and right vertical loads (N); scalar fast path.
+
+    A tire cannot pull, so each load enters as ``max(F_n,i, 0)``: then ``|LTR| <= 1``, +1 when
+    the left wheel has lifted off, -1 when the right one has (the rollover limit). The
+    denominator is floored at ``floor_n`` (the estimators: :data:`LTR_FLOOR_FRACTION` of the
+    static axle load), so the ratio stays finite, and is 0, with both wheels off the ground.
+    """
+    a = fn1_n if fn1_n > 0.0 else 0.0
+    b = fn2_n if fn2_n > 0.0 else 0.0
+    den = a + b
+    return (b - a) / (den if den > floor_n else floor_n)
+
+
+def load_transfer_ratios(fn1_n: np.ndarray, fn2_n: np.ndarray, floor_n) -> np.ndarray:
+    """:func:`load_transfer_ratio` over arrays (the same numbers)."""
+    a = np.maximum(np.asarray(fn1_n, dtype=float), 0.0)
+    b = np.maximum(np.asarray(fn2_n, dtype=float), 0.0)
+    return (b - a) / np.maximum(a + b, floor_n)
 
 
 def distance_m(steps_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The calibration report: Markdown, JSON and figures of a
-:class:`road_force_estimator.estimation.calibration.CalibrationResult`.
+:class:`road_force_estimator.calibration.calibrate.CalibrationResult`.
 
 ``calibration.md`` and ``calibration.json`` hold each parameter with its nominal and fitted
 value and 95 % interval, the alignment found, the force scale, what was held and why, the fit
@@ -19,7 +19,7 @@ from scipy import signal
 
 # The APIs the report uses (one place, for the lead to re-point).
 from road_force_estimator.core.parameters import SPECS
-from road_force_estimator.estimation.calibration_model import OPTIONAL
+from road_force_estimator.calibration.model import OPTIONAL
 
 __all__ = ['write_report', 'report_dict', 'markdown']
 

@@ -34,7 +34,7 @@ from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation import Estimator, diagnostics, model_fit
+from road_force_estimator.estimation import Estimator, diagnostics, fit_check
 from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
@@ -131,7 +131,7 @@ class Observer(Node):
         self.estimator = Estimator(*config)
         # observer.latency > 0: an accepted sample may give no estimate yet (held back)
         self.holds_back = config[1].latency_s > 0.0
-        self.fit = model_fit.ModelFitMonitor()    # restarts with the estimator
+        self.fit = fit_check.ModelFitMonitor()    # restarts with the estimator
         self.findings = static_findings(*config)
         self.half_track_m = config[0].half_track_m
 
@@ -298,8 +298,8 @@ class Observer(Node):
         if fresh['negative_loads']:
             values['negative_load_samples'] = fresh['negative_loads']
         gains = getattr(self.estimator.core, 'gains', None)   # the model's gains in use
-        ratio = self.fit.ratio(model_fit.gains_sigma_nm(gains)) if gains else math.nan
-        word = model_fit.verdict(ratio)
+        ratio = self.fit.ratio(fit_check.gains_sigma_nm(gains)) if gains else math.nan
+        word = fit_check.verdict(ratio)
         values.update(diagnostics.model_fit_values(ratio, word))
         return diagnostics.estimator_status('observer: estimator', self.get_name(), values,
                                             converged=st.converged, lift_off_samples=lifts,

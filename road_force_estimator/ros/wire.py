@@ -1,5 +1,5 @@
 """The observer's messages as CDR bytes: its inputs read and its outputs written without rclpy
-building a message object (:mod:`road_force_estimator.bagio.live`), the same bytes as before.
+building a message object (:mod:`road_force_estimator.serde.live`), the same bytes as before.
 
 rclpy takes a message as serialized bytes (``Publisher.publish(bytes)``) and gives it so
 (``create_subscription(..., raw=True)``). An input in the layout our publishers and bag_player
@@ -18,7 +18,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
+from road_force_estimator.serde import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
 from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
 
 __all__ = ['Wire', 'OUTPUTS', 'SimulatorWire', 'deserialize']

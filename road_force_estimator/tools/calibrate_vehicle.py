@@ -40,7 +40,7 @@ from road_force_estimator.core.parameters import (
     ObserverParameters, SPECS, SimulatorParameters, VehicleParameters, load_params_file,
     read_params_document, validate_parameter)
 from road_force_estimator.bagio import road_from_source
-from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
+from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
 
 __all__ = ['PROG', 'build_parser', 'main', 'updated_document', 'report_folder']
 

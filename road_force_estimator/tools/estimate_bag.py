@@ -307,7 +307,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
            observer, options: dict, stages) -> EstimateResult:
     """Write ``folder/bag`` and ``folder/report``; the result names them in ``output``."""
     from road_force_estimator import bagio
-    from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
+    from road_force_estimator.estimation.fit_check import ADVICE, MISMATCH
     from road_force_estimator.report import raw_road, write_report
 
     mode = options['mode']
@@ -349,7 +349,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
 def _model_fit(est, drive, vehicle, observer):
     """The drive's model-fit verdict (:func:`.model_fit.assess`), or None when the method
     is not the model's or there are too few samples."""
-    from road_force_estimator.estimation.model_fit import assess
+    from road_force_estimator.estimation.fit_check import assess
 
     if getattr(est.status, 'method', '') != 'model':
         return None

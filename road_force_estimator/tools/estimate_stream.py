@@ -145,7 +145,7 @@ class _ModelFit:
     """:func:`.model_fit.assess` from consecutive pieces (its monitor fed as they come)."""
 
     def __init__(self) -> None:
-        from road_force_estimator.estimation.model_fit import ModelFitMonitor
+        from road_force_estimator.estimation.fit_check import ModelFitMonitor
 
         self.monitor = ModelFitMonitor(2.0)
         self.count = 0
@@ -160,7 +160,7 @@ class _ModelFit:
 
     def result(self, summary, status, vehicle, observer):
         """``(ratio, verdict)`` or None (as ``estimate_bag._model_fit``)."""
-        from road_force_estimator.estimation.model_fit import OK, moment_std_nm, verdict
+        from road_force_estimator.estimation.fit_check import OK, moment_std_nm, verdict
 
         if getattr(status, 'method', '') != 'model':
             return None
@@ -311,7 +311,7 @@ class _StreamRun:
 
     def close_bag(self) -> tuple[dict[str, Any], dict[str, int]]:
         """The notes for the report and the bag's counts, once its diagnostics are written."""
-        from road_force_estimator.estimation.model_fit import ADVICE, MISMATCH
+        from road_force_estimator.estimation.fit_check import ADVICE, MISMATCH
 
         status, reader, prog = self.stream.status, self.reader, self.api.prog
         extra: dict[str, Any] = {}

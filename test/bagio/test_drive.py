@@ -8,10 +8,8 @@ import yaml
 
 from bag_samples import BASE_NS, T, header, joint_state, make_trajectory, twist
 from road_force_estimator import bagio, interfaces
-from road_force_estimator.bagio import (
-    BagWriter,
-    TYPESTORE,
-)
+from road_force_estimator.bagio import BagWriter
+from road_force_estimator.serde import TYPESTORE
 
 
 class TestDriveBag:

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from road_force_estimator import bagio, interfaces
-from road_force_estimator.bagio import BagWriter, TYPESTORE, mcap_scan
+from road_force_estimator.bagio import BagWriter, mcap_scan
+from road_force_estimator.serde import TYPESTORE
 from road_force_estimator.bagio import reader as bag_reader
 
 T = TYPESTORE.types

@@ -7,10 +7,8 @@ import pytest
 
 from bag_samples import BASE_NS, T, header, make_trajectory
 from road_force_estimator import bagio
-from road_force_estimator.bagio import (
-    BagReadError,
-    TYPESTORE,
-)
+from road_force_estimator.bagio import BagReadError
+from road_force_estimator.serde import TYPESTORE
 
 
 class TestBrokenFiles:

@@ -17,7 +17,9 @@ from rosbags.highlevel import AnyReader
 import yaml
 
 from road_force_estimator import bagio, interfaces
-from road_force_estimator.bagio import BagWriter, TYPESTORE, cdr, mcap_file
+from road_force_estimator import serde
+from road_force_estimator.bagio import BagWriter, mcap_file
+from road_force_estimator.serde import TYPESTORE, cdr
 
 T = TYPESTORE.types
 BASE_NS = bagio.DEFAULT_START_STAMP_NS
@@ -300,8 +302,8 @@ class TestDriveBag:
 # --------------------------------------------------------------------------------------------
 
 def float64_rows(values):
-    return bagio.encode_columns('std_msgs/msg/Float64',
-                                bagio.message_template('std_msgs/msg/Float64'), len(values),
+    return serde.encode_columns('std_msgs/msg/Float64',
+                                serde.message_template('std_msgs/msg/Float64'), len(values),
                                 {'data': np.asarray(values, dtype=float)})
 
 
@@ -390,12 +392,12 @@ class TestColumns:
         q, roll, heave = rng.normal(size=(n_source, 2)), rng.normal(size=n_source), \
             rng.normal(size=(n_source, 3))
         stamps = BASE_NS + 10**7 * take
-        cols = dict(bagio.stamp_columns(stamps),
+        cols = dict(serde.stamp_columns(stamps),
                     position=cdr.LazyColumns([q, roll, heave[:, ::2]], take),
                     velocity=np.broadcast_to(np.arange(5.0), (take.size, 5)))
         names = ('a', 'bb', 'ccc', 'dddd', 'e')
         msgtype = 'sensor_msgs/msg/JointState'
-        rows = cdr.ColumnRows(msgtype, bagio.message_template(msgtype, 'base_link', names, True),
+        rows = cdr.ColumnRows(msgtype, serde.message_template(msgtype, 'base_link', names, True),
                                   take.size, cols).array()
         for k, i in enumerate(take.tolist()):
             s = int(stamps[k])
@@ -405,9 +407,9 @@ class TestColumns:
                 name=list(names), position=np.array([*q[i], roll[i], heave[i, 0], heave[i, 2]]),
                 velocity=np.arange(5.0), effort=np.zeros(0))
             assert rows[k].tobytes() == bytes(TYPESTORE.serialize_cdr(ref, msgtype))
-        empty = bagio.encode_columns('std_msgs/msg/Float64', bagio.message_template(
+        empty = serde.encode_columns('std_msgs/msg/Float64', serde.message_template(
             'std_msgs/msg/Float64'), 0, {'data': np.zeros(0)})
         assert empty.shape == (0, 12)
         with pytest.raises(ValueError, match='position'):
-            cdr.ColumnRows(msgtype, bagio.message_template(msgtype, 'base_link', names, True), 5,
+            cdr.ColumnRows(msgtype, serde.message_template(msgtype, 'base_link', names, True), 5,
                                {'position': cdr.LazyColumns([q[:5], roll[:5]])})

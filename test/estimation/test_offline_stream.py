@@ -11,12 +11,12 @@ from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.estimation import offline_stream
-from road_force_estimator.estimation.lti import Powers
+from road_force_estimator.estimation.smoothing.lti import Powers
 from road_force_estimator.estimation.offline_stream import OfflineStream
 from road_force_estimator.estimation.outputs import FIELD_COLUMNS, Column, field_columns
 from road_force_estimator.estimation.reconstruction import Reconstruction
-from road_force_estimator.estimation.rts_pass import smoothed_chunks
-from road_force_estimator.estimation.smoother import smooth
+from road_force_estimator.estimation.smoothing.rts_pass import smoothed_chunks
+from road_force_estimator.estimation.smoothing.smoother import smooth
 
 VEHICLE = VehicleParameters()
 BASE = 1_700_000_000 * 10**9
@@ -174,7 +174,7 @@ def test_jittered_stamps_are_smoothed_on_their_clock(monkeypatch):
     grid (never step by step, which keeps a transition per sample), and its loads are those
     of the regular stamps to within 1 % of their RMS (measured 0.2 %: the noise statistics
     see the stamps' steps); in windows too."""
-    from road_force_estimator.estimation import smoother as sm
+    from road_force_estimator.estimation.smoothing import smoother as sm
 
     stamps, q, phi, v = _drive(VEHICLE, 8.0)
     rng = np.random.default_rng(9)
@@ -208,7 +208,7 @@ def test_eager_windows_are_the_explicit_windows(monkeypatch):
     """``eager`` (estimate_bag's stream): every run longer than a window and its overlap goes
     in windows of window_samples's size, as smooth() with those windows given; smooth()
     by default keeps such a run whole (shorter than WINDOWED_RUNS windows' work)."""
-    from road_force_estimator.estimation import smoother as sm
+    from road_force_estimator.estimation.smoothing import smoother as sm
 
     monkeypatch.setattr(sm, 'window_samples', lambda *a, **k: (1500, 700))
     stamps, q, phi, v = _drive(VEHICLE, 10.0)

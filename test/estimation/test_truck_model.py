@@ -14,7 +14,7 @@ from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.estimation import (PAIR_FIELDS, SCALAR_FIELDS, Estimator,
                                             estimate_batch, estimate_recording)
-from road_force_estimator.estimation.model import (NX, State, continuous_model,
+from road_force_estimator.estimation.models.front_axle import (NX, State, continuous_model,
                                                    friction_damping, rest_state)
 
 NOMINAL = VehicleParameters()
@@ -51,7 +51,7 @@ def test_friction_enters_as_a_force_on_the_suspension():
 def test_friction_damping_is_the_statistical_linearisation():
     # E[d/d dq F tanh(dq / v)] over a Gaussian dq: quadrature here, against the closed form
     # the model uses (times its factor), at sigma >> v_f and at sigma = 0 (the slope F / v_f).
-    from road_force_estimator.estimation.model import FRICTION_DAMPING_FACTOR as k
+    from road_force_estimator.estimation.models.front_axle import FRICTION_DAMPING_FACTOR as k
     v, f = 0.01, 1500.0
     for sigma in (0.02, 0.1):
         x = np.linspace(-8 * sigma, 8 * sigma, 400001)

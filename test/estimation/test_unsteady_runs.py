@@ -10,10 +10,10 @@ from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.estimation import estimate_batch
-from road_force_estimator.estimation.run_speed import speed_segments, unsteady
-from road_force_estimator.estimation.sample_clock import clock_step
-from road_force_estimator.estimation.schedule import GainSchedule
-from road_force_estimator.estimation.smoother import smooth
+from road_force_estimator.estimation.smoothing.run_speed import speed_segments, unsteady
+from road_force_estimator.estimation.observer.sample_clock import clock_step
+from road_force_estimator.estimation.observer.schedule import GainSchedule
+from road_force_estimator.estimation.smoothing.smoother import smooth
 from model_observer_data import VEHICLE
 
 #: ISO 8608 class C: Gd(n0) = 256e-6 m^3 (the geometric mean of the class).

@@ -6,7 +6,7 @@ import numpy as np
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.bagio import road_from_source
-from road_force_estimator.estimation.calibration import CalibrationOptions, calibrate
+from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
 from road_force_estimator.report.calibration import write_report
 
 

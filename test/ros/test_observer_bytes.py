@@ -18,8 +18,8 @@ from sensor_msgs.msg import JointState
 
 from node_harness import close, make_executor
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio.live import CdrEncoder
-from road_force_estimator.bagio.messages import message_template
+from road_force_estimator.serde.live import CdrEncoder
+from road_force_estimator.serde.messages import message_template
 from road_force_estimator.estimation import Estimator
 from road_force_estimator.ros.bag_recorder import message_class
 from road_force_estimator.ros.messages import (

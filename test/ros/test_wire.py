@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from road_force_estimator import interfaces as api
-from road_force_estimator.bagio import CdrEncoder, cdr_layout, message_template
+from road_force_estimator.serde import CdrEncoder, cdr_layout, message_template
 from road_force_estimator.ros.messages import (
     MessageRejected, deflections_msg, float64_msg, load_transfer_msg, read_deflections,
     read_twist, reliable_qos, road_point_msg, states_msg, twist_msg, wrench_msg)

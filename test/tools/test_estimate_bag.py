@@ -17,7 +17,8 @@ import pytest
 from scipy import signal
 
 from road_force_estimator import bagio, interfaces
-from road_force_estimator.bagio import TYPESTORE, BagWriter
+from road_force_estimator.bagio import BagWriter
+from road_force_estimator.serde import TYPESTORE
 from road_force_estimator.tools.estimate_bag import build_parser, main
 from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters

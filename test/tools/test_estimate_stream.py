@@ -8,13 +8,14 @@ from mcap.reader import make_reader
 import numpy as np
 import pytest
 
-from road_force_estimator.bagio import TYPESTORE, BagWriter, drive_blocks
+from road_force_estimator.bagio import BagWriter, drive_blocks
+from road_force_estimator.serde import TYPESTORE
 from road_force_estimator.bagio.mcap_file import McapFile
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.interfaces import DEFLECTION_JOINTS
-from road_force_estimator.estimation import smoother
+from road_force_estimator.estimation.smoothing import smoother
 from road_force_estimator.tools import estimate_bag, estimate_stream, stream_figures
 
 import bag_samples

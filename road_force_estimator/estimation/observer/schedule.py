@@ -1,0 +1,329 @@
+"""The operating point of the model observer and its gains: noise and roughness statistics,
+levels on logarithmic grids with hysteresis, the cache of gain designs.
+
+Gains depend on the operating point ``(dt, v, sigma_q, sigma_phi, Gd)``; each is tracked on
+a logarithmic grid with hysteresis, which only decides *when* to design again: a design (a
+few ms, :func:`.gains.design`) uses the estimates of that moment and is cached, never per
+sample. The noise is estimated per block from the sixth differences (:func:`.noise.noise_std`;
+median of the last :data:`HISTORY_BLOCKS` blocks), the roughness by moment matching of the
+first differences of the deflections (median of the last :data:`ROUGHNESS_HISTORY_BLOCKS`);
+see :mod:`.model` for the whole story. :class:`GainSchedule` is shared by the online
+observer (:mod:`.model_core`) and the offline smoother (:mod:`.smoother`).
+"""
+from __future__ import annotations
+
+from collections import deque
+import math
+import warnings
+
+import numpy as np
+from scipy import linalg
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.estimation.observer.gains import NOISE_FLOOR_M, Gains, design
+from road_force_estimator.estimation.models.front_axle import (
+    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, DEFAULT_DQ_STD_MPS,
+    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
+    friction_damping, profile_scheduled, road_diffusion, scheduled)
+from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER, mad_std, noise_std
+from road_force_estimator.estimation.observer.riccati import van_loan
+
+__all__ = [
+    'HISTORY_BLOCKS', 'ROUGHNESS_HISTORY_BLOCKS', 'NOISE_LEVEL_RATIO', 'ROUGHNESS_LEVEL_RATIO',
+    'SPEED_LEVEL_RATIO', 'DT_LEVEL_RATIO', 'LEVEL_HYSTERESIS', 'MIN_SETTLE_S', 'MAX_GAINS',
+    'requantise', 'dt_level', 'GainSchedule',
+]
+
+#: Blocks whose median is the current noise estimate.
+HISTORY_BLOCKS = 8
+#: Blocks whose median is the current roughness estimate (a block's roughness varies by a
+#: factor 3 either way with the stretch of road it covers; 32 blocks, 8 s at 1 kHz, keep the
+#: median within ~15 % on ISO roads).
+ROUGHNESS_HISTORY_BLOCKS = 32
+#: Quantisation ratios of the operating point (gains are designed per level).
+NOISE_LEVEL_RATIO = 2.0 ** 0.25
+ROUGHNESS_LEVEL_RATIO = 2.0 ** 0.5
+SPEED_LEVEL_RATIO = 1.1
+DT_LEVEL_RATIO = 1.1
+#: ... of the RMS suspension rate (with leaf-spring friction only: its equivalent damping).
+DQ_LEVEL_RATIO = 2.0 ** 0.5
+_LOG_DT_RATIO = math.log(DT_LEVEL_RATIO)
+#: A level changes once the estimate is this many levels away from it (hysteresis).
+LEVEL_HYSTERESIS = 0.75
+#: Shortest settling time (s) after a (re)start or a change of the noise levels.
+MIN_SETTLE_S = 0.1
+#: Cache size.
+MAX_GAINS = 128
+
+
+def _level(x: float, ratio: float) -> float:
+    return math.log(x) / math.log(ratio)
+
+
+def requantise(current: int | None, x: float, ratio: float) -> int:
+    """Level of x with hysteresis around the current level."""
+    lv = _level(x, ratio)
+    if current is None or abs(lv - current) > LEVEL_HYSTERESIS:
+        return int(round(lv))
+    return current
+
+
+def dt_level(dt: float) -> int:
+    """Level of the step dt (s)."""
+    return int(round(math.log(dt) / _LOG_DT_RATIO))
+
+
+class GainSchedule:
+    """Noise and roughness estimates, the operating-point levels and the gains in use.
+
+    Parameters
+    ----------
+    vehicle : VehicleParameters
+    observer : ObserverParameters
+        ``noise_deflection_m`` / ``noise_roll_rad`` / ``road_roughness_m3`` (0 = estimate),
+        ``road_correlation_length_m`` (0 = scheduled).
+
+    Notes
+    -----
+    ``levels`` holds the levels ``'dt'``, ``'v'``, ``'nq'``, ``'nr'``, ``'gd'``; ``stale`` is
+    True when the gains in use (``gains``) are not those of the levels.
+    """
+
+    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
+        self.vehicle = vehicle
+        self.observer = observer
+        self._gains: dict[tuple, Gains] = {}
+        self._profile_gains: dict[tuple, Gains] = {}
+        self._var_dq: dict[tuple, float] = {}
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the estimates and levels (the caches of designs stay)."""
+        obs = self.observer
+        self.noise_fixed = (obs.noise_deflection_m > 0.0, obs.noise_roll_rad > 0.0)
+        self.roughness_fixed = obs.road_roughness_m3 > 0.0
+        self.noise_deflection_m = obs.noise_deflection_m or DEFAULT_NOISE_M
+        self.noise_roll_rad = obs.noise_roll_rad or DEFAULT_NOISE_RAD
+        self.road_gd_m3 = obs.road_roughness_m3 or DEFAULT_ROAD_GD_M3
+        #: RMS suspension rate (m/s), estimated per block with the roughness (it sets the
+        #: friction's equivalent damping in the designs; only with leaf-spring friction)
+        self.dq_std_mps = DEFAULT_DQ_STD_MPS
+        self.friction = any(self.vehicle.leaf_spring_friction_n)
+        self.all_fixed = all(self.noise_fixed) and self.roughness_fixed
+        self.blocks = 0                    # statistics blocks seen
+        self.design_count = 0              # gain designs (cache misses)
+        self.profile_design_count = 0      # ... of the profile filter
+        self.design_failures = 0           # designs that fell back to the default levels
+        self.history = (deque(maxlen=HISTORY_BLOCKS), deque(maxlen=HISTORY_BLOCKS),
+                        deque(maxlen=ROUGHNESS_HISTORY_BLOCKS))
+        self.dq_history: deque = deque(maxlen=ROUGHNESS_HISTORY_BLOCKS)
+        self.levels: dict[str, int | None] = {'nq': None, 'nr': None, 'gd': None,
+                                              'v': None, 'dt': None, 'dq': None}
+        self.gains: Gains | None = None
+        self.stale = True
+        self.v_band = (math.inf, -math.inf)
+        self.requantise_noise()
+
+    @property
+    def estimated(self) -> bool:
+        """True once the noise and roughness are known (configured, or one block seen)."""
+        return self.blocks > 0 or self.all_fixed
+
+    def settling_time_s(self, dt_s: float) -> float:
+        """Time after a (re)start after which the estimate counts as converged (s).
+
+        The time in which the current gains take a start-up error's effect on the tire forces
+        down to 5 % (:func:`.gains.design`), at least 20 steps and :data:`MIN_SETTLE_S`.
+        """
+        settle = self.gains.settle_s if self.gains is not None else 0.0
+        return max(settle, 20.0 * dt_s, MIN_SETTLE_S)
+
+    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+        """Design for ``vehicle`` from now on (an estimated sprung mass): the caches of designs
+        are dropped, the estimates and levels stay; the gains in use stay until the next design
+        (``stale``), so that samples held back can still be finalized."""
+        self.vehicle = vehicle
+        self._gains.clear()
+        self._var_dq.clear()
+        self.stale = True
+
+    def invalidate(self) -> None:
+        """Drop the gains in use (e.g. the lag changed)."""
+        self.gains = None
+        self.stale = True
+
+    def requantise_noise(self) -> bool:
+        """Noise and roughness levels from the estimates; True when a noise changed by more
+        than a factor 2 or the roughness by more than 4 (the settling time restarts)."""
+        lv = self.levels
+        old = (lv['nq'], lv['nr'], lv['gd'])
+        lv['nq'] = requantise(lv['nq'], max(self.noise_deflection_m, NOISE_FLOOR_M),
+                              NOISE_LEVEL_RATIO)
+        lv['nr'] = requantise(lv['nr'], max(self.noise_roll_rad, NOISE_FLOOR_M),
+                              NOISE_LEVEL_RATIO)
+        lv['gd'] = requantise(lv['gd'], self.road_gd_m3, ROUGHNESS_LEVEL_RATIO)
+        g = self.gains
+        if self.friction:
+            lv['dq'] = requantise(lv['dq'], self.dq_std_mps, DQ_LEVEL_RATIO)
+            if g is not None and g.key[6:] != (lv['dq'],):
+                self.stale = True
+        if g is None or g.key[2:5] != (lv['nq'], lv['nr'], lv['gd']):
+            self.stale = True
+            if None in old or (abs(lv['nq'] - old[0]) > 4 or abs(lv['nr'] - old[1]) > 4
+                               or abs(lv['gd'] - old[2]) > 4):
+                return True
+        return False
+
+    def set_speed(self, v: float) -> None:
+        """Speed level (with hysteresis) and the band of speeds that keep it."""
+        lv = self.levels
+        av = v if v > 0.0 else -v
+        lv['v'] = requantise(lv['v'], av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS,
+                             SPEED_LEVEL_RATIO)
+        h = LEVEL_HYSTERESIS
+        lo = SPEED_LEVEL_RATIO ** (lv['v'] - h)
+        self.v_band = (-math.inf if lo <= SPEED_FLOOR_MPS else lo,
+                       SPEED_LEVEL_RATIO ** (lv['v'] + h))
+        g = self.gains
+        if g is None or g.key[1] != lv['v']:
+            self.stale = True
+
+    def set_run(self, dt: float, speed: float) -> None:
+        """Levels of a whole run (the smoother): its median step dt (s), |speed| (m/s)."""
+        lv = self.levels
+        lv['v'] = requantise(None, max(speed, SPEED_FLOOR_MPS), SPEED_LEVEL_RATIO)
+        lv['dt'] = dt_level(dt)
+
+    def design(self, dt: float, lag: int) -> Gains:
+        """The gains of the current levels and the lag N (cached); a new design is made at
+        the step dt (s) that asked for it, so that a regular stream uses its exact transition."""
+        g = self._design(dt, lag, '')
+        self.gains = g
+        self.stale = False
+        return g
+
+    def profile_design(self, dt: float, mode: str,
+                       roll_moment_psd: float | None = None) -> Gains:
+        """The profile filter's gains (no lag) at the current levels (cached, as
+        :meth:`design`; the gains in use stay): :func:`.model.profile_scheduled` of ``mode``
+        (``'online'`` or ``'offline'``), with its roll-moment density replaced by
+        ``roll_moment_psd`` ((N m)^2 / s) when given."""
+        return self._design(dt, 0, mode, roll_moment_psd)
+
+    def _design(self, dt: float, lag: int, mode: str,
+                roll_moment_psd: float | None = None) -> Gains:
+        """The gains of the current levels, the lag and the tuning ``mode`` ('' = the load's,
+        else the profile's; its roll-moment density ``roll_moment_psd`` if given), cached."""
+        lv = self.levels
+        key = (lv['dt'], lv['v'], lv['nq'], lv['nr'], lv['gd'], lag)
+        if self.friction:
+            key += (lv['dq'],)
+        if mode:
+            key += (mode,)
+        if roll_moment_psd is not None:
+            key += (roll_moment_psd,)
+        cache = self._profile_gains if mode else self._gains    # (apart: the load's cache
+        g = cache.get(key)                                      # misses stay as they were)
+        if g is None:
+            if len(cache) >= MAX_GAINS:
+                cache.clear()
+            # the levels decide when to design; a design uses the estimates of that moment
+            noise = max(self.noise_deflection_m, NOISE_FLOOR_M)
+            force_psd, corr, gd_factor, moment_psd = (
+                profile_scheduled(noise, mode) if mode else scheduled(noise, roll_moment=True))
+            if roll_moment_psd is not None:
+                moment_psd = roll_moment_psd
+            if self.observer.road_correlation_length_m > 0.0:
+                corr = self.observer.road_correlation_length_m
+            kwargs = dict(dt_s=dt, speed_mps=SPEED_LEVEL_RATIO ** lv['v'], lag=lag,
+                          correlation_length_m=corr, force_psd=force_psd,
+                          roll_moment_psd=moment_psd, key=key)
+            if self.friction:
+                kwargs['friction_damping_nspm'] = friction_damping(
+                    self.vehicle.leaf_spring_friction_n, self.dq_std_mps)
+            try:
+                g = design(self.vehicle, noise_deflection_m=noise,
+                           noise_roll_rad=self.noise_roll_rad,
+                           road_gd_m3=gd_factor * self.road_gd_m3, **kwargs)
+            except ValueError:   # never seen; the defaults always give a stable filter
+                self.design_failures += 1
+                g = design(self.vehicle, noise_deflection_m=DEFAULT_NOISE_M,
+                           noise_roll_rad=DEFAULT_NOISE_RAD, road_gd_m3=DEFAULT_ROAD_GD_M3,
+                           **kwargs)
+            cache[key] = g
+            if mode:
+                self.profile_design_count += 1
+            else:
+                self.design_count += 1
+        return g
+
+    def _var_dq_per_diffusion(self) -> float:
+        """Var(q_k - q_{k-1}) per unit road diffusion D at the current dt and speed levels."""
+        lv = self.levels
+        key = (lv['dt'], lv['v'])
+        extra = {}
+        if self.friction:   # friction damps the motion: its equivalent damping (model notes)
+            key += (lv['dq'],)
+            extra['friction_damping_nspm'] = friction_damping(
+                self.vehicle.leaf_spring_friction_n, DQ_LEVEL_RATIO ** lv['dq'])
+        val = self._var_dq.get(key)
+        if val is None:
+            model = continuous_model(self.vehicle, SPEED_LEVEL_RATIO ** lv['v'], 1.0,
+                                     correlation_length_m=ROUGHNESS_CORRELATION_M, **extra)
+            a, q = van_loan(model.a, model.road_g, np.eye(2), DT_LEVEL_RATIO ** lv['dt'])
+            # Without phi (it follows the road's cross level, a random walk: nothing depends on
+            # it) and the roll moment (a random walk the road does not drive): the rest is
+            # stationary.
+            # (and a lag state of the roll sensor, which follows phi)
+            slots = model.measured
+            drop = {State.PHI, State.M_R, slots[2]}
+            keep = [j for j in range(model.nx) if j not in drop]
+            a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
+            with warnings.catch_warnings():   # undamped models: no stationary variance
+                warnings.simplefilter('ignore')
+                p = linalg.solve_discrete_lyapunov(a, q, method='direct')
+            d = a - np.eye(len(keep))
+            var = d @ p @ d.T + q
+            i1, i2 = keep.index(slots[0]), keep.index(slots[1])   # the measured q_1, q_2
+            val = float(0.5 * (var[i1, i1] + var[i2, i2]))
+            self._var_dq[key] = val
+        return val
+
+    def statistics(self, y: np.ndarray, dts: list, moving: bool = True) -> bool:
+        """One block of consecutive measurements y (m, 3), steps dts (m - 1): noise and
+        roughness estimates; True when the settling time restarts (see
+        :meth:`requantise_noise`). A block that is not ``moving`` (some sample below the
+        speed floor: the road under the tires barely moves) updates the noise only."""
+        if y.shape[0] < 8 * NOISE_DIFF_ORDER or len(dts) != y.shape[0] - 1:
+            return False
+        self.blocks += 1
+        hq, hr, hg = self.history
+        steps = np.asarray(dts)
+        dt_mean = float(np.mean(steps))
+        even = float(np.max(np.abs(steps - dt_mean))) <= 1e-6 * dt_mean
+        t = None if even else np.concatenate([[0.0], np.cumsum(steps)])
+        hq.append(max(noise_std(y[:, 0], t), noise_std(y[:, 1], t)))
+        hr.append(noise_std(y[:, 2], t))
+        if not self.noise_fixed[0]:
+            self.noise_deflection_m = float(np.median(hq))
+        if not self.noise_fixed[1]:
+            self.noise_roll_rad = float(np.median(hr))
+        # first differences scaled to the typical step (a smooth signal's change is ~ dq dt)
+        scale = (dt_mean / steps)[:, None]
+        d1 = (np.diff(y[:, :2], axis=0) * scale).reshape(-1)
+        signal_var = (mad_std(d1) ** 2
+                      - 2.0 * self.noise_deflection_m ** 2 * float(np.mean(scale ** 2)))
+        if self.friction and moving:   # the RMS rate (not the MAD: friction: dq heavy-tailed)
+            rms2 = float(np.mean(d1 * d1)) - 2.0 * self.noise_deflection_m ** 2 * float(
+                np.mean(scale ** 2))
+            if rms2 > 0.0:
+                self.dq_history.append(math.sqrt(rms2) / dt_mean)
+                self.dq_std_mps = float(np.median(self.dq_history))
+                self.levels['dq'] = requantise(self.levels['dq'], self.dq_std_mps,
+                                               DQ_LEVEL_RATIO)
+        per_d = self._var_dq_per_diffusion() if moving else 0.0
+        if per_d > 0.0 and math.isfinite(per_d):     # (an undamped model has no stationary
+            hg.append(max(signal_var / per_d / road_diffusion(1.0), MIN_ROAD_GD_M3))  # variance)
+        if hg and not self.roughness_fixed:
+            self.road_gd_m3 = float(np.median(hg))
+        return self.requantise_noise()

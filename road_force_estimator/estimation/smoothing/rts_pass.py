@@ -1,0 +1,133 @@
+"""The steady-state filter and RTS smoother of an evenly sampled run in chunks, in memory that
+does not grow with the run (issue 21): :func:`smoothed_chunks`.
+
+The forward filter keeps only the state before each chunk (:class:`ForwardPass`); when the
+backward pass reaches a chunk, the chunk's filtered states and innovations are computed again
+from that state, with the same products on the same rows, so the bits are those the forward
+pass had (test_offline_stream). The price: the forward recursion runs twice on a long run (the
+last :data:`CACHE_BYTES` of chunks are kept); the gain: a run's forward states (8 nx bytes a
+sample) and innovations (24) are never held whole, so the profile
+pass (:meth:`.smoother.Smoother._profile`), which cannot be windowed (its slowest mode is
+~720 s), runs over a 4-hour drive.
+
+numpy only.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from typing import Iterator
+
+import numpy as np
+
+from road_force_estimator.estimation.smoothing.lti import lti
+
+__all__ = ['ForwardPass', 'smoothed_chunks']
+
+#: Bytes of forward chunks kept (at least three: a backward chunk spans at most two forward
+#: chunks): a run of up to ~0.5 M samples is never recomputed (as fast as holding it whole).
+CACHE_BYTES = 64 << 20
+
+
+class ForwardPass:
+    """The forward filter of :func:`smoothed_chunks` over ``y`` (m, ny), chunk by chunk.
+
+    ``segs``: ``(start, end, _)`` stretches of the run and ``mats`` their matrices
+    (:meth:`.smoother.Smoother._pass_matrices`: the forward ``(I - K C) A`` as
+    :class:`.lti.Powers`, ``K^T``, ``(C A)^T``, ..., the friction parts or None); ``x0`` is
+    ``x+_0``; chunks of ``chunk`` samples from sample 1 (each inside one stretch).
+    """
+
+    def __init__(self, segs: list, mats: list, y: np.ndarray, x0: np.ndarray,
+                 chunk: int) -> None:
+        self.y, self.mats, self.x0 = y, mats, np.asarray(x0, dtype=float)
+        self.chunks = [(k0, min(s1, k0 + chunk), i) for i, (s0, s1, _) in enumerate(segs)
+                       for k0 in range(max(1, s0), s1, chunk)]
+        self.starts = np.array([c[0] for c in self.chunks], dtype=np.int64)
+        nx = self.x0.size
+        self.before = np.empty((len(self.chunks), nx))      # x+_(k0 - 1) of each chunk
+        self._cache: OrderedDict[int, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+        prev = self.x0
+        for c in range(len(self.chunks)):
+            self.before[c] = prev
+            xf, nu = self._compute(c)
+            self._keep(c, xf, nu)
+            prev = xf[-1]
+
+    def _compute(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Chunk c's ``x+_k`` and ``nu_k = y_k - C A x+_(k-1)`` (less the friction's part)."""
+        k0, k1, i = self.chunks[c]
+        a_run, kt, ca_t, _, _, _, fin = self.mats[i]
+        y = self.y
+        drive = y[k0:k1] @ kt
+        if fin is not None:
+            drive += fin[0][k0 - 1:k1 - 1]
+        prev = self.before[c]
+        xf = lti(a_run, drive, prev)
+        lagged = np.empty_like(xf)
+        lagged[0] = prev
+        lagged[1:] = xf[:-1]
+        nu = y[k0:k1] - lagged @ ca_t
+        if fin is not None:
+            nu -= fin[1][k0 - 1:k1 - 1]
+        return xf, nu
+
+    def _keep(self, c: int, xf: np.ndarray, nu: np.ndarray) -> None:
+        self._cache[c] = (xf, nu)
+        self._cache.move_to_end(c)
+        limit = max(3, CACHE_BYTES // max(1, xf.nbytes + nu.nbytes))
+        while len(self._cache) > limit:
+            self._cache.popitem(last=False)
+
+    def _chunk(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        got = self._cache.get(c)
+        if got is None:
+            got = self._compute(c)
+            self._keep(c, *got)
+        return got
+
+    def states(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """``x+_k`` (b - a, nx) and ``nu_k`` (b - a, ny) for k = a .. b - 1 (new arrays;
+        ``x+_0 = x0``, ``nu_0 = 0``)."""
+        xf = np.empty((b - a, self.x0.size))
+        nu = np.empty((b - a, self.y.shape[1]))
+        k = a
+        if a == 0 and b > 0:
+            xf[0] = self.x0
+            nu[0] = 0.0
+            k = 1
+        while k < b:
+            c = int(np.searchsorted(self.starts, k, side='right')) - 1
+            k0, k1, _ = self.chunks[c]
+            cx, cn = self._chunk(c)
+            e = min(b, k1)
+            xf[k - a:e - a] = cx[k - k0:e - k0]
+            nu[k - a:e - a] = cn[k - k0:e - k0]
+            k = e
+        return xf, nu
+
+
+def smoothed_chunks(segs: list, mats: list, y: np.ndarray, x0: np.ndarray,
+                    chunk: int) -> Iterator[tuple[int, int, np.ndarray]]:
+    """The smoothed states of an evenly sampled run, ``(k0, k1, x_(k|m))`` chunk by chunk
+    from the end (see :meth:`.smoother.Smoother._uniform_pass` for the equations: the
+    adjoint form of the RTS smoother). Then, as its last item, ``(-1, -1, forward)``: the
+    :class:`ForwardPass` (for a state where the next window starts)."""
+    m = y.shape[0]
+    fwd = ForwardPass(segs, mats, y, x0, chunk)
+    lam_next = np.zeros(fwd.x0.size)             # lam_(k1+1): lam_m = 0
+    for (s0, s1, _), (_, _, _, phi_t, u_t, pa_t, _) in zip(segs[::-1], mats[::-1]):
+        for k1 in range(s1, s0, -chunk):
+            k0 = max(s0, k1 - chunk)
+            # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1),
+            # from lam_(k1+1) (the later chunk's first) backwards; lam_m = 0
+            lo, hi = k0 + 1, min(k1, m - 1)
+            xf, nu = fwd.states(k0, min(k1 + 1, m))
+            xs = xf[:k1 - k0]
+            lam = np.zeros((k1 - k0, fwd.x0.size))
+            if hi >= lo:
+                seq = lti(phi_t, (nu[lo - k0:hi + 1 - k0] @ u_t)[::-1], lam_next)[::-1]
+                lam[:hi - lo + 1] = seq
+                lam_next = seq[0]
+            xs += lam @ pa_t
+            yield k0, k1, xs
+    yield -1, -1, fwd
