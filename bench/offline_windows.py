@@ -77,7 +77,8 @@ def compare(one, win) -> dict:
 
 def measure(duration_s: float, speed: float, window_s: float, overlaps) -> dict:
     from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-    from road_force_estimator.estimation.smoothing.smoother import smooth, window_samples
+    from road_force_estimator.estimation.offline import smooth
+    from road_force_estimator.estimation.smoothing.smoother import window_samples
 
     vehicle, observer = VehicleParameters(), ObserverParameters()
     with tempfile.TemporaryDirectory(prefix='offline_windows_') as tmp:
@@ -99,10 +100,11 @@ def measure(duration_s: float, speed: float, window_s: float, overlaps) -> dict:
 def _slowest_tau(vehicle, observer, status, speed: float) -> float:
     """The slower of the smoother's slowest mode (the gains of the drive's noise and
     roughness) and the body heave high-pass's time constant (s)."""
+    from road_force_estimator.estimation.models.front_axle import FrontAxleModel
     from road_force_estimator.estimation.observer.schedule import GainSchedule
     from road_force_estimator.estimation.smoothing.smoother import slowest_tau_s, window_samples
 
-    sched = GainSchedule(vehicle, observer)
+    sched = GainSchedule(FrontAxleModel(vehicle), observer)
     sched.set_run(1e-3, speed)
     sched.noise_deflection_m = status.noise_deflection_m
     sched.noise_roll_rad = status.noise_roll_rad

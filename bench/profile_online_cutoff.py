@@ -4,7 +4,7 @@ long-wave cutoff, between the band's edge and the level's wander.
     .venv/bin/python -m bench.profile_online_cutoff [--factors 1 0.3 0.1]
                                                    [--scenarios C20-1k-0um D20-1k-0um C20-stop]
 
-The zero-latency road (:mod:`road_force_estimator.estimation.observer.online_road`) integrates the
+The zero-latency road (:mod:`~.models.front_axle_rows`) integrates the
 profile filter's body heave twice with a high-pass at ``w_c = 2 pi v / lambda_c`` (the body
 heave's cutoff over :data:`~.models.front_axle.PROFILE_ONLINE_CUTOFF_RATIO`,
 1 by default): a causal filter, so it starts with the body's rate at the start (not in the
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     from bench import tune
     from bench.run_benchmark import METHODS
     from bench.scenarios import build_drive, scenario_by_name, score
-    from road_force_estimator.estimation.observer import online_road as model_road
+    from road_force_estimator.estimation.models import front_axle_rows as model_road
 
     tuned = tune.load_tuned()
     default = model_road.PROFILE_ONLINE_CUTOFF_RATIO

@@ -18,7 +18,7 @@ from road_force_estimator.estimation.outputs import (
     FIELD_COLUMNS, PAIR_FIELDS, SCALAR_FIELDS, Column, Estimate, EstimateArrays,
     EstimatorStatus)
 from road_force_estimator.estimation.reconstruction import LIFT_OFF_FRACTION, LTR_FLOOR_FRACTION
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.offline import smooth
 
 __all__ = [
     'Estimator', 'estimate_batch', 'estimate_recording', 'estimate_offline', 'smooth',

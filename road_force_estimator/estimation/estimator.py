@@ -58,6 +58,7 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, SampleGate, batch_inputs, check_gap_threshold, output_stamps)
 from road_force_estimator.estimation.methods import CORES
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.speed_check import SpeedCheck
 from road_force_estimator.estimation.static_load import StaticLoadTracker
 from road_force_estimator.estimation.outputs import (
@@ -102,7 +103,9 @@ class Estimator:
         if observer.discretization not in CORES:
             raise ValueError(f'discretization = {observer.discretization!r}: must be one of '
                              f'{", ".join(CORES)}')
-        self.core = CORES[observer.discretization](vehicle, observer)
+        #: the vehicle model the core estimates (:mod:`.models`)
+        self.model = FrontAxleModel(vehicle)
+        self.core = CORES[observer.discretization](self.model, observer)
         self._ready = self.core.ready
         #: the static-load estimate (:mod:`.static_load`) under zero_load, else None
         self.static_load = StaticLoadTracker(vehicle) if vehicle.zero_load else None
@@ -260,7 +263,7 @@ class Estimator:
         gate = self._gate
         x = self._x + 0.5 * (self._v + v) * dt if gate.started else 0.0
         t_run = 0.0 if restart else self._t_run + dt
-        if not self.core.step(stamp, q1, q2, phi, vm, dt, restart, x, t_run, dt_typ):
+        if not self.core.step(stamp, (q1, q2, phi), vm, dt, restart, x, t_run, dt_typ):
             return False
         gate.commit(stamp, dt_typ)
         self._x = x

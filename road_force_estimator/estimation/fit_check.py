@@ -48,12 +48,13 @@ def moment_std_nm(vehicle: VehicleParameters, observer: ObserverParameters, stat
     the step dt (s) and the speed (m/s)."""
     from dataclasses import replace
 
+    from road_force_estimator.estimation.models.front_axle import FrontAxleModel
     from road_force_estimator.estimation.observer.schedule import GainSchedule, dt_level
 
     fixed = replace(observer, noise_deflection_m=max(float(status.noise_deflection_m), 1e-12),
                     noise_roll_rad=max(float(status.noise_roll_rad), 1e-12),
                     road_roughness_m3=max(float(status.road_roughness_m3), 1e-12), latency_s=0.0)
-    sched = GainSchedule(vehicle, fixed)
+    sched = GainSchedule(FrontAxleModel(vehicle), fixed)
     sched.set_speed(float(speed_mps))
     sched.levels['dt'] = dt_level(dt_s)
     return gains_sigma_nm(sched.design(dt_s, 0))

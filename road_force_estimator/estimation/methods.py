@@ -16,7 +16,8 @@ __all__ = ['Core', 'CORES']
 
 
 class Core(Protocol):
-    """What :class:`.Estimator` needs of a core (``core = CORES[name](vehicle, observer)``).
+    """What :class:`.Estimator` needs of a core (``core = CORES[name](model, observer)``, the
+    model a :class:`.models.protocol.VehicleModel`).
 
     ``ready`` holds the final ``(stamp_ns, row)`` (rows of :class:`.Column` slots) in sample
     order; ``last_row`` is the newest row made, ``last_converged`` the converged flag of the
@@ -31,9 +32,10 @@ class Core(Protocol):
     def reset(self) -> None:
         """Forget everything; the next step is a restart."""
 
-    def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
-             restart: bool, x: float, t_run: float, dt_typ: float) -> bool:
-        """One accepted sample (m, m, rad, m/s) after a step dt (s); ``restart``: the first
+    def step(self, stamp: int, y: tuple, v: float, dt: float, restart: bool, x: float,
+             t_run: float, dt_typ: float) -> bool:
+        """One accepted sample ``y`` (the model's channels) at the speed v (m/s) after a step
+        dt (s); ``restart``: the first
         of a run; ``x`` distance (m), ``t_run`` time since the (re)start (s), ``dt_typ`` the
         typical step (s). False, state untouched, on a non-finite result."""
 
@@ -50,7 +52,7 @@ class Core(Protocol):
         """Take ``vehicle`` (a new sprung mass and static loads: :mod:`.static_load`) from the
         next sample on; the model designs its gains again."""
 
-    def set_static_loads(self, fc1: float, fc2: float) -> None:
+    def set_static_loads(self, *static_n: float) -> None:
         """The static wheel loads F_c,i (N) of the rows made from now on."""
 
 

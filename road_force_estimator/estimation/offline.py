@@ -2,20 +2,36 @@
 estimate for the observer's method (:func:`estimate_recording`).
 
 The model observer (``observer.discretization: model``, the default) goes through its forward
-filter and RTS smoother (:func:`.smoothing.smoother.smooth`); a differentiator scheme through
-the zero-phase chain (:func:`.chain.zero_phase.estimate_offline`). With the distance fused from
+filter and RTS smoother over each run (:func:`smooth`: the recording's rejections and gaps
+(:func:`.acceptance.accept_arrays`), the static loads under ``zero_load``, the distance and
+the speed check (:func:`prepare`), then the runs through :class:`.smoothing.smoother.Smoother`
+with the front axle's model (:func:`smoothed_rows`)); a differentiator scheme through the
+zero-phase chain (:func:`.chain.zero_phase.estimate_offline`). With the distance fused from
 GNSS (:func:`fused_speed`) the speed is scaled first.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+from typing import Iterator
+
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
+from road_force_estimator.estimation.acceptance import (
+    GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.chain.zero_phase import estimate_offline
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
+from road_force_estimator.estimation.outputs import (
+    Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
+from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
+from road_force_estimator.estimation.smoothing.smoother import Smoother
+from road_force_estimator.estimation.speed_check import check_arrays
+from road_force_estimator.estimation.static_load import track_recording
 
-__all__ = ['estimate_recording', 'fused_speed']
+__all__ = ['estimate_recording', 'fused_speed', 'smooth', 'prepare', 'smoothed_rows',
+           'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of']
+
+
 
 
 def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
@@ -64,3 +80,174 @@ def fused_speed(stamps_ns, speed_mps, fixes):
         return speed_mps, fit
     v = np.broadcast_to(np.asarray(speed_mps, dtype=float), np.shape(stamps_ns))
     return v * odometer.scale_at(stamps_ns, fit), fit
+
+
+def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
+           observer: ObserverParameters | None = None, *,
+           gap_threshold_s: float = GAP_THRESHOLD_S,
+           window: tuple[int, int] | None = None) -> EstimateArrays:
+    """Offline estimate: the model observer's forward filter and its RTS smoother.
+
+    The same model, gains and outputs as the online observer (:class:`.ModelCore`, linear
+    injection; the sliding-mode term, a correction of the causal estimate, has no place in a
+    smoother), over the whole recording: for each run (the estimator's rejections and gap
+    rule split the data, :func:`.accept_arrays`), the noise and roughness are estimated from
+    the whole run (unless set in ``observer``), the steady-state Kalman filter runs forward
+    and the Rauch-Tung-Striebel smoother (Rauch, Tung, Striebel 1965) backward; the body
+    heave is the zero-phase band-limited double integral of the smoothed body acceleration.
+
+    Parameters
+    ----------
+    stamps_ns, q_m, roll_rad, speed_mps : as :func:`.estimate_batch`.
+    vehicle, observer : parameters (defaults when None); ``observer.latency`` is ignored.
+    gap_threshold_s : float
+        As :class:`.Estimator`.
+    window : (int, int), optional
+        ``(window, overlap)``, samples, for even runs longer than both (:func:`window_samples`).
+
+    Returns
+    -------
+    EstimateArrays
+        Row k = the smoothed estimate of sample k; rejected rows hold the previous row (valid
+        False); ``converged`` is False within the settling time of each run's start; the
+        status counts what the estimator would count (and carries the noise and roughness
+        used).
+    """
+    prep = prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
+                   gap_threshold_s=gap_threshold_s)
+    smoother = Smoother(FrontAxleModel(prep.vehicle), prep.observer, window)
+    fields, columns = field_columns(prep.n)
+    for idx, part in smoothed_rows(prep, smoother, columns):
+        if idx is not None:                     # (None: written in place)
+            for col, values in zip(columns, part):
+                col[idx] = values
+    acc, valid = prep.acc, prep.valid
+    if acc.size and acc.size < valid.size:          # rejected rows hold the previous row
+        held, src = hold_rejected(valid)
+        for arr in fields.values():
+            arr[held] = arr[src]
+    status = EstimatorStatus(**prep.counts)
+    fill_status(status, acc.size, prep.contradicted, prep.last_stamp_ns,
+                last_row(fields, acc[-1]) if acc.size else None, smoother)
+    flags = np.zeros(prep.n, bool)
+    flags[acc] = prep.contradicted
+    out = EstimateArrays(stamp_ns=prep.stamps_out, valid=valid, status=status,
+                         speed_contradicted=flags, **fields)
+    status.negative_load_samples = out.negative_load_samples()
+    return out
+
+
+def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
+            observer: ObserverParameters | None = None, *,
+            gap_threshold_s: float = GAP_THRESHOLD_S) -> SimpleNamespace:
+    """What :func:`smooth` takes of a whole recording before its runs: the estimator's
+    rejections and gap rule (:func:`.accept_arrays`), the static loads under ``zero_load``
+    (:func:`.track_recording`: the offset off the readings, the vehicle of the last estimate),
+    the distance (continued across gaps) and the model's speed (the recorded one unless the
+    deflections contradict it, :func:`.check_arrays`). Attributes: ``n``, ``stamps_out``,
+    ``valid``, ``counts``, ``acc`` (the accepted rows), ``last_stamp_ns``, ``q``, ``phi``, ``y``
+    (the (n, 3) array of both when ``q`` and ``phi`` are its views, else None),
+    ``static`` (N, (acc.size, 2), or None), ``vehicle``, ``observer``, ``t`` (s from the first
+    accepted stamp, per accepted sample), ``dist`` (m), ``v_model`` (m/s), ``contradicted``,
+    ``starts`` (each run's first index into ``acc``, then ``acc.size``)."""
+    vehicle = VehicleParameters() if vehicle is None else vehicle
+    observer = ObserverParameters() if observer is None else observer
+    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
+    valid, restart, stamp_int, cnt = accept_arrays(stamps, q, phi, speed, gap_threshold_s)
+    acc = np.flatnonzero(valid)
+    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
+    q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
+    # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
+    # ~0.2 us, enough to make an even sample step look uneven
+    t_all = (stamp_int[acc] - (stamp_int[acc[0]] if acc.size else 0)) * 1e-9
+    v_all = speed[acc]
+    steps = np.zeros(acc.size)
+    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
+    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
+    del steps
+    return SimpleNamespace(
+        n=stamps.shape[0], stamps_out=output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
+        last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
+        y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
+        dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
+        starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
+
+
+
+
+def rows_of(column, a: int, b: int) -> np.ndarray:
+    """Rows ``a:b`` of an array or of a :class:`.core.spill.SpillColumn`."""
+    return column[a:b] if isinstance(column, np.ndarray) else column.read(a, b)
+
+
+def _joined(q: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+    """The (n, 3) array ``[q_1, q_2, phi]`` whose views ``q`` and ``phi`` are (the offline
+    stream's inputs: the measurements are not copied again), else None."""
+    base = q.base
+    if (base is None or phi.base is not base or base.ndim != 2 or base.shape[1] != 3
+            or base.dtype != np.float64 or not base.flags.c_contiguous
+            or q.shape[0] > base.shape[0]):
+        return None
+    start = base.__array_interface__['data'][0]
+    if (q.__array_interface__['data'][0] != start or q.strides != base.strides
+            or phi.__array_interface__['data'][0] != start + 16):
+        return None
+    return base[:q.shape[0]]
+
+
+def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | None = None
+                  ) -> Iterator[tuple[np.ndarray | slice | None, list]]:
+    """The smoothed rows of a recording (:func:`prepare`) in order, ``(rows, columns)``:
+    ``rows`` the input rows (indices or a slice) and ``columns`` (slots :class:`.Column`) their
+    estimates, the distance and the static loads (:meth:`.Reconstruction.restatic`) in.
+    With ``columns`` (the recording's, each (n,)) a run without a rejected sample inside is
+    written into them directly, and comes as ``(None, columns of its rows)``."""
+    acc, starts, t_all = prep.acc, prep.starts, prep.t
+    restat = Reconstruction(smoother.vehicle, prep.observer.rollover_cutoff_frequency_hz)
+    for r0, r1 in zip(starts[:-1], starts[1:]):
+        idx = acc[r0:r1]
+        whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
+        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
+        direct = [col[src] for col in columns] if whole and columns is not None else None
+        t = t_all[r0:r1]
+        y = (prep.y[src] if whole and prep.y is not None
+             else np.column_stack([prep.q[src], prep.phi[src]]))
+        for a, b, part in smoother.pieces(t, y, prep.v_model[r0:r1], direct):
+            part[Column.DISTANCE][:] = rows_of(prep.dist, r0 + a, r0 + b)
+            if prep.static is not None:
+                restat.restatic(part, prep.static[r0 + a:r0 + b], t[a:b],
+                                None if a == 0 else float(t[a - 1]))
+            if part is direct:
+                yield None, part
+            elif whole:
+                yield slice(idx[a], idx[b - 1] + 1), part
+            else:
+                yield idx[a:b], part
+
+
+def last_row(fields: dict, row: int) -> dict:
+    """What the status takes of the last accepted row ``row`` of the fields (or a piece's)."""
+    return {name: fields[name][row] for name in LAST_ROW_FIELDS}
+
+
+#: The fields of the last accepted row that the status reports (:func:`fill_status`).
+LAST_ROW_FIELDS = ('residual_nm', 'lift_off', 'converged', 'static_load_n')
+
+
+def fill_status(status: EstimatorStatus, accepted: int, contradicted: np.ndarray,
+                last_stamp_ns: int | None, last: dict | None, smoother: Smoother) -> None:
+    """The status of :func:`smooth` (``status`` made from the estimator's counts): the
+    accepted and contradicted counts, the last accepted sample's stamp and flags (``last``,
+    :func:`last_row`; None without one), the smoother's levels and vehicle."""
+    status.accepted = int(accepted)
+    status.speed_contradicted = int(np.count_nonzero(contradicted))
+    vehicle = smoother.vehicle
+    status.sprung_mass_kg = vehicle.sprung_mass_kg
+    status.static_load_n = vehicle.static_load_n
+    if last is not None:
+        status.last_stamp_ns = int(last_stamp_ns)
+        status.last_residual_nm = float(last['residual_nm'])
+        status.lift_off = tuple(bool(b) for b in last['lift_off'])
+        status.converged = bool(last['converged'])
+        status.static_load_n = tuple(float(f) for f in last['static_load_n'])
+    smoother.fill_status(status)

@@ -27,10 +27,12 @@ import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, EstimateArrays, EstimatorStatus, arrays_from_table)
-from road_force_estimator.estimation.smoothing.smoother import (
-    LAST_ROW_FIELDS, Smoother, fill_status, prepare, rows_of, smoothed_rows)
+from road_force_estimator.estimation.offline import (
+    LAST_ROW_FIELDS, fill_status, prepare, rows_of, smoothed_rows)
+from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['PIECE_ROWS', 'OfflineStream']
 
@@ -98,7 +100,8 @@ class OfflineStream:
         if self.spill:            # needed only piece by piece: out of memory until then
             prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
                 prep.stamps_out, self.spill)
-        smoother = Smoother(prep.vehicle, prep.observer, self.window, eager=self.eager)
+        smoother = Smoother(FrontAxleModel(prep.vehicle), prep.observer, self.window,
+                            eager=self.eager)
         self.status = EstimatorStatus(**prep.counts)
         out = _Pieces(prep, self.status)
         for rows, part in smoothed_rows(prep, smoother):

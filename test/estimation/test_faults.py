@@ -6,7 +6,7 @@ import pytest
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation import Estimator, estimate_batch
 from road_force_estimator.estimation.acceptance import accept_arrays
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.offline import smooth
 from model_observer_data import SPEED, VEHICLE
 
 YEAR_2033_NS = 1_988_150_400 * 1_000_000_000

@@ -16,7 +16,7 @@ from road_force_estimator.estimation.offline_stream import OfflineStream
 from road_force_estimator.estimation.outputs import FIELD_COLUMNS, Column, field_columns
 from road_force_estimator.estimation.reconstruction import Reconstruction
 from road_force_estimator.estimation.smoothing.rts_pass import smoothed_chunks
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.offline import smooth
 
 VEHICLE = VehicleParameters()
 BASE = 1_700_000_000 * 10**9

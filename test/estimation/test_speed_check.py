@@ -11,7 +11,7 @@ from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.estimation import Estimator, estimate_batch
 from road_force_estimator.estimation.diagnostics import WARN, batch_diagnostics
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.offline import smooth
 from road_force_estimator.estimation.speed_check import STANDING_MPS, SpeedCheck, check_arrays
 from model_observer_data import VEHICLE
 

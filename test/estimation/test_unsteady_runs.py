@@ -4,6 +4,7 @@ the plant's truth."""
 import numpy as np
 import pytest
 
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.core import metrics
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.core.plant import simulate
@@ -13,7 +14,7 @@ from road_force_estimator.estimation import estimate_batch
 from road_force_estimator.estimation.smoothing.run_speed import speed_segments, unsteady
 from road_force_estimator.estimation.observer.sample_clock import clock_step
 from road_force_estimator.estimation.observer.schedule import GainSchedule
-from road_force_estimator.estimation.smoothing.smoother import smooth
+from road_force_estimator.estimation.offline import smooth
 from model_observer_data import VEHICLE
 
 #: ISO 8608 class C: Gd(n0) = 256e-6 m^3 (the geometric mean of the class).
@@ -104,7 +105,7 @@ def test_speed_segments(stop):
     """The stretches cover the run in order; standing, the gains of the floor speed; a steady
     run: none."""
     d, q, phi, t, v = stop
-    sched = GainSchedule(VEHICLE, ObserverParameters(noise_deflection_m=1e-5,
+    sched = GainSchedule(FrontAxleModel(VEHICLE), ObserverParameters(noise_deflection_m=1e-5,
                                                      noise_roll_rad=1e-4,
                                                      road_roughness_m3=2.56e-4))
     sched.set_run(1e-3, float(np.median(np.abs(v))))

@@ -57,7 +57,9 @@ class ChainCore:
 
     Parameters
     ----------
-    vehicle : VehicleParameters
+    model : FrontAxleModel
+        The front axle (:class:`..models.front_axle.FrontAxleModel`): the chain is MODEL.md's
+        reconstruction of its three channels.
     observer : ObserverParameters
         ``discretization`` (the scheme), ``lipschitz_deflection`` / ``lipschitz_roll`` (L per
         channel), ``latency`` (the estimates are only delayed), ``profile_cutoff_wavelength``.
@@ -70,8 +72,8 @@ class ChainCore:
 
     method = 'chain'
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
-        self.vehicle = vehicle
+    def __init__(self, model, observer: ObserverParameters) -> None:
+        self.vehicle = vehicle = model.vehicle
         self.observer = observer
         self._step = step_function(observer.discretization)
         lq, lr = observer.lipschitz_deflection_mps3, observer.lipschitz_roll_radps3
@@ -139,12 +141,14 @@ class ChainCore:
         self._pending.clear()
         return False
 
-    def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
-             restart: bool, x: float, t_run: float, dt_typ: float) -> bool:
-        """One sample (a restart: the first of a run); False, state untouched, if non-finite.
+    def step(self, stamp: int, y: tuple, v: float, dt: float, restart: bool, x: float,
+             t_run: float, dt_typ: float) -> bool:
+        """One sample ``y = (q_1, q_2, phi)`` (a restart: the first of a run); False, state
+        untouched, if non-finite.
 
         ``x`` distance (m), ``t_run`` time since the (re)start (s), ``dt_typ`` typical step.
         """
+        q1, q2, phi = y
         row = self._advance(q1, q2, phi, v, dt, restart, x, t_run, dt_typ)
         if row is None:
             return False

@@ -105,13 +105,14 @@ estimates of that moment and is cached, never per sample.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import enum
 import math
 
 import numpy as np
 
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
+from road_force_estimator.estimation.models.protocol import (
+    FORCE_PSD, ISO_N0, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 # The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
 # part of the estimate.
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
@@ -119,24 +120,18 @@ from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 __all__ = [
     'State', 'NX', 'NY', 'OUTPUTS', 'NO', 'ISO_N0', 'SPEED_FLOOR_MPS', 'FORCE_PSD',
     'ROLL_MOMENT_PSD', 'SCHEDULE_NOISE_M', 'SCHEDULE_FORCE_PSD', 'SCHEDULE_CORRELATION_M',
-    'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD', 'ROUGHNESS_CORRELATION_M',
-    'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
+    'SCHEDULE_GD_FACTOR', 'SCHEDULE_ROLL_MOMENT_PSD',
     'PROFILE_CUTOFF_RATIO', 'PROFILE_ONLINE_CUTOFF_RATIO', 'PROFILE_ONLINE_GD_RATIO',
     'PROFILE_ONLINE_CORRELATION_M',
     'PROFILE_OFFLINE_FORCE_PSD', 'PROFILE_OFFLINE_ROLL_MOMENT_PSD', 'PROFILE_OFFLINE_GD_RATIO',
     'PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD', 'ROLL_MOMENT_BLOCK_S', 'offline_roll_moment_psd',
     'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
-    'FRICTION_DAMPING_FACTOR', 'DEFAULT_DQ_STD_MPS', 'friction_damping',
+    'FRICTION_DAMPING_FACTOR', 'friction_damping', 'STATE_SCALE', 'LOAD_OUTPUTS',
+    'FRICTION_RATE_STATES', 'FRICTION_RATE_OUTPUTS', 'sm_lipschitz', 'sm_injection',
+    'FrontAxleModel',
 ]
 
-#: Reference spatial frequency of ISO 8608 (cycles/m).
-ISO_N0 = 0.1
-#: Defaults of :func:`continuous_model` / :func:`.gains.design` (the observer uses the schedule):
-#: generalised force noise density on each equation of motion (N^2 s; roll: times s^2) and
-#: random-walk density of the unknown roll moment ((N m)^2 / s).
-FORCE_PSD = 1.0
-ROLL_MOMENT_PSD = 1e7
 #: Settings scheduled on the deflection-noise level (m): at the levels of
 #: SCHEDULE_NOISE_M the generalised force-noise density (N^2 s), the road velocity's
 #: correlation length (m) and the factor on the estimated roughness that the filter assumes;
@@ -159,17 +154,6 @@ SCHEDULE_GD_FACTOR = (1e4, 1.41, 1.41)
 #: change (M h x 1 m/s^3 over ~1 s) and leaves the straight-drive figures unchanged (10 um:
 #: 16.807 % against 16.804 % with 1e6; 1e9 would cost 2.7 %).
 SCHEDULE_ROLL_MOMENT_PSD = (1e9, 1e7, 1e7)
-#: Correlation length (m) of the road model whose variance the roughness estimate matches:
-#: a moving average of 0.25 m (the tire envelope) over a Brownian road has the variance of
-#: an Ornstein-Uhlenbeck velocity with this length (pi x 0.25 m).
-ROUGHNESS_CORRELATION_M = 0.8
-#: Noise and roughness assumed until the first block of data has been seen.
-DEFAULT_NOISE_M = 1e-5
-DEFAULT_NOISE_RAD = 1e-4
-DEFAULT_ROAD_GD_M3 = 256e-6
-#: Floor of the estimated roughness (m^3): a quarter of ISO class A's Gd(n0), so that a
-#: glass-smooth stretch does not make the observer too slow for the next bump.
-MIN_ROAD_GD_M3 = 4e-6
 
 #: The profile's own tuning (issue 21): the road profile comes from a second filter on the same
 #: model, the same data and the same noise and roughness estimates, designed for the road
@@ -300,48 +284,6 @@ def offline_roll_moment_psd(residual_nm, dt_s: float) -> float:
     return min(max(psd, PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD), PROFILE_OFFLINE_ROLL_MOMENT_PSD)
 
 
-def road_diffusion(gd_n0_m3: float) -> float:
-    """Diffusion constant D (m^2/m) of a Brownian road with ISO 8608 ``Gd(n0)`` (m^3).
-
-    ``Var[u(x + dx) - u(x)] = D dx`` gives the one-sided PSD ``D / (2 pi^2 n^2)``, hence
-    ``D = 2 pi^2 Gd(n0) n0^2``.
-    """
-    return 2.0 * math.pi ** 2 * gd_n0_m3 * ISO_N0 ** 2
-
-
-@dataclass(frozen=True)
-class ContinuousModel:
-    """``dx = A x dt + G dW`` (``E[dW dW^T] = Q dt``), ``y = C x``, linear outputs ``H x``."""
-
-    a: np.ndarray     #: (nx, nx); nx = 12 + the lagged channels
-    g: np.ndarray     #: (nx, 7): force noise (heave, roll, wheel 1, wheel 2), road 1, 2, moment
-    q: np.ndarray     #: (7, 7) densities
-    c: np.ndarray     #: (3, nx)
-    h: np.ndarray     #: (21, nx), rows :data:`OUTPUTS`
-    road_g: np.ndarray  #: (nx, 2) road-noise input columns (unit density), for moment matching
-    #: (nx, 2): dx/dt per newton of friction force on side i (added to F_bi)
-    friction_b: np.ndarray | None = None
-    #: (21, 2): the outputs' direct part per newton of friction force
-    friction_d: np.ndarray | None = None
-    #: the lagged channels (0 = q_1, 1 = q_2, 2 = phi), their states at NX, NX + 1, ...
-    lagged: tuple = ()
-    #: the leaf-spring friction F_f,i (N) [left, right]
-    friction_n: tuple = (0.0, 0.0)
-    #: the friction's equivalent damping c_eq,i (N s/m) in the linear part (the known input
-    #: is then the rest, ``-F_f tanh(dq / v_f) + c_eq dq``)
-    friction_damping_nspm: tuple = (0.0, 0.0)
-
-    @property
-    def nx(self) -> int:
-        """Number of states."""
-        return self.a.shape[0]
-
-    @property
-    def measured(self) -> tuple[int, int, int]:
-        """The state measured by each channel (q_1, q_2, phi)."""
-        return tuple(int(np.argmax(row)) for row in self.c)
-
-
 def continuous_model(vehicle: VehicleParameters, speed_mps: float, road_gd_m3: float, *,
                      correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
                      roll_moment_psd: float = ROLL_MOMENT_PSD,
@@ -453,8 +395,6 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
 #: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
 #: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
 FRICTION_DAMPING_FACTOR = 1.5
-#: RMS suspension rate (m/s) assumed until the first block of data has been seen.
-DEFAULT_DQ_STD_MPS = 0.05
 
 
 def friction_damping(friction_n, dq_std_mps: float) -> tuple[float, float]:
@@ -496,3 +436,163 @@ def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> 
     x[State.W2] = (fb2 + m2 * ddzs) / kt2
     x[State.M_R] = -s * (fb1 - fb2) - v.sprung_mass_kg * GRAVITY_MPS2 * v.cg_height_m * phi
     return x
+
+
+#: Typical state magnitudes (m, rad, m/s, rad/s, N m) of :class:`State`, the Riccati
+#: equation's scaling; a sensor's lag state as the measured ones (1e-2).
+STATE_SCALE = np.array([1e-2, 1e-2, 1e-2, 1e-1, 1e-1, 1e-1, 1e-1, 1e-3, 1e-3, 1e-1, 1e-1, 1e3])
+#: The outputs of the dynamic tire forces (the loads): the settling time's.
+LOAD_OUTPUTS = (OUTPUTS.index('df1'), OUTPUTS.index('df2'))
+#: The rates of the friction elements (left, right spring): their states and outputs.
+FRICTION_RATE_STATES = (int(State.DQ1), int(State.DQ2))
+FRICTION_RATE_OUTPUTS = (OUTPUTS.index('dq1'), OUTPUTS.index('dq2'))
+
+
+def sm_lipschitz(vehicle: VehicleParameters) -> tuple[float, float]:
+    """L of the sliding-mode differentiator on the output error (m/s^3, rad/s^3).
+
+    The output error's third derivative is what the model cannot predict of ``dddq``: the
+    rate of the tire force it misses over m, bounded by a tire-deflection rate of 1 m/s
+    (``kt / m`` x 1 m/s), and its roll counterpart over the half track.
+    """
+    v = vehicle
+    lq = max(kt / m for kt, m in zip(v.tire_stiffness_npm, v.unsprung_mass_kg)) * 1.0  # m/s
+    return lq, lq / v.half_track_m
+
+
+def sm_injection(vehicle: VehicleParameters, nx: int = NX) -> np.ndarray:
+    """T (nx, 9): the state correction of the sliding-mode estimates ``rho``.
+
+    ``rho = (e, de, dde)`` per output channel (q_1, q_2, phi) of the output error: ``e`` and
+    ``de`` correct the output and its rate; ``dde``, the output acceleration the model did not
+    explain, is an unknown roll moment ``I_x dde_phi`` and tire forces: the wheel must take
+    ``dd z_ui = -(dde_i -+ s dde_phi)``, i.e. ``w_i += -m_i (dde_i -+ s dde_phi) / kt_i``.
+    """
+    v = vehicle
+    s = v.half_track_m
+    m1, m2 = v.unsprung_mass_kg
+    kt1, kt2 = v.tire_stiffness_npm
+    t = np.zeros((nx, 9))
+    for ch, (pos, rate) in enumerate(((State.Q1, State.DQ1), (State.Q2, State.DQ2),
+                                      (State.PHI, State.DPHI))):
+        t[pos, 3 * ch] = 1.0
+        t[rate, 3 * ch + 1] = 1.0
+    t[State.W1, 2] = -m1 / kt1
+    t[State.W1, 8] = m1 * s / kt1
+    t[State.W2, 5] = -m2 / kt2
+    t[State.W2, 8] = -m2 * s / kt2
+    t[State.M_R, 8] = v.roll_inertia_kgm2
+    return t
+
+
+class FrontAxleModel:
+    """MODEL.md's roll-plane front axle as the observer's vehicle model
+    (:class:`.protocol.VehicleModel`): the functions of this module bound to one
+    :class:`VehicleParameters`.
+
+    Channels ``y = (q_1, q_2, phi)`` (deflections 0, 1; roll 2); the state and outputs of
+    the module notes; the leaf-spring friction of each spring a known input; the rows of
+    :class:`.outputs.Column` (:mod:`.front_axle_rows`).
+    """
+
+    outputs = OUTPUTS
+    deflection_channels = (0, 1)
+    roll_channels = (2,)
+    load_outputs = LOAD_OUTPUTS
+    friction_rate_states = FRICTION_RATE_STATES
+    friction_rate_outputs = FRICTION_RATE_OUTPUTS
+
+    def __init__(self, vehicle: VehicleParameters | None = None) -> None:
+        self.vehicle = VehicleParameters() if vehicle is None else vehicle
+        #: the friction elements' F_f (N), left and right spring
+        self.friction_n = tuple(float(f) for f in self.vehicle.leaf_spring_friction_n)
+
+    def with_vehicle(self, vehicle: VehicleParameters) -> FrontAxleModel:
+        """The model of other parameters (an estimated sprung mass)."""
+        return FrontAxleModel(vehicle)
+
+    # -- design ----------------------------------------------------------------------------
+    def continuous(self, speed_mps: float, road_gd_m3: float, **kwargs) -> ContinuousModel:
+        """:func:`continuous_model` of this vehicle."""
+        return continuous_model(self.vehicle, speed_mps, road_gd_m3, **kwargs)
+
+    @staticmethod
+    def measurement_variances(noise_deflection_m: float, noise_roll_rad: float) -> list:
+        """``diag(R)`` (m^2, m^2, rad^2)."""
+        return [noise_deflection_m * noise_deflection_m, noise_deflection_m * noise_deflection_m,
+                noise_roll_rad * noise_roll_rad]
+
+    def roll_noise_floor(self, deflection_floor_m: float) -> float:
+        """The roll's noise floor (rad): the deflection's over the half track."""
+        return deflection_floor_m / self.vehicle.half_track_m
+
+    @staticmethod
+    def state_scale(nx: int) -> np.ndarray:
+        """:data:`STATE_SCALE`, with a lag state (m, rad) per lagged sensor."""
+        return np.concatenate([STATE_SCALE, np.full(nx - NX, 1e-2)])
+
+    def rest_state(self, y) -> np.ndarray:
+        """:func:`rest_state` of one measurement ``(q_1, q_2, phi)``."""
+        return rest_state(self.vehicle, y[0], y[1], y[2])
+
+    def sm_injection(self, nx: int) -> np.ndarray:
+        """:func:`sm_injection` of this vehicle."""
+        return sm_injection(self.vehicle, nx)
+
+    def sm_lipschitz(self) -> tuple[float, float, float]:
+        """L per channel (m/s^3, m/s^3, rad/s^3): :func:`sm_lipschitz`."""
+        lq, lr = sm_lipschitz(self.vehicle)
+        return lq, lq, lr
+
+    @staticmethod
+    def stationary_states(cm: ContinuousModel) -> list[int]:
+        """The states whose variance the roughness's moment matching solves for: all but the
+        roll (it follows the road's cross level, a random walk: nothing depends on it), the
+        roll moment (a random walk the road does not drive) and the roll sensor's lag state
+        (it follows the roll)."""
+        drop = {State.PHI, State.M_R, cm.measured[2]}
+        return [j for j in range(cm.nx) if j not in drop]
+
+    # -- tuning ----------------------------------------------------------------------------
+    @staticmethod
+    def scheduled(noise_deflection_m: float, *, roll_moment: bool = False) -> tuple:
+        """:func:`scheduled`."""
+        return scheduled(noise_deflection_m, roll_moment=roll_moment)
+
+    @staticmethod
+    def profile_scheduled(noise_deflection_m: float, mode: str) -> tuple:
+        """:func:`profile_scheduled`."""
+        return profile_scheduled(noise_deflection_m, mode)
+
+    # -- friction --------------------------------------------------------------------------
+    def friction_forces(self, dq, ceq) -> np.ndarray:
+        """The friction's known input (N) per spring at its rates dq (m/s): ``-F_f,i
+        tanh(dq_i / v_f)`` less the share ``-c_eq,i dq_i`` of the equivalent damping that the
+        gains' linear model carries (:func:`friction_damping`)."""
+        from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
+        return np.array([-f * math.tanh(d / v_f) + c * d
+                         for f, c, d in zip(self.friction_n, ceq, dq)])
+
+    def friction_forces_array(self, dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
+        """:meth:`friction_forces` over arrays: dq (nf, ...) (m/s), ceq (nf,) (N s/m)."""
+        from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
+        shape = (len(self.friction_n),) + (1,) * (np.ndim(dq) - 1)
+        ff = np.asarray(self.friction_n).reshape(shape)
+        return -ff * np.tanh(dq / v_f) + np.asarray(ceq).reshape(ff.shape) * dq
+
+    def friction_damping(self, dq_std_mps: float) -> tuple:
+        """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s)."""
+        return friction_damping(self.friction_n, dq_std_mps)
+
+    # -- reconstruction --------------------------------------------------------------------
+    def online_rows(self, observer):
+        """The rows of :class:`.outputs.Column`, sample by sample
+        (:class:`.front_axle_rows.OnlineRows`)."""
+        from road_force_estimator.estimation.models.front_axle_rows import OnlineRows
+        return OnlineRows(self.vehicle, observer)
+
+    def offline_rows(self, observer):
+        """The rows of :class:`.outputs.Column` of smoothed runs
+        (:class:`.front_axle_rows.OfflineRows`)."""
+        from road_force_estimator.estimation.models.front_axle_rows import OfflineRows
+        return OfflineRows(self.vehicle, observer)

@@ -8,12 +8,13 @@ noise is raised threefold until it can). Fixed lag N (Anderson & Moore, Optimal 
 1979, ch. 7): ``x_{t|t+N} = x_{t|t} + sum_{i=1..N} P+ A^T (Phi^T)^(i-1) C^T S^-1 nu_{t+i}``
 with ``Phi = A (I - K C)``, applied to the outputs through ``H`` (:attr:`Gains.out`).
 
-The online observer keeps one row per sample (:data:`ROW_SIZE` values; with sensor lag
-states, nx = 12 + the lagged channels in place of 12: :func:`row_layout`)::
+The model is the vehicle model's (:mod:`..models`: its linear state space at the operating
+point, :meth:`.VehicleModel.continuous`); nothing here knows which vehicle it is. The online
+observer keeps one row per sample (nx states, ny measured channels: :func:`row_layout`)::
 
-    [rho_k (9) | x+_k (12) | nu_k (3) | y_{k+1} (3)]
+    [rho_k (3 ny) | x+_k (nx) | nu_k (ny) | y_{k+1} (ny)]
 
-``rho_k`` the sliding-mode differentiator's (e, de, dde) per channel (q1, q2, phi), whose
+``rho_k`` the sliding-mode differentiator's (e, de, dde) per channel, whose
 injection ``T rho_k`` is part of the state estimate ``x_k = x+_k + T rho_k``; ``x+_k`` the
 state after the linear (Kalman) update; ``nu_k`` the innovation; ``y_{k+1}`` the next
 measurement, written when it arrives, so that one matrix product of a row
@@ -27,15 +28,13 @@ import math
 import numpy as np
 from scipy import linalg
 
-from road_force_estimator.core.parameters import VehicleParameters
-from road_force_estimator.estimation.models.front_axle import (
-    FORCE_PSD, NO, NX, NY, OUTPUTS, ROLL_MOMENT_PSD, ContinuousModel, State, continuous_model)
-from road_force_estimator.estimation.observer.riccati import STATE_SCALE, solve_dare, van_loan
+from road_force_estimator.estimation.models.protocol import (
+    FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, VehicleModel, row_layout)
+from road_force_estimator.estimation.observer.riccati import solve_dare, van_loan
 
 __all__ = [
-    'NOISE_FLOOR_M', 'MAX_NOISE_FLOOR_M', 'DT_QUANTUM', 'MAX_STEP_MATRICES', 'ROW_RHO', 'ROW_X',
-    'ROW_NU', 'ROW_Y', 'ROW_SIZE', 'Gains', 'design', 'sm_lipschitz', 'sm_injection',
-    'row_layout', 'state_scale',
+    'NOISE_FLOOR_M', 'MAX_NOISE_FLOOR_M', 'DT_QUANTUM', 'MAX_STEP_MATRICES', 'Gains', 'design',
+    'row_layout',
 ]
 
 #: Floor of the deflection-noise level (m); roll: this over s (rad).
@@ -45,33 +44,6 @@ MAX_NOISE_FLOOR_M = 1e-6
 #: Relative quantum of the per-step transition matrices.
 DT_QUANTUM = 1e-3
 MAX_STEP_MATRICES = 512
-#: Offsets of the parts of a buffer row (rho, x+, nu, y) and its length (see the notes).
-ROW_RHO, ROW_X, ROW_NU, ROW_Y = 0, 9, NX + 9, NX + 12
-ROW_SIZE = NX + 15
-
-
-def row_layout(nx: int) -> tuple[int, int, int, int, int]:
-    """``(ROW_RHO, ROW_X, ROW_NU, ROW_Y, ROW_SIZE)`` of a model with nx states."""
-    return 0, 9, nx + 9, nx + 12, nx + 15
-
-
-def state_scale(nx: int) -> np.ndarray:
-    """The Riccati equation's state scales (:data:`.riccati.STATE_SCALE`), lag states (m, rad)
-    as the measured ones."""
-    return np.concatenate([STATE_SCALE, np.full(nx - NX, 1e-2)])
-
-
-def sm_lipschitz(vehicle: VehicleParameters) -> tuple[float, float]:
-    """L of the sliding-mode differentiator on the output error (m/s^3, rad/s^3).
-
-    The output error's third derivative is what the model cannot predict of ``dddq``: the
-    rate of the tire force it misses over m, bounded by a tire-deflection rate of 1 m/s
-    (``kt / m`` x 1 m/s), and its roll counterpart over the half track.
-    """
-    v = vehicle
-    lq = max(kt / m for kt, m in zip(v.tire_stiffness_npm, v.unsprung_mass_kg)) * 1.0  # m/s
-    return lq, lq / v.half_track_m
-
 
 
 @dataclass
@@ -86,34 +58,34 @@ class Gains:
     road_gd_m3: float
     lag: int
     model: ContinuousModel
-    a: np.ndarray            #: (12, 12) transition at dt
-    q: np.ndarray            #: (12, 12) process-noise covariance at dt
-    r: np.ndarray            #: (3, 3)
+    a: np.ndarray            #: (nx, nx) transition at dt
+    q: np.ndarray            #: (nx, nx) process-noise covariance at dt
+    r: np.ndarray            #: (ny, ny)
     p_prior: np.ndarray      #: a-priori covariance P (DARE)
     p_post: np.ndarray       #: a-posteriori covariance (I - K C) P
     s: np.ndarray            #: innovation covariance C P C^T + R
-    k: np.ndarray            #: (12, 3) Kalman gain P C^T S^-1
-    lag_gains: np.ndarray    #: (lag, 12, 3): B_i = P+ A^T (Phi^T)^(i-1) C^T S^-1
-    out: np.ndarray          #: (21, 27 (lag + 1)): outputs from the buffer rows t..t+lag
-    post_error_std: np.ndarray  #: (3,) std of y - C x+ (a-posteriori output error)
+    k: np.ndarray            #: (nx, ny) Kalman gain P C^T S^-1
+    lag_gains: np.ndarray    #: (lag, nx, ny): B_i = P+ A^T (Phi^T)^(i-1) C^T S^-1
+    out: np.ndarray          #: (no, row size (lag + 1)): outputs from the rows t..t+lag
+    post_error_std: np.ndarray  #: (ny,) std of y - C x+ (a-posteriori output error)
     settle_s: float          #: 5 x the slowest closed-loop time constant
-    t_sm: np.ndarray         #: (12, 9) sliding-mode injection matrix T
+    t_sm: np.ndarray         #: (nx, 3 ny) sliding-mode injection matrix T
     step_cache: dict = field(default_factory=dict)
     a_cache: dict = field(default_factory=dict)
     friction_cache: dict = field(default_factory=dict)
 
     @property
     def nx(self) -> int:
-        """Number of states (12, or more with sensor-lag states)."""
+        """Number of states."""
         return self.a.shape[0]
 
     @property
     def layout(self) -> tuple[int, int, int, int, int]:
         """The buffer row's layout (:func:`row_layout`)."""
-        return row_layout(self.nx)
+        return row_layout(self.nx, self.model.ny)
 
     def friction_input(self, dt_s: float) -> np.ndarray:
-        """``B_d(dt)`` (nx, 2): the state change over a step of dt (s) per newton of friction
+        """``B_d(dt)`` (nx, nf): the state change over a step of dt (s) per newton of friction
         force held over the step (zero-order hold: ``int_0^dt expm(A s) ds B_f``); cached as
         :meth:`transition`."""
         key = round(math.log(dt_s / self.dt_s) / DT_QUANTUM)
@@ -122,7 +94,8 @@ class Gains:
             if len(self.friction_cache) >= MAX_STEP_MATRICES:
                 self.friction_cache.clear()
             nx = self.nx
-            big = np.zeros((nx + 2, nx + 2))
+            nf = self.model.friction_b.shape[1]
+            big = np.zeros((nx + nf, nx + nf))
             big[:nx, :nx] = self.model.a
             big[:nx, nx:] = self.model.friction_b
             step = self.dt_s * math.exp(key * DT_QUANTUM)
@@ -131,7 +104,7 @@ class Gains:
         return bd
 
     def friction_step(self, dt_s: float) -> np.ndarray:
-        """The rows of :meth:`step_matrix` per newton of friction force (nx + 3 [+ 21], 2):
+        """The rows of :meth:`step_matrix` per newton of friction force (nx + ny [+ no], nf):
         ``x+_{k+1} += (I - K C) B_d f``, ``nu_{k+1} -= C B_d f`` [and the outputs ``H``
         of the former]."""
         key = round(math.log(dt_s / self.dt_s) / DT_QUANTUM)
@@ -160,8 +133,8 @@ class Gains:
         return a
 
     def step_matrix(self, dt_s: float) -> np.ndarray:
-        """M (15, 27) with ``[x+_{k+1}; nu_{k+1}] = M row_k`` for a step of dt (s); with no
-        lag (36, 27): then also the linear outputs ``H x+_{k+1}``.
+        """M (nx + ny, row size) with ``[x+_{k+1}; nu_{k+1}] = M row_k`` for a step of dt (s);
+        with no lag (nx + ny + no, row size): then also the linear outputs ``H x+_{k+1}``.
 
         ``row_k = [rho_k, x+_k, nu_k, y_{k+1}]`` (see :class:`.ModelCore`); with
         ``x_k = x+_k + T rho_k``: ``x+_{k+1} = (I - K C) A(dt) x_k + K y_{k+1}`` and
@@ -175,61 +148,38 @@ class Gains:
             a = self.transition(dt_s)
             c = self.model.c
             nx = self.nx
-            _, row_x, _, row_y, row_size = row_layout(nx)
+            ny = c.shape[0]
+            _, row_x, _, row_y, row_size = row_layout(nx, ny)
             ikc_a = (np.eye(nx) - self.k @ c) @ a
-            m = np.zeros((nx + NY, row_size))
+            m = np.zeros((nx + ny, row_size))
             m[:nx, row_x:row_x + nx] = ikc_a
-            m[:nx, row_y:row_y + NY] = self.k
+            m[:nx, row_y:row_y + ny] = self.k
             m[nx:, row_x:row_x + nx] = -c @ a
-            m[nx:, row_y:row_y + NY] = np.eye(NY)
+            m[nx:, row_y:row_y + ny] = np.eye(ny)
             if self.lag == 0:    # and the outputs H x+ of the new state, in the same product
                 m = np.vstack([m, self.model.h @ m[:nx]])
             self.step_cache[key] = m
         return m
 
 
-def sm_injection(vehicle: VehicleParameters, nx: int = NX) -> np.ndarray:
-    """T (nx, 9): the state correction of the sliding-mode estimates ``rho``.
-
-    ``rho = (e, de, dde)`` per output channel (q_1, q_2, phi) of the output error: ``e`` and
-    ``de`` correct the output and its rate; ``dde``, the output acceleration the model did not
-    explain, is an unknown roll moment ``I_x dde_phi`` and tire forces: the wheel must take
-    ``dd z_ui = -(dde_i -+ s dde_phi)``, i.e. ``w_i += -m_i (dde_i -+ s dde_phi) / kt_i``.
-    """
-    v = vehicle
-    s = v.half_track_m
-    m1, m2 = v.unsprung_mass_kg
-    kt1, kt2 = v.tire_stiffness_npm
-    t = np.zeros((nx, 9))
-    for ch, (pos, rate) in enumerate(((State.Q1, State.DQ1), (State.Q2, State.DQ2),
-                                      (State.PHI, State.DPHI))):
-        t[pos, 3 * ch] = 1.0
-        t[rate, 3 * ch + 1] = 1.0
-    t[State.W1, 2] = -m1 / kt1
-    t[State.W1, 8] = m1 * s / kt1
-    t[State.W2, 5] = -m2 / kt2
-    t[State.W2, 8] = -m2 * s / kt2
-    t[State.M_R, 8] = v.roll_inertia_kgm2
-    return t
-
-
-def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
+def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
            noise_deflection_m: float, noise_roll_rad: float, road_gd_m3: float,
            lag: int = 0, correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
            roll_moment_psd: float = ROLL_MOMENT_PSD, key: tuple = (),
-           friction_damping_nspm: tuple = (0.0, 0.0)) -> Gains:
+           friction_damping_nspm: tuple = ()) -> Gains:
     """Discretize the model and design the steady-state Kalman filter and smoothers.
 
     Parameters
     ----------
-    vehicle : VehicleParameters
+    model : VehicleModel
+        The vehicle (:mod:`..models`): its linear model at this operating point.
     dt_s : float
         Sample step (s).
     speed_mps : float
         Speed (m/s).
     noise_deflection_m, noise_roll_rad : float
-        Sensor noise standard deviations (m, rad); floored at :data:`NOISE_FLOOR_M` (and that
-        over s).
+        Sensor noise standard deviations (m, rad); floored at :data:`NOISE_FLOOR_M` (the roll:
+        the model's floor for it, :meth:`.VehicleModel.roll_noise_floor`).
     road_gd_m3 : float
         ``Gd(n0)`` of the road (m^3).
     lag : int
@@ -237,53 +187,52 @@ def design(vehicle: VehicleParameters, *, dt_s: float, speed_mps: float,
     correlation_length_m : float
         ``lambda_v`` (m).
     force_psd, roll_moment_psd : float
-        Process-noise densities (see :func:`continuous_model`).
-    friction_damping_nspm : (left, right)
-        The leaf-spring friction's equivalent damping (N s/m) in the design (see
-        :func:`continuous_model`).
+        Process-noise densities (see :meth:`.VehicleModel.continuous`).
+    friction_damping_nspm : tuple
+        The leaf-spring friction's equivalent damping (N s/m) per element in the design.
 
     Returns
     -------
     Gains
     """
-    s_half = vehicle.half_track_m
-    model = continuous_model(vehicle, speed_mps, road_gd_m3,
-                             correlation_length_m=correlation_length_m, force_psd=force_psd,
-                             roll_moment_psd=roll_moment_psd,
-                             friction_damping_nspm=friction_damping_nspm)
-    a, q = van_loan(model.a, model.g, model.q, dt_s)
-    c = model.c
+    cm = model.continuous(speed_mps, road_gd_m3, correlation_length_m=correlation_length_m,
+                          force_psd=force_psd, roll_moment_psd=roll_moment_psd,
+                          friction_damping_nspm=friction_damping_nspm)
+    a, q = van_loan(cm.a, cm.g, cm.q, dt_s)
+    c = cm.c
     sq = max(noise_deflection_m, NOISE_FLOOR_M)
-    sp = max(noise_roll_rad, NOISE_FLOOR_M / s_half)
-    nx = model.nx
-    sq, sp, r, p, s, k, ikc = _stable_gain(a, c, q, sq, sp, noise_deflection_m, dt_s)
+    sp = max(noise_roll_rad, model.roll_noise_floor(NOISE_FLOOR_M))
+    nx, ny = cm.nx, cm.ny
+    scale = model.state_scale(nx)
+    sq, sp, r, p, s, k, ikc = _stable_gain(model, a, c, q, sq, sp, noise_deflection_m, dt_s,
+                                           scale)
     pf = ikc @ p @ ikc.T + k @ r @ k.T          # Joseph form, symmetric
     pf = 0.5 * (pf + pf.T)
     lag = int(lag)
     lag_gains = _lag_gains(a, c, s, ikc, pf, lag)
-    t_sm = sm_injection(vehicle, nx)
-    out = _output_matrix(model.h, t_sm, lag_gains)
+    t_sm = model.sm_injection(nx)
+    out = _output_matrix(cm.h, t_sm, lag_gains)
     # a-posteriori output error y - C x+ = (I - C K) nu: covariance (I - CK) S (I - CK)^T
-    ick = np.eye(NY) - c @ k
+    ick = np.eye(ny) - c @ k
     post = ick @ s @ ick.T
     f_closed = ikc @ a
-    settle = _settling_time(f_closed, model.h[[OUTPUTS.index('df1'), OUTPUTS.index('df2')]],
-                            dt_s, pf, state_scale(nx))
-    return Gains(key, dt_s, abs(speed_mps), sq, sp, road_gd_m3, lag, model, a, q, r, p, pf, s, k,
+    settle = _settling_time(f_closed, cm.h[list(model.load_outputs)], dt_s, pf, scale)
+    return Gains(key, dt_s, abs(speed_mps), sq, sp, road_gd_m3, lag, cm, a, q, r, p, pf, s, k,
                  lag_gains, out, np.sqrt(np.maximum(np.diag(post), 0.0)), settle, t_sm)
 
 
-def _stable_gain(a, c, q, sq: float, sp: float, noise_deflection_m: float, dt_s: float):
+def _stable_gain(model: VehicleModel, a, c, q, sq: float, sp: float, noise_deflection_m: float,
+                 dt_s: float, scale: np.ndarray):
     """The Kalman gain at the noise levels sq (m), sp (rad), raised threefold until the
     filter is stable; ``(sq, sp, R, P, S, K, I - K C)``."""
     while True:
         # Where double precision cannot give a stabilising solution (noise-free data: the
         # measured states known to ~1e-9 against road states of ~1), the noise levels are
         # raised threefold until it can (the measurement-noise floor a user would add).
-        r = np.diag([sq * sq, sq * sq, sp * sp])
+        r = np.diag(model.measurement_variances(sq, sp))
         nx = a.shape[0]
         try:
-            p = solve_dare(a, c, q, r, scale=state_scale(nx))
+            p = solve_dare(a, c, q, r, scale=scale)
             s = c @ p @ c.T + r
             s = 0.5 * (s + s.T)
             k = np.linalg.solve(s, c @ p).T
@@ -303,10 +252,10 @@ def _stable_gain(a, c, q, sq: float, sp: float, noise_deflection_m: float, dt_s:
 
 
 def _lag_gains(a, c, s, ikc, pf, lag: int) -> np.ndarray:
-    """``B_i = P+ A^T (Phi^T)^(i-1) C^T S^-1`` (lag, 12, 3), ``Phi = A (I - K C)``."""
+    """``B_i = P+ A^T (Phi^T)^(i-1) C^T S^-1`` (lag, nx, ny), ``Phi = A (I - K C)``."""
     sinv = np.linalg.inv(s)
     phi = a @ ikc
-    lag_gains = np.zeros((lag, a.shape[0], NY))
+    lag_gains = np.zeros((lag, a.shape[0], c.shape[0]))
     mpow = pf @ a.T
     for i in range(lag):
         lag_gains[i] = mpow @ c.T @ sinv
@@ -316,21 +265,22 @@ def _lag_gains(a, c, s, ikc, pf, lag: int) -> np.ndarray:
 
 def _output_matrix(h: np.ndarray, t_sm: np.ndarray, lag_gains: np.ndarray) -> np.ndarray:
     """Outputs of sample t from the buffer rows t..t+N: the state estimate x+_t + T rho_t
-    through H, the innovations nu_{t+i} through H B_i; (21, ROW_SIZE (N + 1))."""
+    through H, the innovations nu_{t+i} through H B_i; (no, row size (N + 1))."""
     lag = lag_gains.shape[0]
     nx = h.shape[1]
-    row_rho, row_x, row_nu, _, row_size = row_layout(nx)
-    out = np.zeros((NO, row_size * (lag + 1)))
-    out[:, row_rho:row_rho + 9] = h @ t_sm
+    ny = t_sm.shape[1] // 3
+    row_rho, row_x, row_nu, _, row_size = row_layout(nx, ny)
+    out = np.zeros((h.shape[0], row_size * (lag + 1)))
+    out[:, row_rho:row_rho + 3 * ny] = h @ t_sm
     out[:, row_x:row_x + nx] = h
     for i in range(lag):
         col = row_size * (i + 1) + row_nu
-        out[:, col:col + NY] = h @ lag_gains[i]
+        out[:, col:col + ny] = h @ lag_gains[i]
     return out
 
 
 def _settling_time(f_closed: np.ndarray, h_load: np.ndarray, dt_s: float,
-                   p_post: np.ndarray, scale: np.ndarray = STATE_SCALE, *,
+                   p_post: np.ndarray, scale: np.ndarray, *,
                    fraction: float = 0.05, horizon_s: float = 5.0) -> float:
     """Time (s) after which a start-up error of the typical state magnitudes (the error
     dynamics ``F^k``) leaves on the tire forces at most ``fraction`` of its initial effect or

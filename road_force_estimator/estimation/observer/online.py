@@ -1,26 +1,22 @@
-"""The model-based sliding-mode observer online (``observer.discretization = 'model'``, the
-default): the steady-state Kalman filter on the roll-plane model (:mod:`.model`, gains of
-:mod:`.gains` at the operating point of :mod:`.schedule`), the sliding-mode injection and the
-fixed-lag smoother, one accepted sample at a time.
+"""The model observer online (``observer.discretization = 'model'``, the default): the
+steady-state Kalman filter on a vehicle model (:mod:`..models`; gains of :mod:`.gains` at the
+operating point of :mod:`.schedule`), the fixed-lag smoother and the sliding-mode injection,
+one accepted sample at a time (:class:`ModelCore`). Nothing here knows which vehicle it
+estimates: the model gives the linear model, the channels and the reconstruction of the rows.
 
 Sliding-mode injection
 ----------------------
 After the linear update the output error ``e = y - C x+`` goes through a dead zone of
 :data:`SM_DEAD_ZONE` times its expected standard deviation (the Kalman filter's own
 ``(I - C K) S (I - C K)^T``) and into an implicit Levant differentiator per channel (L from
-the model, :func:`.gains.sm_lipschitz`). Its estimates ``rho = (e, de, dde)`` are the
-equivalent output injection (:func:`.gains.sm_injection`): ``dde``, the output acceleration
-the model did not explain, is an unknown tire force ``-m_i (dde_i -+ s dde_phi)`` (on ``w_i``
-through ``kt_i``) and roll moment ``I_x dde_phi``; ``e`` and ``de`` correct the outputs and
-their rates. It is added to the estimate ``x = x+ + gamma T rho`` (a cascade: the Kalman
-recursion does not see it, so it cannot destabilise it), with ``gamma =
-observer.sliding_mode_gain / (1 + (sigma_q / SM_NOISE_SCALE)^2)``: sliding-mode-like on clean
-data, Kalman-like (gamma ~ 1e-4 at 10 um) on noisy data. ``observer.sliding_mode_gain = 0``
-switches it off (the ablation). Measured (``bench/targets.py``): on every benchmark scenario
-the Kalman part leaves no output error outside the dead zone worth correcting, so the
-injection changes no figure at the precision the benchmark prints; fed back into the
-recursion (instead of cascaded) it was unstable, and without the noise weighting it added 1 %
-(dead zone 3 sigma) to 100 % (no dead zone) to the load error on the 10 um drive.
+the model, :meth:`.VehicleModel.sm_lipschitz`). Its estimates ``rho = (e, de, dde)`` are an
+equivalent output injection (:meth:`.VehicleModel.sm_injection`: e.g. ``dde``, the output
+acceleration the model did not explain, as an unknown tire force and roll moment; ``e`` and
+``de`` correct the outputs and their rates). It is added to the estimate ``x = x+ + gamma T
+rho`` (a cascade: the Kalman recursion does not see it, so it cannot destabilise it), with
+``gamma = observer.sliding_mode_gain / (1 + (sigma_q / SM_NOISE_SCALE)^2)``: sliding-mode-like
+on clean data, Kalman-like on noisy data. ``observer.sliding_mode_gain = 0`` switches it off
+(the ablation: ``python -m bench.run_benchmark``).
 
 Stamps
 ------
@@ -34,18 +30,17 @@ Latency
 fixed-lag correction from the innovations of the N later samples (:mod:`.gains`), applied to
 the outputs through ``H`` in one product per sample. At a gap or the end of the data
 (:meth:`ModelCore.finish`) the pending samples get the same correction from the innovations
-that did arrive (the exact smoother of the shorter window). The outputs become the row of
-:mod:`.reconstruction` (body heave: :mod:`.body_heave`, restarted with each run).
+that did arrive (the exact smoother of the shorter window). The outputs become the model's
+row (:meth:`.VehicleModel.online_rows`).
 
 Profile
 -------
 With no lag the road is not the load filter's: a second steady-state Kalman filter on the
 same model runs beside it on the same measurements, with the profile's gains
 (:meth:`.GainSchedule.profile_design`, ``'online'``: the same noise and roughness estimates,
-a rougher road assumed, so less lag; no sliding mode), and the road of its states
-(:class:`.model_road.OnlineRoad`, its own body-heave integral at the profile's long-wave cutoff)
-replaces the row's ``U1``, ``U2``. The loads and every other column are the load filter's.
-With a lag (``observer.latency`` > 0) the road stays the load filter's.
+a rougher road assumed, so less lag; no sliding mode); the model's reconstruction takes the
+road from its outputs. The loads and every other column are the load filter's. With a lag
+(``observer.latency`` > 0) the road stays the load filter's.
 """
 from __future__ import annotations
 
@@ -54,18 +49,15 @@ import math
 
 import numpy as np
 
-from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-import road_force_estimator.estimation.body_heave as body_heave
-from road_force_estimator.estimation.observer.gains import (
-    ROW_RHO, NY, Gains, row_layout)
-from road_force_estimator.estimation.models.front_axle import (
-    DEFAULT_ROAD_GD_M3, SPEED_FLOOR_MPS, continuous_model, rest_state)
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
 from road_force_estimator.estimation.observer.friction import KnownFriction
-from road_force_estimator.estimation.observer.online_road import OnlineRoad
-from road_force_estimator.estimation.observer.sliding_mode import SlidingMode
-from road_force_estimator.estimation.reconstruction import Reconstruction
+from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.sample_clock import JITTER_MAX_FRACTION, clock_step
-from road_force_estimator.estimation.observer.schedule import MIN_SETTLE_S, GainSchedule, dt_level
+from road_force_estimator.estimation.observer.schedule import (
+    DEFAULT_ROAD_GD_M3, MIN_SETTLE_S, GainSchedule, dt_level)
+from road_force_estimator.estimation.observer.sliding_mode import SlidingMode
 
 __all__ = ['BLOCK_SAMPLES', 'FIRST_BLOCK_SAMPLES', 'LAG_STEPS', 'SM_DEAD_ZONE',
            'SM_NOISE_SCALE', 'ModelCore']
@@ -82,7 +74,7 @@ SM_DEAD_ZONE = 3.0
 SM_NOISE_SCALE = 1e-7
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
-_R0 = ROW_RHO
+_R0 = 0           # the row's rho part starts the row (:func:`.protocol.row_layout`)
 
 
 class ModelCore:
@@ -96,7 +88,9 @@ class ModelCore:
 
     Parameters
     ----------
-    vehicle : VehicleParameters
+    model : VehicleModel
+        The vehicle (:mod:`..models`): its linear model, its channels, its reconstruction
+        into rows (:meth:`.VehicleModel.online_rows`).
     observer : ObserverParameters
         ``latency_s`` (with the first step of a run: the lag N), ``sliding_mode_gain``,
         ``noise_deflection_m`` / ``noise_roll_rad`` / ``road_roughness_m3`` (0 = estimate),
@@ -108,49 +102,51 @@ class ModelCore:
     into the last row, multiplies that row by the step matrix (the Kalman filter), runs the
     sliding-mode differentiators on the output error and writes the next row; the sample N
     rows back is finalized with one product of the rows' window by the output matrix (the
-    fixed-lag correction included) and the reconstruction (body heave, wheel heaves, road,
-    loads, LTR, residual, lift-off).
+    fixed-lag correction included) and the model's reconstruction (:class:`.OnlineRows`:
+    e.g. body heave, wheel heaves, road, loads, LTR, residual, lift-off).
     """
 
     method = 'model'
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
-        self.vehicle = vehicle
+    def __init__(self, model: VehicleModel, observer: ObserverParameters) -> None:
+        self.model = model
         self.observer = observer
-        self._rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
-        self._wc_per_speed = body_heave.cutoff_per_speed(observer.profile_cutoff_wavelength_m)
-        # the profile filter's road (:mod:`.model_road`)
-        self._road = OnlineRoad(self._wc_per_speed, vehicle.half_track_m)
+        self._recon = model.online_rows(observer)
         self.sm_gain = float(observer.sliding_mode_gain)
-        model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
-        self._h = model.h
-        # the buffer row's layout (nx = 12, or more with sensor-lag states) and the slots
-        # the sensors measure
-        _, self._x0i, _, self._y0i, self._row = row_layout(model.nx)
-        self._nx = model.nx
-        self._c_slots = model.measured
-        # leaf-spring friction, a known input (:mod:`.model_friction`), or None
-        self._fr = KnownFriction(model) if any(model.friction_n) else None
-        self.schedule = GainSchedule(vehicle, observer)
+        cm = model.continuous(1.0, DEFAULT_ROAD_GD_M3)
+        self._h = cm.h
+        # the buffer row's layout (nx states, ny channels) and the slots the sensors measure
+        self._ny = cm.ny
+        _, self._x0i, _, self._y0i, self._row = row_layout(cm.nx, cm.ny)
+        self._nx = cm.nx
+        self._c_slots = cm.measured
+        # leaf-spring friction, a known input (:mod:`.friction`), or None
+        self._fr = KnownFriction(model, cm) if any(cm.friction_n) else None
+        self.schedule = GainSchedule(model, observer)
         self.ready: deque = deque()
         self.reset()
 
+    @property
+    def vehicle(self):
+        """The parameters of the model in use."""
+        return self.model.vehicle
+
     # -- configuration --------------------------------------------------------------------
-    def set_vehicle(self, vehicle: VehicleParameters) -> None:
+    def set_vehicle(self, vehicle) -> None:
         """Take ``vehicle`` from the next sample on (an estimated sprung mass and static
-        loads, :mod:`.static_load`): the model, the reconstruction and the sliding mode's L;
+        loads, :mod:`..static_load`): the model, the reconstruction and the sliding mode's L;
         the gains are designed again at the next step (the cache of designs is dropped); the
         state, the run and the noise estimates go on."""
-        self.vehicle = vehicle
-        self._rows.set_vehicle(vehicle)
-        self._slide.set_vehicle(vehicle)
-        self._h = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3).h
-        self.schedule.set_vehicle(vehicle)
+        self.model = self.model.with_vehicle(vehicle)
+        self._recon.set_vehicle(vehicle)
+        self._slide.set_lipschitz(self.model.sm_lipschitz())
+        self._h = self.model.continuous(1.0, DEFAULT_ROAD_GD_M3).h
+        self.schedule.set_model(self.model)
         self._m_dt = -1.0
 
-    def set_static_loads(self, fc1: float, fc2: float) -> None:
-        """The static wheel loads F_c,i (N) of the rows made from now on."""
-        self._rows.set_static(fc1, fc2)
+    def set_static_loads(self, *static_n: float) -> None:
+        """The static wheel loads (N) of the rows made from now on."""
+        self._recon.set_static(*static_n)
 
     def reset(self) -> None:
         """Forget everything, the noise and roughness estimates included."""
@@ -163,10 +159,10 @@ class ModelCore:
         self.last_converged = False           # converged flag of the newest sample
         self.lag = 0
         self._profile = self._profile_on
-        self._slide = SlidingMode(self.vehicle)   # (:mod:`.model_sliding`, off until designed)
+        # (:mod:`.sliding_mode`, off until designed)
+        self._slide = SlidingMode(self.model.sm_lipschitz())
         self._m_dt = -1.0
         self._settle = math.inf
-        self._hstate = body_heave.start(0.0)
         self._buf = np.zeros((0, self._row))
         self._i = 0
         self._block_start = 0
@@ -176,14 +172,13 @@ class ModelCore:
         self._run_y: list = []
         self._dts: list = []
         self._x0 = np.zeros(self._nx)
-        self._body_started = False
         self._slow = 0                    # samples of the block below the speed floor
         self._prow = np.zeros(self._row)        # the profile filter's row: [0, x+, 0, y]
         self._pm = None                    # its step matrix (zero latency only)
         # the step products' buffers (:meth:`_select`) and views of their state and outputs
         self._sv = self._sv_x = np.empty(0)
         self._sp = self._sp_x = self._sp_o = np.empty(0)
-        self._road.restart()
+        self._recon.restart()
         self._clock: float | None = None           # the sample clock's step (s), or None
         self._raw_dts: list = []                   # the stamps' steps of the block (s)
 
@@ -248,7 +243,7 @@ class ModelCore:
         self._m_dt = -1.0
         self._slide.set_gains(self.sm_gain / (1.0 + (g.noise_deflection_m / SM_NOISE_SCALE) ** 2),
                               [SM_DEAD_ZONE * float(e) for e in g.post_error_std])
-        self._ht = g.out[:, _R0:_R0 + 9].copy()     # H T: outputs of rho
+        self._ht = g.out[:, _R0:_R0 + 3 * self._ny].copy()     # H T: outputs of rho
         self._settle = max(g.settle_s, 20.0 * g.dt_s, MIN_SETTLE_S)
         return g
 
@@ -292,15 +287,16 @@ class ModelCore:
         self._buffer_views()
 
     # -- the run --------------------------------------------------------------------------
-    def step(self, stamp: int, q1: float, q2: float, phi: float, v: float, dt: float,
-             restart: bool, x: float, t_run: float, dt_typ: float) -> bool:
-        """One sample (a restart: the first of a run); False, state untouched, if non-finite.
+    def step(self, stamp: int, y: tuple, v: float, dt: float, restart: bool, x: float,
+             t_run: float, dt_typ: float) -> bool:
+        """One sample ``y`` (the model's channels; a restart: the first of a run); False,
+        state untouched, if non-finite.
 
         ``x`` distance (m) carried to the estimate; ``t_run``, ``dt_typ`` are not used (the
         model's own settling decides ``converged``).
         """
         if restart:
-            self._restart(stamp, q1, q2, phi, (x, dt, v, False))
+            self._restart(stamp, y, (x, dt, v, False))
             self.last_converged = False
             return True
         self._raw_dts.append(dt)
@@ -311,28 +307,27 @@ class ModelCore:
         sched = self.schedule       # (converged(), inline: once per sample)
         conv = self._t - self._t_retuned >= self._settle and (sched.blocks > 0
                                                               or sched.all_fixed)
-        if not self._advance(stamp, dt, q1, q2, phi, v, (x, dt, v, conv)):
+        if not self._advance(stamp, dt, y, v, (x, dt, v, conv)):
             return False
         self.last_converged = conv
         return True
 
-    def _restart(self, stamp: int, q1: float, q2: float, phi: float, meta: tuple) -> None:
+    def _restart(self, stamp: int, y: tuple, meta: tuple) -> None:
         """First sample of a run: the state at rest that reproduces it (:func:`.rest_state`).
 
         With no latency its estimate is final at once.
         """
         self.finish()
-        x = self._x0 = rest_state(self.vehicle, q1, q2, phi)
+        x = self._x0 = self.model.rest_state(y)
         self._t = 0.0
         self._t_retuned = 0.0
         self._running = True
         self._stepped = False
         self._slide.restart()
         self._pending.clear()
-        self._run_y = [(q1, q2, phi)]
+        self._run_y = [y]
         self._dts = []
-        self._body_started = False
-        self._road.restart()
+        self._recon.restart()
         self._prow[:] = 0.0
         self._prow[self._x0i:self._x0i + self._nx] = x
         if self.observer.latency_s > 0.0:
@@ -373,9 +368,8 @@ class ModelCore:
         self._block_start = 0
         self._stepped = True
 
-    def _advance(self, stamp: int, dt: float, q1: float, q2: float, phi: float, v: float,
-                 meta: tuple) -> bool:
-        """Advance by dt (s) to the sample (q1, q2, phi) at speed v; False if non-finite.
+    def _advance(self, stamp: int, dt: float, y: tuple, v: float, meta: tuple) -> bool:
+        """Advance by dt (s) to the sample y at speed v; False if non-finite.
 
         The gains are those of dt's level (2 % grid) and the transition that of dt itself
         (0.1 % grid). ``meta`` = (distance (m), dt (s), speed (m/s), converged) of this
@@ -395,13 +389,12 @@ class ModelCore:
         i = self._i
         row = buf[i]
         x0, y0 = self._x0i, self._y0i
-        row[y0] = q1
-        row[y0 + 1] = q2
-        row[y0 + 2] = phi
+        ny = self._ny
+        row[y0:y0 + ny] = y
         sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
         fr = self._fr
         if fr is not None:        # the friction over the step (of x+_k)
-            sv = fr.update(sv, row[x0:y0 - NY])
+            sv = fr.update(sv, row[x0:y0 - ny])
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -411,10 +404,9 @@ class ModelCore:
         rho = None
         slide = self._slide
         if slide.gamma > 0.0:       # the sliding mode on the output errors
-            c1, c2, c3 = self._c_slots
-            rho = slide.inject(q1 - s[c1], q2 - s[c2], phi - s[c3], dt)
+            rho = slide.inject([yk - s[c] for yk, c in zip(y, self._c_slots)], dt)
             if rho is not None:
-                nxt[_R0:_R0 + 9] = rho
+                nxt[_R0:_R0 + 3 * ny] = rho
         self._i = i
         self._dts.append(dt)
         if -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
@@ -426,8 +418,7 @@ class ModelCore:
             o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
-            self._emit(stamp, meta, o, self._profile_step(q1, q2, phi) if self._profile
-                       else None)
+            self._emit(stamp, meta, o, self._profile_step(y) if self._profile else None)
         else:
             pending = self._pending
             pending.append((stamp, meta))
@@ -443,14 +434,12 @@ class ModelCore:
             self._compact()
         return True
 
-    def _profile_step(self, q1: float, q2: float, phi: float) -> list:
+    def _profile_step(self, y: tuple) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
-        profile's gains): its outputs (:data:`.OUTPUTS`)."""
+        profile's gains): its outputs (the model's)."""
         x0, y0 = self._x0i, self._y0i
         prow = self._prow
-        prow[y0] = q1
-        prow[y0 + 1] = q2
-        prow[y0 + 2] = phi
+        prow[y0:y0 + self._ny] = y
         _dot(self._pm, prow, out=self._sp)
         prow[x0:y0] = self._sp_x
         return self._sp_o.tolist()
@@ -480,7 +469,7 @@ class ModelCore:
         """
         buf = self._buf
         i = self._i
-        y = buf[self._block_start:i, self._y0i:self._y0i + NY]
+        y = buf[self._block_start:i, self._y0i:self._y0i + self._ny]
         first_run_block = bool(self._run_y)
         if first_run_block:
             y = np.vstack([np.array(self._run_y), y])
@@ -500,7 +489,8 @@ class ModelCore:
         self._dts = []
         keep = self.lag + 1
         buf[:keep] = buf[i + 1 - keep:i + 1]
-        buf[keep:, _R0:_R0 + 9] = 0.0    # rho stays 0 where the sliding mode does not write
+        buf[keep:, _R0:_R0 + 3 * self._ny] = 0.0    # rho stays 0 where the sliding mode does
+        # not write
         self._i = keep - 1
         self._block_start = keep - 1
 
@@ -516,16 +506,16 @@ class ModelCore:
             sv = g.step_matrix(dt) @ buf[j]
             if fr is not None:
                 fr.select(g, dt)
-                sv = fr.update(sv, buf[j, x0:y0 - NY])
+                sv = fr.update(sv, buf[j, x0:y0 - self._ny])
             nxt[x0:y0] = sv[:y0 - x0]
-            nxt[_R0:_R0 + 9] = 0.0
+            nxt[_R0:_R0 + 3 * self._ny] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels
             pg = self.schedule.profile_design(dts[-1], 'online')
             prow = self._prow
             prow[:] = 0.0
             prow[x0:x0 + self._nx] = self._x0
             for j, dt in enumerate(dts):
-                prow[y0:y0 + NY] = buf[j, y0:y0 + NY]
+                prow[y0:y0 + self._ny] = buf[j, y0:y0 + self._ny]
                 prow[x0:y0] = (pg.step_matrix(dt) @ prow)[:y0 - x0]
         self._t_retuned = 0.0
         self._m_dt = -1.0
@@ -544,27 +534,13 @@ class ModelCore:
         self._emit(stamp, meta, (self.schedule.gains.out @ window).tolist())
 
     def _emit(self, stamp: int, meta: tuple, o: list, op: list | None = None) -> None:
-        """The row of the linear outputs o (:data:`.OUTPUTS`) and the body heave (restarted
-        with each run); appended to ready. With the profile filter's outputs ``op`` (zero
-        latency), the road is :class:`.OnlineRoad`'s."""
+        """The row of the linear outputs o (the model's, friction's direct part added) by the
+        model's reconstruction (:class:`.OnlineRows`); appended to ready. ``op``: the
+        zero-latency profile filter's outputs, or None."""
         fr = self._fr
         if fr is not None:
             fr.add_direct(o)
-        (q1, q2, phi, dq1, dq2, dphi, ddq1, ddq2, ddphi, _, ddzs, _, _, ddzu1, ddzu2, w1, w2,
-         df1, df2, fb1, fb2) = o
-        x_dist, dt, v, conv = meta
-        if self._body_started:
-            h = self._hstate = body_heave.step(self._hstate, ddzs, dt, v, self._wc_per_speed)
-            zs = h[-2]
-            dzs = h[-1]
-        else:
-            zs = dzs = 0.0
-            self._hstate = body_heave.start(ddzs)
-            self._body_started = True
-            self._rows.restart()
-        row = self._rows.row(x_dist, q1, q2, dq1, dq2, ddq1, ddq2, phi, dphi, ddphi, zs, dzs,
-                             ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1, fb2, conv, dt,
-                             None if op is None else self._road.road(op, dt, v, x_dist))
+        row = self._recon.row(o, meta, op)
         self.last_row = row
         self.ready.append((stamp, row))
 

@@ -1,14 +1,15 @@
 """Exact discretization and the discrete algebraic Riccati equation (the model's gains).
 
 :func:`van_loan` discretizes ``dx = A x dt + G dW`` exactly; :func:`solve_dare` solves the
-filter Riccati equation by structured doubling, on scaled states (:data:`STATE_SCALE`).
+filter Riccati equation by structured doubling, on scaled states (the vehicle model's
+typical state magnitudes).
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy import linalg
 
-__all__ = ['STATE_SCALE', 'van_loan', 'solve_dare']
+__all__ = ['van_loan', 'solve_dare']
 
 
 def van_loan(a_c: np.ndarray, g_c: np.ndarray, q_c: np.ndarray,
@@ -23,10 +24,6 @@ def van_loan(a_c: np.ndarray, g_c: np.ndarray, q_c: np.ndarray,
     a_d = e[nx:, nx:].T
     q_d = a_d @ e[:nx, nx:]
     return a_d, 0.5 * (q_d + q_d.T)
-
-
-#: State scales (m, rad, m/s, rad/s, N m) for the Riccati equation's conditioning.
-STATE_SCALE = np.array([1e-2, 1e-2, 1e-2, 1e-1, 1e-1, 1e-1, 1e-1, 1e-3, 1e-3, 1e-1, 1e-1, 1e3])
 
 
 def solve_dare(a: np.ndarray, c: np.ndarray, q: np.ndarray, r: np.ndarray, *,

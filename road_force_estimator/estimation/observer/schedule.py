@@ -19,19 +19,18 @@ import warnings
 import numpy as np
 from scipy import linalg
 
-from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models.protocol import VehicleModel, road_diffusion
 from road_force_estimator.estimation.observer.gains import NOISE_FLOOR_M, Gains, design
-from road_force_estimator.estimation.models.front_axle import (
-    DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, DEFAULT_DQ_STD_MPS,
-    ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
-    friction_damping, profile_scheduled, road_diffusion, scheduled)
 from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.observer.riccati import van_loan
 
 __all__ = [
     'HISTORY_BLOCKS', 'ROUGHNESS_HISTORY_BLOCKS', 'NOISE_LEVEL_RATIO', 'ROUGHNESS_LEVEL_RATIO',
     'SPEED_LEVEL_RATIO', 'DT_LEVEL_RATIO', 'LEVEL_HYSTERESIS', 'MIN_SETTLE_S', 'MAX_GAINS',
-    'requantise', 'dt_level', 'GainSchedule',
+    'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
+    'ROUGHNESS_CORRELATION_M', 'DEFAULT_DQ_STD_MPS', 'requantise', 'dt_level', 'GainSchedule',
 ]
 
 #: Blocks whose median is the current noise estimate.
@@ -54,6 +53,19 @@ LEVEL_HYSTERESIS = 0.75
 MIN_SETTLE_S = 0.1
 #: Cache size.
 MAX_GAINS = 128
+#: Noise and roughness assumed until the first block of data has been seen.
+DEFAULT_NOISE_M = 1e-5
+DEFAULT_NOISE_RAD = 1e-4
+DEFAULT_ROAD_GD_M3 = 256e-6
+#: Floor of the estimated roughness (m^3): a quarter of ISO class A's Gd(n0), so that a
+#: glass-smooth stretch does not make the observer too slow for the next bump.
+MIN_ROAD_GD_M3 = 4e-6
+#: Correlation length (m) of the road model whose variance the roughness estimate matches:
+#: a moving average of 0.25 m (the tire envelope) over a Brownian road has the variance of
+#: an Ornstein-Uhlenbeck velocity with this length (pi x 0.25 m).
+ROUGHNESS_CORRELATION_M = 0.8
+#: RMS suspension rate (m/s) assumed until the first block of data has been seen.
+DEFAULT_DQ_STD_MPS = 0.05
 
 
 def _level(x: float, ratio: float) -> float:
@@ -78,7 +90,8 @@ class GainSchedule:
 
     Parameters
     ----------
-    vehicle : VehicleParameters
+    model : VehicleModel
+        The vehicle (:mod:`..models`): its linear model, channels and tuning.
     observer : ObserverParameters
         ``noise_deflection_m`` / ``noise_roll_rad`` / ``road_roughness_m3`` (0 = estimate),
         ``road_correlation_length_m`` (0 = scheduled).
@@ -89,8 +102,8 @@ class GainSchedule:
     True when the gains in use (``gains``) are not those of the levels.
     """
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
-        self.vehicle = vehicle
+    def __init__(self, model: VehicleModel, observer: ObserverParameters) -> None:
+        self.model = model
         self.observer = observer
         self._gains: dict[tuple, Gains] = {}
         self._profile_gains: dict[tuple, Gains] = {}
@@ -108,7 +121,7 @@ class GainSchedule:
         #: RMS suspension rate (m/s), estimated per block with the roughness (it sets the
         #: friction's equivalent damping in the designs; only with leaf-spring friction)
         self.dq_std_mps = DEFAULT_DQ_STD_MPS
-        self.friction = any(self.vehicle.leaf_spring_friction_n)
+        self.friction = any(self.model.friction_n)
         self.all_fixed = all(self.noise_fixed) and self.roughness_fixed
         self.blocks = 0                    # statistics blocks seen
         self.design_count = 0              # gain designs (cache misses)
@@ -138,11 +151,11 @@ class GainSchedule:
         settle = self.gains.settle_s if self.gains is not None else 0.0
         return max(settle, 20.0 * dt_s, MIN_SETTLE_S)
 
-    def set_vehicle(self, vehicle: VehicleParameters) -> None:
-        """Design for ``vehicle`` from now on (an estimated sprung mass): the caches of designs
+    def set_model(self, model: VehicleModel) -> None:
+        """Design for ``model`` from now on (an estimated sprung mass): the caches of designs
         are dropped, the estimates and levels stay; the gains in use stay until the next design
         (``stale``), so that samples held back can still be finalized."""
-        self.vehicle = vehicle
+        self.model = model
         self._gains.clear()
         self._var_dq.clear()
         self.stale = True
@@ -229,8 +242,10 @@ class GainSchedule:
                 cache.clear()
             # the levels decide when to design; a design uses the estimates of that moment
             noise = max(self.noise_deflection_m, NOISE_FLOOR_M)
+            model = self.model
             force_psd, corr, gd_factor, moment_psd = (
-                profile_scheduled(noise, mode) if mode else scheduled(noise, roll_moment=True))
+                model.profile_scheduled(noise, mode) if mode
+                else model.scheduled(noise, roll_moment=True))
             if roll_moment_psd is not None:
                 moment_psd = roll_moment_psd
             if self.observer.road_correlation_length_m > 0.0:
@@ -239,15 +254,14 @@ class GainSchedule:
                           correlation_length_m=corr, force_psd=force_psd,
                           roll_moment_psd=moment_psd, key=key)
             if self.friction:
-                kwargs['friction_damping_nspm'] = friction_damping(
-                    self.vehicle.leaf_spring_friction_n, self.dq_std_mps)
+                kwargs['friction_damping_nspm'] = model.friction_damping(self.dq_std_mps)
             try:
-                g = design(self.vehicle, noise_deflection_m=noise,
+                g = design(model, noise_deflection_m=noise,
                            noise_roll_rad=self.noise_roll_rad,
                            road_gd_m3=gd_factor * self.road_gd_m3, **kwargs)
             except ValueError:   # never seen; the defaults always give a stable filter
                 self.design_failures += 1
-                g = design(self.vehicle, noise_deflection_m=DEFAULT_NOISE_M,
+                g = design(model, noise_deflection_m=DEFAULT_NOISE_M,
                            noise_roll_rad=DEFAULT_NOISE_RAD, road_gd_m3=DEFAULT_ROAD_GD_M3,
                            **kwargs)
             cache[key] = g
@@ -264,28 +278,25 @@ class GainSchedule:
         extra = {}
         if self.friction:   # friction damps the motion: its equivalent damping (model notes)
             key += (lv['dq'],)
-            extra['friction_damping_nspm'] = friction_damping(
-                self.vehicle.leaf_spring_friction_n, DQ_LEVEL_RATIO ** lv['dq'])
+            extra['friction_damping_nspm'] = self.model.friction_damping(
+                DQ_LEVEL_RATIO ** lv['dq'])
         val = self._var_dq.get(key)
         if val is None:
-            model = continuous_model(self.vehicle, SPEED_LEVEL_RATIO ** lv['v'], 1.0,
-                                     correlation_length_m=ROUGHNESS_CORRELATION_M, **extra)
-            a, q = van_loan(model.a, model.road_g, np.eye(2), DT_LEVEL_RATIO ** lv['dt'])
-            # Without phi (it follows the road's cross level, a random walk: nothing depends on
-            # it) and the roll moment (a random walk the road does not drive): the rest is
-            # stationary.
-            # (and a lag state of the roll sensor, which follows phi)
-            slots = model.measured
-            drop = {State.PHI, State.M_R, slots[2]}
-            keep = [j for j in range(model.nx) if j not in drop]
+            cm = self.model.continuous(SPEED_LEVEL_RATIO ** lv['v'], 1.0,
+                                       correlation_length_m=ROUGHNESS_CORRELATION_M, **extra)
+            a, q = van_loan(cm.a, cm.road_g, np.eye(cm.road_g.shape[1]),
+                            DT_LEVEL_RATIO ** lv['dt'])
+            # The states the road drives to a stationary variance (the model says which:
+            # :meth:`.VehicleModel.stationary_states`); the deflections among them.
+            keep = self.model.stationary_states(cm)
             a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
             with warnings.catch_warnings():   # undamped models: no stationary variance
                 warnings.simplefilter('ignore')
                 p = linalg.solve_discrete_lyapunov(a, q, method='direct')
             d = a - np.eye(len(keep))
             var = d @ p @ d.T + q
-            i1, i2 = keep.index(slots[0]), keep.index(slots[1])   # the measured q_1, q_2
-            val = float(0.5 * (var[i1, i1] + var[i2, i2]))
+            idx = [keep.index(cm.measured[ch]) for ch in self.model.deflection_channels]
+            val = float(sum(var[i, i] for i in idx) / len(idx))
             self._var_dq[key] = val
         return val
 
@@ -302,15 +313,16 @@ class GainSchedule:
         dt_mean = float(np.mean(steps))
         even = float(np.max(np.abs(steps - dt_mean))) <= 1e-6 * dt_mean
         t = None if even else np.concatenate([[0.0], np.cumsum(steps)])
-        hq.append(max(noise_std(y[:, 0], t), noise_std(y[:, 1], t)))
-        hr.append(noise_std(y[:, 2], t))
+        model = self.model
+        hq.append(max(noise_std(y[:, ch], t) for ch in model.deflection_channels))
+        hr.append(max(noise_std(y[:, ch], t) for ch in model.roll_channels))
         if not self.noise_fixed[0]:
             self.noise_deflection_m = float(np.median(hq))
         if not self.noise_fixed[1]:
             self.noise_roll_rad = float(np.median(hr))
         # first differences scaled to the typical step (a smooth signal's change is ~ dq dt)
         scale = (dt_mean / steps)[:, None]
-        d1 = (np.diff(y[:, :2], axis=0) * scale).reshape(-1)
+        d1 = (np.diff(y[:, list(model.deflection_channels)], axis=0) * scale).reshape(-1)
         signal_var = (mad_std(d1) ** 2
                       - 2.0 * self.noise_deflection_m ** 2 * float(np.mean(scale ** 2)))
         if self.friction and moving:   # the RMS rate (not the MAD: friction: dq heavy-tailed)

@@ -1,9 +1,11 @@
 """The model observer offline: its forward filter and Rauch-Tung-Striebel smoother over each
-run of a whole recording (:func:`smooth`), in Bierman's modified Bryson-Frazier form (no
+run of a recording (:class:`Smoother`; :func:`..offline.smooth` runs it over a drive), in
+Bierman's modified Bryson-Frazier form (no
 inverse of the ill-conditioned a-priori covariance), with the noise and roughness estimated
 from the whole run first (:class:`.GainSchedule`; a run with a stop: from its samples at
 speed, and its gains per stretch of speed, :mod:`.run_speed`); the same model, gains and
-outputs as the online observer (:mod:`.model_core`). Long evenly sampled runs go through in
+outputs as the online observer (:mod:`..observer.online`), of any vehicle model
+(:mod:`..models`). Long evenly sampled runs go through in
 overlapping windows (:func:`window_samples`), so that the smoother's own memory does not grow
 with the drive; the numbers are those of one piece to ~1e-11 of each field's RMS. The road comes
 from a second pass of the same smoother with the profile's tuning (:meth:`Smoother.
@@ -17,31 +19,22 @@ from typing import Iterator
 
 import numpy as np
 
-from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-import road_force_estimator.estimation.body_heave as body_heave
-from road_force_estimator.estimation.acceptance import (
-    GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
-from road_force_estimator.estimation.observer.gains import ROW_X, Gains
-from road_force_estimator.estimation.smoothing.lti import Powers
-from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
-from road_force_estimator.estimation.models.front_axle import (
-    DEFAULT_ROAD_GD_M3, NY, OUTPUTS, PROFILE_CUTOFF_RATIO, SPEED_FLOOR_MPS, State,
-    continuous_model, offline_roll_moment_psd, rest_state)
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
+from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER
-from road_force_estimator.estimation.outputs import (
-    Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
-from road_force_estimator.estimation.reconstruction import Reconstruction, distance_m
-from road_force_estimator.estimation.static_load import track_recording
+from road_force_estimator.estimation.observer.schedule import DEFAULT_ROAD_GD_M3
+from road_force_estimator.estimation.outputs import EstimatorStatus
+from road_force_estimator.estimation.smoothing.lti import Powers
 from road_force_estimator.estimation.smoothing.run_speed import (
     level_segments, run_statistics, speed_segments, unsteady)
 from road_force_estimator.estimation.smoothing.rts_pass import smoothed_chunks
 from road_force_estimator.estimation.observer.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.observer.schedule import GainSchedule
-from road_force_estimator.estimation.speed_check import check_arrays
 
-__all__ = ['smooth', 'prepare', 'smoothed_rows', 'Smoother', 'fill_status', 'last_row',
-           'LAST_ROW_FIELDS', 'KeptColumns', 'rows_of', 'grid_steps', 'window_samples',
-           'slowest_tau_s', 'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
+__all__ = ['Smoother', 'KeptColumns', 'grid_steps', 'window_samples', 'slowest_tau_s',
+           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
 #: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
 #: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
@@ -65,24 +58,18 @@ WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
-#: Degree of the polynomial taken off the profile's body heave over each run (see
-#: :meth:`Smoother._profile`).
-PROFILE_DETREND_DEGREE = 3
-#: The outputs (:data:`.OUTPUTS`) the offline rows need, in this order.
-_SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
-                 'ddzu1', 'ddzu2', 'w1', 'w2', 'df1', 'df2', 'fb1', 'fb2')
-_SMOOTH_OUTPUTS = [OUTPUTS.index(name) for name in _SMOOTH_NAMES]
 #: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
 #: is evaluated on the previous pass's smoothed dq (the first pass: none).
 FRICTION_PASSES = 3
 
 
 class KeptColumns:
-    """The columns (slots :class:`.Column`) of m rows of which only ``keep`` are held whole,
-    the rest scratch rows of one chunk: what a pass that needs a few columns of a long run
-    writes into (:meth:`rows`), in memory that does not grow with the run but by those."""
+    """The columns of m rows (the model's, ``field_columns`` makes them) of which only
+    ``keep`` are held whole, the rest scratch rows of one chunk: what a pass that needs a few
+    columns of a long run writes into (:meth:`rows`), in memory that does not grow with the
+    run but by those."""
 
-    def __init__(self, m: int, keep, chunk: int = _SMOOTH_CHUNK) -> None:
+    def __init__(self, m: int, keep, field_columns, chunk: int = _SMOOTH_CHUNK) -> None:
         self.kept = {int(j): np.zeros(m) for j in keep}
         self.scratch = field_columns(chunk)[1]
 
@@ -136,97 +123,6 @@ def slowest_tau_s(g: Gains, dt: float) -> float:
     return -dt / math.log(r) if 0.0 < r < 1.0 else math.inf
 
 
-def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
-           observer: ObserverParameters | None = None, *,
-           gap_threshold_s: float = GAP_THRESHOLD_S,
-           window: tuple[int, int] | None = None) -> EstimateArrays:
-    """Offline estimate: the model observer's forward filter and its RTS smoother.
-
-    The same model, gains and outputs as the online observer (:class:`.ModelCore`, linear
-    injection; the sliding-mode term, a correction of the causal estimate, has no place in a
-    smoother), over the whole recording: for each run (the estimator's rejections and gap
-    rule split the data, :func:`.accept_arrays`), the noise and roughness are estimated from
-    the whole run (unless set in ``observer``), the steady-state Kalman filter runs forward
-    and the Rauch-Tung-Striebel smoother (Rauch, Tung, Striebel 1965) backward; the body
-    heave is the zero-phase band-limited double integral of the smoothed body acceleration.
-
-    Parameters
-    ----------
-    stamps_ns, q_m, roll_rad, speed_mps : as :func:`.estimate_batch`.
-    vehicle, observer : parameters (defaults when None); ``observer.latency`` is ignored.
-    gap_threshold_s : float
-        As :class:`.Estimator`.
-    window : (int, int), optional
-        ``(window, overlap)``, samples, for even runs longer than both (:func:`window_samples`).
-
-    Returns
-    -------
-    EstimateArrays
-        Row k = the smoothed estimate of sample k; rejected rows hold the previous row (valid
-        False); ``converged`` is False within the settling time of each run's start; the
-        status counts what the estimator would count (and carries the noise and roughness
-        used).
-    """
-    prep = prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
-                   gap_threshold_s=gap_threshold_s)
-    smoother = Smoother(prep.vehicle, prep.observer, window)
-    fields, columns = field_columns(prep.n)
-    for idx, part in smoothed_rows(prep, smoother, columns):
-        if idx is not None:                     # (None: written in place)
-            for col, values in zip(columns, part):
-                col[idx] = values
-    acc, valid = prep.acc, prep.valid
-    if acc.size and acc.size < valid.size:          # rejected rows hold the previous row
-        held, src = hold_rejected(valid)
-        for arr in fields.values():
-            arr[held] = arr[src]
-    status = EstimatorStatus(**prep.counts)
-    fill_status(status, acc.size, prep.contradicted, prep.last_stamp_ns,
-                last_row(fields, acc[-1]) if acc.size else None, smoother)
-    flags = np.zeros(prep.n, bool)
-    flags[acc] = prep.contradicted
-    out = EstimateArrays(stamp_ns=prep.stamps_out, valid=valid, status=status,
-                         speed_contradicted=flags, **fields)
-    status.negative_load_samples = out.negative_load_samples()
-    return out
-
-
-def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
-            observer: ObserverParameters | None = None, *,
-            gap_threshold_s: float = GAP_THRESHOLD_S) -> SimpleNamespace:
-    """What :func:`smooth` takes of a whole recording before its runs: the estimator's
-    rejections and gap rule (:func:`.accept_arrays`), the static loads under ``zero_load``
-    (:func:`.track_recording`: the offset off the readings, the vehicle of the last estimate),
-    the distance (continued across gaps) and the model's speed (the recorded one unless the
-    deflections contradict it, :func:`.check_arrays`). Attributes: ``n``, ``stamps_out``,
-    ``valid``, ``counts``, ``acc`` (the accepted rows), ``last_stamp_ns``, ``q``, ``phi``, ``y``
-    (the (n, 3) array of both when ``q`` and ``phi`` are its views, else None),
-    ``static`` (N, (acc.size, 2), or None), ``vehicle``, ``observer``, ``t`` (s from the first
-    accepted stamp, per accepted sample), ``dist`` (m), ``v_model`` (m/s), ``contradicted``,
-    ``starts`` (each run's first index into ``acc``, then ``acc.size``)."""
-    vehicle = VehicleParameters() if vehicle is None else vehicle
-    observer = ObserverParameters() if observer is None else observer
-    stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
-    valid, restart, stamp_int, cnt = accept_arrays(stamps, q, phi, speed, gap_threshold_s)
-    acc = np.flatnonzero(valid)
-    # zero_load: the static loads (the online estimator's numbers), the offset off the readings
-    q, static, vehicle = track_recording(vehicle, q, acc, stamp_int, restart)
-    # seconds from the first accepted stamp: epoch stamps (~1.7e9 s) in float seconds lose
-    # ~0.2 us, enough to make an even sample step look uneven
-    t_all = (stamp_int[acc] - (stamp_int[acc[0]] if acc.size else 0)) * 1e-9
-    v_all = speed[acc]
-    steps = np.zeros(acc.size)
-    steps[1:] = np.diff(stamp_int[acc]) * 1e-9
-    contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
-    del steps
-    return SimpleNamespace(
-        n=stamps.shape[0], stamps_out=output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
-        last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
-        y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
-        dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
-        starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
-
-
 def _clock_grid(dts: np.ndarray, dt: float) -> tuple[float, bool, np.ndarray | None]:
     """``(dt, uniform, steps)`` of a run whose steps ``dts`` (s) are not whole numbers of
     their median ``dt``: on the regular clock under jittered stamps when there is one
@@ -245,86 +141,10 @@ def _clock_grid(dts: np.ndarray, dt: float) -> tuple[float, bool, np.ndarray | N
     return clock, False, steps
 
 
-def rows_of(column, a: int, b: int) -> np.ndarray:
-    """Rows ``a:b`` of an array or of a :class:`.core.spill.SpillColumn`."""
-    return column[a:b] if isinstance(column, np.ndarray) else column.read(a, b)
-
-
-def _joined(q: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
-    """The (n, 3) array ``[q_1, q_2, phi]`` whose views ``q`` and ``phi`` are (the offline
-    stream's inputs: the measurements are not copied again), else None."""
-    base = q.base
-    if (base is None or phi.base is not base or base.ndim != 2 or base.shape[1] != 3
-            or base.dtype != np.float64 or not base.flags.c_contiguous
-            or q.shape[0] > base.shape[0]):
-        return None
-    start = base.__array_interface__['data'][0]
-    if (q.__array_interface__['data'][0] != start or q.strides != base.strides
-            or phi.__array_interface__['data'][0] != start + 16):
-        return None
-    return base[:q.shape[0]]
-
-
-def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | None = None
-                  ) -> Iterator[tuple[np.ndarray | slice | None, list]]:
-    """The smoothed rows of a recording (:func:`prepare`) in order, ``(rows, columns)``:
-    ``rows`` the input rows (indices or a slice) and ``columns`` (slots :class:`.Column`) their
-    estimates, the distance and the static loads (:meth:`.Reconstruction.restatic`) in.
-    With ``columns`` (the recording's, each (n,)) a run without a rejected sample inside is
-    written into them directly, and comes as ``(None, columns of its rows)``."""
-    acc, starts, t_all = prep.acc, prep.starts, prep.t
-    restat = Reconstruction(smoother.vehicle, prep.observer.rollover_cutoff_frequency_hz)
-    for r0, r1 in zip(starts[:-1], starts[1:]):
-        idx = acc[r0:r1]
-        whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
-        src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
-        direct = [col[src] for col in columns] if whole and columns is not None else None
-        t = t_all[r0:r1]
-        y = prep.y[src] if whole and prep.y is not None else None
-        for a, b, part in smoother.pieces(t, prep.q[src], prep.phi[src],
-                                          prep.v_model[r0:r1], direct, y):
-            part[Column.DISTANCE][:] = rows_of(prep.dist, r0 + a, r0 + b)
-            if prep.static is not None:
-                restat.restatic(part, prep.static[r0 + a:r0 + b], t[a:b],
-                                None if a == 0 else float(t[a - 1]))
-            if part is direct:
-                yield None, part
-            elif whole:
-                yield slice(idx[a], idx[b - 1] + 1), part
-            else:
-                yield idx[a:b], part
-
-
-def last_row(fields: dict, row: int) -> dict:
-    """What the status takes of the last accepted row ``row`` of the fields (or a piece's)."""
-    return {name: fields[name][row] for name in LAST_ROW_FIELDS}
-
-
-#: The fields of the last accepted row that the status reports (:func:`fill_status`).
-LAST_ROW_FIELDS = ('residual_nm', 'lift_off', 'converged', 'static_load_n')
-
-
-def fill_status(status: EstimatorStatus, accepted: int, contradicted: np.ndarray,
-                last_stamp_ns: int | None, last: dict | None, smoother: Smoother) -> None:
-    """The status of :func:`smooth` (``status`` made from the estimator's counts): the
-    accepted and contradicted counts, the last accepted sample's stamp and flags (``last``,
-    :func:`last_row`; None without one), the smoother's levels and vehicle."""
-    status.accepted = int(accepted)
-    status.speed_contradicted = int(np.count_nonzero(contradicted))
-    vehicle = smoother.vehicle
-    status.sprung_mass_kg = vehicle.sprung_mass_kg
-    status.static_load_n = vehicle.static_load_n
-    if last is not None:
-        status.last_stamp_ns = int(last_stamp_ns)
-        status.last_residual_nm = float(last['residual_nm'])
-        status.lift_off = tuple(bool(b) for b in last['lift_off'])
-        status.converged = bool(last['converged'])
-        status.static_load_n = tuple(float(f) for f in last['static_load_n'])
-    smoother.fill_status(status)
-
-
 class Smoother:
-    """The smoother of :func:`smooth`, run after run (the schedule persists over runs).
+    """The smoother of a vehicle model's runs (:func:`smooth`'s), run after run (the schedule
+    persists over runs); the model (:mod:`..models`) gives the linear model, the channels
+    and the reconstruction of the rows (:meth:`.VehicleModel.offline_rows`).
 
     ``window``: ``(window, overlap)`` (samples) for every even run longer than both; else
     :func:`window_samples`, for runs of :data:`WINDOWED_RUNS` windows' work or, with
@@ -332,34 +152,40 @@ class Smoother:
     run's rows are then never held whole beyond ~11 minutes at 1 kHz; the numbers differ
     from one piece's by the windows' ~1e-11 of each field's RMS)."""
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters,
+    def __init__(self, model: VehicleModel, observer: ObserverParameters,
                  window: tuple[int, int] | None = None, eager: bool = False) -> None:
-        self.vehicle = vehicle
+        self.model = model
         self.observer = observer
         self.window = window
         self.eager = eager
-        self.schedule = GainSchedule(vehicle, observer)
-        self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
-        model = continuous_model(vehicle, 1.0, DEFAULT_ROAD_GD_M3)
-        self.h = model.h[_SMOOTH_OUTPUTS]
-        self.nx = model.nx
+        self.schedule = GainSchedule(model, observer)
+        self.rows = model.offline_rows(observer)
+        cm = model.continuous(1.0, DEFAULT_ROAD_GD_M3)
+        self.h = cm.h[self.rows.outputs]
+        self.nx = cm.nx
+        self.ny = cm.ny
         #: leaf-spring friction F_f,i (N), or None; the outputs' direct part per newton
-        self.friction = model.friction_n if any(model.friction_n) else None
-        self.fd = None if self.friction is None else model.friction_d[_SMOOTH_OUTPUTS]
-        self.ceq = np.zeros((2, 1))      # the equivalent damping in the run's gains (N s/m)
-        self._dq = [_SMOOTH_NAMES.index('dq1'), _SMOOTH_NAMES.index('dq2')]
+        self.friction = cm.friction_n if any(cm.friction_n) else None
+        self.fd = None if self.friction is None else cm.friction_d[self.rows.outputs]
+        nf = len(cm.friction_n)
+        self.ceq = np.zeros((nf, 1))     # the equivalent damping in the run's gains (N s/m)
+        self._dq = [self.rows.outputs.index(j) for j in model.friction_rate_outputs]
+        self._dq_states = list(model.friction_rate_states)
+
+    @property
+    def vehicle(self):
+        """The parameters of the model."""
+        return self.model.vehicle
 
     def _forces(self, o: np.ndarray) -> np.ndarray:
-        """The known friction input (2, m) (N) at the rates of the outputs o (rows
-        _SMOOTH_NAMES); see :meth:`_forces_at`."""
+        """The known friction input (nf, m) (N) at the rates of the outputs o (the rows of the
+        reconstruction's ``outputs``); see :meth:`_forces_at`."""
         return self._forces_at(o[self._dq])
 
     def _forces_at(self, dq: np.ndarray) -> np.ndarray:
-        """The known friction input (N) at the rates dq (2, ...) (m/s): ``-F_f tanh(dq / v_f)``
-        less the equivalent damping's share that the gains carry (as :mod:`.model_core`)."""
-        ff = np.asarray(self.friction).reshape((2,) + (1,) * (np.ndim(dq) - 1))
-        ceq = self.ceq.reshape(ff.shape)
-        return -ff * np.tanh(dq / FRICTION_VELOCITY_MPS) + ceq * dq
+        """The known friction input (N) at the rates dq (nf, ...) (m/s): the model's law less
+        the equivalent damping's share that the gains carry (as :mod:`..observer.friction`)."""
+        return self.model.friction_forces_array(dq, self.ceq)
 
     def fill_status(self, status: EstimatorStatus) -> None:
         sched = self.schedule
@@ -370,34 +196,33 @@ class Smoother:
         status.statistics_blocks = sched.blocks
         status.gain_designs = sched.design_count
 
-    def pieces(self, t: np.ndarray, q: np.ndarray, phi: np.ndarray, v: np.ndarray,
-               out: list | None = None, y: np.ndarray | None = None
+    def pieces(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, out: list | None = None
                ) -> Iterator[tuple[int, int, list]]:
         """The estimates of one run (see :func:`smooth`) as ``(a, b, columns of rows a:b)``
-        (slots :class:`.Column`; the distance is the caller's), in order.
+        (the model's columns; the distance is the caller's), in order: ``t`` its times (s),
+        ``y`` (m, ny) its measurements, ``v`` its model speeds (m/s).
 
         A long evenly sampled run (:func:`window_samples`) comes window by window
         (:meth:`_windowed`: its rows are never held whole); any other run in one piece, in
         the columns ``out`` (each (m,)) when given. Evenly sampled runs go through in chunks of
         :data:`_SMOOTH_CHUNK` samples (the forward filter chunk after chunk, then the
         smoother backwards: :func:`.rts_pass.smoothed_chunks`); the body heave and the road,
-        which need the whole run, come last. ``y``: ``[q, phi]`` as one (m, 3) array, if the
-        caller has it.
+        which need the whole run, come last.
         """
         m = t.size
-        y = np.column_stack([q, phi]) if y is None else y
-        x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
+        rows = self.rows
+        x0 = self.model.rest_state(y[0])
         if m == 1:
-            out = field_columns(1)[1] if out is None else out
-            self._outputs((self.h @ x0)[:, None], out)
-            self._heave(t, 0.0, 0.0, out)
+            out = rows.field_columns(1)[1] if out is None else out
+            rows.columns((self.h @ x0)[:, None], out)
+            self._finish(out, t, 0.0, 0.0)
             yield 0, 1, out
             return
         run = self._design_run(t, y, v)
         if run.windowed:
             yield from self._windowed(run, t, y, v, x0)
             return
-        out = field_columns(m)[1] if out is None else out
+        out = rows.field_columns(m)[1] if out is None else out
         g, dt, speed, dts, steps = run.gains, run.dt, run.speed, run.dts, run.steps
         if run.uniform:
             self._uniform(g, dt, y, x0, out,
@@ -407,10 +232,11 @@ class Smoother:
         else:
             self._uneven(g, dts, y, x0, out)
         if steps is None:
-            self._heave(t, dt, speed, out)
+            self._finish(out, t, dt, speed)
         road = self._profile(dt, speed, dts, run.uniform, steps, y, v, x0,
-                             offline_roll_moment_psd(out[Column.RESIDUAL], dt))
-        out[Column.U1][:], out[Column.U2][:] = road
+                             rows.roll_moment_psd(out, dt))
+        for j, u in zip(rows.road_columns, road):
+            out[j][:] = u
         yield 0, m, out
 
     def _design_run(self, t: np.ndarray, y: np.ndarray, v: np.ndarray) -> SimpleNamespace:
@@ -436,7 +262,7 @@ class Smoother:
         g = sched.design(dt, 0)
         if self.friction is not None:   # the outputs of the design's model (its c_eq)
             self.ceq = np.asarray(g.model.friction_damping_nspm, dtype=float)[:, None]
-            self.h = g.model.h[_SMOOTH_OUTPUTS]
+            self.h = g.model.h[self.rows.outputs]
         window, overlap = self.window or window_samples(
             dt, speed, self.observer.profile_cutoff_wavelength_m, slowest_tau_s(g, dt))
         longer = (window + overlap if self.window or self.eager
@@ -452,75 +278,46 @@ class Smoother:
         for its roll residual (the profile pass's roll moment), the road from the profile
         pass over the whole run (:meth:`_profile`), then the load pass again (the same
         windows, the same bits), each window's rows with the road put in."""
-        residual = np.empty(t.size)
-        for a, b, rows in self._windows(run, t, y, v, (Column.RESIDUAL,)):
-            residual[a:b] = rows[Column.RESIDUAL]
+        recon = self.rows
+        res = recon.residual_column
+        residual = {res: np.empty(t.size)}
+        for a, b, rows in self._windows(run, t, y, v, (res,)):
+            residual[res][a:b] = rows[res]
         run.dts = None                             # an even run's profile does not need them
-        psd = offline_roll_moment_psd(residual, run.dt)
+        psd = recon.roll_moment_psd(residual, run.dt)
         del residual
         road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd)
         for a, b, rows in self._windows(run, t, y, v):
-            rows[Column.U1][:] = road[0][a:b]
-            rows[Column.U2][:] = road[1][a:b]
+            for j, u in zip(recon.road_columns, road):
+                rows[j][:] = u[a:b]
             yield a, b, rows
 
     def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
                  steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
-                 roll_moment_psd: float) -> tuple[np.ndarray, np.ndarray]:
+                 roll_moment_psd: float) -> tuple:
         """The road columns of a run from the profile smoother (issue 21): the same model and
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
-        profile_design`, ``'offline'``), ``u_i = z_s + s sin(phi) - q_i + w_i`` of its states
-        with the body heave's zero-phase integral at the profile's cutoff
-        (:data:`.model.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``, less its
-        cubic over the run, :data:`PROFILE_DETREND_DEGREE`): in time when the speed is steady
-        (:func:`.body_heave.zero_phase`), else in distance with the rate corrected where the
-        truck stands (:func:`.body_heave.in_distance`); where the model's speed ``v`` (m/s) is
-        0 the road is held. Returns the road ``(u_1, u_2)`` (m) of the run's samples;
-        ``roll_moment_psd`` ((N m)^2 / s) is what the load pass's roll residual shows
-        (:func:`.model.offline_roll_moment_psd`), the other arguments as :meth:`pieces` made
-        them."""
+        profile_design`, ``'offline'``), the road of its states by the model's
+        reconstruction (:meth:`.OfflineRows.road`). Returns the road of each wheel path (m)
+        of the run's samples; ``roll_moment_psd`` ((N m)^2 / s) is what the load pass's roll
+        residual shows (:meth:`.OfflineRows.roll_moment_psd`), the other arguments as
+        :meth:`pieces` made them."""
         # the roll moment as slow as the load pass's roll residual says it is
         g = self.schedule.profile_design(dt, 'offline', roll_moment_psd)
+        recon = self.rows
         pos = None
         if steps is not None:               # completed on the grid, as :meth:`_bridged`
             pos = np.concatenate([[0], np.cumsum(steps)])
             grid = np.arange(int(pos[-1]) + 1)
-            y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
+            y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
         if uniform or steps is not None:        # only the road's columns held whole
-            cols = KeptColumns(y.shape[0], (Column.U1, Column.U2, Column.DDZS))
+            cols = KeptColumns(y.shape[0], recon.profile_columns,
+                               field_columns=recon.field_columns)
             self._uniform(g, dt, y, x0, cols)
         else:
-            cols = field_columns(y.shape[0])[1]
+            cols = recon.field_columns(y.shape[0])[1]
             self._uneven(g, dts, y, x0, cols)
-        zs = self._profile_heave(cols, dt, speed, dts, uniform, pos, v)
-        # standing: the model's speed 0 (a real stop; a dropped-out speed that the deflections
-        # contradict keeps the last trusted speed, :mod:`.speed_check`)
-        standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
-        road = []
-        for j in (Column.U1, Column.U2):
-            u = cols[j] + zs
-            u = u if pos is None else u[pos]
-            if standing.any():
-                # standing, the road under the tires does not change: what the estimate does
-                # then (the body heave's drift, integrated in time) is no road
-                du = np.diff(u)
-                du[standing] = 0.0
-                u = u[0] + np.concatenate([[0.0], np.cumsum(du)])
-            road.append(u)
-        return road[0], road[1]
-
-    def _profile_heave(self, cols: list, dt: float, speed: float, dts: np.ndarray,
-                       uniform: bool, pos: np.ndarray | None, v: np.ndarray):
-        """The profile's body heave (m) from the profile pass's columns ``cols`` (on the grid
-        ``pos`` when not None): :func:`.body_heave.offline_profile`."""
-        m = cols[Column.DDZS].size
-        vg = v if pos is None else np.interp(np.arange(m), pos, v)
-        tg = (dt * np.arange(m) if uniform or pos is not None else
-              np.concatenate([[0.0], np.cumsum(dts)]))
-        return body_heave.offline_profile(
-            cols[Column.DDZS], 0.5 * (cols[Column.U1] + cols[Column.U2]), tg, vg, dt,
-            speed, self.observer.profile_cutoff_wavelength_m,
-            PROFILE_CUTOFF_RATIO, PROFILE_DETREND_DEGREE)
+        return recon.road(cols, dt, speed, dts, uniform, pos, v)
 
     def _windows(self, run: SimpleNamespace, t: np.ndarray, y: np.ndarray, v: np.ndarray,
                  keep: tuple | None = None) -> Iterator[tuple[int, int, list | dict]]:
@@ -538,18 +335,20 @@ class Smoother:
         (m/s)."""
         m = t.size
         g, dt, window, overlap = run.gains, run.dt, run.window, run.overlap
-        x0 = rest_state(self.vehicle, y[0, 0], y[0, 1], y[0, 2])
+        x0 = self.model.rest_state(y[0])
+        recon = self.rows
         for a in range(0, m, window):
             b = min(m, a + window)
             lo, hi = max(0, a - overlap), min(m, b + overlap)
             nxt = b - overlap if b < m else None        # where the next window starts
-            cols = field_columns(hi - lo)[1] if keep is None else KeptColumns(hi - lo, keep)
+            cols = (recon.field_columns(hi - lo)[1] if keep is None else
+                    KeptColumns(hi - lo, keep, field_columns=recon.field_columns))
             segs = level_segments(self.schedule, dt, v[lo:hi]) if run.unsteady else None
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
                                     keep=None if nxt is None else max(0, nxt) - lo,
                                     segments=segs)
             if keep is None:
-                self._heave(t[lo:hi], dt, run.speed, cols, t[0])
+                self._finish(cols, t[lo:hi], dt, run.speed, t[0])
                 yield a, b, [col[a - lo:b - lo] for col in cols]
             else:
                 yield a, b, {j: cols[j][a - lo:b - lo] for j in keep}
@@ -565,12 +364,12 @@ class Smoother:
         pos = np.concatenate([[0], np.cumsum(steps)])
         m = int(pos[-1]) + 1
         grid = np.arange(m)
-        yg = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(NY)])
-        cols = field_columns(m)[1]
+        yg = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
+        cols = self.rows.field_columns(m)[1]
         self._uniform(g, dt, yg, x0, cols)
-        self._heave(t[0] + dt * grid, dt, speed, cols)
+        self._finish(cols, t[0] + dt * grid, dt, speed)
         for j, col in enumerate(cols):
-            if j != Column.DISTANCE:
+            if j != self.rows.distance_column:
                 out[j][:] = col[pos]
 
     def _uneven(self, g: Gains, dts: np.ndarray, y: np.ndarray, x0: np.ndarray,
@@ -581,12 +380,12 @@ class Smoother:
         nx = self.nx
         a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
         xf = np.empty((m, nx))
-        nus = np.empty((m, NY))
+        nus = np.empty((m, self.ny))
         xf[0] = x0
         for k in range(1, m):
             xp = a_steps[k - 1] @ xf[k - 1]
             if self.friction is not None:   # on the filtered dq (one pass: steps uneven)
-                dq = xf[k - 1, [State.DQ1, State.DQ2]]
+                dq = xf[k - 1, self._dq_states]
                 xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
             nus[k] = y[k] - c @ xp
             xf[k] = xp + g.k @ nus[k]
@@ -600,7 +399,7 @@ class Smoother:
         o = self.h @ xs.T
         if self.friction is not None:
             o = o + self.fd @ self._forces(o)
-        self._outputs(o, out)
+        self.rows.columns(o, out)
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
                  out: list, keep: int | None = None, segments: list | None = None
@@ -633,24 +432,25 @@ class Smoother:
         + C^T S^-1 nu_k`` with ``Phi = A (I - K C)``, ``lam_m = 0``, and ``x_(k|m) = x+_k +
         P+ A^T lam_(k+1)``. ``segs``: ``(start, end, gains)`` stretches of the run (one: the
         run's gains), each step with the matrices of its sample's stretch. ``x0`` is ``x+_0``.
-        With friction forces f (2, m) (N), the known input ``B_d f_(k-1)`` joins the
-        prediction ``A x+_(k-1)``. ``out`` None: only the smoothed dq (2, m) is returned; else,
+        With friction forces f (nf, m) (N), the known input ``B_d f_(k-1)`` joins the
+        prediction ``A x+_(k-1)``. ``out`` None: only the smoothed rates (nf, m) are returned;
+        else,
         with ``keep``, the forward state ``x+_keep`` (where the next window starts).
         """
         m = y.shape[0]
         mats = [self._pass_matrices(g, dt, forces) for _, _, g in segs]
-        dq = None if out is not None else np.empty((2, m))
+        dq = None if out is not None else np.empty((len(self._dq_states), m))
         fwd = None
         for k0, k1, xs in smoothed_chunks(segs, mats, y, x0, _SMOOTH_CHUNK):
             if k0 < 0:
                 fwd = xs
             elif out is None:
-                dq[:, k0:k1] = xs[:, [State.DQ1, State.DQ2]].T
+                dq[:, k0:k1] = xs[:, self._dq_states].T
             else:
                 o = self.h @ xs.T
                 if self.friction is not None:
                     o = o + self.fd @ self._forces(o)
-                self._outputs(o, _rows(out, k0, k1))
+                self.rows.columns(o, _rows(out, k0, k1))
         if out is None:
             return dq
         return None if keep is None else fwd.states(keep, keep + 1)[0][0]
@@ -661,7 +461,8 @@ class Smoother:
         ``(C^T S^-1)^T``, ``(P+ A^T)^T`` and the friction forces' parts (or None)."""
         c = g.model.c
         nx = self.nx
-        a_run = Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, ROW_X:ROW_X + nx]))
+        row_x = row_layout(nx, self.ny)[1]
+        a_run = Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, row_x:row_x + nx]))
         a_dt = g.transition(dt)
         kt = np.ascontiguousarray(g.k.T)
         ca_t = np.ascontiguousarray((c @ a_dt).T)
@@ -674,26 +475,9 @@ class Smoother:
             fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
         return a_run, kt, ca_t, phi_t, u_t, pa_t, fin
 
-    def _outputs(self, o: np.ndarray, out: list) -> None:
-        """Rows of the columns ``out`` from the smoothed outputs ``o`` (:data:`_SMOOTH_NAMES`,
-        one per row) of those samples; the body heave comes later (:meth:`_heave`)."""
-        (q1, q2, ph, dq1, dq2, dph, ddq1, ddq2, ddph, ddzs, ddzu1, ddzu2, w1, w2, df1, df2, fb1,
-         fb2) = o
-        self.rows.columns(out, (q1, q2), (dq1, dq2), (ddq1, ddq2), ph, dph, ddph, ddzs,
-                          (ddzu1, ddzu2), (w1, w2), (df1, df2), (fb1, fb2), None)
-
-    def _heave(self, t: np.ndarray, dt: float, speed: float, out: list,
-               t_start: float | None = None) -> None:
-        """The body heave of the whole run (zero phase, from dd z_s) added to the columns;
-        the converged flag. ``dt`` and ``speed``: the run's median step (s) and |speed|;
-        ``t_start`` the run's first time (s; default ``t[0]``)."""
-        m = t.size
-        if m >= 8:
-            w_c = (2.0 * math.pi * max(speed, SPEED_FLOOR_MPS)
-                   / self.observer.profile_cutoff_wavelength_m)
-            zs = body_heave.zero_phase(out[Column.DDZS], dt, w_c)
-            dzs = np.gradient(zs, t, edge_order=2)
-            self.rows.add_heave(out, zs, dzs)
-        self.rows.add_quasi_static(out, t)
-        settle = self.schedule.settling_time_s(dt)
-        out[Column.CONVERGED][:] = (t - (t[0] if t_start is None else t_start)) >= settle
+    def _finish(self, out: list, t: np.ndarray, dt: float, speed: float,
+                t_start: float | None = None) -> None:
+        """What a run's columns need of the whole run (:meth:`.OfflineRows.finish_run`: the
+        body's motion, the quasi-static LTR, the converged flags counted from ``t_start``,
+        default ``t[0]``). ``dt`` and ``speed``: the run's median step (s) and |speed| (m/s)."""
+        self.rows.finish_run(out, t, dt, speed, self.schedule.settling_time_s(dt), t_start)

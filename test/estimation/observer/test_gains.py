@@ -5,13 +5,14 @@ import numpy as np
 import pytest
 
 from model_observer_data import SPEED, VEHICLE
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.observer.gains import design
 
 
 class TestGains:
     @pytest.mark.parametrize('noise', [1e-5, 1e-7])
     def test_gains_satisfy_the_riccati_equation(self, noise):
-        g = design(VEHICLE, dt_s=1e-3, speed_mps=SPEED, noise_deflection_m=noise,
+        g = design(FrontAxleModel(VEHICLE), dt_s=1e-3, speed_mps=SPEED, noise_deflection_m=noise,
                       noise_roll_rad=10.0 * noise, road_gd_m3=256e-6)
         a, c, q, r, p = g.a, g.model.c, g.q, g.r, g.p_prior
         rhs = a @ p @ a.T - a @ p @ c.T @ np.linalg.solve(c @ p @ c.T + r, c @ p @ a.T) + q

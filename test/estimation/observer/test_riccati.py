@@ -6,6 +6,7 @@ import numpy as np
 from scipy import integrate, linalg
 
 from model_observer_data import SPEED, VEHICLE
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.observer.gains import design
 from road_force_estimator.estimation.models.front_axle import continuous_model
 from road_force_estimator.estimation.observer.riccati import van_loan
@@ -29,7 +30,7 @@ class TestRiccati:
 
 
     def test_riccati_matches_scipy_where_scipy_solves_it(self):
-        g = design(VEHICLE, dt_s=1e-3, speed_mps=SPEED, noise_deflection_m=1e-5,
+        g = design(FrontAxleModel(VEHICLE), dt_s=1e-3, speed_mps=SPEED, noise_deflection_m=1e-5,
                       noise_roll_rad=1e-4, road_gd_m3=256e-6)
         ref = linalg.solve_discrete_are(g.a.T, g.model.c.T, g.q, g.r)
         np.testing.assert_allclose(g.p_prior, ref, rtol=1e-5,

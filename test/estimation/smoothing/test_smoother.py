@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.core.parameters import ObserverParameters
 from model_observer_data import FIXED, SPEED, VEHICLE, rts_reference, to_stamps
 from road_force_estimator.estimation import estimate_batch, smooth
@@ -25,10 +26,10 @@ class TestOffline:
         # factor), the speed on its 10 % grid, the step of the data
         force_psd, corr, factor, moment_psd = scheduled(1e-5, roll_moment=True)
         speed = SPEED_LEVEL_RATIO ** round(math.log(SPEED) / math.log(SPEED_LEVEL_RATIO))
-        gains = design(VEHICLE, dt_s=1e-3, speed_mps=speed, noise_deflection_m=1e-5,
-                          noise_roll_rad=1e-4, road_gd_m3=factor * 256e-6,
-                          correlation_length_m=corr, force_psd=force_psd,
-                          roll_moment_psd=moment_psd)
+        gains = design(FrontAxleModel(VEHICLE), dt_s=1e-3, speed_mps=speed,
+                       noise_deflection_m=1e-5, noise_roll_rad=1e-4,
+                       road_gd_m3=factor * 256e-6, correlation_length_m=corr,
+                       force_psd=force_psd, roll_moment_psd=moment_psd)
         x0 = rest_state(VEHICLE, q[0, 0], q[0, 1], phi[0])
         xs = rts_reference(gains, np.column_stack([q[:n], phi[:n]]), x0)
         h_df = gains.model.h[[OUTPUTS.index('df1'), OUTPUTS.index('df2')]]

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.core import metrics
 from road_force_estimator.core.parameters import ObserverParameters
 from model_observer_data import SPEED, VEHICLE, load_pct, to_stamps
@@ -51,21 +52,17 @@ class TestProfileFilter:
         assert ours < 0.6 * theirs
         assert ours < 1.0
 
-    def test_loads_do_not_see_the_profile_filter(self, drive, noisy):
+    def test_loads_do_not_see_the_profile_filter(self, drive, noisy, monkeypatch):
         # the loads of the default observer equal those of an observer whose profile filter
         # is the load filter itself (profile_scheduled = scheduled): the filters are apart
         q, phi = noisy
         st = to_stamps(drive.t_s[:3000])
         base = estimate_batch(st, q[:3000], phi[:3000], SPEED, VEHICLE, ObserverParameters())
-        import road_force_estimator.estimation.observer.schedule as schedule_mod
-        saved = schedule_mod.profile_scheduled
-        try:
-            schedule_mod.profile_scheduled = (
-                lambda noise, mode: scheduled(noise, roll_moment=True))
+        with monkeypatch.context() as patch:
+            patch.setattr(FrontAxleModel, 'profile_scheduled', staticmethod(
+                lambda noise, mode: scheduled(noise, roll_moment=True)))
             same = estimate_batch(st, q[:3000], phi[:3000], SPEED, VEHICLE,
                                   ObserverParameters())
-        finally:
-            schedule_mod.profile_scheduled = saved
         np.testing.assert_array_equal(base.wheel_load_n, same.wheel_load_n)
         np.testing.assert_array_equal(base.body_heave_m, same.body_heave_m)
         assert not np.array_equal(base.road_m, same.road_m)
@@ -76,15 +73,16 @@ class TestProfileFilter:
     def test_profile_design_is_the_profile_tuning(self):
         obs = ObserverParameters(noise_deflection_m=1e-5, noise_roll_rad=1e-4,
                                  road_roughness_m3=64e-6)
-        sched = GainSchedule(VEHICLE, obs)
+        sched = GainSchedule(FrontAxleModel(VEHICLE), obs)
         sched.set_run(1e-3, SPEED)
         load = sched.design(1e-3, 0)
         for mode in ('online', 'offline'):
             g = sched.profile_design(1e-3, mode)
             force, corr, factor, moment = profile_scheduled(1e-5, mode)
-            ref = design(VEHICLE, dt_s=1e-3, speed_mps=g.speed_mps, noise_deflection_m=1e-5,
-                         noise_roll_rad=1e-4, road_gd_m3=factor * 64e-6,
-                         correlation_length_m=corr, force_psd=force, roll_moment_psd=moment)
+            ref = design(FrontAxleModel(VEHICLE), dt_s=1e-3, speed_mps=g.speed_mps,
+                         noise_deflection_m=1e-5, noise_roll_rad=1e-4,
+                         road_gd_m3=factor * 64e-6, correlation_length_m=corr,
+                         force_psd=force, roll_moment_psd=moment)
             np.testing.assert_allclose(g.k, ref.k, rtol=1e-12, atol=0.0)
             assert not np.allclose(g.k, load.k)
         assert sched.gains is load                       # the gains in use stay the load's
