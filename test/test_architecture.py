@@ -186,6 +186,25 @@ def test_no_private_names_of_other_modules(module):
     assert not bad, f'{module} uses private names of other modules: ' + '; '.join(bad)
 
 
+#: The filter code of the model observer: it takes a vehicle model (estimation/models/
+#: protocol.py) and may import no vehicle's own module, nor the front axle's rows.
+FILTER_PACKAGES = ('road_force_estimator.estimation.observer',
+                   'road_force_estimator.estimation.smoothing')
+VEHICLE_MODULES = ('road_force_estimator.estimation.models.front_axle',
+                   'road_force_estimator.estimation.models.front_axle_rows',
+                   'road_force_estimator.estimation.reconstruction',
+                   'road_force_estimator.estimation.static_load')
+
+
+@pytest.mark.parametrize('module', sorted(m for m in PKG.modules if m.startswith(FILTER_PACKAGES)))
+def test_the_filter_code_never_knows_the_vehicle(module):
+    """No module of observer/ or smoothing/ imports a vehicle model's module (issue 27: a
+    second vehicle is a second model module, not a second observer)."""
+    bad = [f'line {line}: {name}' for name, _, line in PKG.imports(module)
+           if (PKG.internal(name) or '').startswith(VEHICLE_MODULES)]
+    assert not bad, f'{module} imports a vehicle: ' + '; '.join(bad)
+
+
 def test_the_checks_see_each_kind_of_violation(tmp_path):
     """A made-up package with one violation of each rule: every rule finds its own."""
     root = tmp_path / 'pkg'

@@ -273,12 +273,6 @@ def simulate_outputs(plant: LinearPlant, road_m: np.ndarray, road_rate_mps: np.n
     return np.ascontiguousarray((c.real @ xi.real - c.imag @ xi.imag).T)
 
 
-def model_outputs(vehicle: VehicleParameters, road_m: np.ndarray, road_rate_mps: np.ndarray,
-                  dt_s: float) -> np.ndarray:
-    """:func:`simulate_outputs` for a parameter set (shape (n, 3))."""
-    return simulate_outputs(linear_plant(vehicle), road_m, road_rate_mps, dt_s)
-
-
 def free_response(plant: LinearPlant, t_s: np.ndarray) -> np.ndarray:
     """The outputs' response to every initial state, as real columns.
 

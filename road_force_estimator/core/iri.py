@@ -53,7 +53,7 @@ BASE_LENGTH_M = 0.25
 #: Length over which the initial slope is taken (m).
 INIT_LENGTH_M = 11.0
 #: Relative tolerance on the sample spacing for a profile to count as evenly spaced.
-UNIFORM_RTOL = 1e-6
+EVEN_SPACING_RTOL = 1e-6
 
 
 def golden_car_matrices() -> tuple[np.ndarray, np.ndarray]:
@@ -133,7 +133,7 @@ def _evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
     steps = np.diff(x)
     span = x[-1] - x[0]
     mean_step = span / (x.size - 1)
-    uniform = np.all(np.abs(steps - mean_step) <= UNIFORM_RTOL * max(mean_step, abs(x[-1])))
+    uniform = np.all(np.abs(steps - mean_step) <= EVEN_SPACING_RTOL * max(mean_step, abs(x[-1])))
     if dx_m is None and uniform:
         return x, z, float(mean_step)
     if dx_m is None:

@@ -30,7 +30,7 @@ def _uniform_step(x: np.ndarray) -> float | None:
         return None
     span = x[-1] - x[0]
     mean_step = span / (x.size - 1)
-    tol = iri_mod.UNIFORM_RTOL * max(mean_step, abs(x[-1]))
+    tol = iri_mod.EVEN_SPACING_RTOL * max(mean_step, abs(x[-1]))
     for a in range(0, x.size - 1, CHUNK):
         steps = np.diff(x[a:a + CHUNK + 1])
         if np.any(steps <= 0.0) or not np.all(np.abs(steps - mean_step) <= tol):

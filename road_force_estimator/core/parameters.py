@@ -122,6 +122,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'offline travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the '
        'speed times the odometer scale estimated from /fix (estimation.odometer; offline '
        'mode of estimate_bag and estimate_fleet only)', choices=('speed', 'gnss')),
+    _p('observer.innovation_gate', 'double', 6.0, '',
+       'innovation gate of the model observer: a channel whose innovation lies beyond this '
+       'many standard deviations of its predicted spread is not fed to the filter (a spike; '
+       'counted per sensor); 0 = off', 0.0, 1000.0),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.speed_profile', 'string', '', '',
@@ -353,6 +357,7 @@ class ObserverParameters(_FromParameters):
     road_correlation_length_m: float = _param('observer.road_correlation_length')
     rollover_cutoff_frequency_hz: float = _param('observer.rollover_cutoff_frequency')
     distance_source: str = _param('observer.distance_source')
+    innovation_gate: float = _param('observer.innovation_gate', quiet_default=True)
 
 
 @dataclass(frozen=True)

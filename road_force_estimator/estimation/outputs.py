@@ -157,6 +157,9 @@ class EstimatorStatus:
     gain_designs: int = 0           #: gain designs (model; cache misses of the operating point)
     static_load_n: tuple[float, float] = (0.0, 0.0)  #: F_c,i in use (N) (estimated: zero_load)
     sprung_mass_kg: float = 0.0     #: sprung mass M in use (kg) (estimated: zero_load)
+    #: samples whose innovation the gate kept from the filter (``observer.innovation_gate``),
+    #: per channel name (model method; a spike, not a rejected sample: the others were used)
+    innovations_gated: dict = field(default_factory=dict)
 
     @property
     def rejected(self) -> int:

@@ -122,7 +122,7 @@ def test_chunked_rts_pass_is_the_sample_loop():
     x0 = rng.standard_normal(nx)
     packed = [(Powers((np.eye(nx) - d['k'] @ d['c']) @ d['a']), d['k'].T, (d['c'] @ d['a']).T,
                Powers((d['a'] @ (np.eye(nx) - d['k'] @ d['c'])).T), (d['c'].T @ d['s_inv']).T,
-               (d['p'] @ d['a'].T).T, None) for d in mats]
+               (d['p'] @ d['a'].T).T, None, None) for d in mats]
     got = np.empty((m, nx))
     for k0, k1, xs in smoothed_chunks(segs, packed, y, x0, 97):
         if k0 >= 0:

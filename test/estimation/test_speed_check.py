@@ -88,8 +88,10 @@ def test_held_values_with_speed_zero_are_stale(moving, estimate):
     r = estimate(STAMPS, qh, ph, v, VEHICLE, ObserverParameters())
     assert r.status.rejected_stale == 10000 - 9 and r.status.resets == 1
     assert np.abs(r.road_m).max() < 1.0
-    assert (r.wheel_load_n > 0.0).all() and r.wheel_load_n.max() < 2.0 * max(
-        VEHICLE.static_load_n)
+    # (online, the innovation gate holds the first held sample, whose step the speed's fall to
+    # 0 makes a model error: a wheel's estimate may touch 0 N for that one sample)
+    assert np.count_nonzero(r.wheel_load_n <= 0.0) <= 1
+    assert r.wheel_load_n.max() < 2.0 * max(VEHICLE.static_load_n)
     after = np.arange(N) >= DROP.stop + 2000
     assert _load_error(d, r, after) <= 2.0 * _load_error(d, ref, after)
 

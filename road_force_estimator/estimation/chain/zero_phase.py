@@ -94,7 +94,7 @@ MIN_RUN_SAMPLES = 32
 #: Fewest samples for the automatic cut-off (below: no low-pass).
 MIN_AUTO_SAMPLES = 256
 #: Relative spread of the steps beyond which a run is resampled on its median step.
-UNIFORM_RTOL = 1e-3
+RESAMPLE_RTOL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -288,7 +288,7 @@ def _estimate_run(t, q, phi, v, vehicle: VehicleParameters, observer: ObserverPa
     n = t.size
     steps = np.diff(t)
     dt = float(np.median(steps)) if n > 1 else 1e-3
-    resampled = bool(n > 2 and np.max(np.abs(steps - dt)) > UNIFORM_RTOL * dt)
+    resampled = bool(n > 2 and np.max(np.abs(steps - dt)) > RESAMPLE_RTOL * dt)
     if resampled:
         tg = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
         qg = np.column_stack([np.interp(tg, t, q[:, i]) for i in (0, 1)])

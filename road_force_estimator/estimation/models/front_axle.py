@@ -116,6 +116,8 @@ from road_force_estimator.estimation.models.protocol import (
 # The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
 # part of the estimate.
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models.front_axle_rows import (
+    PROFILE_CUTOFF_RATIO, PROFILE_ONLINE_CUTOFF_RATIO, OfflineRows, OnlineRows)
 
 __all__ = [
     'State', 'NX', 'NY', 'OUTPUTS', 'NO', 'ISO_N0', 'SPEED_FLOOR_MPS', 'FORCE_PSD',
@@ -128,8 +130,8 @@ __all__ = [
     'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
     'FRICTION_DAMPING_FACTOR', 'friction_damping', 'STATE_SCALE', 'LOAD_OUTPUTS',
-    'FRICTION_RATE_STATES', 'FRICTION_RATE_OUTPUTS', 'sm_lipschitz', 'sm_injection',
-    'FrontAxleModel',
+    'CHANNEL_NAMES', 'FRICTION_RATE_STATES', 'FRICTION_RATE_OUTPUTS', 'sm_lipschitz',
+    'sm_injection', 'FrontAxleModel',
 ]
 
 #: Settings scheduled on the deflection-noise level (m): at the levels of
@@ -190,23 +192,6 @@ PROFILE_OFFLINE_GD_RATIO = 1.0
 PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD = 1e4
 #: Block (s) and the run's first and last blocks skipped (start-up) of that estimate.
 ROLL_MOMENT_BLOCK_S = 1.0
-#: The profile's long-wave cutoff (m) is this many times ``observer.profile_cutoff_wavelength``
-#: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
-#: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
-#: amplitude is ten times that at 10 m; the body heave's 100 m cutoff alone cost 0.34 % of
-#: profile error on the noise-free C20-1k-0um: 0.0041 % at 10 km). Longer cutoffs let the
-#: double integral's low-frequency error and the zero-phase filter's edges wander further (on
-#: a 120 m run after a stale stretch, test_speed_check, true road within 5 cm: 6.6 m at 30 x),
-#: so the smoother takes the run's least-squares cubic off (:mod:`.smoother`): then 0.05 m, and
-#: C20-1k-0um 0.0039 %.
-PROFILE_CUTOFF_RATIO = 100.0
-#: The same for the zero-latency profile, whose causal integral follows the speed with a floor
-#: of this ratio times the body heave's (1 m/s; never below the body heave's cutoff frequency
-#: at its floor). The causal integral wanders further than the zero-phase one (largest |u| on
-#: test_speed_check's drive: 0.43 m at 1 x, 0.81 m at 2 x, 1.19 m at 3 x, 2.8 m at 10 x);
-#: the profile error on C20-1k-0um: 0.20 % at 2 x, 0.16 % at 10 x (the load filter's road:
-#: 0.85 %); 2 x gives 1.03 m after a stale stretch (test_speed_check): 1.
-PROFILE_ONLINE_CUTOFF_RATIO = 1.0
 
 
 class State(enum.IntEnum):
@@ -441,6 +426,8 @@ def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> 
 #: Typical state magnitudes (m, rad, m/s, rad/s, N m) of :class:`State`, the Riccati
 #: equation's scaling; a sensor's lag state as the measured ones (1e-2).
 STATE_SCALE = np.array([1e-2, 1e-2, 1e-2, 1e-1, 1e-1, 1e-1, 1e-1, 1e-3, 1e-3, 1e-1, 1e-1, 1e3])
+#: The measured channels, by the joint names of ``/suspension/deflections``.
+CHANNEL_NAMES = ('left_suspension', 'right_suspension', 'roll')
 #: The outputs of the dynamic tire forces (the loads): the settling time's.
 LOAD_OUTPUTS = (OUTPUTS.index('df1'), OUTPUTS.index('df2'))
 #: The rates of the friction elements (left, right spring): their states and outputs.
@@ -496,6 +483,8 @@ class FrontAxleModel:
     """
 
     outputs = OUTPUTS
+    #: the channels' names (INTERFACES.md's joint names of /suspension/deflections)
+    channel_names = CHANNEL_NAMES
     deflection_channels = (0, 1)
     roll_channels = (2,)
     load_outputs = LOAD_OUTPUTS
@@ -585,14 +574,12 @@ class FrontAxleModel:
         return friction_damping(self.friction_n, dq_std_mps)
 
     # -- reconstruction --------------------------------------------------------------------
-    def online_rows(self, observer):
+    def online_rows(self, observer) -> OnlineRows:
         """The rows of :class:`.outputs.Column`, sample by sample
         (:class:`.front_axle_rows.OnlineRows`)."""
-        from road_force_estimator.estimation.models.front_axle_rows import OnlineRows
         return OnlineRows(self.vehicle, observer)
 
-    def offline_rows(self, observer):
+    def offline_rows(self, observer) -> OfflineRows:
         """The rows of :class:`.outputs.Column` of smoothed runs
-        (:class:`.front_axle_rows.OfflineRows`)."""
-        from road_force_estimator.estimation.models.front_axle_rows import OfflineRows
-        return OfflineRows(self.vehicle, observer)
+        (:class:`.front_axle_rows.OfflineRows`, with :func:`offline_roll_moment_psd`)."""
+        return OfflineRows(self.vehicle, observer, OUTPUTS, offline_roll_moment_psd)

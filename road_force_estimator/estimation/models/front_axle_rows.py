@@ -17,12 +17,11 @@ import numpy as np
 
 import road_force_estimator.estimation.body_heave as body_heave
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
-from road_force_estimator.estimation.models.front_axle import (
-    PROFILE_CUTOFF_RATIO, PROFILE_ONLINE_CUTOFF_RATIO, offline_roll_moment_psd)
 from road_force_estimator.estimation.outputs import Column, field_columns
 from road_force_estimator.estimation.reconstruction import Reconstruction
 
-__all__ = ['OnlineRoad', 'OnlineRows', 'OfflineRows', 'SMOOTH_NAMES', 'PROFILE_DETREND_DEGREE']
+__all__ = ['OnlineRoad', 'OnlineRows', 'OfflineRows', 'SMOOTH_NAMES', 'PROFILE_DETREND_DEGREE',
+           'PROFILE_CUTOFF_RATIO', 'PROFILE_ONLINE_CUTOFF_RATIO']
 
 #: The outputs (:data:`.front_axle.OUTPUTS`) the offline rows need, in this order.
 SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi', 'ddzs',
@@ -30,6 +29,23 @@ SMOOTH_NAMES = ('q1', 'q2', 'phi', 'dq1', 'dq2', 'dphi', 'ddq1', 'ddq2', 'ddphi'
 #: Degree of the polynomial taken off the profile's body heave over each run (see
 #: :meth:`OfflineRows.road`).
 PROFILE_DETREND_DEGREE = 3
+#: The profile's long-wave cutoff (m) is this many times ``observer.profile_cutoff_wavelength``
+#: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
+#: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
+#: amplitude is ten times that at 10 m; the body heave's 100 m cutoff alone cost 0.34 % of
+#: profile error on the noise-free C20-1k-0um: 0.0041 % at 10 km). Longer cutoffs let the
+#: double integral's low-frequency error and the zero-phase filter's edges wander further (on
+#: a 120 m run after a stale stretch, test_speed_check, true road within 5 cm: 6.6 m at 30 x),
+#: so the smoother takes the run's least-squares cubic off (:mod:`.smoother`): then 0.05 m, and
+#: C20-1k-0um 0.0039 %.
+PROFILE_CUTOFF_RATIO = 100.0
+#: The same for the zero-latency profile, whose causal integral follows the speed with a floor
+#: of this ratio times the body heave's (1 m/s; never below the body heave's cutoff frequency
+#: at its floor). The causal integral wanders further than the zero-phase one (largest |u| on
+#: test_speed_check's drive: 0.43 m at 1 x, 0.81 m at 2 x, 1.19 m at 3 x, 2.8 m at 10 x);
+#: the profile error on C20-1k-0um: 0.20 % at 2 x, 0.16 % at 10 x (the load filter's road:
+#: 0.85 %); 2 x gives 1.03 m after a stale stretch (test_speed_check): 1.
+PROFILE_ONLINE_CUTOFF_RATIO = 1.0
 
 
 class OnlineRoad:
@@ -40,7 +56,7 @@ class OnlineRoad:
     wc_per_speed : float
         The body heave's cutoff per speed (rad/m, :func:`.body_heave.cutoff_per_speed` of
         ``observer.profile_cutoff_wavelength``); the road's is that over
-        :data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` (:attr:`wc`).
+        :data:`PROFILE_ONLINE_CUTOFF_RATIO` (:attr:`wc`).
     half_track_m : float
         s (m).
 
@@ -66,7 +82,7 @@ class OnlineRoad:
         """The road ``(u_1, u_2)`` (m) at distance ``x`` (m) from the profile filter's outputs
         ``op`` (:data:`.OUTPUTS`): ``u_i = z_s +- s sin(phi) - q_i + w_i``, ``z_s`` its body
         acceleration's band-limited double integral at the profile's cutoff
-        (:data:`.model.PROFILE_ONLINE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
+        (:data:`PROFILE_ONLINE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
         the speed floored at that ratio times :data:`.body_heave.SPEED_FLOOR_MPS`; restarted
         with each run); held at a stop (the distance stands still, the model's speed ``v``
         (m/s) below that floor)."""
@@ -155,16 +171,19 @@ class OfflineRows:
 
     #: the columns of a piece's rows, their distance, and the columns the profile pass keeps
     distance_column = Column.DISTANCE
-    residual_column = Column.RESIDUAL
+    #: the columns of the load pass the profile pass's roll moment needs (the residual)
+    moment_columns = (Column.RESIDUAL,)
     road_columns = (Column.U1, Column.U2)
     profile_columns = (Column.U1, Column.U2, Column.DDZS)
 
-    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters) -> None:
-        from road_force_estimator.estimation.models.front_axle import OUTPUTS
-
+    def __init__(self, vehicle: VehicleParameters, observer: ObserverParameters,
+                 outputs: tuple, roll_moment_psd) -> None:
+        """``outputs``: the model's output names; ``roll_moment_psd(residual, dt)``: the
+        profile pass's roll-moment density from a run's roll residual."""
         self.observer = observer
         self.rows = Reconstruction(vehicle, observer.rollover_cutoff_frequency_hz)
-        self.outputs = [OUTPUTS.index(name) for name in SMOOTH_NAMES]
+        self.outputs = [outputs.index(name) for name in SMOOTH_NAMES]
+        self._roll_moment_psd = roll_moment_psd
 
     @staticmethod
     def field_columns(m: int) -> tuple[dict, list]:
@@ -194,18 +213,17 @@ class OfflineRows:
         self.rows.add_quasi_static(out, t)
         out[Column.CONVERGED][:] = (t - (t[0] if t_start is None else t_start)) >= settle_s
 
-    @staticmethod
-    def roll_moment_psd(out, dt: float) -> float:
+    def roll_moment_psd(self, out, dt: float) -> float:
         """The profile pass's roll-moment density ((N m)^2 / s) from a run's roll residual:
         :func:`.front_axle.offline_roll_moment_psd`."""
-        return offline_roll_moment_psd(out[Column.RESIDUAL], dt)
+        return self._roll_moment_psd(out[Column.RESIDUAL], dt)
 
     def road(self, cols, dt: float, speed: float, dts: np.ndarray | None, uniform: bool,
              pos: np.ndarray | None, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The road ``(u_1, u_2)`` (m) of a run's samples from the profile pass's columns
         ``cols`` (on the grid ``pos`` when not None): ``u_i = z_s + s sin(phi) - q_i + w_i``
         with the body heave's zero-phase integral at the profile's cutoff
-        (:data:`.front_axle.PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
+        (:data:`PROFILE_CUTOFF_RATIO` x ``observer.profile_cutoff_wavelength``,
         less its cubic over the run, :data:`PROFILE_DETREND_DEGREE`): in time when the speed
         is steady, else in distance (:func:`.body_heave.offline_profile`); where the model's
         speed ``v`` (m/s) is 0 the road is held."""

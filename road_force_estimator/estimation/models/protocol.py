@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Any, Iterator, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -110,8 +110,14 @@ class OfflineRows(Protocol):
 
     #: the rows of ``H`` (indices into the model's ``outputs``) the smoother evaluates
     outputs: list
-    #: the columns the profile pass keeps whole
+    #: the column of the distance (the caller's)
+    distance_column: int
+    #: the road's columns, one per wheel path, from the profile pass (none: no profile pass)
+    road_columns: tuple
+    #: the columns the profile pass keeps whole, and those of the load pass its roll moment
+    #: needs (:meth:`roll_moment_psd`)
     profile_columns: tuple
+    moment_columns: tuple
 
     def field_columns(self, m: int) -> tuple[dict, list]:
         """``(fields, columns)`` of m rows: the arrays and their column views."""
@@ -125,9 +131,15 @@ class OfflineRows(Protocol):
         """What a run's columns need of the whole run (the body's motion, the quasi-static
         LTR, the converged flags) at the times t (s)."""
 
-    def road(self, cols, dt: float, speed: float, t: np.ndarray, v: np.ndarray) -> Iterator:
-        """The road columns of the profile pass's columns ``cols``, one array per wheel
-        path."""
+    def roll_moment_psd(self, cols, dt: float) -> float:
+        """The profile pass's unknown-moment density ((N m)^2 / s) from the load pass's
+        columns (at least :attr:`moment_columns`) of a run sampled every dt (s)."""
+
+    def road(self, cols, dt: float, speed: float, dts: np.ndarray | None, uniform: bool,
+             pos: np.ndarray | None, v: np.ndarray) -> tuple:
+        """The road of each wheel path (m) of a run's samples from the profile pass's columns
+        ``cols`` (on the grid ``pos`` when not None; the run's steps ``dts``, median step dt
+        (s), ``uniform``, |speed| (m/s) and the model speeds ``v`` (m/s))."""
 
 
 class VehicleModel(Protocol):
@@ -137,6 +149,8 @@ class VehicleModel(Protocol):
     vehicle: Any
     #: the linear outputs, names of the rows of ``H``
     outputs: tuple[str, ...]
+    #: the measured channels' names, in ``y``'s order
+    channel_names: tuple[str, ...]
     #: indices into ``y`` of the deflection channels (m) and of the roll channels (rad)
     deflection_channels: tuple[int, ...]
     roll_channels: tuple[int, ...]
@@ -170,6 +184,22 @@ class VehicleModel(Protocol):
 
     def sm_lipschitz(self) -> tuple[float, ...]:
         """L per channel of the sliding-mode differentiators on the output errors."""
+
+    #: the friction elements' F_f (N; empty: none), and their rates' states and outputs
+    friction_n: tuple
+    friction_rate_states: tuple[int, ...]
+    friction_rate_outputs: tuple[int, ...]
+
+    def friction_forces(self, dq, ceq) -> np.ndarray:
+        """The friction's known input (N) per element at its rates dq (m/s), less the share
+        ``-c_eq dq`` of its equivalent damping ``ceq`` (N s/m) that the linear model carries;
+        one sample."""
+
+    def friction_forces_array(self, dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
+        """:meth:`friction_forces` over arrays (nf, ...)."""
+
+    def friction_damping(self, dq_std_mps: float) -> tuple:
+        """The friction's equivalent damping (N s/m) per element at an RMS rate (m/s)."""
 
     def stationary_states(self, cm: ContinuousModel) -> list[int]:
         """The states of ``cm`` whose variance the road's moment matching solves for."""

@@ -59,7 +59,7 @@ from road_force_estimator.estimation.observer.schedule import (
     DEFAULT_ROAD_GD_M3, MIN_SETTLE_S, GainSchedule, dt_level)
 from road_force_estimator.estimation.observer.sliding_mode import SlidingMode
 
-__all__ = ['BLOCK_SAMPLES', 'FIRST_BLOCK_SAMPLES', 'LAG_STEPS', 'SM_DEAD_ZONE',
+__all__ = ['BLOCK_SAMPLES', 'FIRST_BLOCK_SAMPLES', 'LAG_STEPS', 'GATE_START_S', 'SM_DEAD_ZONE',
            'SM_NOISE_SCALE', 'ModelCore']
 
 #: Samples per block of the online noise and roughness statistics.
@@ -68,6 +68,9 @@ BLOCK_SAMPLES = 256
 LAG_STEPS = 5
 #: Samples of the very first block (a quick first estimate).
 FIRST_BLOCK_SAMPLES = 64
+#: Time (s) after a run's (re)start from which the innovation gate is on (the start-up
+#: transient's innovations exceed the steady state's spread), besides the settling time.
+GATE_START_S = 2.0
 #: Sliding-mode injection: dead zone in expected standard deviations of the output error,
 #: and the deflection-noise level (m) at which its weight has halved.
 SM_DEAD_ZONE = 3.0
@@ -163,6 +166,12 @@ class ModelCore:
         self._slide = SlidingMode(self.model.sm_lipschitz())
         self._m_dt = -1.0
         self._settle = math.inf
+        self._gate: list | None = None      # the innovation gate per channel, or None: off
+        self._gate_flags = [0] * self._ny   # 0 inside, 1 gated last sample, 2 fed outside
+        self._undo: tuple | None = None       # the last sample's gate, to undo if it was real
+        self._compactions = 0
+        #: samples whose innovation was gated, per channel
+        self.gated = [0] * self._ny
         self._buf = np.zeros((0, self._row))
         self._i = 0
         self._block_start = 0
@@ -223,6 +232,7 @@ class ModelCore:
         status.road_roughness_m3 = sched.road_gd_m3
         status.statistics_blocks = sched.blocks
         status.gain_designs = sched.design_count
+        status.innovations_gated = dict(zip(self.model.channel_names, self.gated))
 
     def settling_time_s(self, dt_s: float) -> float:
         """Time after a (re)start after which the estimate counts as converged (s); see
@@ -245,6 +255,11 @@ class ModelCore:
                               [SM_DEAD_ZONE * float(e) for e in g.post_error_std])
         self._ht = g.out[:, _R0:_R0 + 3 * self._ny].copy()     # H T: outputs of rho
         self._settle = max(g.settle_s, 20.0 * g.dt_s, MIN_SETTLE_S)
+        # the innovation gate: observer.innovation_gate standard deviations of each channel's
+        # predicted innovation, once the noise is known (before, the spread is a guess)
+        k = self.observer.innovation_gate
+        self._gate = ([k * math.sqrt(float(g.s[j, j])) for j in range(self._ny)]
+                      if k > 0.0 and self.schedule.estimated else None)
         return g
 
     def _select(self, dt: float) -> None:
@@ -324,6 +339,8 @@ class ModelCore:
         self._running = True
         self._stepped = False
         self._slide.restart()
+        self._gate_flags = [0] * self._ny
+        self._undo = None
         self._pending.clear()
         self._run_y = [y]
         self._dts = []
@@ -398,6 +415,27 @@ class ModelCore:
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
+        if self._gate is not None and self._t >= GATE_START_S and meta[3]:
+            # innovations far outside their spread: not fed (not in a run's start-up
+            # transient, whose innovations the steady-state spread does not describe)
+            undo, self._undo = self._undo, None
+            if undo is not None and self._undo_gate(undo, s, row):   # it was real: again
+                sv = _dot(self._m, row, out=self._sv)
+                if fr is not None:
+                    sv = fr.update(sv, row[x0:y0 - ny])
+                s = sv.tolist()
+            raw = y
+            clean = self._innovation_gate(y, s)
+            if clean is not None:
+                y = clean
+                row[y0:y0 + ny] = y
+                sv = _dot(self._m, row, out=self._sv)
+                if fr is not None:
+                    sv = fr.update(sv, row[x0:y0 - ny])
+                s = sv.tolist()
+                self._undo = (i, self._compactions, row.copy(), raw, self._m,
+                              None if fr is None else fr.fm,
+                              self._prow.copy() if self._profile else None)
         i += 1
         nxt = buf[i]
         nxt[x0:y0] = self._sv_x if sv is self._sv else sv[:y0 - x0]   # (friction: a new array)
@@ -434,6 +472,61 @@ class ModelCore:
             self._compact()
         return True
 
+    def _innovation_gate(self, y: tuple, s: list) -> tuple | None:
+        """The sample with each channel whose innovation (in ``s``, the step's product) lies
+        beyond :attr:`gate` standard deviations of its predicted spread replaced by its
+        prediction (its innovation then 0: the measurement is not fed to the filter), or None
+        when none is. A channel is gated for one sample at a time: when the next sample is
+        outside too, the step is real (a pothole, not a spike) and the channel is fed until
+        it comes back inside. Counted per channel (:attr:`gated`)."""
+        nu0 = self._nx
+        flags = self._gate_flags
+        clean = None
+        for ch, g in enumerate(self._gate):
+            e = s[nu0 + ch]
+            if -g <= e <= g:
+                flags[ch] = 0
+            elif flags[ch] == 0:          # a lone excursion: its prediction instead
+                flags[ch] = 1
+                if clean is None:
+                    clean = list(y)
+                clean[ch] = y[ch] - e
+                self.gated[ch] += 1
+            else:                         # outside again: real; fed until back inside
+                flags[ch] = 2
+        return None if clean is None else tuple(clean)
+
+    def _undo_gate(self, undo: tuple, s: list, row: np.ndarray) -> bool:
+        """The last sample's gated channels that are outside the gate again now (``s``:
+        this step's product) were a real excursion, not a spike: their measurement is
+        restored and the last step made again with it (into ``row``, the row it wrote; the
+        estimate published at zero latency stays), uncounted; True when there were some.
+        Not with friction across a change of the step's matrices (then the gate stands)."""
+        j, compactions, prev, raw, m, fm, prow = undo
+        fr = self._fr
+        if fr is not None and fr.fm is not fm:
+            return False
+        nu0 = self._nx
+        x0, y0 = self._x0i, self._y0i
+        back = [ch for ch, g in enumerate(self._gate)
+                if self._gate_flags[ch] == 1 and not -g <= s[nu0 + ch] <= g]
+        if not back:
+            return False
+        for ch in back:
+            prev[y0 + ch] = raw[ch]
+            self.gated[ch] -= 1
+            self._gate_flags[ch] = 2
+        if compactions == self._compactions:      # the measurement in its row too
+            self._buf[j, y0:y0 + self._ny] = prev[y0:y0 + self._ny]
+        sv = _dot(m, prev)
+        if fr is not None:
+            sv = fr.update(sv, prev[x0:y0 - self._ny])
+        row[x0:y0] = sv[:y0 - x0]
+        if prow is not None:       # the profile filter's step again, with the same data
+            self._prow[:] = prow
+            self._profile_step(tuple(prev[y0:y0 + self._ny].tolist()))
+        return True
+
     def _profile_step(self, y: tuple) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
         profile's gains): its outputs (the model's)."""
@@ -448,6 +541,7 @@ class ModelCore:
         """The lag from the median of the run's first steps; the buffer is resized if needed
         (the rows so far are kept)."""
         self._lag_final = True
+        self._undo = None               # (the rows may move)
         lag_before = self.lag
         self._set_lag(float(np.median(self._dts[:LAG_STEPS])))
         if self.lag != lag_before:
@@ -467,6 +561,7 @@ class ModelCore:
         the gains of the estimated noise (the rows hold every measurement since the restart),
         so that the switch from the assumed noise level leaves no transient.
         """
+        self._compactions += 1          # (the rows move)
         buf = self._buf
         i = self._i
         y = buf[self._block_start:i, self._y0i:self._y0i + self._ny]

@@ -315,10 +315,11 @@ class GainSchedule:
         t = None if even else np.concatenate([[0.0], np.cumsum(steps)])
         model = self.model
         hq.append(max(noise_std(y[:, ch], t) for ch in model.deflection_channels))
-        hr.append(max(noise_std(y[:, ch], t) for ch in model.roll_channels))
+        if model.roll_channels:           # (a vehicle without a roll sensor keeps the default)
+            hr.append(max(noise_std(y[:, ch], t) for ch in model.roll_channels))
         if not self.noise_fixed[0]:
             self.noise_deflection_m = float(np.median(hq))
-        if not self.noise_fixed[1]:
+        if not self.noise_fixed[1] and hr:
             self.noise_roll_rad = float(np.median(hr))
         # first differences scaled to the typical step (a smooth signal's change is ~ dq dt)
         scale = (dt_mean / steps)[:, None]

@@ -33,43 +33,143 @@ class ForwardPass:
 
     ``segs``: ``(start, end, _)`` stretches of the run and ``mats`` their matrices
     (:meth:`.smoother.Smoother._pass_matrices`: the forward ``(I - K C) A`` as
-    :class:`.lti.Powers`, ``K^T``, ``(C A)^T``, ..., the friction parts or None); ``x0`` is
-    ``x+_0``; chunks of ``chunk`` samples from sample 1 (each inside one stretch).
+    :class:`.lti.Powers`, ``K^T``, ``(C A)^T``, ..., the friction parts or None, the
+    innovation gate per channel or None); ``x0`` is ``x+_0``; chunks of ``chunk`` samples
+    from sample 1 (each inside one stretch).
+
+    The innovation gate (from sample ``gate_from`` on) is the online observer's
+    (:meth:`..observer.online.ModelCore._innovation_gate`): a channel whose innovation lies
+    beyond its gate is replaced by its prediction for that sample (its innovation 0), once;
+    outside again at the next sample, it is fed until it comes back inside. The first pass
+    decides, sample by sample (the chunk computed again from a gated sample on), and keeps
+    the replaced samples (:attr:`overrides`), so that a chunk computed again later has the
+    same bits; :attr:`gated` counts them per channel.
     """
 
     def __init__(self, segs: list, mats: list, y: np.ndarray, x0: np.ndarray,
-                 chunk: int) -> None:
+                 chunk: int, gate_from: int = 0) -> None:
         self.y, self.mats, self.x0 = y, mats, np.asarray(x0, dtype=float)
         self.chunks = [(k0, min(s1, k0 + chunk), i) for i, (s0, s1, _) in enumerate(segs)
                        for k0 in range(max(1, s0), s1, chunk)]
         self.starts = np.array([c[0] for c in self.chunks], dtype=np.int64)
         nx = self.x0.size
+        ny = y.shape[1]
         self.before = np.empty((len(self.chunks), nx))      # x+_(k0 - 1) of each chunk
         self._cache: OrderedDict[int, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+        #: the gated samples' measurements (sample -> the row of y used), in sample order
+        self.overrides: dict[int, np.ndarray] = {}
+        self.gated = np.zeros(ny, dtype=np.int64)
+        self._gate_from = int(gate_from)
+        self._flags = np.zeros(ny, dtype=np.int8)       # 0 inside, 1 gated, 2 fed outside
         prev = self.x0
         for c in range(len(self.chunks)):
             self.before[c] = prev
-            xf, nu = self._compute(c)
+            xf, nu = self._compute(c, gate=True)
             self._keep(c, xf, nu)
             prev = xf[-1]
 
-    def _compute(self, c: int) -> tuple[np.ndarray, np.ndarray]:
-        """Chunk c's ``x+_k`` and ``nu_k = y_k - C A x+_(k-1)`` (less the friction's part)."""
-        k0, k1, i = self.chunks[c]
-        a_run, kt, ca_t, _, _, _, fin = self.mats[i]
-        y = self.y
-        drive = y[k0:k1] @ kt
+    def _rows(self, k0: int, k1: int) -> np.ndarray:
+        """``y[k0:k1]`` with the gated samples' replacements."""
+        y = self.y[k0:k1]
+        keys = [k for k in self.overrides if k0 <= k < k1] if self.overrides else ()
+        if keys:
+            y = y.copy()
+            for k in keys:
+                y[k - k0] = self.overrides[k]
+        return y
+
+    def _run(self, mats: tuple, y: np.ndarray, k0: int, prev: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """``x+_k`` and ``nu_k`` of the samples k0 .. k0 + len(y) - 1 from ``x+_(k0-1) =
+        prev``."""
+        a_run, kt, ca_t, _, _, _, fin, _ = mats
+        k1 = k0 + y.shape[0]
+        drive = y @ kt
         if fin is not None:
             drive += fin[0][k0 - 1:k1 - 1]
-        prev = self.before[c]
         xf = lti(a_run, drive, prev)
         lagged = np.empty_like(xf)
         lagged[0] = prev
         lagged[1:] = xf[:-1]
-        nu = y[k0:k1] - lagged @ ca_t
+        nu = y - lagged @ ca_t
         if fin is not None:
             nu -= fin[1][k0 - 1:k1 - 1]
         return xf, nu
+
+    def _compute(self, c: int, gate: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Chunk c's ``x+_k`` and ``nu_k = y_k - C A x+_(k-1)`` (less the friction's part);
+        ``gate``: the first pass, which decides the gated samples."""
+        k0, k1, i = self.chunks[c]
+        mats = self.mats[i]
+        xf, nu = self._run(mats, self._rows(k0, k1), k0, self.before[c])
+        if gate and mats[7] is not None and k1 > self._gate_from:
+            if self._gate_chunk(c, mats, xf, nu):       # the chunk again, in one go
+                xf, nu = self._run(mats, self._rows(k0, k1), k0, self.before[c])
+        return xf, nu
+
+    def _gate_chunk(self, c: int, mats: tuple, xf: np.ndarray, nu: np.ndarray) -> bool:
+        """The gate over chunk c, sample by sample (``xf``, ``nu`` updated from each changed
+        sample on); True when the chunk's measurements changed. A gated channel outside
+        again at the next sample was real, not a spike: its measurement is restored there
+        (not across a chunk's start)."""
+        k0, k1, _ = self.chunks[c]
+        gate = mats[7]
+        flags = self._flags
+        first = max(0, self._gate_from - k0)
+        last = first - 1               # the last sample looked at
+        changed = False
+        j = first
+        while j < k1 - k0:
+            rows = np.flatnonzero((np.abs(nu[j:]) > gate).any(axis=1))
+            hit = None
+            for r in rows.tolist():
+                jj = j + r
+                if jj > last + 1:
+                    flags[:] = 0           # samples inside between: every channel inside
+                out = np.abs(nu[jj]) > gate
+                back = [ch for ch in range(gate.size) if out[ch] and flags[ch] == 1
+                        and jj > first and k0 + jj - 1 in self.overrides]
+                gated = [ch for ch in range(gate.size) if out[ch] and flags[ch] == 0]
+                flags[~out] = 0
+                flags[out] = 2
+                last = jj
+                if back or gated:
+                    hit = (jj, back, gated)
+                    break
+            if hit is None:
+                break
+            jj, back, gated = hit
+            if back:                       # the last sample's gate undone, then this again
+                self._restore(k0 + jj - 1, back)
+                at = jj - 1
+            else:
+                row = self._rows(k0 + jj, k0 + jj + 1)[0].copy()
+                for ch in gated:
+                    flags[ch] = 1
+                    row[ch] -= nu[jj, ch]
+                    self.gated[ch] += 1
+                self.overrides[k0 + jj] = row
+                at = jj
+            changed = True
+            prev = xf[at - 1] if at else self.before[c]
+            xf[at:], nu[at:] = self._run(mats, self._rows(k0 + at, k1), k0 + at, prev)
+            j = jj + 1 if not back else jj
+            if back:
+                last = jj - 1              # this sample is looked at again
+        if last < k1 - k0 - 1:
+            flags[:] = 0                   # the chunk ends with samples inside
+        return changed
+
+    def _restore(self, k: int, channels: list) -> None:
+        """Sample k's measured values of ``channels`` instead of their predictions (a real
+        excursion): uncounted; the override gone when nothing of it is left."""
+        row = self.overrides[k]
+        raw = self.y[k]
+        for ch in channels:
+            row[ch] = raw[ch]
+            self.gated[ch] -= 1
+        if np.array_equal(row, raw):
+            del self.overrides[k]
 
     def _keep(self, c: int, xf: np.ndarray, nu: np.ndarray) -> None:
         self._cache[c] = (xf, nu)
@@ -107,15 +207,16 @@ class ForwardPass:
 
 
 def smoothed_chunks(segs: list, mats: list, y: np.ndarray, x0: np.ndarray,
-                    chunk: int) -> Iterator[tuple[int, int, np.ndarray]]:
+                    chunk: int, gate_from: int = 0) -> Iterator[tuple[int, int, np.ndarray]]:
     """The smoothed states of an evenly sampled run, ``(k0, k1, x_(k|m))`` chunk by chunk
     from the end (see :meth:`.smoother.Smoother._uniform_pass` for the equations: the
-    adjoint form of the RTS smoother). Then, as its last item, ``(-1, -1, forward)``: the
-    :class:`ForwardPass` (for a state where the next window starts)."""
+    adjoint form of the RTS smoother), the innovation gate on from sample ``gate_from``
+    (:class:`ForwardPass`). Then, as its last item, ``(-1, -1, forward)``: the
+    :class:`ForwardPass` (for a state where the next window starts, and its gate's counts)."""
     m = y.shape[0]
-    fwd = ForwardPass(segs, mats, y, x0, chunk)
+    fwd = ForwardPass(segs, mats, y, x0, chunk, gate_from)
     lam_next = np.zeros(fwd.x0.size)             # lam_(k1+1): lam_m = 0
-    for (s0, s1, _), (_, _, _, phi_t, u_t, pa_t, _) in zip(segs[::-1], mats[::-1]):
+    for (s0, s1, _), (_, _, _, phi_t, u_t, pa_t, _, _) in zip(segs[::-1], mats[::-1]):
         for k1 in range(s1, s0, -chunk):
             k0 = max(s0, k1 - chunk)
             # row k of the chunk takes lam_(k+1): lam_j for j = k0 + 1 .. min(k1, m - 1),

@@ -18,7 +18,7 @@ import numpy as np
 from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.observer.schedule import (
     SPEED_LEVEL_RATIO, GainSchedule, requantise)
-from road_force_estimator.estimation.models.front_axle import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 
 __all__ = ['MOVING_SPEED_FRACTION', 'unsteady', 'run_statistics', 'speed_segments',
            'level_segments']

@@ -24,6 +24,7 @@ from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
 from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER
+from road_force_estimator.estimation.observer.online import GATE_START_S
 from road_force_estimator.estimation.observer.schedule import DEFAULT_ROAD_GD_M3
 from road_force_estimator.estimation.outputs import EstimatorStatus
 from road_force_estimator.estimation.smoothing.lti import Powers
@@ -170,6 +171,9 @@ class Smoother:
         nf = len(cm.friction_n)
         self.ceq = np.zeros((nf, 1))     # the equivalent damping in the run's gains (N s/m)
         self._dq = [self.rows.outputs.index(j) for j in model.friction_rate_outputs]
+        #: samples whose innovation the gate kept from the filter, per channel (the load
+        #: passes whose rows are the estimate)
+        self.gated = np.zeros(self.ny, dtype=np.int64)
         self._dq_states = list(model.friction_rate_states)
 
     @property
@@ -195,6 +199,7 @@ class Smoother:
         status.road_roughness_m3 = sched.road_gd_m3
         status.statistics_blocks = sched.blocks
         status.gain_designs = sched.design_count
+        status.innovations_gated = dict(zip(self.model.channel_names, self.gated.tolist()))
 
     def pieces(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, out: list | None = None
                ) -> Iterator[tuple[int, int, list]]:
@@ -226,17 +231,19 @@ class Smoother:
         g, dt, speed, dts, steps = run.gains, run.dt, run.speed, run.dts, run.steps
         if run.uniform:
             self._uniform(g, dt, y, x0, out,
-                          segments=speed_segments(self.schedule, dt, v, speed))
+                          segments=speed_segments(self.schedule, dt, v, speed),
+                          gate_from=self._gate_start(dt), count=True)
         elif steps is not None:
             self._bridged(g, dt, speed, t, steps, y, x0, out)
         else:
-            self._uneven(g, dts, y, x0, out)
+            self._uneven(g, dts, y, x0, out, count=True)
         if steps is None:
             self._finish(out, t, dt, speed)
-        road = self._profile(dt, speed, dts, run.uniform, steps, y, v, x0,
-                             rows.roll_moment_psd(out, dt))
-        for j, u in zip(rows.road_columns, road):
-            out[j][:] = u
+        if rows.road_columns:
+            road = self._profile(dt, speed, dts, run.uniform, steps, y, v, x0,
+                                 rows.roll_moment_psd(out, dt))
+            for j, u in zip(rows.road_columns, road):
+                out[j][:] = u
         yield 0, m, out
 
     def _design_run(self, t: np.ndarray, y: np.ndarray, v: np.ndarray) -> SimpleNamespace:
@@ -279,13 +286,17 @@ class Smoother:
         pass over the whole run (:meth:`_profile`), then the load pass again (the same
         windows, the same bits), each window's rows with the road put in."""
         recon = self.rows
-        res = recon.residual_column
-        residual = {res: np.empty(t.size)}
-        for a, b, rows in self._windows(run, t, y, v, (res,)):
-            residual[res][a:b] = rows[res]
+        if not recon.road_columns:
+            yield from self._windows(run, t, y, v)
+            return
+        kept = {j: np.empty(t.size) for j in recon.moment_columns}
+        if kept:
+            for a, b, rows in self._windows(run, t, y, v, tuple(kept)):
+                for j, col in kept.items():
+                    col[a:b] = rows[j]
         run.dts = None                             # an even run's profile does not need them
-        psd = recon.roll_moment_psd(residual, run.dt)
-        del residual
+        psd = recon.roll_moment_psd(kept, run.dt)
+        del kept
         road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd)
         for a, b, rows in self._windows(run, t, y, v):
             for j, u in zip(recon.road_columns, road):
@@ -313,7 +324,7 @@ class Smoother:
         if uniform or steps is not None:        # only the road's columns held whole
             cols = KeptColumns(y.shape[0], recon.profile_columns,
                                field_columns=recon.field_columns)
-            self._uniform(g, dt, y, x0, cols)
+            self._uniform(g, dt, y, x0, cols, gate_from=self._gate_start(dt))
         else:
             cols = recon.field_columns(y.shape[0])[1]
             self._uneven(g, dts, y, x0, cols)
@@ -335,6 +346,7 @@ class Smoother:
         (m/s)."""
         m = t.size
         g, dt, window, overlap = run.gains, run.dt, run.window, run.overlap
+        gate_from = self._gate_start(dt)
         x0 = self.model.rest_state(y[0])
         recon = self.rows
         for a in range(0, m, window):
@@ -346,7 +358,8 @@ class Smoother:
             segs = level_segments(self.schedule, dt, v[lo:hi]) if run.unsteady else None
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
                                     keep=None if nxt is None else max(0, nxt) - lo,
-                                    segments=segs)
+                                    segments=segs, gate_from=max(0, gate_from - lo),
+                                    count=keep is None)
             if keep is None:
                 self._finish(cols, t[lo:hi], dt, run.speed, t[0])
                 yield a, b, [col[a - lo:b - lo] for col in cols]
@@ -366,15 +379,17 @@ class Smoother:
         grid = np.arange(m)
         yg = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
         cols = self.rows.field_columns(m)[1]
-        self._uniform(g, dt, yg, x0, cols)
+        self._uniform(g, dt, yg, x0, cols, gate_from=self._gate_start(dt), count=True)
         self._finish(cols, t[0] + dt * grid, dt, speed)
         for j, col in enumerate(cols):
             if j != self.rows.distance_column:
                 out[j][:] = col[pos]
 
     def _uneven(self, g: Gains, dts: np.ndarray, y: np.ndarray, x0: np.ndarray,
-                out: list) -> None:
-        """Uneven steps: the transition of each step (cached), the run's gains."""
+                out: list, count: bool = False) -> None:
+        """Uneven steps: the transition of each step (cached), the run's gains; the
+        innovation gate as :class:`.rts_pass.ForwardPass`'s (from the time of
+        :meth:`_gate_start`; counted with ``count``)."""
         m = y.shape[0]
         c = g.model.c
         nx = self.nx
@@ -382,12 +397,36 @@ class Smoother:
         xf = np.empty((m, nx))
         nus = np.empty((m, self.ny))
         xf[0] = x0
+        k_gate = self.observer.innovation_gate
+        gate = k_gate * np.sqrt(np.diag(g.s)) if k_gate > 0.0 else None
+        t_gate = self._gate_start(float(np.median(dts))) * float(np.median(dts))
+        elapsed = np.concatenate([[0.0], np.cumsum(dts)])
+        flags = np.zeros(self.ny, dtype=np.int8)
+        undo = None             # (the last sample's prediction and innovations before the gate)
         for k in range(1, m):
-            xp = a_steps[k - 1] @ xf[k - 1]
-            if self.friction is not None:   # on the filtered dq (one pass: steps uneven)
-                dq = xf[k - 1, self._dq_states]
-                xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
+            xp = self._predict(g, a_steps, dts, xf, k)
             nus[k] = y[k] - c @ xp
+            if gate is not None and elapsed[k] >= t_gate:
+                outside = np.abs(nus[k]) > gate
+                back = outside & (flags == 1)
+                if undo is not None and back.any():   # the last sample was real: restored
+                    nus[k - 1, back] = undo[1][back]
+                    xf[k - 1] = undo[0] + g.k @ nus[k - 1]
+                    if count:
+                        self.gated -= back
+                    xp = self._predict(g, a_steps, dts, xf, k)
+                    nus[k] = y[k] - c @ xp
+                    outside = np.abs(nus[k]) > gate
+                    flags[back] = 2
+                undo = None
+                gated = outside & (flags == 0)
+                flags[:] = np.where(outside, 2, 0)
+                if gated.any():          # its prediction instead: innovation 0
+                    flags[gated] = 1
+                    undo = (xp, nus[k].copy())
+                    nus[k, gated] = 0.0
+                    if count:
+                        self.gated += gated
             xf[k] = xp + g.k @ nus[k]
         cs = c.T @ np.linalg.inv(g.s)
         ikc_t = (np.eye(nx) - g.k @ c).T
@@ -401,30 +440,45 @@ class Smoother:
             o = o + self.fd @ self._forces(o)
         self.rows.columns(o, out)
 
+    def _predict(self, g: Gains, a_steps: list, dts: np.ndarray, xf: np.ndarray,
+                 k: int) -> np.ndarray:
+        """The prediction of sample k from ``x+_(k-1)`` over the uneven step (the friction on
+        the filtered dq: one pass, the steps uneven)."""
+        xp = a_steps[k - 1] @ xf[k - 1]
+        if self.friction is not None:
+            dq = xf[k - 1, self._dq_states]
+            xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
+        return xp
+
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
-                 out: list, keep: int | None = None, segments: list | None = None
-                 ) -> np.ndarray | None:
+                 out: list, keep: int | None = None, segments: list | None = None, *,
+                 gate_from: int = 0, count: bool = False) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run
         (:meth:`_uniform_pass`); with friction, :data:`FRICTION_PASSES` passes, each with the
         friction evaluated on the previous pass's smoothed dq (the first without). With
         ``keep`` the forward state ``x+_keep`` is returned (where the next window starts);
-        ``segments`` (:func:`.run_speed.speed_segments`): the gains per stretch of speed."""
+        ``segments`` (:func:`.run_speed.speed_segments`): the gains per stretch of speed;
+        the innovation gate on from sample ``gate_from``, its samples counted (:attr:`gated`)
+        with ``count`` (the load pass whose rows are the estimate)."""
         segs = segments or [(0, y.shape[0], g)]
+        gating = dict(gate_from=gate_from)
         if self.friction is None:
-            return self._uniform_pass(segs, dt, y, x0, out, keep=keep)
+            return self._uniform_pass(segs, dt, y, x0, out, keep=keep, count=count, **gating)
         forces = None
         for _ in range(FRICTION_PASSES - 1):
-            dq = self._uniform_pass(segs, dt, y, x0, None, forces)
+            # (no gate: without the friction input the first pass's innovations exceed it)
+            dq = self._uniform_pass(segs, dt, y, x0, None, forces, gate_from=y.shape[0])
             f = self._forces_at(dq)
             # held over step k -> k + 1: the mean of the ends (the trapezoid; the friction is
             # stiff against the step, see .model_core)
             forces = f.copy()
             forces[:, :-1] = 0.5 * (f[:, :-1] + f[:, 1:])
-        return self._uniform_pass(segs, dt, y, x0, out, forces, keep)
+        return self._uniform_pass(segs, dt, y, x0, out, forces, keep, count=count, **gating)
 
     def _uniform_pass(self, segs: list, dt: float, y: np.ndarray, x0: np.ndarray,
                       out: list | None, forces: np.ndarray | None = None,
-                      keep: int | None = None) -> np.ndarray | None:
+                      keep: int | None = None, *, gate_from: int = 0,
+                      count: bool = False) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
 
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
@@ -441,9 +495,11 @@ class Smoother:
         mats = [self._pass_matrices(g, dt, forces) for _, _, g in segs]
         dq = None if out is not None else np.empty((len(self._dq_states), m))
         fwd = None
-        for k0, k1, xs in smoothed_chunks(segs, mats, y, x0, _SMOOTH_CHUNK):
+        for k0, k1, xs in smoothed_chunks(segs, mats, y, x0, _SMOOTH_CHUNK, gate_from):
             if k0 < 0:
                 fwd = xs
+                if count:
+                    self.gated += fwd.gated
             elif out is None:
                 dq[:, k0:k1] = xs[:, self._dq_states].T
             else:
@@ -473,7 +529,14 @@ class Smoother:
         if forces is not None:
             bd = g.friction_input(dt)
             fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
-        return a_run, kt, ca_t, phi_t, u_t, pa_t, fin
+        k = self.observer.innovation_gate
+        gate = k * np.sqrt(np.diag(g.s)) if k > 0.0 else None
+        return a_run, kt, ca_t, phi_t, u_t, pa_t, fin, gate
+
+    def _gate_start(self, dt: float) -> int:
+        """The first sample of a run (steps of dt, s) the innovation gate sees: as the online
+        observer's, after :data:`..observer.online.GATE_START_S` and the settling time."""
+        return int(math.ceil(max(GATE_START_S, self.schedule.settling_time_s(dt)) / dt))
 
     def _finish(self, out: list, t: np.ndarray, dt: float, speed: float,
                 t_start: float | None = None) -> None:
