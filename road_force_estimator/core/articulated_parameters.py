@@ -113,7 +113,8 @@ class BodyParameters:
 
 _BODY_MAP = {'mass_kg': 'mass', 'cg_position_m': 'cg_position',
              'pitch_inertia_kgm2': 'pitch_inertia', 'roll_inertia_kgm2': 'roll_inertia',
-             'cg_height_m': 'cg_height', 'cg_height_above_roll_axis_m': 'cg_height_above_roll_axis'}
+             'cg_height_m': 'cg_height',
+             'cg_height_above_roll_axis_m': 'cg_height_above_roll_axis'}
 
 
 @dataclass(frozen=True)
