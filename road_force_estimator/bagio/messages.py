@@ -12,6 +12,7 @@ import numpy as np
 from road_force_estimator.bagio.cdr import TYPESTORE, ColumnRows, LazyColumns, ns_to_stamps
 from road_force_estimator.interfaces import (
     FLOAT64,
+    IMU_MSG,
     JOINT_STATE,
     NAVSATFIX,
     POINT,
@@ -46,9 +47,11 @@ def _vector3():
 
 
 def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = (),
-                     velocity: bool = False):
+                     velocity: bool = False, effort: bool = False):
     """A message of ``msgtype`` with zero numbers: frame ``frame_id``; for a JointState the
-    joint ``names``, positions and (``velocity``) velocities, no efforts."""
+    joint ``names``, positions and (``velocity``) velocities, no efforts; with ``effort``
+    efforts only (``/wheel_loads``: no positions or velocities). An Imu has its orientation
+    unknown (``orientation_covariance[0] = -1``, REP-145)."""
     if msgtype == POINT:
         point = message_class('geometry_msgs/msg/Point')(x=0.0, y=0.0, z=0.0)
         return message_class(POINT)(header=_header(frame_id), point=point)
@@ -62,6 +65,18 @@ def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = ()
         return message_class(FLOAT64)(data=0.0)
     if msgtype == VECTOR3_STAMPED:
         return message_class(VECTOR3_STAMPED)(header=_header(frame_id), vector=_vector3())
+    if msgtype == JOINT_STATE and effort:
+        return message_class(JOINT_STATE)(
+            header=_header(frame_id), name=list(names), position=np.zeros(0),
+            velocity=np.zeros(0), effort=np.zeros(len(names)))
+    if msgtype == IMU_MSG:
+        quaternion = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
+        unknown = np.zeros(9)
+        unknown[0] = -1.0
+        return message_class(IMU_MSG)(
+            header=_header(frame_id), orientation=quaternion, orientation_covariance=unknown,
+            angular_velocity=_vector3(), angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=_vector3(), linear_acceleration_covariance=np.zeros(9))
     if msgtype == JOINT_STATE:
         k = len(names)
         return message_class(JOINT_STATE)(

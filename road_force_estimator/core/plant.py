@@ -200,6 +200,9 @@ class Plant:
         ``simulator.bump_stop_*``); None = linear springs. The leaf-spring friction of
         ``vehicle.leaf_spring_friction`` acts in every case (:class:`.VehicleModel`), in the
         law of ``vehicle.leaf_spring_friction_model``.
+    crossfall_rad : float
+        The road plane's cross slope (``simulator.road_crossfall``, rad, > 0 = the left wheel
+        path higher): each tire's road ``+- (T/2) tan(crossfall)``; 0 = none.
     friction_start : float
         Stick friction only (``simulator.leaf_spring_friction_start``): the force each slider
         holds at the start per unit F_f (> 0 upward on the body); 0 = none. With stick
@@ -218,7 +221,8 @@ class Plant:
                  lateral_acceleration: float | Callable[[float], float] | None = None,
                  start_m: float | None = None, tire_envelope_m: float = 0.0,
                  speed_profile: tuple | None = None,
-                 springs: SpringOptions | None = None, friction_start: float = 0.0) -> None:
+                 springs: SpringOptions | None = None, friction_start: float = 0.0,
+                 crossfall_rad: float = 0.0) -> None:
         if not isinstance(road, RoadProfile):
             raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
         speed_mps, rate_hz = float(speed_mps), float(rate_hz)
@@ -229,6 +233,9 @@ class Plant:
         self.model = VehicleModel(vehicle, springs)
         self.vehicle = vehicle
         self.friction_start = float(friction_start)
+        rise = vehicle.half_track_m * math.tan(float(crossfall_rad))
+        #: the crossfall's rise of each tire's road (m), [left, right]
+        self.crossfall_m = (rise, -rise)
         if self.friction_start and not self.model.sticks:
             raise ValueError(f'simulator.leaf_spring_friction_start = {self.friction_start:g}: '
                              'needs vehicle.leaf_spring_friction_model = stick and a '
@@ -403,7 +410,11 @@ class Plant:
         j = np.arange(per * first, per * last + 1)
         x = self._distance(j)
         road_x = self.road.distance_m
-        u = [np.interp(x, road_x, self.road.elevation_m[:, i]).tolist() for i in (0, 1)]
+        if self.crossfall_m[0]:
+            u = [(np.interp(x, road_x, self.road.elevation_m[:, i]) + self.crossfall_m[i]
+                  ).tolist() for i in (0, 1)]
+        else:
+            u = [np.interp(x, road_x, self.road.elevation_m[:, i]).tolist() for i in (0, 1)]
         # Road rate at the samples (outputs): v * slope of the segment holding x (point rate).
         xs = x[::per]
         seg = np.clip(np.searchsorted(road_x, xs, side='right') - 1, 0, len(road_x) - 2)
@@ -561,7 +572,8 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
              lateral_acceleration: float | Callable[[float], float] | None = None,
              substeps: int | None = None, start_m: float | None = None,
              tire_envelope_m: float = 0.0, speed_profile: tuple | None = None,
-             springs: SpringOptions | None = None, friction_start: float = 0.0) -> Trajectory:
+             springs: SpringOptions | None = None, friction_start: float = 0.0,
+             crossfall_rad: float = 0.0) -> Trajectory:
     """Drive ``duration_s`` seconds (or to the end of the road) and return every sample.
 
     Parameters are those of :class:`Plant`, plus ``duration_s`` (s, >= 0). The trajectory
@@ -575,7 +587,7 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
     plant = Plant(vehicle, road, speed_mps=speed_mps, rate_hz=rate_hz, substeps=substeps,
                   lateral_acceleration=lateral_acceleration, start_m=start_m,
                   tire_envelope_m=tire_envelope_m, speed_profile=speed_profile,
-                  springs=springs, friction_start=friction_start)
+                  springs=springs, friction_start=friction_start, crossfall_rad=crossfall_rad)
     wanted = int(math.floor(duration_s * plant.rate_hz + 1e-9)) + 1
     rows = []
     for _ in range(wanted):
