@@ -27,26 +27,14 @@ from road_force_estimator.bagio.drive import _fix_stream
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS, check_finite, message_template, points_rows, stamp_columns)
 from road_force_estimator.bagio.reader import bag_custom_data, read_topic_columns
+from road_force_estimator.bagio.vehicle_layout import AXLES_KEY, MODEL_KEY, STATIC_KEY
 from road_force_estimator.bagio.writer import BagWriter
 from road_force_estimator.interfaces import (
     BASE_FRAME, DEFLECTIONS, IMU, IMU_FRAME, IMU_MSG, JOINT_STATE, ROAD_FRAME, TOPIC_TYPES,
     TRUE_LOAD, TRUE_ROAD, TRUE_UNIT_LOAD_TRANSFER, TRUE_WHEEL_LOADS, TWIST, TWIST_STAMPED,
     VECTOR3_STAMPED, WHEEL_FRAMES, WRENCH, qos_kind)
 
-__all__ = ['write_articulated_drive_bag', 'ArticulatedTruth', 'read_articulated_truth',
-           'MODEL_KEY', 'FRONT_JOINTS_KEY', 'STATIC_KEY', 'is_articulated']
-
-#: custom_data keys of an articulated drive.
-MODEL_KEY = 'road_force_estimator.vehicle_model'
-FRONT_JOINTS_KEY = 'road_force_estimator.front_axle_joints'
-STATIC_KEY = 'road_force_estimator.static_wheel_loads_n'
-WHEELS_KEY = 'road_force_estimator.wheels'
-AXLES_KEY = 'road_force_estimator.axle_bodies'
-
-
-def is_articulated(custom_data: Mapping[str, str]) -> bool:
-    """A bag's ``custom_data`` says it is an articulated drive."""
-    return custom_data.get(MODEL_KEY) == 'articulated'
+__all__ = ['write_articulated_drive_bag', 'ArticulatedTruth', 'read_articulated_truth']
 
 
 def write_articulated_drive_bag(path: str | Path, *, stamps_ns: np.ndarray,

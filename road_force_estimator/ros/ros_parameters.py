@@ -38,7 +38,7 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from road_force_estimator.core.parameters import (
-    PARAMETERS, SPECS, ParameterSpec, check_spec)
+    PARAMETERS, SPECS, ParameterSpec, check_spec, spec_of)
 
 __all__ = [
     'ParameterError', 'NODE_LOCAL_NAMES', 'local_spec', 'specs_with_prefix', 'descriptor',
@@ -88,6 +88,11 @@ def refuse_unknown_names(node: Node, specs: Iterable[ParameterSpec]) -> None:
     node_specs = {s.name: s for s in specs}
     overrides = getattr(node, '_parameter_overrides', None) or {}
     unknown = sorted(n for n in overrides if not _known_name(n, node_specs))
+    other = [n for n in unknown if spec_of(n) is not None]   # the articulated model's names
+    if other and len(other) == len(unknown):
+        raise ParameterError(f'{node.get_name()}: refused {", ".join(other[:3])}'
+                             f'{", ..." if len(other) > 3 else ""}: parameters of '
+                             'vehicle.model: articulated, which this node does not model')
     if unknown:
         raise ParameterError(f'{node.get_name()}: refused {", ".join(unknown)}: no such '
                              'parameter (a typo?); the parameters are listed by --help')

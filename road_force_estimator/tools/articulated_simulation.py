@@ -86,7 +86,7 @@ def custom_data(drive, result, prog: str) -> dict:
     """The bag's ``custom_data``: the parameters, the statics, the front axle's joints (what
     a front-axle tool reads), where the faults struck."""
     from road_force_estimator import interfaces as api
-    from road_force_estimator.bagio.articulated_drive import (
+    from road_force_estimator.bagio.vehicle_layout import (
         AXLES_KEY, FRONT_JOINTS_KEY, STATIC_KEY, WHEELS_KEY)
 
     v = drive.vehicle
