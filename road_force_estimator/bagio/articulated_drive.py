@@ -25,7 +25,8 @@ from road_force_estimator.bagio.cdr import ColumnRows
 from road_force_estimator.bagio.checks import Rejects, basic_checks, accept_in_order
 from road_force_estimator.bagio.drive import _fix_stream
 from road_force_estimator.bagio.messages import (
-    DEFAULT_START_STAMP_NS, check_finite, message_template, points_rows, stamp_columns)
+    DEFAULT_START_STAMP_NS, IMU_PATHS, check_finite, imu_template, message_template,
+    points_rows, stamp_columns)
 from road_force_estimator.bagio.reader import bag_custom_data, read_topic_columns
 from road_force_estimator.bagio.vehicle_layout import AXLES_KEY, MODEL_KEY, STATIC_KEY
 from road_force_estimator.bagio.writer import BagWriter
@@ -92,17 +93,12 @@ def write_articulated_drive_bag(path: str | Path, *, stamps_ns: np.ndarray,
 
 
 def _imu_rows(cols, n: int, imu: np.ndarray, std) -> ColumnRows:
+    """The IMU's rows; ``imu`` columns a_x, a_y, a_z, roll, pitch, yaw rates."""
     check_finite('imu', imu)
-    template = message_template(IMU_MSG, IMU_FRAME)
-    acc_var, rate_var = float(std[0]) ** 2, float(std[1]) ** 2
-    template.linear_acceleration_covariance[[0, 4, 8]] = acc_var
-    template.angular_velocity_covariance[[0, 4, 8]] = rate_var
     fields = dict(cols)
-    for i, path in enumerate(('linear_acceleration.x', 'linear_acceleration.y',
-                              'linear_acceleration.z', 'angular_velocity.x',
-                              'angular_velocity.y', 'angular_velocity.z')):
-        fields[path] = imu[:, i]
-    return ColumnRows(IMU_MSG, template, n, fields)
+    for path, col in zip(IMU_PATHS, (3, 4, 5, 0, 1, 2)):
+        fields[path] = imu[:, col]
+    return ColumnRows(IMU_MSG, imu_template(IMU_FRAME, *std), n, fields)
 
 
 def _truth_streams(stamps, cols, truth) -> list:

@@ -23,7 +23,7 @@ from road_force_estimator.interfaces import (
 
 __all__ = [
     'DEFAULT_START_STAMP_NS', 'DEFAULT_TRACK_WIDTH_M', 'message_class', 'message_template',
-    'stamp_columns', 'points_rows', 'check_finite',
+    'stamp_columns', 'points_rows', 'check_finite', 'imu_template', 'IMU_PATHS',
 ]
 
 #: Default first stamp of a written bag: 2024-01-01T00:00:00Z (deterministic output).
@@ -88,6 +88,20 @@ def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = ()
             header=_header(frame_id), status=status, latitude=0.0, longitude=0.0, altitude=0.0,
             position_covariance=np.zeros(9), position_covariance_type=0)
     raise ValueError(f'no template for {msgtype}')
+
+
+#: The IMU's numbers in a message's byte order: angular rates, then linear accelerations.
+IMU_PATHS = ('angular_velocity.x', 'angular_velocity.y', 'angular_velocity.z',
+             'linear_acceleration.x', 'linear_acceleration.y', 'linear_acceleration.z')
+
+
+def imu_template(frame_id: str, accel_std: float, rate_std: float):
+    """An Imu message with the noise variances on the covariances' diagonals (m/s^2, rad/s;
+    orientation unknown)."""
+    template = message_template(IMU_MSG, frame_id)
+    template.linear_acceleration_covariance[[0, 4, 8]] = float(accel_std) ** 2
+    template.angular_velocity_covariance[[0, 4, 8]] = float(rate_std) ** 2
+    return template
 
 
 def stamp_columns(stamps_ns: np.ndarray) -> dict[str, np.ndarray]:

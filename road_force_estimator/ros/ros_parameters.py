@@ -192,7 +192,9 @@ def declare(node: Node, specs: Iterable[ParameterSpec], *,
     """Declare ``specs`` on ``node``; return ``{name: checked value}``.
 
     Values given at start-up (``-p``, ``--params-file``, ``parameter_overrides``) are checked
-    with :func:`check_value` before they are declared.
+    with :func:`check_value` before they are declared. A spec without a default (None) and
+    without a start-up value is declared unset (its value None: the node's build refuses it
+    by name).
 
     Raises
     ------
@@ -207,6 +209,11 @@ def declare(node: Node, specs: Iterable[ParameterSpec], *,
         value = spec.default
         if spec.name in overrides:
             value = overrides[spec.name].value
+        elif value is None:     # no default (an axle's value that must be given): unset
+            node.declare_parameter(spec.name, _TYPES[spec.kind], descriptor(
+                spec, read_only=read_only))
+            values[spec.name] = None
+            continue
         try:
             value = check_value(spec, value)
             declared = node.declare_parameter(
