@@ -17,7 +17,7 @@ __all__ = [
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
     'UNITS', 'TRACTOR_ROLL_JOINT', 'TRAILER_ROLL_JOINT', 'axle_deflection_joints',
     'articulated_deflection_joints', 'wheel_joints', 'WHEEL_LOADS', 'TRUE_WHEEL_LOADS',
-    'STATIC_WHEEL_LOADS', 'UNIT_LOAD_TRANSFER', 'TRUE_UNIT_LOAD_TRANSFER', 'FUSED_ROAD', 'IMU',
+    'STATIC_WHEEL_LOADS', 'UNIT_LOAD_TRANSFER', 'TRUE_LOAD_TRANSFER_RATIOS', 'FUSED_ROAD', 'IMU',
     'IMU_MSG', 'IMU_FRAME',
 ]
 
@@ -84,8 +84,10 @@ TRUE_WHEEL_LOADS = '/ground_truth/wheel_loads'
 STATIC_WHEEL_LOADS = '/wheel_loads/static'
 #: Vector3Stamped per unit (tractor, trailer, combination): x = LTR, y = quasi-static LTR.
 UNIT_LOAD_TRANSFER = tuple(f'/load_transfer/{u}' for u in UNITS)
-#: The same, true (plant simulator; not in INTERFACES.md, added with the articulated plant).
-TRUE_UNIT_LOAD_TRANSFER = tuple(f'/ground_truth/load_transfer/{u}' for u in UNITS)
+#: The units' true load transfer in one JointState per sample (plant simulator; not in
+#: INTERFACES.md, added with the articulated plant: one message, not three, for the node's
+#: CPU): ``name`` = UNITS, ``position`` = LTR, ``velocity`` = quasi-static LTR.
+TRUE_LOAD_TRANSFER_RATIOS = '/ground_truth/load_transfer_ratios'
 FUSED_ROAD = ('/road_profile/fused/left', '/road_profile/fused/right')
 #: The tractor's IMU (sensor_msgs/Imu, frame base_link, at the tractor's centre of gravity).
 IMU = '/imu/tractor'
@@ -121,7 +123,7 @@ TOPIC_TYPES: dict[str, str] = {
     TRUE_WHEEL_LOADS: JOINT_STATE,
     STATIC_WHEEL_LOADS: JOINT_STATE,
     **{topic: VECTOR3_STAMPED for topic in UNIT_LOAD_TRANSFER},
-    **{topic: VECTOR3_STAMPED for topic in TRUE_UNIT_LOAD_TRANSFER},
+    TRUE_LOAD_TRANSFER_RATIOS: JOINT_STATE,
     **{topic: POINT for topic in FUSED_ROAD},
     IMU: IMU_MSG,
 }

@@ -8,9 +8,10 @@ instrumented axle, ``tractor_roll``, ``trailer_roll`` where fitted); ``/imu/trac
 ``/ground_truth/wheel_load/left|right`` and ``/ground_truth/road_profile/left|right`` (the road
 under the front wheels, ``y = +-w_front``: every axle drives these two paths), every wheel's
 load in ``/ground_truth/wheel_loads`` (JointState, ``effort``), and each unit's load transfer
-in ``/ground_truth/load_transfer/tractor|trailer|combination`` (x = LTR, y = quasi-static
-LTR). ``custom_data`` says ``road_force_estimator.vehicle_model: articulated``, names the front
-axle's deflection joints (what a front-axle tool reads) and holds the static wheel loads.
+in ``/ground_truth/load_transfer_ratios`` (JointState: name tractor, trailer, combination;
+position = LTR, velocity = quasi-static LTR). ``custom_data`` says
+``road_force_estimator.vehicle_model: articulated``, names the front axle's deflection joints
+(what a front-axle tool reads) and holds the static wheel loads.
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from road_force_estimator.bagio.cdr import ColumnRows
-from road_force_estimator.bagio.checks import Rejects, basic_checks, accept_in_order
+from road_force_estimator.bagio.checks import (
+    Rejects, accept_in_order, basic_checks, read_joint_state)
 from road_force_estimator.bagio.drive import _fix_stream
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS, IMU_PATHS, check_finite, imu_template, message_template,
@@ -32,8 +34,8 @@ from road_force_estimator.bagio.vehicle_layout import AXLES_KEY, MODEL_KEY, STAT
 from road_force_estimator.bagio.writer import BagWriter
 from road_force_estimator.interfaces import (
     BASE_FRAME, DEFLECTIONS, IMU, IMU_FRAME, IMU_MSG, JOINT_STATE, ROAD_FRAME, TOPIC_TYPES,
-    TRUE_LOAD, TRUE_ROAD, TRUE_UNIT_LOAD_TRANSFER, TRUE_WHEEL_LOADS, TWIST, TWIST_STAMPED,
-    VECTOR3_STAMPED, WHEEL_FRAMES, WRENCH, qos_kind)
+    TRUE_LOAD, TRUE_LOAD_TRANSFER_RATIOS, TRUE_ROAD, TRUE_WHEEL_LOADS, TWIST, TWIST_STAMPED,
+    UNITS, WHEEL_FRAMES, WRENCH, qos_kind)
 
 __all__ = ['write_articulated_drive_bag', 'ArticulatedTruth', 'read_articulated_truth']
 
@@ -122,11 +124,9 @@ def _truth_streams(stamps, cols, truth) -> list:
     streams.append((TRUE_WHEEL_LOADS, stamps, ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, truth['wheel_names'],
                                       effort=True), n, dict(cols, effort=loads))))
-    for u, topic in enumerate(TRUE_UNIT_LOAD_TRANSFER):
-        streams.append((topic, stamps, ColumnRows(
-            VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), n,
-            dict(cols, **{'vector.x': ltr[:, 2 * u], 'vector.y': ltr[:, 2 * u + 1],
-                          'vector.z': np.zeros(n)}))))
+    streams.append((TRUE_LOAD_TRANSFER_RATIOS, stamps, ColumnRows(
+        JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, UNITS, velocity=True), n,
+        dict(cols, position=ltr[:, 0::2], velocity=ltr[:, 1::2]))))
     return streams
 
 
@@ -153,9 +153,8 @@ class ArticulatedTruth:
 def read_articulated_truth(path: str | Path) -> ArticulatedTruth | None:
     """The truth per axle of a drive bag (None when it has no ``/ground_truth/wheel_loads``).
     Messages that cannot be trusted are dropped and counted, as :func:`.read_drive_bag` does."""
-    topics = {TRUE_WHEEL_LOADS: JOINT_STATE, **{t: VECTOR3_STAMPED
-                                                for t in TRUE_UNIT_LOAD_TRANSFER}}
-    cols = read_topic_columns(path, topics)
+    cols = read_topic_columns(path, {TRUE_WHEEL_LOADS: JOINT_STATE,
+                                     TRUE_LOAD_TRANSFER_RATIOS: JOINT_STATE})
     if TRUE_WHEEL_LOADS not in cols:
         return None
     rejects = Rejects()
@@ -176,17 +175,14 @@ def read_articulated_truth(path: str | Path) -> ArticulatedTruth | None:
     keep = accept_in_order(stamps, ok & finite, c.topic, rejects)
     stamps, loads = stamps[keep], loads[keep]
     ltr = np.full((stamps.size, 6), np.nan)
-    for u, topic in enumerate(TRUE_UNIT_LOAD_TRANSFER):
-        if topic not in cols:
-            continue
-        s, ok_u = basic_checks(cols[topic], rejects)
-        x, _ = cols[topic].column('vector.x')
-        y, _ = cols[topic].column('vector.y')
-        pos = np.searchsorted(stamps, s)
-        hit = ok_u & (pos < stamps.size)
-        hit[hit] &= stamps[pos[hit]] == s[hit]
-        ltr[pos[hit], 2 * u] = x[hit]
-        ltr[pos[hit], 2 * u + 1] = y[hit]
+    if TRUE_LOAD_TRANSFER_RATIOS in cols:
+        s, pos, vel = read_joint_state(cols[TRUE_LOAD_TRANSFER_RATIOS], UNITS, rejects,
+                                       velocity=True)
+        at = np.searchsorted(stamps, s)
+        hit = at < stamps.size
+        hit[hit] &= stamps[at[hit]] == s[hit]
+        ltr[at[hit], 0::2] = pos[hit]
+        ltr[at[hit], 1::2] = vel[hit]
     custom = bag_custom_data(path)
     axles = tuple(dict.fromkeys(n.rsplit('_', 2)[0] for n in names))
     try:

@@ -5,14 +5,15 @@ writes.
 Per sample: ``/vehicle/twist``; ``/suspension/deflections`` (every instrumented axle, the
 rolls; sensor-data QoS); ``/imu/tractor`` where fitted (sensor data); the truth (reliable):
 the front axle's ``/ground_truth/wheel_load/left|right`` and ``/ground_truth/road_profile/
-left|right``, ``/ground_truth/wheel_loads`` (every wheel) and ``/ground_truth/load_transfer/
-tractor|trailer|combination``. The sensors, the IMU and the units' load transfer run their
-per-sample paths (:mod:`.core.articulated_sensors`, :mod:`.core.unit_loads`): a drive
-recorded from the node carries the numbers ``simulate_bag`` writes for the same drive.
+left|right``, ``/ground_truth/wheel_loads`` (every wheel) and
+``/ground_truth/load_transfer_ratios`` (each unit's LTR and quasi-static LTR). The sensors,
+the IMU and the units' load transfer run their per-sample paths
+(:mod:`.core.articulated_sensors`, :mod:`.core.unit_loads`): a drive recorded from the node
+carries the numbers ``simulate_bag`` writes for the same drive.
 """
 from __future__ import annotations
 
-from geometry_msgs.msg import PointStamped, TwistStamped, Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, TwistStamped, WrenchStamped
 from sensor_msgs.msg import Imu, JointState
 
 from road_force_estimator import interfaces as api
@@ -64,10 +65,11 @@ class ArticulatedOutputs:
                           ['point.x', 'point.y', 'point.z'])
         every = CdrEncoder(api.JOINT_STATE, message_template(api.JOINT_STATE, base, wheels,
                                                              effort=True), ['effort'])
-        unit = CdrEncoder(api.VECTOR3_STAMPED, message_template(api.VECTOR3_STAMPED, base),
-                          ['vector.x', 'vector.y', 'vector.z'])
-        #: the truth's seven messages of a sample at once
-        self.truth = CdrEncoderGroup([*loads, road, road, every, unit, unit, unit])
+        units = CdrEncoder(api.JOINT_STATE, message_template(api.JOINT_STATE, base, api.UNITS,
+                                                             velocity=True),
+                           ['position', 'velocity'])
+        #: the truth's six messages of a sample at once
+        self.truth = CdrEncoderGroup([*loads, road, road, every, units])
         self.twist_pub = node.create_publisher(TwistStamped, api.TWIST, sensor_qos(100))
         self.deflections_pub = node.create_publisher(JointState, api.DEFLECTIONS,
                                                      sensor_qos(100))
@@ -78,11 +80,16 @@ class ArticulatedOutputs:
                                           list(IMU_PATHS))
             self.imu_pub = node.create_publisher(Imu, api.IMU, sensor_qos(100))
         topics = [(WrenchStamped, t) for t in api.TRUE_LOAD] + [
-            (PointStamped, t) for t in api.TRUE_ROAD] + [(JointState, api.TRUE_WHEEL_LOADS)] + [
-            (Vector3Stamped, t) for t in api.TRUE_UNIT_LOAD_TRANSFER]
+            (PointStamped, t) for t in api.TRUE_ROAD] + [
+            (JointState, api.TRUE_WHEEL_LOADS), (JointState, api.TRUE_LOAD_TRANSFER_RATIOS)]
         #: the reliable (truth) publishers, in the truth group's order
         self.reliable = [node.create_publisher(cls, topic, reliable_qos())
                          for cls, topic in topics]
+        # rclpy's publish of serialized bytes without Publisher.publish's Python (as the
+        # observer node does): the measurements', then the truth's
+        self.send_twist = self.twist_pub.handle.publish_raw
+        self.send_deflections = self.deflections_pub.handle.publish_raw
+        self.send_truth = [pub.handle.publish_raw for pub in self.reliable]
 
     def publish(self, sample, stamp_ns: int, speed_mps: float) -> None:
         """Every message of one sample (:class:`.ArticulatedSample`), stamped ``stamp_ns``."""
@@ -91,14 +98,14 @@ class ArticulatedOutputs:
         loads = row[self.load_slice]
         road = row[self.road_slice]
         x = row[self.x_col]
-        self.twist_pub.publish(self.twist.encode(stamp_ns, (speed_mps,)))
-        self.deflections_pub.publish(self.deflections.encode(stamp_ns, readings))
+        self.send_twist(self.twist.encode(stamp_ns, (speed_mps,)))
+        self.send_deflections(self.deflections.encode(stamp_ns, readings))
         if self.imu is not None:
             a = self.imu(row)
-            self.imu_pub.publish(self.imu_encoder.encode(stamp_ns, (a[3], a[4], a[5], a[0],
-                                                                    a[1], a[2])))
+            self.imu_pub.handle.publish_raw(self.imu_encoder.encode(
+                stamp_ns, (a[3], a[4], a[5], a[0], a[1], a[2])))
         ltr = self.ltr.update(loads)
         values = (loads[0], loads[1], x, self.half, road[0], x, -self.half, road[1], *loads,
-                  ltr[0], ltr[1], 0.0, ltr[2], ltr[3], 0.0, ltr[4], ltr[5], 0.0)
-        for pub, data in zip(self.reliable, self.truth.encode(stamp_ns, values)):
-            pub.publish(data)
+                  ltr[0], ltr[2], ltr[4], ltr[1], ltr[3], ltr[5])
+        for send, data in zip(self.send_truth, self.truth.encode(stamp_ns, values)):
+            send(data)
