@@ -290,6 +290,10 @@ class ArticulatedModel:
         wheel = np.array([[-a.tire_stiffness_npm[i] * (tires[j][i] @ x) for i in (0, 1)]
                           for j, a in enumerate(self.axles)])
         kingpin = float(v.fifth_wheel.vertical_stiffness_npm * (delta @ x))
+        if kingpin <= 0.0:
+            raise ValueError(f'the vehicle cannot stand: the kingpin would pull '
+                             f"({kingpin:.4g} N); move the trailer's centre of gravity "
+                             'forward or its axles back')
         for j, a in enumerate(self.axles):
             for i, side in enumerate(('left', 'right')):
                 if spring[j, i] <= 0.0:
@@ -300,10 +304,6 @@ class ArticulatedModel:
                 if wheel[j, i] <= 0.0:
                     raise ValueError(f'the vehicle cannot stand: the {side} wheel of axle '
                                      f'{a.name} lifts at rest ({wheel[j, i]:.4g} N)')
-        if kingpin <= 0.0:
-            raise ValueError(f'the vehicle cannot stand: the kingpin would pull '
-                             f"({kingpin:.4g} N); move the trailer's centre of gravity "
-                             'forward or its axles back')
         setting = np.array([a.static_load_setting_n for a in self.axles], float)
         output = np.where(setting > 0.0, setting, wheel)
         return Statics(spring, wheel, output, kingpin, x)
