@@ -25,7 +25,7 @@ import numpy as np
 from road_force_estimator.bagio.cdr import ColumnRows
 from road_force_estimator.bagio.checks import (
     Rejects, accept_in_order, basic_checks, read_joint_state)
-from road_force_estimator.bagio.drive import _fix_stream
+from road_force_estimator.bagio.drive import fix_stream
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS, IMU_PATHS, check_finite, imu_template, message_template,
     points_rows, stamp_columns)
@@ -83,7 +83,7 @@ def write_articulated_drive_bag(path: str | Path, *, stamps_ns: np.ndarray,
     if truth is not None:
         streams += _truth_streams(stamps, cols, truth)
     if fixes is not None:
-        streams.append(_fix_stream(fixes, start_stamp_ns))
+        streams.append(fix_stream(fixes, start_stamp_ns))
     custom = {'road_force_estimator.kind': 'drive', MODEL_KEY: 'articulated'}
     custom.update(custom_data or {})
     with BagWriter(path, custom_data=custom) as bag:

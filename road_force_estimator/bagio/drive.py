@@ -52,7 +52,7 @@ from road_force_estimator.interfaces import (
     qos_kind,
 )
 
-__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag']
+__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag', 'fix_stream']
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -251,7 +251,7 @@ def write_drive_bag(path: str | Path, trajectory, q_meas: np.ndarray, roll_meas:
         if ground_truth:
             streams += _truth_streams(trajectory, stamps, stamp_cols, track_width_m)
         if fixes is not None:
-            streams.append(_fix_stream(fixes, start_stamp_ns))
+            streams.append(fix_stream(fixes, start_stamp_ns))
         for topic, _, _ in streams:
             bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
         bag.write_rows(streams)
@@ -313,7 +313,7 @@ def _truth_streams(trajectory, stamps, stamp_cols, track_width_m: float) -> list
     return streams
 
 
-def _fix_stream(fixes, start_stamp_ns: int):
+def fix_stream(fixes, start_stamp_ns: int):
     """The /fix stream: NavSatFix, frame ``gnss``, status 0 (FIX)."""
     fs, lat, lon, alt = _fix_arrays(fixes, start_stamp_ns)
     cols = stamp_columns(fs)

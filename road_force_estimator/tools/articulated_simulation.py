@@ -18,17 +18,17 @@ import numpy as np
 __all__ = ['simulate', 'custom_data', 'write']
 
 
-def simulate(drive, *, progress: bool = False, prog: str = 'simulate_bag'):
+def simulate(drive, *, route, progress: bool = False, prog: str = 'simulate_bag'):
     """Run an :class:`~.core.articulated_setup.ArticulatedDrive`: a namespace with the
     trajectory, the readings and their names, the IMU, the truth, the stamps, the fixes,
-    the road and why the drive was cut (``reason``, '' when it was not)."""
+    the road and why the drive was cut (``reason``, '' when it was not). ``route(traj, sim,
+    speed_profile)``: the GNSS fixes (simulate_bag's, the front axle's drive alike)."""
     from road_force_estimator import interfaces as api
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.bagio.messages import DEFAULT_START_STAMP_NS
     from road_force_estimator.core.articulated_plant import simulate_articulated
     from road_force_estimator.core.unit_loads import unit_load_transfer
     from road_force_estimator.tools import cli
-    from road_force_estimator.tools.simulate_bag import _fixes
 
     sim = drive.sim
     road = road_from_source(sim.road, length_m=drive.road_length_m)
@@ -57,9 +57,9 @@ def simulate(drive, *, progress: bool = False, prog: str = 'simulate_bag'):
         stamps = DEFAULT_START_STAMP_NS + np.round(
             (t + sensors.stamp_offsets_s(n)) * 1e9).astype(np.int64)
     speed = traj.speed_mps
-    route = SimpleNamespace(t_s=t, speed_mps=speed if drive.speed_profile is not None
-                            else sim.speed_mps, lateral_accel_mps2=traj.lateral_accel_mps2)
-    fixes = _fixes(route, sim, drive.speed_profile) if sim.gnss_rate_hz > 0.0 else None
+    path = SimpleNamespace(t_s=t, speed_mps=speed if drive.speed_profile is not None
+                           else sim.speed_mps, lateral_accel_mps2=traj.lateral_accel_mps2)
+    fixes = route(path, sim, drive.speed_profile) if sim.gnss_rate_hz > 0.0 else None
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
     reason = ''
     if n < requested:
@@ -111,10 +111,11 @@ def custom_data(drive, result, prog: str) -> dict:
     return custom
 
 
-def write(bag, drive, result, custom: dict, ground_truth: bool = True) -> int:
-    """Write the bag folder ``bag``; the messages written."""
+def write(bag, drive, result, custom: dict, *, twist_speed,
+          ground_truth: bool = True) -> int:
+    """Write the bag folder ``bag``; the messages written. ``twist_speed(speed, sim)``: what
+    the twist carries (simulate_bag's odometer error)."""
     from road_force_estimator.bagio.articulated_drive import write_articulated_drive_bag
-    from road_force_estimator.tools.simulate_bag import twist_speed
 
     return write_articulated_drive_bag(
         bag, stamps_ns=result.stamps_ns,

@@ -246,12 +246,13 @@ def _main_articulated(args: argparse.Namespace, values: dict, lateral) -> int:
         Path(args.output), PROG, force=args.force, owned=_written_here,
         inputs=[road_path] if road_path.exists() else [])
     target.check()
-    result = articulated.simulate(drive, progress=not args.no_progress, prog=PROG)
+    result = articulated.simulate(drive, route=_fixes, progress=not args.no_progress,
+                                  prog=PROG)
     custom = articulated.custom_data(drive, result, PROG)
     if lateral is not None:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
     with target.staged() as bag:
-        count = articulated.write(bag, drive, result, custom,
+        count = articulated.write(bag, drive, result, custom, twist_speed=twist_speed,
                                   ground_truth=not args.no_ground_truth)
     t = result.trajectory.t_s
     if result.reason:

@@ -167,8 +167,9 @@ def test_per_sample_and_batch_give_the_same_bits():
 
 
 def test_lift_off_per_wheel_and_the_tire_never_pulls():
-    """A 5 cm bump under the left wheels at 3 m/s^2 in a left curve: its inner (left) wheels leave the road;
-    loads never below 0 and the tire force floor is -F_c, as in the test's own solve_ivp."""
+    """A 5 cm bump under the left wheels at 3 m/s^2 in a left curve: the inner (left) wheels
+    leave the road; loads never below 0 and the tire force floor is -F_c, as in the test's own
+    solve_ivp."""
     from road_force_estimator.core.road import add_event
     road = add_event(flat_profile(300.0), 'bump', 'left', 60.0, 0.5, 0.05)
     curve = (0.1, 1.0, 10.0, 3.0)
