@@ -39,6 +39,7 @@ import math
 from typing import Callable
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.friction import FrictionLaw, stick_force, tanh_force
@@ -338,9 +339,11 @@ class ArticulatedModel:
         return a.roll_centre_height_m * s / GRAVITY_MPS2 + a.wheel_radius_m * a.mass_kg
 
     def modes(self, stuck: bool = False) -> list[ModeInfo]:
-        """The modes of the linear model, by undamped frequency; each named after the
-        coordinate holding most of its kinetic energy (``stuck``: the stick friction's
-        springs k_f in parallel, as while the sliders hold)."""
+        """The modes of the linear model, by undamped frequency; each named after a coordinate
+        holding much of its kinetic energy (the assignment of the largest shares, each name
+        once), or ``fifth_wheel`` when the coupling's spring holds most of its strain energy
+        (``stuck``: the stick friction's springs k_f in parallel, as while the sliders
+        hold)."""
         lin = self._linear(stuck)
         names = self.dof_names()
         _, _, delta, _ = self._geometry()
@@ -351,14 +354,21 @@ class ArticulatedModel:
         lam, lvecs = lam[keep], lvecs[:self.n_dof, keep]
         mass = np.diag(lin.mass)
         free = list(range(lam.size))
+        order = np.argsort(w2.real)
+        shapes = vecs[:, order].real
+        energy = mass[:, None] * shapes ** 2
+        energy = energy / np.maximum(energy.sum(axis=0), 1e-300)
+        # each coordinate names one mode: the assignment of most kinetic energy (the three
+        # trailer axles' nearly equal modes would otherwise share a name)
+        rows, cols = linear_sum_assignment(-energy)
+        coordinate = dict(zip(cols.tolist(), rows.tolist()))
         out = []
-        for k in np.argsort(w2.real):
+        for i, k in enumerate(order):
             wn = math.sqrt(max(w2.real[k], 0.0))
-            shape = vecs[:, k].real
-            energy = mass * shape ** 2
+            shape = shapes[:, i]
             strain = float(shape @ k5 @ shape) / max(float(shape @ lin.stiffness @ shape),
                                                      1e-300)
-            name = 'fifth_wheel' if strain > 0.5 else names[int(np.argmax(energy))]
+            name = 'fifth_wheel' if strain > 0.5 else names[coordinate[i]]
             # the damped pole whose shape is closest (mass-weighted) to this mode's
             p = 0j
             if free:
