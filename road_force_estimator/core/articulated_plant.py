@@ -223,7 +223,7 @@ class ArticulatedPlant:
         m = self.model
         forces = [-self.friction_start * f for f in m.friction_n.reshape(-1)]
         x, fb = m.equilibrium(self._u[0], self._ay[0], self._ax[0], forces,
-                              road_rate_mps=self._sample_rate(0))
+                              road_rate_mps=self._start_rates())
         self._state = tuple(float(v) for v in x)
         self.sliders = Sliders(m.stick_stiffness_npm(), m.friction_n.reshape(-1).tolist())
         self.sliders.base = list(fb)
@@ -295,9 +295,15 @@ class ArticulatedPlant:
             lo, hi = (mid, hi) if self._distance(per * mid) <= limit else (lo, mid)
         return lo
 
-    def _sample_rate(self, i: int) -> list[float]:
-        """The road rate under each tire at prepared sample i of the block (m/s)."""
-        return self._du[min(i * self.substeps, len(self._du) - 1)]
+    def _start_rates(self) -> np.ndarray:
+        """The road rate under each tire at the start (m/s): the speed times the slope of the
+        segment under it (right-continuous), whatever part of the road is known yet (a live
+        road's plant starts as a batch one)."""
+        road_x = self.road.distance_m
+        pos = self.start_m - self.offsets
+        seg = np.clip(np.searchsorted(road_x, pos, side='right') - 1, 0, len(road_x) - 2)
+        slopes = self.road.segment_slopes()[seg]                # (axles, 2)
+        return (float(self.speed_at(0.0)) * slopes).reshape(-1)
 
     def _prepare(self, first: int) -> None:
         """Road, rates, a_y and a_x at the stage times of samples first .. first + block."""

@@ -128,7 +128,8 @@ class PlantSimulator(Node):
         self.last_index = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9))
         if sim.road.strip().lower() == TOPIC_ROAD:  # the road arrives on /lpa/*: live_road
             self.live = LiveRoad(self, vehicle, sim, self.road_timeout_s,
-                                 make_plant=self.articulated and self.articulated.plant)
+                                 make_plant=self.articulated.plant if self.articulated
+                                 else lambda profile: self.front_axle_plant(vehicle, profile))
         else:
             self.build_plant(vehicle, sim)
             self.last_index = min(self.last_index, self.plant.last_sample_index)
@@ -179,6 +180,17 @@ class PlantSimulator(Node):
         self.reliable += [self.create_publisher(PointStamped, topic, reliable_qos())
                           for topic in api.TRUE_ROAD]
 
+    def front_axle_plant(self, vehicle, road) -> Plant:
+        """The front axle's plant on ``road`` with the drive's options."""
+        sim = self.sim
+        profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
+        return Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
+                     tire_envelope_m=sim.tire_envelope_length_m, speed_profile=profile,
+                     springs=SpringOptions.from_simulator(sim),
+                     lateral_acceleration=parse_lateral_profile(sim.lateral_profile),
+                     friction_start=sim.leaf_spring_friction_start,
+                     crossfall_rad=sim.road_crossfall_rad)
+
     def build_plant(self, vehicle, sim) -> None:
         """The road of ``simulator.road`` and the plant on it (refused: ParameterError)."""
         if self.articulated is not None:
@@ -197,12 +209,7 @@ class PlantSimulator(Node):
             length = min(travel + 2.0 * sim.tire_envelope_length_m + 1.0,
                          MAX_SYNTHETIC_LENGTH_M)
             self.road = road_from_source(sim.road, length_m=length)
-            self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                               tire_envelope_m=sim.tire_envelope_length_m,
-                               speed_profile=profile, springs=SpringOptions.from_simulator(sim),
-                               lateral_acceleration=parse_lateral_profile(sim.lateral_profile),
-                               friction_start=sim.leaf_spring_friction_start,
-                               crossfall_rad=sim.road_crossfall_rad)
+            self.plant = self.front_axle_plant(vehicle, self.road)
         except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None

@@ -211,3 +211,26 @@ def test_crossfall_tilts_the_truck_not_its_springs():
     loads = tr.wheel_load_n[-1]
     assert np.all(loads[1::2] > loads[0::2])             # the lower (right) wheels carry more
     assert loads.sum() == pytest.approx(40200 * G * math.cos(0.0), rel=1e-3)
+
+
+def test_a_road_that_arrives_piece_by_piece_gives_the_batch_drive():
+    """A live road (simulator.road: topic): the plant built on the first piece that carries
+    every axle (its first sample only) and extended as the profile arrives drives as the
+    batch plant does on the whole road."""
+    road = iso8608_profile('C', 40.0, seed=5)
+    kw = dict(speed_mps=20.0, rate_hz=500.0, tire_envelope_m=0.25)
+    tr = simulate_articulated(DEFAULT, road, duration_s=60.0, **kw)
+    first = road.start_m + 12.22 + 0.25 + 0.01        # the shortest piece: one sample
+    plant = ArticulatedPlant(DEFAULT, road.segment(road.start_m, first), **kw)
+    assert plant.last_sample_index == 0
+    rows, end = [], first
+    while True:
+        s = plant.step()
+        if s is not None:
+            rows.append(s.row)
+            continue
+        if end >= road.end_m:
+            break
+        end = min(end + 0.3, road.end_m)
+        plant.extend_road(road.segment(road.start_m, end))
+    np.testing.assert_allclose(np.array(rows), tr.data, rtol=0, atol=1e-9)
