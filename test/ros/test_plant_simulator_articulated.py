@@ -141,3 +141,26 @@ def test_the_observer_reads_an_articulated_truck_s_front_axle_and_says_so():
     assert (stamp, q, phi) == (5_000_000_000, (0.001, 0.002), 0.01)
     assert len(said) == 1 and 'front_left_suspension, front_right_suspension, tractor_roll' in \
         said[0]
+
+
+def test_bag_player_plays_an_articulated_drive_with_its_topics(ros_context, tmp_path):
+    """bag_player replays simulate_bag's articulated drive: every message of the new topics
+    (the IMU with the sensor-data QoS, the truth reliable), values as written."""
+    assert simulate_bag(['--params-file', str(CONFIG), '--duration', '0.5', '--rate', '500',
+                         '-p', 'vehicle.tractor_imu:=true', '--output', str(tmp_path / 'd'),
+                         '--no-progress']) == 0
+    topics = [*TRUTH, '/imu/tractor']
+    collector = Collector(ros_context, topics)
+    player = run_main('bag_player', str(tmp_path / 'd'), '--wait', '30', '--topics', *topics)
+    executor = make_executor(ros_context, collector)
+    try:
+        assert spin_until(executor, lambda: all(collector.count(t) >= 251 for t in topics),
+                          60.0), {t: collector.count(t) for t in topics}
+    finally:
+        close(executor, collector)
+    code, _, err = finish(player, 30.0)
+    assert code == 0, err
+    truth = read_articulated_truth(tmp_path / 'd')
+    np.testing.assert_array_equal(
+        [m.effort for m in collector.messages['/ground_truth/wheel_loads']], truth.wheel_load_n)
+    assert collector.messages['/imu/tractor'][0].linear_acceleration.z > 9.0
