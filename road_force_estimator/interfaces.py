@@ -15,6 +15,10 @@ __all__ = [
     'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
     'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
+    'UNITS', 'TRACTOR_ROLL_JOINT', 'TRAILER_ROLL_JOINT', 'axle_deflection_joints',
+    'articulated_deflection_joints', 'wheel_joints', 'WHEEL_LOADS', 'TRUE_WHEEL_LOADS',
+    'STATIC_WHEEL_LOADS', 'UNIT_LOAD_TRANSFER', 'TRUE_LOAD_TRANSFER_RATIOS', 'FUSED_ROAD', 'IMU',
+    'IMU_MSG', 'IMU_FRAME',
 ]
 
 SIDES = ('left', 'right')
@@ -48,6 +52,47 @@ STATES = '/observer/states'
 DIAGNOSTICS = '/diagnostics'
 LPA = ('/lpa/left', '/lpa/right')
 
+# The whole vehicle (INTERFACES.md "The whole vehicle", vehicle.model: articulated). The
+# front axle's topics above keep their meaning there (the front axle's wheels).
+#: The units of the combination, in the order of the per-unit topics.
+UNITS = ('tractor', 'trailer', 'combination')
+TRACTOR_ROLL_JOINT = 'tractor_roll'
+TRAILER_ROLL_JOINT = 'trailer_roll'
+
+
+def axle_deflection_joints(axle: str) -> tuple[str, str]:
+    """``<axle>_left_suspension``, ``<axle>_right_suspension``."""
+    return f'{axle}_left_suspension', f'{axle}_right_suspension'
+
+
+def articulated_deflection_joints(instrumented_axles, trailer_roll: bool) -> tuple[str, ...]:
+    """The names of an articulated truck's ``/suspension/deflections``: both sides of every
+    instrumented axle (front first), then ``tractor_roll`` and, where fitted,
+    ``trailer_roll``."""
+    names = [n for axle in instrumented_axles for n in axle_deflection_joints(axle)]
+    return tuple(names + [TRACTOR_ROLL_JOINT] + ([TRAILER_ROLL_JOINT] if trailer_roll else []))
+
+
+def wheel_joints(axles) -> tuple[str, ...]:
+    """``<axle>_left_wheel``, ``<axle>_right_wheel`` for every axle (``/wheel_loads``)."""
+    return tuple(f'{a}_{side}_wheel' for a in axles for side in SIDES)
+
+
+#: JointState, ``effort`` = vertical load per wheel (N): estimated, true, static.
+WHEEL_LOADS = '/wheel_loads'
+TRUE_WHEEL_LOADS = '/ground_truth/wheel_loads'
+STATIC_WHEEL_LOADS = '/wheel_loads/static'
+#: Vector3Stamped per unit (tractor, trailer, combination): x = LTR, y = quasi-static LTR.
+UNIT_LOAD_TRANSFER = tuple(f'/load_transfer/{u}' for u in UNITS)
+#: The units' true load transfer in one JointState per sample (plant simulator; not in
+#: INTERFACES.md, added with the articulated plant: one message, not three, for the node's
+#: CPU): ``name`` = UNITS, ``position`` = LTR, ``velocity`` = quasi-static LTR.
+TRUE_LOAD_TRANSFER_RATIOS = '/ground_truth/load_transfer_ratios'
+FUSED_ROAD = ('/road_profile/fused/left', '/road_profile/fused/right')
+#: The tractor's IMU (sensor_msgs/Imu, frame base_link, at the tractor's centre of gravity).
+IMU = '/imu/tractor'
+IMU_FRAME = BASE_FRAME
+
 # Message types, as rosbag2 and rosbags spell them.
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 POINT = 'geometry_msgs/msg/PointStamped'
@@ -57,6 +102,7 @@ FLOAT64 = 'std_msgs/msg/Float64'
 VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
 NAVSATFIX = 'sensor_msgs/msg/NavSatFix'
 DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
+IMU_MSG = 'sensor_msgs/msg/Imu'
 
 #: Every topic of INTERFACES.md and its message type.
 TOPIC_TYPES: dict[str, str] = {
@@ -73,6 +119,13 @@ TOPIC_TYPES: dict[str, str] = {
     DIAGNOSTICS: DIAGNOSTIC_ARRAY,
     FIX: NAVSATFIX,
     **{topic: POINT for topic in LPA},
+    WHEEL_LOADS: JOINT_STATE,
+    TRUE_WHEEL_LOADS: JOINT_STATE,
+    STATIC_WHEEL_LOADS: JOINT_STATE,
+    **{topic: VECTOR3_STAMPED for topic in UNIT_LOAD_TRANSFER},
+    TRUE_LOAD_TRANSFER_RATIOS: JOINT_STATE,
+    **{topic: POINT for topic in FUSED_ROAD},
+    IMU: IMU_MSG,
 }
 
 # QoS kinds: "Sensor streams use the sensor-data QoS (best effort, keep last); ground truth
@@ -82,7 +135,7 @@ RELIABLE = 'reliable'
 #: The QoS kind of every topic: the sensor streams (what the truck's sensors publish) are
 #: sensor data, everything else reliable.
 TOPIC_QOS: dict[str, str] = {
-    topic: SENSOR_DATA if topic in (DEFLECTIONS, TWIST, FIX) else RELIABLE
+    topic: SENSOR_DATA if topic in (DEFLECTIONS, TWIST, FIX, IMU) else RELIABLE
     for topic in TOPIC_TYPES
 }
 

@@ -31,6 +31,7 @@ from road_force_estimator.serde.messages import (
     stamp_columns,
 )
 from road_force_estimator.bagio.reader import bag_custom_data, read_topic_columns
+from road_force_estimator.bagio.vehicle_layout import front_axle_joints
 from road_force_estimator.bagio.writer import BagWriter
 from road_force_estimator.interfaces import (
     BASE_FRAME,
@@ -51,7 +52,7 @@ from road_force_estimator.interfaces import (
     qos_kind,
 )
 
-__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag']
+__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag', 'fix_stream']
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -128,6 +129,8 @@ class Drive:
     noted : dict
         ``topic -> {reason -> count}``: messages kept with a caveat: ``fix_status_unknown``
         (a NavSatFix of status -2, STATUS_UNKNOWN, with a finite position).
+    notes : tuple of str
+        What the reader took (an articulated drive: its front axle, :mod:`.vehicle_layout`).
     """
 
     stamps_ns: np.ndarray
@@ -143,6 +146,7 @@ class Drive:
     issues: tuple[str, ...] = ()
     custom_data: dict[str, str] = field(default_factory=dict)
     noted: dict[str, dict[str, int]] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     @property
     def rejected_total(self) -> int:
@@ -247,7 +251,7 @@ def write_drive_bag(path: str | Path, trajectory, q_meas: np.ndarray, roll_meas:
         if ground_truth:
             streams += _truth_streams(trajectory, stamps, stamp_cols, track_width_m)
         if fixes is not None:
-            streams.append(_fix_stream(fixes, start_stamp_ns))
+            streams.append(fix_stream(fixes, start_stamp_ns))
         for topic, _, _ in streams:
             bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
         bag.write_rows(streams)
@@ -309,7 +313,7 @@ def _truth_streams(trajectory, stamps, stamp_cols, track_width_m: float) -> list
     return streams
 
 
-def _fix_stream(fixes, start_stamp_ns: int):
+def fix_stream(fixes, start_stamp_ns: int):
     """The /fix stream: NavSatFix, frame ``gnss``, status 0 (FIX)."""
     fs, lat, lon, alt = _fix_arrays(fixes, start_stamp_ns)
     cols = stamp_columns(fs)
@@ -379,7 +383,11 @@ def read_drive_bag(path: str | Path) -> Drive:
         raise BagReadError(f'{path}: no {DEFLECTIONS} topic'
                            + (f' ({issues[0]})' if issues else ''))
     rejects = Rejects()
-    stamps, pos = read_joint_state(cols[DEFLECTIONS], DEFLECTION_JOINTS, rejects)
+    custom = bag_custom_data(path)
+    groups = cols[DEFLECTIONS].groups
+    joints, note = front_axle_joints(custom, groups[0].layout.strings.get('name')
+                                     if groups else None)
+    stamps, pos = read_joint_state(cols[DEFLECTIONS], joints, rejects)
     if TWIST in cols:
         twist_ns, twist_v = read_scalar(cols[TWIST], 'twist.linear.x', rejects)
     else:
@@ -404,7 +412,7 @@ def read_drive_bag(path: str | Path) -> Drive:
         stamps_ns=stamps, q_m=pos[:, :2].copy(), roll_rad=pos[:, 2].copy(), speed_mps=speed,
         twist_stamps_ns=twist_ns, twist_speed_mps=twist_v, truth=_union_truth(parts),
         fixes=fixes, messages={t: c.count for t, c in cols.items()}, rejected=rejects.counts,
-        issues=tuple(issues), custom_data=bag_custom_data(path), noted=noted)
+        issues=tuple(issues), custom_data=custom, noted=noted, notes=(note,) if note else ())
 
 
 #: NavSatStatus: no fix (rejected), and unknown (ROS 2 Jazzy: a fix of unknown quality, kept).

@@ -26,12 +26,13 @@ from typing import Iterator
 import numpy as np
 
 from road_force_estimator.bagio.checks import Rejects, read_joint_state, read_scalar
+from road_force_estimator.bagio.vehicle_layout import front_axle_joints
 from road_force_estimator.bagio.errors import BagReadError
 from road_force_estimator.bagio.mcap_scan import Block
 from road_force_estimator.bagio.reader import (
     USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
 from road_force_estimator.interfaces import (
-    DEFLECTION_JOINTS, DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
+    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
     TWIST_STAMPED)
 
 __all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveBlocks', 'streamable']
@@ -97,6 +98,9 @@ class DriveBlocks:
         self.fixes = None
         self.noted: dict = {}
         self.custom_data = bag_custom_data(self.path)
+        #: the deflection joints read and what the reader says of them (.vehicle_layout)
+        self.joints: tuple | None = None
+        self.notes: tuple[str, ...] = ()
         self.twists = 0
         self.first_speed: float | None = None
         self.early = 0
@@ -183,8 +187,13 @@ class DriveBlocks:
                 self._twist_v = np.concatenate([self._twist_v, v])
         if DEFLECTIONS in readers:
             self.seen_deflections = True
-            s, pos = read_joint_state(readers[DEFLECTIONS].columns(DEFLECTIONS),
-                                      DEFLECTION_JOINTS, self.rejects,
+            columns = readers[DEFLECTIONS].columns(DEFLECTIONS)
+            if self.joints is None:         # an articulated drive: its front axle
+                groups = columns.groups
+                self.joints, note = front_axle_joints(
+                    self.custom_data, groups[0].layout.strings.get('name') if groups else None)
+                self.notes = (note,) if note else ()
+            s, pos = read_joint_state(columns, self.joints, self.rejects,
                                       floor=self._last[DEFLECTIONS])
             if s.size:
                 self._last[DEFLECTIONS] = int(s[-1])

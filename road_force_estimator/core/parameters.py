@@ -23,6 +23,8 @@ __all__ = [
     'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
     'validate_parameter', 'check_spec', 'parse_override', 'load_params_file',
     'read_params_document', 'defaults', 'MAX_PARAMS_FILE_BYTES',
+    'ARTICULATED_PARAMETERS', 'ARTICULATED_SPECS', 'AXLE_FIELDS', 'AXLE_DEFAULTS',
+    'axle_parameter_name', 'split_axle_name', 'axle_spec', 'spec_of',
 ]
 
 GRAVITY_MPS2 = 9.80665
@@ -90,6 +92,22 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('vehicle.sensor_time_constant', 'double_pair', [0.0, 0.0], 's',
        'first-order lag of the sensors [deflection, roll]; 0 = none (plant and observer '
        'alike)', 0.0, 0.1),
+    # The whole vehicle and the friction that sticks (MODEL.md "The whole vehicle", "What the
+    # model leaves out"); the articulated model's own names are in ARTICULATED_PARAMETERS.
+    _p('vehicle.model', 'string', 'front_axle', '',
+       'the vehicle model: "front_axle" = the 4-DOF roll-plane front axle (MODEL.md); '
+       '"articulated" = the tractor and semi-trailer with every axle (vehicle.axles)',
+       choices=('front_axle', 'articulated')),
+    _p('vehicle.leaf_spring_friction_model', 'string', 'tanh', '',
+       'law of the leaf-spring friction: "tanh" = -F_f tanh(dq / v_f) (no stick); "stick" = '
+       'the elastic-plastic (Jenkins) element, a spring k_f in series with a Coulomb slider '
+       'F_f (MODEL.md "Friction that sticks"; the plant simulates it, the observer models '
+       'the tanh law)', choices=('tanh', 'stick')),
+    _p('vehicle.leaf_spring_friction_velocity', 'double', 0.01, 'm/s',
+       'smoothing velocity v_f of the tanh friction law -F_f tanh(dq / v_f)', 1e-4, 1.0),
+    _p('vehicle.leaf_spring_friction_stiffness', 'double', 8.0, '',
+       'stiffness k_f of the stick element before it slips, per unit suspension stiffness '
+       '(k_f = this x k; the leaf pack: about 5-10)', 0.1, 100.0),
     _p('observer.lipschitz_deflection', 'double', 3000.0, 'm/s^3',
        'Lipschitz constant L of the deflection differentiators (bound on |dddq|)', 1e-3, 1e9),
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
@@ -178,9 +196,217 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('simulator.stamp_jitter', 'double', 0.0, 's',
        'stamp jitter (plant only): each stamp moved by a uniform draw in [-j, +j] (the '
        'samples stay at their true time); below half a sample period; 0 = none', 0.0, 0.01),
+    _p('simulator.leaf_spring_friction_start', 'double', 0.0, '',
+       'stick friction (plant only): the force each slider holds at the start, per unit F_f, '
+       '> 0 upward on the body (a truck loaded while parked: its springs read F_f less per '
+       'spring than they carry); 0 = none; needs vehicle.leaf_spring_friction_model = stick',
+       -1.0, 1.0),
+    _p('simulator.lateral_profile', 'string', '', '',
+       'lateral acceleration a_y (> 0 to the left): "" = none; "curve:start=T,ramp=R,'
+       'hold=H,ay=A" (a curve entered and left over R s, held H s); or a CSV path with the '
+       'header time_s,lateral_accel_mps2 (linearly interpolated, 0 outside it)'),
+    _p('simulator.sensor_faults', 'string', '', '',
+       'sensor faults (plant only), ";"-separated, each KIND@CHANNEL:KEY=VALUE,...: '
+       '"spikes@C:count=N,size=S[,start=T0,end=T1]" (N samples off by +-S), '
+       '"stuck@C:start=T,duration=D" (the reading held), "drift@C:rate=R[,start=T]" (an '
+       'offset growing R per s); C = a /suspension/deflections joint name; "" = none'),
+    _p('simulator.roll_sensor', 'string', 'ideal', '',
+       'roll-sensor physics (plant only): "ideal" = phi; "pendulum" = an inclinometer reading '
+       'phi + a_y / g; "gyro" = an integrated rate gyro reading phi plus its drift',
+       choices=('ideal', 'pendulum', 'gyro')),
+    _p('simulator.roll_gyro_drift', 'double', 0.0, 'rad/s',
+       'roll_sensor = gyro: bias of the rate, the angle drifting by this per second', -0.01,
+       0.01),
+    _p('simulator.roll_gyro_random_walk', 'double', 0.0, 'rad/s^0.5',
+       'roll_sensor = gyro: angle random walk (white rate noise) of the integrated angle', 0.0,
+       0.01),
+    _p('simulator.road_crossfall', 'double', 0.0, 'rad',
+       'road crossfall or bank (plant only): the road plane tilted by this angle, > 0 = the '
+       'left wheel path higher (the roll angle takes it, the deflections do not)', -0.15,
+       0.15),
 )
 
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
+
+# The articulated model's names (INTERFACES.md "The whole vehicle"; defaults: MODEL.md's
+# European 5-axle 40 t combination, config/tractor_semitrailer.yaml). Kinds 'string_list'
+# and 'bool' as well as those above.
+_BODY = (
+    ('mass', 'kg', 'mass of the sprung body', 100.0, 1e5, 6500.0, 29000.0),
+    ('cg_position', 'm', 'centre of gravity, distance behind the front axle', -5.0, 60.0, 1.1,
+     8.6),
+    ('pitch_inertia', 'kg m^2', 'pitch inertia about the centre of gravity', 10.0, 1e8,
+     20000.0, 450000.0),
+    ('roll_inertia', 'kg m^2', 'roll inertia about the roll axis', 10.0, 1e7, 4000.0, 35000.0),
+    ('cg_height', 'm', 'height of the centre of gravity above the ground (braking pitch)', 0.0,
+     5.0, 1.1, 2.0),
+    ('cg_height_above_roll_axis', 'm', 'height of the centre of gravity above the roll axis',
+     0.0, 5.0, 0.6, 1.4),
+)
+ARTICULATED_PARAMETERS: tuple[ParameterSpec, ...] = (
+    _p('vehicle.axles', 'string_list', ['front', 'drive', 'trailer_1', 'trailer_2',
+                                        'trailer_3'], '',
+       'names of the axles, front first: the per-axle names vehicle.axle.<name>.* and '
+       'simulator.axle.<name>.* are declared from it'),
+    *(_p(f'vehicle.{body}.{name}', 'double', (tractor, trailer)[i], unit, f'{body}: {text}',
+         low, high)
+      for i, body in enumerate(('tractor', 'trailer'))
+      for name, unit, text, low, high, tractor, trailer in _BODY),
+    _p('vehicle.fifth_wheel.position', 'double', 3.2, 'm',
+       'fifth wheel (kingpin), distance behind the front axle', 0.0, 60.0),
+    _p('vehicle.fifth_wheel.vertical_stiffness', 'double', 5e7, 'N/m',
+       'vertical stiffness of the fifth wheel coupling', 1e4, 1e10),
+    _p('vehicle.fifth_wheel.vertical_damping', 'double', 1e5, 'N s/m',
+       'vertical damping of the fifth wheel coupling', 0.0, 1e8),
+    _p('vehicle.fifth_wheel.roll_stiffness', 'double', 3e6, 'N m/rad',
+       'roll stiffness between tractor and trailer at the fifth wheel', 0.0, 1e9),
+    _p('vehicle.fifth_wheel.roll_damping', 'double', 3e4, 'N m s/rad',
+       'roll damping between tractor and trailer at the fifth wheel', 0.0, 1e8),
+    _p('vehicle.trailer_roll_sensor', 'bool', True, '',
+       'the trailer has a roll-angle sensor (trailer_roll in /suspension/deflections)'),
+    _p('vehicle.tractor_imu', 'bool', False, '',
+       'the tractor has an IMU at its centre of gravity (/imu/tractor: a_x, a_y, vertical '
+       'acceleration + g, roll, pitch and yaw rates)'),
+    _p('simulator.noise.imu_acceleration', 'double', 0.05, 'm/s^2',
+       'standard deviation of the IMU accelerometer noise, per axis', 0.0, 10.0),
+    _p('simulator.noise.imu_rate', 'double', 0.002, 'rad/s',
+       'standard deviation of the IMU gyro noise, per axis', 0.0, 1.0),
+)
+ARTICULATED_SPECS: dict[str, ParameterSpec] = {s.name: s for s in ARTICULATED_PARAMETERS}
+
+#: Per-axle fields: ``vehicle.axle.<name>.<field>`` and ``simulator.axle.<name>.<field>``:
+#: (prefix, field, kind, unit, description, low, high, whole-vehicle name giving the default
+#: or None). An axle's values default to MODEL.md's table for the names of
+#: :data:`AXLE_DEFAULTS`; any other axle gives them (body and position always).
+AXLE_FIELDS = (
+    ('vehicle', 'body', 'string', '', 'the body carrying the axle: "tractor" or "trailer"',
+     None, None, None),
+    ('vehicle', 'position', 'double', 'm', 'distance behind the front axle', 0.0, 60.0, None),
+    ('vehicle', 'mass', 'double', 'kg', 'mass of the whole axle with its wheels', 10.0, 1e4,
+     None),
+    ('vehicle', 'roll_inertia', 'double', 'kg m^2', 'roll inertia of the axle', 1.0, 1e5,
+     None),
+    ('vehicle', 'spring_half_track', 'double', 'm', 'half the spring track s', 0.1, 2.0, None),
+    ('vehicle', 'wheel_half_track', 'double', 'm', 'half the wheel track w (dual tires lumped)',
+     0.1, 2.0, None),
+    ('vehicle', 'suspension_stiffness', 'double_pair', 'N/m',
+     'suspension stiffness per side [left, right]', 1e3, 1e8, None),
+    ('vehicle', 'suspension_damping', 'double_pair', 'N s/m',
+     'suspension damping per side [left, right]', 0.0, 1e7, None),
+    ('vehicle', 'auxiliary_roll_stiffness', 'double', 'N m/rad',
+     'auxiliary roll stiffness kphi between body and axle (anti-roll bar, axle torsion)', 0.0,
+     1e9, None),
+    ('vehicle', 'tire_stiffness', 'double_pair', 'N/m',
+     'tire vertical stiffness per side [left, right] (duals lumped)', 1e4, 1e9, None),
+    ('vehicle', 'tire_damping', 'double_pair', 'N s/m',
+     'tire vertical damping per side [left, right]', 0.0, 1e6, None),
+    ('vehicle', 'roll_centre_height', 'double', 'm', 'roll centre height above the ground',
+     0.0, 3.0, None),
+    ('vehicle', 'wheel_radius', 'double', 'm', 'wheel radius (height of the axle centre)', 0.1,
+     1.5, None),
+    ('vehicle', 'static_load', 'double_pair', 'N',
+     'static wheel load per side [left, right]; 0 = from the statics of the spring system',
+     0.0, 1e7, None),
+    ('vehicle', 'instrumented', 'bool', '',
+     'the axle has deflection sensors (<axle>_left_suspension, <axle>_right_suspension)', None,
+     None, None),
+    ('vehicle', 'deflection_zero_load', 'double_pair', 'N',
+     'sprung load per side at which each deflection sensor reads 0 under zero_load', 0.0, 1e7,
+     'vehicle.deflection_zero_load'),
+    ('vehicle', 'leaf_spring_friction', 'double_pair', 'N',
+     'inter-leaf friction force per spring [left, right]; 0 = none', 0.0, 1e5,
+     'vehicle.leaf_spring_friction'),
+    ('vehicle', 'sensor_time_constant', 'double', 's',
+     "first-order lag of the axle's deflection sensors (plant and observer alike)", 0.0, 0.1,
+     'vehicle.sensor_time_constant'),
+    ('simulator', 'spring_progression', 'double', '1/m',
+     'progressive springs of the axle (plant only), see simulator.spring_progression', 0.0,
+     1000.0, 'simulator.spring_progression'),
+    ('simulator', 'bump_stop_clearance', 'double', 'm',
+     'bump-stop clearance of the axle (plant only)', 0.001, 1.0, 'simulator.bump_stop_clearance'),
+    ('simulator', 'bump_stop_stiffness', 'double', 'N/m',
+     'bump-stop stiffness of the axle (plant only); 0 = none', 0.0, 1e9,
+     'simulator.bump_stop_stiffness'),
+    ('simulator', 'sensor_scale_error', 'double_pair', '',
+     "relative scale error of the axle's deflection sensors [left, right] (plant only)", -0.5,
+     0.5, 'simulator.sensor_scale_error.deflection'),
+    ('simulator', 'sensor_offset', 'double_pair', 'm',
+     "offset of the axle's deflection sensors [left, right] (plant only)", -0.1, 0.1,
+     'simulator.sensor_offset.deflection'),
+)
+_AXLE_FIELD = {(f[0], f[1]): f for f in AXLE_FIELDS}
+
+#: MODEL.md's defaults of the 5-axle combination's axles, by name.
+_FRONT = dict(body='tractor', position=0.0, mass=900.0, roll_inertia=600.0,
+              spring_half_track=0.45, wheel_half_track=1.02,
+              suspension_stiffness=(400e3, 400e3), suspension_damping=(15e3, 15e3),
+              auxiliary_roll_stiffness=0.2e6, tire_stiffness=(1000e3, 1000e3),
+              roll_centre_height=0.5, wheel_radius=0.5)
+_DRIVE = dict(body='tractor', position=3.7, mass=1400.0, roll_inertia=800.0,
+              spring_half_track=0.5, wheel_half_track=0.92,
+              suspension_stiffness=(450e3, 450e3), suspension_damping=(20e3, 20e3),
+              auxiliary_roll_stiffness=0.5e6, tire_stiffness=(2000e3, 2000e3),
+              roll_centre_height=0.7, wheel_radius=0.5)
+_TRAILER = dict(body='trailer', mass=800.0, roll_inertia=450.0, spring_half_track=0.65,
+                wheel_half_track=1.02, suspension_stiffness=(450e3, 450e3),
+                suspension_damping=(15e3, 15e3), auxiliary_roll_stiffness=0.8e6,
+                tire_stiffness=(1800e3, 1800e3), roll_centre_height=0.6, wheel_radius=0.45)
+_COMMON = dict(tire_damping=(0.0, 0.0), static_load=(0.0, 0.0), instrumented=True)
+AXLE_DEFAULTS: dict[str, dict[str, Any]] = {
+    'front': {**_FRONT, **_COMMON}, 'drive': {**_DRIVE, **_COMMON},
+    **{f'trailer_{i + 1}': {**_TRAILER, 'position': x, **_COMMON}
+       for i, x in enumerate((9.6, 10.91, 12.22))},
+}
+
+
+def axle_parameter_name(prefix: str, axle: str, name: str) -> str:
+    """``<prefix>.axle.<axle>.<name>`` (prefix ``vehicle`` or ``simulator``)."""
+    return f'{prefix}.axle.{axle}.{name}'
+
+
+def split_axle_name(name: str) -> tuple[str, str, str] | None:
+    """``(prefix, axle, field)`` of a per-axle parameter name, or None."""
+    parts = name.split('.')
+    if len(parts) == 4 and parts[1] == 'axle' and (parts[0], parts[3]) in _AXLE_FIELD:
+        return parts[0], parts[2], parts[3]
+    return None
+
+
+def axle_spec(prefix: str, axle: str, field_name: str,
+              whole: Mapping[str, Any] | None = None) -> ParameterSpec:
+    """The spec of one per-axle parameter; its default is MODEL.md's for a default axle
+    name, else the whole-vehicle parameter's (``whole``: given values by name, else the
+    table's default), else None (to be given)."""
+    _, _, kind, unit, text, low, high, parent = _AXLE_FIELD[(prefix, field_name)]
+    default = AXLE_DEFAULTS.get(axle, {}).get(field_name)
+    if default is None and parent is not None:
+        default = (whole or {}).get(parent, SPECS[parent].default)
+        if field_name == 'sensor_time_constant':
+            default = default[0]          # [deflection, roll]: the deflection sensors' lag
+    if default is None and field_name == 'instrumented':
+        default = True
+    if default is None and field_name in ('tire_damping', 'static_load'):
+        default = (0.0, 0.0)
+    if isinstance(default, tuple):
+        default = list(default)
+    low = -math.inf if low is None else low
+    high = math.inf if high is None else high
+    choices = ('tractor', 'trailer') if field_name == 'body' else ()
+    return ParameterSpec(axle_parameter_name(prefix, axle, field_name), kind, default, unit,
+                         f'axle {axle}: {text}', low, high, choices)
+
+
+def spec_of(name: str) -> ParameterSpec | None:
+    """The spec of any parameter name: the shared table's, the articulated model's, or a
+    per-axle one (for any axle name: whether ``vehicle.axles`` lists it is checked when the
+    vehicle is built, :func:`.articulated_parameters.check_axle_names`); None if none."""
+    spec = SPECS.get(name) or ARTICULATED_SPECS.get(name)
+    if spec is not None:
+        return spec
+    parts = split_axle_name(name)
+    if parts is None or not parts[1].isidentifier():
+        return None
+    return axle_spec(parts[0], parts[1], parts[2])
 
 
 def defaults(prefix: str = '') -> dict[str, Any]:
@@ -197,7 +423,7 @@ def validate_parameter(name: str, value: Any) -> Any:
         Unknown name, wrong type or out of range; the message names the parameter, the value
         and the valid range.
     """
-    spec = SPECS.get(name)
+    spec = spec_of(name)
     if spec is None:
         raise ValueError(f'unknown parameter {name!r}')
     return check_spec(spec, value)
@@ -214,6 +440,15 @@ def check_spec(spec: ParameterSpec, value: Any) -> Any:
         Wrong type or out of range; the message names the parameter, the value and the range.
     """
     bad = f'{spec.name} = {value!r}'
+    if spec.kind == 'bool':
+        if not isinstance(value, bool):
+            raise ValueError(f'{bad}: expected true or false')
+        return value
+    if spec.kind == 'string_list':
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__') or not all(
+                isinstance(v, str) for v in value):
+            raise ValueError(f'{bad}: expected a list of strings')
+        return tuple(value)
     if spec.kind == 'string':
         if not isinstance(value, str):
             raise ValueError(f'{bad}: expected a string ({spec.range_text()})')
@@ -310,6 +545,12 @@ class VehicleParameters(_FromParameters):
                                                          quiet_default=True)
     sensor_time_constant_s: tuple[float, float] = _param('vehicle.sensor_time_constant',
                                                          quiet_default=True)
+    leaf_spring_friction_model: str = _param('vehicle.leaf_spring_friction_model',
+                                             quiet_default=True)
+    leaf_spring_friction_velocity_mps: float = _param('vehicle.leaf_spring_friction_velocity',
+                                                      quiet_default=True)
+    leaf_spring_friction_stiffness_ratio: float = _param(
+        'vehicle.leaf_spring_friction_stiffness', quiet_default=True)
 
     @property
     def half_track_m(self) -> float:
@@ -388,6 +629,14 @@ class SimulatorParameters(_FromParameters):
     sensor_offset_deflection_m: tuple[float, float] = _param('simulator.sensor_offset.deflection')
     sensor_offset_roll_rad: float = _param('simulator.sensor_offset.roll')
     stamp_jitter_s: float = _param('simulator.stamp_jitter')
+    leaf_spring_friction_start: float = _param('simulator.leaf_spring_friction_start',
+                                               quiet_default=True)
+    lateral_profile: str = _param('simulator.lateral_profile', quiet_default=True)
+    sensor_faults: str = _param('simulator.sensor_faults', quiet_default=True)
+    roll_sensor: str = _param('simulator.roll_sensor', quiet_default=True)
+    roll_gyro_drift_radps: float = _param('simulator.roll_gyro_drift', quiet_default=True)
+    roll_gyro_random_walk: float = _param('simulator.roll_gyro_random_walk', quiet_default=True)
+    road_crossfall_rad: float = _param('simulator.road_crossfall', quiet_default=True)
 
     def _check(self) -> None:
         if self.stamp_jitter_s >= 0.5 / self.rate_hz:
@@ -409,7 +658,7 @@ def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
 
 def _yaml_number(name: str, value: Any) -> Any:
     """PyYAML reads ``1e-05`` (no dot) as a string, where ROS's parser reads a double."""
-    spec = SPECS.get(name)
+    spec = spec_of(name)
     if spec is not None and spec.kind == 'double' and isinstance(value, str):
         try:
             return float(value)

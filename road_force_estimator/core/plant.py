@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 
+from road_force_estimator.core.friction import Sliders
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.core.speed_profile import profile_distance, speed_knots
@@ -197,7 +198,15 @@ class Plant:
     springs : SpringOptions, optional
         Plant-only progressive springs and bump stops (``simulator.spring_progression``,
         ``simulator.bump_stop_*``); None = linear springs. The leaf-spring friction of
-        ``vehicle.leaf_spring_friction`` acts in every case (:class:`.VehicleModel`).
+        ``vehicle.leaf_spring_friction`` acts in every case (:class:`.VehicleModel`), in the
+        law of ``vehicle.leaf_spring_friction_model``.
+    crossfall_rad : float
+        The road plane's cross slope (``simulator.road_crossfall``, rad, > 0 = the left wheel
+        path higher): each tire's road ``+- (T/2) tan(crossfall)``; 0 = none.
+    friction_start : float
+        Stick friction only (``simulator.leaf_spring_friction_start``): the force each slider
+        holds at the start per unit F_f (> 0 upward on the body); 0 = none. With stick
+        friction the sliders advance after every RK4 step (:class:`.friction.Sliders`).
 
     Notes
     -----
@@ -212,7 +221,8 @@ class Plant:
                  lateral_acceleration: float | Callable[[float], float] | None = None,
                  start_m: float | None = None, tire_envelope_m: float = 0.0,
                  speed_profile: tuple | None = None,
-                 springs: SpringOptions | None = None) -> None:
+                 springs: SpringOptions | None = None, friction_start: float = 0.0,
+                 crossfall_rad: float = 0.0) -> None:
         if not isinstance(road, RoadProfile):
             raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
         speed_mps, rate_hz = float(speed_mps), float(rate_hz)
@@ -222,6 +232,17 @@ class Plant:
             raise ValueError(f'rate_hz = {rate_hz!r} must be > 0 Hz')
         self.model = VehicleModel(vehicle, springs)
         self.vehicle = vehicle
+        self.friction_start = float(friction_start)
+        rise = vehicle.half_track_m * math.tan(float(crossfall_rad))
+        #: the crossfall's rise of each tire's road (m), [left, right]
+        self.crossfall_m = (rise, -rise)
+        if self.friction_start and not self.model.sticks:
+            raise ValueError(f'simulator.leaf_spring_friction_start = {self.friction_start:g}: '
+                             'needs vehicle.leaf_spring_friction_model = stick and a '
+                             'vehicle.leaf_spring_friction')
+        #: the stick elements' sliders (None without stick friction)
+        self.sliders = Sliders(self.model.stick_stiffness_npm, self.model._ff) \
+            if self.model.sticks else None
         #: The road the tires follow (enveloped when ``tire_envelope_m`` > 0).
         self.road = road.enveloped(tire_envelope_m)
         self.tire_envelope_m = float(tire_envelope_m)
@@ -280,8 +301,15 @@ class Plant:
         self._prepare(0)
         u1, u2, ay = self._inputs[0][0], self._inputs[1][0], self._inputs[4][0]
         d1, d2 = (a[0] for a in self._sample_rate)
-        self._state = tuple(float(v) for v in self.model.equilibrium(
-            (u1, u2), (d1, d2), ay))
+        if self.sliders is None:
+            self._state = tuple(float(v) for v in self.model.equilibrium(
+                (u1, u2), (d1, d2), ay))
+        else:
+            held = tuple(self.friction_start * f for f in self.model._ff)
+            self._state = tuple(float(v) for v in self.model.equilibrium(
+                (u1, u2), (d1, d2), ay, slider_force_n=held))
+            self.sliders.start(self._extensions(self._state), [-f for f in held])
+            self.model.slider_base[:] = self.sliders.base
         self.stop_reason = ''
 
     @property
@@ -382,7 +410,11 @@ class Plant:
         j = np.arange(per * first, per * last + 1)
         x = self._distance(j)
         road_x = self.road.distance_m
-        u = [np.interp(x, road_x, self.road.elevation_m[:, i]).tolist() for i in (0, 1)]
+        if self.crossfall_m[0]:
+            u = [(np.interp(x, road_x, self.road.elevation_m[:, i]) + self.crossfall_m[i]
+                  ).tolist() for i in (0, 1)]
+        else:
+            u = [np.interp(x, road_x, self.road.elevation_m[:, i]).tolist() for i in (0, 1)]
         # Road rate at the samples (outputs): v * slope of the segment holding x (point rate).
         xs = x[::per]
         seg = np.clip(np.searchsorted(road_x, xs, side='right') - 1, 0, len(road_x) - 2)
@@ -436,10 +468,23 @@ class Plant:
         if k + 1 > self._chunk_last:
             self._prepare(k)
         base = 2 * self.substeps * (k - self._chunk_first)
-        self._state = _rk4_sample(self._accelerations, self._state, self._inputs, base,
-                                  self.substeps, self.step_s, self._g1, self._g2)
+        if self.sliders is None:
+            self._state = _rk4_sample(self._accelerations, self._state, self._inputs, base,
+                                      self.substeps, self.step_s, self._g1, self._g2)
+        else:       # one RK4 step at a time, the sliders advanced after each
+            for n in range(self.substeps):
+                self._state = _rk4_sample(self._accelerations, self._state, self._inputs,
+                                          base + 2 * n, 1, self.step_s, self._g1, self._g2)
+                self.sliders.advance(self._extensions(self._state))
+                self.model.slider_base[:] = self.sliders.base
         self._k = k + 1
         return self._row(k + 1)
+
+    def _extensions(self, state) -> tuple[float, float]:
+        """q_1, q_2 (m) of a state (MODEL.md's kinematics)."""
+        zs, ph, z1, z2 = state[:4]
+        sp = self.model._s * math.sin(ph)
+        return zs + sp - z1, zs - sp - z2
 
 
 def _rk4_sample(acc, state, inputs, base, substeps, h, g1, g2):
@@ -527,7 +572,8 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
              lateral_acceleration: float | Callable[[float], float] | None = None,
              substeps: int | None = None, start_m: float | None = None,
              tire_envelope_m: float = 0.0, speed_profile: tuple | None = None,
-             springs: SpringOptions | None = None) -> Trajectory:
+             springs: SpringOptions | None = None, friction_start: float = 0.0,
+             crossfall_rad: float = 0.0) -> Trajectory:
     """Drive ``duration_s`` seconds (or to the end of the road) and return every sample.
 
     Parameters are those of :class:`Plant`, plus ``duration_s`` (s, >= 0). The trajectory
@@ -541,7 +587,7 @@ def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
     plant = Plant(vehicle, road, speed_mps=speed_mps, rate_hz=rate_hz, substeps=substeps,
                   lateral_acceleration=lateral_acceleration, start_m=start_m,
                   tire_envelope_m=tire_envelope_m, speed_profile=speed_profile,
-                  springs=springs)
+                  springs=springs, friction_start=friction_start, crossfall_rad=crossfall_rad)
     wanted = int(math.floor(duration_s * plant.rate_hz + 1e-9)) + 1
     rows = []
     for _ in range(wanted):

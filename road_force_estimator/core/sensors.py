@@ -20,6 +20,11 @@ Stamp jitter (``simulator.stamp_jitter`` j): the samples stay at their true time
 stamps move by ``j (2 r - 1)``, r uniform in [0, 1) from ``default_rng([seed, 1])`` (a stream
 of its own: the noise does not change with it), one per sample (:meth:`SensorModel.
 stamp_offsets_s`, :meth:`SensorModel.stamp_sampler`).
+
+Options of issue 30, off by default (the readings are then those above, bit for bit): the
+roll sensor's physics (:mod:`.roll_sensors`: a pendulum reading ``phi + a_y / g``, a gyro's
+drift) on the true roll before the lag, and the sensor faults (:mod:`.sensor_faults`:
+spikes, a stuck sensor, a drift) on the readings last of all.
 """
 from __future__ import annotations
 
@@ -30,6 +35,8 @@ from typing import Callable
 import numpy as np
 
 from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
+from road_force_estimator.core.roll_sensors import RollSensor
+from road_force_estimator.core.sensor_faults import FaultPlan, parse_faults
 
 __all__ = ['SensorModel', 'lag_step', 'lag_coefficients']
 
@@ -66,6 +73,10 @@ class SensorModel:
         Offsets b (m, m, rad).
     stamp_jitter_s : float
         Half-width j of the uniform stamp jitter (s), >= 0.
+    roll_sensor : RollSensor, optional
+        The roll sensor's physics (None: ideal).
+    faults : FaultPlan, optional
+        Sensor faults on the channels (q_1, q_2, phi) (None: none).
     """
 
     deflection_std_m: float = 0.0
@@ -79,6 +90,8 @@ class SensorModel:
     scale_error: tuple = (0.0, 0.0, 0.0)
     offset: tuple = (0.0, 0.0, 0.0)
     stamp_jitter_s: float = 0.0
+    roll_sensor: RollSensor | None = None
+    faults: FaultPlan | None = None
 
     def __post_init__(self) -> None:
         for name, size in (('time_constant_s', 2), ('scale_error', 3), ('offset', 3)):
@@ -108,18 +121,32 @@ class SensorModel:
 
     @classmethod
     def from_simulator(cls, sim: SimulatorParameters,
-                       vehicle: VehicleParameters | None = None) -> SensorModel:
+                       vehicle: VehicleParameters | None = None,
+                       channels: tuple[str, str, str] | None = None) -> SensorModel:
         """Noise and seed of ``simulator.noise.*`` and ``simulator.seed`` (no quantisation),
         scale, offset and stamp jitter of ``simulator.*``; with ``vehicle`` (the truth), the
-        lag and the deflection reference (:attr:`.VehicleParameters.deflection_offset_m`)."""
+        lag and the deflection reference (:attr:`.VehicleParameters.deflection_offset_m`);
+        the roll sensor's physics and the faults of ``simulator.roll_sensor`` and
+        ``simulator.sensor_faults``, whose channels are the joint names ``channels`` of
+        (q_1, q_2, phi) (the contract's: :data:`.interfaces.DEFLECTION_JOINTS`)."""
         tau = (0.0, 0.0) if vehicle is None else vehicle.sensor_time_constant_s
         zero = (0.0, 0.0) if vehicle is None else vehicle.deflection_offset_m
+        roll = RollSensor.from_simulator(sim, channel=0)
+        faults = None
+        if sim.sensor_faults.strip():
+            if channels is None:
+                raise ValueError('simulator.sensor_faults: the sensor model needs the channel '
+                                 'names')
+            faults = FaultPlan(parse_faults(sim.sensor_faults, channels), channels, sim.rate_hz,
+                               sim.duration_s, sim.seed)
         return cls(deflection_std_m=sim.noise_deflection_m, roll_std_rad=sim.noise_roll_rad,
                    seed=sim.seed, deflection_offset_m=zero, time_constant_s=tau,
                    rate_hz=sim.rate_hz,
                    scale_error=(*sim.sensor_scale_error_deflection, sim.sensor_scale_error_roll),
                    offset=(*sim.sensor_offset_deflection_m, sim.sensor_offset_roll_rad),
-                   stamp_jitter_s=sim.stamp_jitter_s)
+                   stamp_jitter_s=sim.stamp_jitter_s,
+                   roll_sensor=None if roll.ideal else roll,
+                   faults=faults if faults is not None and faults.active else None)
 
     @property
     def lagged(self) -> bool:
@@ -159,8 +186,8 @@ class SensorModel:
 
         return offset
 
-    def measure(self, q_m, roll_rad) -> tuple[np.ndarray, np.ndarray]:
-        """Measured channels for a whole trajectory.
+    def measure(self, q_m, roll_rad, lateral_accel_mps2=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Measured channels for a whole trajectory (sample k at ``k / rate_hz``).
 
         Parameters
         ----------
@@ -168,6 +195,8 @@ class SensorModel:
             True suspension extensions (m).
         roll_rad : array_like, shape (n,)
             True roll angle (rad).
+        lateral_accel_mps2 : float or array_like, shape (n,)
+            a_y (m/s^2): what a pendulum roll sensor also reads.
 
         Returns
         -------
@@ -180,9 +209,16 @@ class SensorModel:
             raise ValueError(f'q_m must have shape (n, 2) and roll_rad (n,), got {q.shape} and '
                              f'{phi.shape}')
         noise = np.random.default_rng(self.seed).standard_normal((q.shape[0], 3))
+        if self.roll_sensor is not None:
+            phi = self.roll_sensor.read(phi, np.arange(phi.size) / self.rate_hz,
+                                        np.broadcast_to(lateral_accel_mps2, phi.shape))
         if self.lagged or self.distorted:
             q, phi = self._distort(q, phi)
-        return self._apply(q, phi, noise)
+        q_meas, roll_meas = self._apply(q, phi, noise)
+        if self.faults is None:
+            return q_meas, roll_meas
+        y = self.faults.hold(self.faults.apply(np.column_stack([q_meas, roll_meas])))
+        return y[:, :2].copy(), y[:, 2].copy()
 
     def _distort(self, q: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Lag, scale and offset of whole channels (the per-sample recursion, sample by
@@ -220,9 +256,12 @@ class SensorModel:
         Returns
         -------
         callable
-            ``f(q_m (2,), roll_rad) -> (q_meas (2,) ndarray, roll_meas float)``.
+            ``f(q_m (2,), roll_rad[, a_y]) -> (q_meas (2,) ndarray, roll_meas float)``.
         """
         rng = np.random.default_rng(self.seed)
+        roll_read = None if self.roll_sensor is None else self.roll_sensor.sampler()
+        faults = None if self.faults is None else self.faults.sampler()
+        count = [0]
         block = np.empty((0, 3))
         index = 0
         lags = self._lags()
@@ -242,8 +281,13 @@ class SensorModel:
                 out.append(scale[ch] * m + self.offset[ch])
             return np.array(out[:2]), np.float64(out[2])
 
-        def measure_one(q_m, roll_rad):
+        def measure_one(q_m, roll_rad, lateral_accel_mps2=0.0):
             nonlocal block, index
+            k = count[0]
+            count[0] = k + 1
+            if roll_read is not None:
+                roll_rad = roll_read(float(roll_rad), k / self.rate_hz,
+                                     float(lateral_accel_mps2))
             if distorted:
                 q_m, roll_rad = distort(q_m, roll_rad)
             if index >= block.shape[0]:
@@ -253,6 +297,9 @@ class SensorModel:
             index += 1
             q_meas, roll_meas = self._apply(np.asarray(q_m, dtype=np.float64),
                                             np.float64(roll_rad), noise)
+            if faults is not None:
+                y = faults(k, [float(q_meas[0]), float(q_meas[1]), float(roll_meas)])
+                return np.array(y[:2]), y[2]
             return q_meas, float(roll_meas)
 
         return measure_one

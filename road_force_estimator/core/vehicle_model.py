@@ -33,13 +33,15 @@ from typing import Callable
 
 import numpy as np
 
+from road_force_estimator.core.friction import FrictionLaw, stick_force, tanh_force, tanh_forces
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 
 __all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode', 'SpringOptions',
            'FRICTION_VELOCITY_MPS', 'friction_force']
 
-#: Smoothing velocity v_f (m/s) of the leaf-spring friction ``-F_f tanh(dq / v_f)``: a fixed
-#: constant (plant and observer alike), small against the suspension rates on a road
+#: Smoothing velocity v_f (m/s) of the leaf-spring friction ``-F_f tanh(dq / v_f)``: the
+#: default of ``vehicle.leaf_spring_friction_velocity`` (the plant takes the parameter; the
+#: observer's model still takes this default), small against the suspension rates on a road
 #: (~0.1 m/s RMS on ISO class C at 20 m/s), so the force is Coulomb-like.
 FRICTION_VELOCITY_MPS = 0.01
 
@@ -186,6 +188,18 @@ class VehicleModel:
         self._ct = np.array(v.tire_damping_nspm, dtype=np.float64)
         self._fc = np.array(self.static_load_n, dtype=np.float64)
         self._ff = tuple(float(f) for f in v.leaf_spring_friction_n)
+        #: the friction law (:mod:`.friction`): tanh with v_f, or the stick element
+        self.friction = FrictionLaw(v.leaf_spring_friction_model,
+                                    v.leaf_spring_friction_velocity_mps,
+                                    v.leaf_spring_friction_stiffness_ratio)
+        self._vf = self.friction.velocity_mps
+        #: True with stick friction on a spring: the per-sample closures read the sliders'
+        #: bases from :attr:`slider_base` ([left, right], N), which the plant advances
+        self.sticks = self.friction.sticks and any(f > 0.0 for f in self._ff)
+        self.slider_base = [0.0, 0.0]
+        #: k_f of each side's stick element (N/m)
+        self.stick_stiffness_npm = tuple(self.friction.stiffness_ratio * float(k)
+                                         for k in self._k)
         self.springs = springs if springs is not None else SpringOptions()
         #: True when friction or nonlinear springs act (the general per-sample closures).
         self.nonlinear_suspension = self.springs.active or any(f > 0.0 for f in self._ff)
@@ -286,7 +300,7 @@ class VehicleModel:
     def _general_accelerations(self) -> Callable[..., tuple[float, float, float, float]]:
         """:meth:`make_accelerations` with friction and nonlinear springs (the arithmetic of
         :meth:`_general_outputs`; with linear springs the spring force stays inline)."""
-        if self.springs.active:
+        if self.springs.active or self.sticks:
             outputs = self._general_outputs()
 
             def general(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
@@ -297,8 +311,8 @@ class VehicleModel:
          fc2) = self._scalars()
         ff1, ff2 = self._ff
         floor1, floor2 = -fc1, -fc2
-        sin, cos, tanh = math.sin, math.cos, math.tanh
-        inv_vf = 1.0 / FRICTION_VELOCITY_MPS
+        sin, cos = math.sin, math.cos
+        inv_vf = 1.0 / self._vf
 
         def friction(zs, ph, z1, z2, vs, vp, v1, v2, u1, u2, du1, du2, ay):
             sn = sin(ph)
@@ -307,8 +321,9 @@ class VehicleModel:
             w = s * cp * vp
             dq1 = vs + w - v1
             dq2 = vs - w - v2
-            fb1 = -k1 * (zs + sp - z1) - c1 * dq1 - ff1 * tanh(dq1 * inv_vf)
-            fb2 = -k2 * (zs - sp - z2) - c2 * dq2 - ff2 * tanh(dq2 * inv_vf)
+            # the tanh law of .friction (a + tanh_force(..) == a - F_f tanh(..), bit for bit)
+            fb1 = -k1 * (zs + sp - z1) - c1 * dq1 + tanh_force(ff1, dq1, inv_vf)
+            fb2 = -k2 * (zs - sp - z2) - c2 * dq2 + tanh_force(ff2, dq2, inv_vf)
             f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
             if f1 < floor1:
                 f1 = floor1
@@ -323,7 +338,8 @@ class VehicleModel:
         return friction
 
     def _general_outputs(self) -> Callable[..., tuple[float, ...]]:
-        """:meth:`make_outputs` with the leaf-spring friction ``-F_f tanh(dq / v_f)`` and the
+        """:meth:`make_outputs` with the leaf-spring friction (``-F_f tanh(dq / v_f)``, or the
+        stick element of :mod:`.friction` with the bases of :attr:`slider_base`) and the
         nonlinear springs of :class:`SpringOptions` in the suspension forces."""
         (s, inv_m, inv_ix, mh, mgh, k1, k2, c1, c2, kt1, kt2, ct1, ct2, inv_m1, inv_m2, fc1,
          fc2) = self._scalars()
@@ -331,8 +347,16 @@ class VehicleModel:
         sp_ = self.springs
         prog, clear, kb = (sp_.progression_per_m, sp_.bump_stop_clearance_m,
                            sp_.bump_stop_stiffness_npm)
-        sin, cos, tanh = math.sin, math.cos, math.tanh
-        inv_vf = 1.0 / FRICTION_VELOCITY_MPS
+        sin, cos = math.sin, math.cos
+        inv_vf = 1.0 / self._vf
+        base = self.slider_base
+        kf1, kf2 = self.stick_stiffness_npm
+        if self.sticks:
+            def leaf(ff, dq, q, side):
+                return stick_force(base[side], kf1 if side == 0 else kf2, q, ff)
+        else:
+            def leaf(ff, dq, q, side):
+                return tanh_force(ff, dq, inv_vf)
 
         def spring(k, q):
             f = -k * q
@@ -349,8 +373,8 @@ class VehicleModel:
             w = s * cp * vp
             q1, q2 = zs + sp - z1, zs - sp - z2
             dq1, dq2 = vs + w - v1, vs - w - v2
-            fb1 = spring(k1, q1) - c1 * dq1 - ff1 * tanh(dq1 * inv_vf)
-            fb2 = spring(k2, q2) - c2 * dq2 - ff2 * tanh(dq2 * inv_vf)
+            fb1 = spring(k1, q1) - c1 * dq1 + leaf(ff1, dq1, q1, 0)
+            fb2 = spring(k2, q2) - c2 * dq2 + leaf(ff2, dq2, q2, 1)
             f1 = kt1 * (u1 - z1) + ct1 * (du1 - v1)
             if f1 < -fc1:
                 f1 = -fc1
@@ -366,7 +390,7 @@ class VehicleModel:
         return outputs
 
     def evaluate(self, state, road_m, road_rate_mps=(0.0, 0.0),
-                 lateral_accel_mps2=0.0) -> ModelOutputs:
+                 lateral_accel_mps2=0.0, slider_force_n=(0.0, 0.0)) -> ModelOutputs:
         """Kinematics, forces and accelerations for state(s) and input(s).
 
         Parameters
@@ -379,6 +403,8 @@ class VehicleModel:
             du_i/dt (m/s); only matters with tire damping.
         lateral_accel_mps2 : float or array_like, shape (...)
             a_y (m/s^2, > 0 to the left).
+        slider_force_n : array_like, shape (..., 2)
+            Stick friction only: the elements' forces on the body (N, > 0 upward).
         """
         x = np.asarray(state, dtype=np.float64)
         u = np.asarray(road_m, dtype=np.float64)
@@ -397,8 +423,11 @@ class VehicleModel:
             sp = self.springs
             comp = np.maximum(-q, 0.0)
             fb = (fb + self._k * sp.progression_per_m * q * q * (q < 0.0)
-                  + sp.bump_stop_stiffness_npm * np.maximum(comp - sp.bump_stop_clearance_m, 0.0)
-                  - np.array(self._ff) * np.tanh(dq / FRICTION_VELOCITY_MPS))
+                  + sp.bump_stop_stiffness_npm * np.maximum(comp - sp.bump_stop_clearance_m, 0.0))
+            if self.sticks:
+                fb = fb + np.asarray(slider_force_n, dtype=np.float64)
+            else:       # a - F_f tanh(dq / v_f): the array form of .friction, bit for bit
+                fb = fb + tanh_forces(self._ff, dq, self._vf)
         df_free = self._kt * (u - zu) + self._ct * (du - vu)
         lift = df_free < -self._fc
         df = np.maximum(df_free, -self._fc)
@@ -421,7 +450,8 @@ class VehicleModel:
                               axis=-1)
 
     def equilibrium(self, road_m, road_rate_mps=(0.0, 0.0),
-                    lateral_accel_mps2: float = 0.0) -> np.ndarray:
+                    lateral_accel_mps2: float = 0.0,
+                    slider_force_n: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """The state at rest on the road (quasi-static), shape (8,).
 
         Positions: the static equilibrium under a constant ``a_y`` on a road held at
@@ -431,7 +461,9 @@ class VehicleModel:
         Newton's method (the gravity moment couples them; equal sides, small angles:
         ``phi = M h a_y / (2 k_e s^2 - M g h)`` on a level road, k_e the suspension and the
         tire in series). Rates: the whole axle follows the road's rate (dz_ui = du_i,
-        dq_i = 0), so that no spring or damper force acts at the start.
+        dq_i = 0), so that no spring or damper force acts at the start. ``slider_force_n``:
+        stick friction holding forces f_0,i on the body (N, > 0 upward) at the start: the
+        springs carry that much less, ``q_i = -(F_bi - f_0,i) / k_i``.
 
         Raises
         ------
@@ -443,7 +475,11 @@ class VehicleModel:
         du1, du2 = (float(v) for v in road_rate_mps)
         ay = float(lateral_accel_mps2)
         s = self._s
-        phi = _roll_equilibrium(s, self._m * self._h, ay, u1 - u2,
+        held = tuple(float(f) for f in slider_force_n)
+        du = u1 - u2
+        if held != (0.0, 0.0):  # the springs' share of F_bi: the roll sees their offsets
+            du = du + held[0] / float(self._k[0]) - held[1] / float(self._k[1])
+        phi = _roll_equilibrium(s, self._m * self._h, ay, du,
                                 float(np.sum(1.0 / self._k) + np.sum(1.0 / self._kt)))
         fb1 = -self._m * self._h * (ay + GRAVITY_MPS2 * math.tan(phi)) / (2.0 * s)
         fb = np.array([fb1, -fb1])
@@ -454,7 +490,7 @@ class VehicleModel:
             limit = 2.0 * s * fc / (self._m * self._h) - GRAVITY_MPS2 * math.tan(tilt)
             raise ValueError(f'lateral_accel_mps2 = {ay:g} at the start exceeds the rollover '
                              f'limit {limit:.3g} m/s^2 of this vehicle: no equilibrium')
-        q = -fb / self._k
+        q = -fb / self._k if held == (0.0, 0.0) else -(fb - np.array(held)) / self._k
         zu = np.array([u1, u2]) - fb / self._kt
         a1, a2 = q + zu                     # z_s +- s sin(phi)
         zs = 0.5 * (a1 + a2)
@@ -536,13 +572,17 @@ class VehicleModel:
 
 
 def _stiffest(model: VehicleModel) -> VehicleModel:
-    """The linear model at the steepest friction slope (a damping of ``F_f / v_f`` more) and
-    the spring stiffness at 10 cm of compression (with the bump stop's)."""
+    """The linear model at the steepest friction slope (a damping of ``F_f / v_f`` more; stick
+    friction: its stiffness k_f more) and the spring stiffness at 10 cm of compression (with
+    the bump stop's)."""
     v, sp = model.vehicle, model.springs
     out = VehicleModel(v)
     bump = sp.bump_stop_stiffness_npm
     out._k = model._k * (1.0 + 2.0 * 0.1 * sp.progression_per_m) + bump
-    out._c = model._c + np.array(model._ff) / FRICTION_VELOCITY_MPS
+    if model.sticks:        # the stick elements' springs k_f in parallel while they hold
+        out._k = out._k + np.array(model.stick_stiffness_npm)
+    else:
+        out._c = model._c + np.array(model._ff) / model._vf
     out.nonlinear_suspension = False
     return out
 

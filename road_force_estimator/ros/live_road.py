@@ -35,9 +35,12 @@ QUIET_S = 0.1
 class LiveRoad:
     """The road of a plant_simulator as it arrives on the LPA topics."""
 
-    def __init__(self, node, vehicle, sim, road_timeout_s: float):
+    def __init__(self, node, vehicle, sim, road_timeout_s: float, make_plant=None):
         self.node = node
         self.vehicle, self.sim = vehicle, sim
+        #: ``make_plant(profile)``: the plant on the profile's start (default: the front
+        #: axle's :class:`.Plant`; an articulated drive's plant, whose axles all need road)
+        self.make_plant = make_plant
         self.road_timeout_s = road_timeout_s
         self.stream = RoadStream(f'topic {LPA[0]}, {LPA[1]}')
         self.last_point = time.monotonic()
@@ -76,9 +79,9 @@ class LiveRoad:
                               f'usable points: too short for a drive')
             return None
         try:
-            plant = Plant(self.vehicle, profile, speed_mps=self.sim.speed_mps,
-                          rate_hz=self.sim.rate_hz, tire_envelope_m=envelope,
-                          springs=SpringOptions.from_simulator(self.sim))
+            plant = self.make_plant(profile) if self.make_plant is not None else Plant(
+                self.vehicle, profile, speed_mps=self.sim.speed_mps, rate_hz=self.sim.rate_hz,
+                tire_envelope_m=envelope, springs=SpringOptions.from_simulator(self.sim))
         except ValueError as exc:
             if stream.closed:
                 self.ended = f'the profile on {LPA[0]}, {LPA[1]} cannot be driven: {exc}'

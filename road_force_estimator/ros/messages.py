@@ -77,6 +77,16 @@ def deflections_msg(stamp_ns: int, q_m: Sequence[float], roll_rad: float) -> Joi
     return msg
 
 
+def front_axle_joints(names) -> tuple[str, str, str]:
+    """The joints read as (q_1, q_2, phi): the contract's, or an articulated drive's front
+    axle and ``tractor_roll`` (:func:`.bagio.vehicle_layout.front_axle_joints`: the first axle
+    of the message)."""
+    if set(DEFLECTION_JOINTS) <= set(names):
+        return DEFLECTION_JOINTS
+    from road_force_estimator.bagio.vehicle_layout import front_axle_joints as layout
+    return layout({}, names)[0]
+
+
 def read_deflections(msg: JointState) -> tuple[int, tuple[float, float], float]:
     """``(stamp_ns, (q_1, q_2) (m), phi (rad))`` from a JointState, mapped by joint name.
 
@@ -85,7 +95,9 @@ def read_deflections(msg: JointState) -> tuple[int, tuple[float, float], float]:
     MessageRejected
         ``reason`` 'length' (position differs in length from name, or a velocity/effort array
         that is neither empty nor as long), 'names' (a required joint missing, or a name
-        repeated), 'nonfinite' (NaN or infinite value).
+        repeated), 'nonfinite' (NaN or infinite value). An articulated truck's message
+        (``<axle>_left_suspension``, ..., ``tractor_roll``) is read as its front axle's
+        (:func:`front_axle_joints`).
     """
     names = list(msg.name)
     n = len(names)
@@ -93,11 +105,12 @@ def read_deflections(msg: JointState) -> tuple[int, tuple[float, float], float]:
         raise MessageRejected('length', f'JointState arrays differ in length from name ({n}): '
                                         f'position {len(msg.position)}, velocity '
                                         f'{len(msg.velocity)}, effort {len(msg.effort)}')
-    if len(set(names)) != n or not set(DEFLECTION_JOINTS) <= set(names):
+    joints = front_axle_joints(names)
+    if len(set(names)) != n or not set(joints) <= set(names):
         raise MessageRejected('names', f'JointState names {names} must include each of '
                                        f'{list(DEFLECTION_JOINTS)} once')
     by_name = dict(zip(names, msg.position))
-    q1, q2, phi = (float(by_name[j]) for j in DEFLECTION_JOINTS)
+    q1, q2, phi = (float(by_name[j]) for j in joints)
     if not (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(phi)):
         raise MessageRejected('nonfinite', f'JointState holds a non-finite value: '
                                            f'q = ({q1}, {q2}), phi = {phi}')

@@ -60,6 +60,10 @@ MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a bur
 
 
 def build(values):
+    if values.get('vehicle.model') == 'articulated':
+        raise ValueError("vehicle.model = 'articulated': the observer models the front axle only "
+                         '(the articulated observer is not built yet); with front-axle '
+                         "parameters it estimates an articulated truck's front axle")
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
 
 
@@ -111,6 +115,7 @@ class Observer(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
         self.wire = Wire()
+        self.wire.on_note = self.get_logger().warning
         self.create_subscription(JointState, api.DEFLECTIONS, self.deflections_callback,
                                  sensor_qos(1000), raw=True)
         self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10),

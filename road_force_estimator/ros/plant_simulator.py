@@ -36,11 +36,17 @@ from road_force_estimator.core.gnss import FixNoise, route
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.ros.messages import (
     diagnostic_status, ns_to_stamp, reliable_qos, sensor_qos)
-from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
+from road_force_estimator.core.articulated_parameters import axle_specs, check_model_names
+from road_force_estimator.core.articulated_plant import RowLayout
+from road_force_estimator.core.articulated_setup import ArticulatedDrive
+from road_force_estimator.core.lateral_profile import parse_lateral_profile
+from road_force_estimator.core.parameters import (
+    ARTICULATED_PARAMETERS, SimulatorParameters, VehicleParameters, validate_parameter)
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
                                                      speed_knots)
 from road_force_estimator.bagio import road_from_source
+from road_force_estimator.ros.articulated_outputs import ArticulatedOutputs
 from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
@@ -50,7 +56,11 @@ from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.core.vehicle_model import SpringOptions
 
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
-SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
+#: vehicle.model: articulated: its names beside the shared ones (the per-axle names are
+#: declared from vehicle.axles, :func:`articulated_specs`)
+ARTICULATED = tuple(s for s in ARTICULATED_PARAMETERS
+                    if s.name.startswith(('vehicle.', 'simulator.')))
+SPECS = specs_with_prefix('vehicle.', 'simulator.') + ARTICULATED + (local_spec(
     'realtime_factor', 'double', 1.0, '',
     'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0), local_spec(
     'start_timeout', 'double', 5.0, 's',
@@ -64,9 +74,41 @@ SPECS = specs_with_prefix('vehicle.', 'simulator.') + (local_spec(
 START_GRACE_S = 0.5
 
 
-def build(values):
-    return (VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values),
+def build(values, given=()):
+    """The node's configuration: ``(vehicle, sim, realtime_factor, start_timeout,
+    road_timeout)``; the vehicle a :class:`.VehicleParameters`, or with ``vehicle.model:
+    articulated`` an :class:`.ArticulatedDrive`. ``given``: the names set at start (a name of
+    the other vehicle model is refused)."""
+    if values.get('vehicle.model') == 'articulated':
+        vehicle = ArticulatedDrive.from_values(values, given)
+    else:
+        check_model_names(given, values)
+        vehicle = VehicleParameters.from_parameters(values)
+    return (vehicle, SimulatorParameters.from_parameters(values),
             values['realtime_factor'], values['start_timeout'], values['road_timeout'])
+
+
+def articulated_specs(node) -> tuple:
+    """The per-axle specs of an articulated vehicle given at start (``vehicle.model:
+    articulated`` among the start-up values: the axles of ``vehicle.axles``, defaults from
+    the whole-vehicle values given), else none.
+
+    Raises
+    ------
+    ParameterError
+        A name the vehicle does not have (one line).
+    """
+    overrides = {n: p.value for n, p in (getattr(node, '_parameter_overrides', None)
+                                         or {}).items()}
+    if overrides.get('vehicle.model') != 'articulated':
+        return ()
+    try:
+        values = {n: validate_parameter(n, v) for n, v in overrides.items()
+                  if n.startswith(('vehicle.', 'simulator.'))}
+        check_model_names(values, values)
+        return axle_specs(values)
+    except ValueError as exc:
+        raise ParameterError(f'plant_simulator: refused {exc}') from None
 
 
 class PlantSimulator(Node):
@@ -74,30 +116,36 @@ class PlantSimulator(Node):
 
     def __init__(self, **kwargs):
         super().__init__('plant_simulator', **kwargs)
-        self.params = ParameterGuard(self, SPECS, build, read_only=True)
+        given = set(getattr(self, '_parameter_overrides', None) or {})
+        self.params = ParameterGuard(self, SPECS + articulated_specs(self),
+                                     lambda values: build(values, given), read_only=True)
         vehicle, self.sim, self.realtime_factor, self.start_timeout_s, self.road_timeout_s = \
             self.params.config
         sim = self.sim
         self.live = self.road = self.plant = None
+        #: vehicle.model: articulated: the drive (:class:`.ArticulatedDrive`), else None
+        self.articulated = vehicle if isinstance(vehicle, ArticulatedDrive) else None
         self.last_index = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9))
         if sim.road.strip().lower() == TOPIC_ROAD:  # the road arrives on /lpa/*: live_road
-            self.live = LiveRoad(self, vehicle, sim, self.road_timeout_s)
+            self.live = LiveRoad(self, vehicle, sim, self.road_timeout_s,
+                                 make_plant=self.articulated.plant if self.articulated
+                                 else lambda profile: self.front_axle_plant(vehicle, profile))
         else:
             self.build_plant(vehicle, sim)
             self.last_index = min(self.last_index, self.plant.last_sample_index)
         self.wait_since = None         # when the drive began waiting for the live road
-        sensors = SensorModel.from_simulator(sim, vehicle)
-        self.measure = sensors.sampler()
-        self.stamp_offset = sensors.stamp_sampler()     # stamp jitter (s), simulator.*
-        self.half_track_m = vehicle.half_track_m
         self.period_ns = Fraction(10**9) / Fraction(sim.rate_hz)
-        self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,
-                                                     sensor_qos(100))
-        self.twist_pub = self.create_publisher(TwistStamped, api.TWIST, sensor_qos(100))
-        self.reliable = [self.create_publisher(WrenchStamped, topic, reliable_qos())
-                         for topic in api.TRUE_LOAD]
-        self.reliable += [self.create_publisher(PointStamped, topic, reliable_qos())
-                          for topic in api.TRUE_ROAD]
+        self.outputs = None
+        if self.articulated is not None:    # its sensors and topics: .articulated_outputs
+            model = self.articulated.model
+            self.outputs = ArticulatedOutputs(self, self.articulated,
+                                              RowLayout(model.n_dof, model.n_axles))
+            self.deflections_pub, self.twist_pub = (self.outputs.deflections_pub,
+                                                    self.outputs.twist_pub)
+            self.reliable = self.outputs.reliable
+            self.stamp_offset = self.outputs.stamp_offset
+        else:
+            self.front_axle_outputs(vehicle, sim)
         self.fix_pub = self.create_publisher(NavSatFix, api.FIX, sensor_qos(10)) if (
             sim.gnss_rate_hz > 0.0) else None
         self.odometer = 1.0 + sim.speed_scale_error   # the twist reads (1 + e) v
@@ -117,8 +165,43 @@ class PlantSimulator(Node):
         self.timer = self.create_timer(period_s, self.timer_callback)
         self.diagnostics_timer = self.create_timer(1.0, self.diagnostics_callback)
 
+    def front_axle_outputs(self, vehicle, sim) -> None:
+        """The front axle's sensors and the publishers of its measurements and truth."""
+        sensors = SensorModel.from_simulator(sim, vehicle, channels=api.DEFLECTION_JOINTS)
+        self.measure = sensors.sampler()
+        self.pendulum = sensors.roll_sensor is not None  # a roll sensor that reads a_y too
+        self.stamp_offset = sensors.stamp_sampler()     # stamp jitter (s), simulator.*
+        self.half_track_m = vehicle.half_track_m
+        self.deflections_pub = self.create_publisher(JointState, api.DEFLECTIONS,
+                                                     sensor_qos(100))
+        self.twist_pub = self.create_publisher(TwistStamped, api.TWIST, sensor_qos(100))
+        self.reliable = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+                         for topic in api.TRUE_LOAD]
+        self.reliable += [self.create_publisher(PointStamped, topic, reliable_qos())
+                          for topic in api.TRUE_ROAD]
+
+    def front_axle_plant(self, vehicle, road) -> Plant:
+        """The front axle's plant on ``road`` with the drive's options."""
+        sim = self.sim
+        profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
+        return Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
+                     tire_envelope_m=sim.tire_envelope_length_m, speed_profile=profile,
+                     springs=SpringOptions.from_simulator(sim),
+                     lateral_acceleration=parse_lateral_profile(sim.lateral_profile),
+                     friction_start=sim.leaf_spring_friction_start,
+                     crossfall_rad=sim.road_crossfall_rad)
+
     def build_plant(self, vehicle, sim) -> None:
         """The road of ``simulator.road`` and the plant on it (refused: ParameterError)."""
+        if self.articulated is not None:
+            try:
+                self.road = road_from_source(sim.road, length_m=min(
+                    self.articulated.road_length_m, MAX_SYNTHETIC_LENGTH_M))
+                self.plant = self.articulated.plant(self.road)
+            except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
+                raise ParameterError(f'plant_simulator: refused simulator.road = '
+                                     f'{sim.road!r}: {exc}') from None
+            return
         try:
             profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
             travel = sim.speed_mps * sim.duration_s if profile is None else \
@@ -126,9 +209,7 @@ class PlantSimulator(Node):
             length = min(travel + 2.0 * sim.tire_envelope_length_m + 1.0,
                          MAX_SYNTHETIC_LENGTH_M)
             self.road = road_from_source(sim.road, length_m=length)
-            self.plant = Plant(vehicle, self.road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                               tire_envelope_m=sim.tire_envelope_length_m,
-                               speed_profile=profile, springs=SpringOptions.from_simulator(sim))
+            self.plant = self.front_axle_plant(vehicle, self.road)
         except Exception as exc:  # ValueError, OSError, BagReadError: any road refused
             raise ParameterError(f'plant_simulator: refused simulator.road = {sim.road!r}: '
                                  f'{exc}') from None
@@ -193,7 +274,21 @@ class PlantSimulator(Node):
         return False
 
     def publish(self, sample, stamp_ns: int) -> None:
-        q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
+        if self.outputs is not None:        # vehicle.model: articulated
+            jitter = self.stamp_offset()
+            if jitter:
+                stamp_ns += int(round(jitter * 1e9))
+            self.outputs.publish(sample, stamp_ns,
+                                 float(self.speed_at(sample.t_s) * self.odometer))
+            if self.fix_pub is not None and int(sample.t_s * self.sim.gnss_rate_hz) > \
+                    self.fix[0]:
+                self.publish_fix(sample.t_s, stamp_ns)
+            return
+        if self.pendulum:
+            q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad,
+                                             sample.lateral_accel_mps2)
+        else:
+            q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
         jitter = self.stamp_offset()
         if jitter:      # the sample at its true time, its stamp moved (simulator.stamp_jitter)
             stamp_ns += int(round(jitter * 1e9))

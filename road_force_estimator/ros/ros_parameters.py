@@ -38,7 +38,7 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from road_force_estimator.core.parameters import (
-    PARAMETERS, SPECS, ParameterSpec, check_spec)
+    PARAMETERS, SPECS, ParameterSpec, check_spec, spec_of)
 
 __all__ = [
     'ParameterError', 'NODE_LOCAL_NAMES', 'local_spec', 'specs_with_prefix', 'descriptor',
@@ -88,6 +88,11 @@ def refuse_unknown_names(node: Node, specs: Iterable[ParameterSpec]) -> None:
     node_specs = {s.name: s for s in specs}
     overrides = getattr(node, '_parameter_overrides', None) or {}
     unknown = sorted(n for n in overrides if not _known_name(n, node_specs))
+    other = [n for n in unknown if spec_of(n) is not None]   # the articulated model's names
+    if other and len(other) == len(unknown):
+        raise ParameterError(f'{node.get_name()}: refused {", ".join(other[:3])}'
+                             f'{", ..." if len(other) > 3 else ""}: parameters of '
+                             'vehicle.model: articulated, which this node does not model')
     if unknown:
         raise ParameterError(f'{node.get_name()}: refused {", ".join(unknown)}: no such '
                              'parameter (a typo?); the parameters are listed by --help')
@@ -187,7 +192,9 @@ def declare(node: Node, specs: Iterable[ParameterSpec], *,
     """Declare ``specs`` on ``node``; return ``{name: checked value}``.
 
     Values given at start-up (``-p``, ``--params-file``, ``parameter_overrides``) are checked
-    with :func:`check_value` before they are declared.
+    with :func:`check_value` before they are declared. A spec without a default (None) and
+    without a start-up value is declared unset (its value None: the node's build refuses it
+    by name).
 
     Raises
     ------
@@ -202,6 +209,11 @@ def declare(node: Node, specs: Iterable[ParameterSpec], *,
         value = spec.default
         if spec.name in overrides:
             value = overrides[spec.name].value
+        elif value is None:     # no default (an axle's value that must be given): unset
+            node.declare_parameter(spec.name, _TYPES[spec.kind], descriptor(
+                spec, read_only=read_only))
+            values[spec.name] = None
+            continue
         try:
             value = check_value(spec, value)
             declared = node.declare_parameter(

@@ -19,7 +19,8 @@ from sensor_msgs.msg import JointState
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.serde import CdrEncoder, CdrEncoderGroup, CdrReader, message_template
-from road_force_estimator.ros.messages import MessageRejected, read_deflections, read_twist
+from road_force_estimator.ros.messages import (
+    MessageRejected, front_axle_joints, read_deflections, read_twist)
 
 __all__ = ['Wire', 'OUTPUTS', 'SimulatorWire', 'deserialize']
 
@@ -67,6 +68,9 @@ class Wire:
             ['position', 'velocity'])
         self.outputs = CdrEncoderGroup([*self.loads, self.road, self.road, self.ltr,
                                         self.load_transfer, self.states])
+        #: called once with a line when an articulated truck's deflections are read as its
+        #: front axle's (the observer logs it); None: say nothing
+        self.on_note = None
 
     def read_deflections(self, data: bytes) -> tuple[int, tuple[float, float], float]:
         """:func:`.read_deflections` of the JointState in ``data``: read straight from the
@@ -75,7 +79,15 @@ class Wire:
         if fast is not None and math.isfinite(sum(fast[1])):
             stamp_ns, (q1, q2, phi) = fast
             return stamp_ns, (q1, q2), phi
-        return read_deflections(deserialize(data, JointState))
+        msg = deserialize(data, JointState)
+        if self.on_note is not None and api.TRACTOR_ROLL_JOINT in msg.name:
+            joints = front_axle_joints(list(msg.name))
+            if joints != api.DEFLECTION_JOINTS:
+                self.on_note(f"an articulated truck's deflections: the front axle estimated "
+                             f'from {", ".join(joints)} (the first axle of the message) with '
+                             'the front-axle model of the parameters')
+                self.on_note = None             # said once
+        return read_deflections(msg)
 
     def read_twist(self, data: bytes) -> tuple[int, float]:
         """:func:`.read_twist` of the TwistStamped in ``data`` (straight from the bytes, as

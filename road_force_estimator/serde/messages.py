@@ -12,6 +12,7 @@ import numpy as np
 from road_force_estimator.serde.cdr import TYPESTORE, ColumnRows, LazyColumns, ns_to_stamps
 from road_force_estimator.interfaces import (
     FLOAT64,
+    IMU_MSG,
     JOINT_STATE,
     NAVSATFIX,
     POINT,
@@ -22,7 +23,7 @@ from road_force_estimator.interfaces import (
 
 __all__ = [
     'DEFAULT_START_STAMP_NS', 'DEFAULT_TRACK_WIDTH_M', 'message_class', 'message_template',
-    'stamp_columns', 'points_rows', 'check_finite',
+    'stamp_columns', 'points_rows', 'check_finite', 'imu_template', 'IMU_PATHS',
 ]
 
 #: Default first stamp of a written bag: 2024-01-01T00:00:00Z (deterministic output).
@@ -46,9 +47,11 @@ def _vector3():
 
 
 def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = (),
-                     velocity: bool = False):
+                     velocity: bool = False, effort: bool = False):
     """A message of ``msgtype`` with zero numbers: frame ``frame_id``; for a JointState the
-    joint ``names``, positions and (``velocity``) velocities, no efforts."""
+    joint ``names``, positions and (``velocity``) velocities, no efforts; with ``effort``
+    efforts only (``/wheel_loads``: no positions or velocities). An Imu has its orientation
+    unknown (``orientation_covariance[0] = -1``, REP-145)."""
     if msgtype == POINT:
         point = message_class('geometry_msgs/msg/Point')(x=0.0, y=0.0, z=0.0)
         return message_class(POINT)(header=_header(frame_id), point=point)
@@ -62,6 +65,18 @@ def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = ()
         return message_class(FLOAT64)(data=0.0)
     if msgtype == VECTOR3_STAMPED:
         return message_class(VECTOR3_STAMPED)(header=_header(frame_id), vector=_vector3())
+    if msgtype == JOINT_STATE and effort:
+        return message_class(JOINT_STATE)(
+            header=_header(frame_id), name=list(names), position=np.zeros(0),
+            velocity=np.zeros(0), effort=np.zeros(len(names)))
+    if msgtype == IMU_MSG:
+        quaternion = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
+        unknown = np.zeros(9)
+        unknown[0] = -1.0
+        return message_class(IMU_MSG)(
+            header=_header(frame_id), orientation=quaternion, orientation_covariance=unknown,
+            angular_velocity=_vector3(), angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=_vector3(), linear_acceleration_covariance=np.zeros(9))
     if msgtype == JOINT_STATE:
         k = len(names)
         return message_class(JOINT_STATE)(
@@ -73,6 +88,20 @@ def message_template(msgtype: str, frame_id: str = '', names: Sequence[str] = ()
             header=_header(frame_id), status=status, latitude=0.0, longitude=0.0, altitude=0.0,
             position_covariance=np.zeros(9), position_covariance_type=0)
     raise ValueError(f'no template for {msgtype}')
+
+
+#: The IMU's numbers in a message's byte order: angular rates, then linear accelerations.
+IMU_PATHS = ('angular_velocity.x', 'angular_velocity.y', 'angular_velocity.z',
+             'linear_acceleration.x', 'linear_acceleration.y', 'linear_acceleration.z')
+
+
+def imu_template(frame_id: str, accel_std: float, rate_std: float):
+    """An Imu message with the noise variances on the covariances' diagonals (m/s^2, rad/s;
+    orientation unknown)."""
+    template = message_template(IMU_MSG, frame_id)
+    template.linear_acceleration_covariance[[0, 4, 8]] = float(accel_std) ** 2
+    template.angular_velocity_covariance[[0, 4, 8]] = float(rate_std) ** 2
+    return template
 
 
 def stamp_columns(stamps_ns: np.ndarray) -> dict[str, np.ndarray]:

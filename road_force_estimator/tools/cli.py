@@ -182,8 +182,16 @@ def load_estimator_parameters(path: str | None, node_names: Sequence[str],
     ValueError, OSError
         A bad or unreadable file, a bad override.
     """
+    from road_force_estimator.core.articulated_parameters import (
+        check_model_names, vehicle_model)
     from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
     values = parameter_values(path, node_names, overrides)
+    if vehicle_model(values) == 'articulated':
+        raise ValueError('vehicle.model: articulated: the estimator models the front axle only '
+                         '(the articulated observer is not built yet); give a front-axle '
+                         'parameter file (e.g. config/road_force_estimator.yaml): an articulated '
+                         "drive's front axle is then estimated from its own sensors")
+    check_model_names(values, values)
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
 
 

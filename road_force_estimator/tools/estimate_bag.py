@@ -174,6 +174,8 @@ class EstimateResult:
     written: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     drive: Any = None
+    #: what the reader took (an articulated drive: its front axle), one line each
+    notes: list[str] = field(default_factory=list)
 
 
 def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
@@ -220,11 +222,31 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     try:
         write = _writer(input_path, output, vehicle, observer, options, progress, stages)
         if not standalone:
-            return write(output)
+            return _whole_vehicle(write(output), input_path, output)
         with target.staged() as stage:
-            return write(stage)
+            return _whole_vehicle(write(stage), input_path, stage)
     finally:
         stages.close()
+
+
+def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path) -> EstimateResult:
+    """An articulated drive: the note of what was estimated, and the truth of every axle
+    in the report (:mod:`~.report.whole_vehicle`)."""
+    from road_force_estimator import bagio
+    from road_force_estimator.bagio.articulated_drive import read_articulated_truth
+    from road_force_estimator.bagio.vehicle_layout import front_axle_joints, is_articulated
+
+    custom = bagio.bag_custom_data(input_path)
+    if result.drive is not None and getattr(result.drive, 'notes', ()):
+        result.notes += list(result.drive.notes)
+    elif is_articulated(custom):
+        result.notes.append(front_axle_joints(custom, None)[1])
+    truth = read_articulated_truth(input_path) if is_articulated(custom) or result.notes \
+        else None
+    if truth is not None and len(truth.stamps_ns):
+        from road_force_estimator.report.whole_vehicle import append_to_report
+        append_to_report(folder / 'report', truth, result.summary)
+    return result
 
 
 def _writer(input_path: Path, output: Path, vehicle, observer, options: dict, progress: bool,
@@ -411,6 +433,8 @@ def _main(args: argparse.Namespace) -> int:
                            'command': cli.command_line(PROG)})
     for line in result.warnings:
         print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
+    for line in result.notes:
+        print(f'{PROG}: note: {line}', file=sys.stderr)
     for line in _headline(result, args.units):
         print(f'{PROG}: {line}')
     return 0

@@ -109,15 +109,27 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parameters_from(args: argparse.Namespace):
     """``(VehicleParameters, SimulatorParameters)``: defaults < params file < ``-p`` <
-    options."""
-    from road_force_estimator.core.parameters import (
-        SimulatorParameters, VehicleParameters, validate_parameter)
+    options (the front axle's; :func:`parameter_mapping` for any vehicle model)."""
+    return _front_parameters(parameter_mapping(args))
+
+
+def parameter_mapping(args: argparse.Namespace) -> dict:
+    """``{dotted name: value}`` of the names given: the params file, ``-p``, the options."""
+    from road_force_estimator.core.parameters import validate_parameter
     values = cli.parameter_values(args.params_file, ('plant_simulator', PROG),
                                   getattr(args, 'overrides', ()))
     for option, name in _OPTIONS.items():
         value = getattr(args, option)
         if value is not None:
             values[name] = validate_parameter(name, value)
+    return values
+
+
+def _front_parameters(values: dict):
+    """The front axle's dataclasses; a name of the articulated model is refused."""
+    from road_force_estimator.core.articulated_parameters import check_model_names
+    from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
+    check_model_names(values, values)
     return VehicleParameters.from_parameters(values), SimulatorParameters.from_parameters(values)
 
 
@@ -161,10 +173,13 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.core.speed_profile import read_speed_profile
     from road_force_estimator.core.vehicle_model import SpringOptions
 
+    from road_force_estimator.core.lateral_profile import parse_lateral_profile
+    from road_force_estimator.interfaces import DEFLECTION_JOINTS
+
     profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
     road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
                             + 2.0 * sim.tire_envelope_length_m + 1.0)
-    accel = None
+    accel = parse_lateral_profile(sim.lateral_profile)
     if lateral is not None:
         a_y, t_on = lateral
 
@@ -173,7 +188,9 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
 
     plant = Plant(vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                   lateral_acceleration=accel, tire_envelope_m=sim.tire_envelope_length_m,
-                  speed_profile=profile, springs=SpringOptions.from_simulator(sim))
+                  speed_profile=profile, springs=SpringOptions.from_simulator(sim),
+                  friction_start=sim.leaf_spring_friction_start,
+                  crossfall_rad=sim.road_crossfall_rad)
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
@@ -199,8 +216,12 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         wheel_load_n=np.array(cols['wheel_load_n']), road_m=np.array(cols['road_m']),
         lateral_accel_mps2=np.array(cols['lateral_accel_mps2']))
     traj.speed_mps = sim.speed_mps if profile is None else plant.speed_at(traj.t_s)  # twist
-    sensors = SensorModel.from_simulator(sim, vehicle)
-    q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
+    sensors = SensorModel.from_simulator(sim, vehicle, channels=DEFLECTION_JOINTS)
+    if sensors.roll_sensor is None:
+        q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad)
+    else:       # a pendulum reads a_y too
+        q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad, traj.lateral_accel_mps2)
+    traj.sensors = sensors
     fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
     _jitter_stamps(traj, sensors)
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
@@ -209,6 +230,39 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
         reason = (f'the road ends at {plant.road.end_m:g} m: drive cut to {done} of {requested} '
                   f'samples ({traj.t_s[-1]:g} s)')
     return traj, q_meas, roll_meas, fixes, road, reason
+
+
+def _main_articulated(args: argparse.Namespace, values: dict, lateral) -> int:
+    """``vehicle.model: articulated`` (:mod:`.articulated_simulation`)."""
+    from road_force_estimator.core.articulated_setup import ArticulatedDrive
+    from road_force_estimator.core.lateral_profile import LateralProfile
+    from road_force_estimator.tools import articulated_simulation as articulated
+
+    drive = ArticulatedDrive.from_values(
+        values, lateral=None if lateral is None else LateralProfile.step(*lateral))
+    sim = drive.sim
+    road_path = Path(sim.road).expanduser()
+    target = output_folder.BagOutput(
+        Path(args.output), PROG, force=args.force, owned=_written_here,
+        inputs=[road_path] if road_path.exists() else [])
+    target.check()
+    result = articulated.simulate(drive, route=_fixes, progress=not args.no_progress,
+                                  prog=PROG)
+    custom = articulated.custom_data(drive, result, PROG)
+    if lateral is not None:
+        custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
+    with target.staged() as bag:
+        count = articulated.write(bag, drive, result, custom, twist_speed=twist_speed,
+                                  ground_truth=not args.no_ground_truth)
+    t = result.trajectory.t_s
+    if result.reason:
+        print(f'{PROG}: {result.reason}', file=sys.stderr)
+    print(f'{PROG}: wrote {count} messages ({t.size} samples, {t[-1]:g} s, '
+          f'{result.trajectory.distance_m[-1] - result.trajectory.distance_m[0]:.1f} m at '
+          f'{_speed_text(sim)}, {len(drive.vehicle.axles)} axles, '
+          f'{drive.model.statics().gross_weight_kg / 1000:.2f} t) over '
+          f'{result.road.name or sim.road} to {args.output}', file=sys.stderr)
+    return 0
 
 
 def _jitter_stamps(traj, sensors) -> None:
@@ -254,8 +308,13 @@ def _main(args: argparse.Namespace) -> int:
     the one-line result."""
     from road_force_estimator import bagio
 
+    from road_force_estimator.core.articulated_parameters import vehicle_model
+
     lateral = _lateral(args.lateral_acceleration)
-    vehicle, sim = parameters_from(args)
+    values = parameter_mapping(args)
+    if vehicle_model(values) == 'articulated':
+        return _main_articulated(args, values, lateral)
+    vehicle, sim = _front_parameters(values)
     road_path = Path(sim.road).expanduser()
     target = output_folder.BagOutput(
         Path(args.output), PROG, force=args.force, owned=_written_here,
@@ -269,6 +328,8 @@ def _main(args: argparse.Namespace) -> int:
               'road_force_estimator.writer_command': PROG}
     if lateral is not None:
         custom['road_force_estimator.lateral_acceleration'] = args.lateral_acceleration
+    if traj.sensors.faults is not None:         # where the faults struck (a detector's truth)
+        custom['road_force_estimator.sensor_faults'] = json.dumps(traj.sensors.faults.truth())
     with target.staged() as bag:
         count = bagio.write_drive_bag(bag, traj, q_meas, roll_meas, fixes=fixes,
                                       speed_mps=twist_speed(traj.speed_mps, sim),

@@ -1,4 +1,4 @@
-"""CDR a column at a time (bagio.cdr): byte-exact against rosbags and rclpy, layouts,
+"""CDR a column at a time (serde.cdr): byte-exact against rosbags and rclpy, layouts,
 decoding of messages with other layouts or byte orders."""
 
 import numpy as np

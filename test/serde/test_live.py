@@ -1,4 +1,4 @@
-"""CDR a message at a time (bagio.live): byte-exact against rosbags, templates' layouts kept,
+"""CDR a message at a time (serde.live): byte-exact against rosbags, templates' layouts kept,
 any other layout refused by the reader."""
 import math
 import struct

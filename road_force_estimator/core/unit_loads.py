@@ -1,0 +1,92 @@
+"""The true load transfer of each unit of the combination (tractor, trailer, combination).
+
+Per unit, the left and right sums of its wheels' vertical loads, L and R (N), give
+``LTR = (R - L) / (R + L)`` (right minus left, MODEL.md step 8; each load ``>= 0``, the
+denominator floored at 1 % of the unit's static load), and the quasi-static LTR: the same
+ratio of L and R low-passed below the wheel-hop band by two equal first-order lags in cascade
+(-3 dB at :data:`QUASI_STATIC_CUTOFF_HZ`, exact for loads held over each step), as the
+observer low-passes its estimates (``observer.rollover_cutoff_frequency``'s default), started
+at the first sample's loads. The batch path (:func:`unit_load_transfer`) and the per-sample
+path (:class:`UnitLoadTransfer`) run the same recursion: the same numbers.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ['QUASI_STATIC_CUTOFF_HZ', 'UnitLoadTransfer', 'unit_load_transfer', 'unit_masks']
+
+#: -3 dB frequency (Hz) of the quasi-static LTR's low-pass.
+QUASI_STATIC_CUTOFF_HZ = 2.0
+_CASCADE_3DB = math.sqrt(math.sqrt(2.0) - 1.0)
+_FLOOR_FRACTION = 0.01
+
+
+def unit_masks(bodies: Sequence[str]) -> list[list[int]]:
+    """The axle indices of each unit (tractor, trailer, combination) of axles on ``bodies``."""
+    tractor = [j for j, b in enumerate(bodies) if b == 'tractor']
+    trailer = [j for j, b in enumerate(bodies) if b == 'trailer']
+    return [tractor, trailer, list(range(len(bodies)))]
+
+
+class UnitLoadTransfer:
+    """Per-sample LTR and quasi-static LTR of each unit.
+
+    Parameters
+    ----------
+    bodies : sequence of str
+        The body of each axle ('tractor' or 'trailer'), front first.
+    static_load_n : array (N_axles, 2)
+        The static wheel loads (N): the LTR floors.
+    dt_s : float
+        The sample step (s).
+    """
+
+    def __init__(self, bodies: Sequence[str], static_load_n, dt_s: float,
+                 cutoff_hz: float = QUASI_STATIC_CUTOFF_HZ) -> None:
+        self.units = unit_masks(bodies)
+        static = np.asarray(static_load_n, float)
+        self.floor = [_FLOOR_FRACTION * float(static[u].sum()) for u in self.units]
+        self.e = math.exp(-dt_s * 2.0 * math.pi * cutoff_hz / _CASCADE_3DB)
+        self.state: list | None = None
+
+    def update(self, loads: Sequence[float]) -> list[float]:
+        """``[LTR, quasi-static LTR]`` per unit (6 numbers) from one sample's wheel loads
+        [axle j left, right, ...] (N)."""
+        e = self.e
+        g = 1.0 - e
+        out = []
+        first = self.state is None
+        if first:
+            self.state = [None] * len(self.units)
+        for i, unit in enumerate(self.units):
+            left = 0.0
+            right = 0.0
+            for j in unit:
+                a, b = loads[2 * j], loads[2 * j + 1]
+                left += a if a > 0.0 else 0.0
+                right += b if b > 0.0 else 0.0
+            st = self.state[i]
+            if st is None:
+                st = (left, left, right, right)
+            else:
+                l1 = e * st[0] + g * left
+                r1 = e * st[2] + g * right
+                st = (l1, e * st[1] + g * l1, r1, e * st[3] + g * r1)
+            self.state[i] = st
+            floor = self.floor[i]
+            den = left + right
+            den_qs = st[1] + st[3]
+            out.append((right - left) / (den if den > floor else floor))
+            out.append((st[3] - st[1]) / (den_qs if den_qs > floor else floor))
+        return out
+
+
+def unit_load_transfer(bodies: Sequence[str], static_load_n, dt_s: float,
+                       loads_n: np.ndarray) -> np.ndarray:
+    """:class:`UnitLoadTransfer` over a drive: (n, 6) = per unit (LTR, quasi-static LTR)."""
+    ltr = UnitLoadTransfer(bodies, static_load_n, dt_s)
+    rows = np.asarray(loads_n, float).tolist()
+    return np.array([ltr.update(r) for r in rows]).reshape(len(rows), 6)
