@@ -1,0 +1,131 @@
+"""Friction and a sensor lag together, both stated in the parameter file (issue 30): the load
+error at zero latency, at 10 ms and offline against the matched drive (no friction, no lag).
+
+``.venv/bin/python -m bench.friction_lag [--duration S] [--road-seeds N ...] [--only NAME ...]``
+
+Drives (:func:`bench.truck_effects.build`): ISO 8608 class C, 20 m/s, 1 kHz, 10 um of
+deflection noise (100 urad of roll), the scoring of :func:`bench.scenarios.score` (load error
+in % of the true dynamic-load RMS after the 2 s skip), per road seed (default 1, 2, 3):
+
+- ``matched``: the nominal truck and file;
+- ``friction``: 1.5 kN of leaf-spring friction per spring, stated in the file;
+- ``lag``: a 3 ms first-order lag of every sensor, stated in the file;
+- ``friction+lag``: both, stated in the file (the truth's tanh ``v_f`` = 0.01 m/s, the
+  package's);
+- ``friction+lag, truth v_f 0.005``: the same truck whose friction is steeper (``v_f`` =
+  0.005 m/s in the plant only: :data:`road_force_estimator.core.vehicle_model.
+  FRICTION_VELOCITY_MPS` is patched while this script simulates, and put back before the
+  observer runs), the file as before (the package's 0.01);
+- ``friction, truth v_f 0.005``: the friction alone with that steeper truth.
+
+Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
+matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
+the seeds) and the ratio to the matched drive (the mean of the per-seed ratios, and the
+worst seed's).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+import sys
+import time
+
+import numpy as np
+
+from road_force_estimator.core.parameters import VehicleParameters
+
+NOMINAL = VehicleParameters()
+FRICTION = replace(NOMINAL, leaf_spring_friction_n=(1500.0, 1500.0))
+LAG = replace(NOMINAL, sensor_time_constant_s=(0.003, 0.003))
+BOTH = replace(FRICTION, sensor_time_constant_s=(0.003, 0.003))
+#: (name, the truck (plant) = the file the observer is given, the plant's v_f (m/s))
+DRIVES = (
+    ('matched', NOMINAL, 0.01),
+    ('friction', FRICTION, 0.01),
+    ('lag', LAG, 0.01),
+    ('friction+lag', BOTH, 0.01),
+    ('friction, truth v_f 0.005', FRICTION, 0.005),
+    ('friction+lag, truth v_f 0.005', BOTH, 0.005),
+)
+MODES = ('online', '10 ms', 'offline')
+TARGET = 1.3
+JUDGED = ('friction+lag', 'friction+lag, truth v_f 0.005')
+
+
+def build(truck: VehicleParameters, v_f: float, duration_s: float, road_seed: int):
+    """The drive of ``truck`` on class C (road seed ``road_seed``, noise seed 100 + it) with
+    the plant's friction velocity ``v_f`` (m/s)."""
+    from bench import truck_effects
+    import road_force_estimator.core.vehicle_model as vm
+
+    saved = vm.FRICTION_VELOCITY_MPS
+    vm.FRICTION_VELOCITY_MPS = v_f
+    try:
+        return truck_effects.build('C', truck, duration_s, road_seed - 1, road_seed=road_seed)
+    finally:
+        vm.FRICTION_VELOCITY_MPS = saved
+
+
+def measure(duration_s: float, road_seeds, only=None, log=None) -> dict:
+    """``{drive: {seed: {mode: error (% dyn)}}}``."""
+    from bench import truck_effects
+
+    out: dict = {}
+    for name, truck, v_f in DRIVES:
+        if only and name not in only and name != 'matched':
+            continue
+        out[name] = {}
+        for seed in road_seeds:
+            t0 = time.perf_counter()
+            drive = build(truck, v_f, duration_s, seed)
+            out[name][seed] = truck_effects.errors(drive, truck)
+            if log:
+                log(f'.. {name}, road seed {seed}: ' + ', '.join(
+                    f'{m} {out[name][seed][m]:.2f} %' for m in MODES)
+                    + f' ({time.perf_counter() - t0:.0f} s)')
+    return out
+
+
+def table(res: dict) -> list[str]:
+    """The Markdown table of :func:`measure`'s result."""
+    ref = res['matched']
+    lines = ['| drive | ' + ' | '.join(f'{m} (% dyn)' for m in MODES)
+             + ' | ratio to matched, mean (worst seed): ' + ' / '.join(MODES) + ' |',
+             '|---|' + '---:|' * len(MODES) + '---|']
+    verdicts = []
+    for name, per_seed in res.items():
+        seeds = list(per_seed)
+        mean = {m: float(np.mean([per_seed[s][m] for s in seeds])) for m in MODES}
+        ratios = {m: [per_seed[s][m] / ref[s][m] for s in seeds] for m in MODES}
+        cells = ' / '.join(f'{np.mean(ratios[m]):.2f} ({max(ratios[m]):.2f})' for m in MODES)
+        lines.append(f'| {name} | ' + ' | '.join(f'{mean[m]:.2f}' for m in MODES)
+                     + f' | {cells} |')
+        if name in JUDGED:
+            worst = max(max(ratios['10 ms']), max(ratios['offline']))
+            verdicts.append(f'{name}: worst seed {worst:.2f} x matched at 10 ms / offline '
+                            f'({"MET" if worst <= TARGET else "NOT MET"}, target {TARGET:g})')
+    return lines + [''] + [f'- {v}' for v in verdicts]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog='python -m bench.friction_lag',
+                                description=__doc__.splitlines()[0])
+    p.add_argument('--duration', type=float, default=20.0, metavar='S', help='s per drive')
+    p.add_argument('--road-seeds', type=int, nargs='+', default=[1, 2, 3], metavar='N')
+    p.add_argument('--only', nargs='+', default=None, metavar='NAME',
+                   help='drives to run (matched always runs)')
+    args = p.parse_args(argv)
+    if args.duration < 5.0:
+        print('friction_lag: --duration must be >= 5 s', file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    res = measure(args.duration, args.road_seeds, args.only,
+                  log=lambda s: print(s, file=sys.stderr, flush=True))
+    print('\n'.join(table(res)))
+    print(f'\n({time.perf_counter() - t0:.0f} s; road seeds {args.road_seeds}, '
+          f'{args.duration:g} s each)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
