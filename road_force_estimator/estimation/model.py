@@ -453,21 +453,30 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
 #: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
 #: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
 FRICTION_DAMPING_FACTOR = 1.5
+#: The same factor with a latency (``observer.latency`` > 0), where the friction of every
+#: step is evaluated again at the smoothed rates (:mod:`.model_friction`, "Delayed
+#: correction"): the forward filter's friction errors are then corrected, and the error
+#: dynamics want less of the damping they would add (``python -m bench.friction_lag``, 10 ms,
+#: friction + 3 ms lag: 1.37 x the matched drive with 1.5, 1.30 with 1.0, 1.28 with 0.5).
+FRICTION_DAMPING_FACTOR_LATENCY = 0.5
 #: RMS suspension rate (m/s) assumed until the first block of data has been seen.
 DEFAULT_DQ_STD_MPS = 0.05
 
 
-def friction_damping(friction_n, dq_std_mps: float) -> tuple[float, float]:
+def friction_damping(friction_n, dq_std_mps: float,
+                     factor: float | None = None) -> tuple[float, float]:
     """The friction's equivalent damping c_eq,i (N s/m) at an RMS suspension rate (m/s).
 
     Statistical linearisation of ``-F_f tanh(dq / v_f)`` over a Gaussian dq of std sigma:
     ``E[d f / d dq] ~ F_f sqrt(2 / pi) / sqrt(sigma^2 + 2 v_f^2 / pi)`` (``F_f / v_f`` at
     sigma = 0, ``F_f sqrt(2 / pi) / sigma`` for sigma >> v_f), times
-    :data:`FRICTION_DAMPING_FACTOR`. The gains are designed with it; the friction itself stays
-    the known input, so it changes the gains, not the model.
+    ``factor`` (default :data:`FRICTION_DAMPING_FACTOR`). The gains are designed with it; the
+    friction itself stays the known input, so it changes the gains, not the model.
     """
     from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
-    scale = FRICTION_DAMPING_FACTOR * math.sqrt(2.0 / math.pi) / math.sqrt(
+    if factor is None:
+        factor = FRICTION_DAMPING_FACTOR
+    scale = factor * math.sqrt(2.0 / math.pi) / math.sqrt(
         dq_std_mps ** 2 + 2.0 * v_f ** 2 / math.pi)
     return tuple(float(f) * scale for f in friction_n)
 

@@ -328,6 +328,9 @@ class ModelCore:
         self._running = True
         self._stepped = False
         self._slide.restart()
+        self._n = 0                      # the newest sample's index in the run
+        if self._fr is not None:
+            self._fr.restart()
         self._pending.clear()
         self._run_y = [(q1, q2, phi)]
         self._dts = []
@@ -405,6 +408,9 @@ class ModelCore:
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
+        if fr is not None:
+            fr.record(self._n, self.lag + 1)
+        self._n += 1
         i += 1
         nxt = buf[i]
         nxt[x0:y0] = self._sv_x if sv is self._sv else sv[:y0 - x0]   # (friction: a new array)
@@ -433,8 +439,15 @@ class ModelCore:
             pending.append((stamp, meta))
             if len(pending) == lag + 1:     # the steady state: the sample N back is due
                 item = pending.popleft()
-                self._emit(item[0], item[1],
-                           _dot(sched.gains.out, buf[i - lag:i + 1].reshape(-1)).tolist())
+                gains = sched.gains
+                if fr is not None:   # the friction at its smoothed rates (.model_friction)
+                    stage = fr.stage_lag(dt, lag)
+                    if stage:
+                        self._friction_correction(gains, dt, i, stage, None)
+                o = _dot(gains.out, buf[i - lag:i + 1].reshape(-1)).tolist()
+                if fr is not None:
+                    self._friction_correction(gains, dt, i, lag, o)
+                self._emit(item[0], item[1], o)
             while len(pending) > lag:
                 first = i - len(pending) + 1
                 self._finalize(pending.popleft(), first, first + lag)
@@ -442,6 +455,22 @@ class ModelCore:
         if i + 1 == buf.shape[0] or (sched.blocks == 0 and i == self._first_block):
             self._compact()
         return True
+
+    def _friction_correction(self, gains: Gains, dt: float, i: int, lag: int,
+                             o: list | None) -> None:
+        """The delayed friction correction (:mod:`.model_friction`) of the rows from the
+        sample ``lag`` rows back on, from its rates estimated there: ``o`` its outputs (the
+        fixed-lag estimate), or None: its rates from the first ``lag + 1`` rows' columns of
+        the output matrix (the same fixed-lag estimate with ``lag`` innovations)."""
+        buf = self._buf
+        if o is None:
+            dq = _dot(gains.out[3:5, :(lag + 1) * self._row], buf[i - lag:i + 1].reshape(-1))
+            dq1, dq2 = float(dq[0]), float(dq[1])
+        else:
+            dq1, dq2 = o[3], o[4]
+        w = self._fr.correction(gains, dt, lag, self._n - lag, dq1, dq2)
+        if w is not None:
+            buf[i - lag:i + 1, self._x0i:self._y0i] += w
 
     def _profile_step(self, q1: float, q2: float, phi: float) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
@@ -511,12 +540,15 @@ class ModelCore:
         g = self.schedule.gains
         x0, y0 = self._x0i, self._y0i
         fr = self._fr
+        if fr is not None:
+            fr.restart()
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
             sv = g.step_matrix(dt) @ buf[j]
             if fr is not None:
                 fr.select(g, dt)
                 sv = fr.update(sv, buf[j, x0:y0 - NY])
+                fr.record(j, self.lag + 1)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 9] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels

@@ -24,7 +24,8 @@ from road_force_estimator.estimation.gains import NOISE_FLOOR_M, Gains, design
 from road_force_estimator.estimation.model import (
     DEFAULT_NOISE_M, DEFAULT_NOISE_RAD, DEFAULT_ROAD_GD_M3, MIN_ROAD_GD_M3, DEFAULT_DQ_STD_MPS,
     ROUGHNESS_CORRELATION_M, SPEED_FLOOR_MPS, State, continuous_model,
-    friction_damping, profile_scheduled, road_diffusion, scheduled)
+    FRICTION_DAMPING_FACTOR_LATENCY, friction_damping, profile_scheduled, road_diffusion,
+    scheduled)
 from road_force_estimator.estimation.noise import NOISE_DIFF_ORDER, mad_std, noise_std
 from road_force_estimator.estimation.riccati import van_loan
 
@@ -240,7 +241,8 @@ class GainSchedule:
                           roll_moment_psd=moment_psd, key=key)
             if self.friction:
                 kwargs['friction_damping_nspm'] = friction_damping(
-                    self.vehicle.leaf_spring_friction_n, self.dq_std_mps)
+                    self.vehicle.leaf_spring_friction_n, self.dq_std_mps,
+                    FRICTION_DAMPING_FACTOR_LATENCY if lag > 0 else None)
             try:
                 g = design(self.vehicle, noise_deflection_m=noise,
                            noise_roll_rad=self.noise_roll_rad,
