@@ -95,10 +95,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
        'Lipschitz constant L of the roll differentiator (bound on |dddphi|)', 1e-6, 1e9),
     _p('observer.discretization', 'string', 'model', '',
-       'observer: "model" = model-based sliding-mode observer (Kalman and Levant injection, '
-       'the default); "euler" (the paper\'s explicit scheme), "taylor", "implicit" = the '
-       'differentiator chain with that scheme',
-       choices=('euler', 'taylor', 'implicit', 'model')),
+       'observer: "model" = the Kalman unknown-input observer on the paper\'s model (with an '
+       'optional sliding-mode injection, observer.sliding_mode_gain; the default); "euler" '
+       '(the paper\'s explicit scheme), "taylor", "implicit", "filtering" (Levant and Livne\'s '
+       'filtering differentiators) = the differentiator chain with that scheme',
+       choices=('euler', 'taylor', 'implicit', 'model', 'filtering')),
     _p('observer.profile_cutoff_wavelength', 'double', 100.0, 'm',
        'long-wavelength cutoff of the body-heave integration (profile high-pass)', 5.0, 1e4),
     _p('observer.latency', 'double', 0.0, 's',

@@ -60,4 +60,5 @@ CORES: dict[str, type] = {
     'euler': ChainCore,
     'taylor': ChainCore,
     'implicit': ChainCore,
+    'filtering': ChainCore,
 }
