@@ -276,9 +276,9 @@ class LevantDifferentiator:
     Notes
     -----
     State per channel ``(z_0, z_1, z_2)`` (and with ``'filtering'`` the filter states ``w``)
-    is kept as Python floats and advanced with scalar math; :meth:`update` writes into one preallocated output array (returned, overwritten by
-    the next call: copy it to keep it). After :meth:`reset` with ``f(t_0)`` the state is
-    ``(f(t_0), 0, 0)``.
+    is kept as Python floats and advanced with scalar math; :meth:`update` writes into one
+    preallocated output array (returned, overwritten by the next call: copy it to keep it).
+    After :meth:`reset` with ``f(t_0)`` the state is ``(f(t_0), 0, 0)`` (and ``w = 0``).
 
     Examples
     --------
