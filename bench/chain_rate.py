@@ -86,7 +86,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--duration', type=float, default=10.0, metavar='S')
     p.add_argument('--rates', type=float, nargs='+', default=list(RATES_HZ), metavar='HZ')
     p.add_argument('--noise', type=float, nargs='+', default=[0.0, 10e-6], metavar='M')
+    p.add_argument('--filtering-order', type=int, default=None, metavar='N',
+                   help="the 'filtering' scheme's n_f (1-3; default the package's, "
+                        'estimation.differentiator.FILTERING_ORDER)')
     args = p.parse_args(argv)
+    if args.filtering_order is not None:
+        import road_force_estimator.estimation.differentiator as differentiator
+        if args.filtering_order not in (1, 2, 3):
+            print('chain_rate: --filtering-order must be 1, 2 or 3', file=sys.stderr)
+            return 2
+        differentiator.FILTERING_ORDER = args.filtering_order
     if args.duration < 4.0 or any(r < 100.0 for r in args.rates):
         print('chain_rate: --duration >= 4 s and rates >= 100 Hz', file=sys.stderr)
         return 2

@@ -101,8 +101,9 @@ __all__ = [
 #: Discretizations: 'euler' is the paper's (the reference), the others ours; 'filtering' is
 #: Levant and Livne's filtering differentiator (its own state: :func:`filtering_step`).
 SCHEMES = ('euler', 'taylor', 'implicit', 'filtering')
-#: Filtering order n_f of the 'filtering' scheme (``python -m bench.observer_schemes
-#: --filtering`` compares 1 to 3 on the benchmark drives).
+#: Filtering order n_f of the 'filtering' scheme: 2, the best of 1-3 in the chain on the
+#: benchmark's class C drive at 1 kHz with 10 um of noise (``python -m bench.chain_rate
+#: --rates 1000 --filtering-order N``).
 FILTERING_ORDER = 2
 #: Gains ``lambda_0 .. lambda_n`` of the non-recursive n-th order differentiator, by n: the
 #: recursive parameters 1.1, 1.5, 2, 3, 5, 7 of Levant (2003) in the non-recursive form, as
