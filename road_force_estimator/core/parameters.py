@@ -104,9 +104,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'long-wavelength cutoff of the body-heave integration (profile high-pass)', 5.0, 1e4),
     _p('observer.latency', 'double', 0.0, 's',
        'delay of the published estimate behind the newest input sample', 0.0, 1.0),
-    _p('observer.sliding_mode_gain', 'double', 1.0, '',
-       'weight of the sliding-mode (Levant) injection of the model observer; 0 = off '
-       '(linear Kalman injection only)', 0.0, 10.0),
+    _p('observer.sliding_mode_gain', 'double', 0.0, '',
+       'weight of the sliding-mode (Levant) injection of the model observer, weighted down '
+       'by the noise level; 0 = off (the default: the Kalman unknown-input observer alone; '
+       'python -m bench.sliding_mode_events measures it)', 0.0, 10.0),
     _p('observer.noise.deflection', 'double', 0.0, 'm',
        'deflection sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
     _p('observer.noise.roll', 'double', 0.0, 'rad',

@@ -1,5 +1,6 @@
-"""Model-based sliding-mode observer of the roll-plane model (``observer.discretization =
-'model'``, the default).
+"""The model observer of the roll-plane model (``observer.discretization = 'model'``, the
+default): a Kalman unknown-input observer on the paper's model, with an optional
+sliding-mode injection (off by default, :mod:`.model_core`).
 
 The model (this module) and what is built on it: the gains (:mod:`.gains`, with
 :mod:`.riccati` and :mod:`.noise`), the operating point they are designed at
@@ -7,13 +8,14 @@ The model (this module) and what is built on it: the gains (:mod:`.gains`, with
 (:mod:`.smoother`).
 
 The observer runs the linearised roll-plane model of MODEL.md (:mod:`.vehicle_model`) with the
-unknown inputs (road, roll moment) as augmented states, corrects it with a linear output
-injection (the steady-state Kalman gain), and runs the Levant differentiator
-(:mod:`.differentiator`, implicit scheme) per message on the output error that the linear
-injection leaves: its estimates of that error and of its rate and acceleration are an
-equivalent output injection (an unknown tire force and roll moment), weighted by the measured
-noise level. Loads, road and LTR come from the states; the same observer gives a fixed-lag
-(``observer.latency``) and an offline (:func:`.smoother.smooth`) estimate.
+unknown inputs (road, roll moment) as augmented states and corrects it with a linear output
+injection (the steady-state Kalman gain). With ``observer.sliding_mode_gain`` > 0 it also runs
+the Levant differentiator (:mod:`.differentiator`, implicit scheme) per message on the output
+error that the linear injection leaves: its estimates of that error and of its rate and
+acceleration are an equivalent output injection (an unknown tire force and roll moment),
+weighted by the measured noise level. Loads, road and LTR come from the states; the same
+observer gives a fixed-lag (``observer.latency``) and an offline (:func:`.smoother.smooth`)
+estimate.
 
 State (SI; :class:`State`; index 1/2 of MODEL.md = left/right)::
 
