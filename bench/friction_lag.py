@@ -16,7 +16,10 @@ in % of the true dynamic-load RMS after the 2 s skip), per road seed (default 1,
   0.005 m/s in the plant only: :data:`road_force_estimator.core.vehicle_model.
   FRICTION_VELOCITY_MPS` is patched while this script simulates, and put back before the
   observer runs), the file as before (the package's 0.01);
-- ``friction, truth v_f 0.005``: the friction alone with that steeper truth.
+- ``friction, truth v_f 0.005``: the friction alone with that steeper truth;
+- ``... , file v_f 0.005``: those two drives again with the observer told the truth's v_f
+  (the observer's constant patched for the run, :mod:`.model_friction` and :mod:`.smoother`,
+  as a file that states v_f would tell it): what is left when the law is right.
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
@@ -38,14 +41,17 @@ NOMINAL = VehicleParameters()
 FRICTION = replace(NOMINAL, leaf_spring_friction_n=(1500.0, 1500.0))
 LAG = replace(NOMINAL, sensor_time_constant_s=(0.003, 0.003))
 BOTH = replace(FRICTION, sensor_time_constant_s=(0.003, 0.003))
-#: (name, the truck (plant) = the file the observer is given, the plant's v_f (m/s))
+#: (name, the truck (plant) = the file the observer is given, the plant's v_f (m/s), the
+#: observer's v_f (m/s))
 DRIVES = (
-    ('matched', NOMINAL, 0.01),
-    ('friction', FRICTION, 0.01),
-    ('lag', LAG, 0.01),
-    ('friction+lag', BOTH, 0.01),
-    ('friction, truth v_f 0.005', FRICTION, 0.005),
-    ('friction+lag, truth v_f 0.005', BOTH, 0.005),
+    ('matched', NOMINAL, 0.01, 0.01),
+    ('friction', FRICTION, 0.01, 0.01),
+    ('lag', LAG, 0.01, 0.01),
+    ('friction+lag', BOTH, 0.01, 0.01),
+    ('friction, truth v_f 0.005', FRICTION, 0.005, 0.01),
+    ('friction+lag, truth v_f 0.005', BOTH, 0.005, 0.01),
+    ('friction, truth v_f 0.005, file v_f 0.005', FRICTION, 0.005, 0.005),
+    ('friction+lag, truth v_f 0.005, file v_f 0.005', BOTH, 0.005, 0.005),
 )
 MODES = ('online', '10 ms', 'offline')
 TARGET = 1.3
@@ -69,16 +75,23 @@ def build(truck: VehicleParameters, v_f: float, duration_s: float, road_seed: in
 def measure(duration_s: float, road_seeds, only=None, log=None) -> dict:
     """``{drive: {seed: {mode: error (% dyn)}}}``."""
     from bench import truck_effects
+    import road_force_estimator.estimation.model_friction as model_friction
+    import road_force_estimator.estimation.smoother as smoother
 
     out: dict = {}
-    for name, truck, v_f in DRIVES:
+    for name, truck, v_f, v_obs in DRIVES:
         if only and name not in only and name != 'matched':
             continue
         out[name] = {}
         for seed in road_seeds:
             t0 = time.perf_counter()
             drive = build(truck, v_f, duration_s, seed)
-            out[name][seed] = truck_effects.errors(drive, truck)
+            saved = (model_friction.FRICTION_VELOCITY_MPS, smoother.FRICTION_VELOCITY_MPS)
+            model_friction.FRICTION_VELOCITY_MPS = smoother.FRICTION_VELOCITY_MPS = v_obs
+            try:
+                out[name][seed] = truck_effects.errors(drive, truck)
+            finally:
+                model_friction.FRICTION_VELOCITY_MPS, smoother.FRICTION_VELOCITY_MPS = saved
             if log:
                 log(f'.. {name}, road seed {seed}: ' + ', '.join(
                     f'{m} {out[name][seed][m]:.2f} %' for m in MODES)
