@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS
-from road_force_estimator.estimation.gains import Gains
+from road_force_estimator.estimation.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 from road_force_estimator.estimation.model import State
 
 __all__ = ['STAGE_S', 'KnownFriction', 'dq_rows']
@@ -73,7 +73,8 @@ class KnownFriction:
         self.fm = self.a_dq = self.b_dq = None
         #: the law's friction ``-F_f tanh(dq / v_f)`` (N) held over the last :meth:`update`
         self.last_force = (0.0, 0.0)
-        self._w_cache: dict = {}
+        self._w_cache: dict = {}     # rows per newton by step (:meth:`_rows_per_newton`)
+        self._w_gains = None         # ... of these gains
         self.restart()
 
     def restart(self) -> None:
@@ -176,10 +177,13 @@ class KnownFriction:
     def _rows_per_newton(self, g: Gains, dt: float) -> np.ndarray:
         """(N + 1, nx + 3, 2): the change of the rows e .. e + N (x+ and nu) per newton of
         the friction over the step e - 1 -> e (module notes)."""
-        key = (id(g), dt)
+        if g is not self._w_gains:      # (a new design: the cache is of the gains in use)
+            self._w_cache.clear()
+            self._w_gains = g
+        key = round(math.log(dt / g.dt_s) / DT_QUANTUM)     # (as the gains' step matrices)
         w = self._w_cache.get(key)
         if w is None:
-            if len(self._w_cache) > 64:
+            if len(self._w_cache) >= MAX_STEP_MATRICES:
                 self._w_cache.clear()
             nx = g.nx
             _, x0, _, _, _ = g.layout
