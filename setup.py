@@ -63,7 +63,8 @@ setup(
     zip_safe=True,
     maintainer='road_force_estimator developers',
     maintainer_email='dev@road-force-estimator.invalid',
-    description='Road profile and vertical wheel load estimation with a sliding-mode observer.',
+    description='Road profile and vertical wheel load estimation with a Kalman unknown-input '
+                'observer on the roll-plane model.',
     license='Apache-2.0',
     python_requires='>=3.10,<3.14',
     entry_points={

@@ -243,8 +243,9 @@ def _ours(kind: str, d: Drive, stamps: np.ndarray, vehicle):
     obs = ObserverParameters()
     if kind == 'latency':
         obs = replace(obs, latency_s=0.01)
-    elif kind == 'no-smo':
-        obs = replace(obs, sliding_mode_gain=0.0)
+    elif kind == 'no-smo':   # the sliding-mode term switched: off, or on (gain 1) where the
+        # default has it off (since issue 30)
+        obs = replace(obs, sliding_mode_gain=0.0 if obs.sliding_mode_gain else 1.0)
     fn = estimate_recording if kind == 'offline' else estimate_batch
     est = fn(stamps, d.q_m, d.roll_rad, d.speed_mps, vehicle, obs)
     return est, per_sample(est, stamps)
@@ -339,12 +340,17 @@ def markdown(results: dict[str, Any], duration_s: float) -> str:
 
 
 def ablation(results: dict[str, Any]) -> list[str]:
-    """Plain lines: where the sliding-mode term changes the zero-latency load error."""
+    """Plain lines: where the sliding-mode term changes the zero-latency load error (the
+    column ``ours-no-smo`` switches it: on where the default has it off)."""
+    from road_force_estimator.core.parameters import ObserverParameters
+    off_by_default = ObserverParameters().sliding_mode_gain == 0.0
     out = []
     for name, r in results.items():
         for fname, row in r.get('files', {}).items():
             a, b = row.get('ours', {}).get('load'), row.get('ours-no-smo', {}).get('load')
             if isinstance(a, float) and isinstance(b, float):
+                if off_by_default:
+                    a, b = b, a
                 out.append(f'{name} / {fname}: with {a:.3f} %, without {b:.3f} % '
                            f'({b - a:+.3f} points for the term)')
     return out

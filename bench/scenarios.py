@@ -131,6 +131,9 @@ def _scenarios() -> tuple[Scenario, ...]:
         replace(base, name='jpcp', road='jpcp',
                 description='jointed concrete (jpcp:seed=1): 4.6 m slabs, joints faulted '
                             '1-3 mm, curl 1 mm, ISO A underneath'),
+        # (issue 30: the headline moves to a road class that users survey)
+        replace(base, name='A20-1k-0um', road='A', noise_deflection_m=0.0,
+                description='ISO class A, noise-free'),
     ]
     return tuple(replace(s, noise_seed=1 + i) for i, s in enumerate(out))
 
@@ -325,7 +328,10 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         skip, and the lowest rating of its 100 m segments, both wheels); ``ltr_rms``,
         ``ltr_peak``; ``convergence_s`` (start-up: time after which the 100 ms trailing RMS of
         the load error stays below max(2 x its scored RMS, 1 % of the static load) until
-        skip + 3 s, before any scripted event; inf if it is still above then).
+        skip + 3 s, before any scripted event; inf if it is still above then); the drive's
+        own ``iri_true_mpkm`` (the true profile's IRI, mean over the 100 m segments and both
+        wheels, m/km), ``load_dyn_rms_n`` (the true dynamic-load RMS, N) and
+        ``static_load_n`` (the mean static load, N).
     """
     from road_force_estimator.core import iri as iri_mod
     from road_force_estimator.core import metrics
@@ -344,6 +350,8 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         'load_rms_pct_static': 100.0 * load_rms / float(np.mean(static)),
         'load_rms_n': load_rms,
         'load_peak_n': float(np.max(st.peak)),
+        'load_dyn_rms_n': dyn_rms,
+        'static_load_n': float(np.mean(static)),
     }
     x = t['distance_m']
     road_est = np.asarray(result.road_m, dtype=float)
@@ -363,6 +371,7 @@ def score(drive: Drive, result: Any, *, iri_segment_m: float = 100.0) -> dict[st
         else:
             edges[-1] = xs[-1]
         iri_true = iri_mod.iri_segments(xs, t['road_m'][k0:], edges)
+        out['iri_true_mpkm'] = float(np.nanmean(iri_true))
         iri_est = iri_mod.iri_segments(xs, road_est[k0:], edges)
         rel = 100.0 * np.abs(iri_est - iri_true) / iri_true
         out['iri_err_pct_mean'] = float(np.nanmean(rel))

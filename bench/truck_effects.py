@@ -41,14 +41,16 @@ PEER_MODES = (('online', 'kf-model'), ('10 ms', 'kf-model-lag10ms'),
               ('offline', 'kf-model-rts'))
 
 
-def build(road_class: str, truck: VehicleParameters, duration_s: float, index: int):
-    """The drive (bench.scenarios.Drive) of ``truck`` on the scenario's road and noise."""
+def build(road_class: str, truck: VehicleParameters, duration_s: float, index: int, *,
+          road_seed: int = 1):
+    """The drive (bench.scenarios.Drive) of ``truck`` on the scenario's road (``road_seed``)
+    and noise (seed 101 + ``index``)."""
     from bench import scenarios as sc
     from road_force_estimator.core.plant import simulate
     from road_force_estimator.core.sensors import SensorModel
 
     base = replace(sc.SCENARIOS[0], name=f'truck-{road_class}', road=road_class,
-                   duration_s=duration_s, noise_seed=101 + index)
+                   duration_s=duration_s, noise_seed=101 + index, road_seed=road_seed)
     length = base.speed_mps * duration_s + 10.0 + sc.TIRE_ENVELOPE_M
     road = sc._road(base, length)
     tr = simulate(truck, road, speed_mps=base.speed_mps, rate_hz=base.rate_hz,

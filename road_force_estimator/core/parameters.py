@@ -113,17 +113,19 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.lipschitz_roll', 'double', 200.0, 'rad/s^3',
        'Lipschitz constant L of the roll differentiator (bound on |dddphi|)', 1e-6, 1e9),
     _p('observer.discretization', 'string', 'model', '',
-       'observer: "model" = model-based sliding-mode observer (Kalman and Levant injection, '
-       'the default); "euler" (the paper\'s explicit scheme), "taylor", "implicit" = the '
-       'differentiator chain with that scheme',
-       choices=('euler', 'taylor', 'implicit', 'model')),
+       'observer: "model" = the Kalman unknown-input observer on the paper\'s model (with an '
+       'optional sliding-mode injection, observer.sliding_mode_gain; the default); "euler" '
+       '(the paper\'s explicit scheme), "taylor", "implicit", "filtering" (Levant and Livne\'s '
+       'filtering differentiators) = the differentiator chain with that scheme',
+       choices=('euler', 'taylor', 'implicit', 'model', 'filtering')),
     _p('observer.profile_cutoff_wavelength', 'double', 100.0, 'm',
        'long-wavelength cutoff of the body-heave integration (profile high-pass)', 5.0, 1e4),
     _p('observer.latency', 'double', 0.0, 's',
        'delay of the published estimate behind the newest input sample', 0.0, 1.0),
-    _p('observer.sliding_mode_gain', 'double', 1.0, '',
-       'weight of the sliding-mode (Levant) injection of the model observer; 0 = off '
-       '(linear Kalman injection only)', 0.0, 10.0),
+    _p('observer.sliding_mode_gain', 'double', 0.0, '',
+       'weight of the sliding-mode (Levant) injection of the model observer, weighted down '
+       'by the noise level; 0 = off (the default: the Kalman unknown-input observer alone; '
+       'python -m bench.sliding_mode_events measures it)', 0.0, 10.0),
     _p('observer.noise.deflection', 'double', 0.0, 'm',
        'deflection sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
     _p('observer.noise.roll', 'double', 0.0, 'rad',

@@ -5,14 +5,17 @@ w)^n``, n = :data:`ORDER` = 8: eight Tustin lags ``1/(s + w)`` in cascade on ``d
 ``y_1..y_8``), and ``z_s = sum_{k=2..8} (k-1) w^(k-2) y_k``, ``dz_s = sum_{k<8} w^(k-1) y_k - 7
 w^7 y_8``. The cutoff ``w = 2 pi max(|v|, SPEED_FLOOR_MPS) / lambda_c`` follows the speed;
 standing (``|v| <`` :data:`STANDING_MPS`, the speed check's threshold) the state holds, as a
-filter in distance does. In the band the error is ``|G| ~ n (w / Omega)^(n-1)``: 0.02 % at 30 m
-for the 100 m default (a second-order high-pass's phase lead would cost tens of % of the
-band-passed profile; five lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free ISO C
-drive, eight 0.85 %: ``bench`` scenarios C20-1k-0um and the noisy ones improve too); a constant
-acceleration bias ``b`` settles at ``C(n, 2) b / w^2 = 28 b / w^2``. The price, outside the
-band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; five poles: 1.9) and is -3
-dB near ``w / 5.9``, and a start takes longer to settle (``~t^7 exp(-w t)``: ~30 s at 20 m/s for
-the 100 m default).
+filter in distance does. In the band the error is ``|G(j Omega)|`` (first-order estimate ``n (w
+/ Omega)^(n-1)``): 0.12 % at 30 m for the 100 m default (the estimate: 0.18 %), and the
+Tustin steps' frequency warping at the short waves (about 1 % at 0.5 m at 20 m/s and 1 kHz;
+both measured on :func:`step` by ``python -m bench.body_heave_band``). Why eight: a
+second-order high-pass's phase lead would cost tens of % of the band-passed profile; five
+lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free ISO C drive, eight 0.85 %
+(benchmark scenario C20-1k-0um when the order was chosen; the noisy ones improved too). A
+constant acceleration bias ``b`` settles at ``C(n, 2) b / w^2 = 28 b / w^2``. The price,
+outside the band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; five poles:
+1.9) and is -3 dB near ``w / 5.9``, and a start takes longer to settle (``~t^7 exp(-w t)``:
+~30 s at 20 m/s for the 100 m default).
 
 The filter runs in distance: when the cutoff rises with the speed, the states
 ``w^(k-2) y_k`` are kept (so ``z_s`` is continuous and ``dz_s`` scales with the speed; when

@@ -4,13 +4,14 @@ One sample in, one estimate out (:meth:`Estimator.update`), and a batch path
 (:func:`estimate_batch`) that runs the very same step function and so gives identical numbers.
 The method is ``observer.discretization`` (the cores: :mod:`.cores`):
 
-- ``'model'`` (the default): the model-based sliding-mode observer of :mod:`.model_core`
-  (Kalman injection on the roll-plane model with the road as states, plus the Levant
-  differentiator on the output error), its noise and road roughness estimated online. It
-  leaves about 0.5 % of the dynamic-load RMS as error without noise and 17 % at 10 um at zero
-  latency (ISO C, 20 m/s, 1 kHz; ``bench/targets.py``), 3 % with 10 ms latency.
-- ``'euler'`` (the paper's scheme), ``'taylor'``, ``'implicit'``: the differentiator chain
-  of :mod:`.chain`, with that scheme.
+- ``'model'`` (the default): the Kalman unknown-input observer of :mod:`.model_core` on the
+  paper's roll-plane model (the road and an unknown roll moment as states), its noise and
+  road roughness estimated online; an optional sliding-mode injection on the output error
+  (``observer.sliding_mode_gain``, off by default). Its accuracy per road, noise level and
+  latency: ``python -m bench.run_benchmark --docs docs/benchmark.md``.
+- ``'euler'`` (the paper's scheme), ``'taylor'``, ``'implicit'``, ``'filtering'`` (Levant and
+  Livne's filtering differentiators): the differentiator chain of :mod:`.chain`, with that
+  scheme (how each converges with the rate: ``python -m bench.chain_rate``).
 
 Both end in MODEL.md's reconstruction (:mod:`.reconstruction`; the body heave of
 :mod:`.body_heave`, the LTR of :mod:`.load_transfer`).

@@ -62,4 +62,5 @@ CORES: dict[str, type] = {
     'euler': ChainCore,
     'taylor': ChainCore,
     'implicit': ChainCore,
+    'filtering': ChainCore,
 }

@@ -106,7 +106,7 @@ class TestRobustness:
 
 
 class TestPaths:
-    @pytest.mark.parametrize('scheme', ['implicit', 'taylor', 'euler'])
+    @pytest.mark.parametrize('scheme', ['implicit', 'taylor', 'euler', 'filtering'])
     def test_per_sample_and_batch_are_identical(self, drive_c, scheme):
         tr = drive_c
         n = 4000

@@ -1,5 +1,7 @@
 """The differentiator chain (``observer.discretization`` = ``'euler'``, ``'taylor'``,
-``'implicit'``): MODEL.md "Reconstruction" from three Levant differentiators.
+``'implicit'``, ``'filtering'``): MODEL.md "Reconstruction" from three Levant differentiators
+(``'filtering'``: Levant and Livne's filtering differentiators, :func:`.differentiator.
+filtering_step`).
 
 0. Three Levant differentiators (:mod:`.differentiator`, the scheme of
    ``observer.discretization``) give ``q_i, dq_i, ddq_i`` and ``phi, dphi, ddphi``;
@@ -23,7 +25,8 @@ import math
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 import road_force_estimator.estimation.body_heave as body_heave
-from road_force_estimator.estimation.chain.differentiator import step_function
+from road_force_estimator.estimation.chain.differentiator import (
+    FilteringConstants, filtering_step, step_function)
 from road_force_estimator.estimation.outputs import Column
 from road_force_estimator.estimation.reconstruction import Reconstruction, tire_decay
 
@@ -75,8 +78,11 @@ class ChainCore:
     def __init__(self, model, observer: ObserverParameters) -> None:
         self.vehicle = vehicle = model.vehicle
         self.observer = observer
-        self._step = step_function(observer.discretization)
         lq, lr = observer.lipschitz_deflection_mps3, observer.lipschitz_roll_radps3
+        # the filtering differentiators' constants (q_1, q_2, phi), or None: the step function
+        self._fc = ((FilteringConstants(lq), FilteringConstants(lq), FilteringConstants(lr))
+                    if observer.discretization == 'filtering' else None)
+        self._step = None if self._fc else step_function(observer.discretization)
         self._lip = (lq, lq ** (1.0 / 3.0), math.sqrt(lq), lr, lr ** (1.0 / 3.0), math.sqrt(lr))
         v = vehicle
         # Constants of the chain, unpacked once per step.
@@ -102,8 +108,10 @@ class ChainCore:
 
     def reset(self) -> None:
         """Forget everything; the next step must be a restart."""
-        # Differentiators: (z0, z1, z2, last sample) for q_1, q_2, phi.
+        # Differentiators: (z0, z1, z2, last sample) for q_1, q_2, phi; the filtering
+        # differentiators' filter states.
         self._d = (0.0,) * 12
+        self._wf = tuple((0.0,) * c.n_f for c in self._fc or ())
         # Body-heave filter state (body_heave.py); tire deflections w_i.
         self._h = body_heave.start(0.0)
         self._w = (0.0, 0.0)
@@ -176,9 +184,18 @@ class ChainCore:
         the tire deflections to their steady state. None, state untouched, if non-finite.
         """
         k1, k2, c1, c2, m1, m2, inv_mass, kt1, kt2, ct1, ct2, wc_per_speed = self._p
+        wf = self._wf
         if restart:
             a0, a1, a2, b0, b1, b2, c0, c1_, c2_ = q1, 0.0, 0.0, q2, 0.0, 0.0, phi, 0.0, 0.0
+            wf = tuple((0.0,) * len(w) for w in wf)
             conv = False
+        elif self._fc is not None:
+            d, fc = self._d, self._fc
+            a0, a1, a2, w1 = filtering_step(d[0], d[1], d[2], wf[0], d[3], dt, fc[0])
+            b0, b1, b2, w2 = filtering_step(d[4], d[5], d[6], wf[1], d[7], dt, fc[1])
+            c0, c1_, c2_, w3 = filtering_step(d[8], d[9], d[10], wf[2], d[11], dt, fc[2])
+            wf = (w1, w2, w3)
+            conv = t_run >= self._settle and t_run >= 20.0 * dt_typ
         else:
             step = self._step
             lq, lq13, lq12, lr, lr13, lr12 = self._lip
@@ -221,6 +238,7 @@ class ChainCore:
                              + row[_ZS] + row[_DZS] + w1 + w2 + row[_DZU1]):
             return None
         self._d = (a0, a1, a2, q1, b0, b1, b2, q2, c0, c1_, c2_, phi)
+        self._wf = wf
         self._h = h
         self._w = (w1, w2)
         self.last_row = row

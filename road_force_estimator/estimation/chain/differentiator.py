@@ -1,4 +1,5 @@
-"""Second-order robust exact differentiator (Levant), three discretizations.
+"""Second-order robust exact differentiator (Levant), three discretizations, and Levant and
+Livne's filtering differentiator.
 
 Per channel f(t) with ``|f'''| <= L``, the differentiator of MODEL.md (recursive form, gains
 3, 1.5, 1.1)::
@@ -32,6 +33,30 @@ Schemes (``scheme=``):
     velocity kept and output is corrected by ``+ dt/2 z_2`` (and un-corrected with the next
     step's dt before that step, so that quadratics stay exact under irregular steps).
 
+``'filtering'``
+    Levant and Livne's robust exact filtering differentiator of differentiation order
+    n_d = 2 and filtering order n_f = :data:`FILTERING_ORDER` (the method family's
+    noise-robust form, MODEL.md). With ``n = n_d + n_f``, ``[x]^g = |x|^g sign(x)`` and the
+    gains ``lambda_0 .. lambda_n`` of the standard n-th order differentiator
+    (:data:`FILTERING_GAINS`, the table the paper uses), in continuous time::
+
+        dw_i    = -lambda_(n+1-i) L^(i/(n+1)) [w_1]^((n+1-i)/(n+1)) + w_(i+1),  i < n_f
+        dw_n_f  = -lambda_(n_d+1) L^(n_f/(n+1)) [w_1]^((n_d+1)/(n+1)) + z_0 - f
+        dz_j    = -lambda_(n_d-j) L^((j+1+n_f)/(n+1)) [w_1]^((n_d-j)/(n+1)) + z_(j+1),  j < n_d
+        dz_n_d  = -lambda_0 L sign(w_1)
+
+    i.e. the n-th order differentiator of the n_f-fold integral of f (w_1 is its error):
+    exact in finite time without noise when the third derivative of f is bounded by L, like
+    the others, while the noise enters only through its n_f-fold integral, so that noise of
+    small local average (sensor noise, above the signal's band) is filtered instead of
+    passed at ``L^(i/3) eps^((3-i)/3)``. Discretization (the paper's: explicit Euler for the
+    filter states ``w``; for ``z`` Livne and Levant's homogeneous discrete differentiator,
+    the explicit step plus the Taylor terms ``dt^k / k! z_(j+k)``); the sample at the start
+    of the step enters (explicit, as ``euler`` and ``taylor``). Without noise its error
+    after convergence is ``|z_j - f^(j)| <= mu_j L dt^(3-j)`` (tested in
+    ``test/estimation/test_differentiator.py``: the errors shrink as ``dt^(3-j)``). State:
+    ``z`` and the n_f values ``w``, all 0 but ``z_0 = f(t_0)`` after a reset.
+
 Which instant the outputs refer to: after the sample ``f(t_k)`` with step ``dt_k = t_k -
 t_{k-1}`` the outputs are estimates of ``f, f', f''`` **at t_k**. The explicit schemes
 (``euler``, ``taylor``) compute them from samples up to ``t_{k-1}`` only (a one-step
@@ -54,7 +79,11 @@ A. Levant, "Higher-order sliding modes, differentiation and output-feedback cont
 Int. J. Control 76(9-10), 2003. M. Livne, A. Levant, "Proper discretization of homogeneous
 differentiators", Automatica 50(8), 2014. M. R. Mojallizadeh, B. Brogliato, V. Acary,
 "Time-discretizations of differentiators: design of implicit algorithms and comparative
-analysis", Int. J. Robust Nonlinear Control 31(16), 2021.
+analysis", Int. J. Robust Nonlinear Control 31(16), 2021. A. Levant, M. Livne, "Robust exact
+filtering differentiators", European Journal of Control 55, 2020, 33-44 (arXiv 2019: the
+filtering differentiator, its gains and its discretization). B. Andritsch et al., "The robust
+exact differentiator toolbox revisited: filtering and discretization features", IEEE ICM
+2021 (the same gains and discrete form, a second source checked against).
 """
 from __future__ import annotations
 
@@ -64,12 +93,26 @@ from typing import Callable
 import numpy as np
 
 __all__ = [
-    'SCHEMES', 'GAINS', 'LevantDifferentiator', 'differentiate', 'step_function',
-    'euler_step', 'taylor_step', 'implicit_step',
+    'SCHEMES', 'GAINS', 'FILTERING_ORDER', 'FILTERING_GAINS', 'LevantDifferentiator',
+    'FilteringConstants', 'differentiate', 'step_function', 'euler_step', 'taylor_step',
+    'implicit_step', 'filtering_step',
 ]
 
-#: Discretizations: 'euler' is the paper's (the reference), the others ours.
-SCHEMES = ('euler', 'taylor', 'implicit')
+#: Discretizations: 'euler' is the paper's (the reference), the others ours; 'filtering' is
+#: Levant and Livne's filtering differentiator (its own state: :func:`filtering_step`).
+SCHEMES = ('euler', 'taylor', 'implicit', 'filtering')
+#: Filtering order n_f of the 'filtering' scheme: 2, the best of 1-3 in the chain on the
+#: benchmark's class C drive at 1 kHz with 10 um of noise (``python -m bench.chain_rate
+#: --rates 1000 --filtering-order N``).
+FILTERING_ORDER = 2
+#: Gains ``lambda_0 .. lambda_n`` of the non-recursive n-th order differentiator, by n: the
+#: recursive parameters 1.1, 1.5, 2, 3, 5, 7 of Levant (2003) in the non-recursive form, as
+#: Levant and Livne (2020) use them (``lambda_(n-1) = 2 x 3^(2/3)`` = 4.16 for n = 3, ...).
+FILTERING_GAINS = {
+    3: (1.1, 3.06, 4.16, 3.0),
+    4: (1.1, 4.57, 9.30, 10.03, 5.0),
+    5: (1.1, 6.75, 20.26, 32.24, 23.72, 7.0),
+}
 #: Gains of the recursive form (lambda_2, lambda_1, lambda_0), MODEL.md / the paper.
 GAINS = (3.0, 1.5, 1.1)
 
@@ -151,15 +194,61 @@ def implicit_step(z0: float, z1: float, z2: float, f_prev: float, f_new: float, 
     return f_new - a * y * y * y, w1 + 1.5 * dt * z2n + dt * dt * _K2 * lip * y, z2n
 
 
+class FilteringConstants:
+    """The constants of one channel of the filtering differentiator, for L (units of f per
+    s^3) and the filtering order ``n_f`` (1 to 3): the products ``lambda L^(k/(n+1))`` of
+    the module notes, ``cw[i]`` in the equation of ``w_(i+1)``, ``cz[j]`` in that of
+    ``z_j``."""
+
+    __slots__ = ('n_f', 'inv', 'cw', 'cz')
+
+    def __init__(self, lipschitz: float, n_f: int | None = None) -> None:
+        n_f = FILTERING_ORDER if n_f is None else n_f
+        n = 2 + n_f
+        if n not in FILTERING_GAINS:
+            raise ValueError(f'filtering order n_f = {n_f!r}: must be 1, 2 or 3')
+        lam = FILTERING_GAINS[n]
+        lip = float(lipschitz)
+        self.n_f = n_f
+        self.inv = 1.0 / (n + 1)
+        self.cw = tuple(lam[n + 1 - i] * lip ** (i / (n + 1)) for i in range(1, n_f + 1))
+        self.cz = tuple(lam[2 - j] * lip ** ((j + 1 + n_f) / (n + 1)) for j in range(3))
+
+
+def filtering_step(z0: float, z1: float, z2: float, w: tuple, f_prev: float, dt: float,
+                   c: FilteringConstants) -> tuple[float, float, float, tuple]:
+    """One step of the filtering differentiator (the module notes: its discretization), one
+    channel: the state ``(z0, z1, z2)`` and the filter states ``w`` (n_f) at the start of
+    the step, ``f_prev`` the sample there; returns ``(z0, z1, z2, w)`` at its end."""
+    w1 = w[0]
+    sg = (w1 > 0.0) - (w1 < 0.0)
+    r = abs(w1) ** c.inv          # |w_1|^(1/(n+1)): [w_1]^(k/(n+1)) = sign(w_1) r^k
+    n_f = c.n_f
+    cw = c.cw
+    top = n_f + 2                 # the exponent (n+1-i)/(n+1) of w_i is (top + 1 - i) * inv
+    new_w = tuple(
+        w[i] + dt * ((w[i + 1] if i + 1 < n_f else z0 - f_prev) - cw[i] * sg * r ** (top - i))
+        for i in range(n_f))
+    cz0, cz1, cz2 = c.cz
+    return (z0 + dt * (z1 - cz0 * sg * r * r) + 0.5 * dt * dt * z2,
+            z1 + dt * (z2 - cz1 * sg * r),
+            z2 - dt * cz2 * sg,
+            new_w)
+
+
 _STEPS: dict[str, StepFunction] = {
     'euler': euler_step, 'taylor': taylor_step, 'implicit': implicit_step}
 
 
 def step_function(scheme: str) -> StepFunction:
-    """The one-channel step function of ``scheme`` (for callers that keep scalar state)."""
+    """The one-channel step function of ``scheme`` (for callers that keep scalar state);
+    ``'filtering'`` keeps filter states too (:func:`filtering_step`)."""
     try:
         return _STEPS[scheme]
     except (KeyError, TypeError):
+        if scheme == 'filtering':
+            raise ValueError("scheme = 'filtering' keeps filter states: use filtering_step "
+                             'with FilteringConstants') from None
         raise ValueError(
             f'scheme = {scheme!r}: must be one of {", ".join(SCHEMES)}') from None
 
@@ -181,15 +270,16 @@ class LevantDifferentiator:
     ----------
     lipschitz : array_like, shape (c,)
         Bound ``L`` on ``|f'''|`` per channel (units of f per s^3), > 0.
-    scheme : {'implicit', 'taylor', 'euler'}
-        Discretization; ``'euler'`` is the paper's explicit scheme (see the module notes).
+    scheme : {'implicit', 'taylor', 'euler', 'filtering'}
+        Discretization; ``'euler'`` is the paper's explicit scheme, ``'filtering'`` Levant and
+        Livne's filtering differentiator (see the module notes).
 
     Notes
     -----
-    State per channel ``(z_0, z_1, z_2)`` is kept as Python floats and advanced with scalar
-    math; :meth:`update` writes into one preallocated output array (returned, overwritten by
-    the next call: copy it to keep it). After :meth:`reset` with ``f(t_0)`` the state is
-    ``(f(t_0), 0, 0)``.
+    State per channel ``(z_0, z_1, z_2)`` (and with ``'filtering'`` the filter states ``w``)
+    is kept as Python floats and advanced with scalar math; :meth:`update` writes into one
+    preallocated output array (returned, overwritten by the next call: copy it to keep it).
+    After :meth:`reset` with ``f(t_0)`` the state is ``(f(t_0), 0, 0)`` (and ``w = 0``).
 
     Examples
     --------
@@ -202,9 +292,13 @@ class LevantDifferentiator:
     """
 
     def __init__(self, lipschitz, scheme: str = 'implicit') -> None:
-        self._step = step_function(scheme)
-        self._scheme = scheme
         lip = _check_lipschitz(lipschitz)
+        # the filtering differentiator: its constants and filter states per channel
+        self._filter = ([FilteringConstants(float(x)) for x in lip] if scheme == 'filtering'
+                        else None)
+        self._step = None if self._filter else step_function(scheme)
+        self._w = [(0.0,) * c.n_f for c in self._filter or ()]
+        self._scheme = scheme
         self._lip = lip.copy()
         self._lip.flags.writeable = False
         self._consts = [(float(x), float(x) ** (1.0 / 3.0), math.sqrt(float(x))) for x in lip]
@@ -257,6 +351,8 @@ class LevantDifferentiator:
             self._z0[i] = f
             self._z1[i] = 0.0
             self._z2[i] = 0.0
+            if self._filter:
+                self._w[i] = (0.0,) * self._filter[i].n_f
             self._f[i] = f
             out[0, i] = f
             out[1, i] = 0.0
@@ -287,7 +383,11 @@ class LevantDifferentiator:
         z0, z1, z2, fp, out = self._z0, self._z1, self._z2, self._f, self._out
         for i, (lip, lip13, lip12) in enumerate(self._consts):
             fn = fs[i]
-            a, b, c = step(z0[i], z1[i], z2[i], fp[i], fn, dt_s, lip, lip13, lip12)
+            if step is None:
+                a, b, c, self._w[i] = filtering_step(z0[i], z1[i], z2[i], self._w[i], fp[i],
+                                                     dt_s, self._filter[i])
+            else:
+                a, b, c = step(z0[i], z1[i], z2[i], fp[i], fn, dt_s, lip, lip13, lip12)
             z0[i] = a
             z1[i] = b
             z2[i] = c
@@ -337,18 +437,24 @@ def differentiate(f, t_s, lipschitz, scheme: str = 'implicit') -> np.ndarray:
     out = np.empty((n, 3, c))
     if n == 0:
         return out[:, :, 0] if one_d else out
-    step = step_function(scheme)
+    filtering = scheme == 'filtering'
+    step = None if filtering else step_function(scheme)
     dt_list = dts.tolist()
     for i in range(c):
         lip_i = float(lip[i])
         lip13, lip12 = lip_i ** (1.0 / 3.0), math.sqrt(lip_i)
+        consts = FilteringConstants(lip_i) if filtering else None
+        w = (0.0,) * consts.n_f if filtering else ()
         col = f2[:, i].tolist()
         z0, z1, z2, fp = col[0], 0.0, 0.0, col[0]
         rows = [(z0, 0.0, 0.0)]
         append = rows.append
         for k in range(1, n):
             fn = col[k]
-            z0, z1, z2 = step(z0, z1, z2, fp, fn, dt_list[k - 1], lip_i, lip13, lip12)
+            if filtering:
+                z0, z1, z2, w = filtering_step(z0, z1, z2, w, fp, dt_list[k - 1], consts)
+            else:
+                z0, z1, z2 = step(z0, z1, z2, fp, fn, dt_list[k - 1], lip_i, lip13, lip12)
             fp = fn
             append((z0, z1, z2))
         out[:, :, i] = rows

@@ -39,14 +39,12 @@ Unevenly sampled runs are resampled on their median step, estimated, and interpo
 ``converged`` is False within :func:`edge_time_s` of each run's start and end, where the
 zero-phase filters lack data on one side.
 
-Measured accuracy (ISO 8608 class C seed 1, 20 m/s, 1 kHz, 10 um deflection / 0.1 mrad roll
-noise, 30 s; ``bench/offline_speed.py``): this mode leaves 2.6 % of the true dynamic-load RMS
-and 1.2 % of the band-passed profile as error; online, the differentiator chain
-(``implicit``) leaves 29.3 % and 11.8 %, the model observer (``model``) 17.2 % and 7.5 %.
-On noise-free data (8 s of the same class) this mode leaves ~0.4 % and ~1 %. Two alternatives
-built on the package's differentiator were measured and dropped: the average of a forward and
-a time-reversed pass of the Levant differentiators (~19 % / 5.5 %), and that average
-low-passed with zero phase (~10 % / 5 %): a sliding-mode differentiator's error under noise is
+``estimate_bag --mode offline`` runs this chain when ``observer.discretization`` is a chain
+scheme (by default it runs the model observer's smoother, :func:`..offline.estimate_recording`,
+whose accuracy ``python -m bench.run_benchmark --docs docs/benchmark.md`` gives as
+ours-offline). Two alternatives built on the package's differentiator were measured and
+dropped: the average of a forward and a time-reversed pass of the Levant differentiators, and
+that average low-passed with zero phase: a sliding-mode differentiator's error under noise is
 not a lag that a backward pass cancels.
 
 The default offline estimate is the model observer's smoother

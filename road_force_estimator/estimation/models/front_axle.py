@@ -1,5 +1,6 @@
-"""Model-based sliding-mode observer of the roll-plane model (``observer.discretization =
-'model'``, the default).
+"""The model observer of the roll-plane model (``observer.discretization = 'model'``, the
+default): a Kalman unknown-input observer on the paper's model, with an optional
+sliding-mode injection (off by default, :mod:`.model_core`).
 
 The model (this module) and what is built on it: the gains (:mod:`.gains`, with
 :mod:`.riccati` and :mod:`.noise`), the operating point they are designed at
@@ -7,13 +8,14 @@ The model (this module) and what is built on it: the gains (:mod:`.gains`, with
 (:mod:`.smoother`).
 
 The observer runs the linearised roll-plane model of MODEL.md (:mod:`.vehicle_model`) with the
-unknown inputs (road, roll moment) as augmented states, corrects it with a linear output
-injection (the steady-state Kalman gain), and runs the Levant differentiator
-(:mod:`.differentiator`, implicit scheme) per message on the output error that the linear
-injection leaves: its estimates of that error and of its rate and acceleration are an
-equivalent output injection (an unknown tire force and roll moment), weighted by the measured
-noise level. Loads, road and LTR come from the states; the same observer gives a fixed-lag
-(``observer.latency``) and an offline (:func:`.smoother.smooth`) estimate.
+unknown inputs (road, roll moment) as augmented states and corrects it with a linear output
+injection (the steady-state Kalman gain). With ``observer.sliding_mode_gain`` > 0 it also runs
+the Levant differentiator (:mod:`.differentiator`, implicit scheme) per message on the output
+error that the linear injection leaves: its estimates of that error and of its rate and
+acceleration are an equivalent output injection (an unknown tire force and roll moment),
+weighted by the measured noise level. Loads, road and LTR come from the states; the same
+observer gives a fixed-lag (``observer.latency``) and an offline (:func:`.smoother.smooth`)
+estimate.
 
 State (SI; :class:`State`; index 1/2 of MODEL.md = left/right)::
 
@@ -380,19 +382,28 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
 #: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
 #: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
 FRICTION_DAMPING_FACTOR = 1.5
+#: The same factor with a latency (``observer.latency`` > 0), where the friction of every
+#: step is evaluated again at the smoothed rates (:mod:`..observer.friction`, "Delayed
+#: correction"): the forward filter's friction errors are then corrected, and the error
+#: dynamics want less of the damping they would add (``python -m bench.friction_lag``, 10 ms,
+#: friction + 3 ms lag: 1.37 x the matched drive with 1.5, 1.30 with 1.0, 1.28 with 0.5).
+FRICTION_DAMPING_FACTOR_LATENCY = 0.5
 
 
-def friction_damping(friction_n, dq_std_mps: float) -> tuple[float, float]:
+def friction_damping(friction_n, dq_std_mps: float, factor: float | None = None,
+                     velocity_mps: float = 0.01) -> tuple[float, float]:
     """The friction's equivalent damping c_eq,i (N s/m) at an RMS suspension rate (m/s).
 
     Statistical linearisation of ``-F_f tanh(dq / v_f)`` over a Gaussian dq of std sigma:
     ``E[d f / d dq] ~ F_f sqrt(2 / pi) / sqrt(sigma^2 + 2 v_f^2 / pi)`` (``F_f / v_f`` at
     sigma = 0, ``F_f sqrt(2 / pi) / sigma`` for sigma >> v_f), times
-    :data:`FRICTION_DAMPING_FACTOR`. The gains are designed with it; the friction itself stays
-    the known input, so it changes the gains, not the model.
+    ``factor`` (default :data:`FRICTION_DAMPING_FACTOR`). The gains are designed with it; the
+    friction itself stays the known input, so it changes the gains, not the model.
     """
-    from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
-    scale = FRICTION_DAMPING_FACTOR * math.sqrt(2.0 / math.pi) / math.sqrt(
+    v_f = velocity_mps
+    if factor is None:
+        factor = FRICTION_DAMPING_FACTOR
+    scale = factor * math.sqrt(2.0 / math.pi) / math.sqrt(
         dq_std_mps ** 2 + 2.0 * v_f ** 2 / math.pi)
     return tuple(float(f) * scale for f in friction_n)
 
@@ -493,8 +504,11 @@ class FrontAxleModel:
 
     def __init__(self, vehicle: VehicleParameters | None = None) -> None:
         self.vehicle = VehicleParameters() if vehicle is None else vehicle
-        #: the friction elements' F_f (N), left and right spring
+        #: the friction elements' F_f (N), left and right spring, and the tanh law's v_f (m/s,
+        #: ``vehicle.leaf_spring_friction_velocity``; the observer models the ``stick`` element
+        #: by the same law: its slider state is not carried)
         self.friction_n = tuple(float(f) for f in self.vehicle.leaf_spring_friction_n)
+        self.friction_velocity_mps = float(self.vehicle.leaf_spring_friction_velocity_mps)
 
     def with_vehicle(self, vehicle: VehicleParameters) -> FrontAxleModel:
         """The model of other parameters (an estimated sprung mass)."""
@@ -558,20 +572,24 @@ class FrontAxleModel:
         """The friction's known input (N) per spring at its rates dq (m/s): ``-F_f,i
         tanh(dq_i / v_f)`` less the share ``-c_eq,i dq_i`` of the equivalent damping that the
         gains' linear model carries (:func:`friction_damping`)."""
-        from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
+        v_f = self.friction_velocity_mps
         return np.array([-f * math.tanh(d / v_f) + c * d
                          for f, c, d in zip(self.friction_n, ceq, dq)])
 
     def friction_forces_array(self, dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
         """:meth:`friction_forces` over arrays: dq (nf, ...) (m/s), ceq (nf,) (N s/m)."""
-        from road_force_estimator.core.vehicle_model import FRICTION_VELOCITY_MPS as v_f
+        v_f = self.friction_velocity_mps
         shape = (len(self.friction_n),) + (1,) * (np.ndim(dq) - 1)
         ff = np.asarray(self.friction_n).reshape(shape)
         return -ff * np.tanh(dq / v_f) + np.asarray(ceq).reshape(ff.shape) * dq
 
-    def friction_damping(self, dq_std_mps: float) -> tuple:
-        """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s)."""
-        return friction_damping(self.friction_n, dq_std_mps)
+    def friction_damping(self, dq_std_mps: float, delayed: bool = False) -> tuple:
+        """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s);
+        ``delayed``: with a latency, whose friction is corrected at the smoothed rates
+        (:data:`FRICTION_DAMPING_FACTOR_LATENCY`)."""
+        return friction_damping(self.friction_n, dq_std_mps,
+                                FRICTION_DAMPING_FACTOR_LATENCY if delayed else None,
+                                self.friction_velocity_mps)
 
     # -- reconstruction --------------------------------------------------------------------
     def online_rows(self, observer) -> OnlineRows:

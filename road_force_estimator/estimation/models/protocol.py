@@ -198,8 +198,10 @@ class VehicleModel(Protocol):
     def friction_forces_array(self, dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
         """:meth:`friction_forces` over arrays (nf, ...)."""
 
-    def friction_damping(self, dq_std_mps: float) -> tuple:
-        """The friction's equivalent damping (N s/m) per element at an RMS rate (m/s)."""
+    def friction_damping(self, dq_std_mps: float, delayed: bool = False) -> tuple:
+        """The friction's equivalent damping (N s/m) per element at an RMS rate (m/s);
+        ``delayed``: for a filter with a latency, whose friction is corrected at the smoothed
+        rates (:meth:`..observer.friction.KnownFriction.correction`)."""
 
     def stationary_states(self, cm: ContinuousModel) -> list[int]:
         """The states of ``cm`` whose variance the road's moment matching solves for."""

@@ -4,8 +4,8 @@ operating point of :mod:`.schedule`), the fixed-lag smoother and the sliding-mod
 one accepted sample at a time (:class:`ModelCore`). Nothing here knows which vehicle it
 estimates: the model gives the linear model, the channels and the reconstruction of the rows.
 
-Sliding-mode injection
-----------------------
+Sliding-mode injection (off by default)
+---------------------------------------
 After the linear update the output error ``e = y - C x+`` goes through a dead zone of
 :data:`SM_DEAD_ZONE` times its expected standard deviation (the Kalman filter's own
 ``(I - C K) S (I - C K)^T``) and into an implicit Levant differentiator per channel (L from
@@ -14,9 +14,12 @@ equivalent output injection (:meth:`.VehicleModel.sm_injection`: e.g. ``dde``, t
 acceleration the model did not explain, as an unknown tire force and roll moment; ``e`` and
 ``de`` correct the outputs and their rates). It is added to the estimate ``x = x+ + gamma T
 rho`` (a cascade: the Kalman recursion does not see it, so it cannot destabilise it), with
-``gamma = observer.sliding_mode_gain / (1 + (sigma_q / SM_NOISE_SCALE)^2)``: sliding-mode-like
-on clean data, Kalman-like on noisy data. ``observer.sliding_mode_gain = 0`` switches it off
-(the ablation: ``python -m bench.run_benchmark``).
+``gamma = observer.sliding_mode_gain / (1 + (sigma_q / SM_NOISE_SCALE)^2)``.
+``observer.sliding_mode_gain`` is 0 by default since issue 30: the weighted term changed no
+figure the benchmark prints, and at full strength it wins only at sharp point-contact events
+at low noise and loses on enveloped roads, friction switching, spikes and heavy-tailed noise
+(``python -m bench.sliding_mode_events``; the decision: docs/method.md). Fed back into the
+recursion (instead of cascaded) it was unstable.
 
 Stamps
 ------
@@ -341,6 +344,9 @@ class ModelCore:
         self._slide.restart()
         self._gate_flags = [0] * self._ny
         self._undo = None
+        self._n = 0                      # the newest sample's index in the run
+        if self._fr is not None:
+            self._fr.restart()
         self._pending.clear()
         self._run_y = [y]
         self._dts = []
@@ -436,6 +442,9 @@ class ModelCore:
                 self._undo = (i, self._compactions, row.copy(), raw, self._m,
                               None if fr is None else fr.fm,
                               self._prow.copy() if self._profile else None)
+        if fr is not None:
+            fr.record(self._n, self.lag + 1)
+        self._n += 1
         i += 1
         nxt = buf[i]
         nxt[x0:y0] = self._sv_x if sv is self._sv else sv[:y0 - x0]   # (friction: a new array)
@@ -462,8 +471,15 @@ class ModelCore:
             pending.append((stamp, meta))
             if len(pending) == lag + 1:     # the steady state: the sample N back is due
                 item = pending.popleft()
-                self._emit(item[0], item[1],
-                           _dot(sched.gains.out, buf[i - lag:i + 1].reshape(-1)).tolist())
+                gains = sched.gains
+                if fr is not None:   # the friction at its smoothed rates (.model_friction)
+                    stage = fr.stage_lag(dt, lag)
+                    if stage:
+                        self._friction_correction(gains, dt, i, stage, None)
+                o = _dot(gains.out, buf[i - lag:i + 1].reshape(-1)).tolist()
+                if fr is not None:
+                    self._friction_correction(gains, dt, i, lag, o)
+                self._emit(item[0], item[1], o)
             while len(pending) > lag:
                 first = i - len(pending) + 1
                 self._finalize(pending.popleft(), first, first + lag)
@@ -521,11 +537,29 @@ class ModelCore:
         sv = _dot(m, prev)
         if fr is not None:
             sv = fr.update(sv, prev[x0:y0 - self._ny])
+            fr.rerecord()
         row[x0:y0] = sv[:y0 - x0]
         if prow is not None:       # the profile filter's step again, with the same data
             self._prow[:] = prow
             self._profile_step(tuple(prev[y0:y0 + self._ny].tolist()))
         return True
+
+    def _friction_correction(self, gains: Gains, dt: float, i: int, lag: int,
+                             o: list | None) -> None:
+        """The delayed friction correction (:mod:`.friction`) of the rows from the
+        sample ``lag`` rows back on, from its rates estimated there: ``o`` its outputs (the
+        fixed-lag estimate), or None: its rates from the first ``lag + 1`` rows' columns of
+        the output matrix (the same fixed-lag estimate with ``lag`` innovations)."""
+        buf = self._buf
+        rates = self.model.friction_rate_outputs
+        if o is None:
+            dq = _dot(gains.out[list(rates), :(lag + 1) * self._row],
+                      buf[i - lag:i + 1].reshape(-1)).tolist()
+        else:
+            dq = [o[j] for j in rates]
+        w = self._fr.correction(gains, dt, lag, self._n - lag, dq)
+        if w is not None:
+            buf[i - lag:i + 1, self._x0i:self._y0i] += w
 
     def _profile_step(self, y: tuple) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
@@ -596,12 +630,15 @@ class ModelCore:
         g = self.schedule.gains
         x0, y0 = self._x0i, self._y0i
         fr = self._fr
+        if fr is not None:
+            fr.restart()
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
             sv = g.step_matrix(dt) @ buf[j]
             if fr is not None:
                 fr.select(g, dt)
                 sv = fr.update(sv, buf[j, x0:y0 - self._ny])
+                fr.record(j, self.lag + 1)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 3 * self._ny] = 0.0
         if self._profile_on:      # the profile filter too, with its gains of the new levels

@@ -254,7 +254,8 @@ class GainSchedule:
                           correlation_length_m=corr, force_psd=force_psd,
                           roll_moment_psd=moment_psd, key=key)
             if self.friction:
-                kwargs['friction_damping_nspm'] = model.friction_damping(self.dq_std_mps)
+                kwargs['friction_damping_nspm'] = model.friction_damping(self.dq_std_mps,
+                                                                         delayed=lag > 0)
             try:
                 g = design(model, noise_deflection_m=noise,
                            noise_roll_rad=self.noise_roll_rad,

@@ -138,7 +138,7 @@ class QuarterCarModel:
     def profile_scheduled(noise_deflection_m: float, mode: str) -> tuple:
         return (238.0, 0.8, 1.41, 1e7)
 
-    def friction_damping(self, dq_std_mps: float) -> tuple:
+    def friction_damping(self, dq_std_mps: float, delayed: bool = False) -> tuple:
         return ()
 
     def online_rows(self, observer) -> QuarterCarRows:

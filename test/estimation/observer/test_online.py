@@ -159,7 +159,9 @@ class TestEndToEnd:
         # notes); the two estimates agree to a small fraction of the error.
         q, phi = noisy
         st = to_stamps(drive.t_s[:3000])
-        on = estimate_batch(st, q[:3000], phi[:3000], SPEED, VEHICLE, ObserverParameters())
+        assert ObserverParameters().sliding_mode_gain == 0.0     # off by default (issue 30)
+        on = estimate_batch(st, q[:3000], phi[:3000], SPEED, VEHICLE,
+                            ObserverParameters(sliding_mode_gain=1.0))
         off = estimate_batch(st, q[:3000], phi[:3000], SPEED, VEHICLE,
                              ObserverParameters(sliding_mode_gain=0.0))
         diff = np.sqrt(np.mean((on.wheel_load_n - off.wheel_load_n)[1000:] ** 2))
