@@ -11,7 +11,7 @@ from __future__ import annotations
 __all__ = [
     'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
     'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'STATIC_LOAD',
-    'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'LTR',
+    'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'ROAD_FUSED', 'LTR',
     'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
     'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
@@ -41,6 +41,8 @@ STATIC_LOAD = ('/wheel_load/static/left', '/wheel_load/static/right')
 #: of this many ns of the stamps (10 Hz; the observer node and the estimate bags alike).
 STATIC_LOAD_PERIOD_NS = 100_000_000
 ROAD = ('/road_profile/left', '/road_profile/right')
+#: The wheel paths' profile fused over every instrumented axle (``vehicle.model: articulated``)
+ROAD_FUSED = ('/road_profile/fused/left', '/road_profile/fused/right')
 LTR = '/load_transfer_ratio'
 #: x = LTR, y = quasi-static LTR (MODEL.md step 8, rollover warnings), z = 0; frame base_link
 LOAD_TRANSFER = '/load_transfer'

@@ -33,7 +33,12 @@ from road_force_estimator.bagio.estimates import (
     write_estimate_bag,
 )
 from road_force_estimator.bagio.live import CdrEncoder, CdrEncoderGroup, CdrReader
-from road_force_estimator.bagio.lpa import DEFAULT_SURVEY_SPEED_MPS, read_lpa_bag, write_lpa_bag
+from road_force_estimator.bagio.lpa import (
+    DEFAULT_SURVEY_SPEED_MPS,
+    read_lpa_bag,
+    read_profile_bag,
+    write_lpa_bag,
+)
 from road_force_estimator.bagio.messages import (
     DEFAULT_START_STAMP_NS,
     DEFAULT_TRACK_WIDTH_M,
@@ -60,7 +65,8 @@ from road_force_estimator.bagio.writer import (
 __all__ = [
     'BagReadError', 'BagWriteError', 'BagWriter', 'BagInfo', 'bag_info', 'bag_custom_data',
     'iter_messages', 'TopicColumns', 'read_topic_columns', 'Drive', 'Fixes', 'GroundTruth',
-    'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'write_lpa_bag', 'road_from_source',
+    'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'read_profile_bag', 'write_lpa_bag',
+    'road_from_source',
     'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag', 'TYPESTORE', 'CdrLayout',
     'cdr_layout', 'encode_columns', 'decode_columns', 'stamps_to_ns', 'ns_to_stamps',
     'CdrEncoder', 'CdrEncoderGroup', 'CdrReader',
