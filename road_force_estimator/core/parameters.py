@@ -120,10 +120,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.rollover_cutoff_frequency', 'double', 2.0, 'Hz',
        'low-pass cutoff of the quasi-static LTR for rollover warnings (below the wheel hop)',
        0.05, 50.0),
-    _p('observer.distance_source', 'string', 'speed', '',
-       'offline travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the '
-       'speed times the odometer scale estimated from /fix (estimation.odometer; offline '
-       'mode of estimate_bag and estimate_fleet only)', choices=('speed', 'gnss')),
+    _p('observer.distance_source', 'string', 'auto', '',
+       'travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the speed '
+       'times the odometer scale estimated from /fix (estimation.odometer; offline mode of '
+       'estimate_bag and estimate_fleet); "auto" = gnss when the drive has fixes that '
+       'give the scale to 0.2 % (the report says how many and how good), else speed (and '
+       'speed online)', choices=('auto', 'speed', 'gnss')),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.speed_profile', 'string', '', '',

@@ -205,10 +205,21 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
                   f'{_fmt(1e3 * s["offline"]["noise_std"][2], 3)}'),
                  ('offline: low-pass cut-offs q1 / q2 / phi (Hz)',
                   _fmt(s['offline']['cutoff_hz'], 1))]
+    rows += _distance_rows(s.get('distance'))
     rows += _odometer_rows(s.get('odometer', False))
     for key, value in (s.get('notes') or {}).items():
         rows.append((key, value))
     return [f'| {a} | {b} |' for a, b in rows]
+
+
+def _distance_rows(source) -> list[tuple[str, Any]]:
+    """Which distance the estimate ran on and why (observer.distance_source)."""
+    if not source:
+        return []
+    what = ('GNSS-corrected (the speed times the odometer scale from /fix)'
+            if source['used'] == 'gnss' else "the speed's (the integral of /vehicle/twist)")
+    return [(f'distance (observer.distance_source = {source["requested"]})',
+             f'{what}: {source["reason"]}')]
 
 
 def _odometer_rows(odo) -> list[tuple[str, Any]]:

@@ -281,8 +281,10 @@ def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, st
         raise InputError(f'{input_path}: no sample could be estimated: '
                          f'{_why_none_estimated(drive, speed, est.status)}')
     extra = {}
-    if mode == 'online' and observer.distance_source == 'gnss':
-        extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
+    if mode == 'online':          # the distance is the speed's online: the report says why
+        from road_force_estimator.estimation.odometer import distance_speed
+        est.distance_source = distance_speed(observer.distance_source, drive.stamps_ns,
+                                             speed, drive.fixes, offline=False)[1]
     if early:
         extra['samples before the first twist (given its speed)'] = early
     return drive, est, extra
@@ -327,7 +329,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
-    fit = getattr(est, 'odometer', None)          # observer.distance_source = gnss, offline
+    fit = getattr(est, 'odometer', None)          # a GNSS fit was made (offline)
     if fit is not None and not fit.problem:
         counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
                       odometer_fixes_rejected=fit.rejected)
