@@ -12,7 +12,8 @@ __all__ = [
     'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
     'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'STATIC_LOAD',
     'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'ROAD_FUSED', 'LTR',
-    'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
+    'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'READERS', 'FIRST_STAMP_KEY',
+    'JOINT_STATE', 'POINT', 'WRENCH',
     'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
 ]
@@ -49,6 +50,14 @@ LOAD_TRANSFER = '/load_transfer'
 STATES = '/observer/states'
 DIAGNOSTICS = '/diagnostics'
 LPA = ('/lpa/left', '/lpa/right')
+
+#: The package's node that reads each input topic: what a publisher waits for at the start of
+#: a drive (``plant_simulator``'s ``start_nodes``, ``bag_player``'s ``--wait-for``).
+READERS = {DEFLECTIONS: 'observer', TWIST: 'observer', LPA[0]: 'plant_simulator',
+           LPA[1]: 'plant_simulator'}
+#: ``/diagnostics`` key prefix of a publisher's first stamp on a topic: ``first_stamp_ns:`` +
+#: the topic, the value integer ns (plant_simulator, bag_player; read by the observer).
+FIRST_STAMP_KEY = 'first_stamp_ns:'
 
 # Message types, as rosbag2 and rosbags spell them.
 JOINT_STATE = 'sensor_msgs/msg/JointState'
