@@ -18,7 +18,8 @@ whoever they are), then :data:`.start_gate.SETTLE_S` and, for the other topics'
 subscribers, at most :data:`START_GRACE_S`; or after ``start_timeout`` (s) with a warning
 naming what is missing. A recorder that must have every sample is named too
 (``start_nodes: [observer, bag_recorder]``, as ``simulation.launch.xml`` has it).
-``/diagnostics`` says the stamp of the first sample (``first_stamp_ns:<topic>``), from which a late observer counts what it missed.
+``/diagnostics`` says the stamp of the first sample (``first_stamp_ns:<topic>``), from which
+a late observer counts what it missed.
 ``/fix`` carries status FIX, service GPS, and the receiver noise ``simulator.gnss.noise``
 (:class:`~.core.gnss.FixNoise`, the numbers of ``simulate_bag``); the twist carries the speed
 times ``1 + simulator.speed_scale_error`` (an odometer error; the route stays true).
