@@ -181,9 +181,10 @@ class PlantSimulator(Node):
                 break
             stamp_ns = self.start_ns + round(self.k * self.period_ns)
             self.publish(sample, stamp_ns)
-            if self.first_stamp_ns is None:
-                self.first_stamp_ns = stamp_ns + self.last_jitter_ns
             self.k += 1
+            if self.first_stamp_ns is None:    # said at once: a late observer counts from it
+                self.first_stamp_ns = stamp_ns + self.last_jitter_ns
+                self.diagnostics_callback()
         if self.k > self.last_index or self.plant.finished:
             self.finish()
 
@@ -298,8 +299,8 @@ def main(args=None) -> int:
 
 
 def _wait_for_subscribers(executor, node: PlantSimulator) -> None:
-    for pub in node.reliable:  # let subscribers take the last samples before leaving
-        pub.wait_for_all_acked(Duration(seconds=2.0))
+    for pub in (*node.reliable, node.diagnostics_pub):  # let subscribers take the last
+        pub.wait_for_all_acked(Duration(seconds=2.0))    # samples and status before leaving
 
 
 if __name__ == '__main__':
