@@ -220,4 +220,5 @@ def test_replay_launch_estimates_a_drive_played_into_it(tmp_path, ros_context):
         close(executor, collector)
         out = stop_launch(process)
     assert got, (collector.count('/observer/states'), out[-3000:])
-    assert sum(1 for _ in iter_messages(tmp_path / 'est', ['/observer/states'])) == 801
+    recorded = sum(1 for _ in iter_messages(tmp_path / 'est', ['/observer/states']))
+    assert recorded == 801, out[-3000:]
