@@ -8,6 +8,7 @@ text-column reader of ``../shared/data/profile_1.txt``) gives the report's IRI p
 from __future__ import annotations
 
 import csv
+import pathlib
 
 import numpy as np
 import pytest
@@ -53,10 +54,10 @@ def drives(tmp_path_factory, shared_data_module):
 
 @pytest.fixture(scope='module')
 def shared_data_module():
-    from conftest import SHARED_DATA
-    if not SHARED_DATA.is_dir():
-        pytest.fail(f'{SHARED_DATA} is missing: clone the project with shared/ beside it')
-    return SHARED_DATA
+    shared = pathlib.Path(__file__).resolve().parents[3] / 'shared' / 'data'
+    if not shared.is_dir():
+        pytest.fail(f'{shared} is missing: clone the project with shared/ beside it')
+    return shared
 
 
 @pytest.mark.parametrize('name', ['profile_1', 'slowdown'])
