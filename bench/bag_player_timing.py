@@ -79,7 +79,7 @@ def lateness(drive: pathlib.Path) -> dict:
                                      QoSProfile(depth=1000,
                                                 reliability=ReliabilityPolicy.BEST_EFFORT))
         options = build_parser().parse_args([str(drive), '--topics', '/suspension/deflections',
-                                             '--clock', '100'])
+                                             '--clock', '100', '--wait-for', 'timing_listener'])
         from rclpy.experimental import EventsExecutor
         player = BagPlayer(open_playback(drive), options, context=context)
         executor = EventsExecutor(context=context)

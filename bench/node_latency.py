@@ -258,7 +258,8 @@ def measure_plant(rate_hz: float, seconds: float) -> dict:
                              raw=True)
     executor.add_node(node)
     cmd = [sys.executable, '-m', 'road_force_estimator.ros.plant_simulator', '--ros-args',
-           '-p', f'simulator.rate:={rate_hz:g}', '-p', f'simulator.duration:={seconds:g}']
+           '-p', f'simulator.rate:={rate_hz:g}', '-p', f'simulator.duration:={seconds:g}',
+           '-p', 'start_subscribers:=1']        # the counter here subscribes to one topic
     child = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.DEVNULL,
                              stdout=subprocess.DEVNULL)
     proc = psutil.Process(child.pid)

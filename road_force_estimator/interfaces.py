@@ -11,13 +11,14 @@ from __future__ import annotations
 __all__ = [
     'SIDES', 'DEFLECTION_JOINTS', 'STATE_JOINTS', 'BASE_FRAME', 'ROAD_FRAME', 'WHEEL_FRAMES',
     'DEFLECTIONS', 'TWIST', 'TRUE_LOAD', 'TRUE_ROAD', 'FIX', 'LOAD', 'STATIC_LOAD',
-    'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'LTR',
-    'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'JOINT_STATE', 'POINT', 'WRENCH',
+    'STATIC_LOAD_PERIOD_NS', 'static_load_due', 'ROAD', 'ROAD_FUSED', 'LTR',
+    'LOAD_TRANSFER', 'STATES', 'DIAGNOSTICS', 'LPA', 'READERS', 'FIRST_STAMP_KEY',
+    'JOINT_STATE', 'POINT', 'WRENCH',
     'TWIST_STAMPED', 'FLOAT64', 'VECTOR3_STAMPED', 'NAVSATFIX', 'DIAGNOSTIC_ARRAY',
     'TOPIC_TYPES', 'SENSOR_DATA', 'RELIABLE', 'TOPIC_QOS', 'qos_kind',
     'UNITS', 'TRACTOR_ROLL_JOINT', 'TRAILER_ROLL_JOINT', 'axle_deflection_joints',
     'articulated_deflection_joints', 'wheel_joints', 'WHEEL_LOADS', 'TRUE_WHEEL_LOADS',
-    'STATIC_WHEEL_LOADS', 'UNIT_LOAD_TRANSFER', 'TRUE_LOAD_TRANSFER_RATIOS', 'FUSED_ROAD', 'IMU',
+    'STATIC_WHEEL_LOADS', 'UNIT_LOAD_TRANSFER', 'TRUE_LOAD_TRANSFER_RATIOS', 'IMU',
     'IMU_MSG', 'IMU_FRAME',
 ]
 
@@ -45,6 +46,8 @@ STATIC_LOAD = ('/wheel_load/static/left', '/wheel_load/static/right')
 #: of this many ns of the stamps (10 Hz; the observer node and the estimate bags alike).
 STATIC_LOAD_PERIOD_NS = 100_000_000
 ROAD = ('/road_profile/left', '/road_profile/right')
+#: The wheel paths' profile fused over every instrumented axle (``vehicle.model: articulated``)
+ROAD_FUSED = ('/road_profile/fused/left', '/road_profile/fused/right')
 LTR = '/load_transfer_ratio'
 #: x = LTR, y = quasi-static LTR (MODEL.md step 8, rollover warnings), z = 0; frame base_link
 LOAD_TRANSFER = '/load_transfer'
@@ -88,10 +91,16 @@ UNIT_LOAD_TRANSFER = tuple(f'/load_transfer/{u}' for u in UNITS)
 #: INTERFACES.md, added with the articulated plant: one message, not three, for the node's
 #: CPU): ``name`` = UNITS, ``position`` = LTR, ``velocity`` = quasi-static LTR.
 TRUE_LOAD_TRANSFER_RATIOS = '/ground_truth/load_transfer_ratios'
-FUSED_ROAD = ('/road_profile/fused/left', '/road_profile/fused/right')
 #: The tractor's IMU (sensor_msgs/Imu, frame base_link, at the tractor's centre of gravity).
 IMU = '/imu/tractor'
 IMU_FRAME = BASE_FRAME
+#: The package's node that reads each input topic: what a publisher waits for at the start of
+#: a drive (``plant_simulator``'s ``start_nodes``, ``bag_player``'s ``--wait-for``).
+READERS = {DEFLECTIONS: 'observer', TWIST: 'observer', LPA[0]: 'plant_simulator',
+           LPA[1]: 'plant_simulator'}
+#: ``/diagnostics`` key prefix of a publisher's first stamp on a topic: ``first_stamp_ns:`` +
+#: the topic, the value integer ns (plant_simulator, bag_player; read by the observer).
+FIRST_STAMP_KEY = 'first_stamp_ns:'
 
 # Message types, as rosbag2 and rosbags spell them.
 JOINT_STATE = 'sensor_msgs/msg/JointState'
@@ -124,7 +133,7 @@ TOPIC_TYPES: dict[str, str] = {
     STATIC_WHEEL_LOADS: JOINT_STATE,
     **{topic: VECTOR3_STAMPED for topic in UNIT_LOAD_TRANSFER},
     TRUE_LOAD_TRANSFER_RATIOS: JOINT_STATE,
-    **{topic: POINT for topic in FUSED_ROAD},
+    **{topic: POINT for topic in ROAD_FUSED},
     IMU: IMU_MSG,
 }
 

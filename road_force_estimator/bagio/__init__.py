@@ -24,7 +24,12 @@ from road_force_estimator.bagio.estimates import (
     diagnostic_array,
     write_estimate_bag,
 )
-from road_force_estimator.bagio.lpa import DEFAULT_SURVEY_SPEED_MPS, read_lpa_bag, write_lpa_bag
+from road_force_estimator.bagio.lpa import (
+    DEFAULT_SURVEY_SPEED_MPS,
+    read_lpa_bag,
+    read_profile_bag,
+    write_lpa_bag,
+)
 from road_force_estimator.bagio.reader import (
     BagInfo,
     TopicColumns,
@@ -45,8 +50,9 @@ from road_force_estimator.serde.messages import DEFAULT_START_STAMP_NS, DEFAULT_
 __all__ = [
     'BagReadError', 'BagWriteError', 'BagWriter', 'BagInfo', 'bag_info', 'bag_custom_data',
     'iter_messages', 'TopicColumns', 'read_topic_columns', 'Drive', 'Fixes', 'GroundTruth',
-    'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'write_lpa_bag', 'road_from_source',
-    'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag', 'DEFAULT_START_STAMP_NS',
+    'read_drive_bag', 'write_drive_bag', 'read_lpa_bag', 'read_profile_bag', 'write_lpa_bag',
+    'road_from_source', 'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag',
+    'DEFAULT_START_STAMP_NS',
     'DEFAULT_TRACK_WIDTH_M', 'DEFAULT_SURVEY_SPEED_MPS', 'ROSBAG2_VERSION', 'SENSOR_DATA_QOS',
     'RELIABLE_QOS',
 ]

@@ -23,9 +23,10 @@ from road_force_estimator.serde.messages import (
 from road_force_estimator.bagio.reader import bag_custom_data, read_topic_columns
 from road_force_estimator.bagio.writer import BagWriter
 from road_force_estimator.core.road import RoadProfile
-from road_force_estimator.interfaces import LPA, POINT, ROAD_FRAME, qos_kind
+from road_force_estimator.interfaces import LPA, POINT, ROAD, ROAD_FRAME, ROAD_FUSED, qos_kind
 
-__all__ = ['DEFAULT_SURVEY_SPEED_MPS', 'write_lpa_bag', 'read_lpa_bag']
+__all__ = ['DEFAULT_SURVEY_SPEED_MPS', 'PROFILE_TOPICS', 'write_lpa_bag', 'read_lpa_bag',
+           'read_profile_bag']
 
 #: Default survey speed of an LPA profile bag (m/s).
 DEFAULT_SURVEY_SPEED_MPS = 20.0
@@ -108,6 +109,44 @@ def read_lpa_bag(path: str | Path, *, issues: list[str] | None = None):
     cols = read_topic_columns(path, {t: POINT for t in LPA}, issues=sink)
     if not cols:
         raise BagReadError(f'{path}: no {LPA[0]} or {LPA[1]} topic: not an LPA bag')
+    return _profile(path, cols, LPA, sink)
+
+
+#: The profile topics of a bag, in the order :func:`read_profile_bag` looks for them.
+PROFILE_TOPICS = (LPA, ROAD_FUSED, ROAD)
+
+
+def read_profile_bag(path: str | Path, *, issues: list[str] | None = None):
+    """The road profile a bag holds: an LPA bag's ``/lpa/*``, else an estimate bag's fused
+    profile ``/road_profile/fused/*`` (an articulated truck's), else its ``/road_profile/*``
+    (the estimated road under the front wheels, by the estimator's distance).
+
+    As :func:`read_lpa_bag` (the same checks; an estimate's repeated distances, where the
+    truck stood, keep their first sample); ``issues`` says which topics were read.
+
+    Raises
+    ------
+    BagReadError
+        None of those topics, or fewer than 2 usable samples.
+    """
+    path = Path(path)
+    sink = issues if issues is not None else []
+    for topics in PROFILE_TOPICS:
+        cols = read_topic_columns(path, {t: POINT for t in topics}, issues=sink)
+        if cols:
+            break
+    else:
+        names = ', '.join(f'{a} / {b}' for a, b in PROFILE_TOPICS)
+        raise BagReadError(f'{path}: no profile topic ({names}): neither an LPA bag nor a bag '
+                           'of estimates')
+    if topics != LPA:
+        sink.append(f'the estimated profile of {topics[0]} and {topics[1]} (band-passed, by '
+                    "the estimator's distance)")
+    return _profile(path, cols, topics, sink)
+
+
+def _profile(path: Path, cols: dict, topics: tuple[str, str], sink: list[str]):
+    """The RoadProfile of the point columns ``cols`` of ``topics`` (left, right)."""
     rejects = Rejects()
     tracks = {}
     for topic, c in cols.items():
@@ -123,7 +162,7 @@ def read_lpa_bag(path: str | Path, *, issues: list[str] | None = None):
         sink.append(f'only {topic} in the bag: used for both wheel paths')
         elevation = np.column_stack([z, z])
     else:
-        (xl, zl), (xr, zr) = tracks[LPA[0]], tracks[LPA[1]]
+        (xl, zl), (xr, zr) = tracks[topics[0]], tracks[topics[1]]
         if xl.size == xr.size and np.array_equal(xl, xr):
             x, elevation = xl, np.column_stack([zl, zr])
         else:

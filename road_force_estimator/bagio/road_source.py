@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from road_force_estimator.bagio.lpa import read_lpa_bag
+from road_force_estimator.bagio.lpa import read_profile_bag
 from road_force_estimator.core import road_files
 from road_force_estimator.core.road import RoadProfile
 
@@ -21,7 +21,8 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     Parameters
     ----------
     source : str
-        A bag folder holding ``metadata.yaml`` (an LPA bag), or any source of
+        A bag folder holding ``metadata.yaml`` (an LPA bag, or a bag of estimates: its
+        ``/road_profile/*``, :func:`.lpa.read_profile_bag`), or any source of
         :func:`road_force_estimator.core.road_files.road_from_source`
         (``iso8608:<A-H>[:option=value...]``, ``flat[...]``, ``jpcp[...]``, a ``.csv``,
         ``.erd``, ``.txt`` / ``.dat`` file).
@@ -34,12 +35,12 @@ def road_from_source(source: str, *, length_m: float | None = None) -> RoadProfi
     ValueError
         Unknown source kind, bad option, unreadable file.
     BagReadError
-        A bag folder that is not a readable LPA bag.
+        A bag folder that holds no readable profile.
     """
     text = str(source).strip()
     head = text.split(':', 1)[0].lower()
     if head not in ('iso8608', 'flat', 'jpcp'):
         path = Path(text).expanduser()
         if path.is_dir() and (path / 'metadata.yaml').is_file():
-            return read_lpa_bag(path)
+            return read_profile_bag(path)
     return road_files.road_from_source(source, length_m=length_m)

@@ -38,7 +38,7 @@ from road_force_estimator.core.segments import segment_bounds
 __all__ = [
     'GOLDEN_K1', 'GOLDEN_K2', 'GOLDEN_C', 'GOLDEN_MU', 'IRI_SPEED_MPS', 'BASE_LENGTH_M',
     'INIT_LENGTH_M', 'RectifiedSlope', 'golden_car_matrices', 'rectified_slope',
-    'filtered_slope', 'iri', 'iri_segments', 'interval_counts', 'iri_table',
+    'filtered_slope', 'iri', 'iri_segments', 'interval_counts', 'iri_table', 'evenly_spaced',
 ]
 
 #: Golden quarter-car, normalised by the sprung mass (ASTM E1926).
@@ -151,6 +151,17 @@ def _evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
         return grid, np.interp(grid, x, z), float(dx_m)
     return grid, np.column_stack([np.interp(grid, x, z[:, j]) for j in range(z.shape[1])]), \
         float(dx_m)
+
+
+def evenly_spaced(distance_m: np.ndarray, elevation_m: np.ndarray,
+                  dx_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """The profile on the even grid the IRI runs on: ``(grid (m,), elevation, dx)``.
+
+    Unchanged when already evenly spaced and ``dx_m`` is None; else linearly resampled at
+    ``dx_m`` (default min(median spacing, 0.25 m)) from the first sample; a standstill's
+    repeated distances keep their first sample (see :func:`rectified_slope`).
+    """
+    return _evenly_spaced(distance_m, elevation_m, dx_m)
 
 
 def rectified_slope(distance_m: np.ndarray, elevation_m: np.ndarray, *,

@@ -18,6 +18,8 @@ from typing import Any, Mapping
 
 import yaml
 
+from road_force_estimator.core import ros_yaml
+
 __all__ = [
     'ParameterSpec', 'PARAMETERS', 'SPECS', 'GRAVITY_MPS2',
     'VehicleParameters', 'ObserverParameters', 'SimulatorParameters',
@@ -138,10 +140,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.rollover_cutoff_frequency', 'double', 2.0, 'Hz',
        'low-pass cutoff of the quasi-static LTR for rollover warnings (below the wheel hop)',
        0.05, 50.0),
-    _p('observer.distance_source', 'string', 'speed', '',
-       'offline travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the '
-       'speed times the odometer scale estimated from /fix (estimation.odometer; offline '
-       'mode of estimate_bag and estimate_fleet only)', choices=('speed', 'gnss')),
+    _p('observer.distance_source', 'string', 'auto', '',
+       'travelled distance: "speed" = the integral of /vehicle/twist; "gnss" = the speed '
+       'times the odometer scale estimated from /fix (estimation.odometer; offline mode of '
+       'estimate_bag and estimate_fleet); "auto" = gnss when the drive has fixes that '
+       'give the scale to 0.2 % (the report says how many and how good), else speed (and '
+       'speed online)', choices=('auto', 'speed', 'gnss')),
     _p('observer.innovation_gate', 'double', 6.0, '',
        'innovation gate of the model observer: a channel whose innovation lies beyond this '
        'many standard deviations of its predicted spread is not fed to the filter (a spike; '
@@ -658,35 +662,8 @@ def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
     return out
 
 
-def _yaml_number(name: str, value: Any) -> Any:
-    """PyYAML reads ``1e-05`` (no dot) as a string, where ROS's parser reads a double."""
-    spec = spec_of(name)
-    if spec is not None and spec.kind == 'double' and isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
-
-
 #: A parameter file larger than this is refused (the package's own file is ~5 KB).
 MAX_PARAMS_FILE_BYTES = 1 << 20
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
-    silently, which would hide an edit)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen: dict[Any, int] = {}
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            line = key_node.start_mark.line + 1
-            if key in seen:
-                raise ValueError(f'line {line}: key {key!r} given twice (first on line '
-                                 f'{seen[key]}): remove one')
-            seen[key] = line
-        return super().construct_mapping(node, deep=deep)
 
 
 def read_params_document(path: str | Path) -> Any:
@@ -695,7 +672,9 @@ def read_params_document(path: str | Path) -> Any:
     Refused with a :class:`ValueError` naming the file (and the line where there is one): an
     unreadable or non-regular file, one over :data:`MAX_PARAMS_FILE_BYTES`, invalid YAML, an
     alias (``*name``: ROS 2 parameter files have none, and nested aliases expand
-    exponentially: the "billion laughs" bomb), or a key given twice in one mapping.
+    exponentially: the "billion laughs" bomb), or a key given twice in one mapping. Values are
+    read as a node reads them (:mod:`.ros_yaml`: rcl's rules, ``1.1e6`` a double, ``0x10`` an
+    integer, quoted text a string), so that what a node accepts the offline commands accept.
     """
     path = Path(path)
     try:
@@ -711,23 +690,18 @@ def read_params_document(path: str | Path) -> Any:
     except UnicodeDecodeError:
         raise ValueError(f'parameter file {path} is not UTF-8 text') from None
     try:
-        for event in yaml.parse(text, Loader=yaml.SafeLoader):
-            if isinstance(event, yaml.AliasEvent):
-                raise ValueError(f'parameter file {path}, line {event.start_mark.line + 1}: '
-                                 f'YAML alias *{event.anchor} refused (parameter files '
-                                 'have no anchors or aliases)')
-        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+        return ros_yaml.load(text)   # the values rcl's parser gives a node
     except yaml.YAMLError as exc:
         raise ValueError(f'parameter file {path} is not valid YAML: {exc}') from None
     except ValueError as exc:
         if str(exc).startswith('parameter file'):
             raise
-        raise ValueError(f'parameter file {path}: {exc}') from None
+        raise ValueError(f'parameter file {path}, {exc}') from None
 
 
 def parse_override(text: str) -> tuple[str, Any]:
     """``NAME:=VALUE`` (``-p``, as ``--ros-args -p``) -> ``(name, validated value)``; VALUE is
-    read as YAML (``20``, ``1e-5``, ``[1, 2]``, ``ekf``).
+    read as rcl reads a ``-p`` value (:mod:`.ros_yaml`: ``20``, ``1e-5``, ``[1, 2]``, ``ekf``).
 
     Raises
     ------
@@ -738,12 +712,12 @@ def parse_override(text: str) -> tuple[str, Any]:
     name = name.strip()
     if not sep or not name:
         raise ValueError(f'-p {text!r}: expected NAME:=VALUE')
-    try:
-        value = yaml.safe_load(value_text) if value_text.strip() else ''
-    except yaml.YAMLError:
+    try:   # rcl reads a -p value as a YAML document of its own, by the same rules
+        value = ros_yaml.load(value_text) if value_text.strip() else ''
+    except (yaml.YAMLError, ValueError):
         value = value_text
     try:
-        return name, validate_parameter(name, _yaml_number(name, value))
+        return name, validate_parameter(name, value)
     except ValueError as exc:
         raise ValueError(f'-p {text}: {exc}') from None
 
@@ -772,7 +746,7 @@ def load_params_file(path: str | Path, node_names: tuple[str, ...] = ()) -> dict
             if name.startswith('use_sim_time') or name.startswith('qos_overrides'):
                 continue
             try:
-                values[name] = validate_parameter(name, _yaml_number(name, value))
+                values[name] = validate_parameter(name, value)
             except ValueError as exc:
                 raise ValueError(f'parameter file {path}: {exc}') from None
     if not found:

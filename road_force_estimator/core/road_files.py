@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from road_force_estimator.core.units import IN_PER_MI_PER_M_PER_KM
 
 __all__ = [
     'read_csv_profile', 'write_csv_profile', 'read_erd_profile', 'write_erd_profile',
+    'write_text_profile',
     'read_text_profile', 'road_from_source', 'erd_stored_iri', 'ERD_IRI_KEYS',
     'MAX_ELEVATION_M', 'MAX_DISTANCE_M', 'MAX_STEP_M',
 ]
@@ -129,12 +131,18 @@ def read_csv_profile(path: str | Path) -> RoadProfile:
     return _clean(data[:, 0], elevation, name=str(path))
 
 
-def write_csv_profile(path: str | Path, profile: RoadProfile) -> None:
-    """Write ``distance_m,left_m,right_m`` CSV (metres, 12 significant digits)."""
+def _number(exact: bool):
+    return repr if exact else (lambda v: f'{v:.12g}')
+
+
+def write_csv_profile(path: str | Path, profile: RoadProfile, *, exact: bool = False) -> None:
+    """Write ``distance_m,left_m,right_m`` CSV (metres, 12 significant digits; ``exact``:
+    every digit, the shortest form that reads back to the same float)."""
+    num = _number(exact)
     with Path(path).open('w', newline='') as f:
         f.write('distance_m,left_m,right_m\n')
         for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
-            f.write(f'{x:.12g},{zl:.12g},{zr:.12g}\n')
+            f.write(f'{num(x)},{num(zl)},{num(zr)}\n')
 
 
 def _numbers(text: str, path, line_no: int) -> list[float]:
@@ -380,11 +388,17 @@ def _pick_tracks(names: list[str], nchan: int, notes: list[str]) -> list[int]:
     return [0, 1]
 
 
-def write_erd_profile(path: str | Path, profile: RoadProfile, units: str = 'm') -> None:
+def write_erd_profile(path: str | Path, profile: RoadProfile, units: str = 'm', *,
+                      keywords: Mapping[str, str] | None = None) -> None:
     """Write a text ERD file (two channels, left and right) in ``units`` (m, mm, in, ft...).
 
-    The distance unit is metres (``XUNITS m``); the profile must be evenly spaced (relative
-    tolerance 1e-6). The start distance goes in an ``XSTART`` keyword.
+    The header has the keywords ProVAL and UMTRI's tools read: ``TITLE`` (the profile's
+    name), ``SHORTNAM`` / ``LONGNAME`` / ``GENNAME`` (channel names), ``UNITSNAM`` (each
+    channel's unit), ``XLABEL`` and ``XUNITS`` (distance, m), then ``XSTART`` (the first
+    distance, for this package's reader) and ``keywords`` (8-character keyword -> text, e.g.
+    how the profile was made), then ``END``. The profile must be evenly spaced (relative
+    tolerance 1e-6); line 2 has its mean step, in 6 significant digits when they hold it
+    exactly, else every digit (so that the profile reads back on the grid it was written on).
     """
     path = Path(path)
     factor = _unit_factor(units, 'units', path)
@@ -398,16 +412,38 @@ def write_erd_profile(path: str | Path, profile: RoadProfile, units: str = 'm') 
     z = profile.elevation_m / factor
     with path.open('w') as f:
         f.write('ERDFILEV2.00\n')
-        f.write(f'{2:7d},{x.size:7d},{1:7d},{1:7d},{5:7d},{step:13.6e},{1:7d},\n')
+        step_text = f'{step:13.6e}'
+        if float(step_text) != step:        # a step of more digits: every digit it has
+            step_text = repr(step)
+        f.write(f'{2:7d},{x.size:7d},{1:7d},{1:7d},{5:7d},{step_text},{1:7d},\n')
         f.write(f'TITLE   {profile.name or "road profile"}\n')
         f.write(f'SHORTNAM{"Left":<8}{"Right":<8}\n')
+        f.write(f'LONGNAME{"Left elevation":<32}{"Right elevation":<32}\n')   # 32-character
+        f.write(f'GENNAME {"Elevation":<32}{"Elevation":<32}\n')             # fields
         f.write(f'UNITSNAM{unit_field}{unit_field}\n')
         f.write('XLABEL  Distance\n')
         f.write('XUNITS  m\n')
         f.write(f'XSTART  {float(x[0])!r}\n')
+        for key, text in (keywords or {}).items():
+            f.write(f'{key.upper():<8.8}{" ".join(str(text).split())}\n')
         f.write('END\n')
         for zl, zr in z.tolist():
             f.write(f'{zl:.10g} {zr:.10g}\n')
+
+
+def write_text_profile(path: str | Path, profile: RoadProfile, *,
+                       comments: Sequence[str] = (), exact: bool = False) -> None:
+    """Write whitespace columns ``distance left right`` (m), the layout of
+    ``profile_1.txt`` with a third column, after ``#`` comment lines (``comments``, then the
+    column names): what :func:`read_text_profile` reads. Digits as
+    :func:`write_csv_profile`'s."""
+    num = _number(exact)
+    with Path(path).open('w') as f:
+        for line in comments:
+            f.write(f'# {line}\n')
+        f.write('# distance_m left_m right_m\n')
+        for x, (zl, zr) in zip(profile.distance_m.tolist(), profile.elevation_m.tolist()):
+            f.write(f'{num(x)} {num(zl)} {num(zr)}\n')
 
 
 # --------------------------------------------------------------------------------------------

@@ -35,8 +35,10 @@ trajectory, which removes the bias an extended filter's own noisy heading leaves
 free curvature, measured; 0.02 % iterated).
 
 :func:`scale_at` gives the scale at any stamps; the offline estimate (:func:`.offline.
-estimate_recording` with ``observer.distance_source = gnss``) multiplies the speed by it, so
-its distance is ``integral of k v dt`` and every profile point and segment boundary follows.
+estimate_recording`) multiplies the speed by it when :func:`distance_speed` says so
+(``observer.distance_source``: ``gnss``, or ``auto``, the default, when the fixes give the
+scale to 0.2 %), so its distance is ``integral of k v dt`` and every profile point and segment
+boundary follows; :class:`DistanceSource` says which distance was used and why.
 
 This module imports numpy only (core, estimation).
 """
@@ -52,7 +54,8 @@ from road_force_estimator.estimation.reconstruction import distance_m
 
 __all__ = ['PROCESS_STD', 'GATE', 'RESET_AFTER_M', 'MIN_NOISE_M', 'MIN_FIXES', 'INIT_BASE_M',
            'OdometerFit', 'fix_noise_m', 'odometer_distance', 'fit_odometer', 'scale_at',
-           'causal_distance']
+           'causal_distance', 'AUTO_MAX_SCALE_STD', 'DISTANCE_SOURCES', 'DistanceSource',
+           'distance_speed']
 
 #: Random-walk standard deviations per square root of metre travelled: position (m), heading
 #: (rad), curvature (1/m), scale (1): model errors, a road's changing bends, the scale's drift
@@ -447,3 +450,83 @@ def causal_distance(stamps_ns, odometer_m, fit: OdometerFit) -> np.ndarray:
     history, which would keep the early, poorly known, scales forever), never decreasing."""
     x = np.asarray(odometer_m, dtype=float)
     return np.maximum.accumulate(scale_at(stamps_ns, fit, causal=True) * (x - x[0])) + x[0]
+
+
+# --------------------------------------------------------------------------------------------
+# observer.distance_source: which distance a drive's estimate runs on
+# --------------------------------------------------------------------------------------------
+
+#: ``observer.distance_source: auto`` takes the fixes' distance when they give the odometer
+#: scale to this standard deviation or better (0.2 %: a wheel odometer reads 1-3 % off, so a
+#: scale known to 0.2 % corrects it; a shorter or noisier drive's would only add its noise).
+AUTO_MAX_SCALE_STD = 0.002
+DISTANCE_SOURCES = ('auto', 'speed', 'gnss')
+
+
+@dataclass(frozen=True)
+class DistanceSource:
+    """Which distance an estimate ran on, and why (for the report and ``report.json``).
+
+    ``requested`` is ``observer.distance_source``; ``used`` ``'gnss'`` (the speed times the
+    scale fitted from the fixes) or ``'speed'``; ``fixes`` the fixes the drive has; ``fit`` the
+    fit when one was made (None otherwise).
+    """
+
+    requested: str
+    used: str
+    reason: str
+    fixes: int = 0
+    fit: OdometerFit | None = None
+
+    def as_dict(self) -> dict:
+        return {'requested': self.requested, 'used': self.used, 'reason': self.reason,
+                'fixes': self.fixes}
+
+
+def _fit_words(fit: OdometerFit) -> str:
+    error = 100.0 * fit.speed_error
+    return (f'{fit.fixes - fit.rejected} of {fit.fixes} fixes used (noise {fit.noise_m:.2g} m '
+            f'per axis), odometer scale {fit.scale:.5f} +- {fit.scale_sigma:.5f} (the speed '
+            f'reads {abs(error):.2f} % {"high" if error >= 0 else "low"})')
+
+
+def distance_speed(requested: str, stamps_ns, speed_mps, fixes, *,
+                   offline: bool = True) -> tuple[np.ndarray, DistanceSource]:
+    """The speed whose integral is the estimate's distance, and the :class:`DistanceSource`.
+
+    ``requested`` (``observer.distance_source``): ``speed``, the speed as given; ``gnss``, the
+    speed times :func:`scale_at` of :func:`fit_odometer` when the fixes make a fit without a
+    ``problem``; ``auto``, the same when the fit's scale is known to
+    :data:`AUTO_MAX_SCALE_STD` or better, else the speed. Online (``offline`` False) the
+    distance is the speed's: the scale is fitted over the whole drive. ``fixes`` has
+    ``stamps_ns``, ``latitude_deg``, ``longitude_deg`` (or is None).
+    """
+    if requested not in DISTANCE_SOURCES:
+        raise ValueError(f'observer.distance_source = {requested!r}: must be one of '
+                         f'{", ".join(DISTANCE_SOURCES)}')
+    n = 0 if fixes is None else int(np.size(fixes.stamps_ns))
+    if requested == 'speed':
+        return speed_mps, DistanceSource(requested, 'speed', 'observer.distance_source = '
+                                         'speed', n)
+    if not offline:
+        return speed_mps, DistanceSource(requested, 'speed', 'online: the odometer scale is '
+                                         'fitted over the whole drive (offline mode only)', n)
+    if n == 0:
+        return speed_mps, DistanceSource(requested, 'speed', 'no /fix in the drive', 0)
+    fit = fit_odometer(*odometer_distance(stamps_ns, speed_mps), fixes.stamps_ns,
+                       fixes.latitude_deg, fixes.longitude_deg)
+    if fit is None:
+        return speed_mps, DistanceSource(requested, 'speed', f'{n} fixes: fewer than '
+                                         f'{MIN_FIXES} in the drive or less than '
+                                         f'{INIT_BASE_M:g} m between them', n)
+    if fit.problem:
+        return speed_mps, DistanceSource(requested, 'speed', f'the fixes refused: '
+                                         f'{fit.problem}', n, fit)
+    if requested == 'auto' and not fit.scale_sigma <= AUTO_MAX_SCALE_STD:
+        return speed_mps, DistanceSource(requested, 'speed', f'{_fit_words(fit)}: the scale '
+                                         f'is known to {100.0 * fit.scale_sigma:.2f} % only '
+                                         f'(auto wants {100.0 * AUTO_MAX_SCALE_STD:g} %)',
+                                         n, fit)
+    v = np.broadcast_to(np.asarray(speed_mps, dtype=float), np.shape(stamps_ns))
+    return v * scale_at(stamps_ns, fit), DistanceSource(requested, 'gnss', _fit_words(fit),
+                                                        n, fit)

@@ -28,8 +28,8 @@ from road_force_estimator.estimation.smoothing.smoother import Smoother
 from road_force_estimator.estimation.speed_check import check_arrays
 from road_force_estimator.estimation.static_load import track_recording
 
-__all__ = ['estimate_recording', 'fused_speed', 'smooth', 'prepare', 'smoothed_rows',
-           'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of']
+__all__ = ['estimate_recording', 'fused_speed', 'attach_distance_source', 'smooth', 'prepare',
+           'smoothed_rows', 'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of']
 
 
 
@@ -46,40 +46,40 @@ def estimate_recording(stamps_ns, q_m, roll_rad, speed_mps,
     differentiator scheme (``euler``, ``taylor``, ``implicit``), the zero-phase chain of
     :func:`estimate_offline`. Row k is the estimate for sample k in both.
 
-    With ``observer.distance_source == 'gnss'`` and ``fixes`` (``stamps_ns``,
-    ``latitude_deg``, ``longitude_deg``), the odometer scale is estimated from the fixes
-    (:func:`.odometer.fit_odometer`) and the speed multiplied by it (:func:`.odometer.scale_at`)
-    before the estimate: the distance is the fused one. The fit (or None: too few fixes) is
-    the result's ``odometer`` attribute (a fit with a ``problem`` is reported, not applied);
-    without fusion there is no such attribute and the numbers are those without fixes.
+    The distance is the one :func:`.odometer.distance_speed` picks for
+    ``observer.distance_source`` and ``fixes`` (``stamps_ns``, ``latitude_deg``,
+    ``longitude_deg``, or None): with ``gnss``, or ``auto`` (the default) when the fixes give
+    the odometer scale to 0.2 %, the speed times the scale fitted from the fixes
+    (:func:`.odometer.fit_odometer`, :func:`.odometer.scale_at`), else the speed's. The
+    result's ``distance_source`` says which and why; its ``odometer`` attribute is the fit
+    when one was made (or None when ``gnss`` was asked and the fixes make none).
     """
     observer = ObserverParameters() if observer is None else observer
-    fit = None
-    fused = observer.distance_source == 'gnss' and fixes is not None
-    if fused:
-        speed_mps, fit = fused_speed(stamps_ns, speed_mps, fixes)
+    speed_mps, source = fused_speed(stamps_ns, speed_mps, fixes, observer.distance_source)
     if observer.discretization == 'model':
         est = smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
                      gap_threshold_s=gap_threshold_s)
     else:
         est = estimate_offline(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
                                gap_threshold_s=gap_threshold_s)
-    if fused:
-        est.odometer = fit
+    attach_distance_source(est, source)
     return est
 
 
-def fused_speed(stamps_ns, speed_mps, fixes):
-    """``(speed times the odometer scale, the fit)``; the speed as given when the fixes do
-    not make a fit (None) or one to use (its ``problem`` says why)."""
+def fused_speed(stamps_ns, speed_mps, fixes, distance_source: str = 'gnss'):
+    """``(the speed the distance integrates, the odometer.DistanceSource)``: the speed times
+    the odometer scale of the fixes, or the speed as given (its ``reason`` says why)."""
     from road_force_estimator.estimation import odometer
 
-    fit = odometer.fit_odometer(*odometer.odometer_distance(stamps_ns, speed_mps),
-                                fixes.stamps_ns, fixes.latitude_deg, fixes.longitude_deg)
-    if fit is None or fit.problem:
-        return speed_mps, fit
-    v = np.broadcast_to(np.asarray(speed_mps, dtype=float), np.shape(stamps_ns))
-    return v * odometer.scale_at(stamps_ns, fit), fit
+    return odometer.distance_speed(distance_source, stamps_ns, speed_mps, fixes)
+
+
+def attach_distance_source(est, source) -> None:
+    """``est.distance_source`` (always) and ``est.odometer`` (the fit, when one was made or
+    ``gnss`` was asked), as the report and the bag's counts read them."""
+    est.distance_source = source
+    if source.fit is not None or source.requested == 'gnss':
+        est.odometer = source.fit
 
 
 def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,

@@ -46,8 +46,9 @@ class OfflineStream:
     :meth:`feed` gathers a block (returns no piece: the smoother needs the whole drive),
     :meth:`finish` yields the pieces; :attr:`status` is the estimate's (complete once
     :meth:`finish` is exhausted, with ``negative_load_samples`` over every piece), and
-    :attr:`odometer` the GNSS fit when the distance is fused (``observer.distance_source:
-    gnss`` and ``fixes`` given to :meth:`finish`).
+    :attr:`odometer` the GNSS fit when one was made from the ``fixes`` given to :meth:`finish`
+    and :attr:`distance_source` which distance was used and why
+    (:func:`.odometer.distance_speed`).
     """
 
     def __init__(self, vehicle: VehicleParameters | None = None,
@@ -71,6 +72,7 @@ class OfflineStream:
         self.status = EstimatorStatus()
         self.odometer = None
         self.fused = False
+        self.distance_source = None
         #: the last accepted stamp (ns; None before :meth:`finish` or without one)
         self.last_stamp_ns: int | None = None
 
@@ -88,11 +90,11 @@ class OfflineStream:
         """The estimates, piece after piece, in input order (see the module notes)."""
         stamps, q, phi, v = self._buf.arrays()
         self._buf = None
-        if self.observer.distance_source == 'gnss' and fixes is not None:
-            from road_force_estimator.estimation.offline import fused_speed
+        from road_force_estimator.estimation.offline import attach_distance_source, fused_speed
 
-            self.fused = True
-            v, self.odometer = fused_speed(stamps, v, fixes)
+        v, source = fused_speed(stamps, v, fixes, self.observer.distance_source)
+        attach_distance_source(self, source)
+        self.fused = source.fit is not None or source.requested == 'gnss'
         prep = prepare(stamps, q, phi, v, self.vehicle, self.observer,
                        gap_threshold_s=self.gap_threshold_s)
         del stamps, q, phi, v

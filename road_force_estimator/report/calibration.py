@@ -139,8 +139,10 @@ def _figures(result, folder: Path) -> list[Path]:
         ax.plot(t[window], f[window, c], lw=0.8, ls='--', label='fitted')
         ax.plot(t[window], y[window, c] - f[window, c], lw=0.6, label='residual')
         ax.set_ylabel(_CHANNEL_NAMES[c])
+        ax.set_title(_CHANNEL_NAMES[c].split(' (')[0], fontsize=10)
     axes[0].legend(loc='upper right')
     axes[-1].set_xlabel('time (s)')
+    fig.suptitle(FIGURE_TITLES['deflections.png'], fontsize=11)
     fig.tight_layout()
     out.append(folder / 'deflections.png')
     fig.savefig(out[-1], dpi=100)
@@ -153,14 +155,32 @@ def _figures(result, folder: Path) -> list[Path]:
                             (y[:, c] - f[:, c], 'residual')):
             fr, p = signal.welch(data - np.mean(data), fs=fs, nperseg=nper)
             ax.loglog(fr[1:], p[1:], lw=0.8, label=label)
-        ax.set_ylabel('PSD ' + _CHANNEL_NAMES[c].split(' (')[0])
+        name, unit = _CHANNEL_NAMES[c][:-1].split(' (')
+        ax.set_ylabel(f'PSD ({unit}²/Hz)')
+        ax.set_title(f'{name}: power spectral density (Welch)', fontsize=10)
     axes[0].legend(loc='lower left')
     axes[-1].set_xlabel('frequency (Hz)')
+    fig.suptitle(FIGURE_TITLES['spectra.png'], fontsize=11)
     fig.tight_layout()
     out.append(folder / 'spectra.png')
     fig.savefig(out[-1], dpi=100)
     plt.close(fig)
     return out
+
+
+#: The figures' titles, also their captions in calibration.md.
+FIGURE_TITLES = {
+    'deflections.png': 'Measured and fitted signals and the residual (first 5 s of the drive)',
+    'spectra.png': 'Power spectral densities of the measured, fitted and residual signals',
+}
+
+
+def figure_links() -> list[str]:
+    """The figures' section of calibration.md (the files are written beside it)."""
+    lines = ['## Figures', '']
+    for name, title in FIGURE_TITLES.items():
+        lines += [f'![{title}]({name})', '', f'{title}: [{name}]({name}).', '']
+    return lines
 
 
 def write_report(result, folder: str | Path, *, drive: str = '', profile: str = '',
@@ -171,7 +191,7 @@ def write_report(result, folder: str | Path, *, drive: str = '', profile: str = 
     folder.mkdir(parents=True, exist_ok=True)
     d = report_dict(result, drive=drive, profile=profile, output=output)
     md = folder / 'calibration.md'
-    md.write_text(markdown(d))
+    md.write_text(markdown(d) + ('\n'.join(['', *figure_links()]) if figures else ''))
     js = folder / 'calibration.json'
     js.write_text(json.dumps(d, indent=2, allow_nan=True))
     paths = [md, js]

@@ -395,12 +395,17 @@ def _overview_figure(c: _Canvas, p: _Profiles, segments: dict[str, np.ndarray] |
         a.set_xlabel(f'distance ({u.length_unit})')
         a.set_title(f'road profile over the drive, {_SIDES[side]} wheel path (min-max per '
                     'pixel column)', fontsize=10)
+    for a in ax[:3]:
+        _legend(a, fontsize=7, loc='upper right')
     if segments is not None and len(segments['start_m']):
         _iri_bars(ax[3], segments, p.against, c.units)
     for a in ax:
         a.grid(True, alpha=0.3)
-        _legend(a, fontsize=7, loc='upper right')
     c.finish(fig, 'overview.png', 'The whole drive')
+
+
+#: The IRI bars reach at most this fraction of their axes' height (the legend above).
+LEGEND_CLEAR = 0.7
 
 
 def _iri_bars(ax, segments: dict[str, np.ndarray], against: str, units: str = 'si') -> None:
@@ -423,7 +428,8 @@ def _iri_bars(ax, segments: dict[str, np.ndarray], against: str, units: str = 's
     top = np.nanmax([np.nanmax(segments[key]) if np.isfinite(segments[key]).any() else 0.0
                      for _, key, _, _, _ in offsets]) * k
     good, poor = condition_bands(u)
-    ymax = max(1.3 * top if top > 0.0 else 1.0, 1.1 * good)
+    # the bars in the lower 70 % of the axes: the legend's one row above them covers none
+    ymax = max(top / LEGEND_CLEAR if top > 0.0 else 1.0, 1.1 * good)
     for (name, colour), lo, hi in zip(_BANDS, (0.0, good, poor), (good, poor, max(ymax, poor))):
         ax.axhspan(lo, hi, color=colour, zorder=0)
         if lo < ymax:
@@ -434,4 +440,4 @@ def _iri_bars(ax, segments: dict[str, np.ndarray], against: str, units: str = 's
     ax.set_xlabel(f'segment centre ({u.length_unit})')
     ax.set_title(f'IRI per segment; FHWA condition: good < {good:.3g}, fair, poor > '
                  f'{poor:.3g} {u.iri_unit}', fontsize=10)
-    _legend(ax, fontsize=7, loc='upper right', ncol=2)
+    _legend(ax, fontsize=7, loc='upper center', ncol=4, borderaxespad=0.3)

@@ -190,12 +190,12 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
     if (~finite).any():
         ax.add_collection(LineCollection([s for s, f in zip(segs, finite) if not f],
                                          colors='0.6', linewidths=2.0))
-    _label_drives(ax, drawn)
     allpts = np.vstack(segs)
     lat_mid = float(np.mean(allpts[:, 1]))
     ax.set_aspect(1.0 / max(math.cos(math.radians(lat_mid)), 1e-6))
     ax.autoscale_view()
     ax.margins(0.05)
+    _label_drives(ax, drawn)
     ax.set_xlabel('longitude (deg, WGS84)')
     ax.set_ylabel('latitude (deg, WGS84)')
     ax.ticklabel_format(useOffset=False, style='plain')
@@ -207,13 +207,33 @@ def plot_segments_map(path: str | Path, lines: Sequence[list | None],
     return True
 
 
+#: A drive's number on the map keeps this far (points) from every other number.
+LABEL_SPACING_PT = 12.0
+
+
 def _label_drives(ax, drawn) -> None:
-    """Each drive's name at the start of its first segment drawn (a dot and the text)."""
-    seen: set[str] = set()
+    """Each drive's number beside the start of its first segment (a hollow dot there), moved
+    apart where starts coincide, and the key (number: drive) under the map: no name over
+    the lines, none over another."""
+    seen: dict[str, int] = {}
+    placed: list[np.ndarray] = []            # the numbers' positions (points, display)
+    fig = ax.figure
+    to_pt = 72.0 / fig.dpi
     for line, _, name in drawn:
         if not name or name in seen or line.size == 0:
             continue
-        seen.add(name)
-        ax.plot(line[0, 0], line[0, 1], 'o', color='k', ms=4)
-        ax.annotate(name, (line[0, 0], line[0, 1]), xytext=(4, 4), textcoords='offset points',
-                    fontsize=8, bbox={'boxstyle': 'round,pad=0.2', 'fc': 'white', 'alpha': 0.8})
+        seen[name] = len(seen) + 1
+        ax.plot(line[0, 0], line[0, 1], 'o', mfc='none', mec='k', ms=5, zorder=4)
+        at = ax.transData.transform((line[0, 0], line[0, 1])) * to_pt
+        offset = np.array([6.0, 6.0])
+        while any(np.hypot(*(at + offset - q)) < LABEL_SPACING_PT for q in placed):
+            offset[1] += LABEL_SPACING_PT
+        placed.append(at + offset)
+        ax.annotate(str(seen[name]), (line[0, 0], line[0, 1]), xytext=tuple(offset),
+                    textcoords='offset points', fontsize=8, fontweight='bold', zorder=5,
+                    arrowprops={'arrowstyle': '-', 'lw': 0.5, 'color': '0.3'}
+                    if offset[1] > 6.0 else None)
+    if seen:
+        key = '   '.join(f'{n}: {name}' for name, n in seen.items())
+        ax.text(0.0, -0.1, f'drives (number at the start): {key}', transform=ax.transAxes,
+                va='top', ha='left', fontsize=8, wrap=True)

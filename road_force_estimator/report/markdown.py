@@ -30,7 +30,10 @@ def _fmt(v, digits: int = 2) -> str:
     return f'{v:.{digits}f}'
 
 
-def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
+def _segment_markdown(segments: dict[str, np.ndarray], u: Units,
+                      against: str = 'true') -> list[str]:
+    """The segment table; ``against``: the word for the comparison columns ('true' for a
+    ground truth, 'reference' for a reference profile)."""
     n = len(segments['start_m'])
     if n == 0:
         return ['No segment: the drive covers no distance.']
@@ -39,7 +42,7 @@ def _segment_markdown(segments: dict[str, np.ndarray], u: Units) -> list[str]:
     lu, iu = u.length_unit, u.iri_unit
     head = [f'from ({lu})', f'to ({lu})', f'IRI L ({iu})', f'IRI R ({iu})']
     if have_true:
-        head += [f'true IRI L ({iu})', f'true IRI R ({iu})']
+        head += [f'{against} IRI L ({iu})', f'{against} IRI R ({iu})']
     head += ['DLC L', 'DLC R', 'peak L (kN)', 'peak R (kN)', 'max abs LTR',
              'static L (kN)', 'static R (kN)', 'max abs LTR quasi-static', 'lift-offs']
     if have_fix:
@@ -89,13 +92,35 @@ def write_markdown(path: str | Path, summary: dict[str, Any], segments: dict[str
               'Also in `segments.csv` (SI units, named in its columns). DLC = std/mean of the '
               'wheel load; lift-offs = events. "no data": no sample in the segment (a gap in '
               'the recording); such segments have no IRI and are left out of the whole-drive '
-              'IRI, never counted as smooth road.', '']
-    lines += _segment_markdown(segments, u)
+              'IRI, never counted as smooth road.' + _tail_text(segments, s, u), '']
+    lines += _segment_markdown(segments, u, 'reference' if _against_reference(s) else 'true')
     if figures:
         lines += ['', '## Figures', '']
         for name in figures:
             lines += [f'![{name[:-4]}]({name})', '', FIGURE_NOTES.get(name, ''), '']
     Path(path).write_text('\n'.join(lines).rstrip() + '\n')
+
+
+def _against_reference(s: dict[str, Any]) -> bool:
+    """The comparison is with a reference profile (an LPA survey), not a ground truth."""
+    return bool(s.get('reference_profile')) or (s.get('iri_m_per_km') or {}).get(
+        'reference') == 'reference profile'
+
+
+def _tail_text(segments: dict[str, np.ndarray], s: dict[str, Any], u: Units) -> str:
+    """The sentence naming a last segment that is not of the nominal length."""
+    if len(segments['start_m']) == 0:
+        return ''
+    nominal = float(s['segment_length_m'])
+    last = float(segments['end_m'][-1] - segments['start_m'][-1])
+    if abs(last - nominal) <= 0.01 * nominal:     # the last sample's spacing, not a tail
+        return ''
+    how = ('a remainder shorter than half a segment joins it' if last > nominal
+           else 'the drive ends inside it')
+    return (f' The last segment ({u.length_text(segments["start_m"][-1], 1)} to '
+            f'{u.length_text(segments["end_m"][-1], 1)} {u.length_unit}) is '
+            f'{u.length_text(last, 1)} {u.length_unit} long, not '
+            f'{u.length_text(nominal, 1)}: {how}.')
 
 
 #: What each figure shows (under it in report.md).
@@ -164,6 +189,16 @@ def _finding_rows(s: dict[str, Any]) -> list[tuple[str, Any]]:
     return rows
 
 
+def _static_label(s: dict[str, Any]) -> str:
+    """What the static loads are: estimated (zero_load) or configured."""
+    reference = (s.get('parameters') or {}).get('vehicle.deflection_reference', 'equilibrium')
+    if reference == 'zero_load':
+        return ('static wheel loads at the end, left / right (N; estimated: '
+                'vehicle.deflection_reference = zero_load)')
+    return ('static wheel loads, left / right (N; configured: vehicle.static_load, or from '
+            'the masses where it is 0)')
+
+
 def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
     """The rows of the summary table."""
     smp = s['samples']
@@ -184,7 +219,7 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
              s.get('negative_load_samples', 0)),
             *_finding_rows(s),
             ('max abs LTR', _fmt(s['max_abs_ltr'], 3)),
-            ('static wheel loads at the end, left / right (N; estimated under zero_load)',
+            (_static_label(s),
              ' / '.join(f'{v:.0f}' for v in s.get('static_load_final_n') or ()) or 'n/a'),
             ('GNSS fixes', s['fixes']),
             (f'IRI of the whole drive, estimated profile, left / right ({u.iri_unit})',
@@ -205,10 +240,21 @@ def _summary_rows(s: dict[str, Any], u: Units) -> list[str]:
                   f'{_fmt(1e3 * s["offline"]["noise_std"][2], 3)}'),
                  ('offline: low-pass cut-offs q1 / q2 / phi (Hz)',
                   _fmt(s['offline']['cutoff_hz'], 1))]
+    rows += _distance_rows(s.get('distance'))
     rows += _odometer_rows(s.get('odometer', False))
     for key, value in (s.get('notes') or {}).items():
         rows.append((key, value))
     return [f'| {a} | {b} |' for a, b in rows]
+
+
+def _distance_rows(source) -> list[tuple[str, Any]]:
+    """Which distance the estimate ran on and why (observer.distance_source)."""
+    if not source:
+        return []
+    what = ('GNSS-corrected (the speed times the odometer scale from /fix)'
+            if source['used'] == 'gnss' else "the speed's (the integral of /vehicle/twist)")
+    return [(f'distance (observer.distance_source = {source["requested"]})',
+             f'{what}: {source["reason"]}')]
 
 
 def _odometer_rows(odo) -> list[tuple[str, Any]]:
@@ -237,9 +283,14 @@ def _summary_notes(s: dict[str, Any], u: Units) -> list[str]:
                 f'({conv["tolerance_n"]:.0f} N: twice the judged RMS error, at least 1 % of '
                 f'the static load) for {conv["hold_s"]:g} s (MODEL.md "Metrics")')
     else:
-        what = ("no truth to measure it against: the estimator's own figure, its first "
-                "converged sample (the differentiators' settling time, "
-                f'{_fmt(conv.get("settling_time_s"), 3)} s, after the start or a restart)')
+        what = ("no truth to measure it against: the estimator's own figure, the time of "
+                f'its first converged sample ({_fmt(conv.get("time_s"), 3)} s after the start '
+                'or a restart)')
+        settling = conv.get('settling_time_s')
+        if settling is not None and math.isfinite(settling) and settling > 0.0 and abs(
+                settling - (conv.get('time_s') or 0.0)) > 5e-4:
+            what += (f"; the differentiators' own settling time is {_fmt(settling, 3)} s "
+                     '(the chain declares convergence only after it)')
     notes = ['', f'- Convergence time t_0: {what}.',
              '- Restarts: the estimator starts again from rest after a gap in the stamps '
              '(longer than its gap threshold) or a reset; 0 (0) = it ran through once.']
@@ -311,6 +362,14 @@ def _accuracy_section(s: dict[str, Any]) -> list[str]:
                 f'segment in "both" | {_fmt(acc["profile_xcorr"][0], 3)} | '
                 f'{_fmt(acc["profile_xcorr"][1], 3)} | '
                 f'{_fmt(acc["profile_xcorr_segment_min"], 3)} |')
+        if acc.get('profile_against') not in (None, 'ground truth'):
+            lines += ['', 'The estimate is the road as the tire follows it: enveloped over the '
+                      "tire's contact (a moving average over its length, about 0.25 m), which "
+                      'smooths the short waves a profiler records. A reference that is not '
+                      'enveloped (a raw LPA or profiler survey) differs from it by that '
+                      'envelope, so the profile error against it includes the envelope (on a '
+                      'simulated drive, the error against the enveloped ground truth is the '
+                      "estimator's own)."]
         if s.get('judged_from') == 'settling time':
             lines += ['', 'The estimator never reported convergence: samples are judged from '
                       f'its settling time ({_fmt(s["settling_time_s"], 3)} s) on.']

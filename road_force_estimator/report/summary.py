@@ -308,10 +308,15 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
 
 
 def _odometer_summary(est) -> dict[str, Any]:
-    """``{'odometer': ...}`` when the fusion was on (observer.distance_source = gnss), else {}."""
-    if not hasattr(est, 'odometer'):
-        return {}
-    return {'odometer': est.odometer.as_dict() if est.odometer is not None else None}
+    """``{'distance': which distance and why}`` (:class:`.odometer.DistanceSource`, when the
+    estimate says) and ``{'odometer': the GNSS fit}`` when one was made."""
+    out: dict[str, Any] = {}
+    source = getattr(est, 'distance_source', None)
+    if source is not None:
+        out['distance'] = source.as_dict()
+    if hasattr(est, 'odometer'):
+        out['odometer'] = est.odometer.as_dict() if est.odometer is not None else None
+    return out
 
 
 def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segments: dict,

@@ -2,7 +2,7 @@
 
     bag_player BAG [--rate R] [--loop] [--start-offset S] [--topics T...]
                [--remap FROM:=TO...] [--clock [HZ]] [--delay S] [--wait S]
-               [--ros-args ...]
+               [--wait-for NODE...] [--wait-count N] [--ros-args ...]
 
 What ``ros2 bag play`` does on a full ROS install, for a machine with rclpy alone (INTERFACES.md,
 "Executables"). Any writer's bag (ours, ``rosbags``', the ``mcap`` library's with zstd or lz4
@@ -13,8 +13,14 @@ period), each topic with the QoS recorded in the bag (INTERFACES.md's kind when 
 none; the queue at least :data:`MIN_DEPTH` deep, so that a burst is not dropped on our side).
 A type that cannot be imported is skipped with one warning naming the topic.
 
-Before it starts it waits, at most ``--wait`` seconds (default 10; 0 = not at all), until each
-played topic has a subscriber, then ``--delay``. ``--clock [HZ]`` publishes ``/clock``
+Before it starts it waits, at most ``--wait`` seconds (default 30; 0 = not at all), for the
+subscribers that matter (:mod:`.start_gate`): on each played topic the nodes of
+``--wait-for NODE...`` (default: the package's node that reads it, ``observer`` for the
+measurements and ``plant_simulator`` for ``/lpa/*``; any one subscriber on a topic no node of
+the package reads), or with ``--wait-count N`` N subscribers on each, then ``--delay``.
+``/diagnostics`` (status ``bag_player: playback``) says the stamp of the first message played
+on each of those topics (``first_stamp_ns:<topic>``), so that a late observer counts what it
+missed. ``--clock [HZ]`` publishes ``/clock``
 (rosgraph_msgs/Clock, the bag's time; HZ default 100) so that nodes with ``use_sim_time``
 follow the bag. At the end of the bag (of the last loop) it waits for the subscribers'
 acknowledgements and exits 0; SIGINT/SIGTERM stop it cleanly (exit 0). A bag cut short plays
@@ -27,6 +33,7 @@ import argparse
 import importlib
 import math
 import queue
+import struct
 import sys
 import threading
 import time
@@ -35,17 +42,20 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from diagnostic_msgs.msg import DiagnosticArray
+
 from road_force_estimator.bagio.playback import PlaybackError, open_playback
+from road_force_estimator.estimation import diagnostics
+from road_force_estimator.interfaces import DIAGNOSTICS, READERS
+from road_force_estimator.ros.messages import diagnostic_status, reliable_qos
 from road_force_estimator.ros.node_runner import run_node
+from road_force_estimator.ros.start_gate import SETTLE_S, SubscriberGate, first_stamp_values
 
 PROG = 'bag_player'
 #: Queue depth of every played topic at least (messages), whatever the bag recorded.
 MIN_DEPTH = 1000
 #: Messages read ahead of the schedule by the reading thread (bounds the memory).
 READ_AHEAD = 20000
-#: After every played topic has a subscriber: time for the subscribers' side of the
-#: discovery to complete before the first message (s).
-SETTLE_S = 0.3
 CLOCK_TOPIC = '/clock'
 
 
@@ -133,8 +143,14 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar='HZ', help='publish /clock at HZ (default 100) with the bag time')
     p.add_argument('--delay', type=_non_negative, default=0.0, metavar='S',
                    help='wait S seconds before playing')
-    p.add_argument('--wait', type=_non_negative, default=10.0, metavar='S',
-                   help='wait at most S seconds for a subscriber on each topic (default 10)')
+    p.add_argument('--wait', type=_non_negative, default=30.0, metavar='S',
+                   help='wait at most S seconds for the subscribers that matter (default 30)')
+    p.add_argument('--wait-for', nargs='+', metavar='NODE',
+                   help='nodes that must subscribe to every played topic first (default: the '
+                        "package's reader of each topic: observer for the measurements, "
+                        'plant_simulator for /lpa/*; any subscriber on the others)')
+    p.add_argument('--wait-count', type=int, default=0, metavar='N',
+                   help='instead: wait until every played topic has N subscribers')
     return p
 
 
@@ -177,6 +193,10 @@ class BagPlayer(Node):
         self.clock_ticks = 0
         self.pubs: dict[str, object] = {}
         self.skipped: set[str] = set()
+        self.first_stamps: dict[str, int] = {}    # first header stamp played, per topic (ns)
+        self.reported_wall = time.monotonic()
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                                     reliable_qos(10))
         self.clock_pub = None
         if options.clock is not None:
             from rosgraph_msgs.msg import Clock
@@ -231,21 +251,42 @@ class BagPlayer(Node):
         pubs = dict(self.pubs)
         if not pubs or self.options.wait <= 0:
             return not self.stopping.is_set()
-        names = ', '.join(self.remap.get(t, t) for t in pubs)
-        self.get_logger().info(f'waiting up to {self.options.wait:g} s for subscribers on '
-                               f'{names}')
+        outs = [self.remap.get(t, t) for t in pubs]
+        given = tuple(self.options.wait_for or ())
+        gate = SubscriberGate(self, {t: given or ((READERS[t],) if t in READERS else ())
+                                     for t in outs}, max(self.options.wait_count, 0))
+        self.get_logger().info(f'waiting up to {self.options.wait:g} s for {gate.describe()}')
         deadline = time.monotonic() + self.options.wait
         while True:
-            lonely = [self.remap.get(t, t) for t, p in pubs.items()
-                      if p.get_subscription_count() == 0]
-            if not lonely:
+            missing = gate.missing()
+            if not missing:
                 return self.sleep(SETTLE_S)
             if time.monotonic() >= deadline:
-                self.get_logger().warning(f'no subscriber after {self.options.wait:g} s on '
-                                          f'{", ".join(lonely)}: playing anyway')
+                self.get_logger().warning(f'no {", ".join(missing)} after '
+                                          f'{self.options.wait:g} s: playing anyway')
                 return not self.stopping.is_set()
             if not self.sleep(0.02):
                 return False
+
+    def note_first(self, out: str, data: bytes) -> None:
+        """Keep the header stamp of the first message played on a topic a package node reads
+        (its CDR: encapsulation, then the header's sec and nanosec), and say it at once."""
+        if out in self.first_stamps or out not in READERS or len(data) < 12:
+            return
+        sec, nanosec = struct.unpack('<iI' if data[1] == 1 else '>iI', data[4:12])
+        self.first_stamps[out] = sec * 1_000_000_000 + nanosec
+        self.report()
+
+    def report(self) -> None:
+        """``/diagnostics``: what was played, and the first stamps (see the module notes)."""
+        values = {f'published:{t}': n for t, n in self.published.items()}
+        values.update(first_stamp_values(self.first_stamps))
+        msg = DiagnosticArray(status=[diagnostic_status(diagnostics.status(
+            'bag_player: playback', self.get_name(), 'done' if self.done else 'playing',
+            values))])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+        self.reported_wall = time.monotonic()
 
     def play_all(self) -> None:
         opts = self.options
@@ -261,6 +302,7 @@ class BagPlayer(Node):
                 return
             if not opts.loop or broken:
                 break
+        self.report()
         total = sum(self.published.values())
         self.get_logger().info(f'played {total} messages from {self.playback.path}'
                                + (f' ({loops} loops)' if loops > 1 else ''))
@@ -301,6 +343,9 @@ class BagPlayer(Node):
             out = self.remap.get(topic, topic)
             self.published[out] += 1
             count += 1
+            self.note_first(out, data)
+            if time.monotonic() - self.reported_wall >= 1.0:
+                self.report()
         return count
 
     def wait_until(self, wall: float) -> bool:

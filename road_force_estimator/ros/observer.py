@@ -17,6 +17,12 @@ the core. Speed: samples that arrive before the first twist wait (up to
 :data:`MAX_WAITING` of them, the oldest dropped and counted beyond) and are estimated with the
 first speed received; after that the latest twist is used. Live parameter changes are vetted
 (:class:`.ros_parameters.ParameterGuard`); a good one rebuilds the estimator, which restarts.
+
+Started after its publisher, the observer says what it missed: when a publisher's
+``/diagnostics`` give the stamp of its first measurement (``first_stamp_ns:<topic>``:
+plant_simulator, bag_player), the samples before the observer's first input (that gap over
+the stamps' own period) are counted as ``missed`` and reported as ``missed_before_first_input``
+with a warning; the input status also gives ``first_stamp_ns``, the stamp of its first input.
 """
 from __future__ import annotations
 
@@ -39,6 +45,7 @@ from road_force_estimator.ros.messages import (
     MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
+from road_force_estimator.ros.start_gate import first_stamps
 from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
@@ -57,6 +64,7 @@ ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m'
 # DDS when the node falls behind a burst): they are not rejections but make the input WARN.
 FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
+MISSED_BEFORE_MAX_NS = 3600 * 10**9  # a publisher's first stamp further back: another drive
 
 
 def build(values):
@@ -116,8 +124,14 @@ class Observer(Node):
                                                      reliable_qos(10))
         self.wire = Wire()
         self.wire.on_note = self.get_logger().warning
-        self.create_subscription(JointState, api.DEFLECTIONS, self.deflections_callback,
-                                 sensor_qos(1000), raw=True)
+        self.input_topic = self.create_subscription(
+            JointState, api.DEFLECTIONS, self.deflections_callback, sensor_qos(1000),
+            raw=True).topic_name
+        # the publishers' first stamps (status name -> ns), and the count they give
+        self.first_input_ns = self.missed_before = None
+        self.publisher_first_ns: dict[str, int] = {}
+        self.create_subscription(DiagnosticArray, api.DIAGNOSTICS, self.publisher_diagnostics,
+                                 reliable_qos(10))
         self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10),
                                  raw=True)
         self.create_timer(1.0, self.diagnostics_callback)
@@ -172,6 +186,8 @@ class Observer(Node):
         except MessageRejected as exc:
             self.reject(exc.reason, str(exc))
             return
+        if self.first_input_ns is None:
+            self.first_input_ns = sample[0]
         if self.speed_mps is not None:
             self.estimate(*sample)
             return
@@ -179,6 +195,34 @@ class Observer(Node):
             self.waiting.popleft()
             self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
         self.waiting.append(sample)
+
+    def publisher_diagnostics(self, msg: DiagnosticArray) -> None:
+        """Keep the first stamp a publisher's diagnostics give for our input topic."""
+        for status in msg.status:
+            if not status.name.startswith('observer:'):
+                first = first_stamps(((v.key, v.value) for v in status.values),
+                                     self.input_topic)
+                if first is not None:
+                    self.publisher_first_ns[status.name] = first
+
+    def count_missed_before_first(self) -> None:
+        """Once the first input and a publisher's first stamp are known: the samples between
+        them (over the stamps' period) were sent before the observer listened."""
+        dt_s = self.estimator.status.typical_dt_s
+        if self.missed_before is not None or self.first_input_ns is None or not dt_s > 0.0:
+            return
+        earlier = [f for f in self.publisher_first_ns.values()
+                   if 0 <= self.first_input_ns - f <= MISSED_BEFORE_MAX_NS]
+        if not earlier:
+            return
+        self.missed_before = round((self.first_input_ns - max(earlier)) * 1e-9 / dt_s)
+        if self.missed_before:
+            self.period['missed'] += self.missed_before
+            self.get_logger().warning(
+                f'{self.missed_before} samples of {self.input_topic} were published before '
+                f'the first one arrived here: start the observer before its publisher, or let '
+                f'the publisher wait for it (plant_simulator start_nodes, bag_player '
+                f'--wait-for)')
 
     def count_missed(self, stamp_ns: int) -> None:
         """Count the samples the stamps say were sent but never arrived, between two samples
@@ -250,6 +294,7 @@ class Observer(Node):
         elapsed, self.last_report = now - self.last_report, now
         core = self.core_base + self.core_counts()
         fresh, self.core_reported = core - self.core_reported, core
+        self.count_missed_before_first()
         period, self.period = self.period, Counter()
         self.total.update(period)
         self.shortest_step_ns = [self.shortest_step_ns[1], math.inf]
@@ -269,6 +314,10 @@ class Observer(Node):
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
                   'published': period['published'], 'missed': missed,
                   'waiting_for_speed': len(self.waiting),
+                  'first_stamp_ns': 'none' if self.first_input_ns is None else
+                  self.first_input_ns,
+                  'missed_before_first_input': 'unknown' if self.missed_before is None else
+                  self.missed_before,
                   'speed_mps': 'none' if self.speed_mps is None else self.speed_mps}
         values.update({f'rejected.{k}': v for k, v in sorted(rejected.items())})
         values.update({f'total.{k}': v for k, v in sorted((self.total + core).items())})

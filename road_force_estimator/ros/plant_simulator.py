@@ -11,9 +11,15 @@ wall-clock read. A timer publishes every sample that is due, so the stream keeps
 the road or of ``simulator.duration`` it stops publishing and :attr:`finished` turns true; its
 ``main`` then returns 0. Parameters are read once (read-only): restart to change the drive.
 
-Start-up order: the drive (sample 0) starts once ``/suspension/deflections`` has a subscriber
-(and the other topics theirs, or :data:`START_GRACE_S` later), or after the node-local
-``start_timeout`` (s) with a warning, so that a recorder started beside it has every sample.
+Start-up order: the drive (sample 0) starts once the nodes of the node-local ``start_nodes``
+(default ``[observer]``) subscribe to ``/suspension/deflections`` and ``/vehicle/twist`` (or,
+with ``start_subscribers`` > 0, once ``/suspension/deflections`` has that many subscribers,
+whoever they are), then :data:`.start_gate.SETTLE_S` and, for the other topics'
+subscribers, at most :data:`START_GRACE_S`; or after ``start_timeout`` (s) with a warning
+naming what is missing. A recorder that must have every sample is named too
+(``start_nodes: [observer, bag_recorder]``, as ``simulation.launch.xml`` has it).
+``/diagnostics`` says the stamp of the first sample (``first_stamp_ns:<topic>``), from which
+a late observer counts what it missed.
 ``/fix`` carries status FIX, service GPS, and the receiver noise ``simulator.gnss.noise``
 (:class:`~.core.gnss.FixNoise`, the numbers of ``simulate_bag``); the twist carries the speed
 times ``1 + simulator.speed_scale_error`` (an odometer error; the route stays true).
@@ -51,6 +57,7 @@ from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
     ParameterError, ParameterGuard, local_spec, specs_with_prefix)
+from road_force_estimator.ros.start_gate import SETTLE_S, SubscriberGate, first_stamp_values
 from road_force_estimator.ros.wire import SimulatorWire
 from road_force_estimator.core.sensors import SensorModel
 from road_force_estimator.core.vehicle_model import SpringOptions
@@ -63,15 +70,23 @@ ARTICULATED = tuple(s for s in ARTICULATED_PARAMETERS
 SPECS = specs_with_prefix('vehicle.', 'simulator.') + ARTICULATED + (local_spec(
     'realtime_factor', 'double', 1.0, '',
     'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0), local_spec(
-    'start_timeout', 'double', 5.0, 's',
-    'the drive starts once /suspension/deflections has a subscriber, or after this', 0.0,
-    3600.0), local_spec(
+    'start_timeout', 'double', 30.0, 's',
+    'the drive starts once start_nodes (or start_subscribers) subscribe to the measurements, '
+    'or after this', 0.0, 3600.0), local_spec(
+    'start_nodes', 'string_list', ('observer',), '',
+    'nodes that must subscribe to /suspension/deflections and /vehicle/twist before the drive '
+    'starts (a name, any namespace; /ns/name: that one)'), local_spec(
+    'start_subscribers', 'integer', 0, '',
+    '> 0: instead of start_nodes, the drive starts once /suspension/deflections has this '
+    'many subscribers (whoever they are)', 0, 1000), local_spec(
     'road_timeout', 'double', 2.0, 's',
     'simulator.road = topic: the drive ends when no profile point came for this long after '
     'the tires reached the last one', 0.01, 3600.0))
-#: Once the measurement topic has a subscriber: the longest wait for the other topics'
-#: subscribers of the same recorder or node (s).
+#: Once the measurement topics have the subscribers that matter: the longest wait for the
+#: other topics' subscribers of the same recorder or node (s).
 START_GRACE_S = 0.5
+#: The topics whose subscribers start the drive: the observer's inputs.
+START_TOPICS = (api.DEFLECTIONS, api.TWIST)
 
 
 def build(values, given=()):
@@ -158,7 +173,14 @@ class PlantSimulator(Node):
         self.k = 0                     # next sample index
         self.start_ns = self.start_wall = None
         self.created_wall = time.monotonic()
-        self.subscribed_wall = None    # when /suspension/deflections got a subscriber
+        values = self.params.values
+        count = values['start_subscribers']
+        self.gate = SubscriberGate(self, {api.DEFLECTIONS: ()} if count else {
+            t: tuple(values['start_nodes']) for t in START_TOPICS}, count)
+        self.subscribed_wall = None    # when the gate opened
+        self.first_stamp_ns = None     # stamp of sample 0, for /diagnostics
+        self.get_logger().info(f'the drive starts once {self.gate.describe()} '
+                               f'(at most {self.start_timeout_s:g} s: start_timeout)')
         self.lag_s = 0.0
         self.finished = False
         period_s = max(1.0 / (sim.rate_hz * self.realtime_factor), 1e-3)
@@ -238,8 +260,12 @@ class PlantSimulator(Node):
             sample = self.plant.step()
             if sample is None:
                 break
-            self.publish(sample, self.start_ns + round(self.k * self.period_ns))
+            stamp_ns = self.start_ns + round(self.k * self.period_ns)
+            self.publish(sample, stamp_ns)
             self.k += 1
+            if self.first_stamp_ns is None:    # said at once: a late observer counts from it
+                self.first_stamp_ns = stamp_ns + self.last_jitter_ns
+                self.diagnostics_callback()
         if self.k > self.last_index or self.plant.finished:
             self.finish()
 
@@ -258,18 +284,22 @@ class PlantSimulator(Node):
         return False
 
     def ready_to_start(self) -> bool:
-        """True once the measurement topic has a subscriber (and the other publishers theirs,
-        or :data:`START_GRACE_S` passed), or ``start_timeout`` passed (with a warning)."""
+        """True once the gate is open (:data:`.start_gate.SETTLE_S` ago, and the other
+        publishers have subscribers or :data:`START_GRACE_S` passed), or ``start_timeout``
+        passed (with a warning naming what is missing)."""
         now = time.monotonic()
-        if self.subscribed_wall is None and self.deflections_pub.get_subscription_count():
-            self.subscribed_wall = now
-        if self.subscribed_wall is not None:
-            return (now - self.subscribed_wall >= START_GRACE_S
-                    or all(p.get_subscription_count() for p in self.reliable))
+        missing = self.gate.missing()
+        if not missing:
+            if self.subscribed_wall is None:
+                self.subscribed_wall = now
+            waited = now - self.subscribed_wall
+            return waited >= SETTLE_S and (waited >= START_GRACE_S or all(
+                p.get_subscription_count() for p in self.reliable))
+        self.subscribed_wall = None
         if now - self.created_wall >= self.start_timeout_s:
             self.get_logger().warning(
-                f'no subscriber on /suspension/deflections after {self.start_timeout_s:g} s '
-                f'(start_timeout): starting the drive anyway')
+                f'no {", ".join(missing)} after {self.start_timeout_s:g} s (start_timeout): '
+                f'starting the drive anyway')
             return True
         return False
 
@@ -290,8 +320,9 @@ class PlantSimulator(Node):
         else:
             q_meas, roll_meas = self.measure(sample.q_m, sample.roll_rad)
         jitter = self.stamp_offset()
+        self.last_jitter_ns = int(round(jitter * 1e9)) if jitter else 0
         if jitter:      # the sample at its true time, its stamp moved (simulator.stamp_jitter)
-            stamp_ns += int(round(jitter * 1e9))
+            stamp_ns += self.last_jitter_ns
         load_l, load_r, road_l, road_r = self.reliable
         wire, x = self.wire, float(sample.distance_m)
         self.twist_pub.publish(wire.twist.encode(stamp_ns, (
@@ -346,6 +377,8 @@ class PlantSimulator(Node):
                   'road_end_m': self.road.end_m if self.road else (
                       self.live.stream.end_m if self.live else math.nan),
                   'finished': self.finished}
+        if self.first_stamp_ns is not None:    # a late subscriber counts what it missed
+            values.update(first_stamp_values(dict.fromkeys(START_TOPICS, self.first_stamp_ns)))
         message = ('finished' if self.finished else
                    f'behind real time by {self.lag_s:.3f} s' if late else 'publishing')
         msg = DiagnosticArray(status=[diagnostic_status(diagnostics.status(
@@ -361,8 +394,8 @@ def main(args=None) -> int:
 
 
 def _wait_for_subscribers(executor, node: PlantSimulator) -> None:
-    for pub in node.reliable:  # let subscribers take the last samples before leaving
-        pub.wait_for_all_acked(Duration(seconds=2.0))
+    for pub in (*node.reliable, node.diagnostics_pub):  # let subscribers take the last
+        pub.wait_for_all_acked(Duration(seconds=2.0))    # samples and status before leaving
 
 
 if __name__ == '__main__':

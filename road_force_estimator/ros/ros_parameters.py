@@ -64,7 +64,8 @@ class ParameterError(ValueError):
 #: parameter file that is neither one of these, nor in the shared table, nor a ROS one
 #: (``use_sim_time``, ``qos_overrides.*``) is a typo and refused at start.
 NODE_LOCAL_NAMES = {
-    'plant_simulator': ('realtime_factor', 'start_timeout', 'road_timeout'),
+    'plant_simulator': ('realtime_factor', 'start_timeout', 'road_timeout', 'start_nodes',
+                        'start_subscribers'),
     'bag_recorder': ('topics', 'output'),
 }
 _ROS_NAMES = ('use_sim_time', 'start_type_description_service')

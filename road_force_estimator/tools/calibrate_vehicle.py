@@ -37,8 +37,8 @@ import yaml
 # The APIs this command uses (one place, for the lead to re-point).
 from road_force_estimator.bagio import BagReadError, read_drive_bag, read_lpa_bag
 from road_force_estimator.core.parameters import (
-    ObserverParameters, SPECS, SimulatorParameters, VehicleParameters, load_params_file,
-    read_params_document, validate_parameter)
+    ObserverParameters, SimulatorParameters, VehicleParameters, load_params_file,
+    parse_override, read_params_document)
 from road_force_estimator.bagio import road_from_source
 from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
 
@@ -91,21 +91,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _override(text: str) -> tuple[str, object]:
-    name, sep, raw = text.partition(':=')
+    """``-p NAME:=VALUE`` read as the other commands and the nodes read it
+    (:func:`.parameters.parse_override`)."""
+    name, sep, _ = text.partition(':=')
     if not sep or not name:
         raise _UsageError(f'-p {text!r}: expected NAME:=VALUE')
-    if name not in SPECS:
-        raise ValueError(f'-p {name}: no such parameter')
-    try:
-        value = yaml.safe_load(raw)
-    except yaml.YAMLError:
-        value = raw
-    if SPECS[name].kind == 'double' and isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    return name, validate_parameter(name, value)
+    return parse_override(text)
 
 
 def _parameters(args) -> tuple[dict, object]:

@@ -3,6 +3,7 @@
     estimate_bag INPUT [--params-file FILE] [-p NAME:=VALUE]... --output DIR
                  [--mode online|offline] [--units si|us] [--segment-length M]
                  [--reference-profile SOURCE [--reference-offset M]]
+                 [--export-profile FILE.erd|FILE.csv|FILE.txt]
                  [--no-figures] [--force] [--no-progress]
 
 Reads the measurement bag INPUT (``/suspension/deflections``, ``/vehicle/twist``, and when
@@ -29,6 +30,8 @@ It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`
 into place when complete, with ``DIR/.written-by-road-force-estimator.json`` listing the files
 written (:mod:`.output_folder`): a failure (out of space) leaves nothing behind, and
 ``--force`` replaces only what estimate_bag wrote there, never INPUT nor other files.
+``--export-profile FILE`` also writes the estimated profile, read back from ``DIR/bag``, as
+ProVAL and pavement-management systems read it (:mod:`.profile_export`).
 
 Exit status: 0 on success (skipped messages are counted in the report, never fatal), 1 for
 bad input (not a bag, no usable sample, no speed, no sample the estimator accepts: every speed
@@ -80,7 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help='distance along the reference profile where the drive starts, m from '
                         'its start (default: found by correlation within +-10 m)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
-    cli.add_force(p, 'replace DIR/bag and DIR/report written by an earlier estimate_bag')
+    p.add_argument('--export-profile', metavar='FILE',
+                   help='also write the estimated profile (both wheel paths, metres, evenly '
+                        'spaced) to FILE: .erd (UMTRI ERD, as ProVAL reads it), .csv '
+                        '(distance_m,left_m,right_m) or .txt (columns distance left right)')
+    cli.add_force(p, 'replace DIR/bag and DIR/report (and the --export-profile file) written '
+                     'by an earlier estimate_bag')
     cli.add_no_progress(p)
     return p
 
@@ -295,8 +303,10 @@ def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, st
         raise InputError(f'{input_path}: no sample could be estimated: '
                          f'{_why_none_estimated(drive, speed, est.status)}')
     extra = {}
-    if mode == 'online' and observer.distance_source == 'gnss':
-        extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
+    if mode == 'online':          # the distance is the speed's online: the report says why
+        from road_force_estimator.estimation.odometer import distance_speed
+        est.distance_source = distance_speed(observer.distance_source, drive.stamps_ns,
+                                             speed, drive.fixes, offline=False)[1]
     if early:
         extra['samples before the first twist (given its speed)'] = early
     return drive, est, extra
@@ -341,7 +351,7 @@ def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict
     counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
               'rejected_by_reader': int(drive.rejected_total),
               'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
-    fit = getattr(est, 'odometer', None)          # observer.distance_source = gnss, offline
+    fit = getattr(est, 'odometer', None)          # a GNSS fit was made (offline)
     if fit is not None and not fit.problem:
         counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
                       odometer_fixes_rejected=fit.rejected)
@@ -425,6 +435,11 @@ def _main(args: argparse.Namespace) -> int:
         reference = road_from_source(args.reference_profile)
         for note in getattr(reference, 'notes', ()):      # e.g. an ERD file's feet converted
             print(f'{PROG}: note: {args.reference_profile}: {note}', file=sys.stderr)
+    export = None
+    if args.export_profile:       # checked before the drive is estimated
+        from road_force_estimator.tools import profile_export
+        export = profile_export.target(args.export_profile, force=args.force,
+                                       inputs=[Path(args.input)])
     result = run(args.input, args.output, vehicle=vehicle, observer=observer,
                  mode=args.mode, segment_length_m=segment_length_m, reference=reference,
                  reference_offset_m=args.reference_offset, figures=not args.no_figures,
@@ -437,6 +452,9 @@ def _main(args: argparse.Namespace) -> int:
         print(f'{PROG}: note: {line}', file=sys.stderr)
     for line in _headline(result, args.units):
         print(f'{PROG}: {line}')
+    if export is not None:
+        print(f'{PROG}: ' + profile_export.export_profile(
+            result.bag, export, cutoff_wavelength_m=observer.profile_cutoff_wavelength_m))
     return 0
 
 

@@ -315,14 +315,12 @@ class _StreamRun:
 
         status, reader, prog = self.stream.status, self.reader, self.api.prog
         extra: dict[str, Any] = {}
-        if self.observer.distance_source == 'gnss' and not self.offline:
-            extra['observer.distance_source = gnss: offline only (distance from the speed)'] = 1
         if reader.early:
             extra['samples before the first twist (given its speed)'] = reader.early
         counts = {'samples': self.summary.inputs, 'estimated': int(status.accepted),
                   'rejected_by_reader': int(reader.rejected_total),
                   'rejected_by_estimator': int(status.rejected), 'resets': int(status.resets)}
-        fit = getattr(self.stream, 'odometer', None)  # observer.distance_source = gnss, offline
+        fit = getattr(self.stream, 'odometer', None)  # a GNSS fit was made (offline)
         if fit is not None and not fit.problem:
             counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
                           odometer_fixes_rejected=fit.rejected)
@@ -475,8 +473,14 @@ def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(notes(SimpleNamespace(), extra))
-    if getattr(stream, 'fused', False):           # observer.distance_source = gnss, offline
+    if getattr(stream, 'fused', False):           # a GNSS fit was made (offline)
         summary['odometer'] = stream.odometer.as_dict() if stream.odometer is not None else None
+    source = getattr(stream, 'distance_source', None)
+    if source is None:                            # online: the distance is the speed's
+        from road_force_estimator.estimation.odometer import distance_speed
+        source = distance_speed(observer.distance_source, (), (), drive.fixes,
+                                offline=False)[1]
+    summary['distance'] = source.as_dict()
     summary.update(acc.speed_findings())
     summary['accuracy'] = None
     segments = acc.segment_table(drive.fixes)

@@ -194,6 +194,7 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
     """A Dask client: on ``scheduler``, or on a local cluster of ``workers`` processes."""
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -213,9 +214,15 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
         finally:
             client.close()
         return
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host='127.0.0.1', dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    # No dashboard, and no HTTP routes: Dask's scheduler opens its HTTP listener whatever
+    # dashboard_address says (on 8787 by default, warning on stderr when that port is taken):
+    # here it is on a free loopback port with nothing to serve.
+    with dask.config.set({'distributed.scheduler.http.routes': [],
+                          'distributed.worker.http.routes': []}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host='127.0.0.1', dashboard_address=None,
+                               scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
+                               silence_logs=logging.ERROR)
     try:
         client = Client(cluster, set_as_default=False)
         try:

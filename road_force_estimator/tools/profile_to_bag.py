@@ -7,7 +7,8 @@ INPUT is a profile file (CSV ``distance_m,left_m,right_m`` or ``distance_m,eleva
 ERD, or whitespace columns such as profile_1.txt) or a synthetic road spec
 (``iso8608:C:seed=1``, ``flat``; ``--length`` sets its length). It becomes the LPA bag DIR:
 ``/lpa/left`` and ``/lpa/right`` (geometry_msgs/PointStamped, INTERFACES.md). When INPUT is a
-bag folder, the profile it holds is written to the CSV file given as ``--output`` instead,
+bag folder (an LPA bag, or a bag of estimates: its ``/road_profile/fused/*`` when present, else
+``/road_profile/*``), the profile it holds is written to the CSV file ``--output`` instead,
 rounded to what a profiler measures (1 mm of distance, 0.1 um of elevation), or with
 ``--exact`` every number exactly (shortest round-trip form), so CSV -> bag -> CSV loses
 nothing.
@@ -47,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
                'to 1 mm of distance and 0.1 um of elevation (--exact: exact).')
     parser.add_argument('input', metavar='INPUT',
                         help='profile file (.csv, .erd, .txt/.dat), road spec such as '
-                             'iso8608:C:seed=1, or an LPA bag folder')
+                             'iso8608:C:seed=1, or an LPA bag folder or bag of estimates')
     cli.add_output(parser, 'bag folder to create, or CSV file when INPUT is a bag',
                    metavar='PATH')
     parser.add_argument('--survey-speed', type=float, default=DEFAULT_SURVEY_SPEED_MPS,
@@ -104,7 +105,7 @@ def _run(args: argparse.Namespace) -> list[str]:
                                           inputs=inputs)
         target.check()
         notes: list[str] = []
-        profile = bagio.read_lpa_bag(source, issues=notes)
+        profile = bagio.read_profile_bag(source, issues=notes)
         with target.staged() as tmp:
             (write_exact_csv if args.exact else write_rounded_csv)(tmp, profile)
         return notes + [f'wrote {len(profile)} samples to {output}']

@@ -3,7 +3,9 @@
     road_profile_iri PROFILE [--units si|us] [--segment-length M] [--length M]
 
 PROFILE is a profile file (CSV, ERD, whitespace columns such as profile_1.txt), an LPA bag
-folder, or a synthetic road spec (``iso8608:C:seed=1``). Output, one row per segment:
+folder, a bag of estimates (``estimate_bag``'s ``DIR/bag``: its ``/road_profile/fused/*`` when
+present, else ``/road_profile/*``, the estimated road by the estimator's distance), or a
+synthetic road spec (``iso8608:C:seed=1``). Output, one row per segment:
 ``start_m,end_m,iri_left_m_per_km,iri_right_m_per_km`` (``--units si``, the default: 100 m
 segments) or ``start_ft,end_ft,iri_left_in_per_mi,iri_right_in_per_mi`` (``--units us``:
 0.1-mile segments, 1 m/km = 63.36 in/mi), rounded to 1 mm of distance and 0.001 m/km
@@ -45,8 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                'rectified slope inside it. The IRI of the whole profile goes to stderr (and an '
                "ERD file's stored IRILWP / IRIRWP beside it).")
     parser.add_argument('profile', metavar='PROFILE',
-                        help='profile file (.csv, .erd, .txt/.dat), LPA bag folder, or road '
-                             'spec such as iso8608:C:seed=1')
+                        help='profile file (.csv, .erd, .txt/.dat), LPA bag folder, bag of '
+                             'estimates (/road_profile/*), or road spec such as '
+                             'iso8608:C:seed=1')
     cli.add_units(parser)
     cli.add_segment_length(parser, 'segment length, m (default 100 m; 0.1 mi = 160.9344 m with '
                                    '--units us)', default=None)

@@ -6,19 +6,20 @@ from road_force_estimator.bagio import road_source
 from road_force_estimator.core.road import flat_profile, iso8608_profile
 
 
-def test_bag_folders_go_to_read_lpa_bag(tmp_path, monkeypatch):
-    # read_lpa_bag is tested in test_lpa.py: check that a bag folder is handed to it.
+def test_bag_folders_go_to_read_profile_bag(tmp_path, monkeypatch):
+    # read_profile_bag is tested in test_lpa.py and test_profile_export.py: check that a bag
+    # folder is handed to it.
     bag = tmp_path / 'lpa_bag'
     bag.mkdir()
     (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')
     seen = []
     profile = flat_profile(5.0)
 
-    def read_lpa_bag(path):
+    def read_profile_bag(path):
         seen.append(path)
         return profile
 
-    monkeypatch.setattr(road_source, 'read_lpa_bag', read_lpa_bag)
+    monkeypatch.setattr(road_source, 'read_profile_bag', read_profile_bag)
     assert bagio.road_from_source(str(bag)) is profile
     assert seen == [bag]
 

@@ -165,14 +165,20 @@ class TestOfflineEstimate:
         assert est.odometer.scale == pytest.approx(TRUE_SCALE, rel=1e-5)   # exact fixes
         true = drive.distance_m - drive.distance_m[0]
         assert np.max(np.abs(est.distance_m - true)) < 0.01
-        raw = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters(), fixes=fixes)
+        raw = estimate_recording(stamps, q, phi, v, VEHICLE,
+                                 ObserverParameters(distance_source='speed'), fixes=fixes)
         assert raw.distance_m[-1] - true[-1] == pytest.approx(ERROR * true[-1], rel=1e-3)
-        assert not hasattr(raw, 'odometer')
+        assert not hasattr(raw, 'odometer') and raw.distance_source.used == 'speed'
+        # the default, auto: exact fixes give the scale to far better than 0.2 %
+        auto = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters(),
+                                  fixes=fixes)
+        assert auto.distance_source.used == 'gnss'
+        np.testing.assert_array_equal(auto.distance_m, est.distance_m)
 
     def test_without_fixes_or_fusion_the_numbers_are_unchanged(self, inputs):
         stamps, q, phi, v, fixes = inputs
         base = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters())
-        for obs, fx in ((ObserverParameters(), fixes),
+        for obs, fx in ((ObserverParameters(distance_source='speed'), fixes),
                         (ObserverParameters(distance_source='gnss'), None)):
             other = estimate_recording(stamps, q, phi, v, VEHICLE, obs, fixes=fx)
             for name in ('distance_m', 'road_m', 'wheel_load_n', 'ltr', 'converged'):

@@ -59,3 +59,40 @@ def test_the_map_labels_each_drive(tmp_path, monkeypatch):
                                        labels=['a', 'a', 'b'], units='us')
     assert seen == [['a', 'a', 'b']]
     assert (tmp_path / 'm.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_drive_numbers_never_overlap_and_the_key_is_below_the_map(tmp_path, monkeypatch):
+    """Issue 29: three drives from one start (the README's fleet example: two routes from
+    the same place) were labelled with their names on top of each other and of the lines.
+    Now a number per drive, moved apart where starts coincide, and the names in a key under
+    the axes."""
+    from matplotlib.text import Annotation, Text
+
+    from road_force_estimator.report import fleet_map
+    figures = []
+    real = fleet_map._label_drives
+
+    def spy(ax, drawn):
+        real(ax, drawn)
+        figures.append(ax)
+    monkeypatch.setattr(fleet_map, '_label_drives', spy)
+    start = [17.1077, 48.1486]
+    lines = [[start, [17.1087, 48.1496]], [start, [17.1067, 48.1496]],
+             [start, [17.1077, 48.1476]], [[17.1100, 48.1500], [17.1110, 48.1510]]]
+    assert fleet_map.plot_segments_map(tmp_path / 'm.png', lines, [1.0, 2.0, 3.0, 4.0],
+                                       labels=['truck1/monday', 'truck1/tuesday',
+                                               'truck2/monday', 'truck3/monday'])
+    ax, = figures
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    numbers = [t for t in ax.texts if isinstance(t, Annotation)]
+    assert [t.get_text() for t in numbers] == ['1', '2', '3', '4']
+    boxes = [Text.get_window_extent(t, renderer) for t in numbers]   # the digits, no leader
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            assert not boxes[i].overlaps(boxes[j]), (i, j)
+    key, = [t for t in ax.texts if t.get_text().startswith('drives')]
+    assert all(f'{n}: {name}' in key.get_text() for n, name in (
+        (1, 'truck1/monday'), (2, 'truck1/tuesday'), (3, 'truck2/monday')))
+    assert key.get_window_extent(renderer).y1 < ax.get_window_extent(renderer).y0
+    assert key.get_window_extent(renderer).y0 >= 0.0             # inside the figure

@@ -43,7 +43,8 @@ class RawCollector(Node):
 
 def play(context, bag, *args, topics=TYPES, until=None, timeout_s=30.0):
     """Play ``bag`` with the options ``args`` into a raw collector; (player, collector)."""
-    options = build_parser().parse_args([str(bag), *args])
+    # the collector is the only subscriber: any one will do (not the package's readers)
+    options = build_parser().parse_args([str(bag), '--wait-count', '1', *args])
     collector = RawCollector(context, topics)
     player = BagPlayer(open_playback(bag), options, context=context)
     executor = make_executor(context, collector, player)
@@ -109,7 +110,8 @@ def test_loop_plays_the_bag_again_until_stopped(ros_context, tmp_path):
 def test_clock_publishes_the_bag_time(ros_context, tmp_path):
     items = expected(300)
     write_ours(tmp_path / 'bag', items)
-    options = build_parser().parse_args([str(tmp_path / 'bag'), '--clock', '--rate', '2'])
+    options = build_parser().parse_args([str(tmp_path / 'bag'), '--clock', '--rate', '2',
+                                         '--wait-count', '1'])
     assert options.clock == 100.0
     clocks = []
     listener = Node('clock_listener', context=ros_context)
@@ -158,7 +160,7 @@ def test_main_plays_waits_for_a_subscriber_and_exits_0(ros_context, tmp_path):
     items = expected(100)
     write_rosbags(tmp_path / 'bag', items)
     process = run_main('bag_player', str(tmp_path / 'bag'), '--topics', '/lpa/left',
-                       '--wait', '20')
+                       '--wait', '20', '--wait-for', 'raw_collector')
     col = RawCollector(ros_context, {'/lpa/left': POINT})
     executor = make_executor(ros_context, col)
     try:
@@ -167,7 +169,7 @@ def test_main_plays_waits_for_a_subscriber_and_exits_0(ros_context, tmp_path):
         close(executor, col)
     code, _, err = finish(process, 30.0)
     assert code == 0, err
-    assert 'waiting up to 20 s for subscribers on /lpa/left' in err
+    assert 'waiting up to 20 s for raw_collector on /lpa/left' in err
     assert 'played 100 messages' in err and 'Traceback' not in err
     assert col.messages['/lpa/left'] == by_topic(items)['/lpa/left']
 

@@ -54,7 +54,7 @@ def test_an_lpa_bag_played_into_the_plant_drives_as_simulate_bag(ros_context, tm
     collector = Collector(ros_context, TOPICS)
     plant = PlantSimulator(context=ros_context, parameter_overrides=[
         Parameter('simulator.road', value='topic'), Parameter('simulator.duration', value=60.0),
-        Parameter('road_timeout', value=0.5)])
+        Parameter('road_timeout', value=0.5), Parameter('start_nodes', value=['collector'])])
     player = run_main('bag_player', str(bag), '--wait', '30')
     executor = make_executor(ros_context, collector, plant)
     try:

@@ -27,6 +27,7 @@ WGS84_A, WGS84_E2 = 6378137.0, 6.69437999014e-3
 
 def drive(context, timeout_s=30.0, **params):
     """Run a plant_simulator with ``params`` to its end; (node, collector) after delivery."""
+    params.setdefault('start_nodes', ['collector'])      # the test's collector starts it
     overrides = [Parameter(k.replace('__', '.'), value=v) for k, v in params.items()]
     collector = Collector(context, TOPICS)
     plant = PlantSimulator(context=context, parameter_overrides=overrides)
@@ -165,13 +166,15 @@ def test_live_set_is_refused_naming_the_parameter(ros_context):
 
 def test_main_exits_cleanly_when_the_drive_ends():
     code, _, err = finish(run_main('plant_simulator', '--ros-args', '-p',
-                                   'simulator.duration:=0.3', '-p', 'realtime_factor:=3.0'))
+                                   'simulator.duration:=0.3', '-p', 'realtime_factor:=3.0',
+                                   '-p', 'start_timeout:=0.5'))
     assert code == 0, err
     assert 'drive finished after 301 samples' in err
 
 
 def test_main_exits_cleanly_on_sigint_mid_drive(ros_context):
-    process = run_main('plant_simulator')  # 60 s by default
+    process = run_main('plant_simulator', '--ros-args', '-p',
+                       'start_timeout:=0.5')  # 60 s by default
     collector = Collector(ros_context, ['/vehicle/twist'])
     executor = make_executor(ros_context, collector)
     try:
@@ -197,7 +200,8 @@ def test_main_refuses_a_bad_parameter_with_one_line(tmp_path):
 
 def test_the_drive_waits_for_a_subscriber_on_the_measurements(ros_context):
     plant = PlantSimulator(context=ros_context, parameter_overrides=[
-        Parameter('simulator.duration', value=0.2), Parameter('start_timeout', value=60.0)])
+        Parameter('simulator.duration', value=0.2), Parameter('start_timeout', value=60.0),
+        Parameter('start_nodes', value=['collector'])])
     executor = make_executor(ros_context, plant)
     collector = None
     try:
@@ -220,8 +224,8 @@ def test_main_starts_after_start_timeout_without_a_subscriber():
     code, _, err = finish(run_main('plant_simulator', '--ros-args', '-p',
                                    'simulator.duration:=0.1', '-p', 'start_timeout:=0.5'))
     assert code == 0, err
-    assert ('no subscriber on /suspension/deflections after 0.5 s (start_timeout): starting '
-            'the drive anyway') in err
+    assert ('no observer on /suspension/deflections, observer on /vehicle/twist after 0.5 s '
+            '(start_timeout): starting the drive anyway') in err
     assert 'drive finished after 101 samples' in err
 
 
@@ -238,7 +242,8 @@ def test_a_drive_recorded_from_the_nodes_has_every_sample_and_coordinates(ros_co
         Parameter('output', value=str(bag))])
     plant = PlantSimulator(context=ros_context, parameter_overrides=[
         Parameter('simulator.duration', value=4.0), Parameter('simulator.speed', value=25.0),
-        Parameter('simulator.road', value='iso8608:C:seed=3')])
+        Parameter('simulator.road', value='iso8608:C:seed=3'),
+        Parameter('start_nodes', value=['bag_recorder'])])
     executor = make_executor(ros_context, recorder, plant)
     try:
         assert spin_until(executor, lambda: plant.finished, 60.0)
@@ -262,3 +267,59 @@ def test_a_drive_recorded_from_the_nodes_has_every_sample_and_coordinates(ros_co
         values = dict(zip(header, row.split(',')))
         assert all(math.isfinite(float(values[k])) for k in ('start_lat', 'start_lon',
                                                              'end_lat', 'end_lon')), row
+
+
+def first_stamp_said(collector) -> int | None:
+    """The plant's /diagnostics: the stamp of its first sample on the measurements."""
+    for msg in collector.messages['/diagnostics']:
+        for status in msg.status:
+            values = {v.key: v.value for v in status.values}
+            if 'first_stamp_ns:/suspension/deflections' in values:
+                assert values['first_stamp_ns:/vehicle/twist'] == values[
+                    'first_stamp_ns:/suspension/deflections']
+                return int(values['first_stamp_ns:/suspension/deflections'])
+    return None
+
+
+def test_the_drive_waits_for_the_observer_not_for_any_subscriber(ros_context):
+    """Issue 29: a recorder (any subscriber) no longer starts the drive; the node that reads
+    the measurements (``start_nodes``, default observer) does, and the plant says in its
+    /diagnostics the stamp of its first sample."""
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        Parameter('simulator.duration', value=0.2), Parameter('start_timeout', value=60.0)])
+    recorder_like = Collector(ros_context, TOPICS, name='bag_recorder')
+    executor = make_executor(ros_context, plant, recorder_like)
+    observer = None
+    try:
+        assert spin_until(executor, lambda: plant.deflections_pub.get_subscription_count()
+                          >= 1, 30.0)
+        assert not spin_until(executor, lambda: plant.k > 0, 1.5)      # a bounded look
+        observer = Collector(ros_context, ['/suspension/deflections', '/vehicle/twist'],
+                             name='observer')
+        executor.add_node(observer)
+        assert spin_until(executor, lambda: plant.finished, 30.0)
+        assert spin_until(executor, lambda: observer.count('/suspension/deflections')
+                          >= plant.k and first_stamp_said(recorder_like) is not None, 10.0)
+    finally:
+        close(executor, plant, recorder_like, *([observer] if observer else []))
+    assert observer.stamps('/suspension/deflections')[0] == plant.start_ns
+    assert first_stamp_said(recorder_like) == plant.start_ns
+
+
+def test_start_subscribers_counts_whoever_subscribes(ros_context):
+    plant = PlantSimulator(context=ros_context, parameter_overrides=[
+        Parameter('simulator.duration', value=0.1), Parameter('start_timeout', value=60.0),
+        Parameter('start_subscribers', value=2)])
+    first = Collector(ros_context, TOPICS, name='one')
+    executor = make_executor(ros_context, plant, first)
+    second = None
+    try:
+        assert spin_until(executor, lambda: plant.deflections_pub.get_subscription_count()
+                          >= 1, 30.0)
+        assert not spin_until(executor, lambda: plant.k > 0, 1.0)
+        second = Collector(ros_context, TOPICS, name='two')
+        executor.add_node(second)
+        assert spin_until(executor, lambda: plant.finished, 30.0)
+    finally:
+        close(executor, plant, first, *([second] if second else []))
+    assert plant.k == 101

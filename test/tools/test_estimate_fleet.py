@@ -488,3 +488,30 @@ def test_output_inside_a_bag_folder_given_directly_is_not_recomputed(drives, tmp
     assert 'processed 1, skipped (already done) 0' in (bag / 'fleet' / 'summary.md').read_text()
     assert estimate_fleet.main(argv) == 0
     assert 'processed 0, skipped (already done) 1' in (bag / 'fleet' / 'summary.md').read_text()
+
+
+def test_a_default_local_run_prints_no_warning_even_with_the_dashboard_port_taken(drives,
+                                                                                  tmp_path):
+    """Issue 29: Dask's scheduler opened an HTTP server on 8787 although the local cluster has
+    no dashboard, and warned on stderr when the port was taken. A default run (no options
+    but the input and the output) now leaves stderr silent but for its progress bar."""
+    taken = socket.socket()
+    try:
+        taken.bind(('127.0.0.1', 8787))
+        taken.listen(1)
+    except OSError:
+        pass      # someone else holds it: the same condition
+    good = tmp_path / 'one'
+    shutil.copytree(drives['inputs'] / 'd1', good / 'd1')
+    try:
+        run = subprocess.run([PY, '-m', 'road_force_estimator.tools.estimate_fleet', str(good),
+                              '--output', str(tmp_path / 'out'), '--workers', '1'],
+                             capture_output=True, text=True, timeout=TIMEOUT)
+    finally:
+        taken.close()
+    assert run.returncode == 0, run.stderr[-3000:]
+    lines = [line for line in run.stderr.replace('\r', '\n').splitlines() if line.strip()]
+    assert lines and all(line.startswith('estimate_fleet:') and 'drive' in line
+                         for line in lines), run.stderr   # the progress bar, nothing else
+    assert 'arn' not in run.stderr and 'in use' not in run.stderr
+    assert '1 processed, 0 skipped, 0 failed' in run.stdout

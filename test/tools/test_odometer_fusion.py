@@ -89,3 +89,58 @@ def test_offline_fusion_reports_the_scale_and_places_the_segments(estimated):
     keys = {kv.key: kv.value for kv in diags[-1].status[0].values}
     assert float(keys['total.odometer_scale']) == pytest.approx(odo['scale'], rel=1e-6)  # %g
     assert keys['total.odometer_fixes_rejected'] == '0'
+
+
+# ------------------------------------------------------------------------------------------
+# observer.distance_source: auto, the default (issue 29)
+
+@pytest.fixture(scope='module')
+def by_default(drives, tmp_path_factory):
+    """estimate_bag --mode offline with no parameter at all, on the drive whose speed reads
+    1.5 % high (fixes with 2.5 m of noise), and on the same drive without /fix."""
+    root = tmp_path_factory.mktemp('auto')
+    nofix = simulate(root / 'nofix', '-p', f'simulator.speed_scale_error:={ERROR}',
+                     '-p', 'simulator.gnss.rate:=0')
+    out = {}
+    for name, drive in (('fix', drives[1]), ('nofix', nofix)):
+        assert estimate_main([str(drive), '--output', str(root / f'{name}-est'), '--mode',
+                              'offline', '--no-figures', '--no-progress']) == 0
+        out[name] = (drive, root / f'{name}-est')
+    return out
+
+
+def mark_position_m(drive: Path, estimate: Path, mark_m: float) -> float:
+    """Where the truck truly was (m) when the estimate's distance reached ``mark_m``."""
+    truth = bagio.read_drive_bag(drive)
+    stamps, x = [], []
+    for _, _, msg in bagio.iter_messages(estimate / 'bag', topics=['/road_profile/left']):
+        stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+        x.append(msg.point.x)
+    at = stamps[int(np.searchsorted(np.asarray(x), mark_m))]
+    return float(np.interp(at, truth.stamps_ns, truth.truth.distance_m))
+
+
+def test_by_default_the_distance_is_the_fixes_when_the_drive_has_them(by_default):
+    drive, est = by_default['fix']
+    s = json.loads((est / 'report' / 'report.json').read_text())
+    assert s['parameters']['observer.distance_source'] == 'auto'
+    assert s['distance']['used'] == 'gnss' and s['distance']['fixes'] == 601
+    assert '601 of 601 fixes used' in s['distance']['reason']
+    assert 'reads 1.5' in s['distance']['reason'] and '% high' in s['distance']['reason']
+    assert abs(mark_position_m(drive, est, 1000.0) - 1000.0) <= 2.0
+    xcorr = s['accuracy']['profile_xcorr']
+    assert min(np.atleast_1d(xcorr)) >= 0.95, xcorr
+    md = (est / 'report' / 'report.md').read_text()
+    assert '| distance (observer.distance_source = auto) | GNSS-corrected' in md
+
+
+def test_without_fixes_the_report_says_the_distance_is_the_speeds(by_default):
+    drive, est = by_default['nofix']
+    s = json.loads((est / 'report' / 'report.json').read_text())
+    assert s['distance'] == {'requested': 'auto', 'used': 'speed',
+                             'reason': 'no /fix in the drive', 'fixes': 0}
+    md = (est / 'report' / 'report.md').read_text()
+    assert ("| distance (observer.distance_source = auto) | the speed's (the integral of "
+            '/vehicle/twist): no /fix in the drive |') in md
+    assert mark_position_m(drive, est, 1000.0) == pytest.approx(1000.0 / (1.0 + ERROR),
+                                                                abs=0.5)
