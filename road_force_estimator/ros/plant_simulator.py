@@ -306,8 +306,8 @@ class PlantSimulator(Node):
     def publish(self, sample, stamp_ns: int) -> None:
         if self.outputs is not None:        # vehicle.model: articulated
             jitter = self.stamp_offset()
-            if jitter:
-                stamp_ns += int(round(jitter * 1e9))
+            self.last_jitter_ns = int(round(jitter * 1e9)) if jitter else 0
+            stamp_ns += self.last_jitter_ns
             self.outputs.publish(sample, stamp_ns,
                                  float(self.speed_at(sample.t_s) * self.odometer))
             if self.fix_pub is not None and int(sample.t_s * self.sim.gnss_rate_hz) > \

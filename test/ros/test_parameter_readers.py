@@ -16,7 +16,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from road_force_estimator.core import ros_yaml
-from road_force_estimator.core.parameters import parse_override
+from road_force_estimator.core.parameters import load_params_file, parse_override
 from road_force_estimator.ros.observer import Observer
 from road_force_estimator.ros.plant_simulator import PlantSimulator
 from road_force_estimator.ros.ros_parameters import ParameterError
@@ -131,7 +131,44 @@ def offline_configs(path: pathlib.Path, *overrides: str):
     return estimator, plant, values
 
 
-@pytest.mark.parametrize('name', [p.name for p in CONFIGS] + ['numbers.yaml'])
+def _articulated(path: pathlib.Path) -> bool:
+    return load_params_file(path).get('vehicle.model') == 'articulated'
+
+
+FRONT_AXLE = [p.name for p in CONFIGS if not _articulated(p)]
+ARTICULATED = [p.name for p in CONFIGS if _articulated(p)]
+
+
+@pytest.mark.parametrize('name', ARTICULATED)
+def test_an_articulated_file_reads_the_same_in_the_plant_node_and_simulate_bag(name):
+    """``vehicle.model: articulated``: the plant node and simulate_bag build the same drive;
+    the estimators (observer node, estimate_bag) refuse the file with one line naming the
+    model, as they estimate the front axle only."""
+    from road_force_estimator.core.articulated_setup import ArticulatedDrive
+    path = REPO / 'config' / name
+    context = rcl_context('--params-file', str(path))
+    try:
+        node = PlantSimulator(context=context)
+        drive, simulator = node.params.config[:2]
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    args = simulate_bag.build_parser().parse_args(
+        ['--road', 'flat', '--params-file', str(path), '--output', 'unused'])
+    offline = ArticulatedDrive.from_values(simulate_bag.parameter_mapping(args))
+    assert offline.vehicle == drive.vehicle
+    assert offline.sim == dataclasses.replace(simulator, road='flat')
+    context = rcl_context('--params-file', str(path))
+    try:
+        with pytest.raises(ParameterError, match='articulated'):
+            Observer(context=context)
+    finally:
+        rclpy.try_shutdown(context=context)
+    with pytest.raises(ValueError, match='articulated'):
+        estimate_bag.load_parameters(str(path), [])
+
+
+@pytest.mark.parametrize('name', FRONT_AXLE + ['numbers.yaml'])
 def test_every_config_file_reads_the_same_in_the_nodes_and_the_offline_commands(
         tmp_path, name):
     path = REPO / 'config' / name if name != 'numbers.yaml' else params_file(
