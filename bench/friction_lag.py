@@ -18,7 +18,7 @@ in % of the true dynamic-load RMS after the 2 s skip), per road seed (default 1,
   observer runs), the file as before (the package's 0.01);
 - ``friction, truth v_f 0.005``: the friction alone with that steeper truth;
 - ``... , file v_f 0.005``: those two drives again with the observer told the truth's v_f
-  (the observer's constant patched for the run, :mod:`.model_friction` and :mod:`.smoother`,
+  (the observer's constant patched for the run, :mod:`.observer.friction` and :mod:`.smoother`,
   as a file that states v_f would tell it): what is left when the law is right.
 
 Then where the cost comes from: the forward filter's posterior std of the suspension rate

@@ -3,7 +3,7 @@
 
 :func:`calibrate` (:mod:`.calibrate`) aligns the drive with the survey (:mod:`.alignment`),
 fits the plant's model to the measured deflections and roll (:mod:`.fit`, the model's free
-slots: :mod:`.model`) and gives each value a confidence interval (:mod:`.covariance`).
+slots: :mod:`.models.front_axle`) and gives each value a confidence interval (:mod:`.covariance`).
 ``calibrate_vehicle`` is its command; :mod:`road_force_estimator.report.calibration` its
 report.
 """

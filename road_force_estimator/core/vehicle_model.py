@@ -36,21 +36,7 @@ import numpy as np
 from road_force_estimator.core.friction import FrictionLaw, stick_force, tanh_force, tanh_forces
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
 
-__all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode', 'SpringOptions',
-           'FRICTION_VELOCITY_MPS', 'friction_force']
-
-#: Smoothing velocity v_f (m/s) of the leaf-spring friction ``-F_f tanh(dq / v_f)``: the
-#: default of ``vehicle.leaf_spring_friction_velocity`` (the plant takes the parameter; the
-#: observer's model still takes this default), small against the suspension rates on a road
-#: (~0.1 m/s RMS on ISO class C at 20 m/s), so the force is Coulomb-like.
-FRICTION_VELOCITY_MPS = 0.01
-
-
-def friction_force(friction_n: float, dq_mps: float) -> float:
-    """The leaf-spring friction force on the body (N, > 0 upward), ``-F_f tanh(dq / v_f)``:
-    it opposes the suspension's extension rate dq (m/s)."""
-    return -friction_n * math.tanh(dq_mps / FRICTION_VELOCITY_MPS)
-
+__all__ = ['State', 'VehicleModel', 'ModelOutputs', 'LinearModel', 'Mode', 'SpringOptions']
 
 @dataclass(frozen=True)
 class SpringOptions:

@@ -90,7 +90,7 @@ def estimator_status(name: str, hardware_id: str, values: Mapping[str, Any], *,
 
 
 def model_fit_values(ratio: float, word: str) -> dict[str, Any]:
-    """The status values of the model-fit diagnostic (:mod:`.model_fit`): ``model_fit``
+    """The status values of the model-fit diagnostic (:mod:`.fit_check`): ``model_fit``
     ('ok' | 'mismatch') and ``model_fit_ratio`` (band RMS of the residual over sigma_M)."""
     return {'model_fit': word, 'model_fit_ratio': float(ratio)}
 

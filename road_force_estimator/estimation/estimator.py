@@ -2,9 +2,9 @@
 
 One sample in, one estimate out (:meth:`Estimator.update`), and a batch path
 (:func:`estimate_batch`) that runs the very same step function and so gives identical numbers.
-The method is ``observer.discretization`` (the cores: :mod:`.cores`):
+The method is ``observer.discretization`` (the cores: :mod:`.methods`):
 
-- ``'model'`` (the default): the Kalman unknown-input observer of :mod:`.model_core` on the
+- ``'model'`` (the default): the Kalman unknown-input observer of :mod:`.observer.online` on the
   paper's roll-plane model (the road and an unknown roll moment as states), its noise and
   road roughness estimated online; an optional sliding-mode injection on the output error
   (``observer.sliding_mode_gain``, off by default). Its accuracy per road, noise level and
@@ -14,7 +14,7 @@ The method is ``observer.discretization`` (the cores: :mod:`.cores`):
   scheme (how each converges with the rate: ``python -m bench.chain_rate``).
 
 Both end in MODEL.md's reconstruction (:mod:`.reconstruction`; the body heave of
-:mod:`.body_heave`, the LTR of :mod:`.load_transfer`).
+:mod:`.body_heave`, the LTR of :mod:`.reconstruction`).
 
 Latency (``observer.latency`` = T > 0): :meth:`Estimator.update` returns, per accepted input,
 the estimate of the sample N = round(T / dt) samples back, stamped with that sample's stamp
@@ -83,14 +83,14 @@ class Estimator:
         The method (``discretization``: ``'model'`` or a chain scheme), the latency, the
         profile cutoff wavelength; for the chain L per channel (``lipschitz_deflection`` for
         both deflections, ``lipschitz_roll``); for the model the sliding-mode gain and the
-        noise / roughness settings (0 = estimated online, see :mod:`.model`).
+        noise / roughness settings (0 = estimated online, see :mod:`.models.front_axle`).
     gap_threshold_s : float
         Shortest step that is a gap (s), default :data:`GAP_THRESHOLD_S`.
 
     Notes
     -----
     :meth:`update` returns a new immutable :class:`Estimate`, or None for a rejected sample
-    or while nothing is due yet (latency). :attr:`core` is the method's core (:mod:`.cores`).
+    or while nothing is due yet (latency). :attr:`core` is the method's core (:mod:`.methods`).
     """
 
     def __init__(self, vehicle: VehicleParameters | None = None,

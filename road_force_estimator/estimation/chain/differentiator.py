@@ -323,15 +323,6 @@ class LevantDifferentiator:
         return self._lip
 
     @property
-    def n_channels(self) -> int:
-        return len(self._z0)
-
-    @property
-    def initialised(self) -> bool:
-        """False until :meth:`reset` (or the first :meth:`update`) gave it a sample."""
-        return self._initialised
-
-    @property
     def state(self) -> np.ndarray:
         """Internal state (3, c): ``z_0, z_1, z_2`` (equal to the last output), a copy."""
         return np.array([self._z0, self._z1, self._z2])

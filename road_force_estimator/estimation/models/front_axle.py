@@ -1,10 +1,10 @@
 """The model observer of the roll-plane model (``observer.discretization = 'model'``, the
 default): a Kalman unknown-input observer on the paper's model, with an optional
-sliding-mode injection (off by default, :mod:`.model_core`).
+sliding-mode injection (off by default, :mod:`.observer.online`).
 
 The model (this module) and what is built on it: the gains (:mod:`.gains`, with
 :mod:`.riccati` and :mod:`.noise`), the operating point they are designed at
-(:mod:`.schedule`), the online observer (:mod:`.model_core`) and the offline smoother
+(:mod:`.schedule`), the online observer (:mod:`.observer.online`) and the offline smoother
 (:mod:`.smoother`).
 
 The observer runs the linearised roll-plane model of MODEL.md (:mod:`.vehicle_model`) with the
@@ -46,11 +46,11 @@ heave published stays the load filter's at ``observer.profile_cutoff_wavelength`
 
 Friction and sensor lag (``vehicle.leaf_spring_friction``, ``vehicle.sensor_time_constant``)
 -------------------------------------------------------------------------------------------
-The leaf-spring friction ``f_i = -F_f,i tanh(dq_i / v_f)`` (:func:`.vehicle_model.
-friction_force`) is added to ``F_bi`` as a known nonlinear input, evaluated on the estimated
-``dq_i`` (in the filter's prediction held over the step, the trapezoid of the previous
+The leaf-spring friction ``f_i = -F_f,i tanh(dq_i / v_f)`` (``v_f`` =
+``vehicle.leaf_spring_friction_velocity``; :mod:`.observer.friction`) is added to ``F_bi``
+as a known nonlinear input, evaluated on the estimated ``dq_i`` (in the filter's prediction held over the step, the trapezoid of the previous
 sample's estimate and the step's end, whose rate the updated state gives: one iterated
-update, :mod:`.model_core`; the estimate's own in its outputs): ``dx = A x + B_f f``,
+update, :mod:`.observer.online`; the estimate's own in its outputs): ``dx = A x + B_f f``,
 outputs ``H x + D_f f``
 (:attr:`ContinuousModel.friction_b`, :attr:`ContinuousModel.friction_d`). A sensor lag is a
 first-order state per lagged channel, ``tau dl_j = y_j - l_j``, appended after ``M_R``

@@ -7,8 +7,8 @@ few ms, :func:`.gains.design`) uses the estimates of that moment and is cached, 
 sample. The noise is estimated per block from the sixth differences (:func:`.noise.noise_std`;
 median of the last :data:`HISTORY_BLOCKS` blocks), the roughness by moment matching of the
 first differences of the deflections (median of the last :data:`ROUGHNESS_HISTORY_BLOCKS`);
-see :mod:`.model` for the whole story. :class:`GainSchedule` is shared by the online
-observer (:mod:`.model_core`) and the offline smoother (:mod:`.smoother`).
+see :mod:`.models.front_axle` for the whole story. :class:`GainSchedule` is shared by the online
+observer (:mod:`.observer.online`) and the offline smoother (:mod:`.smoother`).
 """
 from __future__ import annotations
 
