@@ -48,10 +48,10 @@ Friction and sensor lag (``vehicle.leaf_spring_friction``, ``vehicle.sensor_time
 -------------------------------------------------------------------------------------------
 The leaf-spring friction ``f_i = -F_f,i tanh(dq_i / v_f)`` (``v_f`` =
 ``vehicle.leaf_spring_friction_velocity``; :mod:`.observer.friction`) is added to ``F_bi``
-as a known nonlinear input, evaluated on the estimated ``dq_i`` (in the filter's prediction held over the step, the trapezoid of the previous
-sample's estimate and the step's end, whose rate the updated state gives: one iterated
-update, :mod:`.observer.online`; the estimate's own in its outputs): ``dx = A x + B_f f``,
-outputs ``H x + D_f f``
+as a known nonlinear input, evaluated on the estimated ``dq_i`` (in the filter's prediction
+held over the step, the trapezoid of the previous sample's estimate and the step's end,
+whose rate the updated state gives: one iterated update, :mod:`.observer.online`; the
+estimate's own in its outputs): ``dx = A x + B_f f``, outputs ``H x + D_f f``
 (:attr:`ContinuousModel.friction_b`, :attr:`ContinuousModel.friction_d`). A sensor lag is a
 first-order state per lagged channel, ``tau dl_j = y_j - l_j``, appended after ``M_R``
 (:attr:`ContinuousModel.lagged`); the sensors then measure ``l_j`` (``C``), the outputs stay
