@@ -55,3 +55,12 @@ def test_layout_lists_every_module():
         if f'`{".".join(rel.parts)}`' not in text:
             missing.append('.'.join(rel.parts))
     assert not missing, missing
+
+
+def test_readme_quickstart_block_is_the_tested_one():
+    """The README's node block is docs/quickstart.md's, which test/ros/test_quickstart_blocks.py
+    runs as written."""
+    pattern = re.compile(r'<!-- block: quickstart -->\s*```bash\n(.*?)```', re.S)
+    readme = pattern.search((ROOT / 'README.md').read_text(encoding='utf-8'))
+    page = pattern.search((ROOT / 'docs' / 'quickstart.md').read_text(encoding='utf-8'))
+    assert readme and page and readme.group(1) == page.group(1)
