@@ -42,6 +42,7 @@ import numpy as np
 from scipy import linalg, signal
 
 from road_force_estimator.core.parameters import GRAVITY_MPS2, VehicleParameters
+from road_force_estimator.estimation.observer.riccati import van_loan
 
 __all__ = [
     'PeerResult', 'reconstruct', 'paper_euler', 'lowpass_fd', 'kf_jerk', 'zero_phase_offline',
@@ -124,24 +125,6 @@ def iso_road_diffusion(gd_n0_m3: float, n0_cpm: float = ISO_N0) -> float:
     velocity is white with two-sided spectral density ``D v`` (m^2/s).
     """
     return 2.0 * math.pi ** 2 * gd_n0_m3 * n0_cpm ** 2
-
-
-def van_loan(a_c: np.ndarray, g_c: np.ndarray, q_c: np.ndarray,
-             dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact discretization of ``dx = A x dt + G dW`` (``E[dW dW^T] = Q dt``) at step dt.
-
-    Returns ``(A_d, Q_d)`` with ``A_d = expm(A dt)`` and
-    ``Q_d = int_0^dt expm(A s) G Q G^T expm(A^T s) ds`` (Van Loan, 1978).
-    """
-    nx = a_c.shape[0]
-    big = np.zeros((2 * nx, 2 * nx))
-    big[:nx, :nx] = -a_c
-    big[:nx, nx:] = g_c @ q_c @ g_c.T
-    big[nx:, nx:] = a_c.T
-    e = linalg.expm(big * dt_s)
-    a_d = e[nx:, nx:].T
-    q_d = a_d @ e[:nx, nx:]
-    return a_d, 0.5 * (q_d + q_d.T)
 
 
 def _run_lti(f: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
