@@ -8,6 +8,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
+pytestmark = pytest.mark.slow   # `pytest -m 'not slow'` skips it; scripts/test runs it
+
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = 'road_force_estimator'
 EXECUTABLES = ['plant_simulator', 'observer', 'bag_recorder', 'bag_player', 'simulate_bag',

@@ -12,6 +12,8 @@ from road_force_estimator.calibration.calibrate import (
     AlignmentError, CalibrationError, CalibrationOptions, calibrate)
 from road_force_estimator.calibration.model import SLOTS, slot_value
 
+pytestmark = pytest.mark.slow   # `pytest -m 'not slow'` skips it; scripts/test runs it
+
 RATE = 200.0
 SPEED = 20.0
 START = 30.0          # survey distance where the drive starts (m)

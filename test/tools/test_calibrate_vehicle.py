@@ -11,6 +11,8 @@ from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.core.road_files import road_from_source, write_csv_profile
 from road_force_estimator.tools import calibrate_vehicle, simulate_bag
 
+pytestmark = pytest.mark.slow   # `pytest -m 'not slow'` skips it; scripts/test runs it
+
 TRUCK = """/**:
   ros__parameters:
     vehicle:

@@ -20,6 +20,8 @@ from road_force_estimator.tools import estimate_fleet
 from road_force_estimator.tools import simulate_bag
 from road_force_estimator.tools.estimate_fleet import FLEET_COLUMNS
 
+pytestmark = pytest.mark.slow   # `pytest -m 'not slow'` skips it; scripts/test runs it
+
 PY = sys.executable
 DASK = str(Path(sys.executable).parent / 'dask')
 SEGMENT_M = 25.0

@@ -14,6 +14,8 @@ import pytest
 from road_force_estimator.tools import estimate_fleet, fleet_dask
 from road_force_estimator.tools.fleet_drives import FleetError
 
+pytestmark = pytest.mark.slow   # `pytest -m 'not slow'` skips it; scripts/test runs it
+
 TIMEOUT_S = 0.5
 
 
