@@ -189,6 +189,23 @@ def _probe_comm(address: str, text: str, scheme: str) -> None:
                          f'{kind or "service of unknown type"}: give the scheduler\'s address)')
 
 
+def _ignoring_sigint(make):
+    """``make()`` with SIGINT ignored, so that the worker processes it starts inherit that
+    (an ignored signal stays ignored through fork and exec): Ctrl-C reaches the whole process
+    group, and only this process acts on it, stopping the cluster (one line, no worker
+    traceback). A Ctrl-C during the cluster's start (a second or two) is not seen."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return make()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return make()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @contextmanager
 def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]]:
     """A Dask client: on ``scheduler``, or on a local cluster of ``workers`` processes."""
@@ -213,9 +230,11 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
         finally:
             client.close()
         return
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host='127.0.0.1', dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    # Worker logs below CRITICAL are silenced: a stopped run's heartbeat errors are noise, and
+    # a drive that fails says why in failures.csv.
+    cluster = _ignoring_sigint(lambda: LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True, host='127.0.0.1',
+        dashboard_address=None, silence_logs=logging.CRITICAL))
     try:
         client = Client(cluster, set_as_default=False)
         try:
