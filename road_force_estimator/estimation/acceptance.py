@@ -12,8 +12,8 @@ stamp is not later than the last accepted one (``rejected_time``). A step of mor
 :data:`MAX_STAMP_JUMP_S`) is a jump no regular stream takes: the sample is held back (counted
 in ``rejected_time``) and the next decides. Earlier than the held stamp (a lone corrupt header,
 a minute or a year ahead), it is judged against the stream as if the outlier had never come;
-later and continuing from it (the stream really jumped: a gap, a pause, lost samples), it is
-taken, and the held sample stays lost. So any number of lone outlier stamps ahead of the stream
+later and continuing from it (the stream really jumped: a gap, a pause, lost samples, a rate
+that dropped), it is taken, and the held sample stays lost. So any number of lone outlier stamps ahead of the stream
 cost those samples only, and so do those behind it (rejected as backwards); one less than
 :data:`GAP_PERIODS` steps ahead costs the samples it overtakes. :data:`BEHIND_SAMPLES` samples
 in a row behind the last accepted one that continue each other mean the stream is there (the
@@ -197,9 +197,11 @@ class SampleGate:
 
     def _jump_confirmed(self, stamp: int) -> bool:
         """Whether the jump to ``stamp`` (ns) is real: it continues from the held stamp (a
-        step after it that is no jump itself); else ``stamp`` is held instead."""
+        step after it that is no jump itself, or no longer than the jump to the held one: a
+        stream whose rate dropped); else ``stamp`` is held instead."""
         held, self.held = self.held, None
-        if held is not None and 0 < stamp - held and not self._jump((stamp - held) * 1e-9):
+        if held is not None and 0 < stamp - held and (
+                not self._jump((stamp - held) * 1e-9) or stamp - held <= held - self.clock):
             return True
         self.held = stamp
         return False
