@@ -439,3 +439,95 @@ def test_a_gap_where_the_model_fit_starts_is_taken_and_publishing_goes_on(rig):
                               10.0)
     assert collector.stamps('/observer/states') == [T0_NS + k * 1_000_000 for k in out]
     assert observer.total['gaps'] + observer.core_counts()['gaps'] == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 28: a second publisher, huge messages
+
+class Intruder(Node):
+    """A second publisher on /suspension/deflections: other values, stamps among the
+    feeder's (as a second node of the truck, or a bag played by mistake)."""
+
+    def __init__(self, context):
+        super().__init__('intruder', context=context)
+        self.deflections = self.create_publisher(JointState, '/suspension/deflections',
+                                                 sensor_qos(1000))
+
+    def sample(self, k):
+        self.deflections.publish(deflections_msg(T0_NS + k * 1_000_000 + 500_000,
+                                                 (5e-3, -5e-3), 0.01))
+
+
+def test_a_second_publisher_is_detected_named_and_not_mixed_in(make_rig, ros_context, capfd):
+    """Issue 28: a second publisher interleaving other values was taken as data (load error
+    116 %). Its samples are rejected (second_source), the publishers named once in the log
+    and in the diagnostics; the estimates are those of the first publisher alone."""
+    observer, feeder, collector, executor = make_rig()
+    intruder = Intruder(ros_context)
+    executor.add_node(intruder)
+    try:
+        assert spin_until(executor, lambda: intruder.deflections.get_subscription_count() > 0,
+                          10.0)
+        time.sleep(0.3)
+        n = 400
+        for k in range(n):
+            feeder.sample(k, speed=20.0)
+            intruder.sample(k)
+            if k % 50 == 49:
+                assert spin_until(executor, lambda: collector.count('/observer/states')
+                                  == k + 1, 10.0)
+        assert collector.stamps('/observer/states') == [T0_NS + k * 1_000_000
+                                                        for k in range(n)]
+        assert spin_until(executor, lambda: input_diagnostics(collector).get('sources') == '2',
+                          5.0), input_diagnostics(collector)
+        values = input_diagnostics(collector)
+        assert values['publishers'] == '/feeder, /intruder'
+    finally:
+        executor.remove_node(intruder)
+        intruder.destroy_node()
+    assert observer.input.second_source == n
+    # the estimates: those of the feeder's samples alone (the estimator, fed the same)
+    from road_force_estimator.estimation import Estimator
+    ref = Estimator(*observer.params.config)
+    want = [ref.update(T0_NS + k * 1_000_000, (1e-3 * math.sin(0.05 * k),
+                                               -1e-3 * math.cos(0.05 * k)), 1e-4 * k, 20.0)
+            for k in range(n)]
+    got = [m.wrench.force.z for m in collector.messages['/wheel_load/left']]
+    assert got == [w.wheel_load_n[0] for w in want]
+    lines = [line for line in capfd.readouterr().err.splitlines() if 'interleave' in line]
+    assert len(lines) == 1 and '2 publishers interleave on /suspension/deflections ' \
+        '(/feeder, /intruder)' in lines[0], lines
+
+
+def test_log_lines_and_diagnostic_values_are_bounded(rig, capfd):
+    """Issue 28: a JointState with 1e5 names made each WARN line 1 MB and put a 489,000
+    character last_rejection on /diagnostics every second."""
+    observer, feeder, collector, executor = rig
+    names = [f'joint_{i}' for i in range(100_000)]
+    feeder.raw(T0_NS, names, [0.0] * len(names))
+    assert spin_until(executor, lambda: observer.total['names'] == 1, 10.0)
+    assert spin_until(executor, lambda: 'last_rejection' in input_diagnostics(collector), 5.0)
+    text = input_diagnostics(collector)['last_rejection']
+    assert len(text) <= 240 and "'joint_0', 'joint_1'" in text and '(100000 names)' in text
+    for msg in collector.messages['/diagnostics']:
+        for status in msg.status:
+            assert len(status.message) <= 240
+            assert all(len(v.value) <= 240 for v in status.values)
+    lines = [line for line in capfd.readouterr().err.splitlines() if '[observer]' in line]
+    assert lines and max(len(line) for line in lines) < 1000
+
+
+def test_a_flood_keeps_memory_and_diagnostics(tmp_path):
+    """Issue 28: under a 13.5 kHz flood the node's memory grew from 131 to 359 MB and its
+    /diagnostics stopped (2 messages in 120 s): the message events queued up ahead of its
+    timer. bench.observer_flood, short: an observer process flooded at 15 kHz for 4 s."""
+    import json
+
+    from bench import observer_flood
+    out = tmp_path / 'flood.json'
+    assert observer_flood.main(['--rate', '15000', '--seconds', '4', '--steady', '3',
+                                '--json', str(out)]) == 0
+    summary = json.loads(out.read_text())['summary']
+    assert summary['flood_seconds_without_diagnostics'] == 0, summary
+    assert summary['flood_max_rss_mb'] - summary['steady_rss_mb'] < 50.0, summary
+    assert summary['flood_published'] > 0
