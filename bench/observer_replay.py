@@ -3,7 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python -m bench.observer_replay [--drive-seconds 20] [--rates 1,2,5,10,20]
-        [--json FILE]
+        [--observer FILE] [--json FILE]
 
 A simulated drive (``--drive-seconds`` at 1 kHz, ISO 8608 class C, 20 m/s, the package's
 default parameters) is played with ``bag_player DRIVE --topics /suspension/deflections
@@ -66,8 +66,10 @@ def taken_inputs(stamps: np.ndarray, answered: np.ndarray) -> np.ndarray:
     return taken
 
 
-def replay(drive: pathlib.Path, rate: float, context, truth) -> dict:
-    """One replay at ``rate``: what came back and how it compares."""
+def replay(drive: pathlib.Path, rate: float, context, truth,
+           observer_module: str | None = None) -> dict:
+    """One replay at ``rate`` (``observer_module``: another version of the node's module
+    to run): what came back and how it compares."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.experimental import EventsExecutor
     from rclpy.node import Node
@@ -95,8 +97,9 @@ def replay(drive: pathlib.Path, rate: float, context, truth) -> dict:
     executor = EventsExecutor(context=context)
     executor.add_node(node)
     log = tempfile.TemporaryFile('w+')
-    observer = subprocess.Popen([sys.executable, '-m', 'road_force_estimator.ros.observer'],
-                                cwd=REPO, env=env, stderr=log)
+    command = [observer_module] if observer_module else ['-m',
+                                                         'road_force_estimator.ros.observer']
+    observer = subprocess.Popen([sys.executable, *command], cwd=REPO, env=env, stderr=log)
     # the player starts once the observer runs (its first /diagnostics): a player that
     # starts first sees the observer's subscription before the observer sees it (DDS
     # discovery), and its first samples are lost (bag_player's --wait: issue 29)
@@ -167,6 +170,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--drive-seconds', type=float, default=20.0)
     p.add_argument('--rates', default='1,2,5,10,20')
+    p.add_argument('--observer', metavar='FILE',
+                   help="another version of the node's module to run (from git history)")
     p.add_argument('--json', metavar='FILE')
     args = p.parse_args(argv)
     rates = [float(r) for r in args.rates.split(',')]
@@ -181,7 +186,7 @@ def main(argv=None) -> int:
         rclpy.init(context=context)
         try:
             for rate in rates:
-                results[rate] = replay(folder, rate, context, truth)
+                results[rate] = replay(folder, rate, context, truth, args.observer)
                 print(json.dumps({'rate': rate, **results[rate]}), flush=True)
         finally:
             rclpy.try_shutdown(context=context)

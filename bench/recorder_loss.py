@@ -143,9 +143,10 @@ def bag_numbers(folder: pathlib.Path, templates: dict) -> tuple[dict[str, set[in
     return got, ending
 
 
-def loss(talker: Talker, got: dict[str, set[int]], at_ns: int) -> tuple[float, int]:
+def loss(talker: Talker, got: dict[str, set[int]], at_ns: int,
+         per_topic: dict | None = None) -> tuple[float, int]:
     """(seconds between ``at_ns`` and the first message sent before it that the bag lacks,
-    how many such messages) over every topic."""
+    how many such messages) over every topic (``per_topic``: filled with each topic's)."""
     first, missing = None, 0
     for topic, times in talker.sent.items():
         have = got.get(topic, set())
@@ -155,6 +156,8 @@ def loss(talker: Talker, got: dict[str, set[int]], at_ns: int) -> tuple[float, i
             if k not in have:
                 missing += 1
                 first = t if first is None else min(first, t)
+                if per_topic is not None:
+                    per_topic[topic] = per_topic.get(topic, 0) + 1
     return (0.0 if first is None else (at_ns - first) * 1e-9), missing
 
 
@@ -207,7 +210,8 @@ def record_once(context, topics: dict[str, str], rate: float, sig: int, moment_s
         _, err = process.communicate()
         node.destroy_node()
     got, ending = bag_numbers(out, talker.templates)
-    lost_s, missing = loss(talker, got, at)
+    per_topic: dict[str, int] = {}
+    lost_s, missing = loss(talker, got, at, per_topic)
     said = re.search(r'\((\d+) missed on the way\)', err)
     return {'signal': signal.Signals(sig).name, 'moment_s': round(moment_s, 3),
             'lost_s': round(lost_s, 4), 'missing': missing,
@@ -216,6 +220,7 @@ def record_once(context, topics: dict[str, str], rate: float, sig: int, moment_s
             'stop_s': None if stop_s is None else round(stop_s, 3), 'exit': process.returncode,
             'bag': ending, 'metadata': (out / 'metadata.yaml').is_file(),
             'recorder_says_missed': int(said.group(1)) if said else 0,
+            'missing_by_topic': per_topic,
             'stderr_lines': len(err.strip().splitlines())}
 
 

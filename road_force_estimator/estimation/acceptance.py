@@ -13,15 +13,16 @@ stamp is not later than the last accepted one (``rejected_time``). A step of mor
 in ``rejected_time``) and the next decides. Earlier than the held stamp (a lone corrupt header,
 a minute or a year ahead), it is judged against the stream as if the outlier had never come;
 later and continuing from it (the stream really jumped: a gap, a pause, lost samples, a rate
-that dropped), it is taken, and the held sample stays lost. So any number of lone outlier stamps ahead of the stream
-cost those samples only, and so do those behind it (rejected as backwards); one less than
-:data:`GAP_PERIODS` steps ahead costs the samples it overtakes. :data:`BEHIND_SAMPLES` samples
-in a row behind the last accepted one that continue each other mean the stream is there (the
-accepted ones were ahead of it, e.g. a first sample stamped in the future, or the clock was set
-back): a new run starts at the last of them (a gap). A step longer than
-``max(gap_threshold_s,`` :data:`GAP_PERIODS` ``typical steps)`` is a gap (the estimate restarts
-there; ``gaps``, ``resets``); the typical step is the running average ``dt_typ += 0.05 (dt -
-dt_typ)`` of the accepted steps, restarted (the next step taken as it is) at every restart.
+that dropped), it is taken, and the held sample stays lost. So any number of lone outlier
+stamps ahead of the stream cost those samples only, and so do those behind it (rejected as
+backwards); one less than :data:`GAP_PERIODS` steps ahead costs the samples it overtakes.
+:data:`BEHIND_SAMPLES` samples in a row behind the last accepted one that continue each other
+mean the stream is there (the accepted ones were ahead of it, e.g. a first sample stamped in
+the future, or the clock was set back): a new run starts at the last of them (a gap). A step
+longer than ``max(gap_threshold_s,`` :data:`GAP_PERIODS` ``typical steps)`` is a gap (the
+estimate restarts there; ``gaps``, ``resets``); the typical step is the running average
+``dt_typ += 0.05 (dt - dt_typ)`` of the accepted steps, restarted (the next step taken as it
+is) at every restart.
 
 :class:`SampleGate` applies the rules one sample at a time (the per-sample path and
 :func:`.estimate_batch`); :func:`accept_arrays` over whole arrays (the offline smoothers), with

@@ -18,10 +18,9 @@ What a recording can lose, and what it does about it:
   :data:`CHUNK_AGE_S`, as well as by size; the bag (no summary, no metadata.yaml, a
   ``.recording`` file left in it) is read from its start by the readers here and by the
   ``mcap`` library;
-- SIGINT / SIGTERM: what was received before the signal, and what is still on its way, is
-  taken from the queues and written (until a quiet of :data:`QUIET_S`, within
-  :data:`DRAIN_S` however fast the data come), then the bag is closed: summary, index,
-  ``metadata.yaml``;
+- SIGINT / SIGTERM: what was received before the signal, and what comes within
+  :data:`GRACE_S` (on its way), is taken from the queues and written (within :data:`DRAIN_S`
+  however fast the data come), then the bag is closed: summary, index, ``metadata.yaml``;
 - a full disk: one error line; the bag is ended with what was written whole (the space held
   back, :data:`RESERVE_BYTES`, goes to its summary and ``metadata.yaml``) and the node exits
   with status 1;
@@ -58,10 +57,10 @@ from road_force_estimator.ros.take_loop import TakeLoop
 QUEUE_DEPTH = 10_000
 #: A chunk is closed once its first message is this old (s): what a SIGKILL can lose.
 CHUNK_AGE_S = 0.5
-#: At SIGINT / SIGTERM, the longest time taken to empty the queues (s), and the quiet that
-#: ends it sooner (s: the messages still on their way when the signal came are in).
+#: At SIGINT / SIGTERM: what comes this long after the signal is still written (s: the
+#: messages on their way), and the longest time taken to empty the queues (s).
+GRACE_S = 0.02
 DRAIN_S = 0.5
-QUIET_S = 0.05
 #: Space held back for the end of the bag (bytes).
 RESERVE_BYTES = 4 << 20
 SPECS = (
@@ -216,21 +215,24 @@ class BagRecorder(Node):
         self.diagnostics_pub.publish(msg)
 
     def stop(self) -> None:
-        """Stop taking; write what is queued and what is still on its way (until the topics
-        have been quiet for :data:`QUIET_S`, at most :data:`DRAIN_S`); close the bag
-        (idempotent)."""
+        """Stop taking; write what was received before now and what comes within
+        :data:`GRACE_S` (the messages on their way when the signal came): every topic read up
+        to its first later message, or until nothing more comes (at most :data:`DRAIN_S`);
+        close the bag (idempotent)."""
         self.loop.stop()
-        start = quiet = time.monotonic()
-        while self.writer is not None:
-            now = time.monotonic()
-            if now - start >= DRAIN_S or now - quiet >= QUIET_S:
+        until = time.time_ns() + int(GRACE_S * 1e9)
+        start = time.monotonic()
+        done: set[int] = set()             # topics that showed a message after `until`
+        while self.writer is not None and time.monotonic() - start < DRAIN_S:
+            batch = self.loop.take_all(until_ns=until)
+            self.write_batch([m for m in batch if m.received_ns <= until])
+            done.update(m.index for m in batch if m.received_ns > until)
+            if len(done) == len(self.names):
                 break
-            batch = self.loop.take_all()
-            if batch:
-                self.write_batch(batch)
-                quiet = time.monotonic()
-            else:
-                time.sleep(0.005)
+            if not batch:
+                if time.time_ns() > until:
+                    break
+                time.sleep(0.002)
         self.close()
 
     def close(self) -> None:

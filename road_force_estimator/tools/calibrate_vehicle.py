@@ -177,12 +177,25 @@ def _written_values(result, static) -> dict:
     return out
 
 
+def _check_options(args) -> None:
+    """Refuse the numbers no calibration can work with (a bad command line)."""
+    if not args.search_range > 0.0:
+        raise cli.UsageError(f'--search-range {args.search_range:g}: must be > 0 m')
+    if not -1.0 < args.min_correlation <= 1.0:
+        raise cli.UsageError(f'--min-correlation {args.min_correlation:g}: a correlation, in '
+                             '(-1, 1]')
+    if args.static_load is not None and not all(v > 0.0 for v in args.static_load):
+        raise cli.UsageError(f'--static-load {args.static_load[0]:g} {args.static_load[1]:g}: '
+                             'wheel loads, > 0 N')
+
+
 def _run(args) -> tuple[object, Path, list[str]]:
     from tqdm import tqdm
 
     from road_force_estimator.report.calibration import write_report
 
     output = Path(args.output)
+    _check_options(args)
     if output.exists() and not args.force:
         raise ValueError(f'{output} exists (use --force to replace it)')
     values, doc = _parameters(args)
