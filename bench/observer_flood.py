@@ -12,7 +12,8 @@ bytes serialized once, the stamp and values patched in) and ``/vehicle/twist`` a
 first at 1 kHz for ``--steady`` s (the steady state), then at ``--rate`` for ``--seconds`` s
 (the flood), then 1 kHz again for 5 s. Every second: the observer's resident memory
 (``/proc/<pid>/status`` VmRSS), the ``/diagnostics`` messages that came in that second, and
-what the input status said (received, published, missed). ``--observer FILE`` runs another
+what the input status said (received, published, missed); and the longest wait for a
+``/diagnostics`` during the flood. ``--observer FILE`` runs another
 version of the node's module (e.g. from git history) to compare. The machine is shared (other
 work may run): figures vary between runs.
 """
@@ -137,6 +138,10 @@ def main(argv=None) -> int:
                   (5.0, 1000.0, 'after')]
         for length, rate, phase in phases:
             talker.rate = rate
+            if phase == 'flood':
+                flood_from = time.monotonic()
+            if phase == 'after':
+                flood_to = time.monotonic()
             end = time.monotonic() + length
             while time.monotonic() < end:
                 second_end = time.monotonic() + 1.0
@@ -159,10 +164,15 @@ def main(argv=None) -> int:
         rclpy.try_shutdown(context=context)
         log.close()
     steady = [s['rss_kb'] for s in seconds if s['phase'] == 'steady'][-3:]
+    # the longest wait for a /diagnostics during the flood (s): from its start, between two,
+    # and to its end
+    times = [flood_from] + [t for t, _ in diags if flood_from <= t <= flood_to] + [flood_to]
+    max_gap = max(b - a for a, b in zip(times, times[1:]))
     flood = [s for s in seconds if s['phase'] == 'flood']
     summary = {'rate_hz': args.rate, 'steady_rss_mb': max(steady) / 1024 if steady else None,
                'flood_max_rss_mb': max(s['rss_kb'] for s in flood) / 1024 if flood else None,
                'flood_seconds_without_diagnostics': sum(s['diagnostics'] == 0 for s in flood),
+               'flood_longest_wait_for_diagnostics_s': round(max_gap, 3),
                'flood_diagnostics': sum(s['diagnostics'] for s in flood),
                'flood_published': sum(s['published'] for s in flood),
                'flood_sent': sum(s['sent'] for s in flood)}

@@ -32,6 +32,7 @@ What a recording can lose, and what it does about it:
 from __future__ import annotations
 
 from datetime import datetime
+import errno
 import importlib
 import os
 import sys
@@ -46,7 +47,7 @@ from road_force_estimator.bagio import BagWriteError, BagWriter
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.interfaces import DIAGNOSTICS, TOPIC_TYPES
 from road_force_estimator.ros.messages import (
-    diagnostic_status, reliable_qos, sensor_qos, topic_qos)
+    bounded, diagnostic_status, reliable_qos, sensor_qos, topic_qos)
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import ParameterError, ParameterGuard, local_spec
 from road_force_estimator.ros.sources import Sources
@@ -58,8 +59,9 @@ QUEUE_DEPTH = 10_000
 #: A chunk is closed once its first message is this old (s): what a SIGKILL can lose.
 CHUNK_AGE_S = 0.5
 #: At SIGINT / SIGTERM: what comes this long after the signal is still written (s: the
-#: messages on their way), and the longest time taken to empty the queues (s).
-GRACE_S = 0.02
+#: messages on their way, late on a loaded machine; a topic still flowing shows its first
+#: later message at once and is done), and the longest time taken to empty the queues (s).
+GRACE_S = 0.25
 DRAIN_S = 0.5
 #: Space held back for the end of the bag (bytes).
 RESERVE_BYTES = 4 << 20
@@ -164,8 +166,8 @@ class BagRecorder(Node):
             kept = writer.salvage()
         except BagWriteError as exc:
             kept = str(exc)
-        reason = f'out of space ({err.strerror})' if err.errno in (28, 122) else \
-            (err.strerror or str(err))
+        reason = f'out of space ({err.strerror})' if err.errno in (
+            errno.ENOSPC, errno.EDQUOT) else (err.strerror or str(err))
         self.failed = f'cannot write {self.output}: {reason}: recording stopped; {kept}'
         self.get_logger().error(self.failed)
         self.exit_status = 1
@@ -190,8 +192,18 @@ class BagRecorder(Node):
                 except (BagWriteError, ImportError, AttributeError, ValueError) as exc:
                     self.get_logger().error(f'not recording {topic} ({types[topic][0]}): {exc}')
 
+    def check_loop(self) -> None:
+        """A take thread that died (a bug): said once, and the recording stops."""
+        error = self.loop.error
+        if error is not None and not self.failed:
+            self.failed = bounded(f'the recording thread stopped: {type(error).__name__}: '
+                                  f'{error}')
+            self.get_logger().error(self.failed)
+            self.exit_status = 1
+
     def diagnostics_callback(self) -> None:
         """The recording's status: messages received and missed per topic (totals)."""
+        self.check_loop()
         values: dict[str, object] = {'output': self.output}
         missed = 0
         for topic in sorted(self.sources):
@@ -220,6 +232,7 @@ class BagRecorder(Node):
         to its first later message, or until nothing more comes (at most :data:`DRAIN_S`);
         close the bag (idempotent)."""
         self.loop.stop()
+        self.check_loop()
         until = time.time_ns() + int(GRACE_S * 1e9)
         start = time.monotonic()
         done: set[int] = set()             # topics that showed a message after `until`

@@ -53,6 +53,10 @@ from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_p
 from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
+#: Estimates each output's publisher keeps until its reliable subscribers acknowledge them
+#: (1 s at 1 kHz): what the input thread publishes in one go after a backlog is not
+#: overwritten before a slow subscriber (a recorder on a loaded machine) has taken it.
+OUTPUT_DEPTH = 1000
 __all__ = ['MAX_WAITING', 'Observer', 'main']
 # The core's counters, by the names the diagnostics give them.
 CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
@@ -105,17 +109,17 @@ class Observer(Node):
         self.last_stamp_ns = None
         self.shortest_step_ns = [math.inf, math.inf]   # (last period, this period)
         self.reconfigure(self.params.config)
-        self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+        self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos(OUTPUT_DEPTH))
                           for topic in api.LOAD]
-        self.static_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+        self.static_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos(OUTPUT_DEPTH))
                             for topic in api.STATIC_LOAD]
         self.static_stamp_ns = None   # stamp of the last static loads published
-        self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos())
+        self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos(OUTPUT_DEPTH))
                           for topic in api.ROAD]
-        self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos())
+        self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos(OUTPUT_DEPTH))
         self.load_transfer_pub = self.create_publisher(Vector3Stamped, api.LOAD_TRANSFER,
-                                                       reliable_qos())
-        self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
+                                                       reliable_qos(OUTPUT_DEPTH))
+        self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos(OUTPUT_DEPTH))
         # Per estimate: rclpy's publish of serialized bytes without Publisher.publish's
         # Python (its type check and handle guard: 1.5-2 us a call); in wire.OUTPUTS' order.
         self.send = [pub.handle.publish_raw for pub in (

@@ -206,6 +206,18 @@ def _ignoring_sigint(make):
         signal.signal(signal.SIGINT, previous)
 
 
+def _quiet_cluster(local_cluster, workers: int, log_level: int):
+    """A local cluster, without distributed's warning that its HTTP port (8787) is taken by
+    another cluster of the machine (it takes another one: a run prints nothing of it)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', message=r'Port \d+ is already in use',
+                                category=UserWarning)
+        return local_cluster(n_workers=workers, threads_per_worker=1, processes=True,
+                             host='127.0.0.1', dashboard_address=None, silence_logs=log_level)
+
+
 @contextmanager
 def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]]:
     """A Dask client: on ``scheduler``, or on a local cluster of ``workers`` processes."""
@@ -232,9 +244,8 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
         return
     # Worker logs below CRITICAL are silenced: a stopped run's heartbeat errors are noise, and
     # a drive that fails says why in failures.csv.
-    cluster = _ignoring_sigint(lambda: LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, host='127.0.0.1',
-        dashboard_address=None, silence_logs=logging.CRITICAL))
+    cluster = _ignoring_sigint(lambda: _quiet_cluster(LocalCluster, workers,
+                                                      logging.CRITICAL))
     try:
         client = Client(cluster, set_as_default=False)
         try:

@@ -528,6 +528,7 @@ def test_a_flood_keeps_memory_and_diagnostics(tmp_path):
     assert observer_flood.main(['--rate', '15000', '--seconds', '4', '--steady', '3',
                                 '--json', str(out)]) == 0
     summary = json.loads(out.read_text())['summary']
-    assert summary['flood_seconds_without_diagnostics'] == 0, summary
+    # one a second (a loaded machine delays a timer now and then; before: none at all)
+    assert summary['flood_longest_wait_for_diagnostics_s'] < 2.5, summary
     assert summary['flood_max_rss_mb'] - summary['steady_rss_mb'] < 50.0, summary
     assert summary['flood_published'] > 0
