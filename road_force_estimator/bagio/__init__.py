@@ -41,6 +41,7 @@ from road_force_estimator.bagio.reader import (
 from road_force_estimator.bagio.road_source import road_from_source
 from road_force_estimator.bagio.writer import (
     RELIABLE_QOS,
+    RESERVE_NAME,
     ROSBAG2_VERSION,
     SENSOR_DATA_QOS,
     BagWriter,
@@ -54,5 +55,5 @@ __all__ = [
     'road_from_source', 'ESTIMATE_FIELDS', 'diagnostic_array', 'write_estimate_bag',
     'DEFAULT_START_STAMP_NS',
     'DEFAULT_TRACK_WIDTH_M', 'DEFAULT_SURVEY_SPEED_MPS', 'ROSBAG2_VERSION', 'SENSOR_DATA_QOS',
-    'RELIABLE_QOS',
+    'RELIABLE_QOS', 'RESERVE_NAME',
 ]

@@ -12,8 +12,8 @@ import numpy as np
 
 from road_force_estimator.bagio.reader import TopicColumns
 
-__all__ = ['Rejects', 'accept_in_order', 'basic_checks', 'read_points', 'read_scalar',
-           'read_joint_state']
+__all__ = ['Rejects', 'accept_in_order', 'increasing_run', 'basic_checks', 'read_points',
+           'read_scalar', 'read_joint_state']
 
 class Rejects:
     """Counts of rejected messages: topic -> reason -> count."""
@@ -30,28 +30,77 @@ class Rejects:
 
 def accept_in_order(stamps: np.ndarray, ok: np.ndarray, topic: str,
                      rejects: Rejects, floor: int | None = None) -> np.ndarray:
-    """Keep the messages (file order) whose stamp exceeds every earlier accepted one.
+    """Keep the messages (file order) that form the longest run of increasing stamps.
 
-    A stamp equal to the latest accepted is a duplicate, a smaller one goes backwards; both
-    are dropped and counted. ``floor``: the latest stamp accepted before these messages (a
-    bag read block by block, :mod:`.drive_blocks`). Returns the mask of accepted messages.
+    The usual case (every stamp later than the one before) keeps them all. Otherwise the
+    longest strictly increasing subsequence of the stamps is kept (:func:`increasing_run`):
+    any number of outlier stamps, ahead of the stream or behind it, costs those messages
+    only, where keeping every stamp above the latest one kept lost the rest of the drive to
+    one stamp in the future. A dropped stamp is counted as a ``duplicate_stamp`` (equal to
+    the one kept before it), an ``outlier_stamp`` (later than the one kept after it) or a
+    ``backwards_stamp``. ``floor``: the latest stamp accepted before these messages (a bag
+    read block by block, :mod:`.drive_blocks`): a stamp not after it is dropped (an outlier
+    that is a block's last message can so cost the next block the messages before its
+    stamp). Returns the mask of accepted messages.
     """
     if ok.all() and bool(np.all(stamps[1:] > stamps[:-1])) and (
             floor is None or stamps.size == 0 or stamps[0] > floor):
         return ok.copy()                        # the usual case: nothing to drop
     idx = np.flatnonzero(ok)
     s = stamps[idx]
-    if s.size == 0:
-        return np.zeros_like(ok)
-    start = np.iinfo(np.int64).min if floor is None else int(floor)
-    prev = np.maximum(np.maximum.accumulate(s), start)
-    before = np.concatenate([[start], prev[:-1]])
-    keep = s > before
-    rejects.add(topic, 'duplicate_stamp', np.count_nonzero(s == before))
-    rejects.add(topic, 'backwards_stamp', np.count_nonzero(s < before))
     mask = np.zeros_like(ok)
+    if s.size == 0:
+        return mask
+    start = np.iinfo(np.int64).min if floor is None else int(floor)
+    above = s > start
+    rejects.add(topic, 'duplicate_stamp', np.count_nonzero(s == start))
+    rejects.add(topic, 'backwards_stamp', np.count_nonzero(s < start))
+    idx, s = idx[above], s[above]
+    keep = increasing_run(s)
+    kept = s[keep]
+    dropped = s[~keep]
+    # the kept stamps around each dropped one: before (equal: a duplicate), after (smaller:
+    # it was ahead of the stream)
+    pos = np.searchsorted(np.flatnonzero(keep), np.flatnonzero(~keep))
+    prev = np.where(pos > 0, kept[np.maximum(pos - 1, 0)], start) if kept.size else \
+        np.full(dropped.size, start)
+    nxt = kept[np.minimum(pos, kept.size - 1)] if kept.size else dropped
+    duplicate = dropped == prev
+    ahead = ~duplicate & (pos < kept.size) & (dropped > nxt)
+    rejects.add(topic, 'duplicate_stamp', np.count_nonzero(duplicate))
+    rejects.add(topic, 'outlier_stamp', np.count_nonzero(ahead))
+    rejects.add(topic, 'backwards_stamp', np.count_nonzero(~duplicate & ~ahead))
     mask[idx[keep]] = True
     return mask
+
+
+def increasing_run(values: np.ndarray) -> np.ndarray:
+    """Mask of a longest strictly increasing subsequence of ``values`` (int64); of the
+    longest, the one that keeps the earliest messages (``[10, 20, 15, 40]`` keeps 20, which
+    came first, and drops 15). Patience sorting over the values reversed and negated (the
+    longest run that ends highest, read backwards), O(n log n)."""
+    import bisect
+
+    v = [-x for x in reversed(values.tolist())]
+    n = len(v)
+    tails: list[int] = []        # the smallest last value of an increasing run of length j+1
+    tail_at: list[int] = []      # its index
+    before = [-1] * n
+    for i, x in enumerate(v):
+        j = bisect.bisect_left(tails, x)
+        if j == len(tails):
+            tails.append(x)
+            tail_at.append(i)
+        else:                    # (equal: the later here, the earlier message, replaces it)
+            tails[j] = x
+            tail_at[j] = i
+        before[i] = tail_at[j - 1] if j else -1
+    keep = np.zeros(n, dtype=bool)
+    i = tail_at[-1] if tail_at else -1
+    while i >= 0:
+        keep[n - 1 - i] = True
+        i = before[i]
+    return keep
 
 
 def basic_checks(cols: TopicColumns, rejects: Rejects) -> tuple[np.ndarray, np.ndarray]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 import struct
+import time
 from typing import Mapping, Sequence
 import zlib
 
@@ -100,22 +101,34 @@ class McapFile:
     a system call per chunk; each byte is read once for the CRCs (the data section CRC is
     combined from the chunk's), so a long drive costs well under a microsecond per row of
     six messages. After a crash the chunks already flushed stay readable.
+
+    ``chunk_age_s``: a chunk is also closed once its first message is that old (s, wall
+    time; checked at each message and by :meth:`flush_due`), so that a recorder killed
+    (SIGKILL) loses at most that much whatever the rates; None: by size only. The file is
+    written unbuffered, each record whole or not at all from the readers' view: a write that
+    fails (out of space) leaves the file cut back at the last complete record
+    (:attr:`good_offset`), and :meth:`salvage` then ends it with its summary when it can.
     """
 
     CHUNK_BYTES = 1 << 20
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, chunk_age_s: float | None = None) -> None:
         self.path = path
-        self.file = path.open('xb')
+        self.file = path.open('xb', buffering=0)
+        self.chunk_age_s = chunk_age_s
+        self.pending_since = 0.0       # time.monotonic() of the pending chunk's first message
+        self.good_offset = 0           # bytes of complete records in the file
         self.crc = 0
         self.offset = 0
         self._put(MAGIC)
         # The header's library string names the writer as it was then (bags stay byte-identical).
         self._put(_mcap_record(0x01, _mcap_string('ros2') + _mcap_string(
             'road_force_estimator bag_io (rosbags typestore ros2_jazzy)')))
+        self.good_offset = self.offset
         self.schemas: list[bytes] = []
         self.channels: list[bytes] = []
         self.counts: dict[int, int] = {}
+        self.committed: dict[int, int] = {}     # messages per channel in complete chunks
         self.chunk_indexes: list[bytes] = []
         self.pending = bytearray()
         self.pending_index: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -125,8 +138,17 @@ class McapFile:
         self.end_ns = 0
         self.message_count = 0
 
+    def _write_all(self, data) -> None:
+        """Write every byte of ``data`` (an unbuffered file may take part of it)."""
+        view = memoryview(data).cast('B')
+        while view:
+            done = self.file.write(view)
+            if done is None:             # (a non-blocking file: never for a regular one)
+                continue
+            view = view[done:]
+
     def _put(self, data: bytes | bytearray) -> None:
-        self.file.write(data)
+        self._write_all(data)
         self.crc = zlib.crc32(data, self.crc)
         self.offset += len(data)
 
@@ -137,6 +159,7 @@ class McapFile:
                               + _mcap_string(encoding) + _mcap_string(text))
         self.schemas.append(record)
         self._put(record)
+        self.good_offset = self.offset
         return sid
 
     def add_channel(self, sid: int, topic: str, encoding: str,
@@ -147,7 +170,9 @@ class McapFile:
                               + _mcap_string(encoding) + _mcap_map(metadata))
         self.channels.append(record)
         self.counts[cid] = 0
+        self.committed[cid] = 0
         self._put(record)
+        self.good_offset = self.offset
         return cid
 
     def sequences(self, cids: np.ndarray) -> np.ndarray:
@@ -238,13 +263,25 @@ class McapFile:
         self.pending_start = min(self.pending_start, log_ns)
         self.pending_end = max(self.pending_end, log_ns)
         self.message_count += 1
-        if len(self.pending) >= self.CHUNK_BYTES:
+        if offset == 0:
+            self.pending_since = time.monotonic()
+        if len(self.pending) >= self.CHUNK_BYTES or (
+                self.chunk_age_s is not None
+                and time.monotonic() - self.pending_since >= self.chunk_age_s):
             self.flush_chunk()
 
     def flush_chunk(self) -> None:
         """Write the pending messages as a chunk (if any)."""
         if self.pending:
             self._emit_chunk([self.pending], len(self.pending))
+
+    def flush_due(self) -> bool:
+        """Close the pending chunk if it is ``chunk_age_s`` old; whether it was."""
+        if self.pending and self.chunk_age_s is not None and \
+                time.monotonic() - self.pending_since >= self.chunk_age_s:
+            self.flush_chunk()
+            return True
+        return False
 
     @staticmethod
     def _index_pairs(parts: list) -> np.ndarray:
@@ -274,16 +311,34 @@ class McapFile:
         """Write bytes-like ``pieces`` in order, a system call per 512 (not per piece)."""
         for i in range(0, len(pieces), 512):
             group = pieces[i:i + 512]
-            self.file.flush()
             done = os.writev(self.file.fileno(), group)
             for piece in group:                 # a short write: the rest the usual way
                 if done < len(piece):
-                    self.file.write(memoryview(piece)[done:])
+                    self._write_all(memoryview(piece)[done:])
                 done = max(0, done - len(piece))
 
     def _emit_chunk(self, pieces: Sequence, length: int) -> None:
         """Write the pending chunk: its records are ``pieces`` (bytes-like, ``length`` bytes
         in all), then the message indexes; note its chunk index; reset ``pending``."""
+        chunk_start, crc_before = self.offset, self.crc
+        try:
+            self._emit(pieces, length)
+        except BaseException:
+            # a failed write (out of space): back to the last complete record
+            self.offset, self.crc = chunk_start, crc_before
+            self.good_offset = chunk_start
+            self.cut_back()
+            raise
+
+    def cut_back(self) -> None:
+        """Cut the file at :attr:`good_offset` (what a failed write left beyond it goes)."""
+        try:
+            os.ftruncate(self.file.fileno(), self.good_offset)
+            os.lseek(self.file.fileno(), self.good_offset, os.SEEK_SET)
+        except OSError:
+            pass
+
+    def _emit(self, pieces: Sequence, length: int) -> None:
         crc = 0
         for piece in pieces:
             crc = zlib.crc32(piece, crc)
@@ -296,13 +351,17 @@ class McapFile:
         self.offset += length
         chunk_length = self.offset - chunk_start
         index_offsets, index, index_length = {}, [], 0
+        done = []
         for cid, parts in sorted(self.pending_index.items()):
             pairs = self._index_pairs(parts)
+            done.append((cid, pairs.shape[0]))
             index_offsets[cid] = self.offset + index_length
             index += [RECORD.pack(0x07, 6 + pairs.nbytes), struct.pack('<HI', cid, pairs.nbytes),
                       pairs.tobytes()]
             index_length += 15 + pairs.nbytes
         self._put(b''.join(index))
+        for cid, n in done:                     # the chunk is whole in the file from here
+            self.committed[cid] = self.committed.get(cid, 0) + n
         offsets_map = b''.join(struct.pack('<HQ', c, o) for c, o in index_offsets.items())
         self.chunk_indexes.append(_mcap_record(0x08, struct.pack(
             '<QQQQ', self.pending_start, self.pending_end, chunk_start, chunk_length)
@@ -313,7 +372,7 @@ class McapFile:
         self.pending = bytearray()
         self.pending_index = {}
         self.pending_start, self.pending_end = 2**64 - 1, 0
-        self.file.flush()
+        self.good_offset = self.offset
 
     def close(self, metadata_yaml: str) -> None:
         """Flush, write the rosbag2 metadata record, the summary and the footer."""
@@ -350,8 +409,8 @@ class McapFile:
             self._put(_mcap_record(0x0E, struct.pack('<BQQ', op, start, length)))
         footer = RECORD.pack(0x02, 20) + struct.pack('<QQ', summary_start, offsets_start)
         self._put(footer)
-        self.file.write(U32.pack(self.crc))
-        self.file.write(MAGIC)
+        self._write_all(U32.pack(self.crc))
+        self._write_all(MAGIC)
         self.file.close()
 
     def abort(self) -> None:
@@ -360,3 +419,27 @@ class McapFile:
             self.flush_chunk()
         finally:
             self.file.close()
+
+    def salvage(self, metadata_yaml: str) -> bool:
+        """After a failed write: end the file with the summary of the chunks written (the
+        pending messages are dropped) if the space allows, else leave it cut at its last
+        complete record; True when the summary was written. The file is closed."""
+        self.pending = bytearray()
+        self.pending_index = {}
+        self.pending_start, self.pending_end = 2**64 - 1, 0
+        self.counts = dict(self.committed)
+        self.message_count = sum(self.committed.values())
+        good, crc = self.good_offset, self.crc
+        self.offset = good
+        self.cut_back()
+        try:
+            self.close(metadata_yaml)
+            return True
+        except OSError:
+            self.good_offset, self.offset, self.crc = good, good, crc
+            self.cut_back()
+            try:
+                self.file.close()
+            except OSError:
+                pass
+            return False

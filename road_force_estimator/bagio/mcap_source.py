@@ -21,7 +21,7 @@ import zlib
 from road_force_estimator.bagio.mcap_file import MAGIC, RECORD
 
 __all__ = ['FileChanged', 'NotRegular', 'McapSource', 'Summary', 'read_summary', 'find_chunk',
-           'decompress', 'decompress_partial', 'MAX_SUMMARY_BYTES']
+           'first_log_time', 'decompress', 'decompress_partial', 'MAX_SUMMARY_BYTES']
 
 #: The largest summary section read (bytes): a chunk index is about 100 bytes a chunk.
 MAX_SUMMARY_BYTES = 64 << 20
@@ -166,6 +166,26 @@ def read_summary(src: McapSource) -> Summary:
                 out.chunks[chunk_start] = chunk_length
         pos = nxt
     return out
+
+
+def first_log_time(src: McapSource, records: int = 4096) -> int | None:
+    """The log time (ns) of a file's first message: its first chunk's start time, or its
+    first message outside chunks, walking at most ``records`` top-level records (schemas and
+    channels come first); None when there is none (no message, a cut or corrupt head)."""
+    pos = len(MAGIC)
+    for _ in range(records):
+        head = src.read(pos, RECORD.size + 8) if pos + RECORD.size + 8 <= src.size else b''
+        if len(head) < RECORD.size + 8:
+            return None
+        op, length = RECORD.unpack_from(head)
+        if op == 0x06 and length >= 32:
+            return int(struct.unpack_from('<Q', head, RECORD.size)[0])
+        if op == 0x05 and length >= 14:
+            return int(struct.unpack_from('<Q', src.read(pos + RECORD.size + 6, 8))[0])
+        if op in (0x0F, 0x02) or pos + RECORD.size + length > src.size:
+            return None
+        pos += RECORD.size + length
+    return None
 
 
 _CHUNK_HEAD = struct.Struct('<BQQQQII')   # op, length, times, size, CRC, compression length

@@ -135,18 +135,24 @@ class Playback:
     ----------
     path : Path
     files : list of Path
-        The MCAP files, in the order metadata.yaml lists them.
+        The MCAP files, in the order of their first messages.
     topics : dict of str to PlayedTopic
         Known from metadata.yaml before reading; topics found only in the MCAP channels are
         added while :meth:`messages` reads.
     broken : str
         Empty, or what stopped the last :meth:`messages` early (a cut or damaged file).
+    issues : list of str
+        What the bag's folder lacks or holds out of order (a file metadata.yaml lists but
+        that is missing, files listed out of time order: read in time order), as
+        :func:`.reader.bag_files` says it: the player warns of each.
     """
 
-    def __init__(self, path: Path, files: list[Path], topics: dict[str, PlayedTopic]):
+    def __init__(self, path: Path, files: list[Path], topics: dict[str, PlayedTopic],
+                 issues: list[str] | None = None):
         self.path = path
         self.files = files
         self.topics = topics
+        self.issues = list(issues or [])
         self.broken = ''
 
     def messages(self, topics: Sequence[str] | None = None, start_offset_ns: int = 0
@@ -285,7 +291,7 @@ def open_playback(path: str | Path) -> Playback:
     """
     path = Path(path)
     try:
-        files, info, _ = bag_files(path)   # regular files inside the folder only
+        files, info, issues = bag_files(path)   # regular files inside the folder only
     except BagReadError as exc:
         raise PlaybackError(str(exc)) from None
     topics: dict[str, PlayedTopic] = {}
@@ -303,5 +309,5 @@ def open_playback(path: str | Path) -> Playback:
         with file.open('rb') as f:
             if f.read(8) != b'\x89MCAP0\r\n':
                 raise PlaybackError(f'{file}: not an MCAP file (rosbag2 MCAP storage only)')
-    return Playback(path, files, topics)
+    return Playback(path, files, topics, issues)
 

@@ -7,10 +7,11 @@ skipped and reading goes on; a cut or corrupt record outside chunks ends the fil
 readers take a chunk whose message index accounts for every record in it through that index,
 about five times faster than the walk and with the same result; any other chunk is walked
 (bench/bag_read_speed.py). Messages come in file order, which is log-time order for the bags
-rosbag2, the bag_recorder node and this package write. Only regular files inside the bag
-folder are read (a FIFO, a device, or a ``metadata.yaml`` entry such as ``../x.mcap`` or an
-absolute path is refused and named); a file that changes while it is read is a
-:class:`BagReadError`.
+rosbag2, the bag_recorder node and this package write; the files of a split bag in the order of
+their first messages, whatever order ``metadata.yaml`` lists them in (an issue says so). Only
+regular files inside the bag folder are read (a FIFO, a device, or a ``metadata.yaml`` entry
+such as ``../x.mcap`` or an absolute path is refused and named); a file that changes while it
+is read is a :class:`BagReadError`.
 """
 from __future__ import annotations
 
@@ -31,7 +32,10 @@ from road_force_estimator.serde.cdr import (
     stamps_to_ns,
 )
 from road_force_estimator.bagio.errors import BagReadError
+from road_force_estimator.bagio.writer import RESERVE_NAME
 from road_force_estimator.bagio.mcap_scan import Block, Channel, McapScan
+from road_force_estimator.bagio.mcap_source import (
+    FileChanged, McapSource, NotRegular, first_log_time)
 
 __all__ = [
     'USE_MESSAGE_INDEX', 'BagInfo', 'bag_info', 'bag_custom_data', 'iter_messages',
@@ -129,6 +133,9 @@ def bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
             raise BagReadError(f'{path}: not a bag folder or an .mcap file')
         return [path], {}, issues
     info = _metadata(path / 'metadata.yaml', issues)
+    if (path / RESERVE_NAME).exists():
+        issues.append('the recording did not end (the recorder was stopped without closing '
+                      'the bag, e.g. killed): read as far as it was written')
     storage = info.get('storage_identifier', 'mcap')
     if storage != 'mcap':
         raise BagReadError(f'{path}: storage {storage!r}: only MCAP bags are read here')
@@ -146,7 +153,33 @@ def bag_files(path: Path) -> tuple[list[Path], dict[str, Any], list[str]]:
             raise BagReadError(f'{path}: no readable .mcap file ({"; ".join(issues)})')
     if not files:
         raise BagReadError(f'{path}: no metadata.yaml and no .mcap file: not an MCAP bag')
-    return files, info, issues
+    return _in_time_order(files, issues), info, issues
+
+
+def _in_time_order(files: list[Path], issues: list[str]) -> list[Path]:
+    """The files of a split bag in the order of their first messages (a file without one
+    last, in the given order), whatever order metadata.yaml lists them in (said so when it
+    is another)."""
+    if len(files) < 2:
+        return files
+    starts = []
+    for f in files:
+        try:
+            src = McapSource(f)
+        except (OSError, NotRegular):
+            starts.append(None)
+            continue
+        try:
+            starts.append(first_log_time(src))
+        except (OSError, FileChanged):
+            starts.append(None)
+        finally:
+            src.close()
+    order = sorted(range(len(files)), key=lambda i: (starts[i] is None, starts[i] or 0, i))
+    if order != list(range(len(files))):
+        issues.append('the files are not listed in time order: read in the order of their '
+                      f'first messages ({", ".join(files[i].name for i in order)})')
+    return [files[i] for i in order]
 
 
 def raw_batches(path: Path, topics: Iterable[str] | None, issues: list[str],

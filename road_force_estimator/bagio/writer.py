@@ -30,7 +30,12 @@ from road_force_estimator.bagio.mcap_file import McapFile
 from road_force_estimator.bagio.row_blocks import write_interleaved
 from road_force_estimator.interfaces import RELIABLE, SENSOR_DATA
 
-__all__ = ['ROSBAG2_VERSION', 'SENSOR_DATA_QOS', 'RELIABLE_QOS', 'BagWriter']
+__all__ = ['ROSBAG2_VERSION', 'SENSOR_DATA_QOS', 'RELIABLE_QOS', 'RESERVE_NAME', 'BagWriter']
+
+#: The file that holds space for the end of a recording (its summary and metadata.yaml) while
+#: it runs (``reserve_bytes``): removed when the bag is closed; found in a bag, it says the
+#: recording did not end (the recorder was killed).
+RESERVE_NAME = '.recording'
 
 #: metadata.yaml version written by Jazzy's rosbag2.
 ROSBAG2_VERSION = 9
@@ -103,6 +108,13 @@ def _qos_dict(qos: Qos) -> dict[str, Any]:
     }
 
 
+def _reason(err: OSError) -> str:
+    """The OS reason of a failed write: 'out of space (...)' for ENOSPC / EDQUOT."""
+    import errno
+    text = err.strerror or str(err)
+    return f'out of space ({text})' if err.errno in (errno.ENOSPC, errno.EDQUOT) else text
+
+
 def _yaml(data: Any) -> str:
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=False, width=1000)
 
@@ -126,6 +138,14 @@ class BagWriter:
         Replace an existing bag folder.
     custom_data : mapping, optional
         ``str -> str`` pairs stored in metadata.yaml ``custom_data``.
+    chunk_age_s : float, optional
+        Close a chunk once its first message is this old (s; a recorder: what a SIGKILL can
+        lose), besides by size (:class:`.McapFile`); :meth:`flush_due` checks it between
+        messages.
+    reserve_bytes : int
+        Space (bytes) held in :data:`RESERVE_NAME` while the bag is open and given back to
+        write its end: a disk that fills during a recording still gets the summary and
+        ``metadata.yaml`` (:meth:`salvage`).
 
     Examples
     --------
@@ -146,11 +166,14 @@ class BagWriter:
     BLOCK_BYTES = 1 << 22
 
     def __init__(self, path: str | Path, *, storage: str = 'mcap', overwrite: bool = False,
-                 custom_data: Mapping[str, str] | None = None) -> None:
+                 custom_data: Mapping[str, str] | None = None, chunk_age_s: float | None = None,
+                 reserve_bytes: int = 0) -> None:
         if storage != 'mcap':
             raise ValueError(f"storage = {storage!r}: only 'mcap' is written")
         self.path = Path(path)
         self._overwrite = overwrite
+        self._chunk_age_s = chunk_age_s
+        self._reserve_bytes = int(reserve_bytes)
         self._file: McapFile | None = None
         # A map, never null (yaml-cpp in rosbag2 refuses a null custom_data), with a tag
         # that tells where the bag came from ('bag_io', the writer's name when the tag was
@@ -180,13 +203,59 @@ class BagWriter:
         _prepare_folder(self.path, self._overwrite)
         try:
             self.path.mkdir(parents=True)
-            self._file = McapFile(self.path / f'{self.path.name}_0.mcap')
+            if self._reserve_bytes:
+                with (self.path / RESERVE_NAME).open('xb') as f:
+                    f.write(bytes(self._reserve_bytes))
+            self._file = McapFile(self.path / f'{self.path.name}_0.mcap', self._chunk_age_s)
         except OSError as err:
-            raise BagWriteError(f'{self.path}: cannot create the bag ({err.strerror})') \
+            shutil.rmtree(self.path, ignore_errors=True)
+            raise BagWriteError(f'{self.path}: cannot create the bag ({_reason(err)})') \
                 from None
 
-    def _metadata(self) -> dict[str, Any]:
-        f = self._file
+    def flush_due(self) -> None:
+        """Close the pending chunk if it is ``chunk_age_s`` old (a recorder's timer).
+
+        Raises
+        ------
+        OSError
+            The write failed (out of space): see :meth:`salvage`.
+        """
+        if self._file is not None:
+            self._file.flush_due()
+
+    def _release_reserve(self) -> None:
+        try:
+            (self.path / RESERVE_NAME).unlink()
+        except FileNotFoundError:
+            pass
+
+    def salvage(self) -> str:
+        """After a write that failed (out of space): end the bag with what was written
+        whole (the messages of the chunk that failed are lost), with the space held back
+        given to its summary and ``metadata.yaml``; what was kept, one phrase.
+
+        Raises
+        ------
+        BagWriteError
+            Not even ``metadata.yaml`` could be written (the .mcap file stays readable).
+        """
+        f, self._file = self._file, None
+        if f is None:
+            return 'nothing was open'
+        self._release_reserve()
+        summary = f.salvage(_yaml(self._metadata(f)))
+        try:
+            self._write_metadata(self._metadata(f))
+        except OSError as err:
+            raise BagWriteError(f'{self.path}: metadata.yaml not written ({_reason(err)}); '
+                                f'{f.message_count} messages kept in {f.path.name}, readable '
+                                'without it') from None
+        return (f'{f.message_count} messages kept in {f.path.name}, readable, with '
+                + ('its summary' if summary else 'no summary (read from its start)')
+                + ' and metadata.yaml')
+
+    def _metadata(self, f: McapFile | None = None) -> dict[str, Any]:
+        f = self._file if f is None else f
         count = f.message_count
         start = f.start_ns if count else 0
         duration = (f.end_ns - f.start_ns) if count else 0
@@ -215,25 +284,43 @@ class BagWriter:
         }
 
     def close(self) -> None:
-        """Write the summary, the index and metadata.yaml."""
+        """Write the summary, the index and metadata.yaml.
+
+        Raises
+        ------
+        BagWriteError
+            Out of space (or another OS error) on the way: the bag is ended by
+            :meth:`salvage` first, the message says what was kept.
+        """
         if self._file is None:
             return
         f, info = self._file, None
         try:
             f.flush_chunk()
+            self._release_reserve()
             info = self._metadata()
             f.close(_yaml(info))
+        except OSError as err:
+            kept = self.salvage()
+            raise BagWriteError(f'{self.path}: {_reason(err)} while closing: {kept}') from None
         except BaseException:
             self._file = None
-            try:                # out of space: no file descriptor left open on the bag
+            try:                # no file descriptor left open on the bag
                 f.file.close()
             except OSError:
                 pass
             raise
         self._file = None
+        self._write_metadata(info)
+
+    def _write_metadata(self, info: dict[str, Any]) -> None:
         tmp = self.path / 'metadata.yaml.tmp'
-        tmp.write_text(_yaml({'rosbag2_bagfile_information': info}), 'utf-8')
-        tmp.replace(self.path / 'metadata.yaml')
+        try:
+            tmp.write_text(_yaml({'rosbag2_bagfile_information': info}), 'utf-8')
+            tmp.replace(self.path / 'metadata.yaml')
+        except OSError:
+            tmp.unlink(missing_ok=True)
+            raise
 
     def __enter__(self) -> BagWriter:
         self.open()

@@ -10,6 +10,7 @@ distance that does not increase are dropped and counted in the profile's ``notes
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -97,38 +98,115 @@ def read_csv_profile(path: str | Path) -> RoadProfile:
     """Read a CSV profile (INTERFACES.md): header ``distance_m,left_m,right_m`` or
     ``distance_m,elevation_m`` (one track, used for both wheels); metres.
 
-    Columns are found by name (any order, extra columns ignored). Rows with a non-finite value
-    or a distance that does not increase are dropped and counted in ``notes``; a row that is
-    not numbers raises :class:`ValueError` naming the file and line.
+    Columns are found by name (any order, extra columns ignored); a UTF-8 byte-order mark (as
+    Excel writes) is read. Rows with a non-finite value or a distance that does not increase
+    are dropped and counted in ``notes``; a row that is not numbers raises
+    :class:`ValueError` naming the file and line. Read :data:`CHUNK_LINES` lines at a time:
+    the memory is that of the numbers (a few times 8 bytes per value), not of the text.
     """
     path = Path(path)
+    with _open_text(path, newline='') as f:
+        numbered = _numbered_lines(f, path)
+        header_line = next(((i, t) for i, t in numbered if t.strip()), None)
+        if header_line is None:
+            raise ValueError(f'{path}: empty CSV profile')
+        header = [c.strip() for c in next(csv.reader([header_line[1]]))]
+        try:
+            cols = [header.index('distance_m')]
+            if 'left_m' in header and 'right_m' in header:
+                cols += [header.index('left_m'), header.index('right_m')]
+            else:
+                cols.append(header.index('elevation_m'))
+        except ValueError:
+            raise ValueError(f'{path}: header {",".join(header)!r} must be '
+                             f'"distance_m,left_m,right_m" or "distance_m,elevation_m"') from None
+
+        def bad(no: int, text: str) -> str | None:
+            row = next(csv.reader([text]))
+            try:
+                [float(row[c]) for c in cols]
+                return None
+            except (ValueError, IndexError):
+                return (f'{path}, line {no}: expected {len(header)} numbers, got '
+                        f'{",".join(row)!r}')
+
+        data, numbers = _parse_rows(numbered, len(cols), bad, delimiter=',',
+                                    usecols=cols)
+    elevation = data[:, 1:] if len(cols) == 3 else data[:, 1]
+    return _clean(data[:, 0], elevation, name=str(path), line_numbers=numbers)
+
+
+#: Lines of a profile file parsed at a time (bounds the memory of the text).
+CHUNK_LINES = 1 << 16
+
+
+def _open_text(path: Path, **kwargs):
+    """``path`` opened for reading text, UTF-8 with or without a byte-order mark (undecodable
+    bytes replaced); ValueError naming the file when it cannot be opened."""
     try:
-        with path.open(newline='') as f:
-            rows = list(csv.reader(f))
+        return path.open(encoding='utf-8-sig', errors='replace', **kwargs)
     except OSError as exc:
         raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
-    rows = [r for r in rows if r and any(c.strip() for c in r)]
-    if not rows:
-        raise ValueError(f'{path}: empty CSV profile')
-    header = [c.strip() for c in rows[0]]
+
+
+def _numbered_lines(f, path: Path):
+    """``(line number, text)`` of a file's lines (1-based, no line end); ValueError naming
+    the file on a read error."""
     try:
-        cols = [header.index('distance_m')]
-        if 'left_m' in header and 'right_m' in header:
-            cols += [header.index('left_m'), header.index('right_m')]
-        else:
-            cols.append(header.index('elevation_m'))
-    except ValueError:
-        raise ValueError(f'{path}: header {",".join(header)!r} must be '
-                         f'"distance_m,left_m,right_m" or "distance_m,elevation_m"') from None
-    data = np.empty((len(rows) - 1, len(cols)))
-    for i, row in enumerate(rows[1:]):
+        for i, line in enumerate(f, 1):
+            yield i, line.rstrip('\r\n')
+    except OSError as exc:
+        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+
+
+def _parse_rows(numbered, width: int, bad, *, delimiter=None, usecols=None, comments=None,
+                clean=None) -> tuple[np.ndarray, np.ndarray]:
+    """The numbers of the remaining lines of ``numbered`` ((line number, text) pairs), read
+    :data:`CHUNK_LINES` at a time: ``(rows (m, width) float64, line numbers (m,) int64)``.
+
+    Blank lines (and, with ``comments``, lines starting with it) are skipped; ``clean(text)``
+    rewrites a line first. When a chunk does not parse, ``bad(line number, text)`` finds the
+    faulty line and its message (raised as ValueError).
+    """
+    blocks, line_blocks = [], []
+    texts: list[str] = []
+    nums: list[int] = []
+
+    def flush() -> None:
+        if not texts:
+            return
         try:
-            data[i] = [float(row[c]) for c in cols]
-        except (ValueError, IndexError):
-            raise ValueError(f'{path}, line {i + 2}: expected {len(header)} numbers, got '
-                             f'{",".join(row)!r}') from None
-    elevation = data[:, 1:] if len(cols) == 3 else data[:, 1]
-    return _clean(data[:, 0], elevation, name=str(path))
+            block = np.loadtxt(texts, delimiter=delimiter, usecols=usecols, ndmin=2,
+                               dtype=np.float64, comments=None, quotechar='"' if delimiter
+                               else None)
+            if block.shape[1] != width:
+                raise ValueError('width')
+        except ValueError:
+            for no, text in zip(nums, texts):
+                message = bad(no, text)
+                if message:
+                    raise ValueError(message) from None
+            raise ValueError(f'line {nums[0]}..{nums[-1]}: not a table of {width} numbers') \
+                from None
+        blocks.append(block)
+        line_blocks.append(np.asarray(nums, dtype=np.int64))
+        texts.clear()
+        nums.clear()
+
+    for no, text in numbered:
+        stripped = text.strip()
+        if not stripped.strip(', \t') or (comments and stripped.startswith(comments)):
+            continue
+        texts.append(clean(stripped) if clean else stripped)
+        nums.append(no)
+        if len(texts) >= CHUNK_LINES:
+            flush()
+    flush()
+    if not blocks:
+        return np.empty((0, width)), np.empty(0, dtype=np.int64)
+    data = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+    blocks.clear()
+    return data, np.concatenate(line_blocks)
 
 
 def _number(exact: bool):
@@ -157,31 +235,30 @@ def read_text_profile(path: str | Path) -> RoadProfile:
     """Read a whitespace-separated text profile (the format of ``profile_1.txt``).
 
     Two columns (distance m, elevation m: one track, used for both wheels) or three
-    (distance, left, right). Blank lines and lines starting with '#' are skipped.
+    (distance, left, right), blank- or comma-separated. Blank lines and lines starting with
+    '#' are skipped; a UTF-8 byte-order mark is read. Read in chunks, as
+    :func:`read_csv_profile`.
     """
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as exc:
-        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
-    values, numbers = [], []
-    width = None
-    for i, line in enumerate(lines):
-        text = line.strip()
-        if not text or text.startswith('#'):
-            continue
-        row = _numbers(text, path, i + 1)
-        numbers.append(i + 1)
-        if width is None:
-            width = len(row)
-            if width not in (2, 3):
-                raise ValueError(f'{path}, line {i + 1}: expected 2 or 3 columns, got {width}')
-        elif len(row) != width:
-            raise ValueError(f'{path}, line {i + 1}: expected {width} columns, got {len(row)}')
-        values.append(row)
-    if not values:
-        raise ValueError(f'{path}: no profile points')
-    data = np.array(values)
+    with _open_text(path) as f:
+        numbered = _numbered_lines(f, path)
+        first = next(((i, t) for i, t in numbered
+                      if t.strip() and not t.strip().startswith('#')), None)
+        if first is None:
+            raise ValueError(f'{path}: no profile points')
+        width = len(_numbers(first[1].strip(), path, first[0]))
+        if width not in (2, 3):
+            raise ValueError(f'{path}, line {first[0]}: expected 2 or 3 columns, got {width}')
+
+        def bad(no: int, text: str) -> str | None:
+            row = _numbers(text, path, no)
+            if len(row) != width:
+                return f'{path}, line {no}: expected {width} columns, got {len(row)}'
+            return None
+
+        rows = itertools.chain([first], numbered)
+        data, numbers = _parse_rows(rows, width, bad, comments='#',
+                                    clean=lambda t: t.replace(',', ' '))
     elevation = data[:, 1:] if width == 3 else data[:, 1]
     return _clean(data[:, 0], elevation, name=str(path), line_numbers=numbers)
 
@@ -211,32 +288,36 @@ def read_erd_profile(path: str | Path) -> RoadProfile:
     filtered: their mean and grade are not the road's.
     """
     path = Path(path)
-    try:
-        lines = path.read_text(errors='replace').splitlines()
-    except OSError as exc:
-        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
-    nchan, nsamp, step = _erd_header(lines, path)
-    keys, raw_keys, end = _erd_keywords(lines, path)
-    x_factor = _unit_factor(keys.get('XUNITS', 'm') or 'm', 'XUNITS', path)
-    units = _fixed_fields(raw_keys.get('UNITSNAM', ''), nchan)
-    if not any(units):
-        units = ['m'] * nchan
-    names = _fixed_fields(raw_keys.get('SHORTNAM', ''), nchan)
-    notes: list[str] = []
-    data, numbers = _erd_rows(lines, end, nchan, path)
+    with _open_text(path) as f:
+        numbered = _numbered_lines(f, path)
+        lines = _erd_head(numbered)
+        nchan, nsamp, step = _erd_header(lines, path)
+        keys, raw_keys, end = _erd_keywords(lines, path)
+        _require_units(keys, path)
+        x_factor = _unit_factor(keys['XUNITS'], 'XUNITS', path)
+        units = _fixed_fields(raw_keys['UNITSNAM'], nchan)
+        names = _fixed_fields(raw_keys.get('SHORTNAM', ''), nchan)
+        notes: list[str] = []
+
+        def bad(no: int, text: str) -> str | None:
+            row = _numbers(text, path, no)
+            if len(row) != nchan:
+                return f'{path}, line {no}: expected {nchan} values, got {len(row)}'
+            return None
+
+        data, numbers = _parse_rows(numbered, nchan, bad)
     if nsamp > 0 and data.shape[0] < nsamp:
         notes.append(f'truncated: {data.shape[0]} of {nsamp} samples')
     elif nsamp > 0 and data.shape[0] > nsamp:
         notes.append(f'{data.shape[0] - nsamp} rows beyond NSAMP = {nsamp} ignored')
         data, numbers = data[:nsamp], numbers[:nsamp]
     if step * x_factor > MAX_STEP_M:
-        raise ValueError(f'{path}, line 2: STEP = {step:.6g} {keys.get("XUNITS", "m") or "m"} is '
+        raise ValueError(f'{path}, line 2: STEP = {step:.6g} {keys["XUNITS"]} is '
                          f'more than {MAX_STEP_M:g} m between samples: not a road profile')
     cols = _pick_tracks(names, nchan, notes)
-    factors = [_unit_factor(units[c] or units[0] or 'm', f'channel {c + 1}', path)
-               for c in cols]
-    notes += _unit_notes(keys.get('XUNITS', 'm') or 'm', x_factor,
-                         [units[c] or units[0] or 'm' for c in cols], factors)
+    factors = [_unit_factor(units[c] or units[0], f'channel {c + 1}', path) for c in cols]
+    notes += _unit_notes(keys['XUNITS'], x_factor, [units[c] or units[0] for c in cols],
+                         factors)
     elevation = data[:, cols] * np.array(factors)
     try:
         x0 = float(keys.get('XSTART', '0') or 0.0)
@@ -282,10 +363,8 @@ def erd_stored_iri(path: str | Path) -> dict | None:
         Not a readable ERD file.
     """
     path = Path(path)
-    try:
-        lines = path.read_text(errors='replace').splitlines()
-    except OSError as exc:
-        raise ValueError(f'cannot read profile {path}: {exc.strerror}') from None
+    with _open_text(path) as f:
+        lines = _erd_head(_numbered_lines(f, path))
     _erd_header(lines, path)
     keys, _, _ = _erd_keywords(lines, path)
     values = {}
@@ -305,6 +384,35 @@ def erd_stored_iri(path: str | Path) -> dict | None:
         v = values[side]
         out[f'{side}_m_per_km'] = None if v is None else v / per
     return out
+
+
+#: Header lines of an ERD file read at most (its keywords end with END well before).
+_MAX_ERD_HEADER_LINES = 10_000
+
+
+def _erd_head(numbered) -> list[str]:
+    """The lines of an ERD file up to its ``END`` line (at most
+    :data:`_MAX_ERD_HEADER_LINES`); the data rows stay in ``numbered``."""
+    lines = []
+    for _, text in numbered:
+        lines.append(text)
+        if (len(lines) > 2 and text.strip().upper() == 'END') \
+                or len(lines) >= _MAX_ERD_HEADER_LINES:
+            break
+    return lines
+
+
+def _require_units(keys: dict[str, str], path: Path) -> None:
+    """Refuse an ERD file that does not state its units: a file without them is read as
+    metres by some tools and as inches by others (an inch file taken for metres reads 39
+    times too rough)."""
+    missing = [k for k in ('UNITSNAM', 'XUNITS') if not keys.get(k, '').strip()]
+    if missing:
+        what = ' and '.join(missing)
+        raise ValueError(f'{path}: the ERD header has no {what}: the units of the '
+                         f'{"elevations" if "UNITSNAM" in missing else "distances"} are '
+                         f'unknown; add the keyword line{"s" if len(missing) > 1 else ""} '
+                         f'(e.g. "UNITSNAMin      in" and "XUNITS  ft") before END')
 
 
 def _erd_header(lines: list[str], path: Path) -> tuple[int, int, float]:
@@ -343,23 +451,6 @@ def _erd_keywords(lines: list[str], path: Path) -> tuple[dict[str, str], dict[st
         keys[keyword] = line[8:].strip()
         raw_keys[keyword] = line[8:].rstrip('\n')
     raise ValueError(f'{path}: ERD header has no END line')
-
-
-def _erd_rows(lines: list[str], end: int, nchan: int,
-              path: Path) -> tuple[np.ndarray, list[int]]:
-    """The data rows after the END line, (m, NCHAN) in the file's units, and their line
-    numbers."""
-    rows, numbers = [], []
-    for i in range(end + 1, len(lines)):
-        text = lines[i].strip()
-        if not text:
-            continue
-        row = _numbers(text, path, i + 1)
-        if len(row) != nchan:
-            raise ValueError(f'{path}, line {i + 1}: expected {nchan} values, got {len(row)}')
-        rows.append(row)
-        numbers.append(i + 1)
-    return np.array(rows, dtype=np.float64).reshape(-1, nchan), numbers
 
 
 def _fixed_fields(text: str, count: int) -> list[str]:

@@ -26,7 +26,8 @@ import numpy as np
 from road_force_estimator.core.gnss import positions_at
 
 __all__ = ['SEGMENT_COLUMNS', 'MIN_COVERAGE', 'segment_bounds', 'segment_table',
-           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coordinate_columns']
+           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coordinate_columns',
+           'sample_spacing', 'check_segment_length']
 
 #: A segment's IRI needs samples over this fraction of its length.
 MIN_COVERAGE = 0.9
@@ -40,6 +41,35 @@ SEGMENT_COLUMNS = (
     'lift_offs', 'start_lat', 'start_lon', 'end_lat', 'end_lon', 'static_load_left_n',
     'static_load_right_n', 'max_abs_ltr_quasi_static',
 )
+
+
+def sample_spacing(stamps_ns, speed_mps, max_speed_mps: float = np.inf) -> float:
+    """The distance between two samples at the drive's top speed (m): the largest finite
+    |speed| (m/s) up to ``max_speed_mps`` (faster ones are no speed a sample is estimated
+    with) times the median step of the increasing stamps (ns); 0 when it cannot be told
+    (fewer than two samples, no such speed)."""
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    v = np.abs(np.asarray(speed_mps, dtype=float))
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    v = v[np.isfinite(v) & (v <= max_speed_mps)]
+    if steps.size == 0 or v.size == 0:
+        return 0.0
+    return float(v.max()) * float(np.median(steps)) * 1e-9
+
+
+def check_segment_length(segment_length_m: float, spacing_m: float, what: str = 'drive'
+                         ) -> None:
+    """Raise ValueError when segments of ``segment_length_m`` (m) are shorter than the
+    sample spacing ``spacing_m`` (m, :func:`sample_spacing`): such a segment holds at most one
+    sample (no IRI, no load figures), and their number grows without bound as the length
+    shrinks."""
+    if not (segment_length_m > 0.0 and np.isfinite(segment_length_m)):
+        raise ValueError(f'segment length {segment_length_m!r} m: must be finite and > 0')
+    if segment_length_m < spacing_m:
+        raise ValueError(f'segment length {segment_length_m:g} m is shorter than the '
+                         f"{what}'s sample spacing ({spacing_m:.3g} m): a segment would hold "
+                         f'at most one sample; give --segment-length >= {spacing_m:.3g} m')
 
 
 def segment_bounds(start_m: float, end_m: float, segment_length_m: float) -> np.ndarray:

@@ -1,25 +1,32 @@
 """Which samples the estimators use: the rejection and gap rules, per sample and over arrays.
 
-A sample is rejected when a value or the stamp (integer nanoseconds) is non-finite or
-malformed (``rejected_nonfinite``), when a value is impossible (``|q| > 1 m``,
-``|phi| > pi/2``: ``rejected_range``), when the speed is negative or above 100 m/s
-(``rejected_speed``), when the deflections and roll repeat exactly, for the
-:data:`FROZEN_REPEATS` th time in a row or more, those of a sample that was moving while the
-speed now reads standing (below :data:`~.speed_check.STANDING_MPS`): a CAN drop-out holding
-the last values (``rejected_stale``; a truck that stands still from the start keeps its
-estimate), or when its stamp is not later than the last accepted one
-(``rejected_time``). A stamp more than :data:`MAX_STAMP_JUMP_S` (and a gap) ahead of the last
-accepted one is held back (counted in ``rejected_time``): the next sample decides. Earlier
-than the held stamp (a lone corrupt header, e.g. a year ahead), it is judged against the
-stream as if the outlier had never come; later (the stream really jumped), it starts a new
-run there (a gap), and the held sample stays lost. A step longer than ``max(gap_threshold_s,``
-:data:`GAP_PERIODS` ``typical steps)`` is a gap (the estimate restarts there; ``gaps``,
-``resets``); the typical step is the running average ``dt_typ += 0.05 (dt - dt_typ)`` of the
-accepted steps, restarted (the next step taken as it is) at every restart.
+A sample is rejected when a value or the stamp (integer nanoseconds) is non-finite or malformed
+(``rejected_nonfinite``), when a value is impossible (``|q| > 1 m``, ``|phi| > pi/2``:
+``rejected_range``), when the speed is negative or above 100 m/s (``rejected_speed``), when the
+deflections and roll repeat exactly, for the :data:`FROZEN_REPEATS` th time in a row or more,
+those of a sample that was moving while the speed now reads standing (below
+:data:`~.speed_check.STANDING_MPS`): a CAN drop-out holding the last values
+(``rejected_stale``; a truck that stands still from the start keeps its estimate), or when its
+stamp is not later than the last accepted one (``rejected_time``). A step of more than
+:data:`GAP_PERIODS` typical steps (with no typical step yet, at a run's second sample, one over
+:data:`MAX_STAMP_JUMP_S`) is a jump no regular stream takes: the sample is held back (counted
+in ``rejected_time``) and the next decides. Earlier than the held stamp (a lone corrupt header,
+a minute or a year ahead), it is judged against the stream as if the outlier had never come;
+later and continuing from it (the stream really jumped: a gap, a pause, lost samples, a rate
+that dropped), it is taken, and the held sample stays lost. So any number of lone outlier
+stamps ahead of the stream cost those samples only, and so do those behind it (rejected as
+backwards); one less than :data:`GAP_PERIODS` steps ahead costs the samples it overtakes.
+:data:`BEHIND_SAMPLES` samples in a row behind the last accepted one that continue each other
+mean the stream is there (the accepted ones were ahead of it, e.g. a first sample stamped in
+the future, or the clock was set back): a new run starts at the last of them (a gap). A step
+longer than ``max(gap_threshold_s,`` :data:`GAP_PERIODS` ``typical steps)`` is a gap (the
+estimate restarts there; ``gaps``, ``resets``); the typical step is the running average
+``dt_typ += 0.05 (dt - dt_typ)`` of the accepted steps, restarted (the next step taken as it
+is) at every restart.
 
 :class:`SampleGate` applies the rules one sample at a time (the per-sample path and
-:func:`.estimate_batch`); :func:`accept_arrays` over whole arrays (the offline smoothers),
-with the same result.
+:func:`.estimate_batch`); :func:`accept_arrays` over whole arrays (the offline smoothers), with
+the same result.
 """
 from __future__ import annotations
 
@@ -31,7 +38,8 @@ from road_force_estimator.estimation.speed_check import STANDING_MPS
 
 __all__ = [
     'GAP_THRESHOLD_S', 'GAP_PERIODS', 'MAX_DEFLECTION_M', 'MAX_ROLL_RAD', 'MAX_SPEED_MPS',
-    'MAX_STAMP_JUMP_S', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT', 'check_gap_threshold',
+    'MAX_STAMP_JUMP_S', 'BEHIND_SAMPLES', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT',
+    'check_gap_threshold',
     'batch_inputs', 'SampleGate',
     'accept_arrays', 'gap_samples', 'output_stamps',
 ]
@@ -46,9 +54,14 @@ TYPICAL_STEP_WEIGHT = 0.05
 MAX_DEFLECTION_M = 1.0
 MAX_ROLL_RAD = 0.5 * math.pi
 MAX_SPEED_MPS = 100.0
-#: A forward stamp step longer than this (s) is held until the next sample confirms it.
+#: A forward stamp step longer than this (s) is held until the next sample confirms it (as
+#: every jump of more than GAP_PERIODS typical steps now is).
 MAX_STAMP_JUMP_S = 60.0
 _MAX_JUMP_NS = int(MAX_STAMP_JUMP_S * 1e9)
+#: Samples in a row behind the last accepted stamp, continuing each other, from which the
+#: stream is taken to be there (a new run starts): more than an outlier less than
+#: GAP_PERIODS steps ahead can put behind it.
+BEHIND_SAMPLES = int(GAP_PERIODS) + 2
 #: Exact repeats of (q_1, q_2, phi) in a row from which samples are stale (a real sensor
 #: has noise).
 FROZEN_REPEATS = 10
@@ -93,7 +106,9 @@ class SampleGate:
         self.started = False
         self.stamp = 0
         self.dt_typ = 0.0
-        self.held = None        # stamp (ns) of a far jump not confirmed yet
+        self.clock = 0          # the stream's latest stamp (ns): accepted, or continuing it
+        self.held = None        # stamp (ns) of a jump not confirmed yet
+        self._behind = None     # (last stamp, count) of the samples in a row behind the stream
         self._values = None     # (q1, q2, phi) of the last sample with good values
         self._moving = False    # whether the sample that first had them was moving
         self._repeats = 0
@@ -127,12 +142,14 @@ class SampleGate:
                 and -MAX_DEFLECTION_M <= q2 <= MAX_DEFLECTION_M
                 and -MAX_ROLL_RAD <= phi <= MAX_ROLL_RAD and 0.0 <= v <= MAX_SPEED_MPS):
             self._count_bad(q1, q2, phi, v)
+            self._tick(stamp)
             return None
         values = (q1, q2, phi)
         if values == self._values:
             self._repeats += 1
             if self._repeats >= FROZEN_REPEATS and self._moving and v < STANDING_MPS:
                 st.rejected_stale += 1
+                self._tick(stamp)
                 return None
         else:
             self._values = values
@@ -142,20 +159,67 @@ class SampleGate:
             return stamp, q1, q2, phi, v, 0.0, True, 0.0
         dt_ns = stamp - self.stamp
         if dt_ns <= 0:
+            if self._behind_run(stamp):       # the stream is back there: a new run
+                st.gaps += 1
+                st.resets += 1
+                return stamp, q1, q2, phi, v, 0.0, True, 0.0
             st.rejected_time += 1
             return None
+        self._behind = None
         dt = dt_ns * 1e-9
-        if dt > self.gap_threshold_s and dt > GAP_PERIODS * self.dt_typ:
-            if not self._jump_confirmed(stamp, dt_ns):
+        typ = self.dt_typ
+        if self._jump((stamp - self.clock) * 1e-9):
+            if not self._jump_confirmed(stamp):
                 st.rejected_time += 1
                 return None
+        else:
+            self.held = None              # back in the stream: a held stamp was an outlier
+        if dt > self.gap_threshold_s and dt > GAP_PERIODS * typ:
             st.gaps += 1
             st.resets += 1
             return stamp, q1, q2, phi, v, dt, True, 0.0
-        self.held = None
-        typ = self.dt_typ
         return (stamp, q1, q2, phi, v, dt, False,
                 dt if typ == 0.0 else typ + TYPICAL_STEP_WEIGHT * (dt - typ))
+
+    def _tick(self, stamp: int) -> None:
+        """A sample rejected for its values still tells where the stream is: its stamp
+        moves the clock on when it continues it (so that a run of such samples makes no
+        jump of the next good one)."""
+        if self.started and 0 < stamp - self.clock and not self._jump(
+                (stamp - self.clock) * 1e-9):
+            self.clock = stamp
+
+    def _jump(self, dt: float) -> bool:
+        """Whether a step of dt (s) is one no regular stream takes: more than GAP_PERIODS
+        typical steps, or with no typical step yet (a run's second sample) more than
+        :data:`MAX_STAMP_JUMP_S`."""
+        typ = self.dt_typ
+        return dt > GAP_PERIODS * typ if typ > 0.0 else dt > MAX_STAMP_JUMP_S
+
+    def _jump_confirmed(self, stamp: int) -> bool:
+        """Whether the jump to ``stamp`` (ns) is real: it continues from the held stamp (a
+        step after it that is no jump itself, or no longer than the jump to the held one: a
+        stream whose rate dropped); else ``stamp`` is held instead."""
+        held, self.held = self.held, None
+        if held is not None and 0 < stamp - held and (
+                not self._jump((stamp - held) * 1e-9) or stamp - held <= held - self.clock):
+            return True
+        self.held = stamp
+        return False
+
+    def _behind_run(self, stamp: int) -> bool:
+        """Count ``stamp`` (not after the last accepted one) into the run of such samples
+        that continue each other; True when it is :data:`BEHIND_SAMPLES` long (forgotten)."""
+        run = self._behind
+        if run is not None and stamp > run[0] and not self._jump((stamp - run[0]) * 1e-9):
+            run = (stamp, run[1] + 1)
+        else:
+            run = (stamp, 1)
+        if run[1] >= BEHIND_SAMPLES:
+            self._behind = self.held = None
+            return True
+        self._behind = run
+        return False
 
     def _count_bad(self, q1: float, q2: float, phi: float, v: float) -> None:
         """Count a sample with a value out of its range: speed, range or non-finite."""
@@ -169,21 +233,12 @@ class SampleGate:
         else:
             st.rejected_range += 1
 
-    def _jump_confirmed(self, stamp: int, dt_ns: int) -> bool:
-        """Whether a gap of dt_ns (ns) to ``stamp`` starts a new run now: short gaps at once,
-        a far jump only when it continues from the held far stamp (else this one is held)."""
-        held, self.held = self.held, None
-        if dt_ns <= _MAX_JUMP_NS:
-            return True
-        if held is not None and 0 < stamp - held <= _MAX_JUMP_NS:
-            return True
-        self.held = stamp
-        return False
-
     def commit(self, stamp: int, dt_typ: float) -> None:
         """Record an accepted sample and the typical step after it."""
         self.started = True
         self.stamp = stamp
+        if stamp > self.clock or dt_typ == 0.0:     # (a run starting behind: the clock too)
+            self.clock = stamp
         self.dt_typ = dt_typ
 
 
@@ -246,8 +301,12 @@ def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):
         before[1:] = run_max[:-1]
     valid = cand & (stamp_int > before)
     acc = np.flatnonzero(valid)
-    if acc.size > 1 and int(np.max(np.diff(stamp_int[acc]))) > _MAX_JUMP_NS:
-        # a far jump: held until the next sample decides, one sample at a time
+    steps = np.diff(stamp_int[acc])
+    if steps.size and (int(steps.max()) > GAP_PERIODS * int(steps.min())
+                       or steps[0] > _MAX_JUMP_NS) \
+            or np.count_nonzero(cand & ~valid) >= BEHIND_SAMPLES:
+        # a step that may be a jump (held until the next sample decides) or a run behind
+        # the stream: one sample at a time
         valid, restart, gate = _gate_over(stamp_int, q, phi, v, cand, gap_threshold_s)
         cnt.update(rejected_time=gate.rejected_time, gaps=gate.gaps, resets=gate.resets)
         return valid, restart, np.where(valid, stamp_int, 0), cnt

@@ -20,16 +20,22 @@ measurements and ``plant_simulator`` for ``/lpa/*``; any one subscriber on a top
 the package reads), or with ``--wait-count N`` N subscribers on each, then ``--delay``.
 ``/diagnostics`` (status ``bag_player: playback``) says the stamp of the first message played
 on each of those topics (``first_stamp_ns:<topic>``), so that a late observer counts what it
-missed. ``--clock [HZ]`` publishes ``/clock``
-(rosgraph_msgs/Clock, the bag's time; HZ default 100) so that nodes with ``use_sim_time``
-follow the bag. At the end of the bag (of the last loop) it waits for the subscribers'
-acknowledgements and exits 0; SIGINT/SIGTERM stop it cleanly (exit 0). A bag cut short plays
-up to the break and says so. Bad input (no such bag, not MCAP, ``--rate 0``): one line on
-stderr, exit 1 (2 for a bad command line).
+missed. ``--clock [HZ]`` publishes ``/clock`` (rosgraph_msgs/Clock, the bag's time; HZ default
+100, at most :data:`MAX_CLOCK_HZ`; a tick that falls late is not published in a burst with the
+others: the latest due is) so that nodes with ``use_sim_time`` follow the bag. ``--loop``: each
+pass starts one mean message spacing after the last message of the one before
+(:data:`LOOP_SINGLE_S` for a bag of one message), in bounded memory. The files of a split bag
+play in time order; a file that ``metadata.yaml`` lists but that is missing is one warning (as
+``estimate_bag`` gives), and so is a recorded QoS depth beyond :data:`MAX_DEPTH`; ``--remap``
+to a name that is not a valid topic name is a bad command line. At the end of the bag (of the
+last loop) it waits for the subscribers' acknowledgements and exits 0; SIGINT/SIGTERM stop it
+cleanly (exit 0). A bag cut short plays up to the break and says so. Bad input (no such bag,
+not MCAP, ``--rate 0``): one line on stderr, exit 1 (2 for a bad command line).
 """
 from __future__ import annotations
 
 import argparse
+from collections import deque
 import importlib
 import math
 import queue
@@ -54,6 +60,19 @@ from road_force_estimator.ros.start_gate import SETTLE_S, SubscriberGate, first_
 PROG = 'bag_player'
 #: Queue depth of every played topic at least (messages), whatever the bag recorded.
 MIN_DEPTH = 1000
+#: ... and at most (a recorded depth beyond it, e.g. 1e11 in a hand-edited metadata.yaml,
+#: is played with this one, said so): DDS allocates the history it is given.
+MAX_DEPTH = 100_000
+#: The fastest /clock (Hz): a publication takes tens of microseconds, a faster clock would
+#: slow the playback down (1 MHz played 7.5 times slower than asked) or stop it.
+MAX_CLOCK_HZ = 10_000.0
+#: Lateness values kept for bench/bag_player_timing.py (the newest; older ones dropped, so
+#: that --loop runs for ever in bounded memory).
+LATENESS_KEPT = 20_000
+#: A loop of a bag lasts its span plus its mean spacing between messages (bag time), so the
+#: first message follows the last one as the others follow each other; a bag of one
+#: message (no spacing) plays it every LOOP_SINGLE_S of bag time.
+LOOP_SINGLE_S = 1.0
 #: Messages read ahead of the schedule by the reading thread (bounds the memory).
 READ_AHEAD = 20000
 CLOCK_TOPIC = '/clock'
@@ -88,7 +107,12 @@ def read_ahead(messages, stopping: threading.Event, size: int = READ_AHEAD):
 
     threading.Thread(target=fill, name='bag_reader', daemon=True).start()
     while True:
-        item = buffer.get()
+        try:
+            item = buffer.get(timeout=0.1)
+        except queue.Empty:          # the reader stops without a last item when stopped
+            if stopping.is_set():
+                return
+            continue
         if item is end:
             return
         if isinstance(item, Exception):
@@ -120,10 +144,27 @@ def _non_negative(text: str) -> float:
 
 
 def _remap(text: str) -> tuple[str, str]:
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
     old, sep, new = text.partition(':=')
     if not sep or not old.startswith('/') or not new.startswith('/'):
         raise argparse.ArgumentTypeError(f'{text!r} is not FROM:=TO (two absolute topic names)')
+    try:
+        validate_full_topic_name(new)
+    except InvalidTopicNameException as exc:
+        reason = str(exc).splitlines()[0].split(': ', 1)[-1].rstrip(':')
+        raise argparse.ArgumentTypeError(f'{text!r}: {new!r} is not a valid topic name '
+                                         f'({reason})') from None
     return old, new
+
+
+def _clock(text: str) -> float:
+    value = _positive(text)
+    if value > MAX_CLOCK_HZ:
+        raise argparse.ArgumentTypeError(f'{text} Hz: at most {MAX_CLOCK_HZ:g} Hz (a faster '
+                                         '/clock would slow the playback down)')
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -139,8 +180,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--topics', nargs='+', metavar='T', help='play only these topics')
     p.add_argument('--remap', nargs='+', type=_remap, default=[], metavar='FROM:=TO',
                    help='publish topic FROM of the bag on TO')
-    p.add_argument('--clock', nargs='?', type=_positive, const=100.0, default=None,
-                   metavar='HZ', help='publish /clock at HZ (default 100) with the bag time')
+    p.add_argument('--clock', nargs='?', type=_clock, const=100.0, default=None,
+                   metavar='HZ', help='publish /clock at HZ (default 100, at most '
+                                      f'{MAX_CLOCK_HZ:g}) with the bag time')
     p.add_argument('--delay', type=_non_negative, default=0.0, metavar='S',
                    help='wait S seconds before playing')
     p.add_argument('--wait', type=_non_negative, default=30.0, metavar='S',
@@ -161,9 +203,10 @@ def message_class(msgtype: str):
 
 
 def qos_profile(qos) -> QoSProfile:
-    """rclpy's profile of a :class:`bagio.playback.TopicQoS`."""
+    """rclpy's profile of a :class:`bagio.playback.TopicQoS` (depth between
+    :data:`MIN_DEPTH` and :data:`MAX_DEPTH`)."""
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=max(qos.depth, MIN_DEPTH),
+        history=HistoryPolicy.KEEP_LAST, depth=min(max(qos.depth, MIN_DEPTH), MAX_DEPTH),
         reliability=(ReliabilityPolicy.BEST_EFFORT if qos.reliability == 'best_effort'
                      else ReliabilityPolicy.RELIABLE),
         durability=(DurabilityPolicy.TRANSIENT_LOCAL if qos.durability == 'transient_local'
@@ -187,8 +230,8 @@ class BagPlayer(Node):
         self.stopping = threading.Event()
         self.done = False
         self.published: dict[str, int] = {}
-        self.lateness_s: list[float] = []
-        self.clock_lateness_s: list[float] = []
+        self.lateness_s: deque[float] = deque(maxlen=LATENESS_KEPT)
+        self.clock_lateness_s: deque[float] = deque(maxlen=LATENESS_KEPT)
         self.schedule: tuple[float, int] | None = None  # (monotonic start, first log time ns)
         self.clock_ticks = 0
         self.pubs: dict[str, object] = {}
@@ -203,6 +246,8 @@ class BagPlayer(Node):
             self.clock_msg = Clock
             self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(
                 depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        for issue in playback.issues:       # a file missing, files out of order: as estimate_bag
+            self.get_logger().warning(f'{playback.path}: {issue}')
         wanted = options.topics or list(playback.topics)
         missing = [t for t in wanted if t not in playback.topics]
         if missing and playback.topics and options.topics:
@@ -228,6 +273,9 @@ class BagPlayer(Node):
                                       f'{info.type or "(none)"!r} ({exc})')
             return None
         out = self.remap.get(topic, topic)
+        if info.qos.depth > MAX_DEPTH:
+            self.get_logger().warning(f'{topic}: the recorded QoS depth {info.qos.depth} is '
+                                      f'more than {MAX_DEPTH}: played with {MAX_DEPTH}')
         self.pubs[topic] = self.create_publisher(cls, out, qos_profile(info.qos))
         self.published.setdefault(out, 0)
         return self.pubs[topic]
@@ -291,8 +339,9 @@ class BagPlayer(Node):
     def play_all(self) -> None:
         opts = self.options
         loops = 0
+        origin = None          # (wall time, bag time ns) the next pass is scheduled from
         while not self.stopping.is_set():
-            count = self.play_once()
+            count, origin = self.play_once(origin)
             loops += 1
             broken = self.playback.broken
             if broken:
@@ -310,10 +359,12 @@ class BagPlayer(Node):
             if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
                 pub.wait_for_all_acked(Duration(seconds=2.0))
 
-    def play_once(self) -> int:
-        """One pass over the bag on its schedule; the number of messages published."""
+    def play_once(self, origin=None) -> tuple[int, tuple[float, int] | None]:
+        """One pass over the bag on its schedule, from ``origin`` (wall time, bag time ns:
+        where the previous pass said the next one starts) or now; the number of messages
+        published, and the origin of a next pass (:data:`LOOP_SINGLE_S`)."""
         opts = self.options
-        start_wall = first_ns = None
+        start_wall = first_ns = last_ns = None
         period_s = 1.0 / opts.clock if opts.clock else math.inf
         next_clock = math.inf
         count = 0
@@ -327,17 +378,17 @@ class BagPlayer(Node):
                 continue
             if start_wall is None:
                 start_wall, first_ns = time.monotonic(), t_ns
+                if origin is not None:
+                    start_wall = max(origin[0], start_wall - 1.0)   # (a slow reader: late)
                 self.schedule = (start_wall, first_ns)
                 next_clock = start_wall if self.clock_pub else math.inf
             due = start_wall + (t_ns - first_ns) * 1e-9 / opts.rate
-            while next_clock <= due:  # /clock ticks due before this message
-                if not self.wait_until(next_clock):
-                    return count
-                self.publish_clock(first_ns + (next_clock - start_wall) * opts.rate * 1e9)
-                self.clock_lateness_s.append(time.monotonic() - next_clock)
-                next_clock += period_s
+            if next_clock <= due:
+                next_clock = self.tick_clock(next_clock, due, period_s, start_wall, first_ns)
+                if next_clock is None:
+                    return count, None
             if not self.wait_until(due):
-                return count
+                return count, None
             pub.publish(data)
             self.lateness_s.append(time.monotonic() - due)
             out = self.remap.get(topic, topic)
@@ -346,7 +397,29 @@ class BagPlayer(Node):
             self.note_first(out, data)
             if time.monotonic() - self.reported_wall >= 1.0:
                 self.report()
-        return count
+            last_ns = t_ns
+        if start_wall is None:
+            return count, None
+        span = last_ns - first_ns
+        gap_ns = span / (count - 1) if count > 1 and span > 0 else LOOP_SINGLE_S * 1e9
+        return count, (start_wall + (span + gap_ns) * 1e-9 / opts.rate, first_ns)
+
+    def tick_clock(self, next_clock: float, due: float, period_s: float, start_wall: float,
+                   first_ns: int) -> float | None:
+        """Publish the /clock ticks due before the message due at ``due`` (monotonic s); the
+        next tick's time, None when stopped. Ticks that are already late are not published
+        one by one: the latest of them is, and the schedule goes on from there."""
+        opts = self.options
+        while next_clock <= due:
+            if not self.wait_until(next_clock):
+                return None
+            now = time.monotonic()
+            if now - next_clock >= period_s:            # behind: skip to the latest tick due
+                next_clock += math.floor((now - next_clock) / period_s) * period_s
+            self.publish_clock(first_ns + (next_clock - start_wall) * opts.rate * 1e9)
+            self.clock_lateness_s.append(time.monotonic() - next_clock)
+            next_clock += period_s
+        return next_clock
 
     def wait_until(self, wall: float) -> bool:
         """Sleep until the monotonic time ``wall``; False when stopped."""

@@ -49,11 +49,31 @@ def topic_qos(topic: str, depth: int = 100) -> QoSProfile:
     return sensor_qos(depth) if qos_kind(topic) == SENSOR_DATA else reliable_qos(depth)
 
 
+#: The longest text a rejection, a log line's detail or a diagnostic value carries (chars):
+#: a message's content is quoted up to it (a JointState with 1e5 names made 1 MB lines).
+MAX_TEXT = 240
+
+
+def bounded(text: str, limit: int = MAX_TEXT) -> str:
+    """``text`` cut to ``limit`` characters, the cut said with the length it had."""
+    text = str(text)
+    if len(text) <= limit:
+        return text
+    return f'{text[:limit - 32]}... ({len(text)} characters)'
+
+
+def _names_text(names: list) -> str:
+    """A list of names for a message: the first few, and how many in all."""
+    shown = ', '.join(repr(n)[:40] for n in names[:5])
+    return f'[{shown}{", ..." if len(names) > 5 else ""}] ({len(names)} names)'
+
+
 class MessageRejected(ValueError):
-    """A received message that cannot be used; ``reason`` is a short counter key."""
+    """A received message that cannot be used; ``reason`` is a short counter key; the
+    message is at most :data:`MAX_TEXT` characters."""
 
     def __init__(self, reason: str, message: str):
-        super().__init__(message)
+        super().__init__(bounded(message))
         self.reason = reason
 
 
@@ -107,8 +127,8 @@ def read_deflections(msg: JointState) -> tuple[int, tuple[float, float], float]:
                                         f'{len(msg.velocity)}, effort {len(msg.effort)}')
     joints = front_axle_joints(names)
     if len(set(names)) != n or not set(joints) <= set(names):
-        raise MessageRejected('names', f'JointState names {names} must include each of '
-                                       f'{list(DEFLECTION_JOINTS)} once')
+        raise MessageRejected('names', f'JointState names {_names_text(names)} must include '
+                                       f'each of {list(DEFLECTION_JOINTS)} once')
     by_name = dict(zip(names, msg.position))
     q1, q2, phi = (float(by_name[j]) for j in joints)
     if not (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(phi)):
@@ -180,7 +200,9 @@ def states_msg(stamp_ns: int, position: Sequence[float], velocity: Sequence[floa
 
 
 def diagnostic_status(st: Status) -> DiagnosticStatus:
-    """A ``diagnostic_msgs/DiagnosticStatus`` from the estimator's plain :class:`Status`."""
-    return DiagnosticStatus(level=bytes([st.level]), name=st.name, message=st.message,
-                            hardware_id=st.hardware_id,
-                            values=[KeyValue(key=k, value=v) for k, v in st.values])
+    """A ``diagnostic_msgs/DiagnosticStatus`` from the estimator's plain :class:`Status`,
+    every text at most :data:`MAX_TEXT` characters."""
+    return DiagnosticStatus(level=bytes([st.level]), name=bounded(st.name),
+                            message=bounded(st.message), hardware_id=bounded(st.hardware_id),
+                            values=[KeyValue(key=bounded(k), value=bounded(v))
+                                    for k, v in st.values])

@@ -36,8 +36,9 @@ def run_node(prog: str, description: str, specs: Iterable[ParameterSpec], args,
     """Run one node until SIGINT/SIGTERM, an external shutdown or ``done(node)``.
 
     ``finish(executor, node)`` runs after the loop while the context is valid; ``cleanup(node)``
-    always runs before ``destroy_node``. Returns 0, or 1 after a one-line message on stderr
-    when a parameter (or a ROS argument) is refused.
+    always runs before ``destroy_node``. Returns the node's ``exit_status`` (0 when it has
+    none: a node that had to stop, e.g. a recorder on a full disk, sets 1), or 1 after a
+    one-line message on stderr when a parameter (or a ROS argument) is refused.
     """
     try:
         init_ros(prog, description, specs, args,
@@ -57,7 +58,7 @@ def run_node(prog: str, description: str, specs: Iterable[ParameterSpec], args,
             executor.spin_once(timeout_sec=0.1)
         if finish is not None and rclpy.ok():
             finish(executor, node)
-        return 0
+        return int(getattr(node, 'exit_status', 0))
     except ParameterError as exc:
         print(exc, file=sys.stderr)
         return 1

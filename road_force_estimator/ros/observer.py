@@ -10,13 +10,23 @@ the first estimate of every 0.1 s of stamps, and ``/diagnostics`` at 1 Hz
 (INTERFACES.md). Messages come and go as CDR bytes (:mod:`.wire`: the same bytes as rclpy's,
 without a message object per message).
 
+Inputs (:mod:`.observer_input`): taken by a thread of their own, what queued up at once, so a
+node that falls behind estimates what it took, and what it could not take is dropped by DDS
+as whole runs of samples, which the estimator's stamp rules take as the long steps or gaps
+they are: the estimates it publishes are those ``estimate_bag`` gives on the inputs it took,
+gaps included. Memory stays bounded under any flood and ``/diagnostics`` comes on time. Each
+sample gets the speed of the latest twist stamped at or before it (as ``estimate_bag``);
+samples before the first twist wait (up to :data:`.observer_input.MAX_WAITING`, the oldest
+dropped and counted beyond). A second publisher on ``/suspension/deflections`` is detected by
+its sequence numbers (:mod:`.sources`), named (the topic's publishers) in one warning and in
+the diagnostics, and its samples are not mixed in.
+
 Rejected and counted, never misread (the node keeps running and never publishes NaN): a
 JointState whose arrays differ in length from ``name`` or that lacks a joint, a non-finite value
 (:mod:`.messages`); a duplicate or backwards stamp, an impossible value, and gaps (a restart) in
-the core. Speed: samples that arrive before the first twist wait (up to
-:data:`MAX_WAITING` of them, the oldest dropped and counted beyond) and are estimated with the
-first speed received; after that the latest twist is used. Live parameter changes are vetted
-(:class:`.ros_parameters.ParameterGuard`); a good one rebuilds the estimator, which restarts.
+the core. Log lines and diagnostic values are bounded in size (:data:`.messages.MAX_TEXT`).
+Live parameter changes are vetted (:class:`.ros_parameters.ParameterGuard`); a good one
+rebuilds the estimator, which restarts.
 
 Started after its publisher, the observer says what it missed: when a publisher's
 ``/diagnostics`` give the stamp of its first measurement (``first_stamp_ns:<topic>``:
@@ -26,13 +36,14 @@ with a warning; the input status also gives ``first_stamp_ns``, the stamp of its
 """
 from __future__ import annotations
 
-from collections import Counter, deque
+from collections import Counter
 import math
 import sys
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped, TwistStamped, Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -41,15 +52,19 @@ from std_msgs.msg import Float64
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation import Estimator, diagnostics, fit_check
-from road_force_estimator.ros.messages import (
-    MessageRejected, diagnostic_status, reliable_qos, sensor_qos)
+from road_force_estimator.ros.messages import bounded, diagnostic_status, reliable_qos
 from road_force_estimator.ros.node_runner import run_node
+from road_force_estimator.ros.observer_input import MAX_WAITING, ObserverInput
 from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
 from road_force_estimator.ros.start_gate import first_stamps
 from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
-MAX_WAITING = 2000  # deflection samples held while no speed is known (2 s at 1 kHz)
+#: Estimates each output's publisher keeps until its reliable subscribers acknowledge them
+#: (1 s at 1 kHz): what the input thread publishes in one go after a backlog is not
+#: overwritten before a slow subscriber (a recorder on a loaded machine) has taken it.
+OUTPUT_DEPTH = 1000
+__all__ = ['MAX_WAITING', 'Observer', 'main']
 # The core's counters, by the names the diagnostics give them.
 CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
                  'rejected_speed': 'speed', 'rejected_stale': 'stale',
@@ -59,10 +74,13 @@ CORE_COUNTERS = {'rejected_nonfinite': 'nonfinite', 'rejected_range': 'range',
 # Further EstimatorStatus fields reported as they are (those the core has).
 ESTIMATOR_VALUES = ('method', 'latency_samples', 'pending', 'noise_deflection_m',
                     'noise_roll_rad', 'road_roughness_m3')
-# The rest of a period's counts are rejections. 'missed': inputs that never arrived, inferred
-# from the stamps (a step of k typical periods means k - 1 samples lost on the way, e.g. by
-# DDS when the node falls behind a burst): they are not rejections but make the input WARN.
-FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed')
+# The rest of a period's counts are rejections. 'missed': inputs published that never arrived
+# (lost on the way, e.g. dropped by DDS when the node falls behind a burst), from the
+# publishers' sequence numbers; where the middleware gives none, inferred from the stamps (a
+# step of k typical periods means k - 1 samples lost). They are not rejections but make the
+# input WARN. 'stamps_skipped': what the stamps say is absent (lost before it was published,
+# or on the way), with the sequence numbers beside it.
+FLOW_COUNTS = ('received', 'published', 'lift_offs', 'missed', 'stamps_skipped')
 MISSED_MAX_PERIODS = 1000  # a longer silence is a pause or a restart, not a burst of losses
 MISSED_BEFORE_MAX_NS = 3600 * 10**9  # a publisher's first stamp further back: another drive
 
@@ -92,9 +110,8 @@ class Observer(Node):
 
     def __init__(self, **kwargs):
         super().__init__('observer', **kwargs)
+        self.lock = threading.RLock()      # the estimator and counters: input thread, executor
         self.params = ParameterGuard(self, SPECS, build, self.reconfigure)
-        self.speed_mps = None
-        self.waiting = deque()
         self.period, self.total = Counter(), Counter()   # node-side counters
         self.core_base = Counter()                        # counters of retired estimators
         self.core_reported = Counter()
@@ -104,17 +121,17 @@ class Observer(Node):
         self.last_stamp_ns = None
         self.shortest_step_ns = [math.inf, math.inf]   # (last period, this period)
         self.reconfigure(self.params.config)
-        self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+        self.load_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos(OUTPUT_DEPTH))
                           for topic in api.LOAD]
-        self.static_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos())
+        self.static_pubs = [self.create_publisher(WrenchStamped, topic, reliable_qos(OUTPUT_DEPTH))
                             for topic in api.STATIC_LOAD]
         self.static_stamp_ns = None   # stamp of the last static loads published
-        self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos())
+        self.road_pubs = [self.create_publisher(PointStamped, topic, reliable_qos(OUTPUT_DEPTH))
                           for topic in api.ROAD]
-        self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos())
+        self.ltr_pub = self.create_publisher(Float64, api.LTR, reliable_qos(OUTPUT_DEPTH))
         self.load_transfer_pub = self.create_publisher(Vector3Stamped, api.LOAD_TRANSFER,
-                                                       reliable_qos())
-        self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos())
+                                                       reliable_qos(OUTPUT_DEPTH))
+        self.states_pub = self.create_publisher(JointState, api.STATES, reliable_qos(OUTPUT_DEPTH))
         # Per estimate: rclpy's publish of serialized bytes without Publisher.publish's
         # Python (its type check and handle guard: 1.5-2 us a call); in wire.OUTPUTS' order.
         self.send = [pub.handle.publish_raw for pub in (
@@ -123,23 +140,28 @@ class Observer(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
         self.wire = Wire()
-        self.wire.on_note = self.get_logger().warning
-        self.input_topic = self.create_subscription(
-            JointState, api.DEFLECTIONS, self.deflections_callback, sensor_qos(1000),
-            raw=True).topic_name
+        self.speed_mps = None
+        self.sources_said = 1      # sources on /suspension/deflections last told in the log
+        self.taken = (0, 0)        # the input's (received, missed) at the last report
+        self.input = ObserverInput(self.context, self.estimate, self.reject)
+        self.input.wire.on_note = self.get_logger().warning
+        self.input_topic = self.resolve_topic_name(api.DEFLECTIONS)
         # the publishers' first stamps (status name -> ns), and the count they give
         self.first_input_ns = self.missed_before = None
         self.publisher_first_ns: dict[str, int] = {}
         self.create_subscription(DiagnosticArray, api.DIAGNOSTICS, self.publisher_diagnostics,
                                  reliable_qos(10))
-        self.create_subscription(TwistStamped, api.TWIST, self.twist_callback, sensor_qos(10),
-                                 raw=True)
+        self.input.start()
         self.create_timer(1.0, self.diagnostics_callback)
         self.input_seen = False  # logged once: waiting, then the rate input arrives at
         self.get_logger().info('waiting for /suspension/deflections and /vehicle/twist')
 
     def reconfigure(self, config) -> None:
         """(Re)build the estimator from ``(VehicleParameters, ObserverParameters)``."""
+        with self.lock:
+            self._reconfigure(config)
+
+    def _reconfigure(self, config) -> None:
         old = getattr(self, 'estimator', None)
         if old is not None:
             for est in old.flush():  # estimates held back (observer.latency > 0): publish them
@@ -155,9 +177,12 @@ class Observer(Node):
         self.half_track_m = config[0].half_track_m
 
     def finish(self) -> None:
-        """Publish the estimates still held back (``observer.latency`` > 0) before leaving."""
-        for est in self.estimator.flush():
-            self.publish(est)
+        """Estimate what is still queued, publish the estimates still held back
+        (``observer.latency`` > 0) before leaving."""
+        self.input.stop()
+        with self.lock:
+            for est in self.estimator.flush():
+                self.publish(est)
         for pub in (*self.load_pubs, *self.static_pubs, *self.road_pubs, self.ltr_pub,
                     self.load_transfer_pub, self.states_pub):
             pub.wait_for_all_acked(Duration(seconds=1.0))
@@ -167,34 +192,9 @@ class Observer(Node):
         return Counter({short: getattr(st, name) for name, short in CORE_COUNTERS.items()})
 
     def reject(self, reason: str, detail: str) -> None:
-        self.period[reason] += 1
-        self.last_rejection = detail
-
-    def twist_callback(self, data: bytes) -> None:
-        try:
-            _, self.speed_mps = self.wire.read_twist(data)
-        except MessageRejected as exc:
-            self.reject('twist_' + exc.reason, str(exc))
-            return
-        while self.waiting:
-            self.estimate(*self.waiting.popleft())
-
-    def deflections_callback(self, data: bytes) -> None:
-        self.period['received'] += 1
-        try:
-            sample = self.wire.read_deflections(data)
-        except MessageRejected as exc:
-            self.reject(exc.reason, str(exc))
-            return
-        if self.first_input_ns is None:
-            self.first_input_ns = sample[0]
-        if self.speed_mps is not None:
-            self.estimate(*sample)
-            return
-        if len(self.waiting) == MAX_WAITING:
-            self.waiting.popleft()
-            self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
-        self.waiting.append(sample)
+        with self.lock:
+            self.period[reason] += 1
+            self.last_rejection = bounded(detail)
 
     def publisher_diagnostics(self, msg: DiagnosticArray) -> None:
         """Keep the first stamp a publisher's diagnostics give for our input topic."""
@@ -203,7 +203,8 @@ class Observer(Node):
                 first = first_stamps(((v.key, v.value) for v in status.values),
                                      self.input_topic)
                 if first is not None:
-                    self.publisher_first_ns[status.name] = first
+                    with self.lock:
+                        self.publisher_first_ns[status.name] = first
 
     def count_missed_before_first(self) -> None:
         """Once the first input and a publisher's first stamp are known: the samples between
@@ -236,18 +237,23 @@ class Observer(Node):
         if period < math.inf and 1 < (periods := round(step / period)) <= MISSED_MAX_PERIODS:
             self.period['missed'] += periods - 1
 
-    def estimate(self, stamp_ns: int, q_m, roll_rad: float) -> None:
-        if self.holds_back:   # accepted or not: the core's count says (a held-back estimate)
-            accepted = self.estimator.status.accepted
-            est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
-            if self.estimator.status.accepted > accepted:
-                self.count_missed(stamp_ns)
-        else:  # no latency: an accepted sample gives its estimate at once, a rejected none
-            est = self.estimator.update(stamp_ns, q_m, roll_rad, self.speed_mps)
-            if est is not None:
-                self.count_missed(stamp_ns)
-        if est is not None:  # None: rejected by the core (counted), or held back (latency)
-            self.publish(est)
+    def estimate(self, stamp_ns: int, q_m, roll_rad: float, speed_mps: float) -> None:
+        """One sample (the input thread), with its speed: estimated, published."""
+        with self.lock:
+            self.speed_mps = speed_mps
+            if self.first_input_ns is None:
+                self.first_input_ns = stamp_ns
+            if self.holds_back:   # accepted or not: the core's count says (held back)
+                accepted = self.estimator.status.accepted
+                est = self.estimator.update(stamp_ns, q_m, roll_rad, speed_mps)
+                if self.estimator.status.accepted > accepted:
+                    self.count_missed(stamp_ns)
+            else:  # no latency: an accepted sample gives its estimate at once, a rejected none
+                est = self.estimator.update(stamp_ns, q_m, roll_rad, speed_mps)
+                if est is not None:
+                    self.count_missed(stamp_ns)
+            if est is not None:  # None: rejected by the core (counted), or held back
+                self.publish(est)
 
     def publish(self, est) -> None:
         """The seven output messages of one estimate, stamped with its sample's stamp, and
@@ -290,12 +296,38 @@ class Observer(Node):
     def diagnostics_callback(self) -> None:
         """Input, estimator and configuration statuses: this period's counts (cleared after
         each report), then the totals."""
+        with self.lock:
+            self._diagnostics()
+
+    def _sources(self, values: dict) -> None:
+        """Two or more publishers interleaving on /suspension/deflections: named once in the
+        log and in the diagnostics."""
+        live = self.input.live_sources()
+        if live > 1:
+            infos = self.get_publishers_info_by_topic(api.DEFLECTIONS)
+            names = ', '.join(sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                                     for i in infos)) or 'unknown'
+            values['sources'] = live
+            values['publishers'] = bounded(names)
+            if live != self.sources_said:
+                self.get_logger().warning(bounded(
+                    f'{live} publishers interleave on {api.DEFLECTIONS} ({names}): the first '
+                    'one is followed, the samples of the others are rejected (second_source)',
+                    2 * 240))
+        self.sources_said = live
+
+    def _diagnostics(self) -> None:
         now = time.monotonic()
         elapsed, self.last_report = now - self.last_report, now
         core = self.core_base + self.core_counts()
         fresh, self.core_reported = core - self.core_reported, core
         self.count_missed_before_first()
         period, self.period = self.period, Counter()
+        taken, self.taken = self.taken, (self.input.received, self.input.missed)
+        period['received'] = self.taken[0] - taken[0]
+        if self.input.sources.started:   # lost on the way, the publishers' numbers say;
+            period['stamps_skipped'] = period['missed']   # the stamps: maybe never sent
+            period['missed'] = self.taken[1] - taken[1]
         self.total.update(period)
         self.shortest_step_ns = [self.shortest_step_ns[1], math.inf]
         msg = DiagnosticArray(status=[diagnostic_status(st) for st in (
@@ -311,18 +343,20 @@ class Observer(Node):
         rejected.update({k: fresh[k] for k in ('nonfinite', 'range', 'speed', 'stale', 'time')
                         if fresh[k]})
         received, missed = period['received'], period['missed']
+        waiting = self.input.waiting
         values = {'rate_hz': received / elapsed if elapsed > 0 else 0.0, 'received': received,
                   'published': period['published'], 'missed': missed,
-                  'waiting_for_speed': len(self.waiting),
+                  'waiting_for_speed': len(waiting),
                   'first_stamp_ns': 'none' if self.first_input_ns is None else
                   self.first_input_ns,
                   'missed_before_first_input': 'unknown' if self.missed_before is None else
                   self.missed_before,
                   'speed_mps': 'none' if self.speed_mps is None else self.speed_mps}
+        self._sources(values)
         values.update({f'rejected.{k}': v for k, v in sorted(rejected.items())})
         values.update({f'total.{k}': v for k, v in sorted((self.total + core).items())})
         message = ('no input' if not received else f'{sum(rejected.values())} rejected'
-                   if rejected else f'{len(self.waiting)} waiting for a speed' if self.waiting
+                   if rejected else f'{len(waiting)} waiting for a speed' if waiting
                    else f'falling behind: {missed} of {received + missed} inputs missed'
                    if missed else 'ok')
         if period.keys() - FLOW_COUNTS:  # rejected here (not in the core): say the last why
@@ -367,6 +401,11 @@ class Observer(Node):
         return diagnostics.status('observer: configuration', self.get_name(),
                                   '; '.join(self.findings) or 'ok', values,
                                   level=diagnostics.WARN if self.findings else diagnostics.OK)
+
+
+    def destroy_node(self):
+        self.input.destroy()
+        super().destroy_node()
 
 
 def main(args=None) -> int:

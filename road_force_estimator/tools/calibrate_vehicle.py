@@ -41,19 +41,16 @@ from road_force_estimator.core.parameters import (
     parse_override, read_params_document)
 from road_force_estimator.bagio import road_from_source
 from road_force_estimator.calibration.calibrate import CalibrationOptions, calibrate
+from road_force_estimator.tools import cli
+from road_force_estimator.tools.output_folder import staged_path
 
 __all__ = ['PROG', 'build_parser', 'main', 'updated_document', 'report_folder']
 
 PROG = 'calibrate_vehicle'
 
 
-class _UsageError(Exception):
-    """A bad command line (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise _UsageError(message)
+_UsageError = cli.UsageError
+_Parser = cli.Parser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -64,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('drive', metavar='DRIVE', help='drive bag folder (rosbag2 MCAP)')
     p.add_argument('--profile', required=True, metavar='SOURCE',
                    help='survey of the wheel paths: LPA bag, CSV, ERD or a road spec')
-    p.add_argument('--static-load', nargs=2, type=float, metavar=('LEFT', 'RIGHT'),
+    p.add_argument('--static-load', nargs=2, type=cli.finite_float, metavar=('LEFT', 'RIGHT'),
                    help='weighbridge static wheel loads, N (the force scale)')
     p.add_argument('--params-file', metavar='FILE', help='nominal parameters (ROS 2 file)')
     p.add_argument('--hold', nargs='+', action='extend', default=[], metavar='NAME',
@@ -77,12 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help='override a parameter of the file (repeatable)')
     p.add_argument('--output', '-o', required=True, metavar='FILE',
                    help='parameter file to write (the report goes next to it)')
-    p.add_argument('--start-offset', type=float, metavar='M',
+    p.add_argument('--start-offset', type=cli.finite_float, metavar='M',
                    help="expected survey distance at the drive's start, m (default: the "
                         "survey's start)")
-    p.add_argument('--search-range', type=float, default=50.0, metavar='M',
+    p.add_argument('--search-range', type=cli.finite_float, default=50.0, metavar='M',
                    help='start offset searched +- this, m (default 50)')
-    p.add_argument('--min-correlation', type=float, default=0.5, metavar='R',
+    p.add_argument('--min-correlation', type=cli.finite_float, default=0.5, metavar='R',
                    help='refuse the alignment below this correlation (default 0.5)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
     p.add_argument('--force', action='store_true', help='replace an existing output')
@@ -171,12 +168,25 @@ def _written_values(result, static) -> dict:
     return out
 
 
+def _check_options(args) -> None:
+    """Refuse the numbers no calibration can work with (a bad command line)."""
+    if not args.search_range > 0.0:
+        raise cli.UsageError(f'--search-range {args.search_range:g}: must be > 0 m')
+    if not -1.0 < args.min_correlation <= 1.0:
+        raise cli.UsageError(f'--min-correlation {args.min_correlation:g}: a correlation, in '
+                             '(-1, 1]')
+    if args.static_load is not None and not all(v > 0.0 for v in args.static_load):
+        raise cli.UsageError(f'--static-load {args.static_load[0]:g} {args.static_load[1]:g}: '
+                             'wheel loads, > 0 N')
+
+
 def _run(args) -> tuple[object, Path, list[str]]:
     from tqdm import tqdm
 
     from road_force_estimator.report.calibration import write_report
 
     output = Path(args.output)
+    _check_options(args)
     if output.exists() and not args.force:
         raise ValueError(f'{output} exists (use --force to replace it)')
     values, doc = _parameters(args)
@@ -207,10 +217,16 @@ def _run(args) -> tuple[object, Path, list[str]]:
     header = (f'# calibrate_vehicle: {args.drive} over {args.profile}; report in '
               f'{report_folder(output).name}/\n')
     output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(header + text)
-    files = write_report(result, report_folder(output), drive=str(args.drive),
-                         profile=str(args.profile), output=str(output),
-                         figures=not args.no_figures)
+    # Both built beside their places and renamed in when complete (a signal or a full disk
+    # leaves what was there before).
+    report = report_folder(output)
+    with staged_path(report) as stage:
+        files = write_report(result, stage, drive=str(args.drive), profile=str(args.profile),
+                             output=str(output), figures=not args.no_figures)
+    files = [report / Path(f).relative_to(stage) if Path(f).is_relative_to(stage) else f
+             for f in files]
+    with staged_path(output) as tmp:
+        tmp.write_text(header + text)
     notes = [f'{len(result.parameters)} numbers, {result.used_samples} samples '
              f'({result.rejected_samples} missing or rejected'
              + (f'; {drive.rejected_total} messages rejected by the reader, calibrated on the '
@@ -220,17 +236,13 @@ def _run(args) -> tuple[object, Path, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``calibrate_vehicle``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
-    try:
-        args = build_parser().parse_args(argv)
-        result, output, notes = _run(args)
-    except SystemExit as done:          # --help
-        return int(done.code or 0)
-    except _UsageError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
-    except (ValueError, BagReadError, OSError) as err:
-        print(f'{PROG}: {err}'.splitlines()[0], file=sys.stderr)
-        return 1
+    return cli.run_main(PROG, build_parser(), _main, argv,
+                        {(ValueError, BagReadError, OSError): 1})
+
+
+def _main(args: argparse.Namespace) -> int:
+    """The command's work and its lines on stderr."""
+    result, output, notes = _run(args)
     a = result.alignment
     print(f'{PROG}: aligned at {a.offset_m + result.fine_alignment[0]:.2f} m, odometer scale '
           f'{a.scale + result.fine_alignment[1]:.5f} (correlation {a.correlation:.2f}); '

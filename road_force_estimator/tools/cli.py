@@ -5,19 +5,28 @@ Every command is ``build_parser()`` plus ``main(argv=None) -> int``; ``main`` ha
 
 - :class:`UsageError` (a bad command line, also argparse's own errors through
   :class:`Parser`): ``<prog>: error: <message>``, status 2;
-- the exception types the command lists (bad input): ``<prog>: <first line>``, the status it
+- the exception types the command lists (bad input): ``<prog>: <message>``, the status it
   gives them (1 for most commands);
-- ``SystemExit`` (``--help``): its code.
+- ``SystemExit`` (``--help``): its code;
+- SIGINT (Ctrl-C): ``<prog>: interrupted``, status 130; SIGTERM: ``<prog>: terminated``,
+  status 143 (SIGTERM is raised as :class:`Terminated` in the main thread, so that the
+  commands' clean-ups run: a temporary folder is removed, nothing half-written stays).
+
+Messages are made one line with :func:`one_line`: a line break inside them (a file name with
+a newline) is written as ``\\n``, so that nothing after it is lost.
 """
 from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
+import threading
 from typing import Callable, Mapping, Sequence
 
 __all__ = [
-    'MODES', 'UsageError', 'Parser', 'run_main', 'one_line', 'check_positive',
+    'MODES', 'UsageError', 'Terminated', 'Parser', 'run_main', 'one_line', 'finite_float',
+    'check_positive', 'available_memory',
     'add_output', 'add_params_file', 'add_mode', 'add_segment_length', 'segment_length',
     'add_force',
     'add_no_progress', 'add_overrides', 'add_units', 'parameter_values',
@@ -46,10 +55,22 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def one_line(err: BaseException) -> str:
-    """The first line of an exception's message, else its type's name."""
-    text = str(err).strip().splitlines()
-    return text[0] if text else type(err).__name__
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread by :func:`run_main` (not an ``Exception``: no
+    ``except Exception`` takes it for a bad input)."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+def one_line(err: BaseException | str) -> str:
+    """An exception's message (else its type's name) on one line: the line breaks in it (a
+    file name with a newline, a multi-line library message) written as ``\\n``, ``\\r``."""
+    text = str(err).strip()
+    if not text:
+        return type(err).__name__ if isinstance(err, BaseException) else ''
+    return text.replace('\r', '\\r').replace('\n', '\\n')
 
 
 def run_main(prog: str, parser: argparse.ArgumentParser,
@@ -70,18 +91,57 @@ def run_main(prog: str, parser: argparse.ArgumentParser,
     errors : mapping
         Exception types -> exit status; such an error prints ``<prog>: <first line>``.
     """
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         _ARGV[:] = sys.argv[1:] if argv is None else list(argv)     # for command_line()
         return body(parser.parse_args(argv))
     except SystemExit as done:          # --help
         return int(done.code or 0)
     except UsageError as err:
-        print(f'{prog}: error: {err}', file=sys.stderr)
+        print(f'{prog}: error: {one_line(err)}', file=sys.stderr)
         return 2
     except tuple(t for types in errors for t in types) as err:
         status = next(s for types, s in errors.items() if isinstance(err, types))
-        print(f'{prog}: {err}'.splitlines()[0], file=sys.stderr)
+        print(f'{prog}: {one_line(err)}', file=sys.stderr)
         return status
+    except KeyboardInterrupt:
+        print(f'{prog}: interrupted (SIGINT); nothing half-written is left', file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f'{prog}: terminated (SIGTERM); nothing half-written is left', file=sys.stderr)
+        return 143
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (``nan``, ``inf`` refused with a one-line reason)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f'{text!r}: must be a finite number')
+    return value
+
+
+def available_memory() -> float | None:
+    """The memory (bytes) the system can give now without swapping (``MemAvailable`` of
+    /proc/meminfo, else the free physical pages); None when it cannot be told."""
+    try:
+        with open('/proc/meminfo', encoding='ascii') as f:
+            for line in f:
+                if line.startswith('MemAvailable:'):
+                    return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+        return float(os.sysconf('SC_AVPHYS_PAGES')) * float(os.sysconf('SC_PAGE_SIZE'))
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 def check_positive(option: str, value: float | None, *, finite: bool = True) -> None:
@@ -115,7 +175,7 @@ def add_segment_length(parser: argparse.ArgumentParser, help: str, *,
                        default: float | None = 100.0) -> None:
     """``--segment-length M`` (m, default 100; None: :func:`segment_length` gives the default
     of ``--units``)."""
-    parser.add_argument('--segment-length', type=float, default=default, metavar='M',
+    parser.add_argument('--segment-length', type=finite_float, default=default, metavar='M',
                         help=help)
 
 

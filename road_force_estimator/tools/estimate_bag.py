@@ -79,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--reference-profile', metavar='SOURCE',
                    help='profile to compare the estimate with when the bag has no ground '
                         'truth: LPA bag, CSV or ERD')
-    p.add_argument('--reference-offset', type=float, metavar='M',
+    p.add_argument('--reference-offset', type=cli.finite_float, metavar='M',
                    help='distance along the reference profile where the drive starts, m from '
                         'its start (default: found by correlation within +-10 m)')
     p.add_argument('--no-figures', action='store_true', help='report without figures')
@@ -268,12 +268,26 @@ def _writer(input_path: Path, output: Path, vehicle, observer, options: dict, pr
         return lambda folder: estimate_stream.run_stream(
             folder, output, input_path, vehicle, observer, options, stages, api, progress)
     drive, est, extra = _estimate(input_path, vehicle, observer, options['mode'], progress,
-                                  stages)
+                                  stages, options['segment_length_m'])
     return lambda folder: _write(folder, output, input_path, drive, est, extra, vehicle,
                                  observer, options, stages)
 
 
-def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, stages):
+def check_spacing(segment_length_m: float, stamps_ns, speed_mps) -> None:
+    """Raise :class:`InputError` when the segments are shorter than the drive's sample
+    spacing (:func:`.core.segments.check_segment_length`): refused before the work."""
+    from road_force_estimator.core.segments import check_segment_length, sample_spacing
+    from road_force_estimator.estimation.acceptance import MAX_SPEED_MPS
+
+    try:
+        check_segment_length(segment_length_m,
+                             sample_spacing(stamps_ns, speed_mps, MAX_SPEED_MPS))
+    except ValueError as err:
+        raise InputError(str(err)) from None
+
+
+def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, stages,
+              segment_length_m: float = 100.0):
     """Read the bag and estimate: ``(drive, estimates, notes for the report)``.
 
     Raises
@@ -293,6 +307,7 @@ def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, st
         raise InputError(f'{input_path}: no usable /suspension/deflections message'
                          + (f' ({drive.issues[0]})' if drive.issues else ''))
     speed, early = drive_speed(drive)
+    check_spacing(segment_length_m, drive.stamps_ns, speed)
     args = (drive.stamps_ns, drive.q_m, drive.roll_rad, speed, vehicle, observer)
     stages.next(f'estimating ({mode})')
     if mode == 'online':

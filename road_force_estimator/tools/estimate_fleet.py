@@ -8,7 +8,10 @@
 Each INPUT is a drive bag folder or a folder holding bag folders (any folder with a
 ``metadata.yaml``, searched recursively; the search does not enter a bag folder, nor DIR).
 A drive's id is its bag folder's path relative to the INPUT that holds it (its folder name
-when given directly); ids must be unique.
+when given directly); ids must be unique. The search stays inside each INPUT: a link that
+leads out of it (to ``/``, to ``..``) is not followed and a bag folder holding one is not
+taken, and the temporary folders that unfinished writes leave (``.<name>.tmp-*``) are no
+drives; each is named on stderr (``skipped: ...``).
 
 Every drive is one Dask task (:func:`~.fleet_drives.process_drive`) that runs exactly what
 ``estimate_bag`` runs (:func:`tools.estimate_bag.run` with the same parameters, mode and
@@ -124,7 +127,10 @@ def run_fleet(inputs: Sequence[str | Path], output: str | Path, *, vehicle=None,
     observer = ObserverParameters() if observer is None else observer
     _check_options(mode, segment_length_m, scheduler, workers)
     out = Path(output).resolve()
-    drives = find_drives(inputs, exclude=[out])
+    skipped: list[str] = []
+    drives = find_drives(inputs, exclude=[out], skipped=skipped)
+    for line in skipped:                  # links out of an INPUT, unfinished writes
+        print(f'{PROG}: skipped: {cli.one_line(line)}', file=sys.stderr)
     if scheduler:
         probe_scheduler(scheduler)
     try:
@@ -201,13 +207,15 @@ def _process(out: Path, tasks: list[DriveTask], outcomes: dict[str, DriveOutcome
     engine's description."""
     n_local = min(workers or default_workers(), max(len(tasks), 1))
     t1 = time.perf_counter()
-    with dask_client(scheduler, n_local) as (client, engine):
-        t2 = time.perf_counter()
-        timings['engine_start'] = t2 - t1
-        if tasks:
-            run_tasks(client, tasks, outcomes, total=total, progress=progress, name=PROG)
-        timings['processing'] = time.perf_counter() - t2
-    shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)
+    try:
+        with dask_client(scheduler, n_local) as (client, engine):
+            t2 = time.perf_counter()
+            timings['engine_start'] = t2 - t1
+            if tasks:
+                run_tasks(client, tasks, outcomes, total=total, progress=progress, name=PROG)
+            timings['processing'] = time.perf_counter() - t2
+    finally:       # also on SIGINT / SIGTERM: the drives being built go with the workers
+        shutil.rmtree(out / 'drives' / TMP_NAME, ignore_errors=True)
     return engine
 
 

@@ -256,6 +256,7 @@ class _StreamRun:
         progress = progress and sys.stderr.isatty()
         try:
             for i, block in enumerate(self.reader):
+                self._check_spacing(block)
                 if self.snapshots is not None:
                     self.snapshots.keep(i, block.stamps_ns[0], self.stream, self.summary)
                 self.speeds.append(np.where(block.early, np.nan, block.speed_mps))
@@ -281,6 +282,17 @@ class _StreamRun:
         if problem:
             self.bag.abort()
             raise self.api.error(problem)
+
+    def _check_spacing(self, block) -> None:
+        """The segments no shorter than the block's sample spacing (else api.error)."""
+        from road_force_estimator.core.segments import check_segment_length, sample_spacing
+        from road_force_estimator.estimation.acceptance import MAX_SPEED_MPS
+
+        try:
+            check_segment_length(self.options['segment_length_m'], sample_spacing(
+                block.stamps_ns, block.speed_mps, MAX_SPEED_MPS))
+        except ValueError as err:
+            raise self.api.error(str(err)) from None
 
     def _consume(self, piece) -> None:
         """One piece of estimates to the bag, the report's accumulators, the diagnostics and

@@ -189,6 +189,37 @@ def _probe_comm(address: str, text: str, scheme: str) -> None:
                          f'{kind or "service of unknown type"}: give the scheduler\'s address)')
 
 
+def _ignoring_sigint(make):
+    """``make()`` with SIGINT ignored, so that the worker processes it starts inherit that
+    (an ignored signal stays ignored through fork and exec): Ctrl-C reaches the whole process
+    group, and only this process acts on it, stopping the cluster (one line, no worker
+    traceback). A Ctrl-C during the cluster's start (a second or two) is not seen."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return make()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return make()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_cluster(local_cluster, workers: int, log_level: int):
+    """A local cluster, without distributed's warning that its HTTP port (8787) is taken by
+    another cluster of the machine (it takes another one: a run prints nothing of it)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', message=r'Port \d+ is already in use',
+                                category=UserWarning)
+        return local_cluster(n_workers=workers, threads_per_worker=1, processes=True,
+                             host='127.0.0.1', dashboard_address=None,
+                             scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
+                             silence_logs=log_level)
+
+
 @contextmanager
 def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]]:
     """A Dask client: on ``scheduler``, or on a local cluster of ``workers`` processes."""
@@ -216,13 +247,13 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[tuple[Any, str]
         return
     # No dashboard, and no HTTP routes: Dask's scheduler opens its HTTP listener whatever
     # dashboard_address says (on 8787 by default, warning on stderr when that port is taken):
-    # here it is on a free loopback port with nothing to serve.
+    # here it is on a free loopback port with nothing to serve. Worker logs below CRITICAL are
+    # silenced: a stopped run's heartbeat errors are noise, and a drive that fails says why in
+    # failures.csv.
     with dask.config.set({'distributed.scheduler.http.routes': [],
                           'distributed.worker.http.routes': []}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host='127.0.0.1', dashboard_address=None,
-                               scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
-                               silence_logs=logging.ERROR)
+        cluster = _ignoring_sigint(lambda: _quiet_cluster(LocalCluster, workers,
+                                                          logging.CRITICAL))
     try:
         client = Client(cluster, set_as_default=False)
         try:

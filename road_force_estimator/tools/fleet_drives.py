@@ -19,6 +19,7 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import shutil
 import tempfile
 import time
@@ -112,9 +113,70 @@ def _is_inside(path: Path, folder: Path) -> bool:
         return False
 
 
-def find_drives(inputs: Sequence[str | Path], *, exclude: Sequence[str | Path] = ()
-                ) -> list[DriveInput]:
+#: A temporary folder of the offline commands (:mod:`.output_folder`): ``.<name>.tmp-*``.
+_STAGE = re.compile(r'^\..+\.tmp-[^/]+$')
+
+
+def _links_out(folder: Path, root: Path) -> list[str]:
+    """The entries of a bag folder that are links leading out of ``root`` (names)."""
+    out = []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return out
+    for entry in entries:
+        if entry.is_symlink() and not _is_inside(entry.resolve(), root):
+            out.append(entry.name)
+    return sorted(out)
+
+
+def _walk(given, root: Path, skip: list[Path], skipped: list[str]) -> list[DriveInput]:
+    """The bag folders under ``root`` (an INPUT resolved): links are followed only while they
+    stay inside it, temporary folders of unfinished writes are left out; both named in
+    ``skipped``."""
+    drives = []
+    seen: set[Path] = set()
+    for folder, dirs, files in os.walk(root, followlinks=True):
+        here = Path(folder)
+        real = here.resolve()
+        if real in seen or any(_is_inside(real, s) for s in skip):
+            dirs[:] = []
+            continue
+        seen.add(real)
+        rel = here.relative_to(root).as_posix()
+        if 'metadata.yaml' in files:
+            outside = _links_out(here, root)
+            if outside:
+                skipped.append(f'{given}/{rel}: not a drive of {given}: '
+                               f'{", ".join(outside[:3])} link{"s" if len(outside) > 1 else ""} '
+                               f'out of it (not followed)')
+            else:
+                drives.append(DriveInput(rel, here))
+            dirs[:] = []
+            continue
+        keep = []          # real folders before links to them: a drive keeps its real path
+        for d in sorted(dirs, key=lambda d: ((here / d).is_symlink(), d)):
+            sub = here / d
+            if _STAGE.match(d):
+                skipped.append(f'{given}/{(Path(rel) / d).as_posix()}: the temporary folder '
+                               'of an unfinished write (not a drive)')
+            elif sub.is_symlink() and not _is_inside(sub.resolve(), root):
+                skipped.append(f'{given}/{(Path(rel) / d).as_posix()}: a link out of {given} '
+                               f'(to {sub.resolve()}): not followed')
+            else:
+                keep.append(d)
+        dirs[:] = keep
+    return drives
+
+
+def find_drives(inputs: Sequence[str | Path], *, exclude: Sequence[str | Path] = (),
+                skipped: list[str] | None = None) -> list[DriveInput]:
     """The drives under ``inputs`` (see the module notes), sorted by id.
+
+    The search stays inside each INPUT: a link that leads out of it (to ``/``, to ``..``) is
+    not followed, a bag folder holding such a link is not taken, and the temporary folders
+    of unfinished writes (``.<name>.tmp-*``) are no drives; each is named in ``skipped``
+    (one line each) when a list is given.
 
     Raises
     ------
@@ -123,6 +185,7 @@ def find_drives(inputs: Sequence[str | Path], *, exclude: Sequence[str | Path] =
         two drives with the same id, or an id that is a parent folder of another.
     """
     skip = [Path(p).resolve() for p in exclude]
+    skipped = [] if skipped is None else skipped
     drives: list[DriveInput] = []
     for given in inputs:
         top = Path(given)
@@ -133,25 +196,16 @@ def find_drives(inputs: Sequence[str | Path], *, exclude: Sequence[str | Path] =
                              'folders)')
         root = top.resolve()
         if (top / 'metadata.yaml').is_file():
+            outside = _links_out(root, root)
+            if outside:
+                raise FleetError(f'{given}: {", ".join(outside[:3])} link out of the bag '
+                                 'folder: not read')
             drives.append(DriveInput(root.name, root))
             continue
-        found = 0
-        seen: set[Path] = set()
-        for folder, dirs, files in os.walk(root, followlinks=True):
-            here = Path(folder)
-            real = here.resolve()
-            if real in seen or any(_is_inside(real, s) for s in skip):
-                dirs[:] = []
-                continue
-            seen.add(real)
-            if 'metadata.yaml' in files:
-                drives.append(DriveInput(here.relative_to(root).as_posix(), here))
-                found += 1
-                dirs[:] = []
-            else:
-                dirs.sort()
+        found = _walk(given, root, skip, skipped)
         if not found:
             raise FleetError(f'{given}: no bag folder (a folder with metadata.yaml) found')
+        drives += found
     ids: dict[str, Path] = {}
     for d in drives:
         if d.drive_id in ids:

@@ -15,21 +15,30 @@ the cause ("out of space" for ENOSPC or EDQUOT, else the OS reason).
 - a CSV file (``profile_to_bag``): it begins with the header the command writes.
 
 Anything else is refused with :class:`OutputError`, naming what would have been replaced.
+
+A run that is killed (SIGKILL, a power cut) cannot remove its temporary folder: each holds a
+lock (``.lock``, ``flock``) while its run lives, and the next run that stages beside it
+removes every temporary folder of the same name whose lock no process holds (one without a
+lock, as a run killed at its very start leaves, once it is a minute old). SIGINT and SIGTERM
+remove it at once (:func:`.cli.run_main` raises SIGTERM as an exception).
 """
 from __future__ import annotations
 
 from contextlib import contextmanager
 import errno
+import fcntl
 import json
 import os
 from pathlib import Path
 import shutil
 import tempfile
+import time
 from typing import Callable, Iterator, Sequence
 import uuid
 
-__all__ = ['MARKER_NAME', 'OutputError', 'os_reason', 'write_error', 'is_within',
-           'check_not_input', 'bag_metadata', 'BagOutput', 'FolderOutput', 'FileOutput']
+__all__ = ['MARKER_NAME', 'STAGE_LOCK', 'OutputError', 'os_reason', 'write_error',
+           'is_within', 'check_not_input', 'bag_metadata', 'remove_stale_stages',
+           'staged_path', 'BagOutput', 'FolderOutput', 'FileOutput']
 
 #: estimate_bag's marker in DIR: the files it wrote (JSON ``{"writer", "files"}``).
 MARKER_NAME = '.written-by-road-force-estimator.json'
@@ -37,6 +46,10 @@ MARKER_NAME = '.written-by-road-force-estimator.json'
 SPACE_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 #: Largest metadata.yaml or marker read to decide ownership (bytes).
 _MAX_METADATA_BYTES = 1 << 20
+#: The lock file inside a temporary folder, held (``flock``) while its run lives.
+STAGE_LOCK = '.lock'
+#: Age (s) from which a temporary folder without a lock is taken as left by a killed run.
+_UNLOCKED_STALE_S = 60.0
 
 
 class OutputError(ValueError):
@@ -142,16 +155,66 @@ def _install(moves: Sequence[tuple[Path, Path]], stage: Path) -> None:
         raise
 
 
+def _stale(stage: Path, now: float) -> bool:
+    """Whether the temporary folder ``stage`` was left by a run that is gone: its lock is
+    free, or it has none and is older than :data:`_UNLOCKED_STALE_S`."""
+    lock = stage / STAGE_LOCK
+    try:
+        fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW)
+    except FileNotFoundError:
+        try:
+            return now - stage.lstat().st_mtime > _UNLOCKED_STALE_S
+        except OSError:
+            return False
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+
+
+def remove_stale_stages(parent: Path, prefix: str) -> list[Path]:
+    """Remove the temporary folders ``parent/<prefix>*`` that killed runs left (see the
+    module notes); the ones removed."""
+    removed = []
+    now = time.time()
+    try:
+        entries = [p for p in parent.iterdir() if p.name.startswith(prefix)]
+    except OSError:
+        return removed
+    for stage in entries:
+        if stage.is_symlink() or not stage.is_dir() or not _stale(stage, now):
+            continue
+        shutil.rmtree(stage, ignore_errors=True)
+        removed.append(stage)
+    return removed
+
+
+def _lock_stage(stage: Path) -> int:
+    """Create and hold ``stage/``:data:`STAGE_LOCK`; its file descriptor."""
+    fd = os.open(stage / STAGE_LOCK, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return fd
+
+
 @contextmanager
 def _staging(target: Path, parent: Path, prefix: str, made: list[Path]) -> Iterator[Path]:
     """A temporary folder in ``parent`` (created with its missing parents, which go again
-    on failure when empty), removed at the end; errors as :func:`write_error` of ``target``."""
+    on failure when empty), locked while it lives and removed at the end (with the ones
+    killed runs left there); errors as :func:`write_error` of ``target``."""
     stage = None
+    fd = None
     try:
         missing = [p for p in [parent, *parent.parents] if not _exists(p)]
         parent.mkdir(parents=True, exist_ok=True)
         made.extend(missing)
+        remove_stale_stages(parent, prefix)
         stage = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+        fd = _lock_stage(stage)
         yield stage
     except BaseException as err:
         if stage is not None:
@@ -169,6 +232,21 @@ def _staging(target: Path, parent: Path, prefix: str, made: list[Path]) -> Itera
     finally:
         if stage is not None:
             shutil.rmtree(stage, ignore_errors=True)
+        if fd is not None:
+            os.close(fd)
+
+
+@contextmanager
+def staged_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path (in a temporary folder beside ``path``) renamed onto ``path`` when the
+    block ends without error, replacing the file or folder there; on an error, or a signal,
+    nothing changes at ``path``. No ownership check: the caller decides what may be
+    replaced."""
+    path = Path(path)
+    with _staging(path, path.parent, f'.{path.name}.tmp-', []) as stage:
+        yield stage / path.name
+        if _exists(stage / path.name):
+            _install([(stage / path.name, path)], stage)
 
 
 class _OneOutput:

@@ -51,13 +51,14 @@ def build_parser() -> argparse.ArgumentParser:
                              'iso8608:C:seed=1, or an LPA bag folder or bag of estimates')
     cli.add_output(parser, 'bag folder to create, or CSV file when INPUT is a bag',
                    metavar='PATH')
-    parser.add_argument('--survey-speed', type=float, default=DEFAULT_SURVEY_SPEED_MPS,
+    parser.add_argument('--survey-speed', type=cli.finite_float,
+                        default=DEFAULT_SURVEY_SPEED_MPS,
                         metavar='V', help='survey speed for the bag stamps, m/s (default '
                                           f'{DEFAULT_SURVEY_SPEED_MPS:g})')
-    parser.add_argument('--track-width', type=float, default=DEFAULT_TRACK_WIDTH_M,
+    parser.add_argument('--track-width', type=cli.finite_float, default=DEFAULT_TRACK_WIDTH_M,
                         metavar='T', help='lateral distance between the wheel paths, m: '
                                           f'y = +-T/2 (default {DEFAULT_TRACK_WIDTH_M:g})')
-    parser.add_argument('--length', type=float, default=None, metavar='M',
+    parser.add_argument('--length', type=cli.finite_float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
     parser.add_argument('--exact', action='store_true',
                         help='bag to CSV: every number exactly (shortest round-trip form), '

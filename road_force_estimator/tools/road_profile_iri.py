@@ -21,6 +21,8 @@ import argparse
 from pathlib import Path
 import sys
 
+import numpy as np
+
 from road_force_estimator.tools import cli
 
 __all__ = ['build_parser', 'main', 'columns']
@@ -53,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli.add_units(parser)
     cli.add_segment_length(parser, 'segment length, m (default 100 m; 0.1 mi = 160.9344 m with '
                                    '--units us)', default=None)
-    parser.add_argument('--length', type=float, default=None, metavar='M',
+    parser.add_argument('--length', type=cli.finite_float, default=None, metavar='M',
                         help='length of a synthetic road, m (default 1000)')
     return parser
 
@@ -76,6 +78,10 @@ def _main(args: argparse.Namespace) -> int:
 
     u = units(args.units)
     profile = road_from_source(args.profile, length_m=args.length)
+    from road_force_estimator.core.segments import check_segment_length
+    steps = np.diff(profile.distance_m)
+    check_segment_length(segment_length_m, float(np.median(steps)) if steps.size else 0.0,
+                         'profile')
     table = iri_table(profile.distance_m, profile.elevation_m,
                       segment_length_m=segment_length_m)
     for note in getattr(profile, 'notes', ()):

@@ -51,6 +51,12 @@ from road_force_estimator.tools import cli, output_folder
 __all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'twist_speed', 'main']
 
 PROG = 'simulate_bag'
+#: Peak memory of a simulated sample and of a synthetic road point (bytes), rounded up from
+#: the peak resident size of runs of two lengths (``/usr/bin/time -f %M simulate_bag ...``;
+#: 20 and 80 s at 1 kHz, roads of 20 and 80 km): a drive that cannot fit in the memory
+#: available is refused before it starts.
+BYTES_PER_SAMPLE = 1000
+BYTES_PER_ROAD_POINT = 256
 
 # Command-line option -> parameter name.
 _OPTIONS = {
@@ -78,9 +84,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='road: iso8608:<A-H>[:seed=N], jpcp[:seed=N] (jointed concrete), flat, '
                         'or an LPA bag / CSV / ERD path'
                         + dflt('road'))
-    p.add_argument('--speed', type=float, metavar='V', help='speed, m/s' + dflt('speed'))
-    p.add_argument('--rate', type=float, metavar='HZ', help='sample rate, Hz' + dflt('rate'))
-    p.add_argument('--duration', type=float, metavar='S',
+    number = cli.finite_float
+    p.add_argument('--speed', type=number, metavar='V', help='speed, m/s' + dflt('speed'))
+    p.add_argument('--rate', type=number, metavar='HZ', help='sample rate, Hz' + dflt('rate'))
+    p.add_argument('--duration', type=cli.finite_float, metavar='S',
                    help='duration, s (the drive also stops at the end of the road)'
                         + dflt('duration'))
     cli.add_params_file(p, 'ROS 2 parameter file (/**: ros__parameters:) with vehicle.* and '
@@ -89,13 +96,13 @@ def build_parser() -> argparse.ArgumentParser:
     cli.add_output(p, 'bag folder to create')
     p.add_argument('--seed', type=int, metavar='N',
                    help='seed of the sensor noise' + dflt('seed'))
-    p.add_argument('--noise-deflection', type=float, metavar='M',
+    p.add_argument('--noise-deflection', type=cli.finite_float, metavar='M',
                    help='deflection noise standard deviation, m' + dflt('noise_deflection'))
-    p.add_argument('--noise-roll', type=float, metavar='RAD',
+    p.add_argument('--noise-roll', type=cli.finite_float, metavar='RAD',
                    help='roll noise standard deviation, rad' + dflt('noise_roll'))
-    p.add_argument('--tire-envelope', type=float, metavar='M',
+    p.add_argument('--tire-envelope', type=cli.finite_float, metavar='M',
                    help='tire envelope length, m (0 = point contact)' + dflt('tire_envelope'))
-    p.add_argument('--gnss-rate', type=float, metavar='HZ',
+    p.add_argument('--gnss-rate', type=cli.finite_float, metavar='HZ',
                    help='rate of /fix, Hz (0 = none)' + dflt('gnss_rate'))
     p.add_argument('--lateral-acceleration', metavar='A[@T]',
                    help='lateral acceleration a_y, m/s^2 (> 0 to the left), from time T s on '
@@ -177,8 +184,10 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     from road_force_estimator.interfaces import DEFLECTION_JOINTS
 
     profile = read_speed_profile(sim.speed_profile) if sim.speed_profile else None
-    road = road_from_source(sim.road, length_m=_travel_m(sim, profile)
-                            + 2.0 * sim.tire_envelope_length_m + 1.0)
+    length_m = _travel_m(sim, profile) + 2.0 * sim.tire_envelope_length_m + 1.0
+    _check_memory(_synthetic_points(sim.road, length_m) * BYTES_PER_ROAD_POINT,
+                  f'a synthetic road of {length_m:.6g} m')
+    road = road_from_source(sim.road, length_m=length_m)
     accel = parse_lateral_profile(sim.lateral_profile)
     if lateral is not None:
         a_y, t_on = lateral
@@ -193,6 +202,8 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
                   crossfall_rad=sim.road_crossfall_rad)
     wanted = min(int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)),
                  plant.last_sample_index) + 1
+    _check_memory(wanted * BYTES_PER_SAMPLE,
+                  f'{wanted} samples ({wanted / sim.rate_hz:.6g} s at {sim.rate_hz:g} Hz)')
     cols = {k: [] for k in ('t_s', 'distance_m', 'q_m', 'roll_rad', 'wheel_load_n', 'road_m',
                             'lateral_accel_mps2')}
     appenders = [(cols[k].append, k) for k in cols]
@@ -263,6 +274,31 @@ def _main_articulated(args: argparse.Namespace, values: dict, lateral) -> int:
           f'{drive.model.statics().gross_weight_kg / 1000:.2f} t) over '
           f'{result.road.name or sim.road} to {args.output}', file=sys.stderr)
     return 0
+
+
+def _synthetic_points(source: str, length_m: float) -> float:
+    """The points of a synthetic road of ``length_m`` (0 for a file: its size bounds it)."""
+    head, _, options = str(source).strip().partition(':')
+    if head.lower() not in ('iso8608', 'flat', 'jpcp'):
+        return 0.0
+    dx = 0.05
+    for option in options.split(':'):
+        key, _, value = option.partition('=')
+        if key.strip() == 'dx':
+            try:
+                dx = float(value)
+            except ValueError:
+                return 0.0          # refused with its reason by the road's parser
+    return length_m / dx if dx > 0.0 and math.isfinite(dx) else 0.0
+
+
+def _check_memory(need_bytes: float, what: str) -> None:
+    """Raise ValueError when ``need_bytes`` exceed the memory available now."""
+    available = cli.available_memory()
+    if available is not None and need_bytes > available:
+        raise ValueError(f'{what} would need about {need_bytes / 1e9:.3g} GB of memory, more '
+                         f'than the {available / 1e9:.3g} GB available: shorten --duration or '
+                         'lower --rate')
 
 
 def _jitter_stamps(traj, sensors) -> None:

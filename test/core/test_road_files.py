@@ -290,3 +290,83 @@ def test_bag_folders_are_left_to_bagio(tmp_path):
     with pytest.raises(ValueError, match='bagio.road_from_source'):
         road_from_source(str(bag))
     assert flat_profile(5.0).end_m == 5.0
+
+
+# ------------------------------------------------------------------------------------------
+# Files as people have them (issue 28): a byte-order mark, no units, very long files
+# ------------------------------------------------------------------------------------------
+
+BOM = '\ufeff'
+
+
+def test_files_with_a_utf8_byte_order_mark_are_read_as_without(tmp_path):
+    csv_text = 'distance_m,elevation_m\n0.0,0.001\n0.5,0.002\n1.0,0.003\n'
+    (tmp_path / 'plain.csv').write_text(csv_text, 'utf-8')
+    (tmp_path / 'excel.csv').write_text(BOM + csv_text.replace('\n', '\r\n'), 'utf-8')
+    (tmp_path / 'plain.erd').write_text(ERD_METRES, 'utf-8')
+    (tmp_path / 'excel.erd').write_text(BOM + ERD_METRES, 'utf-8')
+    (tmp_path / 'plain.txt').write_text('0 0.001\n1 0.002\n2 0.004\n', 'utf-8')
+    (tmp_path / 'excel.txt').write_text(BOM + '0 0.001\n1 0.002\n2 0.004\n', 'utf-8')
+    for stem in ('csv', 'erd', 'txt'):
+        a = road_from_source(str(tmp_path / f'plain.{stem}'))
+        b = road_from_source(str(tmp_path / f'excel.{stem}'))
+        np.testing.assert_array_equal(a.distance_m, b.distance_m)
+        np.testing.assert_array_equal(a.elevation_m, b.elevation_m)
+        assert a.distance_m.size >= 3
+
+
+@pytest.mark.parametrize('drop, named', [('UNITSNAMm       m\n', 'UNITSNAM'),
+                                         ('XUNITS  m\n', 'XUNITS'),
+                                         ('UNITSNAMm       m\nXUNITS  m\n',
+                                          'UNITSNAM and XUNITS')])
+def test_an_erd_file_without_its_units_is_refused_naming_what_is_missing(tmp_path, drop,
+                                                                          named):
+    text = ERD_METRES
+    for line in drop.splitlines(keepends=True):
+        text = text.replace(line, '')
+    path = tmp_path / 'nounits.erd'
+    path.write_text(text)
+    with pytest.raises(ValueError, match=rf'has no {named}: the units .* unknown'):
+        read_erd_profile(path)
+
+
+def _long_csv(path, rows: int) -> None:
+    x = np.arange(rows) * 0.05
+    z = np.column_stack([x, 1e-3 * np.sin(x), 1e-3 * np.cos(x)])
+    np.savetxt(path, z, delimiter=',', fmt='%.9g', header='distance_m,left_m,right_m',
+               comments='')
+
+
+def test_a_long_csv_profile_is_read_in_memory_of_its_numbers_not_of_its_text(tmp_path):
+    # numpy's allocations are traced by tracemalloc: the peak of the read, against the size
+    # of the numbers it returns (3 columns of float64). Reading the text whole (a list of
+    # rows of str) took more than ten times that.
+    import tracemalloc
+
+    path = tmp_path / 'long.csv'
+    rows = 600_000
+    _long_csv(path, rows)
+    numbers = rows * 3 * 8
+    tracemalloc.start()
+    try:
+        p = read_csv_profile(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert p.distance_m.size == rows
+    np.testing.assert_allclose(p.elevation_m[-1], [1e-3 * np.sin(p.distance_m[-1]),
+                                                   1e-3 * np.cos(p.distance_m[-1])], atol=1e-11)
+    assert peak < 5 * numbers, (peak, numbers, path.stat().st_size)
+
+
+def test_a_bad_line_deep_in_a_long_file_is_named(tmp_path):
+    from road_force_estimator.core import road_files
+    path = tmp_path / 'long.csv'
+    _long_csv(path, 3 * road_files.CHUNK_LINES)
+    lines = path.read_text().splitlines()
+    k = 2 * road_files.CHUNK_LINES + 17            # in the third chunk
+    lines[k] = '12.5,abc,0.1'
+    path.write_text('\n'.join(lines) + '\n')
+    with pytest.raises(ValueError, match=rf'long.csv, line {k + 1}: expected 3 numbers, got '
+                                         r"'12.5,abc,0.1'"):
+        read_csv_profile(path)

@@ -212,3 +212,116 @@ def test_bad_input_gives_one_line(tmp_path, args, code, line):
     args = [a.format(tmp=tmp_path) for a in args]
     got, out, err = finish(run_main('bag_player', *args))
     assert (got, err.strip().splitlines()) == (code, [line.format(tmp=tmp_path)])
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 28: names, depths, clocks and loops that cannot work; split bags
+
+@pytest.mark.parametrize('args, line', [
+    (['--remap', '/lpa/left:=/bad name!'],
+     "bag_player: error: argument --remap: '/lpa/left:=/bad name!': '/bad name!' is not a "
+     "valid topic name (topic name must not contain characters other than alphanumerics, "
+     "'_', or '/')"),
+    (['--clock', '1e6'], 'bag_player: error: argument --clock: 1e6 Hz: at most 10000 Hz (a '
+                         'faster /clock would slow the playback down)'),
+    (['--clock', '1e9'], 'bag_player: error: argument --clock: 1e9 Hz: at most 10000 Hz (a '
+                         'faster /clock would slow the playback down)'),
+    (['--rate', 'nan'], 'bag_player: error: argument --rate: nan must be a number > 0'),
+])
+def test_options_that_cannot_work_are_one_line(tmp_path, args, line):
+    write_ours(tmp_path / 'bag', expected(10))
+    got, out, err = finish(run_main('bag_player', str(tmp_path / 'bag'), *args))
+    assert (got, err.strip().splitlines()) == (2, [line])
+
+
+def test_a_huge_recorded_queue_depth_plays_with_the_largest_one(tmp_path):
+    import yaml
+    write_ours(tmp_path / 'bag', expected(20))
+    meta = tmp_path / 'bag' / 'metadata.yaml'
+    doc = yaml.safe_load(meta.read_text())
+    for entry in doc['rosbag2_bagfile_information']['topics_with_message_count']:
+        entry['topic_metadata']['offered_qos_profiles'][0]['depth'] = 10**11
+    meta.write_text(yaml.safe_dump(doc))
+    code, _, err = finish(run_main('bag_player', str(tmp_path / 'bag'), '--wait', '0',
+                                   '--rate', '10'))
+    assert code == 0 and 'Traceback' not in err, err
+    assert err.count('the recorded QoS depth 100000000000 is more than 100000: played with '
+                     '100000') == 3
+    assert 'played 42 messages' in err
+
+
+def split_bag(folder, items, listed):
+    """The items in two files bag_0.mcap (first half) and bag_1.mcap, metadata.yaml listing
+    ``listed``."""
+    import shutil
+    import yaml
+    half = len(items) // 2
+    for k, part in enumerate((items[:half], items[half:])):
+        write_ours(folder.parent / f'part{k}', part)
+        folder.mkdir(exist_ok=True)
+        shutil.move(str(folder.parent / f'part{k}' / f'part{k}_0.mcap'), folder / f'bag_{k}.mcap')
+    doc = yaml.safe_load((folder.parent / 'part0' / 'metadata.yaml').read_text())
+    info = doc['rosbag2_bagfile_information']
+    info['relative_file_paths'] = listed
+    (folder / 'metadata.yaml').write_text(yaml.safe_dump(doc))
+
+
+def test_a_split_bag_plays_in_time_order_whatever_metadata_lists(ros_context, tmp_path):
+    items = expected(200)
+    split_bag(tmp_path / 'bag', items, ['bag_1.mcap', 'bag_0.mcap'])
+    playback = open_playback(tmp_path / 'bag')
+    assert [f.name for f in playback.files] == ['bag_0.mcap', 'bag_1.mcap']
+    assert playback.issues == ['the files are not listed in time order: read in the order of '
+                               'their first messages (bag_0.mcap, bag_1.mcap)']
+    player, col = play(ros_context, tmp_path / 'bag', '--rate', '10')
+    assert col.messages == by_topic(items)
+
+
+def test_a_missing_file_of_a_split_bag_is_a_warning(tmp_path):
+    items = expected(200)
+    split_bag(tmp_path / 'bag', items, ['bag_0.mcap', 'bag_1.mcap'])
+    (tmp_path / 'bag' / 'bag_1.mcap').unlink()
+    code, _, err = finish(run_main('bag_player', str(tmp_path / 'bag'), '--wait', '0',
+                                   '--rate', '10'))
+    assert code == 0 and 'Traceback' not in err, err
+    assert f'{tmp_path}/bag: bag_1.mcap: listed in metadata.yaml but missing' in err
+    assert f'played {len(items) // 2} messages' in err
+
+
+def test_a_loop_of_one_message_is_paced_and_a_loop_keeps_bounded_memory(ros_context, tmp_path,
+                                                                         monkeypatch):
+    """Issue 28: --loop busy-looped a one-message bag and kept 32 bytes per message played."""
+    import tracemalloc
+
+    from road_force_estimator.ros import bag_player
+    write_ours(tmp_path / 'one', expected(1))
+    options = build_parser().parse_args([str(tmp_path / 'one'), '--rate', '4', '--wait', '0'])
+    player = BagPlayer(open_playback(tmp_path / 'one'), options, context=ros_context)
+    player.stop()                                       # its thread: the passes run here
+    player.stopping.clear()
+    count, origin = player.play_once()
+    assert count == len(expected(1)) == 3               # /lpa/left, /lpa/right, /ratio at t0
+    # the next pass LOOP_SINGLE_S of bag time later: 0.25 s at --rate 4
+    assert origin[0] - player.schedule[0] == pytest.approx(bag_player.LOOP_SINGLE_S / 4)
+    player.destroy_node()
+    monkeypatch.setattr(bag_player, 'LATENESS_KEPT', 100)
+    write_ours(tmp_path / 'bag', expected(200))
+    options = build_parser().parse_args([str(tmp_path / 'bag'), '--rate', '1000', '--wait',
+                                         '0'])
+    player = BagPlayer(open_playback(tmp_path / 'bag'), options, context=ros_context)
+    player.stop()
+    player.stopping.clear()
+    tracemalloc.start()
+    try:
+        origin = None
+        for k in range(30):
+            if k == 10:
+                before = tracemalloc.get_traced_memory()[0]
+            count, origin = player.play_once(origin)
+            assert count == len(expected(200))
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+        player.destroy_node()
+    assert len(player.lateness_s) == 100
+    assert grown < 20 * count * 8, grown        # well under a byte per message played

@@ -234,7 +234,7 @@ def test_a_drive_recorded_from_the_nodes_has_every_sample_and_coordinates(ros_co
     """plant_simulator + bag_recorder (started together): the bag holds every sample from
     the first on and every fix, and estimate_bag gives coordinates on every segment."""
     from road_force_estimator.bagio import read_drive_bag
-    from road_force_estimator.ros.bag_recorder import BagRecorder, drain
+    from road_force_estimator.ros.bag_recorder import BagRecorder
     from road_force_estimator.tools.estimate_bag import main as estimate_bag
 
     bag = tmp_path / 'drive'
@@ -249,7 +249,7 @@ def test_a_drive_recorded_from_the_nodes_has_every_sample_and_coordinates(ros_co
         assert spin_until(executor, lambda: plant.finished, 60.0)
         assert spin_until(executor, lambda: recorder.counts['/suspension/deflections']
                           >= plant.k, 20.0)
-        drain(executor, recorder)
+        recorder.stop()                  # what is queued, written; the bag closed
     finally:
         recorder.close()
         close(executor, plant, recorder)

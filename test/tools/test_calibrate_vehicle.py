@@ -223,3 +223,17 @@ def test_a_held_fitted_parameter_is_written_unchanged(files, capsys):
     rows = {p['name']: p for p in report['parameters']}
     assert rows['vehicle.roll_inertia']['status'] == 'held'
     assert rows['vehicle.sprung_mass']['status'] == 'fitted'
+
+
+@pytest.mark.parametrize('args, line', [
+    (['--search-range', '0'], '--search-range 0: must be > 0 m'),
+    (['--min-correlation', '1.5'], '--min-correlation 1.5: a correlation, in (-1, 1]'),
+    (['--static-load', '30000', '-5'], '--static-load 30000 -5: wheel loads, > 0 N'),
+    (['--search-range', 'nan'], "argument --search-range: 'nan': must be a finite number"),
+])
+def test_numbers_that_cannot_work_are_a_bad_command_line(tmp_path, capsys, args, line):
+    """Issue 28: every numeric option checked against what can work, non-finite refused."""
+    from road_force_estimator.tools.calibrate_vehicle import main
+    code = main([str(tmp_path / 'drive'), '--profile', 'iso8608:C', '--output',
+                 str(tmp_path / 'out.yaml'), *args])
+    assert (code, capsys.readouterr().err) == (2, f'calibrate_vehicle: error: {line}\n')

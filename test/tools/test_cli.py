@@ -1,5 +1,7 @@
 """tools.cli: the exit-status wrapper (usage error 2, listed errors their status, --help 0,
 anything else raised), the positive-length check and the shared options."""
+import argparse
+
 import pytest
 
 from road_force_estimator.tools import cli
@@ -50,15 +52,18 @@ class TestRunMain:
             cli.check_positive('--segment-length', args.segment_length)
             return 0
 
+        rc, out = run(['1', '-o', 'x', '--segment-length', '0'], body, capsys)
+        assert (rc, out.err) == (2, 'demo: error: --segment-length 0.0: must be > 0 m\n')
         rc, out = run(['1', '-o', 'x', '--segment-length', 'inf'], body, capsys)
-        assert (rc, out.err) == (2, 'demo: error: --segment-length inf: must be > 0 m\n')
+        assert (rc, out.err) == (2, "demo: error: argument --segment-length: 'inf': must be a "
+                                    'finite number\n')
 
-    def test_listed_errors_print_their_first_line(self, capsys):
+    def test_listed_errors_print_one_line_that_keeps_all_of_the_message(self, capsys):
         def body(args):
             raise InputTrouble('first line\nsecond line')
 
         rc, out = run(['1', '-o', 'x'], body, capsys)
-        assert (rc, out.err) == (1, 'demo: first line\n')
+        assert (rc, out.err) == (1, 'demo: first line\\nsecond line\n')
         rc, out = run(['1', '-o', 'x'], lambda args: (_ for _ in ()).throw(
             FileNotFoundError(2, 'No such file', 'f.yaml')), capsys)
         assert rc == 1 and out.err == "demo: [Errno 2] No such file: 'f.yaml'\n"
@@ -90,8 +95,16 @@ class TestChecks:
             cli.check_positive('--length', float('nan'), finite=False)
 
     def test_one_line(self):
-        assert cli.one_line(ValueError('  a\nb')) == 'a'
+        assert cli.one_line(ValueError('  a\nb')) == 'a\\nb'
+        assert (cli.one_line(ValueError('/data/x\r\ny: no such bag'))
+                == '/data/x\\r\\ny: no such bag')
         assert cli.one_line(ValueError()) == 'ValueError'
+
+    def test_finite_float_refuses_what_is_not_a_finite_number(self):
+        assert cli.finite_float('1e-3') == 1e-3
+        for bad in ('nan', 'inf', '-inf', 'NaN', 'x'):
+            with pytest.raises(argparse.ArgumentTypeError):
+                cli.finite_float(bad)
 
     def test_estimator_parameters_default_and_from_a_file(self, tmp_path):
         from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters

@@ -436,3 +436,28 @@ def test_model_fit_in_the_bag_diagnostics_and_the_report(noisy_drive, tmp_path, 
         assert 'calibrate_vehicle' in last.message
     notes = report_json(out)['notes']
     assert notes['model fit'].startswith('mismatch' if wrong else 'ok')
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_segments_shorter_than_the_sample_spacing_are_refused_before_the_work(
+        noisy_drive, tmp_path, capsys, mode):
+    """Issue 28: --segment-length 1e-5 ran 10 minutes at 9.8 GB before it was killed, 1e-7
+    ended in a MemoryError. 20 m/s at 1 kHz: 0.02 m between samples."""
+    for length in ('1e-5', '1e-7', '0.019'):
+        code, out, err = run([noisy_drive, '--output', tmp_path / 'o', '--mode', mode,
+                              '--segment-length', length, '--no-figures'], capsys)
+        assert (code, out) == (1, '')
+        assert err == (f'estimate_bag: segment length {float(length):g} m is shorter than the '
+                       "drive's sample spacing (0.02 m): a segment would hold at most one "
+                       'sample; give --segment-length >= 0.02 m\n')
+        assert not (tmp_path / 'o').exists()
+
+
+@pytest.mark.parametrize('value', ['nan', 'inf', '-inf'])
+def test_non_finite_numbers_are_refused(noisy_drive, tmp_path, capsys, value):
+    """Issue 28: --reference-offset nan|inf was accepted, the comparison silently n/a."""
+    code, out, err = run([noisy_drive, '--output', tmp_path / 'o', '--reference-profile',
+                          'iso8608:C:seed=5', f'--reference-offset={value}'], capsys)
+    assert code == 2
+    assert err == (f"estimate_bag: error: argument --reference-offset: '{value}': must be a "
+                   'finite number\n')

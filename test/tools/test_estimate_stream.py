@@ -205,6 +205,12 @@ def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
     assert estimate_stream.FIGURES_NOTE in streamed.summary['notes']
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    'issue 28 found it: the streamed offline smoother differs from one piece (by <0.4 N over '
+    'the last 100 rows of the window) when the run after the 0.2 s gap starts one sample '
+    'later (here: the first sample after a jump is held back; before issue 28 the same with '
+    'a NaN at sample 2500): a windowing difference in estimation/ (offline_stream, smoother) '
+    'left to the restructuring of issue 27'))
 @pytest.mark.parametrize('guess', [True, False])
 def test_streamed_offline_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch, guess):
     """Offline the detail window's pieces are kept as they pass (OfflineWindow's guess of

@@ -30,6 +30,49 @@ def test_find_drives_ids_nesting_and_output_exclusion(tmp_path):
         find_drives([tmp_path / 'in2', tmp_path / 'in3'])
 
 
+def _bag(path):
+    path.mkdir(parents=True)
+    (path / 'metadata.yaml').write_text('x: 1\n')
+
+
+def test_the_search_stays_inside_its_input_and_names_the_links_it_does_not_follow(tmp_path):
+    """Issue 28: a link to / walked the whole machine (/proc/<pid>/cwd included), a link to
+    .. pulled in the drives beside the input."""
+    _bag(tmp_path / 'beside' / 'other')           # outside the input: never a drive of it
+    top = tmp_path / 'fleet'
+    _bag(top / 'truck1' / 'mon')
+    _bag(top / 'truck1' / 'tue')
+    (top / 'root').symlink_to('/')
+    (top / 'up').symlink_to('..')
+    (top / 'again').symlink_to(top / 'truck1')    # inside: followed (the same drives once)
+    linked = top / 'truck2' / 'wed'
+    _bag(linked)
+    (linked / 'data_0.mcap').symlink_to(tmp_path / 'beside' / 'x.mcap')   # a file out
+    skipped = []
+    found = find_drives([top], skipped=skipped)
+    assert [d.drive_id for d in found] == ['truck1/mon', 'truck1/tue']
+    assert all(fleet_drives._is_inside(d.path.resolve(), top.resolve()) for d in found)
+    text = '\n'.join(skipped)
+    assert f'{top}/root: a link out of {top} (to /): not followed' in text
+    assert f'{top}/up: a link out of {top} (to {tmp_path}): not followed' in text
+    assert f'{top}/truck2/wed: not a drive of {top}: data_0.mcap link out of it' in text
+    assert len(skipped) == 3
+    with pytest.raises(FleetError, match='data_0.mcap link out of the bag folder'):
+        find_drives([linked])
+
+
+def test_the_temporary_folders_of_unfinished_writes_are_no_drives(tmp_path):
+    """Issue 28: a simulate_bag killed while writing left .<bag>.tmp-* with a bag inside,
+    which the fleet took for a drive."""
+    top = tmp_path / 'fleet'
+    _bag(top / 'mon')
+    _bag(top / '.tue.tmp-k2j3h4' / 'tue')
+    skipped = []
+    assert [d.drive_id for d in find_drives([top], skipped=skipped)] == ['mon']
+    assert skipped == [f'{top}/.tue.tmp-k2j3h4: the temporary folder of an unfinished write '
+                       '(not a drive)']
+
+
 def test_input_hash_and_key_see_every_change(tmp_path):
     bag = tmp_path / 'bag'
     bag.mkdir()

@@ -284,3 +284,29 @@ def test_truck_effects_reach_the_bag(tmp_path, capsys):
     np.testing.assert_array_equal(d.stamps_ns - d.stamps_ns[0] + expect[0], expect)
     offsets_ns = expect - np.round(tr.t_s * 1e9).astype(np.int64)
     assert np.max(np.abs(offsets_ns)) <= 50_000 and np.std(offsets_ns) > 20_000
+
+
+@pytest.mark.parametrize('argv, what', [
+    (['--duration', '1e6', '--rate', '1e5'], 'a synthetic road of 2e+07 m'),
+    (['--duration', '1e4', '--rate', '1e5'], '1000000001 samples (10000 s at 100000 Hz)')])
+def test_a_drive_that_cannot_fit_in_memory_is_refused_before_it_starts(tmp_path, capsys,
+                                                                      monkeypatch, argv, what):
+    """Issue 28: --duration 1e6 --rate 1e5 failed late with a MemoryError. The memory
+    available is made 8 GB here (the machine's own varies)."""
+    from road_force_estimator.tools import cli
+    monkeypatch.setattr(cli, 'available_memory', lambda: 8e9)
+    code, out, err = run(['--road', 'iso8608:C', '--speed', '20', *argv, '--output',
+                          tmp_path / 'huge', '--no-progress'], capsys)
+    assert (code, out) == (1, '')
+    assert err.startswith(f'simulate_bag: {what} would need about ')
+    assert err.endswith(' GB of memory, more than the 8 GB available: shorten --duration or '
+                        'lower --rate\n') and err.count('\n') == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize('option', ['--speed', '--rate', '--duration', '--noise-deflection',
+                                    '--gnss-rate'])
+def test_non_finite_options_are_refused(tmp_path, capsys, option):
+    code, out, err = run(['--road', 'flat', option, 'nan', '--output', tmp_path / 'x'], capsys)
+    assert code == 2 and err == (f"simulate_bag: error: argument {option}: 'nan': must be a "
+                                 'finite number\n')

@@ -287,7 +287,8 @@ def _settling_time(f_closed: np.ndarray, h_load: np.ndarray, dt_s: float,
     the filter's own steady-state error std (``H P+ H^T``), whichever is larger."""
     e = np.diag(scale)
     ref = float(np.max(np.abs(h_load @ e)))
-    floor = float(np.sqrt(np.max(np.diag(h_load @ p_post @ h_load.T))))
+    # (a covariance a hair below zero by rounding, at a step the design barely handles: 0)
+    floor = math.sqrt(max(0.0, float(np.max(np.diag(h_load @ p_post @ h_load.T)))))
     tol = max(fraction * ref, floor)
     last_big = 0
     steps = int(horizon_s / dt_s)

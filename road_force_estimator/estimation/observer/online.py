@@ -624,16 +624,21 @@ class ModelCore:
         self._block_start = keep - 1
 
     def _replay(self, dts: list) -> None:
-        """Filter rows 0..i again with the current levels' gains (see :meth:`_compact`)."""
+        """Filter rows 0..i again with the current levels' gains (see :meth:`_compact`), each
+        step with the gains of its own dt level, as :meth:`_select` gives them (the gains of
+        one level with the transition of a step several times longer are not stable: a
+        stream that lost samples then diverged)."""
         buf = self._buf
         self._select(dts[-1])
-        g = self.schedule.gains
+        sched = self.schedule
+        g = sched.gains
         x0, y0 = self._x0i, self._y0i
         fr = self._fr
         if fr is not None:
             fr.restart()
         for j, dt in enumerate(dts):
             nxt = buf[j + 1]
+            g = self._gains_at(g, dt)
             sv = g.step_matrix(dt) @ buf[j]
             if fr is not None:
                 fr.select(g, dt)
@@ -648,9 +653,21 @@ class ModelCore:
             prow[x0:x0 + self._nx] = self._x0
             for j, dt in enumerate(dts):
                 prow[y0:y0 + self._ny] = buf[j, y0:y0 + self._ny]
+                pg = self._gains_at(pg, dt, profile=True)
                 prow[x0:y0] = (pg.step_matrix(dt) @ prow)[:y0 - x0]
+        self._select(dts[-1])         # the gains in use: those of the last step's level
         self._t_retuned = 0.0
         self._m_dt = -1.0
+
+    def _gains_at(self, g: Gains, dt: float, profile: bool = False) -> Gains:
+        """``g``, or the gains (load or profile filter) of the current levels at the dt level
+        of ``dt`` when ``g``'s is another (cached designs)."""
+        sched = self.schedule
+        level = dt_level(dt)
+        if g.key[0] == level:
+            return g
+        sched.levels['dt'] = level
+        return sched.profile_design(dt, 'online') if profile else sched.design(dt, self.lag)
 
     def _finalize(self, item: tuple, first: int, last: int) -> None:
         """Estimate of the sample in row ``first`` from rows first..last (missing: zeros)."""

@@ -100,7 +100,8 @@ class TestLatency:
         est = Estimator(VEHICLE, obs)
         outs = [est.update(int(stamps[k]), qq[k], pp[k], SPEED) for k in range(n)]
         good = [o for o in outs if o is not None] + est.flush()
-        assert len(good) == int(batch.valid.sum()) == n - 2
+        # the NaN, the duplicate, and the first sample after the gap (held, then lost)
+        assert len(good) == int(batch.valid.sum()) == n - 3
         assert est.status == batch.status
         assert batch.status.gaps == 1 and batch.status.latency_samples == 10
         np.testing.assert_array_equal([o.stamp_ns for o in good], batch.stamp_ns[batch.valid])

@@ -1,0 +1,176 @@
+"""Subscriptions served by a thread of their own: every queued message taken at once, with its
+message info.
+
+rclpy hands a subscription's messages to an executor one callback at a time, and its
+EventsExecutor queues one event per arriving message (a queue that grows without bound when
+the callbacks fall behind a flood, ahead of every timer) and cannot give the message info
+(publisher sequence numbers, reception times) to a callback. A :class:`TakeLoop` instead owns
+a node that no executor spins (hidden: its name starts with ``_``): a thread waits on its
+subscriptions (an rcl wait set, and a guard condition to wake it) and takes what is queued,
+up to ``batch`` messages per subscription and round, each with its info
+(``source_timestamp``, ``received_timestamp``, ``publication_sequence_number``), and hands
+each round to ``sink(batch)`` in that thread. What waits is bounded by the subscriptions'
+own history depth (DDS drops the oldest beyond it); the node that uses it keeps its timers and
+services on its executor, on time.
+
+The two users: the bag recorder (:mod:`.bag_recorder`: the receive time is the log time, a
+stop drains exactly what was received before it) and the observer (:mod:`.observer`: what
+queued up is estimated in one go).
+"""
+from __future__ import annotations
+
+from contextlib import ExitStack
+from dataclasses import dataclass
+import threading
+import time
+from typing import Callable
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+
+__all__ = ['Taken', 'TakeLoop']
+
+
+@dataclass(frozen=True)
+class Taken:
+    """One message: the index of its subscription, its CDR bytes, reception time (ns, the
+    system clock), the publisher's sequence number (None when the middleware gives none)."""
+
+    index: int
+    data: bytes
+    received_ns: int
+    sequence: int | None
+
+
+class TakeLoop:
+    """A hidden node whose subscriptions a thread of its own takes from (see the module).
+
+    Parameters
+    ----------
+    name : str
+        The hidden node's name (``_`` is prepended).
+    context : rclpy Context
+        The context of the node that uses it.
+    batch : int
+        Messages taken per subscription and round at most (a round's share of the time).
+    """
+
+    def __init__(self, name: str, context, *, batch: int = 1000) -> None:
+        self.node = Node('_' + name, context=context, start_parameter_services=False,
+                         enable_rosout=False)
+        self.context = self.node.context
+        self.batch = int(batch)
+        self.subscriptions: list = []
+        self._guard = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._sink: Callable | None = None
+        self._idle: Callable | None = None
+        self.rounds = 0
+        self.error: BaseException | None = None
+
+    def add(self, msg_class, topic: str, qos) -> int:
+        """Subscribe (raw) to ``topic``; the subscription's index (also while running: the
+        thread takes from it from its next round on)."""
+        self.subscriptions = [*self.subscriptions, self.node.create_subscription(
+            msg_class, topic, _never, qos, raw=True)]      # (a new list: the thread's stays)
+        return len(self.subscriptions) - 1
+
+    def start(self, sink: Callable[[list[Taken]], None],
+              idle: Callable[[], None] | None = None, period_s: float = 0.1) -> None:
+        """Run the thread: ``sink(batch)`` for every round that took something, ``idle()``
+        at least every ``period_s`` (e.g. to close a chunk by time)."""
+        self._sink, self._idle, self._period_s = sink, idle, float(period_s)
+        self._stop.clear()                 # (a loop stopped can start again)
+        if self._guard is None:
+            with self.context.handle:
+                self._guard = _rclpy.GuardCondition(self.context.handle)
+        self._thread = threading.Thread(target=self._run, name=self.node.get_name(),
+                                        daemon=True)
+        self._thread.start()
+
+    def take_all(self, until_ns: int | None = None) -> list[Taken]:
+        """What is queued now, every subscription once (at most ``batch`` each); with
+        ``until_ns`` only what was received up to that time (ns, system clock) and, with it,
+        the first message received after it (taken, so not left for later: the caller drops
+        it). For the thread, and for a drain once the thread is stopped."""
+        out: list[Taken] = []
+        for index, sub in enumerate(list(self.subscriptions)):
+            try:
+                with sub.handle:
+                    for _ in range(self.batch):
+                        got = sub.handle.take_message(sub.msg_type, True)
+                        if got is None:
+                            break
+                        data, info = got
+                        taken = Taken(index, data, int(info.get('received_timestamp') or 0),
+                                      info.get('publication_sequence_number'))
+                        out.append(taken)
+                        if until_ns is not None and taken.received_ns > until_ns:
+                            break
+            except Exception:            # a destroyed handle (shutdown): nothing more there
+                continue
+        return out
+
+    def _run(self) -> None:
+        next_idle = time.monotonic() + self._period_s
+        try:
+            while not self._stop.is_set():
+                batch = self.take_all()
+                if batch:
+                    self.rounds += 1
+                    self._sink(batch)
+                now = time.monotonic()
+                if self._idle is not None and now >= next_idle:
+                    next_idle = now + self._period_s
+                    self._idle()
+                if batch:
+                    continue          # more may be queued: take again before waiting
+                self._wait(max(0.0, min(next_idle - now, self._period_s)))
+        except BaseException as exc:  # noqa: BLE001 - kept for the owner (never a crash here)
+            self.error = exc
+
+    def _wait(self, timeout_s: float) -> None:
+        subs = list(self.subscriptions)
+        with ExitStack() as stack:
+            stack.enter_context(self.context.handle)
+            if not self.context.ok():
+                self._stop.set()
+                return
+            for sub in subs:
+                stack.enter_context(sub.handle)
+            wait_set = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, self.context.handle)
+            wait_set.clear_entities()
+            for sub in subs:
+                wait_set.add_subscription(sub.handle)
+            wait_set.add_guard_condition(self._guard)
+            wait_set.wait(int(timeout_s * 1e9))
+
+    def request_stop(self) -> None:
+        """Ask the thread to end after its round (callable from the thread itself)."""
+        self._stop.set()
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Stop the thread (it finishes its round); idempotent. The subscriptions stay, so
+        that what is queued can still be taken (:meth:`take_all`)."""
+        self._stop.set()
+        if self._guard is not None:
+            try:
+                self._guard.trigger_guard_condition()
+            except Exception:  # noqa: BLE001 - already gone with the context
+                pass
+        if self._thread is not None and self._thread.is_alive():
+            self._thread.join(timeout=timeout_s)
+
+    def destroy(self) -> None:
+        """Stop and destroy the hidden node."""
+        self.stop()
+        self.node.destroy_node()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+
+def _never(msg) -> None:   # the hidden node is never spun: no callback runs
+    pass
