@@ -109,7 +109,7 @@ class BagRecorder(Node):
         self.counts: dict[str, int] = {topic: 0 for topic in topics}
         self.sources: dict[str, Sources] = {}
         self.sim_time = bool(self.get_parameter('use_sim_time').value)
-        self.loop = TakeLoop('bag_recorder_input', self.context)
+        self.loop = TakeLoop(self.get_name(), self.context)
         self.waiting = [t for t in topics if t not in TOPIC_TYPES]
         for topic in topics:
             if topic in TOPIC_TYPES:

@@ -143,7 +143,7 @@ class Observer(Node):
         self.speed_mps = None
         self.sources_said = 1      # sources on /suspension/deflections last told in the log
         self.taken = (0, 0)        # the input's (received, missed) at the last report
-        self.input = ObserverInput(self.context, self.estimate, self.reject)
+        self.input = ObserverInput(self.get_name(), self.context, self.estimate, self.reject)
         self.input.wire.on_note = self.get_logger().warning
         self.input_topic = self.resolve_topic_name(api.DEFLECTIONS)
         # the publishers' first stamps (status name -> ns), and the count they give

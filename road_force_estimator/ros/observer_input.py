@@ -51,6 +51,8 @@ class ObserverInput:
 
     Parameters
     ----------
+    owner : str
+        The observer node's name (the take loop's hidden node is named after it).
     context : rclpy Context
     sample : callable
         ``sample(stamp_ns, (q1, q2), phi, speed_mps)`` for every sample to estimate, in
@@ -59,8 +61,8 @@ class ObserverInput:
         ``reject(reason, text)`` for every message not used (bounded text).
     """
 
-    def __init__(self, context, sample: Callable, reject: Callable) -> None:
-        self.loop = TakeLoop('observer_input', context, batch=QUEUE_DEPTH)
+    def __init__(self, owner: str, context, sample: Callable, reject: Callable) -> None:
+        self.loop = TakeLoop(owner, context, batch=QUEUE_DEPTH)
         self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH))
         self.deflection_index = self.loop.add(JointState, api.DEFLECTIONS,
                                               sensor_qos(QUEUE_DEPTH))

@@ -19,6 +19,7 @@ from typing import Iterable, Mapping, Sequence
 from rclpy.node import Node
 
 from road_force_estimator.interfaces import FIRST_STAMP_KEY
+from road_force_estimator.ros.take_loop import input_node_name
 
 __all__ = ['SETTLE_S', 'SubscriberGate', 'first_stamp_values', 'first_stamps']
 
@@ -28,11 +29,13 @@ SETTLE_S = 0.3
 
 
 def _matches(wanted: str, namespace: str, name: str) -> bool:
-    """A node name as given (``observer``: any namespace; ``/ns/observer``: that one)."""
+    """A node name as given (``observer``: any namespace; ``/ns/observer``: that one); the
+    hidden node that takes a node's inputs (:func:`.take_loop.input_node_name`) counts as
+    that node."""
     if wanted.startswith('/'):
-        full = f'{namespace.rstrip("/")}/{name}'
-        return full == wanted
-    return name == wanted
+        ns, _, base = wanted.rpartition('/')
+        return namespace.rstrip('/') == ns and name in (base, input_node_name(base))
+    return name in (wanted, input_node_name(wanted))
 
 
 class SubscriberGate:

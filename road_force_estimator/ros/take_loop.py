@@ -28,7 +28,14 @@ from typing import Callable
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
-__all__ = ['Taken', 'TakeLoop']
+__all__ = ['Taken', 'TakeLoop', 'input_node_name']
+
+
+def input_node_name(owner: str) -> str:
+    """The hidden node whose subscriptions carry the inputs of the node ``owner``: what the
+    graph shows as the subscriber of those topics (``_observer_input`` for ``observer``;
+    :class:`.start_gate.SubscriberGate` counts it as its owner)."""
+    return f'_{owner}_input'
 
 
 @dataclass(frozen=True)
@@ -47,17 +54,17 @@ class TakeLoop:
 
     Parameters
     ----------
-    name : str
-        The hidden node's name (``_`` is prepended).
+    owner : str
+        The name of the node that uses it: the hidden node is :func:`input_node_name` of it.
     context : rclpy Context
         The context of the node that uses it.
     batch : int
         Messages taken per subscription and round at most (a round's share of the time).
     """
 
-    def __init__(self, name: str, context, *, batch: int = 1000) -> None:
-        self.node = Node('_' + name, context=context, start_parameter_services=False,
-                         enable_rosout=False)
+    def __init__(self, owner: str, context, *, batch: int = 1000) -> None:
+        self.node = Node(input_node_name(owner), context=context,
+                         start_parameter_services=False, enable_rosout=False)
         self.context = self.node.context
         self.batch = int(batch)
         self.subscriptions: list = []

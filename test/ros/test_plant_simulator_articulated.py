@@ -39,20 +39,20 @@ def test_a_recorded_drive_has_every_sample_and_the_numbers_of_simulate_bag(ros_c
                                                                          tmp_path):
     """plant_simulator at 1 kHz with 5 axles and the IMU + bag_recorder, started together: the
     bag holds every sample from the first, the same readings and truth as simulate_bag."""
-    from road_force_estimator.ros.bag_recorder import BagRecorder, drain
+    from road_force_estimator.ros.bag_recorder import BagRecorder
 
     bag = tmp_path / 'drive'
     recorder = BagRecorder(context=ros_context, parameter_overrides=[
         Parameter('output', value=str(bag))])
     plant = PlantSimulator(context=ros_context, parameter_overrides=overrides(**{
         'simulator.duration': 3.0, 'simulator.road': 'iso8608:C:seed=3',
-        'vehicle.tractor_imu': True}))
+        'vehicle.tractor_imu': True, 'start_nodes': ['bag_recorder']}))
     executor = make_executor(ros_context, recorder, plant)
     try:
         assert spin_until(executor, lambda: plant.finished, 60.0)
         assert spin_until(executor, lambda: all(recorder.counts[t] >= plant.k for t in
                                                 (*TRUTH, '/imu/tractor')), 20.0)
-        drain(executor, recorder)
+        recorder.stop()                  # what is queued, written; the bag closed
     finally:
         recorder.close()
         close(executor, plant, recorder)
