@@ -69,3 +69,15 @@ def finish(process: subprocess.Popen, timeout_s: float = 60.0) -> tuple[int, str
         out, err = process.communicate()
         raise AssertionError(f'process did not exit within {timeout_s} s: {err[-2000:]}')
     return process.returncode, out, err
+
+
+def recorder_received(collector, topics) -> dict[str, int]:
+    """What the bag recorder's latest /diagnostics (in ``collector``) says it received, per
+    topic of ``topics``."""
+    counts: dict[str, int] = {}
+    for msg in collector.messages['/diagnostics']:
+        for status in msg.status:
+            values = {v.key: v.value for v in status.values}
+            if status.name == 'bag_recorder':
+                counts = {t: int(values.get(f'{t}.received', '0')) for t in topics}
+    return counts

@@ -12,7 +12,7 @@ import signal
 import numpy as np
 import pytest
 
-from node_harness import Collector, close, finish, make_executor, run_main
+from node_harness import Collector, close, finish, make_executor, recorder_received, run_main
 from road_force_estimator.bagio import iter_messages
 from road_force_estimator.tools.estimate_bag import main as estimate_bag
 from road_force_estimator.tools.simulate_bag import main as simulate_bag
@@ -52,17 +52,6 @@ def read_outputs(bag) -> dict[str, list[tuple[int | None, tuple[float, ...]]]]:
             values = (msg.point.x, msg.point.y, msg.point.z)
         out[topic].append((stamp, tuple(float(v) for v in values)))
     return out
-
-
-def recorder_received(collector) -> dict[str, int]:
-    """What the recorder's latest /diagnostics says it received, per output topic."""
-    counts: dict[str, int] = {}
-    for msg in collector.messages['/diagnostics']:
-        for status in msg.status:
-            values = {v.key: v.value for v in status.values}
-            if status.name == 'bag_recorder':
-                counts = {t: int(values.get(f'{t}.received', '0')) for t in OUTPUTS}
-    return counts
 
 
 def input_status(collector) -> dict[str, str]:
@@ -114,8 +103,8 @@ def test_a_played_drive_gives_the_estimates_of_estimate_bag(ros_context, tmp_pat
         # dropped in a burst (a loaded machine) is sent again at the writer's next heartbeat,
         # seconds later; SIGINT writes what was received, not what is still to be repaired.
         assert spin_until(executor, lambda: min(
-            recorder_received(collector).values(), default=0) >= N, 30.0), \
-            recorder_received(collector)
+            recorder_received(collector, OUTPUTS).values(), default=0) >= N, 30.0), \
+            recorder_received(collector, OUTPUTS)
     finally:
         close(executor, collector)
         for process in (recorder, observer):
