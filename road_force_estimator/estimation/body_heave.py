@@ -8,7 +8,7 @@ standing (``|v| <`` :data:`STANDING_MPS`, the speed check's threshold) the state
 filter in distance does. In the band the error is ``|G(j Omega)|`` (first-order estimate ``n (w
 / Omega)^(n-1)``): 0.12 % at 30 m for the 100 m default (the estimate: 0.18 %), and the
 Tustin steps' frequency warping at the short waves (about 1 % at 0.5 m at 20 m/s and 1 kHz;
-both measured on :func:`step` by ``python -m bench.body_heave_band``). Why eight: a
+both measured on :func:`step` by ``python -m bench.studies.body_heave_band``). Why eight: a
 second-order high-pass's phase lead would cost tens of % of the band-passed profile; five
 lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free ISO C drive, eight 0.85 %
 (benchmark scenario C20-1k-0um when the order was chosen; the noisy ones improved too). A
@@ -248,7 +248,7 @@ def polynomial_fit(z, degree: int):
 
     Its values (:func:`polynomial_values`) differ from ``np.polyval(np.polyfit(tt, z, degree),
     tt)`` by at most 1.3e-14 of z's RMS (random data, m = 5 .. 3.6 M, degree 0 .. 5; 2.2e-15 on
-    :func:`zero_phase`'s output over 3.6 M samples: bench.body_heave_bits).
+    :func:`zero_phase`'s output over 3.6 M samples: docs/notes/body_heave_bits.md).
     """
     import numpy as np
 

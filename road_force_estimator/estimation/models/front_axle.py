@@ -101,8 +101,8 @@ estimates of that moment and is cached, never per sample.
   force-noise density, the road velocity's correlation length (``observer.
   road_correlation_length`` when > 0) and the factor between the estimated roughness and the
   one the filter assumes, tuned once on the benchmark's separate tuning drive at 0, 10 and
-  50 um (``python -m bench.targets --tune``) and interpolated in between (log-log). Without
-  noise the tuned road model is a near random walk of the road velocity (what a 1 ms
+  50 um (``python -m bench.accuracy.targets --tune``) and interpolated in between (log-log).
+  Without noise the tuned road model is a near random walk of the road velocity (what a 1 ms
   prediction needs); with noise, the envelope's ~0.8 m correlation.
 """
 from __future__ import annotations
@@ -140,10 +140,10 @@ __all__ = [
 #: SCHEDULE_NOISE_M the generalised force-noise density (N^2 s), the road velocity's
 #: correlation length (m) and the factor on the estimated roughness that the filter assumes;
 #: log-log interpolation in between, held beyond the ends (see :func:`scheduled`).
-#: Tuned on bench.scenarios.TUNING (ISO C, 20 m/s, 1 kHz, road seed 1001, noise seed 1002;
-#: no scored drive) at 0, 10 and 50 um: ``python -m bench.targets --tune`` (the procedure of
-#: bench.tune: grid, then pattern search, zero-latency load error as the objective; the best
-#: of two runs per level: 0.511 %, 17.08 %, 29.54 % on that drive; the optimum is flat: the
+#: Tuned on bench.accuracy.scenarios.TUNING (ISO C, 20 m/s, 1 kHz, road seed 1001, noise seed 1002;
+#: no scored drive) at 0, 10 and 50 um: ``python -m bench.accuracy.targets --tune`` (the procedure
+#: of bench.accuracy.tune: grid, then pattern search, zero-latency load error as the objective; the
+#: best of two runs per level: 0.511 %, 17.08 %, 29.54 % on that drive; the optimum is flat: the
 #: other run's values, e.g. 200 / 1.35 m / 3.4 at 10 um, give the same to 0.2 %). Without
 #: noise the tuned road velocity is a near random walk (force noise and bound-limited
 #: roughness factor: what a 1 ms prediction needs); with noise the envelope's correlation.
@@ -162,8 +162,8 @@ SCHEDULE_ROLL_MOMENT_PSD = (1e9, 1e7, 1e7)
 #: The profile's own tuning (issue 21): the road profile comes from a second filter on the same
 #: model, the same data and the same noise and roughness estimates, designed for the road
 #: instead of the load (the loads never see it). Measured on single benchmark scenarios
-#: (``python -m bench.run_benchmark --scenarios ...``): at zero latency the profile wants a
-#: filter that trusts the deflections more than the load's does (a rougher road assumed:
+#: (``python -m bench.accuracy.run_benchmark --scenarios ...``): at zero latency the profile wants
+#: a filter that trusts the deflections more than the load's does (a rougher road assumed:
 #: less lag, which is what the band-passed profile error is made of; A20-1k-10um 13.8 % ->
 #: 6.5 %, C20-1k-10um 6.7 -> 2.9, while the load would be 27 -> 50 %), offline the RTS
 #: smoother of a near-exact model (force noise tiny) with a slow unknown roll moment: the
@@ -378,15 +378,15 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
 
 
 #: Equivalent damping of the friction (:func:`friction_damping`): the factor on the
-#: statistical linearisation, tuned on bench/truck_effects.py (classes A and C, 20 m/s,
+#: statistical linearisation, tuned on bench/studies/truck_effects.py (classes A and C, 20 m/s,
 #: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
 #: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
 FRICTION_DAMPING_FACTOR = 1.5
 #: The same factor with a latency (``observer.latency`` > 0), where the friction of every
 #: step is evaluated again at the smoothed rates (:mod:`..observer.friction`, "Delayed
 #: correction"): the forward filter's friction errors are then corrected, and the error
-#: dynamics want less of the damping they would add (``python -m bench.friction_lag``, 10 ms,
-#: friction + 3 ms lag: 1.37 x the matched drive with 1.5, 1.30 with 1.0, 1.28 with 0.5).
+#: dynamics want less of the damping they would add (``python -m bench.studies.friction_lag``, 10
+#: ms, friction + 3 ms lag: 1.37 x the matched drive with 1.5, 1.30 with 1.0, 1.28 with 0.5).
 FRICTION_DAMPING_FACTOR_LATENCY = 0.5
 
 

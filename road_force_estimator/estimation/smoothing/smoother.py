@@ -45,7 +45,7 @@ WINDOW_SAMPLES = 2 ** 19
 #: edge starts: the smoother's backward pass (the slowest mode of ``A (I - K C)``; the forward
 #: pass carries its state from window to window) or the body heave's zero-phase high-pass
 #: (slowest pole ``w_c sin(pi / 8)``, ``w_c = 2 pi v / lambda_c``). Measured
-#: (``python -m bench.offline_windows --duration 240 --window 20``: ISO C, 20 m/s, 1 kHz,
+#: (``python -m bench.studies.offline_windows --duration 240 --window 20``: ISO C, 20 m/s, 1 kHz,
 #: 10 um / 0.1 mrad noise, slowest time constant 8.6 s, the smoother's): the largest
 #: difference from the one-piece smoother, relative to each field's RMS, is 1.3e-6 with 4,
 #: 2.5e-8 with 8, 3.7e-10 with 12 and 1.4e-11 with 16 time constants (rounding: 1.8e-11 with
@@ -53,7 +53,7 @@ WINDOW_SAMPLES = 2 ** 19
 WINDOW_OVERLAP_TAUS = 16.0
 #: By default, runs are smoothed in windows when longer than this many windows with their
 #: overlaps (below, one piece takes less memory than a window's temporaries and the overlaps'
-#: extra work: measured at 0.25 h, 1 kHz, ``bench/long_drive_memory.py``: 670 MB in windows
+#: extra work: measured at 0.25 h, 1 kHz, ``bench/probes/long_drive_memory.py``: 670 MB in windows
 #: against 621 MB in one piece).
 WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
