@@ -59,3 +59,16 @@ def test_every_script_is_in_a_group():
     loose = [p.name for p in (ROOT / 'bench').glob('*.py')
              if p.name not in ('__init__.py', 'output_hashes.py')]
     assert not loose, f'bench scripts outside {GROUPS}: {loose}'
+
+
+def test_every_study_has_its_note():
+    """An investigation is kept as the command of its note (docs/notes/<name>.md), which cites
+    it; a note names its script's command."""
+    missing = []
+    for path in sorted((ROOT / 'bench' / 'studies').glob('*.py')):
+        if path.stem == '__init__':
+            continue
+        note = ROOT / 'docs' / 'notes' / f'{path.stem}.md'
+        if not note.is_file() or f'bench.studies.{path.stem}' not in note.read_text():
+            missing.append(path.stem)
+    assert not missing, f'studies without a note that cites them: {missing}'

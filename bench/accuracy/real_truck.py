@@ -36,7 +36,7 @@ same file (a sensor lag the file states: their model's lag states, :class:`bench
 RollPlaneKalman`; deflections read from the mechanical zero: taken back to the file's
 equilibrium, its static loads, which the peers cannot estimate); load error in % of the true
 dynamic-load RMS, profile error in % of the 0.5-30 m band (:func:`bench.accuracy.scenarios.score`);
-the model-fit verdict (:mod:`.estimation.model_fit`) of the zero-latency run.
+the model-fit verdict (:mod:`road_force_estimator.estimation.fit_check`) of the zero-latency run.
 """
 from __future__ import annotations
 

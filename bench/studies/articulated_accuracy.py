@@ -10,6 +10,8 @@ MODEL.md's 5-axle combination on an ISO class C road, braking from 15 m/s at 3 m
 stop while in a 2 m/s^2 curve, 10 s at 1 kHz. Printed per RK4 step count: the RMS and the
 largest error of the wheel loads, and the RMS error relative to the dynamic-load RMS (the
 test's bound: 1e-4), overall and for the worst wheel.
+
+What it found: docs/notes/articulated_accuracy.md.
 """
 from __future__ import annotations
 

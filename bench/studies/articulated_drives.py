@@ -20,6 +20,8 @@ stretch), the static axle loads and the gross weight (t), the peak dynamic wheel
 axle (kN: the largest |F_n - F_c| of its two wheels), the trailer's peak |LTR| and peak
 |quasi-static LTR| (:mod:`road_force_estimator.core.unit_loads`), and the wheel samples at
 zero load (lift-off).
+
+What it found: docs/notes/articulated_drives.md.
 """
 from __future__ import annotations
 

@@ -11,6 +11,8 @@ statics of the spring system, and every mode of the small-motion model about equ
 energy (``fifth_wheel`` when the coupling's spring holds most of its strain energy), its
 undamped and damped frequency, damping ratio and pole's real part, and whether every pole is
 stable. ``--stuck``: the stick friction's springs k_f in parallel (as while the sliders hold).
+
+What it found: docs/notes/articulated_modes.md.
 """
 from __future__ import annotations
 

@@ -10,6 +10,8 @@ discrete filter itself: :func:`road_force_estimator.estimation.body_heave.step` 
 acceleration of a sine of that wavelength at the speed and rate given, its ``z_s`` fitted
 (least squares, after 60 s of settling) by amplitude and phase against the sine: the
 magnitude of the complex relative error ``|z_fit / z_true - 1|``.
+
+What it found: docs/notes/body_heave_band.md.
 """
 from __future__ import annotations
 

@@ -45,6 +45,8 @@ one of 22 parameter rows passes with a probability of about 0.14, 0.25, 0.34, 0.
 (independent rows): a row under 90 % is expected at a few tens of repeats; the RMS of the
 standardised errors and the pooled coverage are the sharper checks (the summary prints that
 probability for the run's N).
+
+What it found: docs/notes/calibration.md.
 """
 from __future__ import annotations
 

@@ -37,6 +37,8 @@ Per drive, from the data only (no truth, nothing from the time-domain fit):
 Prints per parameter the worst and RMS error over the repeats and the fit's time (alignment
 included). :mod:`bench.studies.calibration` ``--frequency-domain`` runs the same fit beside the
 time-domain calibration of each drive.
+
+What it found: docs/notes/calibration_frequency.md.
 """
 from __future__ import annotations
 

@@ -13,6 +13,8 @@ RMS). Per scheme and rate: the package's default L (3000 m/s^3) and the best L o
 The explicit schemes chatter by about ``lambda_0 L dt`` in z_2 (MODEL.md), so their error
 falls with the step; under noise the differentiator's error is of order
 ``L^(2/3) eps^(1/3)`` at any rate.
+
+What it found: docs/notes/chain_rate.md.
 """
 from __future__ import annotations
 

@@ -31,6 +31,8 @@ Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
 the seeds) and the ratio to the matched drive (the mean of the per-seed ratios, and the
 worst seed's).
+
+What it found: docs/notes/friction_lag.md.
 """
 from __future__ import annotations
 

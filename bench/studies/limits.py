@@ -15,6 +15,8 @@
 
 Scores as ``bench.accuracy.scenarios.score`` (load % of the true dynamic-load RMS, profile % of the
 band-passed truth's RMS).
+
+What it found: docs/notes/limits.md.
 """
 from __future__ import annotations
 

@@ -19,6 +19,8 @@ a shared machine disturb it less than wall time) of :meth:`Estimator.update` per
 (``--cost-samples`` samples per repeat), and of :func:`estimate_batch`.
 
 Run: ``.venv/bin/python -m bench.studies.observer_schemes [--duration 30] [--tune]``.
+
+What it found: docs/notes/observer_schemes.md.
 """
 from __future__ import annotations
 

@@ -10,6 +10,8 @@ time constants of the slowest transient (:func:`.smoother.window_samples`), for 
 ``--overlaps``; prints per overlap the largest difference of every estimated field, relative
 to that field's RMS over the drive (the worst field named), and the largest differences of
 the wheel loads (N), the road (m) and the LTR. The converged flags must agree exactly.
+
+What it found: docs/notes/offline_windows.md.
 """
 from __future__ import annotations
 

@@ -16,6 +16,8 @@ truly travelled (as :mod:`road_force_estimator.report` does), from 30 m after th
 skip. Figures: the lower wheel over the drive, the lowest 100 m segment, and the best offset
 of the last segment with its rating (how far the estimate has placed the road from where it
 is, found within the +-1 m search only: a low rating says it is further off).
+
+What it found: docs/notes/profile_correlation.md.
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ designs its smoother for the load pass's roughness times
 profile error (% of the 0.5-30 m band's RMS) and the mean IRI error per 100 m (%), and how many
 scenarios' profile is no worse than the peer's.
 
-Measured (this session): see the README's "What limits the remaining gaps".
+What it found: docs/notes/profile_offline_roughness.md.
 """
 from __future__ import annotations
 

@@ -16,9 +16,7 @@ model-based Kalman filter, the target's peer; it does not depend on the factor),
 prints the profile error (% of the 0.5-30 m band's RMS) and the largest |error| of the road's level
 (m, less its mean, after the scenario's convergence skip).
 
-Measured (this session): at 0.1 the noise-free drives match kf-model (C20-1k-0um 0.161 against
-0.161 %, D20-1k-0um 0.636 against 0.637) but the level wanders 1.4 and 2.8 m (0.34, 0.68 at 1)
-and the stop drive loses (43.9 -> 76.9 %); factor 1 is kept.
+What it found: docs/notes/profile_online_cutoff.md.
 """
 from __future__ import annotations
 

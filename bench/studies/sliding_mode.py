@@ -8,6 +8,8 @@ Per drive and setting (``observer.sliding_mode_gain``, ``estimation.model_core.S
 and ``SM_DEAD_ZONE``; the weight is ``gain / (1 + (sigma_q / SM_NOISE_SCALE)^2)``): the load
 error (% of the true dynamic-load RMS) / profile error (% of the 0.5-30 m band RMS). The
 defaults are (1, 1e-7, 3); gain 0 is the ablation.
+
+What it found: docs/notes/sliding_mode.md.
 """
 from __future__ import annotations
 

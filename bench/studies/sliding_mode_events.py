@@ -26,6 +26,8 @@ Figures: the load error in % of the true dynamic-load RMS over the drive (after 
 the RMS load error (N) in a window of +-0.25 s around the event (for the spikes: the
 +-0.1 s windows around them; for the roads without an event and the friction drives: the
 drive's RMS in N). Prints a Markdown table.
+
+What it found: docs/notes/sliding_mode_events.md.
 """
 from __future__ import annotations
 

@@ -28,6 +28,8 @@ dynamic-load RMS) against the observer given the true file with ``equilibrium`` 
 
 Run: ``.venv/bin/python -m bench.studies.static_load [--duration 100] [--friction 1500]
 [--friction-model stick] [--parked 1]``.
+
+What it found: docs/notes/static_load.md.
 """
 from __future__ import annotations
 

@@ -13,6 +13,8 @@ static-load offset settles). Estimated offline (``estimate_recording``, the nomi
 profile error (% of the 0.5-30 m band's RMS, :func:`bench.accuracy.scenarios.score`) over the drive
 and over each third of it (the last far from an early stop) and the load error (% of the
 dynamic RMS).
+
+What it found: docs/notes/stop_bias.md.
 """
 from __future__ import annotations
 

@@ -10,6 +10,8 @@ the true dynamic-load RMS after the 2 s skip): matched; leaf-spring friction of 
 within 1.25 x the matched drive's error in every mode. Prints a Markdown table.
 
     python -m bench.studies.truck_effects [--duration S] [--only NAME...]
+
+What it found: docs/notes/truck_effects.md.
 """
 from __future__ import annotations
 
