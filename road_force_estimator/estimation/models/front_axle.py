@@ -156,8 +156,9 @@ SCHEDULE_GD_FACTOR = (1e4, 1.41, 1.41)
 #: (a 3 m/s^2 step on ISO C without noise: the load error falls from 1e6 to 1e7 and little
 #: beyond), with noise the 1e7 that still follows ~1 m/s^2 per second of lateral acceleration
 #: change (M h x 1 m/s^3 over ~1 s) and leaves the straight drives' figures as 1e6 does (1e9
-#: would cost some); ``python -m bench.accuracy.run_benchmark --scenarios C20-lateral
-#: C20-1k-10um`` measures both.
+#: would cost some). The benchmark's C20-lateral is that step with 10 um of noise, beside the
+#: straight C20-1k-10um: ``python -m bench.accuracy.run_benchmark --scenarios C20-lateral
+#: C20-1k-10um``.
 SCHEDULE_ROLL_MOMENT_PSD = (1e9, 1e7, 1e7)
 
 #: The profile's own tuning (issue 21): the road profile comes from a second filter on the same
