@@ -1,4 +1,4 @@
-"""Light correctness tests of the benchmark's peers (bench/peers.py).
+"""Light correctness tests of the benchmark's peers (bench/accuracy/peers.py).
 
 References are independent of the code under test: analytic discretizations, the package's
 vehicle model (another module) for the physics, a Kalman filter's own error covariance for its
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from bench import peers
+from bench.accuracy import peers
 from road_force_estimator.core.parameters import VehicleParameters
 
 DT = 1e-3
@@ -291,7 +291,7 @@ class TestCallPeer:
 
 class TestTunedSettings:
     def test_settings_follow_the_noise_level(self):
-        from bench import tune
+        from bench.accuracy import tune
 
         doc = {'peers': {'lowpass-fd': {
             '0': {'settings': {'cutoff_hz': 400.0}},

@@ -1,13 +1,13 @@
-"""bench/profile_correlation.py: its rating of a perfect estimate (1, the offset 0) and of one
-placed by a speed read 1.5 % high (the rating collapses), on a short drive. No timing."""
+"""bench/studies/profile_correlation.py: its rating of a perfect estimate (1, the offset 0) and of
+one placed by a speed read 1.5 % high (the rating collapses), on a short drive. No timing."""
 from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from bench import profile_correlation as bpc
-from bench.scenarios import build_drive, scenario_by_name
+from bench.studies import profile_correlation as bpc
+from bench.accuracy.scenarios import build_drive, scenario_by_name
 
 
 @pytest.fixture(scope='module')

@@ -1,5 +1,5 @@
-"""bench/real_truck.py: the drives it describes are the ones it builds (parameters against the
-package defaults), a drive needing a parameter the package lacks is listed and skipped, and
+"""bench/accuracy/real_truck.py: the drives it describes are the ones it builds (parameters against
+the package defaults), a drive needing a parameter the package lacks is listed and skipped, and
 on (e) the nominal file trips model_fit while the true file does not."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from bench import real_truck as rt
+from bench.accuracy import real_truck as rt
 from road_force_estimator.core.parameters import VehicleParameters
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 import re
 
-from bench import readme_headline
+from bench.accuracy import readme_headline
 
 ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r'\]\(([^)#\s]+)(?:#[^)]*)?\)')
@@ -27,7 +27,7 @@ def test_every_relative_link_resolves():
 
 def test_readme_headline_is_the_benchmark_pages():
     """The README's first-screen figures are the strings of docs/benchmark.md's headline table
-    (written by bench.run_benchmark), row by row."""
+    (written by bench.accuracy.run_benchmark), row by row."""
     readme = (ROOT / 'README.md').read_text(encoding='utf-8')
     page = (ROOT / 'docs' / 'benchmark.md').read_text(encoding='utf-8')
     start = readme.index(readme_headline.BEGIN)

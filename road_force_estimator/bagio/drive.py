@@ -52,7 +52,8 @@ from road_force_estimator.interfaces import (
     qos_kind,
 )
 
-__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag', 'fix_stream']
+__all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag', 'fix_stream',
+           'measurement_streams']
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -247,7 +248,7 @@ def write_drive_bag(path: str | Path, trajectory, q_meas: np.ndarray, roll_meas:
     custom.update(custom_data or {})
     stamp_cols = stamp_columns(stamps)
     with BagWriter(path, overwrite=overwrite, custom_data=custom) as bag:
-        streams = _measurement_streams(stamps, stamp_cols, q, roll, speed)
+        streams = measurement_streams(stamps, stamp_cols, q, roll, speed)
         if ground_truth:
             streams += _truth_streams(trajectory, stamps, stamp_cols, track_width_m)
         if fixes is not None:
@@ -281,7 +282,7 @@ def _measurements(trajectory, stamps: np.ndarray, q_meas, roll_meas, speed_mps):
     return q, roll, speed
 
 
-def _measurement_streams(stamps, stamp_cols, q, roll, speed) -> list:
+def measurement_streams(stamps, stamp_cols, q, roll, speed) -> list:
     """The /vehicle/twist and /suspension/deflections streams (twist first: at equal stamps a
     replay delivers the speed before the deflections)."""
     n = stamps.size

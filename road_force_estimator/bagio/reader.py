@@ -6,7 +6,7 @@ corrupt yields every message it can trust and one line per break: a chunk that f
 skipped and reading goes on; a cut or corrupt record outside chunks ends the file. The column
 readers take a chunk whose message index accounts for every record in it through that index,
 about five times faster than the walk and with the same result; any other chunk is walked
-(bench/bag_read_speed.py). Messages come in file order, which is log-time order for the bags
+(bench/probes/bag_read_speed.py). Messages come in file order, which is log-time order for the bags
 rosbag2, the bag_recorder node and this package write; the files of a split bag in the order of
 their first messages, whatever order ``metadata.yaml`` lists them in (an issue says so). Only
 regular files inside the bag folder are read (a FIFO, a device, or a ``metadata.yaml`` entry

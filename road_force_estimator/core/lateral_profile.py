@@ -81,10 +81,6 @@ class LateralProfile:
     def __call__(self, t_s: float) -> float:
         return float(self.at(t_s))
 
-    @property
-    def peak_mps2(self) -> float:
-        return float(max(abs(a) for a in self.accel_mps2))
-
 
 def parse_lateral_profile(text: str) -> LateralProfile | None:
     """The profile of ``simulator.lateral_profile`` (None for ``""``).

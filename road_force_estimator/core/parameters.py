@@ -127,7 +127,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.sliding_mode_gain', 'double', 0.0, '',
        'weight of the sliding-mode (Levant) injection of the model observer, weighted down '
        'by the noise level; 0 = off (the default: the Kalman unknown-input observer alone; '
-       'python -m bench.sliding_mode_events measures it)', 0.0, 10.0),
+       'python -m bench.studies.sliding_mode_events measures it)', 0.0, 10.0),
     _p('observer.noise.deflection', 'double', 0.0, 'm',
        'deflection sensor noise std for the model observer; 0 = estimate online', 0.0, 0.1),
     _p('observer.noise.roll', 'double', 0.0, 'rad',

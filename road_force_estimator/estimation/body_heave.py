@@ -8,10 +8,11 @@ standing (``|v| <`` :data:`STANDING_MPS`, the speed check's threshold) the state
 filter in distance does. In the band the error is ``|G(j Omega)|`` (first-order estimate ``n (w
 / Omega)^(n-1)``): 0.12 % at 30 m for the 100 m default (the estimate: 0.18 %), and the
 Tustin steps' frequency warping at the short waves (about 1 % at 0.5 m at 20 m/s and 1 kHz;
-both measured on :func:`step` by ``python -m bench.body_heave_band``). Why eight: a
+both measured on :func:`step` by ``python -m bench.studies.body_heave_band``). Why eight: a
 second-order high-pass's phase lead would cost tens of % of the band-passed profile; five
-lags, ``5 (w / Omega)^4``, cost 3.1 % of it on a noise-free ISO C drive, eight 0.85 %
-(benchmark scenario C20-1k-0um when the order was chosen; the noisy ones improved too). A
+lags, ``5 (w / Omega)^4``, cost several times what eight cost on the noise-free benchmark
+scenario when the order was chosen (``python -m bench.accuracy.run_benchmark --scenarios
+C20-1k-0um``; the noisy ones improved too). A
 constant acceleration bias ``b`` settles at ``C(n, 2) b / w^2 = 28 b / w^2``. The price,
 outside the band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; five poles:
 1.9) and is -3 dB near ``w / 5.9``, and a start takes longer to settle (``~t^7 exp(-w t)``:
@@ -20,7 +21,8 @@ outside the band: ``|H|`` peaks at 2.5 near ``0.52 w`` (waves of ~1.9 lambda_c; 
 The filter runs in distance: when the cutoff rises with the speed, the states
 ``w^(k-2) y_k`` are kept (so ``z_s`` is continuous and ``dz_s`` scales with the speed; when
 it falls the ``y_k`` are, so ``z_s`` shrinks: neither amplifies), and standing it holds.
-At a constant speed nothing of this runs. (C20-stop: profile error 161920 % -> 34 %.)
+At a constant speed nothing of this runs. (What it does on a stop: ``python -m
+bench.accuracy.run_benchmark --scenarios C20-stop``.)
 
 The state is a plain tuple ``(dd z_s of the last step, its cutoff w (0 = none yet), y_1..y_8,
 z_s, dz_s)`` (``z_s`` and ``dz_s`` last) so that the per-sample estimators pay one function
@@ -248,7 +250,7 @@ def polynomial_fit(z, degree: int):
 
     Its values (:func:`polynomial_values`) differ from ``np.polyval(np.polyfit(tt, z, degree),
     tt)`` by at most 1.3e-14 of z's RMS (random data, m = 5 .. 3.6 M, degree 0 .. 5; 2.2e-15 on
-    :func:`zero_phase`'s output over 3.6 M samples: bench.body_heave_bits).
+    :func:`zero_phase`'s output over 3.6 M samples: docs/notes/body_heave_bits.md).
     """
     import numpy as np
 
@@ -321,8 +323,8 @@ def _rest_correction(t, z, standing, level):
     stretches (a constant acceleration bias), before the first and after the last going on with
     the acceleration bias fitted on it (``bias``, m/s^2; held constant there, a bias the whole
     drive long, as the profile pass's under ``zero_load`` while its offset settles, made a kink
-    of the rate at the stop: bench real_truck (f) 207 / 229 %, now 27 / 8.8 %). None without
-    such a stretch."""
+    of the rate at the stop: the real-truck family's drive with every effect at once, ``python
+    -m bench.accuracy.real_truck --drives all``). None without such a stretch."""
     import numpy as np
 
     knots_t, knots_c, bias = [], [], []
@@ -544,10 +546,11 @@ def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
     filter's edge transients and the double integral's wander as a smooth curve over the whole
     run: metres on a 120 m run at 10 km; waves of the run's length, which no band-passed figure
     sees). A stop (:func:`rest_stretches`): :func:`in_distance` at that wavelength with
-    ``level`` (run in time with one cutoff, the slow stretches lost their metre waves: C20-stop
-    55.4 %, now 0.88 %; kf-model-rts 4.17 %). A speed that changes without a stop to correct
-    the rate with: :func:`zero_phase` at ``cutoff_wavelength_m`` (the long one lets the drift
-    of the slow stretches into the profile: C20-stop 164 % against 55 %). ``accel`` (m/s^2),
+    ``level`` (run in time with one cutoff, the slow stretches lost their metre waves). A speed
+    that changes without a stop to correct the rate with: :func:`zero_phase` at
+    ``cutoff_wavelength_m`` (the long one lets the drift of the slow stretches into the
+    profile). Both measured on the stop scenario beside the RTS peer: ``python -m
+    bench.accuracy.run_benchmark --scenarios C20-stop``. ``accel`` (m/s^2),
     ``level`` (m), times ``t_s`` (s), speeds ``v_mps`` (m/s): (m,); ``dt_s`` the run's step
     (s). Extra memory: one whole-run float64 array steady (the result), three with a stop.
     """

@@ -8,10 +8,10 @@ The method is ``observer.discretization`` (the cores: :mod:`.methods`):
   paper's roll-plane model (the road and an unknown roll moment as states), its noise and
   road roughness estimated online; an optional sliding-mode injection on the output error
   (``observer.sliding_mode_gain``, off by default). Its accuracy per road, noise level and
-  latency: ``python -m bench.run_benchmark --docs docs/benchmark.md``.
+  latency: ``python -m bench.accuracy.run_benchmark --docs docs/benchmark.md``.
 - ``'euler'`` (the paper's scheme), ``'taylor'``, ``'implicit'``, ``'filtering'`` (Levant and
   Livne's filtering differentiators): the differentiator chain of :mod:`.chain`, with that
-  scheme (how each converges with the rate: ``python -m bench.chain_rate``).
+  scheme (how each converges with the rate: ``python -m bench.studies.chain_rate``).
 
 Both end in MODEL.md's reconstruction (:mod:`.reconstruction`; the body heave of
 :mod:`.body_heave`, the LTR of :mod:`.reconstruction`).

@@ -14,7 +14,8 @@ the previous row (zeros before the first accepted one). Concatenated, the pieces
 with ``eager`` (``estimate_bag``'s stream) a run goes in windows once it is longer than one
 window and its overlap (~11 min at 1 kHz; :func:`.smoother.smooth` by default from ~55 min),
 and the windows' own difference from a smoother over the whole run in one go is ~1e-11 of
-each field's RMS (:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m bench.offline_windows``).
+each field's RMS (:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m
+bench.studies.offline_windows``).
 
 Only the model's smoother (``observer.discretization: model``, the default) streams; the
 differentiator schemes' zero-phase chain (:func:`.offline.estimate_offline`) is one piece.

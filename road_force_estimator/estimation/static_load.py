@@ -18,13 +18,13 @@ within a few tau. The estimated F_c,i go to the observer's reconstruction (the l
 core gets each reading minus an offset that follows the mean through a further first-order
 lag of :data:`CORE_OFFSET_TIME_CONSTANT_S` (started at the first reading). The model observer
 has no state for a deflection offset: an offset error of 1 mm on both sides costs about 10
-points of dynamic-load error, and it takes a change of the offset for a motion. Measured
-(class C, 20 m/s, 10 um; load error in % of the dynamic RMS, the observer given the true file
-with equilibrium deflections in brackets): from the plant's equilibrium start (a truck that
-sets off from standing: its first reading is the scale), 12 s: the running mean fed directly
-22.5 (17.4: its 1/n phase wanders a few mm in the first second), lagged by 2 s 21.3, by 10 s
-17.8, by 30 s 17.2; observer started 20 s into the drive (the first reading 5.6 / 1.8 mm off),
-30 s: lagged by 3 s 17.3 (14.7), 10 s 33.9, 30 s 57.6. 10 s is the compromise; a restart
+points of dynamic-load error, and it takes a change of the offset for a motion. From the
+plant's equilibrium start (a truck that sets off from standing: its first reading is the
+scale) a longer lag is better (the running mean's 1/n phase wanders a few mm in the first
+second); from a start in mid-drive (the first reading mm off) a shorter one is, and 30 s
+costs several times the load error of 3 s. 10 s is the compromise (class C, 20 m/s, 10 um:
+``python -m bench.studies.static_load --classes C --modes online --start 20 --duration 30``,
+and ``--start 0 --duration 12``). A restart
 after a gap keeps the mean and the offset (the load has not changed).
 
 The sprung mass moves the observer's model: when it has moved more than

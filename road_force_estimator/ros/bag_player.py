@@ -66,7 +66,7 @@ MAX_DEPTH = 100_000
 #: The fastest /clock (Hz): a publication takes tens of microseconds, a faster clock would
 #: slow the playback down (1 MHz played 7.5 times slower than asked) or stop it.
 MAX_CLOCK_HZ = 10_000.0
-#: Lateness values kept for bench/bag_player_timing.py (the newest; older ones dropped, so
+#: Lateness values kept for bench/probes/bag_player_timing.py (the newest; older ones dropped, so
 #: that --loop runs for ever in bounded memory).
 LATENESS_KEPT = 20_000
 #: A loop of a bag lasts its span plus its mean spacing between messages (bag time), so the
@@ -219,7 +219,7 @@ class BagPlayer(Node):
     :attr:`done` turns true at the end (or on :meth:`stop`); :attr:`published` counts the
     messages published per output topic; :attr:`lateness_s` (and :attr:`clock_lateness_s`)
     hold, per message (per /clock tick), how late it was published against its schedule (s),
-    and :attr:`schedule` the schedule's origin, for bench/bag_player_timing.py.
+    and :attr:`schedule` the schedule's origin, for bench/probes/bag_player_timing.py.
     """
 
     def __init__(self, playback, options, **kwargs):

@@ -4,7 +4,7 @@ rclpy 7.1's own SIGINT handler shuts the context down before a node can act, so 
 install their own: SIGINT/SIGTERM stop the spin loop, then ``finish`` runs while the context
 is still valid (publish what is held back, drain a queue, wait for acknowledgements), then the
 node is destroyed and rclpy shut down. The executor is rclpy's EventsExecutor (its callbacks
-cost a fraction of the SingleThreadedExecutor's: bench/node_latency.py), spun with
+cost a fraction of the SingleThreadedExecutor's: bench/probes/node_latency.py), spun with
 ``spin_once`` because its ``spin()`` busy-waits in rclpy 7.1.6.
 """
 from __future__ import annotations

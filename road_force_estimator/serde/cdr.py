@@ -8,7 +8,7 @@ number, the bytes of every length and string) is found by walking the CDR stream
 numbers are then written into, or read out of, an (n, size) byte array with numpy. A received
 message whose lengths or strings differ from the template is parsed on its own, so the fast path
 never misreads one (test_cdr checks the bytes against rosbags' ``serialize_cdr`` and rclpy's
-``serialize_message``; bench/bag_io_speed.py measures both paths).
+``serialize_message``; bench/probes/bag_io_speed.py measures both paths).
 
 Message definitions, type hashes and the serialization of arbitrary messages come from the
 rosbags typestore for ROS 2 Jazzy (:data:`TYPESTORE`, chosen explicitly, never LATEST). Stamps

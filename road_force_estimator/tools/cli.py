@@ -40,10 +40,6 @@ MODES = ('online', 'offline')
 PROGRESS_MIN_SAMPLES = 50_000
 
 
-#: The arguments of the command :func:`run_main` runs (for :func:`command_line`).
-_ARGV: list[str] = []
-
-
 class UsageError(Exception):
     """A bad command line (exit status 2)."""
 
@@ -94,7 +90,6 @@ def run_main(prog: str, parser: argparse.ArgumentParser,
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
-        _ARGV[:] = sys.argv[1:] if argv is None else list(argv)     # for command_line()
         return body(parser.parse_args(argv))
     except SystemExit as done:          # --help
         return int(done.code or 0)
@@ -255,11 +250,11 @@ def load_estimator_parameters(path: str | None, node_names: Sequence[str],
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
 
 
-def command_line(prog: str) -> str:
-    """The command line being run by :func:`run_main` (``prog`` and its arguments,
-    shell-quoted), for reports."""
+def command_line(prog: str, argv: Sequence[str] | None) -> str:
+    """A command line for reports: ``prog`` and its arguments ``argv`` (``main``'s, which
+    :func:`run_main` parses: ``sys.argv[1:]`` when None), shell-quoted."""
     import shlex
-    return ' '.join(shlex.quote(a) for a in [prog, *_ARGV])
+    return ' '.join(shlex.quote(a) for a in [prog, *(sys.argv[1:] if argv is None else argv)])
 
 
 class NullBar:

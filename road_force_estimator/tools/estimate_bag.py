@@ -434,11 +434,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
     from road_force_estimator.bagio import BagReadError, BagWriteError
 
-    return cli.run_main(PROG, build_parser(), _main, argv,
+    return cli.run_main(PROG, build_parser(), lambda args: _main(args, argv), argv,
                         {(InputError, ValueError, BagReadError, BagWriteError, OSError): 1})
 
 
-def _main(args: argparse.Namespace) -> int:
+def _main(args: argparse.Namespace, argv: list[str] | None) -> int:
     """The command's work: options, parameters, reference, :func:`run`, the headline."""
     segment_length_m = cli.segment_length(args)
     vehicle, observer = load_parameters(args.params_file, args.overrides)
@@ -460,7 +460,7 @@ def _main(args: argparse.Namespace) -> int:
                  reference_offset_m=args.reference_offset, figures=not args.no_figures,
                  force=args.force, progress=not args.no_progress, units=args.units,
                  run_info={'params_file': args.params_file, 'overrides': list(args.overrides),
-                           'command': cli.command_line(PROG)})
+                           'command': cli.command_line(PROG, argv)})
     for line in result.warnings:
         print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
     for line in result.notes:

@@ -255,10 +255,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_fleet``; the exit status (0 all done, 1 some drives failed, 2 bad
     invocation)."""
-    return cli.run_main(PROG, build_parser(), _main, argv, {(FleetError,): 2})
+    return cli.run_main(PROG, build_parser(), lambda args: _main(args, argv), argv,
+                        {(FleetError,): 2})
 
 
-def _main(args: argparse.Namespace) -> int:
+def _main(args: argparse.Namespace, argv: list[str] | None) -> int:
     """The command's work: the parameters, :func:`run_fleet`, the one-line result."""
     from road_force_estimator.tools.estimate_bag import load_parameters
 
@@ -268,7 +269,7 @@ def _main(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as err:
         raise FleetError(cli.one_line(err)) from None
     run_info = {'params_file': args.params_file, 'overrides': list(args.overrides),
-                'command': cli.command_line(PROG)}
+                'command': cli.command_line(PROG, argv)}
     result = run_fleet(args.inputs, args.output, vehicle=vehicle, observer=observer,
                        mode=args.mode, segment_length_m=segment_length_m, units=args.units,
                        run_info=run_info,

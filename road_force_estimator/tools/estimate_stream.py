@@ -41,7 +41,7 @@ FIGURES_NOTE = ('figures: the profile and overview show the detail window (a dri
 
 
 #: What a sample costs the one-piece path at its peak, figures on (bytes; measured 545
-#: offline and ~720 online, ``bench/long_drive_memory.py``), rounded up.
+#: offline and ~720 online, ``bench/probes/long_drive_memory.py``), rounded up.
 ONE_PIECE_BYTES_PER_SAMPLE = 1000
 
 

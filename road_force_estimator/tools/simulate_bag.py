@@ -48,7 +48,8 @@ import numpy as np
 
 from road_force_estimator.tools import cli, output_folder
 
-__all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'twist_speed', 'main']
+__all__ = ['PROG', 'build_parser', 'parameters_from', 'simulate', 'twist_speed', 'gnss_fixes',
+           'main']
 
 PROG = 'simulate_bag'
 #: Peak memory of a simulated sample and of a synthetic road point (bytes), rounded up from
@@ -233,7 +234,7 @@ def simulate(vehicle, sim, *, lateral=None, progress: bool = False):
     else:       # a pendulum reads a_y too
         q_meas, roll_meas = sensors.measure(traj.q_m, traj.roll_rad, traj.lateral_accel_mps2)
     traj.sensors = sensors
-    fixes = _fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
+    fixes = gnss_fixes(traj, sim, profile) if sim.gnss_rate_hz > 0.0 else None
     _jitter_stamps(traj, sensors)
     requested = int(math.floor(sim.duration_s * sim.rate_hz + 1e-9)) + 1
     reason = ''
@@ -257,7 +258,7 @@ def _main_articulated(args: argparse.Namespace, values: dict, lateral) -> int:
         Path(args.output), PROG, force=args.force, owned=_written_here,
         inputs=[road_path] if road_path.exists() else [])
     target.check()
-    result = articulated.simulate(drive, route=_fixes, progress=not args.no_progress,
+    result = articulated.simulate(drive, route=gnss_fixes, progress=not args.no_progress,
                                   prog=PROG)
     custom = articulated.custom_data(drive, result, PROG)
     if lateral is not None:
@@ -310,7 +311,7 @@ def _jitter_stamps(traj, sensors) -> None:
             (traj.t_s + sensors.stamp_offsets_s(traj.t_s.size)) * 1e9).astype(np.int64)
 
 
-def _fixes(traj, sim, profile):
+def gnss_fixes(traj, sim, profile):
     """The fixes of a drive (``core.gnss.GnssRoute``): one at the first sample of each GNSS
     period, on the true route, with the receiver noise."""
     from road_force_estimator.core.gnss import FixNoise, route

@@ -154,7 +154,7 @@ def test_noisy_drives_intervals_cover_the_truth(road):
     residuals' covariance: on three noise seeds the 95 % intervals of the 11 fitted vehicle
     parameters hold the truth at least 30 times in 33 (33 independent honest intervals fail
     this with a probability of 8 %, the seeds are fixed; the coverage itself is measured by
-    bench.calibration). The friction and sensor-lag rows, 'fixed' at their true 0, are not
+    bench.studies.calibration). The friction and sensor-lag rows, 'fixed' at their true 0, are not
     counted: their zero-width intervals hold the truth trivially."""
     traj = simulate(TRUCK, road, speed_mps=SPEED, rate_hz=RATE, duration_s=12.0,
                     tire_envelope_m=0.25, start_m=START)

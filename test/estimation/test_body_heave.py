@@ -170,10 +170,10 @@ def test_rest_stretches_count_the_stops_long_enough():
 @pytest.mark.parametrize('decay_s, bound', [(math.inf, 0.005), (25.0, 0.1)])
 def test_in_distance_over_a_stop_with_an_acceleration_bias(decay_s, bound):
     # an acceleration that carries a bias the whole drive, as the profile pass's does under
-    # deflection_reference zero_load while its offset settles (drive (f) of bench.real_truck:
-    # -45 to -19 mm/s^2 over 20 s): the stop's fit sees it and it goes on before and after
-    # (held there instead, the rate's kink at the stop was the profile's error: here 264 %
-    # for a constant bias, 164 % for one decaying over 25 s; now 0.12 % and 6.1 %: what
+    # deflection_reference zero_load while its offset settles (drive (f) of
+    # bench.accuracy.real_truck: -45 to -19 mm/s^2 over 20 s): the stop's fit sees it and it goes
+    # on before and after (held there instead, the rate's kink at the stop was the profile's error:
+    # here 264 % for a constant bias, 164 % for one decaying over 25 s; now 0.12 % and 6.1 %: what
     # changes of the bias in time leave)
     from road_force_estimator.core import metrics
 

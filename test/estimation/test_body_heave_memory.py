@@ -2,7 +2,7 @@
 scipy primitives (the whole-run way: ``np.polyfit``, ``sosfilt``, ``sosfiltfilt``, ``cumsum``).
 
 Bit for bit where no whole-run polynomial is fitted; with the fit within a bound of the RMS of
-what the trend is taken off. (The memory itself is measured by ``bench.body_heave_memory``,
+what the trend is taken off. (The memory itself is measured by ``bench.probes.body_heave_memory``,
 not here: the numbers are in the report of that work.)
 """
 from __future__ import annotations
@@ -156,7 +156,7 @@ def test_offline_profile_steady_is_zero_phase_less_polyfit():
 def test_offline_profile_over_stops_is_in_distance_the_whole_run_way(degree):
     # 200 s, two stops: the stop path (in_distance at 100 m: its high-pass at 4e-4 of the grid's
     # rate; at the 10 km of the smoother, 4e-6, the high-pass's own rounding is ~1e-9 of the
-    # double integral: bench.body_heave_bits)
+    # double integral: docs/notes/body_heave_bits.md)
     m = 3 * CHUNK + 11
     a, level, t, v = _run(m, True)
     assert body_heave.rest_stretches(v) == 2

@@ -187,7 +187,8 @@ def test_friction_and_lag_together_cost_little_more_than_the_matched_drive():
     # Issue 30: friction (1.5 kN per spring) and a 3 ms lag of every sensor, both stated in
     # the file, against the matched drive (neither) on the same road and noise: within 1.3 x
     # its load error at 10 ms and offline (measured 1.21 and 1.16 here; before the delayed
-    # friction correction 1.61 and 1.16; `python -m bench.friction_lag` on three 20 s drives).
+    # friction correction 1.61 and 1.16; `python -m bench.studies.friction_lag` on three 20 s
+    # drives).
     both = VehicleParameters(leaf_spring_friction_n=(1500.0, 1500.0),
                              sensor_time_constant_s=(0.003, 0.003))
     errs = {}

@@ -21,7 +21,8 @@ from ros_helpers import spin_until
 OUTPUTS = ['/wheel_load/left', '/wheel_load/right', '/road_profile/left', '/road_profile/right',
            '/load_transfer_ratio', '/observer/states']
 N = 801  # 0.8 s at 1 kHz: fits the observer's input queue (1000), so that no machine load
-#          can make it lose one at --rate 5 (the rate it sustains: bench/bag_player_timing.py)
+#          can make it lose one at --rate 5 (the rate it sustains:
+# bench/probes/bag_player_timing.py)
 
 
 @pytest.fixture(scope='module')

@@ -520,10 +520,10 @@ def test_log_lines_and_diagnostic_values_are_bounded(rig, capfd):
 def test_a_flood_keeps_memory_and_diagnostics(tmp_path):
     """Issue 28: under a 13.5 kHz flood the node's memory grew from 131 to 359 MB and its
     /diagnostics stopped (2 messages in 120 s): the message events queued up ahead of its
-    timer. bench.observer_flood, short: an observer process flooded at 15 kHz for 4 s."""
+    timer. bench.probes.observer_flood, short: an observer process flooded at 15 kHz for 4 s."""
     import json
 
-    from bench import observer_flood
+    from bench.probes import observer_flood
     out = tmp_path / 'flood.json'
     assert observer_flood.main(['--rate', '15000', '--seconds', '4', '--steady', '3',
                                 '--json', str(out)]) == 0

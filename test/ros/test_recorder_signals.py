@@ -21,7 +21,7 @@ import time
 import pytest
 import yaml
 
-from bench.recorder_loss import TWO, Talker, bag_numbers, loss, record_once
+from bench.probes.recorder_loss import TWO, Talker, bag_numbers, loss, record_once
 from road_force_estimator import bagio
 from road_force_estimator.interfaces import TOPIC_TYPES
 

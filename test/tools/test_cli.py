@@ -150,8 +150,28 @@ class TestChecks:
         args = estimate_fleet.build_parser().parse_args(['x', '-o', 'y'])   # no --params-file
         assert args.params_file is None and cli.segment_length(args) == 100.0
 
-    def test_command_line_is_what_run_main_ran(self, capsys):
+    def test_command_line_is_the_arguments_given(self, monkeypatch):
+        assert cli.command_line('demo', ['2', '-o', 'a b']) == "demo 2 -o 'a b'"
+        monkeypatch.setattr('sys.argv', ['x', '3', "it's"])     # main(None): the process's
+        assert cli.command_line('demo', None) == """demo 3 'it'"'"'s'"""
+
+    def test_the_estimate_commands_report_their_own_arguments(self, monkeypatch, capsys):
+        """estimate_bag and estimate_fleet give the report ``main``'s argv, run after run in
+        one process (nothing kept from the run before)."""
+        from road_force_estimator.tools import estimate_bag, estimate_fleet
         seen = []
-        rc, _ = run(['2', '-o', 'a b'], lambda args: seen.append(cli.command_line('demo')) or 0,
-                    capsys)
-        assert rc == 0 and seen == ["demo 2 -o 'a b'"]
+
+        def stop(*args, run_info, **kw):
+            seen.append(run_info['command'])
+            raise ValueError('stop here')
+
+        monkeypatch.setattr(estimate_bag, 'run', stop)
+        monkeypatch.setattr(estimate_fleet, 'run_fleet', stop)
+        monkeypatch.setattr('sys.argv', ['estimate_bag', 'from', 'the', 'shell'])
+        assert estimate_bag.main(['a.bag', '-o', 'out dir']) == 1
+        assert estimate_bag.main(['b.bag', '-o', 'out']) == 1
+        with pytest.raises(ValueError):
+            estimate_fleet.main(['c.bag', 'd.bag', '-o', 'fleet'])
+        assert estimate_bag.main(None) == 2              # sys.argv's: not a valid command line
+        assert seen == ["estimate_bag a.bag -o 'out dir'", 'estimate_bag b.bag -o out',
+                        'estimate_fleet c.bag d.bag -o fleet']

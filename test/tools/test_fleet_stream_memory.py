@@ -8,7 +8,7 @@ from road_force_estimator.tools.fleet_drives import DriveTask, process_drive
 
 #: The worker's memory limit (Dask terminates a worker at 95 % of it).
 LIMIT_MB = 400
-#: 0.15 h at 1 kHz: in one piece ~545-720 bytes a sample (bench.long_drive_memory, issue 21)
+#: 0.15 h at 1 kHz: in one piece ~545-720 bytes a sample (bench.probes.long_drive_memory, issue 21)
 #: plus ~150 MB of interpreter: 430-520 MB, over the limit.
 HOURS = 0.15
 
@@ -20,7 +20,7 @@ def _threshold():
 
 def test_worker_stays_under_its_memory_limit(tmp_path):
     distributed = pytest.importorskip('distributed')
-    from bench.long_drive_memory import make_drive
+    from bench.probes.long_drive_memory import make_drive
 
     n = make_drive(tmp_path / 'long', HOURS, 60.0)
     assert n * 545 / 2**20 + 150 > LIMIT_MB                 # one piece would not fit
@@ -43,4 +43,4 @@ def test_worker_stays_under_its_memory_limit(tmp_path):
     # The worker's memory limit made the drive go block by block and it completed there.
     # Its peak RSS is not asserted: alone it is 274 MB, inside the suite 320-460 MB (the
     # spawned worker's heap varies with the parent process, unexplained); the memory per
-    # sample is measured by bench.long_drive_memory.
+    # sample is measured by bench.probes.long_drive_memory.

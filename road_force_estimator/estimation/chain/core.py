@@ -47,8 +47,8 @@ def settling_time_s(lipschitz_deflection: float, lipschitz_roll: float, dt_s: fl
     After a start at ``(f, 0, 0)`` the initial error is the signal's own ``f''``; we take the
     largest accelerations a rough road gives the front axle (100 m/s^2 of deflection,
     10 rad/s^2 of roll) and a factor 3, with a floor of 20 sample periods and of 50 ms. With
-    the defaults (3000 m/s^3, 200 rad/s^3) that is 0.15 s; measured on ISO class C at 20 m/s
-    from starts in mid-drive (``bench/observer_schemes.py``): t_0 <= 0.04 s.
+    the defaults (3000 m/s^3, 200 rad/s^3) that is 0.15 s, well above what starts in mid-drive
+    on ISO class C at 20 m/s take (``python -m bench.studies.observer_schemes``).
     """
     t_q = 3.0 * _ACCEL_SCALE[0] / lipschitz_deflection
     t_phi = 3.0 * _ACCEL_SCALE[1] / lipschitz_roll

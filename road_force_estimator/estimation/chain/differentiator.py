@@ -102,7 +102,7 @@ __all__ = [
 #: Levant and Livne's filtering differentiator (its own state: :func:`filtering_step`).
 SCHEMES = ('euler', 'taylor', 'implicit', 'filtering')
 #: Filtering order n_f of the 'filtering' scheme: 2, the best of 1-3 in the chain on the
-#: benchmark's class C drive at 1 kHz with 10 um of noise (``python -m bench.chain_rate
+#: benchmark's class C drive at 1 kHz with 10 um of noise (``python -m bench.studies.chain_rate
 #: --rates 1000 --filtering-order N``).
 FILTERING_ORDER = 2
 #: Gains ``lambda_0 .. lambda_n`` of the non-recursive n-th order differentiator, by n: the

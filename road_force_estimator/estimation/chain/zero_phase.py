@@ -41,7 +41,7 @@ zero-phase filters lack data on one side.
 
 ``estimate_bag --mode offline`` runs this chain when ``observer.discretization`` is a chain
 scheme (by default it runs the model observer's smoother, :func:`..offline.estimate_recording`,
-whose accuracy ``python -m bench.run_benchmark --docs docs/benchmark.md`` gives as
+whose accuracy ``python -m bench.accuracy.run_benchmark --docs docs/benchmark.md`` gives as
 ours-offline). Two alternatives built on the package's differentiator were measured and
 dropped: the average of a forward and a time-reversed pass of the Levant differentiators, and
 that average low-passed with zero phase: a sliding-mode differentiator's error under noise is

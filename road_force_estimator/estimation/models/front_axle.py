@@ -101,8 +101,8 @@ estimates of that moment and is cached, never per sample.
   force-noise density, the road velocity's correlation length (``observer.
   road_correlation_length`` when > 0) and the factor between the estimated roughness and the
   one the filter assumes, tuned once on the benchmark's separate tuning drive at 0, 10 and
-  50 um (``python -m bench.targets --tune``) and interpolated in between (log-log). Without
-  noise the tuned road model is a near random walk of the road velocity (what a 1 ms
+  50 um (``python -m bench.accuracy.targets --tune``) and interpolated in between (log-log).
+  Without noise the tuned road model is a near random walk of the road velocity (what a 1 ms
   prediction needs); with noise, the envelope's ~0.8 m correlation.
 """
 from __future__ import annotations
@@ -140,11 +140,11 @@ __all__ = [
 #: SCHEDULE_NOISE_M the generalised force-noise density (N^2 s), the road velocity's
 #: correlation length (m) and the factor on the estimated roughness that the filter assumes;
 #: log-log interpolation in between, held beyond the ends (see :func:`scheduled`).
-#: Tuned on bench.scenarios.TUNING (ISO C, 20 m/s, 1 kHz, road seed 1001, noise seed 1002;
-#: no scored drive) at 0, 10 and 50 um: ``python -m bench.targets --tune`` (the procedure of
-#: bench.tune: grid, then pattern search, zero-latency load error as the objective; the best
-#: of two runs per level: 0.511 %, 17.08 %, 29.54 % on that drive; the optimum is flat: the
-#: other run's values, e.g. 200 / 1.35 m / 3.4 at 10 um, give the same to 0.2 %). Without
+#: Tuned on bench.accuracy.scenarios.TUNING (ISO C, 20 m/s, 1 kHz, road seed 1001, noise seed 1002;
+#: no scored drive) at 0, 10 and 50 um: ``python -m bench.accuracy.targets --tune`` (the procedure
+#: of bench.accuracy.tune: grid, then pattern search, zero-latency load error as the objective; the
+#: best of two runs per level, the command prints their scores; the optimum is flat: the other
+#: run's values, e.g. 200 / 1.35 m / 3.4 at 10 um, give nearly the same). Without
 #: noise the tuned road velocity is a near random walk (force noise and bound-limited
 #: roughness factor: what a 1 ms prediction needs); with noise the envelope's correlation.
 SCHEDULE_NOISE_M = (1e-9, 1e-5, 5e-5)
@@ -153,30 +153,33 @@ SCHEDULE_CORRELATION_M = (5.38, 0.8, 0.566)
 SCHEDULE_GD_FACTOR = (1e4, 1.41, 1.41)
 #: Random-walk density of the unknown roll moment ((N m)^2 / s), not tuned (the tuning drive
 #: is straight): on clean data large enough to follow a lateral-acceleration step at once
-#: (3 m/s^2 step, ISO C, no noise: load error 2.2 % with 1e6, 0.54 % with 1e7, 0.39 % with
-#: 1e9), with noise the 1e7 that still follows ~1 m/s^2 per second of lateral acceleration
-#: change (M h x 1 m/s^3 over ~1 s) and leaves the straight-drive figures unchanged (10 um:
-#: 16.807 % against 16.804 % with 1e6; 1e9 would cost 2.7 %).
+#: (a 3 m/s^2 step on ISO C without noise: the load error falls from 1e6 to 1e7 and little
+#: beyond), with noise the 1e7 that still follows ~1 m/s^2 per second of lateral acceleration
+#: change (M h x 1 m/s^3 over ~1 s) and leaves the straight drives' figures as 1e6 does (1e9
+#: would cost some). The benchmark's C20-lateral is that step with 10 um of noise, beside the
+#: straight C20-1k-10um: ``python -m bench.accuracy.run_benchmark --scenarios C20-lateral
+#: C20-1k-10um``.
 SCHEDULE_ROLL_MOMENT_PSD = (1e9, 1e7, 1e7)
 
 #: The profile's own tuning (issue 21): the road profile comes from a second filter on the same
 #: model, the same data and the same noise and roughness estimates, designed for the road
 #: instead of the load (the loads never see it). Measured on single benchmark scenarios
-#: (``python -m bench.run_benchmark --scenarios ...``): at zero latency the profile wants a
-#: filter that trusts the deflections more than the load's does (a rougher road assumed:
-#: less lag, which is what the band-passed profile error is made of; A20-1k-10um 13.8 % ->
-#: 6.5 %, C20-1k-10um 6.7 -> 2.9, while the load would be 27 -> 50 %), offline the RTS
-#: smoother of a near-exact model (force noise tiny) with a slow unknown roll moment: the
-#: load tuning's fast roll moment (1e7 (N m)^2/s) passes the roll sensor's noise (s x 1e-4
-#: rad = 100 um) into ``s sin(phi)`` at the wheel-hop wavelengths (1-3 m) that IRI weighs.
+#: (``python -m bench.accuracy.run_benchmark --scenarios ...``): at zero latency the profile wants
+#: a filter that trusts the deflections more than the load's does (a rougher road assumed:
+#: less lag, which is what the band-passed profile error is made of; on A20-1k-10um and
+#: C20-1k-10um it halves the profile error, where the load's error would nearly double),
+#: offline the RTS smoother of a near-exact model (force noise tiny) with a slow unknown roll
+#: moment: the load tuning's fast roll moment (1e7 (N m)^2/s) passes the roll sensor's noise
+#: (s x 1e-4 rad = 100 um) into ``s sin(phi)`` at the wheel-hop wavelengths (1-3 m) that IRI
+#: weighs.
 #: Factor on the load schedule's roughness factor of the zero-latency profile filter (its
 #: roll moment is the load's: with wrong parameters and no noise the roll moment takes what
 #: the model misses, and a slower one lost the calibration's alignment, test_calibration).
 PROFILE_ONLINE_GD_RATIO = 30.0
 #: The zero-latency profile filter's road correlation length (m) at the levels of
 #: SCHEDULE_NOISE_M (log-log in between, as :func:`scheduled`): the load's but without noise,
-#: where the road wants a slower road velocity (D20-1k-0um 0.645 % -> 0.634 %, C20-1k-0um
-#: 0.148 -> 0.157; kf-model: 0.637 and 0.162; measured with a 10 x cutoff, see below).
+#: where the road wants a slower road velocity (D20-1k-0um a little better, C20-1k-0um a
+#: little worse, both beside kf-model; measured with a 10 x cutoff, see below).
 PROFILE_ONLINE_CORRELATION_M = (15.0, 0.8, 0.566)
 #: Largest force-noise density (N^2 s) and roll-moment density ((N m)^2 / s) of the offline
 #: profile smoother.
@@ -186,11 +189,10 @@ PROFILE_OFFLINE_GD_RATIO = 1.0
 #: The offline profile smoother's roll-moment density is the one the run's roll residual
 #: shows (:func:`offline_roll_moment_psd`), within this floor and
 #: PROFILE_OFFLINE_ROLL_MOMENT_PSD: a straight drive's roll moment hardly moves, and a slow
-#: one keeps the roll sensor's noise out of ``s sin(phi)`` (offline profile / IRI per 100 m
-#: at 1e4 against 1e6: C10-1k-10um 0.131 / 0.0062 % against 0.147 / 0.0198, C20-1k-50um
-#: 1.73 / 0.055 against 1.77 / 0.064; kf-model-rts 0.1465 / 0.0195 and 1.75 / 0.060), while a
-#: lateral-acceleration step needs the fast one (C20-lateral profile 1.12 % at 1e4, 0.515 at
-#: 1e6, the peer 0.516).
+#: one keeps the roll sensor's noise out of ``s sin(phi)`` (the offline profile and IRI of
+#: C10-1k-10um and C20-1k-50um better at 1e4 than at 1e6, beside kf-model-rts), while a
+#: lateral-acceleration step needs the fast one (C20-lateral's profile); ``python -m
+#: bench.accuracy.run_benchmark --scenarios C10-1k-10um C20-1k-50um C20-lateral``.
 PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD = 1e4
 #: Block (s) and the run's first and last blocks skipped (start-up) of that estimate.
 ROLL_MOMENT_BLOCK_S = 1.0
@@ -378,15 +380,15 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
 
 
 #: Equivalent damping of the friction (:func:`friction_damping`): the factor on the
-#: statistical linearisation, tuned on bench/truck_effects.py (classes A and C, 20 m/s,
-#: 10 um, 1.5 kN; 10 ms load error on A / C: 9.25 / 4.06 % with 1, 8.59 / 3.97 % with 1.5,
-#: 9.55 / 3.96 % with 2, 17.65 / 4.11 % with 3).
+#: statistical linearisation, tuned on bench/studies/truck_effects.py (classes A and C, 20 m/s,
+#: 10 um, 1.5 kN; of 1, 1.5, 2 and 3, 1.5 the best 10 ms load error over both classes:
+#: ``python -m bench.studies.truck_effects``).
 FRICTION_DAMPING_FACTOR = 1.5
 #: The same factor with a latency (``observer.latency`` > 0), where the friction of every
 #: step is evaluated again at the smoothed rates (:mod:`..observer.friction`, "Delayed
 #: correction"): the forward filter's friction errors are then corrected, and the error
-#: dynamics want less of the damping they would add (``python -m bench.friction_lag``, 10 ms,
-#: friction + 3 ms lag: 1.37 x the matched drive with 1.5, 1.30 with 1.0, 1.28 with 0.5).
+#: dynamics want less of the damping they would add (10 ms, friction + 3 ms lag, against the
+#: matched drive: 0.5 the best of 1.5, 1.0 and 0.5; ``python -m bench.studies.friction_lag``).
 FRICTION_DAMPING_FACTOR_LATENCY = 0.5
 
 

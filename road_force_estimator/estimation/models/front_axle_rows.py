@@ -32,19 +32,22 @@ PROFILE_DETREND_DEGREE = 3
 #: The profile's long-wave cutoff (m) is this many times ``observer.profile_cutoff_wavelength``
 #: (the body heave's, MODEL.md step 4): the profile's judges see longer waves than the body
 #: heave needs (the 0.5-30 m band-pass of order 2 passes 0.8 % at 100 m, where the ISO road's
-#: amplitude is ten times that at 10 m; the body heave's 100 m cutoff alone cost 0.34 % of
-#: profile error on the noise-free C20-1k-0um: 0.0041 % at 10 km). Longer cutoffs let the
+#: amplitude is ten times that at 10 m; the body heave's 100 m cutoff alone cost the
+#: noise-free C20-1k-0um almost all its profile error, a 10 km one next to none). Longer
+#: cutoffs let the
 #: double integral's low-frequency error and the zero-phase filter's edges wander further (on
 #: a 120 m run after a stale stretch, test_speed_check, true road within 5 cm: 6.6 m at 30 x),
 #: so the smoother takes the run's least-squares cubic off (:mod:`.smoother`): then 0.05 m, and
-#: C20-1k-0um 0.0039 %.
+#: C20-1k-0um as good as at 10 km (``python -m bench.accuracy.run_benchmark --scenarios
+#: C20-1k-0um``).
 PROFILE_CUTOFF_RATIO = 100.0
 #: The same for the zero-latency profile, whose causal integral follows the speed with a floor
 #: of this ratio times the body heave's (1 m/s; never below the body heave's cutoff frequency
 #: at its floor). The causal integral wanders further than the zero-phase one (largest |u| on
 #: test_speed_check's drive: 0.43 m at 1 x, 0.81 m at 2 x, 1.19 m at 3 x, 2.8 m at 10 x);
-#: the profile error on C20-1k-0um: 0.20 % at 2 x, 0.16 % at 10 x (the load filter's road:
-#: 0.85 %); 2 x gives 1.03 m after a stale stretch (test_speed_check): 1.
+#: the profile error on C20-1k-0um hardly falls beyond 2 x and is well below the load filter's
+#: road at any (``python -m bench.accuracy.run_benchmark --scenarios C20-1k-0um``); 2 x gives
+#: 1.03 m after a stale stretch (test_speed_check): 1.
 PROFILE_ONLINE_CUTOFF_RATIO = 1.0
 
 

@@ -21,7 +21,7 @@ B_d delta``, ``nu_e += -C B_d delta``, ``x+_(e+j) += ((I - K C) A)^j (I - K C) B
 ``nu_(e+j) += -C A ((I - K C) A)^(j-1) (I - K C) B_d delta`` (:meth:`KnownFriction.
 correction`). Every later estimate then sees the friction at the smoothed rates. Why: with a
 sensor lag the filtered rate is that of a prediction over the lag, so friction and lag
-together cost far more than either alone (``python -m bench.friction_lag``).
+together cost far more than either alone (``python -m bench.studies.friction_lag``).
 """
 from __future__ import annotations
 
@@ -37,7 +37,8 @@ __all__ = ['STAGE_S', 'KnownFriction', 'dq_rows']
 
 #: With a latency, each step's friction is corrected twice: at this lag (s), where the rates
 #: have taken most of what the later samples tell (the sensor lag and the wheel's sticking
-#: time ``m_i v_f / F_f`` are ~3 ms), and at the full lag (``python -m bench.friction_lag``).
+#: time ``m_i v_f / F_f`` are ~3 ms), and at the full lag (``python -m
+#: bench.studies.friction_lag``).
 STAGE_S = 0.004
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)

@@ -18,7 +18,7 @@ rho`` (a cascade: the Kalman recursion does not see it, so it cannot destabilise
 ``observer.sliding_mode_gain`` is 0 by default since issue 30: the weighted term changed no
 figure the benchmark prints, and at full strength it wins only at sharp point-contact events
 at low noise and loses on enveloped roads, friction switching, spikes and heavy-tailed noise
-(``python -m bench.sliding_mode_events``; the decision: docs/method.md). Fed back into the
+(``python -m bench.studies.sliding_mode_events``; the decision: docs/method.md). Fed back into the
 recursion (instead of cascaded) it was unstable.
 
 Stamps

@@ -12,12 +12,11 @@ stamp's (the samples are where the clock put them), for steps within
 rounded to the nanosecond (a scatter below :data:`JITTER_MIN_FRACTION` of the step, which the
 model's transitions do not resolve: :data:`.gains.DT_QUANTUM`) are left as they are.
 
-Measured (``python -m bench.real_truck --drives sensors``: a 3 ms lag, +-2 % scale errors and
-+-50 us of stamp jitter, the nominal file; zero latency): 28.9 % of the dynamic load with the
-stamps' steps, 28.4 % with the clock's (the true sample times: 28.39 %; the Kalman peer on
-the regular grid: 28.4 %). The offline smoother runs such a run on the clock's grid too
-(``smoother._clock_grid``: not step by step): offline (d) 3.77 -> 3.53 % on the stated file
-(RTS peer 3.54), 15.7 -> 15.8 on the nominal one (peer 15.8).
+With the clock's steps the zero-latency load error is that of the true sample times and of
+the Kalman peer on the regular grid, where the stamps' own steps cost some; the offline
+smoother runs such a run on the clock's grid too (``smoother._clock_grid``: not step by step).
+Measured on the real-truck family's sensor drive (a 3 ms lag, +-2 % scale errors and +-50 us
+of stamp jitter): ``python -m bench.accuracy.real_truck --drives sensors``.
 """
 from __future__ import annotations
 

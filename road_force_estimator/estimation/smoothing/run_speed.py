@@ -4,12 +4,12 @@ and the stretches of speed whose own gains it runs (:func:`speed_segments`).
 
 Runs at a steady speed (every sample at least :data:`MOVING_SPEED_FRACTION` of the run's
 median |v|) are taken whole with the gains of that median speed, as before: both functions
-then change nothing. Measured on the stop of ``bench.real_truck`` (c) (ISO C, 20 m/s, braking
-at 5 m/s^2, 10 s standing, pulling away; 10 um): the roughness from every sample 6.1e-5 m^3,
-from those at speed 2.9e-4 (the same road at constant speed: 2.5e-4); load error offline
-3.07 % (one design at the median speed, the roughness of every sample), 2.88 % (the
-roughness at speed), 2.40 % with the gains per stretch of speed as well (the RTS peer:
-2.72 %; standing, the load error 12 N against 61 N before).
+then change nothing. On a run with a stop, the standing samples would understate the road's
+roughness (the same road at constant speed gives the roughness of the samples at speed), and
+one design at the median speed would misfit the stretches braking and pulling away: the
+offline load error of such a run, beside the RTS peer's, is the stop drive of the real-truck
+family (ISO C, 20 m/s, braking at 5 m/s^2, 10 s standing, pulling away; 10 um):
+``python -m bench.accuracy.real_truck --drives stop``.
 """
 from __future__ import annotations
 

@@ -44,17 +44,14 @@ WINDOW_SAMPLES = 2 ** 19
 #: Overlap of the windows on each side, in time constants of the slowest transient a window
 #: edge starts: the smoother's backward pass (the slowest mode of ``A (I - K C)``; the forward
 #: pass carries its state from window to window) or the body heave's zero-phase high-pass
-#: (slowest pole ``w_c sin(pi / 8)``, ``w_c = 2 pi v / lambda_c``). Measured
-#: (``python -m bench.offline_windows --duration 240 --window 20``: ISO C, 20 m/s, 1 kHz,
-#: 10 um / 0.1 mrad noise, slowest time constant 8.6 s, the smoother's): the largest
-#: difference from the one-piece smoother, relative to each field's RMS, is 1.3e-6 with 4,
-#: 2.5e-8 with 8, 3.7e-10 with 12 and 1.4e-11 with 16 time constants (rounding: 1.8e-11 with
-#: 20); the loads within 2e-8 N, the converged flags equal.
+#: (slowest pole ``w_c sin(pi / 8)``, ``w_c = 2 pi v / lambda_c``). 16 is where the
+#: difference from the one-piece smoother, relative to each field's RMS, reaches rounding
+#: (``python -m bench.studies.offline_windows --duration 240 --window 20``: ISO C, 20 m/s, 1 kHz,
+#: 10 um / 0.1 mrad noise; docs/notes/offline_windows.md).
 WINDOW_OVERLAP_TAUS = 16.0
 #: By default, runs are smoothed in windows when longer than this many windows with their
 #: overlaps (below, one piece takes less memory than a window's temporaries and the overlaps'
-#: extra work: measured at 0.25 h, 1 kHz, ``bench/long_drive_memory.py``: 670 MB in windows
-#: against 621 MB in one piece).
+#: extra work: ``python -m bench.probes.long_drive_memory --hours 0.25``).
 WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.

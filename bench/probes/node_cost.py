@@ -1,0 +1,176 @@
+"""Benchmark: the observer node's CPU per sample in its callbacks, by part (thread CPU time).
+
+Run from the repository root::
+
+    .venv/bin/python -m bench.probes.node_cost [--samples 3000] [--repeats 7]
+
+The observer runs in this process; its outputs go to a subscriber in a child process (every
+topic, raw, reliable), as in bench/probes/node_latency.py. The inputs are the bytes our publishers
+send (a sinusoidal drive at 1 kHz, a twist with every sample), handed to the node's two
+callbacks directly, so the executor and the receiving side of DDS are left out (those are in
+bench/probes/node_latency.py's CPU share). Per sample, in microseconds of this thread's CPU time
+(``time.thread_time_ns``: another process's load on a shared machine moves it much less than
+a wall clock), min and median over ``--repeats`` blocks of ``--samples``:
+
+- callbacks: ``twist_callback`` + ``deflections_callback``, the seven publishes included;
+- callbacks, publish a no-op: the same with rclpy's publish replaced (the node's Python and
+  the estimator);
+- estimator.update: the numeric core alone, on the same inputs;
+- publish_raw: one rclpy publish of a serialized ``/observer/states`` (rclpy, rmw, DDS);
+- plant_simulator sample: its plant's step and its six publishes of one sample (the
+  plant_simulator node made in this process once the observer is gone: the cost of each
+  sample its timer publishes).
+
+The node's own Python is the second figure less the third; rclpy's share the first less
+the second.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+import rclpy
+from rclpy.node import Node
+
+from bench.probes.node_latency import input_encoders
+from road_force_estimator import interfaces as api
+from road_force_estimator.ros.bag_recorder import message_class
+from road_force_estimator.ros.messages import topic_qos
+
+TOPICS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES, *api.STATIC_LOAD,
+          api.DEFLECTIONS, api.TWIST, *api.TRUE_LOAD, *api.TRUE_ROAD)
+T0_NS = 1_700_000_000 * 10**9
+
+
+def serve_subscriber(seconds: float) -> int:
+    """Take every output topic raw for ``seconds``."""
+    from rclpy.experimental import EventsExecutor
+    rclpy.init()
+    node = Node('node_cost_sink')
+    for topic in TOPICS:
+        node.create_subscription(message_class(api.TOPIC_TYPES[topic]), topic, lambda d: None,
+                                 topic_qos(topic, 10000), raw=True)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.1)
+    return 0
+
+
+class _NoPublish:
+    def publish(self, data) -> None:
+        pass
+
+    publish_raw = publish
+
+
+def per_sample_us(fn, blocks, repeats: int) -> tuple[float, float]:
+    """(min, median) thread CPU time per item (us) of ``fn`` over ``repeats`` blocks."""
+    times = []
+    for r in range(repeats):
+        block = blocks(r)
+        start = time.thread_time_ns()
+        for item in block:
+            fn(item)
+        times.append((time.thread_time_ns() - start) / len(block) / 1e3)
+    return min(times), statistics.median(times)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--samples', type=int, default=3000)
+    parser.add_argument('--repeats', type=int, default=7)
+    parser.add_argument('--serve', type=float, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.serve:
+        return serve_subscriber(args.serve)
+    os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    child = subprocess.Popen([sys.executable, '-m', 'bench.probes.node_cost', '--serve', '600'],
+                             stderr=subprocess.DEVNULL)
+    rclpy.init()
+    from road_force_estimator.estimation import Estimator
+    from road_force_estimator.ros.observer import Observer
+    observer = Observer()
+    try:
+        deadline = time.monotonic() + 30.0
+        while observer.states_pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        report(observer, Estimator, args)
+    finally:
+        child.kill()
+        rclpy.try_shutdown()
+    return 0
+
+
+def plant_sample_us(args) -> tuple[float, float]:
+    """(min, median) thread CPU time (us) of one plant_simulator sample: step and publish."""
+    from rclpy.parameter import Parameter
+
+    from road_force_estimator.ros.plant_simulator import PlantSimulator
+    plant = PlantSimulator(parameter_overrides=[Parameter('simulator.duration', value=120.0)])
+    try:
+        def sample(k):
+            plant.publish(plant.plant.step(), T0_NS + k * 10**6)
+
+        return per_sample_us(sample, lambda r: range(r * args.samples, (r + 1) * args.samples),
+                             args.repeats)
+    finally:
+        plant.destroy_node()
+
+
+def report(observer, estimator_class, args) -> None:
+    """Time the parts (see the module docstring) and print them."""
+    (deflections, twist), n = input_encoders(), args.samples
+    inputs = [(T0_NS + k * 10**6, (2e-3 * math.sin(k / 80), 1e-3 * math.cos(k / 50)),
+               1e-3 * math.sin(k / 160)) for k in range(n * (2 * args.repeats + 2))]
+    data = [(deflections.encode(t, (*q, phi)), twist.encode(t, (20.0,)))
+            for t, q, phi in inputs]
+
+    def callbacks(pair):
+        observer.twist_callback(pair[1])
+        observer.deflections_callback(pair[0])
+
+    for pair in data[:n]:   # warm: past the model fit's skip and the first designs
+        callbacks(pair)
+    rows = [('callbacks', per_sample_us(callbacks, lambda r: data[n * (r + 1):n * (r + 2)],
+                                        args.repeats))]
+    names = ('send', 'load_pubs', 'road_pubs', 'static_pubs', 'ltr_pub', 'load_transfer_pub',
+             'states_pub')
+    kept = {k: getattr(observer, k) for k in names if hasattr(observer, k)}
+    for k, v in kept.items():   # (an observer without 'send' publishes with Publisher.publish)
+        setattr(observer, k, [_NoPublish().publish_raw] * len(v) if k == 'send' else
+                [_NoPublish()] * len(v) if isinstance(v, list) else _NoPublish())
+    off = n * (args.repeats + 1)
+    rows.append(('callbacks, publish a no-op', per_sample_us(
+        callbacks, lambda r: data[off + n * r:off + n * (r + 1)], args.repeats)))
+    for k, v in kept.items():
+        setattr(observer, k, v)
+    estimator = estimator_class(*observer.params.config)
+    for t, q, phi in inputs[:n]:
+        estimator.update(t, q, phi, 20.0)
+    rows.append(('estimator.update', per_sample_us(
+        lambda s: estimator.update(s[0], s[1], s[2], 20.0),
+        lambda r: inputs[n * (r + 1):n * (r + 2)], args.repeats)))
+    states = observer.wire.states.encode(T0_NS, (0.0,) * 12)
+    raw = observer.states_pub.handle.publish_raw
+    rows.append(('publish_raw (/observer/states)', per_sample_us(
+        lambda _: raw(states), lambda r: range(n), args.repeats)))
+    observer.destroy_node()   # the plant's inputs go to the child alone
+    rows.append(('plant_simulator sample', plant_sample_us(args)))
+    for name, (low, mid) in rows:
+        print(f'{name:32s} min {low:7.2f} us   median {mid:7.2f} us per sample')
+    (cb, _), (py, _), (core, _) = rows[0][1], rows[1][1], rows[2][1]
+    print(f"node's own Python (min) {py - core:.1f} us, rclpy publish (min) {cb - py:.1f} us "
+          f'per sample')
+
+
+if __name__ == '__main__':
+    sys.exit(main())
