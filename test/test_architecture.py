@@ -24,7 +24,8 @@ ALLOWED = {
     'bagio': {'interfaces', 'core', 'estimation', 'serde'},
     'report': {'interfaces', 'core', 'estimation', 'calibration'},
     'ros': {'interfaces', 'core', 'estimation', 'serde', 'bagio'},
-    'tools': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report'},
+    'pipeline': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report'},
+    'tools': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report', 'pipeline'},
 }
 BAG_LIBRARIES = {'rosbags', 'mcap', 'mcap_ros2'}
 #: The concerns that may import the bag libraries: the codec (rosbags' typestore) and the bags.

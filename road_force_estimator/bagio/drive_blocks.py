@@ -15,13 +15,13 @@ the same samples, speeds and counts (test_drive_blocks):
   are counted (:attr:`DriveBlocks.early`);
 - ``/fix`` (a few per second) is gathered whole and read as :func:`read_drive_bag` does.
 
-Ground truth topics are not read here (:func:`streamable` says whether a bag has any).
+Ground truth topics are not read here.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -32,10 +32,10 @@ from road_force_estimator.bagio.mcap_scan import Block
 from road_force_estimator.bagio.reader import (
     USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
 from road_force_estimator.interfaces import (
-    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
-    TWIST_STAMPED)
+    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TWIST, TWIST_STAMPED)
 
-__all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveBlocks', 'streamable']
+__all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveRecord', 'DriveBlocks', 'listed_messages',
+           'streamable']
 
 #: Default samples per block (deflection messages gathered before a block is decoded).
 BLOCK_SAMPLES = 1 << 16
@@ -60,25 +60,47 @@ class InputBlock:
     early: np.ndarray | None = None
 
 
-def streamable(path: str | Path) -> int:
-    """The ``/suspension/deflections`` messages metadata.yaml lists for a bag without ground
-    truth topics; 0 when it has truth, or no usable metadata (then read it whole)."""
+@dataclass(frozen=True)
+class DriveRecord:
+    """What a drive read block by block says of itself, without its arrays: the fields of
+    :class:`.Drive` of the same names (messages per topic, rejections, breaks, fixes,
+    ``custom_data``, kept-with-a-caveat counts, what the reader took)."""
+
+    messages: dict[str, int]
+    rejected: dict[str, dict[str, int]]
+    issues: tuple[str, ...]
+    fixes: Any
+    custom_data: dict[str, str]
+    noted: dict[str, dict[str, int]]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def rejected_total(self) -> int:
+        """Messages rejected over all topics."""
+        return sum(sum(r.values()) for r in self.rejected.values())
+
+
+def listed_messages(path: str | Path) -> dict[str, int]:
+    """``topic -> message count`` as metadata.yaml lists them; empty without usable
+    metadata (then a drive is read whole)."""
     try:
         _, info, issues = bag_files(Path(path))
     except BagReadError:
-        return 0
+        return {}
     if issues or not isinstance(info, dict):
-        return 0
-    count = 0
-    truth = set(TRUE_LOAD) | set(TRUE_ROAD)
+        return {}
+    counts: dict[str, int] = {}
     for entry in info.get('topics_with_message_count') or []:
-        meta = (entry or {}).get('topic_metadata') or {}
-        name = meta.get('name')
-        if name in truth:
-            return 0
-        if name == DEFLECTIONS:
-            count = int(entry.get('message_count') or 0)
-    return count
+        name = ((entry or {}).get('topic_metadata') or {}).get('name')
+        if name:
+            counts[str(name)] = int((entry or {}).get('message_count') or 0)
+    return counts
+
+
+def streamable(path: str | Path) -> int:
+    """The ``/suspension/deflections`` messages metadata.yaml lists; 0 without usable
+    metadata (then read it whole)."""
+    return listed_messages(path).get(DEFLECTIONS, 0)
 
 
 class DriveBlocks:
@@ -113,6 +135,11 @@ class DriveBlocks:
     @property
     def rejected(self) -> dict[str, dict[str, int]]:
         return self.rejects.counts
+
+    def record(self) -> DriveRecord:
+        """What was read (after the iteration), as :class:`DriveRecord`."""
+        return DriveRecord(self.messages, self.rejected, tuple(self.issues), self.fixes,
+                           self.custom_data, self.noted, self.notes)
 
     @property
     def rejected_total(self) -> int:

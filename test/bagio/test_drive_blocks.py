@@ -64,13 +64,15 @@ def test_blocks_equal_one_piece(tmp_path, monkeypatch, block):
     assert list(reader.issues) == list(whole.issues)
 
 
-def test_streamable_needs_metadata_without_truth(tmp_path, monkeypatch):
+def test_streamable_counts_the_listed_deflections(tmp_path, monkeypatch):
+    """metadata.yaml's deflection messages, ground truth topics or not (every drive goes in
+    blocks); 0 without metadata."""
     _messy_bag(tmp_path / 'b', monkeypatch)
     assert streamable(tmp_path / 'b') == 119
     with bagio.BagWriter(tmp_path / 'c') as bag:
         bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState', 'sensor_data')
         bag.add_topic('/ground_truth/wheel_load/left', 'geometry_msgs/msg/WrenchStamped')
         bag.write('/suspension/deflections', 1, joint_state(1, NAMES, [0.0, 0.0, 0.0], []))
-    assert streamable(tmp_path / 'c') == 0
+    assert streamable(tmp_path / 'c') == 1
     assert streamable(tmp_path / 'missing') == 0
 

@@ -1,6 +1,6 @@
-"""estimate_bag on a drive estimated block by block (tools.estimate_stream, issue 21) against
-the one-piece path on the same bag: the same messages in the estimate bag (read with the
-mcap library), the same segments.csv, report.json and report.md."""
+"""estimate_bag on a drive estimated block by block (pipeline.blocks, issue 21) against the
+same drive in one block (pipeline.one_block): the same messages in the estimate bag (read with
+the mcap library), the same segments.csv, report.json and report.md."""
 import dataclasses
 import json
 
@@ -16,7 +16,8 @@ from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.interfaces import DEFLECTION_JOINTS
 from road_force_estimator.estimation.smoothing import smoother
-from road_force_estimator.tools import estimate_bag, estimate_stream, stream_figures
+from road_force_estimator.pipeline import blocks, plan, window_figures
+from road_force_estimator.tools import estimate_bag
 
 import bag_samples
 
@@ -98,7 +99,7 @@ def test_streamed_equals_one_piece(drive, tmp_path, monkeypatch, latency_s, segm
     kw = dict(observer=observer, segment_length_m=segment_m, figures=False)
     one = estimate_bag.run(drive, tmp_path / 'one', **kw)
     assert one.estimates is not None
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
     streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
     assert_same_outputs(one, streamed, tmp_path)
@@ -157,7 +158,7 @@ def test_streamed_offline_equals_one_piece(drive, tmp_path, monkeypatch, windows
                                    distance_source='gnss' if gnss else 'speed')
     kw = dict(observer=observer, segment_length_m=segment_m, figures=False, mode='offline')
     one = estimate_bag.run(drive, tmp_path / 'one', **kw)
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
     streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
     assert_same_outputs(one, streamed, tmp_path)
@@ -168,13 +169,23 @@ def test_short_drives_stay_in_one_piece(drive, tmp_path):
     """Below STREAM_MIN_SAMPLES (and with a reference, or offline with a differentiator
     scheme) one piece, as before."""
     obs = ObserverParameters()
-    assert not estimate_stream.use_stream(drive, 'online', None, obs)
-    assert not estimate_stream.use_stream(drive, 'offline', None, obs)
-    assert estimate_stream.use_stream(drive, 'online', None, obs, 1)
-    assert estimate_stream.use_stream(drive, 'offline', None, obs, 1)
-    assert not estimate_stream.use_stream(drive, 'online', object(), obs, 1)
+    assert not plan.plan_drive(drive, 'online', obs).blocks
+    assert not plan.plan_drive(drive, 'offline', obs).blocks
+    assert plan.plan_drive(drive, 'online', obs, min_samples=1).blocks
+    assert plan.plan_drive(drive, 'offline', obs, min_samples=1).blocks
+    assert not plan.plan_drive(drive, 'online', obs, object(), min_samples=1).blocks
     implicit = dataclasses.replace(obs, discretization='implicit')
-    assert not estimate_stream.use_stream(drive, 'offline', None, implicit, 1)
+    assert not plan.plan_drive(drive, 'offline', implicit, min_samples=1).blocks
+
+
+def test_the_threshold_follows_the_memory_limit():
+    """No limit: STREAM_MIN_SAMPLES; a limit: half of it at ONE_BLOCK_BYTES_PER_SAMPLE."""
+    assert plan.stream_threshold() == plan.STREAM_MIN_SAMPLES
+    assert plan.stream_threshold(400e6) == int(0.5 * 400e6 / plan.ONE_BLOCK_BYTES_PER_SAMPLE)
+    assert plan.stream_threshold(1e15) == plan.STREAM_MIN_SAMPLES
+    assert plan.stream_threshold(1.0) == 1
+    with pytest.raises(ValueError):
+        plan.stream_threshold(0.0)
 
 
 def test_a_streamed_drive_without_twist_is_refused(tmp_path, monkeypatch, capsys):
@@ -183,7 +194,7 @@ def test_a_streamed_drive_without_twist_is_refused(tmp_path, monkeypatch, capsys
         bag.add_topic('/suspension/deflections', 'sensor_msgs/msg/JointState')
         for k in range(20):
             bag.write('/suspension/deflections', k, joint_state(k, (0.0, 0.0), 0.0))
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     code = estimate_bag.main([str(folder), '--output', str(tmp_path / 'o'), '--no-progress'])
     err = capsys.readouterr().err
     assert code == 1 and 'speed' in err and err.count('\n') == 1
@@ -194,7 +205,7 @@ def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
     """The detail figures come from the estimator resumed at a snapshot before the window:
     the same pictures as in one piece; the profile and overview show the window only."""
     one = estimate_bag.run(drive, tmp_path / 'one', segment_length_m=10.0)
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
     streamed = estimate_bag.run(drive, tmp_path / 'str', segment_length_m=10.0)
     assert streamed.summary['figures'] == one.summary['figures']
@@ -202,7 +213,7 @@ def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
     for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
         assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
             (tmp_path / 'str' / 'report' / name).read_bytes(), name
-    assert estimate_stream.FIGURES_NOTE in streamed.summary['notes']
+    assert blocks.FIGURES_NOTE in streamed.summary['notes']
 
 
 @pytest.mark.xfail(strict=True, reason=(
@@ -219,10 +230,10 @@ def test_streamed_offline_detail_figures_equal_one_piece(drive, tmp_path, monkey
     small_windows(monkeypatch, 900, 300)
     kw = dict(segment_length_m=10.0, mode='offline')
     one = estimate_bag.run(drive, tmp_path / 'one', **kw)
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
     if not guess:           # a wrong guess of the drive's end: the window estimated again
-        monkeypatch.setattr(stream_figures.OfflineWindow, 'keep', lambda self, p, a: None)
+        monkeypatch.setattr(window_figures.OfflineWindow, 'keep', lambda self, p, a: None)
     streamed = estimate_bag.run(drive, tmp_path / 'str', **kw)
     assert streamed.summary['figures'] == one.summary['figures']
     assert len(one.summary['figures']) == 6
@@ -241,7 +252,7 @@ def test_a_full_disk_while_spilling_leaves_nothing(drive, tmp_path, monkeypatch,
     def full(self, rows):
         raise OSError(errno.ENOSPC, 'No space left on device')
 
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(spill.SpillColumn, 'append', full)
     out = tmp_path / 'o'
     code = estimate_bag.main([str(drive), '--output', str(out), '--mode', 'offline',
@@ -265,7 +276,7 @@ def test_a_cut_bag_streams_as_one_piece(drive, tmp_path, monkeypatch, mode):
     mcap.write_bytes(data[:int(0.6 * len(data))])
     kw = dict(segment_length_m=10.0, figures=False, mode=mode)
     one = estimate_bag.run(cut, tmp_path / 'one', **kw)
-    monkeypatch.setattr(estimate_stream, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
     streamed = estimate_bag.run(cut, tmp_path / 'str', **kw)
     assert 0 < one.summary['samples']['input'] < 3000
