@@ -30,6 +30,7 @@ import numpy as np
 from road_force_estimator.pipeline.result import (
     PROG, EstimateResult, InputError, check_spacing, estimate_counts, fit_note,
     nothing_estimated)
+from road_force_estimator.report.streamed import TRUTH_NOTE
 
 __all__ = ['FIGURES_NOTE', 'run_blocks', 'BlockRun']
 
@@ -63,8 +64,7 @@ def run_blocks(folder: Path, output: Path, input_path: Path, vehicle, observer,
     extra, written = run.close_bag()
     stages.next('writing the report' + (' and figures' if options['figures'] else ''))
     drive = run.reader.record()
-    doc = _write_report(folder / 'report', run.summary, run.stream, drive,
-                        vehicle, observer, extra, input_path.name, options, run.figures)
+    doc = _write_report(folder / 'report', run, drive, extra, input_path.name, options)
     warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     return EstimateResult(doc, output / 'bag', output / 'report', run.summary.track(),
                           written, warnings, drive)
@@ -78,9 +78,11 @@ class BlockRun:
                  block_samples: int | None, samples: int) -> None:
         from road_force_estimator.bagio.drive_blocks import BLOCK_SAMPLES, DriveBlocks
         from road_force_estimator.bagio.estimate_stream import EstimateBagStream
+        from road_force_estimator.bagio.drive_blocks import listed_messages
+        from road_force_estimator.interfaces import TRUE_LOAD
         from road_force_estimator.pipeline.sinks import (
-            DiagnosticWindows, ModelFitSink, SpeedQueue)
-        from road_force_estimator.report.streamed import StreamedSummary
+            DiagnosticWindows, ModelFitSink, SampleQueue)
+        from road_force_estimator.report.streamed import LoadAccuracy, StreamedSummary
 
         self.folder, self.input_path, self.samples = folder, input_path, samples
         self.vehicle, self.observer, self.options = vehicle, observer, options
@@ -96,7 +98,13 @@ class BlockRun:
                                        with_stamps=_has_fixes(input_path),
                                        capacity=samples, spill=folder)
         self.diag, self.fit = DiagnosticWindows(), ModelFitSink()
-        self.speeds = SpeedQueue(folder if self.offline else None)
+        spill = folder if self.offline else None
+        self.speeds = SampleQueue(spill)
+        #: the true loads wait for their estimates as the speeds do (a drive with truth)
+        self.truths = (SampleQueue(spill, 2) if set(listed_messages(input_path)) & set(TRUE_LOAD)
+                       else None)
+        self.accuracy = LoadAccuracy()
+        self.static_n = np.asarray(vehicle.static_load_n, dtype=float)
         self.snapshots = self.window = None
         if options['figures']:
             self._figure_window()
@@ -135,6 +143,9 @@ class BlockRun:
                 if self.snapshots is not None:
                     self.snapshots.keep(i, block.stamps_ns[0], self.stream, self.summary)
                 self.speeds.append(np.where(block.early, np.nan, block.speed_mps))
+                if self.truths is not None:
+                    self.truths.append(np.full((block.stamps_ns.size, 2), np.nan)
+                                       if block.truth is None else block.truth.wheel_load_n)
                 for piece in self.stream.feed(block.stamps_ns, block.q_m, block.roll_rad,
                                               block.speed_mps):
                     self._consume(piece)
@@ -166,6 +177,8 @@ class BlockRun:
         self.summary.add(piece, v)
         self.diag.add(piece)
         self.fit.add(piece)
+        if self.truths is not None:
+            self.accuracy.add(piece, self.truths.take(m), self.static_n)
         if self.window is not None:
             self.window.keep(piece, self.summary)
 
@@ -198,6 +211,8 @@ class BlockRun:
             extra['estimates not written (non-finite)'] = written['nonfinite']
         if self.options['figures']:
             extra[FIGURES_NOTE] = 1
+        if self.accuracy.seen:
+            extra[TRUTH_NOTE] = 1
         return extra, written
 
     def figures(self, segments: dict, doc: dict) -> list[str]:
@@ -234,18 +249,20 @@ def _has_fixes(input_path: Path) -> bool:
     return bool(listed_messages(input_path).get(FIX))
 
 
-def _write_report(folder: Path, acc, stream, drive, vehicle, observer, extra: dict,
-                  input_name: str, options: dict, figures) -> dict[str, Any]:
+def _write_report(folder: Path, run: BlockRun, drive, extra: dict, input_name: str,
+                  options: dict) -> dict[str, Any]:
     """``report.md``, ``segments.csv``, ``report.json`` and the figures
-    (``figures(segments, summary)`` draws them) as :func:`.report.write_report`, from the
-    accumulators."""
+    (:meth:`BlockRun.figures`) as :func:`.report.write_report`, from the run's sinks."""
     from road_force_estimator.report.folder import json_safe, write_segments_csv
     from road_force_estimator.report.markdown import write_markdown
 
     folder.mkdir(parents=True, exist_ok=True)
-    summary, segments = _summary(acc, stream, drive, vehicle, observer, extra, input_name,
-                                 options)
-    names = figures(segments, summary)
+    summary, segments = _summary(run.summary, run.stream, drive, run.vehicle, run.observer,
+                                 extra, input_name, options)
+    if run.accuracy.seen:
+        summary['has_ground_truth'] = True
+        summary['accuracy'] = run.accuracy.result(run.static_n)
+    names = run.figures(segments, summary)
     summary['figures'] = names
     write_segments_csv(folder / 'segments.csv', segments)
     write_markdown(folder / 'report.md', summary, segments, names)

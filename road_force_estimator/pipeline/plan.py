@@ -6,9 +6,11 @@ A drive is one block (:func:`.run.run_drive` reads it whole, ``estimate_batch`` 
 blocks of :data:`~.bagio.drive_blocks.BLOCK_SAMPLES` from it on. The threshold is
 :data:`STREAM_MIN_SAMPLES` (about 35 min at 1 kHz, below which one block takes less than
 ~1 GB), less when a memory limit is given (an ``estimate_fleet`` worker's) that one block
-would pass half of at :data:`ONE_BLOCK_BYTES_PER_SAMPLE`. The offline differentiator chain
+would pass half of at :data:`ONE_BLOCK_BYTES_PER_SAMPLE`, whatever the drive carries (ground
+truth, fixes). Two stay one block: a drive compared with a ``--reference-profile`` (its
+alignment is found over the whole drive) and the offline differentiator chain
 (``observer.discretization`` other than ``model``: a zero-phase filter over the whole
-recording) is always one block.
+recording).
 """
 from __future__ import annotations
 
@@ -53,14 +55,12 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
     :func:`stream_threshold` (tests)."""
     from road_force_estimator.bagio.drive_blocks import listed_messages
-    from road_force_estimator.interfaces import DEFLECTIONS, TRUE_LOAD, TRUE_ROAD
+    from road_force_estimator.interfaces import DEFLECTIONS
 
     listed = listed_messages(Path(input_path))
     samples = listed.get(DEFLECTIONS, 0)
     limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
-        return BlockPlan(False, samples)
-    if set(listed) & (set(TRUE_LOAD) | set(TRUE_ROAD)):
         return BlockPlan(False, samples)
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain

@@ -1,8 +1,8 @@
 """The sinks of a drive in many blocks that are not files of their own: the diagnostics per
-second (:class:`DiagnosticWindows`), the model fit (:class:`ModelFitSink`) and the recorded
-speeds waiting for their estimates (:class:`SpeedQueue`). Each takes the pieces of estimates
-as the estimator stage hands them out (``add``) and gives its figures at the end, as the
-one-block path computes them from the whole arrays (:mod:`.one_block`)."""
+second (:class:`DiagnosticWindows`), the model fit (:class:`ModelFitSink`), and the recorded
+speeds and true loads waiting for their estimates (:class:`SampleQueue`). Each takes the
+pieces of estimates as the estimator stage hands them out (``add``) and gives its figures at
+the end, as the one-block path computes them from the whole arrays (:mod:`.one_block`)."""
 from __future__ import annotations
 
 import math
@@ -11,7 +11,7 @@ import numpy as np
 
 from road_force_estimator.pipeline.result import finite_fit
 
-__all__ = ['DiagnosticWindows', 'ModelFitSink', 'SpeedQueue']
+__all__ = ['DiagnosticWindows', 'ModelFitSink', 'SampleQueue']
 
 
 class DiagnosticWindows:
@@ -108,19 +108,20 @@ class ModelFitSink:
         return finite_fit(ratio, word)
 
 
-class SpeedQueue:
-    """The recorded speeds of the samples read and not yet estimated, first in first out:
-    in memory (online: a block or two), or in a temporary file in ``spill`` (offline: the
-    whole drive is read before its first estimate)."""
+class SampleQueue:
+    """A per-sample column of the samples read and not yet estimated (the recorded speeds,
+    the true loads), first in first out: in memory (online: a block or two), or in a
+    temporary file in ``spill`` (offline: the whole drive is read before its first
+    estimate); ``width``: values per sample (None: one, a 1-D column)."""
 
-    def __init__(self, spill=None) -> None:
+    def __init__(self, spill=None, width: int | None = None) -> None:
         self.parts: list[np.ndarray] = []
         self.file = None
         self.done = 0
         if spill is not None:
             from road_force_estimator.core.spill import SpillColumn
 
-            self.file = SpillColumn(float, None, spill)
+            self.file = SpillColumn(float, width, spill)
 
     def append(self, values: np.ndarray) -> None:
         if self.file is not None:

@@ -126,13 +126,24 @@ def _inside(piece, bounds: Window | None) -> np.ndarray:
     return bounds.inside(piece.stamp_ns)
 
 
+def _inside_inputs(block, inside: np.ndarray) -> tuple:
+    """``(q, roll, truth)`` of a block's samples ``inside`` (truth: its GroundTruth or
+    None)."""
+    from road_force_estimator.bagio.drive import GroundTruth
+
+    t = block.truth
+    truth = None if t is None else GroundTruth(
+        t.stamps_ns[inside], t.wheel_load_n[inside], t.road_m[inside], t.distance_m[inside])
+    return block.q_m[inside], block.roll_rad[inside], truth
+
+
 def _window_inputs(reader, bounds: Window) -> list:
-    """The inputs ``(q, roll)`` of the samples in the window ``bounds``, per block."""
+    """The inputs ``(q, roll, truth)`` of the samples in the window ``bounds``, per block."""
     inputs = []
     for block in reader:
         inside = bounds.inside(block.stamps_ns)
         if inside.any():
-            inputs.append((block.q_m[inside], block.roll_rad[inside]))
+            inputs.append(_inside_inputs(block, inside))
         if block.stamps_ns.size and block.stamps_ns[-1] > bounds.ns[1]:
             break
     return inputs
@@ -148,7 +159,7 @@ def _window_pieces(reader, index: int, stream, bounds: Window):
             continue
         inside = bounds.inside(block.stamps_ns)
         if inside.any():
-            inputs.append((block.q_m[inside], block.roll_rad[inside]))
+            inputs.append(_inside_inputs(block, inside))
         pieces += stream.feed(block.stamps_ns, block.q_m, block.roll_rad, block.speed_mps)
         if pieces and pieces[-1].stamp_ns[-1] > hi:
             break
@@ -200,10 +211,21 @@ def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
     if est is None or np.count_nonzero(est.valid) < 2:
         return []
     drive = None
-    q = np.concatenate([a for a, _ in inputs]) if inputs else np.zeros((0, 2))
+    q = np.concatenate([a for a, _, _ in inputs]) if inputs else np.zeros((0, 2))
     if len(q) == len(est.stamp_ns):
-        drive = FigureDrive(q, np.concatenate([b for _, b in inputs]))
+        drive = FigureDrive(q, np.concatenate([b for _, b, _ in inputs]),
+                            _joined([t for _, _, t in inputs]))
     al = align(est, drive)
     al.t_s = (al.stamps_ns - acc.t0_ns) * 1e-9       # the drive's time, as in one piece
     return write_figures(folder, est, al, drive, segments=segments, title=title, units=units,
                          static_load_n=static_load_n)
+
+
+def _joined(truths: list):
+    """The window's GroundTruth from its blocks' (None when the drive has none)."""
+    from road_force_estimator.bagio.drive import GroundTruth
+
+    if not truths or any(t is None for t in truths):
+        return None
+    return GroundTruth(*(np.concatenate([getattr(t, name) for t in truths])
+                         for name in ('stamps_ns', 'wheel_load_n', 'road_m', 'distance_m')))

@@ -76,3 +76,25 @@ def test_streamable_counts_the_listed_deflections(tmp_path, monkeypatch):
     assert streamable(tmp_path / 'c') == 1
     assert streamable(tmp_path / 'missing') == 0
 
+
+
+@pytest.mark.parametrize('block', [7, 64, 1000])
+def test_blocks_carry_the_truth_at_their_samples(tmp_path, monkeypatch, block):
+    """A drive with ground truth in small chunks: each block's truth is the whole drive's
+    truth at its samples' stamps (GroundTruth.at), the messages and rejections counted as
+    read_drive_bag counts them."""
+    from bag_samples import make_trajectory
+
+    monkeypatch.setattr(McapFile, 'CHUNK_BYTES', 512)
+    traj, q, roll = make_trajectory(300)
+    bagio.write_drive_bag(tmp_path / 'd', traj, q, roll)
+    whole = bagio.read_drive_bag(tmp_path / 'd')
+    reader = DriveBlocks(tmp_path / 'd', block)
+    parts = list(reader)
+    assert (len(parts) > 1 or block >= 300) and all(p.truth is not None for p in parts)
+    want = whole.truth.at(whole.stamps_ns)
+    for name in ('stamps_ns', 'wheel_load_n', 'road_m', 'distance_m'):
+        got = np.concatenate([getattr(p.truth, name) for p in parts])
+        np.testing.assert_array_equal(got, getattr(want, name), err_msg=name)
+    assert reader.messages == whole.messages and reader.rejected == whole.rejected
+    assert streamable(tmp_path / 'd') == 300

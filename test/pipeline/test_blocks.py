@@ -286,3 +286,70 @@ def test_a_cut_bag_streams_as_one_piece(drive, tmp_path, monkeypatch, mode):
     ja = json.loads((tmp_path / 'one' / 'report' / 'report.json').read_text())
     jb = json.loads((tmp_path / 'str' / 'report' / 'report.json').read_text())
     assert ja == jb
+
+
+@pytest.fixture(scope='module')
+def truth_drive(tmp_path_factory):
+    """4 s at 1 kHz of a simulated drive with its ground truth (simulate_bag's topics), small
+    chunks."""
+    from road_force_estimator import bagio
+
+    tr = simulate(VehicleParameters(), iso8608_profile('C', 120.0, seed=6), speed_mps=20.0,
+                  rate_hz=1000.0, duration_s=4.0, tire_envelope_m=0.25)
+    rng = np.random.default_rng(7)
+    q = tr.q_m + 1e-5 * rng.standard_normal(tr.q_m.shape)
+    folder = tmp_path_factory.mktemp('truth') / 'd'
+    old = McapFile.CHUNK_BYTES
+    McapFile.CHUNK_BYTES = 1 << 13
+    try:
+        bagio.write_drive_bag(folder, tr, q, tr.roll_rad)
+    finally:
+        McapFile.CHUNK_BYTES = old
+    return folder
+
+
+def _csv_without_true_iri(path):
+    rows = [line.split(',') for line in path.read_text().splitlines()]
+    keep = [i for i, name in enumerate(rows[0]) if not name.startswith('true_iri')]
+    return [[r[i] for i in keep] for r in rows]
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_a_drive_with_ground_truth_goes_in_blocks(truth_drive, tmp_path, monkeypatch, mode):
+    """Ground truth no longer keeps a drive in one block: the same estimate bag, the same
+    segments (but the truth's IRI), the load and LTR accuracy of one block (to the sums'
+    last bits) and a note of what a drive in blocks leaves out."""
+    kw = dict(segment_length_m=10.0, figures=False, mode=mode)
+    one = estimate_bag.run(truth_drive, tmp_path / 'one', **kw)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 700)
+    many = estimate_bag.run(truth_drive, tmp_path / 'str', **kw)
+    assert not hasattr(many.estimates, 'wheel_load_n')          # went in blocks
+    a, b = messages(tmp_path / 'one' / 'bag'), messages(tmp_path / 'str' / 'bag')
+    assert sorted(a) == sorted(b)
+    for topic in a:
+        assert a[topic] == b[topic], topic
+    assert _csv_without_true_iri(tmp_path / 'one' / 'report' / 'segments.csv') == \
+        _csv_without_true_iri(tmp_path / 'str' / 'report' / 'segments.csv')
+    ja, jb = one.summary, many.summary
+    assert ja['has_ground_truth'] and jb['has_ground_truth']
+    assert ja['messages'] == jb['messages'] and ja['rejected'] == jb['rejected']
+    assert set(jb['accuracy']) < set(ja['accuracy'])
+    for key, value in jb['accuracy'].items():
+        np.testing.assert_allclose(value, ja['accuracy'][key], rtol=1e-9, err_msg=key)
+    assert jb['accuracy']['samples_judged'] > 3000
+    from road_force_estimator.report.streamed import TRUTH_NOTE
+    assert TRUTH_NOTE in jb['notes']
+
+
+def test_streamed_detail_figures_with_truth_equal_one_block(truth_drive, tmp_path,
+                                                            monkeypatch):
+    """The detail figures of a drive with truth in blocks show its truth as one block's."""
+    one = estimate_bag.run(truth_drive, tmp_path / 'one', segment_length_m=10.0)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 500)
+    many = estimate_bag.run(truth_drive, tmp_path / 'str', segment_length_m=10.0)
+    assert many.summary['figures'] == one.summary['figures']
+    for name in ('states.png', 'body.png', 'wheels.png', 'loads.png'):
+        assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
+            (tmp_path / 'str' / 'report' / name).read_bytes(), name
