@@ -162,7 +162,7 @@ def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict,
         if p.exists():
             raise InputError(f'{p} exists (use --force to replace it)')
     counts = estimate_counts(len(drive.stamps_ns), est.status, drive.rejected_total,
-                             getattr(est, 'odometer', None))     # set offline with GNSS
+                             est.odometer)                       # set offline with GNSS
     folder.mkdir(parents=True, exist_ok=True)
     custom = {'road_force_estimator.mode': mode,
               'road_force_estimator.input': input_path.name,

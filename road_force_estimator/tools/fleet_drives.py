@@ -350,7 +350,9 @@ def _install(tmp: Path, final: Path, tmp_root: Path) -> None:
 
 
 def _fixes_of(result, input_path: str):
-    drive = getattr(result, 'drive', None)
+    """The drive's fixes: those the run read (its ``drive``: a :class:`.bagio.Drive` or,
+    in blocks, a :class:`.bagio.drive_blocks.DriveRecord`), else read again."""
+    drive = result.drive
     if drive is None:
         from road_force_estimator.bagio import read_drive_bag
         drive = read_drive_bag(input_path)
