@@ -145,8 +145,10 @@ class DriveBlocks:
         self._twist_ns = np.zeros(0, np.int64)      # the twists a pending sample may need
         self._twist_v = np.zeros(0)
         self._pending: list[InputBlock] = []
-        #: the truth topics the bag lists (a sample waits until each has reached it)
-        self._truth_topics = set(listed_messages(self.path)) & set(_TRUTH)
+        #: the truth topics the bag lists with messages (a sample waits until each has
+        #: reached its stamp or has given every message listed)
+        self._listed = listed_messages(self.path)
+        self._truth_topics = {t for t, c in self._listed.items() if c} & set(_TRUTH)
         self._truth_last: dict[str, int | None] = {t: None for t in _TRUTH}
         self._truth: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -255,7 +257,8 @@ class DriveBlocks:
         if not self._pending:
             return None
         stamps = np.concatenate([b.stamps_ns for b in self._pending])
-        lasts = [self._last[TWIST]] + [self._truth_last[t] for t in self._truth_topics]
+        lasts = [self._last[TWIST]] + [self._truth_last[t] for t in self._truth_topics
+                                       if self.messages.get(t, 0) < self._listed.get(t, 1)]
         if final:
             k = stamps.size
         elif any(last is None for last in lasts):

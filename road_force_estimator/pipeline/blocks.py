@@ -101,7 +101,8 @@ class BlockRun:
         spill = folder if self.offline else None
         self.speeds = SampleQueue(spill)
         #: the true loads wait for their estimates as the speeds do (a drive with truth)
-        self.truths = (SampleQueue(spill, 2) if set(listed_messages(input_path)) & set(TRUE_LOAD)
+        listed = listed_messages(input_path)
+        self.truths = (SampleQueue(spill, 2) if any(listed.get(t) for t in TRUE_LOAD)
                        else None)
         self.accuracy = LoadAccuracy()
         self.static_n = np.asarray(vehicle.static_load_n, dtype=float)

@@ -98,3 +98,33 @@ def test_blocks_carry_the_truth_at_their_samples(tmp_path, monkeypatch, block):
         np.testing.assert_array_equal(got, getattr(want, name), err_msg=name)
     assert reader.messages == whole.messages and reader.rejected == whole.rejected
     assert streamable(tmp_path / 'd') == 300
+
+
+def test_a_truth_that_ends_early_holds_no_sample_back(tmp_path, monkeypatch):
+    """Truth topics that stop before the deflections: once they have given every message
+    metadata.yaml lists, the samples go on block by block (not all at the end), NaN truth."""
+    from types import SimpleNamespace
+
+    from bag_samples import make_trajectory
+    from road_force_estimator.bagio.drive import _measurement_streams, _truth_streams
+    from road_force_estimator.interfaces import TOPIC_TYPES, qos_kind
+    from road_force_estimator.serde.messages import stamp_columns
+
+    monkeypatch.setattr(McapFile, 'CHUNK_BYTES', 512)
+    traj, q, roll = make_trajectory(600)
+    stamps = 10**9 + 5_000_000 * np.arange(600, dtype=np.int64)
+    cols = stamp_columns(stamps)
+    meas = _measurement_streams(stamps, cols, q, roll, np.full(600, 15.0))
+    part = SimpleNamespace(wheel_load_n=traj.wheel_load_n[:200], road_m=traj.road_m[:200],
+                           distance_m=traj.distance_m[:200])
+    truth = _truth_streams(part, stamps[:200], stamp_columns(stamps[:200]), 1.8)
+    with bagio.BagWriter(tmp_path / 'd') as bag:
+        for topic, _, _ in meas + truth:
+            bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
+        bag.write_rows(meas + truth)
+    whole = bagio.read_drive_bag(tmp_path / 'd')
+    parts = list(DriveBlocks(tmp_path / 'd', 50))
+    assert len(parts) >= 10                     # 600 samples, 50 a block: none held back
+    got = np.concatenate([p.truth.wheel_load_n for p in parts])
+    np.testing.assert_array_equal(got, whole.truth.at(whole.stamps_ns).wheel_load_n)
+    assert np.isnan(got[200:]).all() and np.isfinite(got[:200]).all()
