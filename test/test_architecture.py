@@ -24,7 +24,8 @@ ALLOWED = {
     'bagio': {'interfaces', 'core', 'estimation', 'serde'},
     'report': {'interfaces', 'core', 'estimation', 'calibration'},
     'ros': {'interfaces', 'core', 'estimation', 'serde', 'bagio'},
-    'tools': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report'},
+    'pipeline': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report'},
+    'tools': {'interfaces', 'core', 'estimation', 'calibration', 'bagio', 'report', 'pipeline'},
 }
 BAG_LIBRARIES = {'rosbags', 'mcap', 'mcap_ros2'}
 #: The concerns that may import the bag libraries: the codec (rosbags' typestore) and the bags.
@@ -245,3 +246,59 @@ def test_the_checks_see_each_kind_of_violation(tmp_path):
     assert pkg.layering_errors('pkg.ros.c') == []
     assert pkg.private_uses('pkg.estimation.b') == ['line 2: _hidden from pkg.core.a']
     assert pkg.private_uses('pkg.ros.c') == ['line 3: mod._secret']
+
+
+#: The pipeline's plan: the one module that decides whether a drive goes in blocks.
+PLAN_MODULE = 'road_force_estimator.pipeline.plan'
+#: What that decision reads: the threshold and the metadata's counts it is made from.
+PLAN_NAMES = {'STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'stream_threshold',
+              'plan_drive', 'streamable', 'listed_messages'}
+#: The modules that define those names (bagio: the counts) or use them inside the pipeline.
+PLAN_USERS = ('road_force_estimator.pipeline.', 'road_force_estimator.bagio.drive_blocks')
+
+
+def plan_uses(pkg: Package, module: str) -> list[str]:
+    """Where ``module`` reads the block plan or its inputs (names of :data:`PLAN_NAMES`, or an
+    import of the plan or of the many-block stages), outside the pipeline."""
+    if module == PLAN_MODULE or module.startswith(PLAN_USERS):
+        return []
+    bad = []
+    for name, names, line in pkg.imports(module):
+        target = pkg.internal(name) or ''
+        if target.endswith(('pipeline.plan', 'pipeline.blocks')):
+            bad.append(f'line {line}: imports {target}')
+        bad += [f'line {line}: {n} from {target}' for n in names if n in PLAN_NAMES]
+    for node in ast.walk(pkg.tree(module)):
+        if isinstance(node, ast.Attribute) and node.attr in PLAN_NAMES:
+            bad.append(f'line {node.lineno}: .{node.attr}')
+        elif isinstance(node, ast.Name) and node.id in PLAN_NAMES:
+            bad.append(f'line {node.lineno}: {node.id}')
+    return bad
+
+
+@pytest.mark.parametrize('module', sorted(PKG.modules))
+def test_only_the_pipeline_decides_whether_to_stream(module):
+    """No module outside pipeline/ decides whether a drive goes in blocks (issue 27): only
+    pipeline/plan.py reads the threshold, nothing outside the pipeline imports the plan or
+    the many-block stages or counts a bag's messages to choose."""
+    bad = plan_uses(PKG, module)
+    assert not bad, f'{module} decides whether to stream: ' + '; '.join(bad)
+
+
+def test_the_plan_rule_sees_a_decision_outside_the_pipeline(tmp_path):
+    root = tmp_path / 'road_force_estimator'
+    files = {'__init__.py': '', 'pipeline/__init__.py': '',
+             'pipeline/plan.py': 'STREAM_MIN_SAMPLES = 1\n',
+             'tools/__init__.py': '',
+             'tools/a.py': 'from road_force_estimator.pipeline import plan\n'
+                           'big = plan.STREAM_MIN_SAMPLES\n',
+             'tools/b.py': 'def f(p):\n    from road_force_estimator.bagio.drive_blocks '
+                           'import streamable\n    return streamable(p) > 5\n'}
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    pkg = Package(root)
+    assert any('pipeline.plan' in e for e in plan_uses(pkg, 'road_force_estimator.tools.a'))
+    assert any('STREAM_MIN_SAMPLES' in e for e in plan_uses(pkg, 'road_force_estimator.tools.a'))
+    assert any('streamable' in e for e in plan_uses(pkg, 'road_force_estimator.tools.b'))
+    assert plan_uses(pkg, 'road_force_estimator.pipeline.plan') == []

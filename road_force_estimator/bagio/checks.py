@@ -128,14 +128,15 @@ def _finite_rows(values: np.ndarray) -> np.ndarray:
     return ok
 
 
-def read_points(cols: TopicColumns, rejects: Rejects):
-    """(stamps, x, y, z) of the accepted PointStamped messages, file order."""
+def read_points(cols: TopicColumns, rejects: Rejects, floor: int | None = None):
+    """(stamps, x, y, z) of the accepted PointStamped messages, file order (``floor``: as
+    :func:`accept_in_order`)."""
     stamps, ok = basic_checks(cols, rejects)
     xyz = np.column_stack([cols.column(f'point.{a}')[0] for a in 'xyz']) if cols.count \
         else np.zeros((0, 3))
     finite = _finite_rows(xyz)
     rejects.add(cols.topic, 'nonfinite', np.count_nonzero(ok & ~finite))
-    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects)
+    keep = accept_in_order(stamps, ok & finite, cols.topic, rejects, floor)
     if not keep.all():
         stamps, xyz = stamps[keep], xyz[keep]
     return stamps, xyz[:, 0], xyz[:, 1], xyz[:, 2]

@@ -13,38 +13,50 @@ the same samples, speeds and counts (test_drive_blocks):
   change it), the rest at the end; samples before the first twist take its speed (as
   ``estimate_bag`` does: :func:`~road_force_estimator.tools.estimate_bag.drive_speed`) and
   are counted (:attr:`DriveBlocks.early`);
-- ``/fix`` (a few per second) is gathered whole and read as :func:`read_drive_bag` does.
-
-Ground truth topics are not read here (:func:`streamable` says whether a bag has any).
+- ``/fix`` (a few per second) is gathered whole and read as :func:`read_drive_bag` does;
+- the ground truth (wheel loads, road points) is checked as the deflections are (its own
+  floor per topic) and handed out with the samples, at their stamps
+  (:attr:`InputBlock.truth`: :meth:`.GroundTruth.at` of the whole drive's truth, NaN where
+  a topic has no sample at that stamp); while a truth topic the bag lists has not reached a
+  sample's stamp, the sample waits.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
-from road_force_estimator.bagio.checks import Rejects, read_joint_state, read_scalar
+from road_force_estimator.bagio.checks import (
+    Rejects, read_joint_state, read_points, read_scalar)
+from road_force_estimator.bagio.drive import GroundTruth
 from road_force_estimator.bagio.vehicle_layout import front_axle_joints
 from road_force_estimator.bagio.errors import BagReadError
 from road_force_estimator.bagio.mcap_scan import Block
 from road_force_estimator.bagio.reader import (
     USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
 from road_force_estimator.interfaces import (
-    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, TRUE_LOAD, TRUE_ROAD, TWIST,
-    TWIST_STAMPED)
+    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, POINT, TRUE_LOAD, TRUE_ROAD, TWIST,
+    TWIST_STAMPED, WRENCH)
 
-__all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveBlocks', 'streamable']
+__all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveRecord', 'DriveBlocks', 'listed_messages',
+           'streamable']
 
 #: Default samples per block (deflection messages gathered before a block is decoded).
 BLOCK_SAMPLES = 1 << 16
 
 _STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
-_WANTED = {DEFLECTIONS: JOINT_STATE, TWIST: TWIST_STAMPED, FIX: NAVSATFIX}
+_TRUTH = {**{t: WRENCH for t in TRUE_LOAD}, **{t: POINT for t in TRUE_ROAD}}
+_WANTED = {DEFLECTIONS: JOINT_STATE, TWIST: TWIST_STAMPED, FIX: NAVSATFIX, **_TRUTH}
 _FIELDS = {DEFLECTIONS: _STAMP + ('position', 'velocity', 'effort'),
            TWIST: _STAMP + ('twist.linear.x',),
-           FIX: _STAMP + ('latitude', 'longitude', 'altitude', 'status.status')}
+           FIX: _STAMP + ('latitude', 'longitude', 'altitude', 'status.status'),
+           **{t: _STAMP + ('wrench.force.z',) for t in TRUE_LOAD},
+           **{t: _STAMP + ('point.x', 'point.y', 'point.z') for t in TRUE_ROAD}}
+#: The truth's columns by topic: (key, value column) as :func:`.drive.read_drive_bag` keys them.
+_TRUTH_KEYS = {TRUE_LOAD[0]: ('load_l',), TRUE_LOAD[1]: ('load_r',),
+               TRUE_ROAD[0]: ('road_l', 'x_l'), TRUE_ROAD[1]: ('road_r', 'x_r')}
 
 
 @dataclass
@@ -58,27 +70,51 @@ class InputBlock:
     roll_rad: np.ndarray
     speed_mps: np.ndarray
     early: np.ndarray | None = None
+    #: the ground truth at the samples' stamps (None: the bag has none)
+    truth: GroundTruth | None = None
 
 
-def streamable(path: str | Path) -> int:
-    """The ``/suspension/deflections`` messages metadata.yaml lists for a bag without ground
-    truth topics; 0 when it has truth, or no usable metadata (then read it whole)."""
+@dataclass(frozen=True)
+class DriveRecord:
+    """What a drive read block by block says of itself, without its arrays: the fields of
+    :class:`.Drive` of the same names (messages per topic, rejections, breaks, fixes,
+    ``custom_data``, kept-with-a-caveat counts, what the reader took)."""
+
+    messages: dict[str, int]
+    rejected: dict[str, dict[str, int]]
+    issues: tuple[str, ...]
+    fixes: Any
+    custom_data: dict[str, str]
+    noted: dict[str, dict[str, int]]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def rejected_total(self) -> int:
+        """Messages rejected over all topics."""
+        return sum(sum(r.values()) for r in self.rejected.values())
+
+
+def listed_messages(path: str | Path) -> dict[str, int]:
+    """``topic -> message count`` as metadata.yaml lists them; empty without usable
+    metadata (then a drive is read whole)."""
     try:
         _, info, issues = bag_files(Path(path))
     except BagReadError:
-        return 0
+        return {}
     if issues or not isinstance(info, dict):
-        return 0
-    count = 0
-    truth = set(TRUE_LOAD) | set(TRUE_ROAD)
+        return {}
+    counts: dict[str, int] = {}
     for entry in info.get('topics_with_message_count') or []:
-        meta = (entry or {}).get('topic_metadata') or {}
-        name = meta.get('name')
-        if name in truth:
-            return 0
-        if name == DEFLECTIONS:
-            count = int(entry.get('message_count') or 0)
-    return count
+        name = ((entry or {}).get('topic_metadata') or {}).get('name')
+        if name:
+            counts[str(name)] = int((entry or {}).get('message_count') or 0)
+    return counts
+
+
+def streamable(path: str | Path) -> int:
+    """The ``/suspension/deflections`` messages metadata.yaml lists; 0 without usable
+    metadata (then read it whole)."""
+    return listed_messages(path).get(DEFLECTIONS, 0)
 
 
 class DriveBlocks:
@@ -109,10 +145,21 @@ class DriveBlocks:
         self._twist_ns = np.zeros(0, np.int64)      # the twists a pending sample may need
         self._twist_v = np.zeros(0)
         self._pending: list[InputBlock] = []
+        #: the truth topics the bag lists with messages (a sample waits until each has
+        #: reached its stamp or has given every message listed)
+        self._listed = listed_messages(self.path)
+        self._truth_topics = {t for t, c in self._listed.items() if c} & set(_TRUTH)
+        self._truth_last: dict[str, int | None] = {t: None for t in _TRUTH}
+        self._truth: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
     def rejected(self) -> dict[str, dict[str, int]]:
         return self.rejects.counts
+
+    def record(self) -> DriveRecord:
+        """What was read (after the iteration), as :class:`DriveRecord`."""
+        return DriveRecord(self.messages, self.rejected, tuple(self.issues), self.fixes,
+                           self.custom_data, self.noted, self.notes)
 
     @property
     def rejected_total(self) -> int:
@@ -185,6 +232,9 @@ class DriveBlocks:
                 self.twists += int(s.size)
                 self._twist_ns = np.concatenate([self._twist_ns, s])
                 self._twist_v = np.concatenate([self._twist_v, v])
+        for topic in set(readers) & set(_TRUTH):
+            self._truth_topics.add(topic)
+            self._add_truth(topic, readers[topic].columns(topic))
         if DEFLECTIONS in readers:
             self.seen_deflections = True
             columns = readers[DEFLECTIONS].columns(DEFLECTIONS)
@@ -207,13 +257,14 @@ class DriveBlocks:
         if not self._pending:
             return None
         stamps = np.concatenate([b.stamps_ns for b in self._pending])
-        last = self._last[TWIST]
+        lasts = [self._last[TWIST]] + [self._truth_last[t] for t in self._truth_topics
+                                       if self.messages.get(t, 0) < self._listed.get(t, 1)]
         if final:
             k = stamps.size
-        elif last is None:
+        elif any(last is None for last in lasts):
             k = 0
         else:
-            k = int(np.searchsorted(stamps, last, side='right'))
+            k = int(np.searchsorted(stamps, min(lasts), side='right'))
         if k == 0:
             return None
         q = np.concatenate([b.q_m for b in self._pending])
@@ -234,4 +285,42 @@ class DriveBlocks:
         nxt = stamps[k] if k < stamps.size else s[-1]
         keep = max(0, int(np.searchsorted(self._twist_ns, nxt, side='right')) - 1)
         self._twist_ns, self._twist_v = self._twist_ns[keep:], self._twist_v[keep:]
-        return InputBlock(s, q[:k], roll[:k], speed, early)
+        return InputBlock(s, q[:k], roll[:k], speed, early, self._truth_at(s))
+
+    def _add_truth(self, topic: str, columns) -> None:
+        """One batch of a truth topic, checked (its own floor) into the waiting columns."""
+        if topic in TRUE_LOAD:
+            s, v = read_scalar(columns, 'wrench.force.z', self.rejects, self._truth_last[topic])
+            values = (v,)
+        else:
+            s, x, _, z = read_points(columns, self.rejects, self._truth_last[topic])
+            values = (z, x)
+        if s.size:
+            self._truth_last[topic] = int(s[-1])
+        for key, v in zip(_TRUTH_KEYS[topic], values):
+            old = self._truth.get(key)
+            self._truth[key] = ((s, v) if old is None else
+                                (np.concatenate([old[0], s]), np.concatenate([old[1], v])))
+
+    def _truth_at(self, s: np.ndarray) -> GroundTruth | None:
+        """The truth at the released stamps ``s`` (NaN where a topic has none there); the
+        waiting truth up to ``s[-1]`` dropped."""
+        if not self._truth_topics:
+            return None
+        k = s.size
+
+        def place(key: str) -> np.ndarray:
+            out = np.full(k, np.nan)
+            if key not in self._truth:
+                return out
+            ts, tv = self._truth[key]
+            pos = np.minimum(np.searchsorted(ts, s), max(ts.size - 1, 0))
+            hit = (ts[pos] == s) if ts.size else np.zeros(k, bool)
+            out[hit] = tv[pos[hit]]
+            drop = int(np.searchsorted(ts, s[-1], side='right'))
+            self._truth[key] = (ts[drop:], tv[drop:])
+            return out
+        load = np.column_stack([place('load_l'), place('load_r')])
+        road = np.column_stack([place('road_l'), place('road_r')])
+        x_l, x_r = place('x_l'), place('x_r')
+        return GroundTruth(s.copy(), load, road, np.where(np.isnan(x_l), x_r, x_l))

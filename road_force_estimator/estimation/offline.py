@@ -80,6 +80,7 @@ def attach_distance_source(est, source) -> None:
     est.distance_source = source
     if source.fit is not None or source.requested == 'gnss':
         est.odometer = source.fit
+        est.fused = True
 
 
 def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,

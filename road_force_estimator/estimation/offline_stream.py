@@ -95,7 +95,6 @@ class OfflineStream:
 
         v, source = fused_speed(stamps, v, fixes, self.observer.distance_source)
         attach_distance_source(self, source)
-        self.fused = source.fit is not None or source.requested == 'gnss'
         prep = prepare(stamps, q, phi, v, self.vehicle, self.observer,
                        gap_threshold_s=self.gap_threshold_s)
         del stamps, q, phi, v

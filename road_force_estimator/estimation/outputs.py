@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 import enum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -208,6 +208,14 @@ class EstimateArrays:
     #: (n, 2): the static wheel loads F_c,i in use (N); every estimator fills it (None: a
     #: hand-made batch without them)
     static_load_n: np.ndarray | None = None
+    #: which distance ``distance_m`` is and why (an :class:`.odometer.DistanceSource`; None:
+    #: not said)
+    distance_source: Any = None
+    #: the GNSS odometer fit (an :class:`.odometer.OdometerFit`) when one was made
+    odometer: Any = None
+    #: a GNSS fit was asked for or made (offline): the report gives ``odometer`` (None when
+    #: the fixes were refused)
+    fused: bool = False
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:

@@ -27,7 +27,7 @@ import numpy as np
 from road_force_estimator.report.alignment import Aligned, bandpass
 
 __all__ = ['FIGURES', 'DEFAULT_WINDOW_S', 'DEFAULT_PROFILE_WINDOW_M', 'MAX_OVERVIEW_POINTS',
-           'ENVELOPE_COLUMNS', 'envelope', 'write_figures']
+           'ENVELOPE_COLUMNS', 'FigureDrive', 'envelope', 'window_start', 'write_figures']
 
 #: Figure files of a report, in the order of the Markdown.
 FIGURES = ('states.png', 'body.png', 'wheels.png', 'profile.png', 'loads.png', 'overview.png')
@@ -52,14 +52,34 @@ _ERROR = ('tab:purple', 'tab:brown')
 _BANDS = (('good', '#c8e6c9'), ('fair', '#fff3c4'), ('poor', '#ffcdd2'))
 
 
+@dataclass(frozen=True)
+class FigureDrive:
+    """What the figures read of a drive (:class:`.bagio.Drive` has these fields): the
+    measured deflections ``q_m`` ((n, 2), m) and roll ``roll_rad`` ((n,), rad) of the
+    estimate's samples, the ground truth (:class:`.bagio.GroundTruth` or None)."""
+
+    q_m: np.ndarray
+    roll_rad: np.ndarray
+    truth: Any = None
+    fixes: Any = None
+
+
+def window_start(lo_s: float, hi_s: float, length_s: float) -> float:
+    """Where a detail window of ``length_s`` starts (s) in the converged stretch
+    ``[lo_s, hi_s]`` (s; the whole drive when nothing converged): a third of the way into
+    what is left of it (the one rule of one block's figures and of many blocks')."""
+    return lo_s + max(0.0, (hi_s - lo_s - length_s)) / 3.0
+
+
 def _window(al: Aligned, length_s: float) -> np.ndarray:
-    """Row mask of a detail window: ``length_s`` from a third of the converged stretch."""
+    """Row mask of a detail window: ``length_s`` from a third of the converged stretch
+    (:func:`window_start`); every row when fewer than two fall in it."""
     t = al.t_s
     if t.size == 0:
         return np.zeros(0, bool)
     conv = np.flatnonzero(al.converged)
     lo, hi = (t[conv[0]], t[conv[-1]]) if conv.size else (t[0], t[-1])
-    start = lo + max(0.0, (hi - lo - length_s)) / 3.0
+    start = window_start(lo, hi, length_s)
     mask = (t >= start) & (t <= start + length_s)
     return mask if np.count_nonzero(mask) >= 2 else np.ones(t.size, bool)
 

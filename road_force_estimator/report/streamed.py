@@ -15,12 +15,16 @@ What each number needs of the whole drive is kept, and only that:
 - the stamps and speeds of the accepted samples (16 bytes a sample), for the mean and the
   medians of :func:`~.drive_info.run_description` and the model fit.
 
-Ground truth, a reference profile and GNSS coordinates are not handled here (the caller
-reads such drives in one piece). The numbers equal the one-piece report's
-(test_estimate_stream).
+With a ground truth of the loads, :class:`LoadAccuracy` gives the load and LTR figures of
+:func:`.summary.accuracy` from sums over the converged samples (equal to one piece's to the
+last bits of the sums' order); the profile's band-passed errors, its cross correlation, the
+measured convergence time and the truth's IRI need the whole drive and are left out
+(:data:`TRUTH_NOTE`). A reference profile is not handled here (such drives go in one piece).
+The other numbers equal the one-piece report's (test/pipeline/test_blocks.py).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 from typing import Any
 
@@ -30,7 +34,12 @@ from road_force_estimator.core.iri_chunks import segment_iri
 from road_force_estimator.core.segments import (
     MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage, segment_bounds)
 
-__all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary']
+__all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary', 'Track', 'LoadAccuracy',
+           'TRUTH_NOTE']
+
+#: The note in the report of a drive with ground truth estimated block by block.
+TRUTH_NOTE = ('accuracy: loads and LTR (a drive estimated block by block; the profile errors, '
+              'cross correlation, measured convergence time and true IRI need it in one block)')
 
 
 class GrowingArray:
@@ -164,6 +173,76 @@ class SegmentAccumulator:
         out['max_abs_ltr_quasi_static'] = a['quasi']
         out['count'] = counts.astype(np.int64)
         return out
+
+
+@dataclass(frozen=True)
+class Track:
+    """The accepted samples' stamps (ns) and distances (m) of a drive estimated piece by
+    piece (what ``estimate_fleet`` maps a distance to a stamp with); ``valid`` all True."""
+
+    valid: np.ndarray
+    stamp_ns: np.ndarray
+    distance_m: np.ndarray
+
+
+class LoadAccuracy:
+    """:func:`.summary.accuracy`'s load and LTR figures from consecutive pieces and the true
+    loads of their samples (N, (m, 2), NaN where the truth has none): sums over the accepted,
+    converged samples with a finite truth."""
+
+    def __init__(self) -> None:
+        self.samples = 0
+        self.seen = False               #: a finite true load at an accepted sample
+        self.err2 = np.zeros(2)
+        self.ref2 = np.zeros(2)
+        self.peak = np.zeros(2)
+        self.ltr_err2 = 0.0
+        self.ltr_peak = 0.0
+        self.ltr_max = 0.0
+        self.ltr_true_max = 0.0
+
+    def add(self, piece, true_load_n: np.ndarray, static_n: np.ndarray) -> None:
+        """One piece, the true loads of its samples and the static loads F_c (N, (2,))."""
+        rows = np.flatnonzero(piece.valid)
+        true = np.asarray(true_load_n, dtype=float)[rows]
+        finite = np.isfinite(true).all(axis=1)
+        self.seen = self.seen or bool(np.isfinite(true).any())
+        judged = rows[piece.converged[rows] & finite]
+        if judged.size == 0:
+            return
+        true = true[piece.converged[rows] & finite]
+        err = piece.wheel_load_n[judged] - true
+        self.samples += judged.size
+        self.err2 += np.sum(err ** 2, axis=0)
+        self.ref2 += np.sum((true - static_n) ** 2, axis=0)
+        self.peak = np.maximum(self.peak, np.max(np.abs(err), axis=0))
+        ltr_true = (true[:, 1] - true[:, 0]) / (true[:, 0] + true[:, 1])
+        ltr = piece.ltr[judged]
+        self.ltr_err2 += float(np.sum((ltr - ltr_true) ** 2))
+        self.ltr_peak = max(self.ltr_peak, float(np.max(np.abs(ltr - ltr_true))))
+        self.ltr_max = max(self.ltr_max, float(np.max(np.abs(ltr))))
+        self.ltr_true_max = max(self.ltr_true_max, float(np.max(np.abs(ltr_true))))
+
+    def result(self, static_n: np.ndarray) -> dict[str, Any] | None:
+        """The figures (keys of :func:`.summary.accuracy`), None under two judged samples."""
+        if self.samples < 2:
+            return None
+        n = self.samples
+        rms, ref = np.sqrt(self.err2 / n), np.sqrt(self.ref2 / n)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            pooled = float(100.0 * math.sqrt(np.mean(np.square(rms)))
+                           / math.sqrt(np.mean(np.square(ref))))
+            return {
+                'samples_judged': n, 'load_rms_n': _floats(rms), 'load_peak_n': _floats(self.peak),
+                'load_rms_pct_dynamic': _floats(100.0 * rms / ref),
+                'load_rms_pct_static': _floats(100.0 * rms / static_n),
+                'load_rms_pct_dynamic_both': pooled, 'true_dynamic_rms_n': _floats(ref),
+                'ltr_rms_error': math.sqrt(self.ltr_err2 / n), 'ltr_peak_error': self.ltr_peak,
+                'max_abs_ltr': self.ltr_max, 'max_abs_ltr_true': self.ltr_true_max}
+
+
+def _floats(a) -> list[float]:
+    return [float(v) for v in np.ravel(a)]
 
 
 class StreamedSummary:
@@ -346,17 +425,13 @@ class StreamedSummary:
             return whole_iri(x, z) if np.isfinite(values).all() else None
         return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
 
-    def track(self):
-        """What ``estimate_fleet`` maps distance to stamp with (``valid``, ``stamp_ns``,
-        ``distance_m`` of the accepted samples; empty without ``with_stamps``)."""
-        from types import SimpleNamespace
-
+    def track(self) -> Track:
+        """What ``estimate_fleet`` maps distance to stamp with (:class:`Track`; empty without
+        ``with_stamps``)."""
         if self.x_valid is None:
-            return SimpleNamespace(valid=np.zeros(0, bool), stamp_ns=np.zeros(0, np.int64),
-                                   distance_m=np.zeros(0))
+            return Track(np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0))
         x = self.x_valid.array()
-        return SimpleNamespace(valid=np.ones(x.size, bool), stamp_ns=self.stamps.array(),
-                               distance_m=x)
+        return Track(np.ones(x.size, bool), self.stamps.array(), x)
 
     def speed_stats(self) -> dict[str, float] | None:
         v = self.speed.array()

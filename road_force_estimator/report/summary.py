@@ -311,10 +311,9 @@ def _odometer_summary(est) -> dict[str, Any]:
     """``{'distance': which distance and why}`` (:class:`.odometer.DistanceSource`, when the
     estimate says) and ``{'odometer': the GNSS fit}`` when one was made."""
     out: dict[str, Any] = {}
-    source = getattr(est, 'distance_source', None)
-    if source is not None:
-        out['distance'] = source.as_dict()
-    if hasattr(est, 'odometer'):
+    if est.distance_source is not None:
+        out['distance'] = est.distance_source.as_dict()
+    if est.fused:
         out['odometer'] = est.odometer.as_dict() if est.odometer is not None else None
     return out
 

@@ -20,9 +20,9 @@ Then it estimates:
 ``offline``
     :func:`estimation.offline.estimate_recording`: non-causal, the whole recording.
 
-A drive of 2^21 samples or more without ground truth (fewer in a Dask worker with a memory
-limit) is estimated block by block in either mode (:mod:`.estimate_stream`: a 4-hour drive at
-1 kHz under 2 GB).
+The drive goes through :func:`road_force_estimator.pipeline.run.run_drive`: one block, or
+block by block from 2^21 samples or from a memory limit
+(:mod:`road_force_estimator.pipeline.plan`; a 4-hour drive at 1 kHz under 2 GB).
 
 It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`, with a
 ``/diagnostics`` message per second of the drive) and the report ``DIR/report/``
@@ -41,26 +41,20 @@ parameters, 2 for a bad command line; each with one line on stderr.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
 import math
 from pathlib import Path
 import sys
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
+from road_force_estimator.pipeline.one_block import drive_speed
+from road_force_estimator.pipeline.result import PROG, EstimateResult, InputError, check_spacing
 from road_force_estimator.tools import cli, output_folder
 from road_force_estimator.tools.cli import MODES
 
-__all__ = ['PROG', 'MODES', 'EstimateResult', 'build_parser', 'load_parameters', 'drive_speed',
-           'estimate_online', 'run', 'main']
-
-PROG = 'estimate_bag'
-
-
-class InputError(Exception):
-    """Bad input (exit status 1)."""
+__all__ = ['PROG', 'MODES', 'EstimateResult', 'InputError', 'build_parser', 'load_parameters',
+           'drive_speed', 'check_spacing', 'estimate_online', 'run', 'main']
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -99,34 +93,20 @@ def load_parameters(path: str | None, overrides=()):
     return cli.load_estimator_parameters(path, ('observer', PROG), overrides)
 
 
-def drive_speed(drive) -> tuple[np.ndarray, int]:
-    """Speed per sample (m/s) and how many samples took the first twist's speed.
-
-    Samples before the first accepted ``/vehicle/twist`` get its speed (the observer node
-    holds them until a speed arrives and estimates them with it).
-
-    Raises
-    ------
-    InputError
-        No usable twist at all.
-    """
-    speed = np.array(drive.speed_mps, dtype=float)
-    if len(drive.twist_speed_mps) == 0:
-        raise InputError('no usable /vehicle/twist message: the speed is unknown')
-    early = ~np.isfinite(speed)
-    speed[early] = float(drive.twist_speed_mps[0])
-    return speed, int(np.count_nonzero(early))
-
-
 class _Stages:
     """A one-line progress display of the stages of :func:`run` (stderr, TTY only)."""
 
     NAMES = ('read', 'estimate', 'write bag', 'report')
 
     def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
         self.bar = cli.progress_bar(enabled, total=len(self.NAMES), desc=PROG, leave=False,
                                     bar_format='{desc} ({n}/{total} stages done)')
         self.started = False
+
+    def samples(self, total: int, desc: str):
+        """A progress bar over ``total`` samples (:func:`.cli.sample_progress`)."""
+        return cli.sample_progress(total, self.enabled, desc)
 
     def next(self, name: str) -> None:
         if self.started:
@@ -140,57 +120,21 @@ class _Stages:
 
 def estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer, *,
                     progress: bool = False):
-    """The observer node's numbers: :func:`~.estimator.estimate_batch`, which runs
-    :meth:`Estimator.update`'s steps per sample, in order, then ``flush`` (bit-identical to
-    them: test_estimator); row k holds the estimate of sample k (with a latency it came with a
-    later input or from ``flush``), rejected rows hold the previous one with ``valid`` False.
-
-    Returns
-    -------
-    EstimateArrays
-    """
-    from road_force_estimator.estimation import estimate_batch
+    """:func:`.pipeline.one_block.estimate_online` (the observer node's numbers,
+    :func:`~.estimator.estimate_batch`) with a progress bar when ``progress``."""
+    from road_force_estimator.pipeline import one_block
 
     with cli.sample_progress(len(stamps_ns), progress, f'{PROG}: online') as bar:
-        return estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle, observer,
-                              progress=bar.update)
-
-
-def _diagnostics(est, summary_counts: dict[str, int], mode: str, model_fit=None):
-    """One estimator status per second of the drive (data time), the last with the totals;
-    ``model_fit``: the drive's (ratio, verdict) or None."""
-    from road_force_estimator.estimation.diagnostics import batch_diagnostics
-
-    per_second = batch_diagnostics(est.stamp_ns, est.valid, est.converged, est.lift_off, est.ltr,
-                                   est.residual_nm, summary_counts,
-                                   f'{PROG}: estimator ({mode})', PROG,
-                                   speed_contradicted=getattr(est, 'speed_contradicted', None),
-                                   model_fit=model_fit)
-    return [(stamp, [st.as_dict() for st in statuses]) for stamp, statuses in per_second]
-
-
-@dataclass
-class EstimateResult:
-    """What :func:`run` did: the summary of the report, the paths, the estimates, the bag's
-    messages that were written (``written``), warnings (breaks in the bag) and the drive read
-    (:class:`~.bagio.Drive`)."""
-
-    summary: dict[str, Any]
-    bag: Path
-    report: Path
-    estimates: Any = None
-    written: dict[str, int] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
-    drive: Any = None
-    #: what the reader took (an articulated drive: its front axle), one line each
-    notes: list[str] = field(default_factory=list)
+        return one_block.estimate_online(stamps_ns, q_m, roll_rad, speed_mps, vehicle,
+                                         observer, progress=bar.update)
 
 
 def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=None,
         mode: str = 'online', segment_length_m: float = 100.0, reference=None,
         reference_offset_m: float | None = None, figures: bool = True, force: bool = False,
         progress: bool = False, standalone: bool = True, units: str = 'si',
-        run_info: dict[str, Any] | None = None) -> EstimateResult:
+        run_info: dict[str, Any] | None = None,
+        memory_limit_bytes: float | None = None) -> EstimateResult:
     """Estimate one drive bag and write ``output/bag`` and ``output/report``.
 
     ``units`` ('si' or 'us') are those of the report's text; ``run_info`` (the parameter file,
@@ -200,7 +144,8 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     :data:`~.output_folder.MARKER_NAME` when complete (:mod:`.output_folder`); ``force``
     replaces only what estimate_bag wrote there, never the input. ``standalone`` False:
     ``output`` is a fresh folder that the caller builds and renames itself (estimate_fleet),
-    written directly and without the marker.
+    written directly and without the marker. ``memory_limit_bytes``: the memory the run may
+    take (:func:`.pipeline.plan.stream_threshold`; None: none given).
 
     Raises
     ------
@@ -211,6 +156,7 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
         left behind).
     """
     from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+    from road_force_estimator.pipeline.run import run_drive
 
     vehicle = VehicleParameters() if vehicle is None else vehicle
     observer = ObserverParameters() if observer is None else observer
@@ -228,180 +174,14 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
                    segment_length_m=segment_length_m, figures=figures, units=units,
                    run_info=run_info)
     try:
-        write = _writer(input_path, output, vehicle, observer, options, progress, stages)
         if not standalone:
-            return _whole_vehicle(write(output), input_path, output)
+            return run_drive(output, output, input_path, vehicle, observer, options, stages,
+                             progress=progress, memory_limit_bytes=memory_limit_bytes)
         with target.staged() as stage:
-            return _whole_vehicle(write(stage), input_path, stage)
+            return run_drive(stage, output, input_path, vehicle, observer, options, stages,
+                             progress=progress, memory_limit_bytes=memory_limit_bytes)
     finally:
         stages.close()
-
-
-def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path) -> EstimateResult:
-    """An articulated drive: the note of what was estimated, and the truth of every axle
-    in the report (:mod:`~.report.whole_vehicle`)."""
-    from road_force_estimator import bagio
-    from road_force_estimator.bagio.articulated_drive import read_articulated_truth
-    from road_force_estimator.bagio.vehicle_layout import front_axle_joints, is_articulated
-
-    custom = bagio.bag_custom_data(input_path)
-    if result.drive is not None and getattr(result.drive, 'notes', ()):
-        result.notes += list(result.drive.notes)
-    elif is_articulated(custom):
-        result.notes.append(front_axle_joints(custom, None)[1])
-    truth = read_articulated_truth(input_path) if is_articulated(custom) or result.notes \
-        else None
-    if truth is not None and len(truth.stamps_ns):
-        from road_force_estimator.report.whole_vehicle import append_to_report
-        append_to_report(folder / 'report', truth, result.summary)
-    return result
-
-
-def _writer(input_path: Path, output: Path, vehicle, observer, options: dict, progress: bool,
-            stages):
-    """``write(folder) -> EstimateResult``: a long drive block by block
-    (:mod:`.estimate_stream`), else estimated in one piece now and written by :func:`_write`."""
-    from road_force_estimator.tools import estimate_stream
-
-    if estimate_stream.use_stream(input_path, options['mode'], options['reference'], observer):
-        api = SimpleNamespace(prog=PROG, error=InputError, result=EstimateResult)
-        return lambda folder: estimate_stream.run_stream(
-            folder, output, input_path, vehicle, observer, options, stages, api, progress)
-    drive, est, extra = _estimate(input_path, vehicle, observer, options['mode'], progress,
-                                  stages, options['segment_length_m'])
-    return lambda folder: _write(folder, output, input_path, drive, est, extra, vehicle,
-                                 observer, options, stages)
-
-
-def check_spacing(segment_length_m: float, stamps_ns, speed_mps) -> None:
-    """Raise :class:`InputError` when the segments are shorter than the drive's sample
-    spacing (:func:`.core.segments.check_segment_length`): refused before the work."""
-    from road_force_estimator.core.segments import check_segment_length, sample_spacing
-    from road_force_estimator.estimation.acceptance import MAX_SPEED_MPS
-
-    try:
-        check_segment_length(segment_length_m,
-                             sample_spacing(stamps_ns, speed_mps, MAX_SPEED_MPS))
-    except ValueError as err:
-        raise InputError(str(err)) from None
-
-
-def _estimate(input_path: Path, vehicle, observer, mode: str, progress: bool, stages,
-              segment_length_m: float = 100.0):
-    """Read the bag and estimate: ``(drive, estimates, notes for the report)``.
-
-    Raises
-    ------
-    InputError
-        Not a drive bag, no usable sample or speed, no sample estimated.
-    """
-    from road_force_estimator import bagio
-    from road_force_estimator.estimation import estimate_recording
-
-    stages.next('reading the bag')
-    try:
-        drive = bagio.read_drive_bag(input_path)
-    except bagio.BagReadError as err:
-        raise InputError(str(err)) from None
-    if len(drive.stamps_ns) == 0:
-        raise InputError(f'{input_path}: no usable /suspension/deflections message'
-                         + (f' ({drive.issues[0]})' if drive.issues else ''))
-    speed, early = drive_speed(drive)
-    check_spacing(segment_length_m, drive.stamps_ns, speed)
-    args = (drive.stamps_ns, drive.q_m, drive.roll_rad, speed, vehicle, observer)
-    stages.next(f'estimating ({mode})')
-    if mode == 'online':
-        est = estimate_online(*args, progress=progress)
-    else:
-        est = estimate_recording(*args, fixes=drive.fixes)
-    if est.status.accepted == 0:
-        raise InputError(f'{input_path}: no sample could be estimated: '
-                         f'{_why_none_estimated(drive, speed, est.status)}')
-    extra = {}
-    if mode == 'online':          # the distance is the speed's online: the report says why
-        from road_force_estimator.estimation.odometer import distance_speed
-        est.distance_source = distance_speed(observer.distance_source, drive.stamps_ns,
-                                             speed, drive.fixes, offline=False)[1]
-    if early:
-        extra['samples before the first twist (given its speed)'] = early
-    return drive, est, extra
-
-
-def _why_none_estimated(drive, speed: np.ndarray, status) -> str:
-    """Why every one of the drive's samples was rejected (one phrase)."""
-    from road_force_estimator.estimation.acceptance import (
-        MAX_DEFLECTION_M, MAX_ROLL_RAD, MAX_SPEED_MPS)
-
-    n = len(speed)
-    finite = np.isfinite(speed)
-    if not np.any(finite & (np.abs(speed) <= MAX_SPEED_MPS)):
-        worst = speed[finite][np.argmax(np.abs(speed[finite]))] if finite.any() else math.nan
-        return (f'every speed out of range ({worst:g} m/s; the limit is |v| <= '
-                f'{MAX_SPEED_MPS:g} m/s)')
-    if np.all(speed < 0.0):
-        return f'every speed negative (e.g. {speed[0]:g} m/s)'
-    q = np.asarray(drive.q_m, dtype=float)
-    roll = np.asarray(drive.roll_rad, dtype=float)
-    if not np.any(np.all(np.abs(q) <= MAX_DEFLECTION_M, axis=1)):
-        return f'every deflection out of range (|q| <= {MAX_DEFLECTION_M:g} m)'
-    if not np.any(np.abs(roll) <= MAX_ROLL_RAD):
-        return f'every roll angle out of range (|phi| <= {MAX_ROLL_RAD:g} rad)'
-    return (f'all {n} samples rejected ({status.rejected_range} out of range, '
-            f'{status.rejected_nonfinite} non-finite, {status.rejected_time} with a bad stamp)')
-
-
-def _write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict, vehicle,
-           observer, options: dict, stages) -> EstimateResult:
-    """Write ``folder/bag`` and ``folder/report``; the result names them in ``output``."""
-    from road_force_estimator import bagio
-    from road_force_estimator.estimation.fit_check import ADVICE, MISMATCH
-    from road_force_estimator.report import raw_road, write_report
-
-    mode = options['mode']
-    bag_dir, report_dir = folder / 'bag', folder / 'report'
-    for p in (bag_dir, report_dir):
-        if p.exists():
-            raise InputError(f'{p} exists (use --force to replace it)')
-    st = est.status
-    counts = {'samples': int(len(drive.stamps_ns)), 'estimated': int(st.accepted),
-              'rejected_by_reader': int(drive.rejected_total),
-              'rejected_by_estimator': int(st.rejected), 'resets': int(st.resets)}
-    fit = getattr(est, 'odometer', None)          # a GNSS fit was made (offline)
-    if fit is not None and not fit.problem:
-        counts.update(odometer_scale=fit.scale, odometer_scale_std=fit.scale_sigma,
-                      odometer_fixes_rejected=fit.rejected)
-    folder.mkdir(parents=True, exist_ok=True)
-    custom = {'road_force_estimator.mode': mode,
-              'road_force_estimator.input': input_path.name,
-              'road_force_estimator.writer_command': PROG}
-    fit = _model_fit(est, drive, vehicle, observer)
-    if fit is not None:
-        extra['model fit'] = (f'{fit[1]} (residual band RMS {fit[0]:.3g} x sigma_M)'
-                              + (f': {ADVICE}' if fit[1] == MISMATCH else ''))
-    stages.next('writing the bag')
-    written = bagio.write_estimate_bag(
-        bag_dir, est, track_width_m=vehicle.track_width_m,
-        diagnostics=_diagnostics(est, counts, mode, fit), custom_data=custom)
-    if written.get('nonfinite'):
-        extra['estimates not written (non-finite)'] = written['nonfinite']
-    stages.next('writing the report' + (' and figures' if options['figures'] else ''))
-    summary = write_report(report_dir, est, drive, vehicle, observer,
-                           input_name=input_path.name, extra=extra,
-                           raw_road=raw_road(drive, reader=bagio.road_from_source), **options)
-    warnings = [f'{input_path}: {issue}' for issue in drive.issues]
-    return EstimateResult(summary, output / 'bag', output / 'report', est, written, warnings,
-                          drive)
-
-
-def _model_fit(est, drive, vehicle, observer):
-    """The drive's model-fit verdict (:func:`.model_fit.assess`), or None when the method
-    is not the model's or there are too few samples."""
-    from road_force_estimator.estimation.fit_check import assess
-
-    if getattr(est.status, 'method', '') != 'model':
-        return None
-    ratio, word = assess(est, vehicle, observer, drive.speed_mps)
-    return None if not math.isfinite(ratio) else (ratio, word)
 
 
 def _headline(result: EstimateResult, units: str = 'si') -> list[str]:

@@ -350,11 +350,26 @@ def _install(tmp: Path, final: Path, tmp_root: Path) -> None:
 
 
 def _fixes_of(result, input_path: str):
-    drive = getattr(result, 'drive', None)
+    """The drive's fixes: those the run read (its ``drive``: a :class:`.bagio.Drive` or,
+    in blocks, a :class:`.bagio.drive_blocks.DriveRecord`), else read again."""
+    drive = result.drive
     if drive is None:
         from road_force_estimator.bagio import read_drive_bag
         drive = read_drive_bag(input_path)
     return drive.fixes
+
+
+def worker_memory_limit() -> float | None:
+    """The memory limit (bytes) of the Dask worker this task runs in, None outside one or
+    without a limit: what :func:`.estimate_bag.run` is given (the pipeline's block plan)."""
+    try:
+        from distributed import get_worker
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return None
+    manager = getattr(worker, 'memory_manager', None)     # a Dask object, not ours
+    limit = getattr(manager, 'memory_limit', None)
+    return float(limit) if limit else None
 
 
 def process_drive(task: DriveTask) -> DriveOutcome:
@@ -378,7 +393,8 @@ def process_drive(task: DriveTask) -> DriveOutcome:
                 task.input_path, tmp, vehicle=task.vehicle, observer=task.observer,
                 mode=settings['mode'], segment_length_m=settings['segment_length_m'],
                 figures=settings['figures'], force=False, progress=False, standalone=False,
-                units=settings.get('units', 'si'), run_info=settings.get('run_info'))
+                units=settings.get('units', 'si'), run_info=settings.get('run_info'),
+                memory_limit_bytes=worker_memory_limit())
             table = read_segments_csv(tmp / 'report' / 'segments.csv')
             fixes = _fixes_of(result, task.input_path)
             est = result.estimates

@@ -168,7 +168,7 @@ class TestOfflineEstimate:
         raw = estimate_recording(stamps, q, phi, v, VEHICLE,
                                  ObserverParameters(distance_source='speed'), fixes=fixes)
         assert raw.distance_m[-1] - true[-1] == pytest.approx(ERROR * true[-1], rel=1e-3)
-        assert not hasattr(raw, 'odometer') and raw.distance_source.used == 'speed'
+        assert not raw.fused and raw.odometer is None and raw.distance_source.used == 'speed'
         # the default, auto: exact fixes give the scale to far better than 0.2 %
         auto = estimate_recording(stamps, q, phi, v, VEHICLE, ObserverParameters(),
                                   fixes=fixes)

@@ -1,6 +1,6 @@
 """An estimate_fleet worker under a Dask memory limit on a drive that does not fit it in one
-piece (issue 21): the worker's limit makes the drive go block by block
-(tools.estimate_stream.stream_threshold) and it completes there."""
+piece (issue 21): the worker's limit, handed to the pipeline, makes the drive go block by block
+(pipeline.plan.stream_threshold) and it completes there."""
 import pytest
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
@@ -14,8 +14,9 @@ HOURS = 0.15
 
 
 def _threshold():
-    from road_force_estimator.tools import estimate_stream
-    return estimate_stream.stream_threshold()
+    from road_force_estimator.pipeline.plan import stream_threshold
+    from road_force_estimator.tools.fleet_drives import worker_memory_limit
+    return stream_threshold(worker_memory_limit())
 
 
 def test_worker_stays_under_its_memory_limit(tmp_path):

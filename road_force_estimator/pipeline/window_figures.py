@@ -1,4 +1,4 @@
-"""The figures of a drive estimated block by block (:mod:`.estimate_stream`).
+"""The figures of a drive in many blocks (:mod:`.blocks`): the sink of the detail window.
 
 The detail figures (:func:`.report.figures.write_figures`) show a window of
 :data:`~.report.figures.DEFAULT_WINDOW_S` from a third of the converged stretch, which is
@@ -20,16 +20,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import pickle
-from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ['Snapshots', 'OfflineWindow', 'Window', 'window_bounds', 'draw']
+from road_force_estimator.report.figures import window_start
+
+__all__ = ['Snapshots', 'OfflineWindow', 'Window', 'window_bounds', 'window_of', 'draw']
 
 
 @dataclass(frozen=True)
 class Window:
-    """A detail window as :func:`.figures._window` picks it: the samples whose time
+    """A detail window as one block's figures pick it (:func:`.figures.window_start`): the
+    samples whose time
     ``(stamp - t0_ns) * 1e-9`` (s, the same float expression) lies in ``[start_s, end_s]``."""
 
     t0_ns: int
@@ -49,17 +51,26 @@ class Window:
 
 
 def window_bounds(acc, length_s: float) -> Window | None:
-    """The detail window that :func:`.figures._window` picks on the whole drive (from the
-    accumulators ``acc``: :class:`~.report.streamed.StreamedSummary`), None without one."""
-    if acc.t0_ns is None or acc.last_ns == acc.t0_ns:
+    """The detail window of the whole drive (from the accumulators ``acc``:
+    :class:`~.report.streamed.StreamedSummary`), None without one."""
+    return window_of(acc.t0_ns, acc.last_ns, acc.first_converged_ns, acc.last_converged_ns,
+                     length_s)
+
+
+def window_of(t0_ns: int | None, last_ns: int | None, first_converged_ns: int | None,
+              last_converged_ns: int | None, length_s: float) -> Window | None:
+    """The detail window (:func:`.figures.window_start`) of a drive whose accepted samples
+    run from ``t0_ns`` to ``last_ns`` (ns) and converged ones from ``first_converged_ns`` to
+    ``last_converged_ns`` (None: none converged); None without a window."""
+    if t0_ns is None or last_ns == t0_ns:
         return None
-    if acc.first_converged_ns is not None:
-        lo = (acc.first_converged_ns - acc.t0_ns) * 1e-9
-        hi = (acc.last_converged_ns - acc.t0_ns) * 1e-9
+    if first_converged_ns is not None:
+        lo = (first_converged_ns - t0_ns) * 1e-9
+        hi = (last_converged_ns - t0_ns) * 1e-9
     else:
-        lo, hi = 0.0, (acc.last_ns - acc.t0_ns) * 1e-9
-    start = lo + max(0.0, (hi - lo - length_s)) / 3.0
-    return Window(int(acc.t0_ns), start, start + length_s)
+        lo, hi = 0.0, (last_ns - t0_ns) * 1e-9
+    start = window_start(lo, hi, length_s)
+    return Window(int(t0_ns), start, start + length_s)
 
 
 class Snapshots:
@@ -99,9 +110,8 @@ class OfflineWindow:
     def keep(self, piece, acc) -> None:
         end = self.stream.last_stamp_ns
         first = acc.first_converged_ns
-        guess = SimpleNamespace(t0_ns=acc.t0_ns, last_ns=end, first_converged_ns=first,
-                                last_converged_ns=None if first is None else end)
-        bounds = window_bounds(guess, self.length_s)
+        bounds = window_of(acc.t0_ns, end, first, None if first is None else end,
+                           self.length_s)
         if bounds != self.bounds:
             self.bounds = bounds
             self.pieces = [p for p in self.pieces if _inside(p, bounds).any()]
@@ -116,13 +126,24 @@ def _inside(piece, bounds: Window | None) -> np.ndarray:
     return bounds.inside(piece.stamp_ns)
 
 
+def _inside_inputs(block, inside: np.ndarray) -> tuple:
+    """``(q, roll, truth)`` of a block's samples ``inside`` (truth: its GroundTruth or
+    None)."""
+    from road_force_estimator.bagio.drive import GroundTruth
+
+    t = block.truth
+    truth = None if t is None else GroundTruth(
+        t.stamps_ns[inside], t.wheel_load_n[inside], t.road_m[inside], t.distance_m[inside])
+    return block.q_m[inside], block.roll_rad[inside], truth
+
+
 def _window_inputs(reader, bounds: Window) -> list:
-    """The inputs ``(q, roll)`` of the samples in the window ``bounds``, per block."""
+    """The inputs ``(q, roll, truth)`` of the samples in the window ``bounds``, per block."""
     inputs = []
     for block in reader:
         inside = bounds.inside(block.stamps_ns)
         if inside.any():
-            inputs.append((block.q_m[inside], block.roll_rad[inside]))
+            inputs.append(_inside_inputs(block, inside))
         if block.stamps_ns.size and block.stamps_ns[-1] > bounds.ns[1]:
             break
     return inputs
@@ -138,7 +159,7 @@ def _window_pieces(reader, index: int, stream, bounds: Window):
             continue
         inside = bounds.inside(block.stamps_ns)
         if inside.any():
-            inputs.append((block.q_m[inside], block.roll_rad[inside]))
+            inputs.append(_inside_inputs(block, inside))
         pieces += stream.feed(block.stamps_ns, block.q_m, block.roll_rad, block.speed_mps)
         if pieces and pieces[-1].stamp_ns[-1] > hi:
             break
@@ -171,7 +192,7 @@ def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
     one (``rerun()``: the drive's pieces again, when its guess missed)."""
     from road_force_estimator.bagio.drive_blocks import DriveBlocks
     from road_force_estimator.report.alignment import align
-    from road_force_estimator.report.figures import DEFAULT_WINDOW_S, write_figures
+    from road_force_estimator.report.figures import DEFAULT_WINDOW_S, FigureDrive, write_figures
 
     bounds = window_bounds(acc, DEFAULT_WINDOW_S)
     if bounds is None:
@@ -190,11 +211,21 @@ def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
     if est is None or np.count_nonzero(est.valid) < 2:
         return []
     drive = None
-    q = np.concatenate([a for a, _ in inputs]) if inputs else np.zeros((0, 2))
+    q = np.concatenate([a for a, _, _ in inputs]) if inputs else np.zeros((0, 2))
     if len(q) == len(est.stamp_ns):
-        drive = SimpleNamespace(q_m=q, roll_rad=np.concatenate([b for _, b in inputs]),
-                                truth=None, fixes=None)
+        drive = FigureDrive(q, np.concatenate([b for _, b, _ in inputs]),
+                            _joined([t for _, _, t in inputs]))
     al = align(est, drive)
     al.t_s = (al.stamps_ns - acc.t0_ns) * 1e-9       # the drive's time, as in one piece
     return write_figures(folder, est, al, drive, segments=segments, title=title, units=units,
                          static_load_n=static_load_n)
+
+
+def _joined(truths: list):
+    """The window's GroundTruth from its blocks' (None when the drive has none)."""
+    from road_force_estimator.bagio.drive import GroundTruth
+
+    if not truths or any(t is None for t in truths):
+        return None
+    return GroundTruth(*(np.concatenate([getattr(t, name) for t in truths])
+                         for name in ('stamps_ns', 'wheel_load_n', 'road_m', 'distance_m')))

@@ -1,0 +1,67 @@
+"""How a drive goes through the pipeline: in one block or in many, from its length and the
+memory limit it is given (the only module that decides whether to stream).
+
+A drive is one block (:func:`.run.run_drive` reads it whole, ``estimate_batch`` or
+``estimate_recording`` estimates it in one call) below :func:`stream_threshold` samples, many
+blocks of :data:`~.bagio.drive_blocks.BLOCK_SAMPLES` from it on. The threshold is
+:data:`STREAM_MIN_SAMPLES` (about 35 min at 1 kHz, below which one block takes less than
+~1 GB), less when a memory limit is given (an ``estimate_fleet`` worker's) that one block
+would pass half of at :data:`ONE_BLOCK_BYTES_PER_SAMPLE`, whatever the drive carries (ground
+truth, fixes). Two stay one block: a drive compared with a ``--reference-profile`` (its
+alignment is found over the whole drive) and the offline differentiator chain
+(``observer.discretization`` other than ``model``: a zero-phase filter over the whole
+recording).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ['STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'BlockPlan', 'stream_threshold',
+           'plan_drive']
+
+#: Drives of at least this many deflection messages (metadata.yaml) go in blocks.
+STREAM_MIN_SAMPLES = 1 << 21
+#: What a sample costs one block at its peak, figures on (bytes; measured 545 offline and
+#: ~720 online without truth, ``bench/probes/long_drive_memory.py``), rounded up.
+ONE_BLOCK_BYTES_PER_SAMPLE = 1000
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """A drive's way through the pipeline: ``blocks`` False (one block) or True (many);
+    ``samples``: the deflection messages metadata.yaml lists (0: unknown)."""
+
+    blocks: bool
+    samples: int
+
+
+def stream_threshold(memory_limit_bytes: float | None = None) -> int:
+    """Deflection messages from which a drive goes in blocks: :data:`STREAM_MIN_SAMPLES`,
+    less when one block would pass half of ``memory_limit_bytes`` (bytes, > 0; None: no
+    limit) at :data:`ONE_BLOCK_BYTES_PER_SAMPLE` a sample."""
+    if memory_limit_bytes is None:
+        return STREAM_MIN_SAMPLES
+    if not memory_limit_bytes > 0:
+        raise ValueError(f'memory limit {memory_limit_bytes!r} bytes: must be > 0')
+    return max(1, min(STREAM_MIN_SAMPLES,
+                      int(0.5 * memory_limit_bytes / ONE_BLOCK_BYTES_PER_SAMPLE)))
+
+
+def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
+               memory_limit_bytes: float | None = None,
+               min_samples: int | None = None) -> BlockPlan:
+    """The :class:`BlockPlan` of a drive bag (see the module notes); ``reference``: the
+    ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
+    :func:`stream_threshold` (tests)."""
+    from road_force_estimator.bagio.drive_blocks import listed_messages
+    from road_force_estimator.interfaces import DEFLECTIONS
+
+    listed = listed_messages(Path(input_path))
+    samples = listed.get(DEFLECTIONS, 0)
+    limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
+    if mode not in ('online', 'offline') or samples == 0 or reference is not None:
+        return BlockPlan(False, samples)
+    if mode == 'offline' and observer.discretization != 'model':
+        return BlockPlan(False, samples)        # the differentiators' zero-phase chain
+    return BlockPlan(samples >= limit, samples)

@@ -1,0 +1,74 @@
+"""One drive through the pipeline: :func:`run_drive`, the one downward pass of
+``estimate_bag`` and of each ``estimate_fleet`` drive.
+
+Source (the drive bag, with its ground truth and fixes) -> estimator stage (online or
+offline, with or without a latency) -> sinks (the estimate bag, the diagnostics, the
+report's segments, IRI and summary, the figures), closed once at the end. The plan
+(:func:`.plan.plan_drive`: one block or many, from the drive's length and the memory limit)
+picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
+block). Then an articulated drive's whole-vehicle truth joins the report
+(:mod:`~.report.whole_vehicle`).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from road_force_estimator.pipeline.result import EstimateResult
+
+__all__ = ['run_drive']
+
+
+def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, options: dict,
+              stages, *, progress: bool = False,
+              memory_limit_bytes: float | None = None) -> EstimateResult:
+    """Estimate the drive bag ``input_path`` and write ``folder/bag`` and ``folder/report``
+    (the result names them in ``output``).
+
+    ``options``: ``mode``, ``reference``, ``reference_offset_m``, ``segment_length_m``,
+    ``figures``, ``units``, ``run_info`` (:func:`~.report.write_report`'s);
+    ``stages``: the progress display (:class:`.result.Stages`); ``memory_limit_bytes``: the
+    memory the run may take (an ``estimate_fleet`` worker's limit; None: none given).
+
+    Raises
+    ------
+    InputError
+        Not a drive bag, no usable sample or speed, no sample estimated, an output exists.
+    """
+    from road_force_estimator.pipeline import blocks, one_block
+    from road_force_estimator.pipeline.plan import plan_drive
+
+    plan = plan_drive(input_path, options['mode'], observer, options['reference'],
+                      memory_limit_bytes=memory_limit_bytes)
+    if plan.blocks:
+        result = blocks.run_blocks(folder, output, input_path, vehicle, observer, options,
+                                   stages, progress, samples=plan.samples)
+    else:
+        stages.next('reading the bag')
+        drive, speed, early = one_block.read(input_path, options['segment_length_m'])
+        stages.next(f'estimating ({options["mode"]})')
+        est = one_block.estimate(input_path, drive, speed, vehicle, observer, options['mode'],
+                                 stages)
+        extra = {'samples before the first twist (given its speed)': early} if early else {}
+        result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
+                                 observer, options, stages)
+    return _whole_vehicle(result, input_path, folder)
+
+
+def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path) -> EstimateResult:
+    """An articulated drive: the note of what was estimated, and the truth of every axle
+    in the report (:mod:`~.report.whole_vehicle`)."""
+    from road_force_estimator import bagio
+    from road_force_estimator.bagio.articulated_drive import read_articulated_truth
+    from road_force_estimator.bagio.vehicle_layout import front_axle_joints, is_articulated
+
+    custom = bagio.bag_custom_data(input_path)
+    if result.drive.notes:
+        result.notes += list(result.drive.notes)
+    elif is_articulated(custom):
+        result.notes.append(front_axle_joints(custom, None)[1])
+    truth = read_articulated_truth(input_path) if is_articulated(custom) or result.notes \
+        else None
+    if truth is not None and len(truth.stamps_ns):
+        from road_force_estimator.report.whole_vehicle import append_to_report
+        append_to_report(folder / 'report', truth, result.summary)
+    return result
