@@ -160,6 +160,15 @@ class EstimatorStatus:
     #: samples whose innovation the gate kept from the filter (``observer.innovation_gate``),
     #: per channel name (model method; a spike, not a rejected sample: the others were used)
     innovations_gated: dict = field(default_factory=dict)
+    #: per channel name: 'ok', 'stuck' or 'drift' now (:mod:`.sensor_health`)
+    sensor_faults: dict = field(default_factory=dict)
+    #: per channel name: stuck / drift flags raised (episodes) and samples flagged
+    stuck_episodes: dict = field(default_factory=dict)
+    stuck_samples: dict = field(default_factory=dict)
+    drift_episodes: dict = field(default_factory=dict)
+    drift_samples: dict = field(default_factory=dict)
+    #: per channel name: the stamp (ns) of its first flag of each kind
+    fault_first_ns: dict = field(default_factory=dict)
 
     @property
     def rejected(self) -> int:

@@ -237,6 +237,24 @@ class ModelCore:
         status.gain_designs = sched.design_count
         status.innovations_gated = dict(zip(self.model.channel_names, self.gated))
 
+    def set_excluded(self, channels: tuple) -> None:
+        """Leave ``channels`` (indices) out of the filter from the next step on (a stuck
+        sensor, :mod:`..sensor_health`): the gains are those of a design without them
+        (:func:`.gains.design` ``excluded``, cached per set); () feeds every channel."""
+        sched = self.schedule
+        if tuple(channels) != sched.excluded:
+            sched.excluded = tuple(channels)
+            sched.stale = True
+
+    def body_rates(self) -> tuple[float, float] | None:
+        """The body's heave and roll rates of the newest state (m/s, rad/s; the model's
+        ``momentum_states``), or None (:mod:`..sensor_health`)."""
+        slots = getattr(self.model, 'momentum_states', None)
+        if slots is None or self._buf.shape[0] == 0:
+            return None
+        row = self._buf[self._i]
+        return float(row[self._x0i + slots[0]]), float(row[self._x0i + slots[1]])
+
     def settling_time_s(self, dt_s: float) -> float:
         """Time after a (re)start after which the estimate counts as converged (s); see
         :meth:`.GainSchedule.settling_time_s`."""
