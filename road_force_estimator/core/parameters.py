@@ -152,7 +152,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'counted per sensor); 0 = off', 0.0, 1000.0),
     _p('observer.fault_stuck_time', 'double', 0.5, 's',
        'a sensor whose reading has not changed (by more than observer.fault_stuck_tolerance) '
-       'for this long while another sensor moved is flagged stuck (estimation.sensor_health)',
+       'for this long while every other sensor moved is flagged stuck (estimation.sensor_health)',
        0.01, 1000.0),
     _p('observer.fault_stuck_tolerance', 'double', 0.0, 'm or rad',
        'largest change between samples that counts as no change for the stuck flag (0 = '

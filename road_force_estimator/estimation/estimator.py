@@ -362,6 +362,15 @@ class BatchRun:
                            count=len(rows) * N_COLUMNS).reshape(len(rows), N_COLUMNS)
 
 
+def _fault_flags(faults: FaultDetector, accepted: np.ndarray, n: int) -> np.ndarray:
+    """The detector's flags per sample of a batch (``accepted``: the sample of each accepted
+    one, in order); a rejected sample holds the flags before it."""
+    out = np.zeros((n, faults.n), dtype=np.int8)
+    for k, ch, code in faults.events:
+        out[accepted[k]:, ch] = code
+    return out
+
+
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                    observer: ObserverParameters | None = None, *,
                    gap_threshold_s: float = GAP_THRESHOLD_S,
@@ -424,5 +433,6 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
             arr[held] = arr[src]
     out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=run.estimator.status,
                          speed_contradicted=contradicted, **fields)
+    out.fault_flags = _fault_flags(run.estimator.faults, accepted[:run.accepted], n)
     out.status.negative_load_samples = out.negative_load_samples()
     return out

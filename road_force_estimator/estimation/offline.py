@@ -133,8 +133,60 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     flags[acc] = prep.contradicted
     out = EstimateArrays(stamp_ns=prep.stamps_out, valid=valid, status=status,
                          speed_contradicted=flags, **fields)
+    faults = FaultRows(prep)
+    out.fault_flags = faults.flags(0, prep.n, valid, np.column_stack(
+        [out.body_heave_rate[acc], out.droll[acc]]))
+    faults.fill_status(status)
     status.negative_load_samples = out.negative_load_samples()
     return out
+
+
+class FaultRows:
+    """The stuck and drifting sensors (:mod:`.sensor_health`) of an offline estimate, over
+    its input rows in order (the whole recording at once, or piece by piece: the same steps,
+    the same flags): each accepted sample's readings and the body's rates of its smoothed
+    estimate."""
+
+    def __init__(self, prep: SimpleNamespace) -> None:
+        from road_force_estimator.estimation.models.front_axle import CHANNEL_NAMES
+        from road_force_estimator.estimation.sensor_health import FaultDetector, FaultSettings
+
+        self.prep = prep
+        self.detector = FaultDetector(FaultSettings.of(prep.observer, prep.vehicle,
+                                                       CHANNEL_NAMES))
+        self.last = np.zeros(self.detector.n, dtype=np.int8)   # the flags a row holds
+
+    def flags(self, a: int, b: int, ok: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """The flags (``(b - a, channels)`` int8) of input rows ``a:b``, whose accepted
+        ones (``ok``) have the smoothed body rates ``rates`` ((k, 2): heave, roll); a
+        rejected row holds the flags before it."""
+        det, prep = self.detector, self.prep
+        idx = np.flatnonzero(ok) + a
+        stamps = rows_of(prep.stamps_out, a, b)[ok].tolist()
+        values = np.column_stack([prep.q[idx], prep.phi[idx]]).tolist()
+        k0, seen = det.samples, len(det.events)
+        for stamp, v, r in zip(stamps, values, np.asarray(rates, dtype=float).tolist()):
+            det.step(stamp, v, r)
+        codes = np.empty((idx.size, det.n), dtype=np.int8)
+        codes[:] = self.last
+        for k, ch, code in det.events[seen:]:
+            codes[k - k0:, ch] = code
+        out = np.empty((b - a, det.n), dtype=np.int8)
+        src = np.where(ok, np.cumsum(ok) - 1, -1)
+        np.maximum.accumulate(src, out=src)
+        out[src < 0] = self.last
+        out[src >= 0] = codes[src[src >= 0]]
+        if idx.size:
+            self.last = codes[-1].copy()
+        return out
+
+    def fill_status(self, status: EstimatorStatus) -> None:
+        """The flags and counts into ``status`` (:class:`.EstimatorStatus`)."""
+        fc = self.detector.counts()
+        status.sensor_faults = fc.flags
+        status.stuck_episodes, status.stuck_samples = fc.stuck_episodes, fc.stuck_samples
+        status.drift_episodes, status.drift_samples = fc.drift_episodes, fc.drift_samples
+        status.fault_first_ns = fc.first_ns
 
 
 def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,

@@ -217,6 +217,9 @@ class EstimateArrays:
     #: (n, 2): the static wheel loads F_c,i in use (N); every estimator fills it (None: a
     #: hand-made batch without them)
     static_load_n: np.ndarray | None = None
+    #: (n, channels) int8: each sample's sensor flags (:mod:`.sensor_health` CODES: 0 ok,
+    #: 1 stuck, 2 drift; channels in the model's order), or None: not judged
+    fault_flags: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:

@@ -4,8 +4,10 @@ or over whole arrays (:func:`detect_faults`, the same steps in order: the same f
 
 Stuck (``observer.fault_stuck_time``, ``observer.fault_stuck_tolerance``): a channel whose
 reading has not changed by more than the tolerance (0: exact repeats) for the stated time while
-another channel moved within that time. A standing truck (every channel still, e.g. without
-noise) is not a stuck sensor. The flag holds until the reading changes.
+every other channel moved within that time. A standing truck (every channel still, e.g. without
+noise) is not a stuck sensor, nor are two channels still at once (which one is wrong is not
+known: a synthetic drive with constant channels, or two failed sensors, flag nothing). The
+flag holds until the reading changes.
 
 Drift (``observer.fault_drift_window``, ``observer.fault_drift_offset``; the front axle's two
 deflection sensors): the body's momentum balance over the last window of T seconds, MODEL.md's
@@ -43,10 +45,12 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ['STUCK', 'DRIFT', 'OK', 'DRIFT_START_S', 'GAP_S', 'FaultSettings',
-           'FaultDetector', 'detect_faults']
+__all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'GAP_S',
+           'FaultSettings', 'FaultDetector', 'detect_faults']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
+#: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
+CODES = {OK: 0, STUCK: 1, DRIFT: 2}
 #: Time (s) after the first sample (or a gap) before a drift window is judged (the
 #: observer's start-up transient in its rate estimates).
 DRIFT_START_S = 3.0
@@ -111,6 +115,11 @@ class FaultDetector:
         self.drift_episodes = [0] * n
         self.drift_samples = [0] * n
         self.first_ns: list = [{} for _ in range(n)]
+        #: samples stepped, and the flags' changes: (sample, channel, code) with code
+        #: :data:`CODES` (0 ok, 1 stuck, 2 drift)
+        self.samples = 0
+        self.events: list = []
+        self._last = None
         self._restart(None)
 
     def _restart(self, t: float | None) -> None:
@@ -155,7 +164,10 @@ class FaultDetector:
                         self.stuck_episodes[ch] += 1
                     else:
                         self.drift_episodes[ch] += 1
+            if flags[ch] != word:
+                self.events.append((self.samples, ch, CODES[word]))
             flags[ch] = word
+        self.samples += 1
 
     @property
     def stuck(self) -> list:
@@ -172,9 +184,9 @@ class FaultDetector:
                 run[ch] = t
                 stuck[ch] = False
         still = [t - r >= s.stuck_time_s for r in run]
-        for ch in range(self.n):
-            if still[ch] and not stuck[ch] and not all(still):
-                stuck[ch] = True
+        if sum(still) == 1:             # one channel still while every other one moves
+            ch = still.index(True)
+            stuck[ch] = True
 
     def _drift_step(self, t: float, values: Sequence[float], rates: tuple) -> None:
         k1, k2, c1, c2, s, m, ix, mgh = self.settings.body
@@ -224,18 +236,25 @@ class FaultDetector:
                            {n: dict(f) for n, f in zip(names, self.first_ns) if f})
 
 
+def flag_codes(events: list, n: int, channels: int) -> np.ndarray:
+    """The flags per sample, ``(n, channels)`` int8 (:data:`CODES`), from a detector's
+    :attr:`~FaultDetector.events` over its ``n`` samples."""
+    out = np.zeros((n, channels), dtype=np.int8)
+    for k, ch, code in events:
+        out[k:, ch] = code
+    return out
+
+
 def detect_faults(settings: FaultSettings, stamps_ns, values, rates=None
                   ) -> tuple[FaultCounts, np.ndarray]:
     """:class:`FaultDetector` over whole arrays (accepted samples, in order): the counts and
-    the flags per sample, ``(n, channels)`` array of 0 ok, 1 stuck, 2 drift.
+    the flags per sample, ``(n, channels)`` int8 (:data:`CODES`: 0 ok, 1 stuck, 2 drift).
 
     ``values`` (n, channels); ``rates`` (n, 2) the body's heave and roll rates, or None."""
     det = FaultDetector(settings)
     vals = np.asarray(values, dtype=float).tolist()
     rts = None if rates is None else np.asarray(rates, dtype=float).tolist()
-    code = {OK: 0, STUCK: 1, DRIFT: 2}
-    out = np.zeros((len(vals), det.n), dtype=np.int8)
+    step = det.step
     for j, (stamp, v) in enumerate(zip(np.asarray(stamps_ns, dtype=np.int64).tolist(), vals)):
-        det.step(stamp, v, None if rts is None else rts[j])
-        out[j] = [code[f] for f in det.flags]
-    return det.counts(), out
+        step(stamp, v, None if rts is None else rts[j])
+    return det.counts(), flag_codes(det.events, len(vals), det.n)

@@ -101,17 +101,19 @@ def test_clean_drives_raise_no_flag(class_c, drive):
 
 
 def test_a_standing_truck_is_not_a_stuck_sensor():
-    """Every channel still (a truck standing, no noise) flags nothing; one of them still while
-    another moves does."""
+    """Every channel still (a truck standing, no noise) flags nothing, nor do two still while
+    one moves (which one is wrong is not known); one still while both others move does."""
     det = FaultDetector(FaultSettings(NAMES))
     for k in range(3000):
         det.step(k * 1_000_000, (0.001, -0.002, 0.01))
-    assert det.counts().stuck_episodes == dict.fromkeys(NAMES, 0)
     for k in range(3000, 4000):
         det.step(k * 1_000_000, (0.001, -0.002, 0.01 + 1e-6 * (k % 2)))
-    assert det.counts().stuck_episodes == {NAMES[0]: 1, NAMES[1]: 1, NAMES[2]: 0}
-    # flagged at the first sample at which another channel moved (they had been still 3 s)
-    assert det.counts().first_ns[NAMES[0]]['stuck'] == 3001 * 1_000_000
+    assert det.counts().stuck_episodes == dict.fromkeys(NAMES, 0)
+    for k in range(4000, 5000):
+        det.step(k * 1_000_000, (0.001, -0.002 + 1e-6 * (k % 2), 0.01 + 1e-6 * (k % 2)))
+    assert det.counts().stuck_episodes == {NAMES[0]: 1, NAMES[1]: 0, NAMES[2]: 0}
+    # flagged at the first sample at which both others had moved (it had been still 4 s)
+    assert det.counts().first_ns[NAMES[0]]['stuck'] == 4001 * 1_000_000
 
 
 def test_per_sample_and_batch_give_the_same_flags(class_c):
@@ -142,3 +144,34 @@ def test_per_sample_and_batch_give_the_same_flags(class_c):
     assert counts == det.counts()
     assert codes.tolist() == [[{'ok': 0, 'stuck': 1, 'drift': 2}[f] for f in row]
                               for row in flags]
+
+
+def test_the_bag_diagnostics_name_the_flagged_sensor_each_second():
+    """batch_diagnostics with the flags per sample: each second's status reads each sensor's
+    flag at its last row and WARNs naming the faulty ones; the totals on the last."""
+    from road_force_estimator.estimation.diagnostics import (
+        WARN, batch_diagnostics, sensor_totals)
+    from road_force_estimator.estimation.outputs import EstimatorStatus
+
+    n = 3000
+    stamps = np.arange(n, dtype=np.int64) * 1_000_000
+    codes = np.zeros((n, 3), np.int8)
+    codes[1500:2200, 0] = 1          # left stuck from 1.5 s to 2.2 s
+    codes[2500:, 1] = 2              # right drifting from 2.5 s
+    st = EstimatorStatus(innovations_gated={'left_suspension': 3, 'right_suspension': 2,
+                                            'roll': 0},
+                         stuck_episodes={'left_suspension': 1, 'right_suspension': 0, 'roll': 0},
+                         drift_episodes={'left_suspension': 0, 'right_suspension': 1, 'roll': 0})
+    out = batch_diagnostics(stamps, np.ones(n, bool), np.ones(n, bool), np.zeros((n, 2), bool),
+                            np.zeros(n), np.zeros(n), sensor_totals(st), 'est', 'hw',
+                            sensors=(NAMES, codes))
+    statuses = [s[1][0] for s in out]
+    vals = [dict(s.values) for s in statuses]
+    assert [v['sensor.left_suspension'] for v in vals] == ['ok', 'stuck', 'ok']
+    assert [v['sensor.right_suspension'] for v in vals] == ['ok', 'ok', 'drift']
+    assert statuses[1].message == 'sensor fault: left_suspension stuck'
+    assert statuses[1].level == WARN and statuses[0].message == 'ok'
+    assert statuses[2].message == 'sensor fault: right_suspension drift'
+    assert vals[2]['total.innovations_gated.left_suspension'] == '3'
+    assert vals[2]['total.stuck.left_suspension'] == '1'
+    assert vals[2]['total.drift.right_suspension'] == '1'
