@@ -175,6 +175,10 @@ class ModelCore:
         self._compactions = 0
         #: samples whose innovation was gated, per channel
         self.gated = [0] * self._ny
+        #: the converged samples' innovation negative log-likelihood, when not None
+        #: (:func:`..offline.fit_friction_velocity` sets it to 0 to have it summed)
+        self.nll: float | None = None
+        self._nll_gains = None
         self._buf = np.zeros((0, self._row))
         self._i = 0
         self._block_start = 0
@@ -460,6 +464,8 @@ class ModelCore:
                 self._undo = (i, self._compactions, row.copy(), raw, self._m,
                               None if fr is None else fr.fm,
                               self._prow.copy() if self._profile else None)
+        if self.nll is not None and meta[3]:      # the innovations' likelihood (a fit)
+            self._add_nll(s)
         if fr is not None:
             fr.record(self._n, self.lag + 1)
         self._n += 1
@@ -505,6 +511,17 @@ class ModelCore:
         if i + 1 == buf.shape[0] or (sched.blocks == 0 and i == self._first_block):
             self._compact()
         return True
+
+    def _add_nll(self, s: list) -> None:
+        """Add this sample's negative log-likelihood ``(nu^T S^-1 nu + log det S) / 2`` of
+        its innovation (``s``: the step's product) under the gains in use to :attr:`nll`."""
+        g = self.schedule.gains
+        if g is not self._nll_gains:
+            self._nll_gains = g
+            self._nll_si = np.linalg.inv(g.s)
+            self._nll_logdet = float(np.linalg.slogdet(g.s)[1])
+        nu = np.array(s[self._nx:self._nx + self._ny])
+        self.nll += 0.5 * (float(nu @ self._nll_si @ nu) + self._nll_logdet)
 
     def _innovation_gate(self, y: tuple, s: list) -> tuple | None:
         """The sample with each channel whose innovation (in ``s``, the step's product) lies
