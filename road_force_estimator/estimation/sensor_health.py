@@ -18,7 +18,8 @@ heave and roll equations averaged over it,
         + I_x dP / T                                                      (= M h a_y)
 
 (dQ_i, dV, dP: the change over the window of q_i, of the body's heave rate and of its roll
-rate, the observer's zero-latency estimates). The road moves the deflections by millimetres,
+rate, the observer's zero-latency estimates; the window moves, and is judged, a block of
+:data:`DRIFT_BLOCK` samples at a time). The road moves the deflections by millimetres,
 but its slow part, the mean force on the body over seconds, is its momentum's change: H is
 about 0 (tens of microns of deflection on class C over 10 s), whatever the road, the curves
 (a lateral acceleration enters R only) or a stop. An offset d on the left sensor adds k_1 d
@@ -45,8 +46,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'GAP_S',
-           'FaultSettings', 'FaultDetector', 'detect_faults']
+__all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
+           'GAP_S', 'FaultSettings', 'FaultDetector', 'detect_faults']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -54,6 +55,9 @@ CODES = {OK: 0, STUCK: 1, DRIFT: 2}
 #: Time (s) after the first sample (or a gap) before a drift window is judged (the
 #: observer's start-up transient in its rate estimates).
 DRIFT_START_S = 3.0
+#: Samples per block of the drift's window (its sums are kept per block; the window moves,
+#: and is judged, a block at a time).
+DRIFT_BLOCK = 10
 #: A step longer than this (s) starts the drift window and the stuck runs again.
 GAP_S = 0.5
 
@@ -128,88 +132,123 @@ class FaultDetector:
         self._run = [t] * self.n          # when each channel's still run began
         self._stuck = [False] * self.n
         self._drift = [False] * self.n
-        self._win: deque = deque()        # (t, q1, q2, vz, dphi, k q sum, roll sum)
+        self._flagged = False             # a flag is up (the bookkeeping runs)
+        #: the drift's window: blocks (t, q1, q2, vz, dphi of their first sample, their sums
+        #: of k q and of the roll balance, samples), and its sums; the block being summed
+        self._win: deque = deque()
         self._sh = self._sr = 0.0
+        self._sn = 0
+        self._bh = self._br = 0.0
+        self._bn = 0
         self._ref = None
 
     def step(self, stamp_ns: int, values: Sequence[float],
              rates: tuple[float, float] | None = None) -> None:
-        """One accepted sample: its stamp (ns), its readings (the channels' order) and, for
-        the drift, the body's heave and roll rates estimated at it (m/s, rad/s), or None."""
+        """One accepted sample: its stamp (ns), its readings (the channels' order; the
+        detector keeps the sequence, not a copy) and, for the drift, the body's heave and roll
+        rates estimated at it (m/s, rad/s), or None."""
         t = stamp_ns * 1e-9
         last = self._last
         if last is None or t - self._tl > GAP_S:
             self._restart(t)
         self._tl = t
-        self._stuck_step(t, values)
-        if any(self._stuck):       # a held reading is no evidence of a drift: start again
-            self._win.clear()
-            self._sh = self._sr = 0.0
+        stuck = self._stuck
+        if last is not None and self._stuck_step(t, values, last):
+            self._win.clear()      # a held reading is no evidence of a drift: start again
+            self._sh = self._sr = self._bh = self._br = 0.0
+            self._sn = self._bn = 0
             self._t0 = t
             self._drift = [False] * self.n
-        elif self.settings.body is not None and rates is not None:
+        elif rates is not None and self.settings.body is not None:
             self._drift_step(t, values, rates)
-        self._last = list(values)
-        flags = self.flags
+        self._last = values
+        if self._flagged or True in stuck or True in self._drift:
+            self._book(stamp_ns)
+        self.samples += 1
+
+    def _book(self, stamp_ns: int) -> None:
+        """The flags of this sample: counts, first stamps, events."""
+        flags, stuck, drift = self.flags, self._stuck, self._drift
+        up = False
         for ch in range(self.n):
-            word = STUCK if self._stuck[ch] else DRIFT if self._drift[ch] else OK
+            word = STUCK if stuck[ch] else DRIFT if drift[ch] else OK
             if word != OK:
+                up = True
                 if word == STUCK:
                     self.stuck_samples[ch] += 1
                 else:
                     self.drift_samples[ch] += 1
-                if flags[ch] != word:
+            if flags[ch] != word:
+                if word != OK:
                     self.first_ns[ch].setdefault(word, int(stamp_ns))
                     if word == STUCK:
                         self.stuck_episodes[ch] += 1
                     else:
                         self.drift_episodes[ch] += 1
-            if flags[ch] != word:
                 self.events.append((self.samples, ch, CODES[word]))
-            flags[ch] = word
-        self.samples += 1
+                flags[ch] = word
+        self._flagged = up
 
     @property
     def stuck(self) -> list:
         """Per channel: flagged stuck now (a list the detector keeps updating)."""
         return self._stuck
 
-    def _stuck_step(self, t: float, values: Sequence[float]) -> None:
-        s = self.settings
-        last, run, stuck = self._last, self._run, self._stuck
-        if last is None:
-            return
+    def _stuck_step(self, t: float, values: Sequence[float], last: Sequence[float]) -> bool:
+        """The still runs and the stuck flags; True when a channel is flagged stuck."""
+        settings = self.settings
+        tol, begun = settings.stuck_tolerance, t - settings.stuck_time_s
+        run, stuck = self._run, self._stuck
+        still, which = 0, 0
         for ch in range(self.n):
-            if abs(values[ch] - last[ch]) > s.stuck_tolerance:
+            if abs(values[ch] - last[ch]) > tol:
                 run[ch] = t
                 stuck[ch] = False
-        still = [t - r >= s.stuck_time_s for r in run]
-        if sum(still) == 1:             # one channel still while every other one moves
-            ch = still.index(True)
-            stuck[ch] = True
+            elif run[ch] <= begun:
+                still += 1
+                which = ch
+        if still == 1:             # one channel still while every other one moves
+            stuck[which] = True
+        return True in stuck
 
     def _drift_step(self, t: float, values: Sequence[float], rates: tuple) -> None:
+        """One sample into the drift's window: summed per block of :data:`DRIFT_BLOCK`
+        samples; at a block's end the window (whole blocks) is judged."""
         k1, k2, c1, c2, s, m, ix, mgh = self.settings.body
-        q1, q2, phi = values[0], values[1], values[2]
-        h = k1 * q1 + k2 * q2
-        r = s * (k1 * q1 - k2 * q2) - mgh * phi
+        q1, q2 = values[0], values[1]
+        self._bh += k1 * q1 + k2 * q2
+        self._br += s * (k1 * q1 - k2 * q2) - mgh * values[2]
+        self._bn += 1
+        if self._bn == 1:
+            self._b0 = (t, q1, q2, rates[0], rates[1])
+        if self._bn < DRIFT_BLOCK:
+            return
         win = self._win
-        win.append((t, q1, q2, rates[0], rates[1], h, r))
-        self._sh += h
-        self._sr += r
+        win.append((*self._b0, self._bh, self._br, self._bn))
+        self._sh += self._bh
+        self._sr += self._br
+        self._sn += self._bn
+        self._bh = self._br = 0.0
+        self._bn = 0
         w = self.settings.drift_window_s
         while t - win[0][0] > w:
             old = win.popleft()
             self._sh -= old[5]
             self._sr -= old[6]
+            self._sn -= old[7]
         a = win[0]
         span = t - a[0]
         if t - self._t0 < DRIFT_START_S + w or span < 0.99 * w:
             return
-        n = len(win)
+        n = self._sn
         d1, d2 = q1 - a[1], q2 - a[2]
         big_h = self._sh / n + (c1 * d1 + c2 * d2 + m * (rates[0] - a[3])) / span
         big_r = self._sr / n + (s * (c1 * d1 - c2 * d2) + ix * (rates[1] - a[4])) / span
+        self._judge(big_h, big_r)
+
+    def _judge(self, big_h: float, big_r: float) -> None:
+        """The drift flags from the window's heave and roll balances (N, N m)."""
+        k1, k2 = self.settings.body[:2]
         if self.settings.relative:
             if self._ref is None:
                 self._ref = (big_h, big_r)
