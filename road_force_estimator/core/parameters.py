@@ -150,6 +150,23 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'innovation gate of the model observer: a channel whose innovation lies beyond this '
        'many standard deviations of its predicted spread is not fed to the filter (a spike; '
        'counted per sensor); 0 = off', 0.0, 1000.0),
+    _p('observer.friction_velocity_fit', 'integer', 1, '',
+       'offline: 1 = fit v_f of the tanh leaf-spring friction (vehicle.leaf_spring_friction_'
+       'velocity x 0.5-2) by the likelihood of the innovations of the online observer over the '
+       'first 20 s (estimation.offline.fit_friction_velocity); 0 = the v_f of the file', 0, 1),
+    _p('observer.fault_stuck_time', 'double', 0.5, 's',
+       'a sensor whose reading has not changed (by more than observer.fault_stuck_tolerance) '
+       'for this long while every other sensor moved is flagged stuck (estimation.sensor_health)',
+       0.01, 1000.0),
+    _p('observer.fault_stuck_tolerance', 'double', 0.0, 'm or rad',
+       'largest change between samples that counts as no change for the stuck flag (0 = '
+       'exact repeats)', 0.0, 0.1),
+    _p('observer.fault_drift_window', 'double', 6.0, 's',
+       'window of the momentum balance whose mean force flags a drifting deflection sensor '
+       '(estimation.sensor_health)', 1.0, 1000.0),
+    _p('observer.fault_drift_offset', 'double', 2e-4, 'm',
+       'deflection offset the momentum balance must show for a drifting-sensor flag; 0 = '
+       'drift detection off', 0.0, 0.1),
     _p('simulator.rate', 'double', 1000.0, 'Hz', 'output sample rate of the plant', 10.0, 1e5),
     _p('simulator.speed', 'double', 20.0, 'm/s', 'vehicle speed (constant)', 0.1, 60.0),
     _p('simulator.speed_profile', 'string', '', '',
@@ -605,6 +622,12 @@ class ObserverParameters(_FromParameters):
     rollover_cutoff_frequency_hz: float = _param('observer.rollover_cutoff_frequency')
     distance_source: str = _param('observer.distance_source')
     innovation_gate: float = _param('observer.innovation_gate', quiet_default=True)
+    friction_velocity_fit: int = _param('observer.friction_velocity_fit',
+                                         quiet_default=True)
+    fault_stuck_time_s: float = _param('observer.fault_stuck_time', quiet_default=True)
+    fault_stuck_tolerance: float = _param('observer.fault_stuck_tolerance', quiet_default=True)
+    fault_drift_window_s: float = _param('observer.fault_drift_window', quiet_default=True)
+    fault_drift_offset_m: float = _param('observer.fault_drift_offset', quiet_default=True)
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,12 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 __all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'Status', 'text', 'status', 'estimator_message',
-           'estimator_status', 'model_fit_values', 'batch_diagnostics']
+           'estimator_status', 'model_fit_values', 'sensor_values', 'sensor_totals',
+           'fault_message', 'batch_diagnostics']
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
+#: The sensor flags' words by code (:data:`.sensor_health.CODES`).
+_FLAG_WORDS = ('ok', 'stuck', 'drift')
 _NS = 1_000_000_000
 
 
@@ -61,12 +64,16 @@ def status(name: str, hardware_id: str, message: str, values: Mapping[str, Any],
 
 
 def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
-                      speed_contradicted: int = 0, model_fit: str = 'ok') -> str:
-    """The estimator status' words: 'speed contradicted by the deflections (N samples)',
-    'converging', the model-fit advice (:data:`.model_fit.ADVICE`, when ``model_fit`` is
-    'mismatch'), 'N lift-off samples', 'N restarts' or 'ok' (in that order of precedence)."""
+                      speed_contradicted: int = 0, model_fit: str = 'ok',
+                      faults: str = '') -> str:
+    """The estimator status' words: the sensor faults (``faults``, :func:`fault_message`),
+    'speed contradicted by the deflections (N samples)', 'converging', the model-fit advice
+    (:data:`.model_fit.ADVICE`, when ``model_fit`` is 'mismatch'), 'N lift-off samples',
+    'N restarts' or 'ok' (in that order of precedence)."""
     from road_force_estimator.estimation.fit_check import ADVICE, MISMATCH
 
+    if faults:
+        return faults
     if speed_contradicted:
         return f'speed contradicted by the deflections ({speed_contradicted} samples)'
     if not converged:
@@ -83,10 +90,44 @@ def estimator_message(converged: bool, lift_off_samples: int, restarts: int = 0,
 def estimator_status(name: str, hardware_id: str, values: Mapping[str, Any], *,
                      converged: bool, lift_off_samples: int, restarts: int = 0,
                      speed_contradicted: int = 0, model_fit: str = 'ok') -> Status:
-    """The estimator's status (speed contradicted, convergence, model fit, lift-offs,
-    restarts) with ``values``; WARN unless 'ok'."""
+    """The estimator's status (sensor faults from the ``sensor.<channel>`` values, speed
+    contradicted, convergence, model fit, lift-offs, restarts) with ``values``; WARN unless
+    'ok'."""
+    faults = fault_message({k[len('sensor.'):]: v for k, v in values.items()
+                            if k.startswith('sensor.')})
     return status(name, hardware_id, estimator_message(converged, lift_off_samples, restarts,
-                                                       speed_contradicted, model_fit), values)
+                                                       speed_contradicted, model_fit, faults),
+                  values)
+
+
+def fault_message(flags: Mapping[str, str]) -> str:
+    """'sensor fault: left_suspension stuck, roll drift' for the channels whose flag
+    (:mod:`.sensor_health`) is not 'ok'; '' when none."""
+    bad = [f'{name} {flag}' for name, flag in flags.items() if flag != 'ok']
+    return 'sensor fault: ' + ', '.join(bad) if bad else ''
+
+
+def sensor_values(flags: Mapping[str, str], gated: Mapping[str, int] | None = None
+                  ) -> dict[str, Any]:
+    """The status values of the sensors: ``sensor.<channel>`` ('ok' | 'stuck' | 'drift',
+    :mod:`.sensor_health`) and, when given, ``innovations_gated.<channel>`` (the samples the
+    innovation gate kept from the filter in the status' period)."""
+    out: dict[str, Any] = {f'sensor.{name}': flag for name, flag in flags.items()}
+    if gated is not None:
+        out.update({f'innovations_gated.{name}': int(n) for name, n in gated.items()})
+    return out
+
+
+def sensor_totals(st) -> dict[str, int]:
+    """Whole-run counts of an :class:`.EstimatorStatus` per channel (reported as
+    ``total.<key>``): ``innovations_gated.<channel>``, ``stuck.<channel>`` and
+    ``drift.<channel>`` (flags raised)."""
+    out: dict[str, int] = {}
+    for key, attr in (('innovations_gated', 'innovations_gated'), ('stuck', 'stuck_episodes'),
+                      ('drift', 'drift_episodes')):
+        counts = getattr(st, attr, None) or {}
+        out.update({f'{key}.{name}': int(n) for name, n in counts.items()})
+    return out
 
 
 def model_fit_values(ratio: float, word: str) -> dict[str, Any]:
@@ -99,7 +140,8 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
                       lift_off: np.ndarray, ltr: np.ndarray, residual_nm: np.ndarray,
                       totals: Mapping[str, Any], name: str, hardware_id: str,
                       speed_contradicted: np.ndarray | None = None,
-                      model_fit: tuple[float, str] | None = None
+                      model_fit: tuple[float, str] | None = None,
+                      sensors: tuple[Sequence[str], np.ndarray] | None = None
                       ) -> list[tuple[int, list[Status]]]:
     """The estimator status per second of data time over a batch of estimates.
 
@@ -121,6 +163,9 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
     model_fit : (ratio, 'ok' | 'mismatch'), optional
         The drive's model-fit verdict (:func:`.model_fit.assess`), reported by every status
         (:func:`model_fit_values`); 'mismatch' WARNs with the advice to calibrate.
+    sensors : (channel names, (n, channels) flag codes), optional
+        The sensor flags per sample (:mod:`.sensor_health` CODES): every status reports each
+        channel's flag at its last row (:func:`sensor_values`), a fault WARNs naming it.
 
     Returns
     -------
@@ -151,6 +196,10 @@ def batch_diagnostics(stamp_ns: np.ndarray, valid: np.ndarray, converged: np.nda
             values['speed_contradicted_samples'] = bad_speed
         if model_fit is not None:
             values.update(model_fit_values(*model_fit))
+        if sensors is not None:
+            codes = np.asarray(sensors[1])[rows[b - 1]]
+            values.update(sensor_values({n: _FLAG_WORDS[int(c)]
+                                         for n, c in zip(sensors[0], codes)}))
         if j == len(bounds) - 1:
             values.update({f'total.{k}': v for k, v in totals.items()})
         out.append((int(stamps[b - 1]), [estimator_status(

@@ -60,6 +60,7 @@ from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, SampleGate, batch_inputs, check_gap_threshold, output_stamps)
 from road_force_estimator.estimation.methods import CORES
 from road_force_estimator.estimation.models.front_axle import FrontAxleModel
+from road_force_estimator.estimation.sensor_health import FaultDetector, FaultSettings
 from road_force_estimator.estimation.speed_check import SpeedCheck
 from road_force_estimator.estimation.static_load import StaticLoadTracker
 from road_force_estimator.estimation.outputs import (
@@ -110,6 +111,9 @@ class Estimator:
         self._ready = self.core.ready
         #: the static-load estimate (:mod:`.static_load`) under zero_load, else None
         self.static_load = StaticLoadTracker(vehicle) if vehicle.zero_load else None
+        #: stuck and drifting sensors (:mod:`.sensor_health`)
+        self.faults = FaultDetector(FaultSettings.of(observer, vehicle,
+                                                     self.model.channel_names))
         self.reset()
 
     # -- state ----------------------------------------------------------------------------
@@ -125,6 +129,8 @@ class Estimator:
         self._t_run = 0.0
         self._flushed = False
         self._speed = SpeedCheck()
+        self._raw = (0.0, 0.0)
+        self.faults.reset()
         if self.static_load is not None:
             self.static_load.reset()
             self.core.set_vehicle(self.vehicle)
@@ -149,6 +155,11 @@ class Estimator:
             st.last_residual_nm = row[Column.RESIDUAL]
             st.lift_off = (row[Column.LIFT_OFF1], row[Column.LIFT_OFF2])
         core.fill_status(st)
+        fc = self.faults.counts()
+        st.sensor_faults = fc.flags
+        st.stuck_episodes, st.stuck_samples = fc.stuck_episodes, fc.stuck_samples
+        st.drift_episodes, st.drift_samples = fc.drift_episodes, fc.drift_samples
+        st.fault_first_ns = fc.first_ns
         tracker = self.static_load
         st.static_load_n = self.vehicle.static_load_n if tracker is None else tracker.static_n
         st.sprung_mass_kg = (self.vehicle.sprung_mass_kg if tracker is None
@@ -225,6 +236,7 @@ class Estimator:
         if sample is None:
             return False
         stamp, q1, q2, phi, v, dt, restart, dt_typ = sample
+        self._raw = (q1, q2)
         if self.static_load is not None:
             q1, q2 = self._static_step(q1, q2, 0.0 if restart else dt)
         if restart or self._flushed:
@@ -264,9 +276,15 @@ class Estimator:
         gate = self._gate
         x = self._x + 0.5 * (self._v + v) * dt if gate.started else 0.0
         t_run = 0.0 if restart else self._t_run + dt
+        exclude = getattr(self.core, 'set_excluded', None)
+        if exclude is not None:    # a stuck sensor is not fed (the model's core)
+            stuck = self.faults.stuck
+            exclude(tuple(j for j in self.model.droppable_channels if stuck[j]))
         if not self.core.step(stamp, (q1, q2, phi), vm, dt, restart, x, t_run, dt_typ):
             return False
         gate.commit(stamp, dt_typ)
+        rates = getattr(self.core, 'body_rates', None)
+        self.faults.step(stamp, (*self._raw, phi), None if rates is None else rates())
         self._x = x
         self._v = v
         self._dt = dt
@@ -344,6 +362,15 @@ class BatchRun:
                            count=len(rows) * N_COLUMNS).reshape(len(rows), N_COLUMNS)
 
 
+def _fault_flags(faults: FaultDetector, accepted: np.ndarray, n: int) -> np.ndarray:
+    """The detector's flags per sample of a batch (``accepted``: the sample of each accepted
+    one, in order); a rejected sample holds the flags before it."""
+    out = np.zeros((n, faults.n), dtype=np.int8)
+    for k, ch, code in faults.events:
+        out[accepted[k]:, ch] = code
+    return out
+
+
 def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
                    observer: ObserverParameters | None = None, *,
                    gap_threshold_s: float = GAP_THRESHOLD_S,
@@ -406,5 +433,6 @@ def estimate_batch(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParamete
             arr[held] = arr[src]
     out = EstimateArrays(stamp_ns=output_stamps(stamps), valid=valid, status=run.estimator.status,
                          speed_contradicted=contradicted, **fields)
+    out.fault_flags = _fault_flags(run.estimator.faults, accepted[:run.accepted], n)
     out.status.negative_load_samples = out.negative_load_samples()
     return out

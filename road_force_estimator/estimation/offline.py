@@ -14,6 +14,8 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Iterator
 
+import math
+
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
@@ -134,8 +136,60 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     flags[acc] = prep.contradicted
     out = EstimateArrays(stamp_ns=prep.stamps_out, valid=valid, status=status,
                          speed_contradicted=flags, **fields)
+    faults = FaultRows(prep)
+    out.fault_flags = faults.flags(0, prep.n, valid, np.column_stack(
+        [out.body_heave_rate[acc], out.droll[acc]]))
+    faults.fill_status(status)
     status.negative_load_samples = out.negative_load_samples()
     return out
+
+
+class FaultRows:
+    """The stuck and drifting sensors (:mod:`.sensor_health`) of an offline estimate, over
+    its input rows in order (the whole recording at once, or piece by piece: the same steps,
+    the same flags): each accepted sample's readings and the body's rates of its smoothed
+    estimate."""
+
+    def __init__(self, prep: SimpleNamespace) -> None:
+        from road_force_estimator.estimation.models.front_axle import CHANNEL_NAMES
+        from road_force_estimator.estimation.sensor_health import FaultDetector, FaultSettings
+
+        self.prep = prep
+        self.detector = FaultDetector(FaultSettings.of(prep.observer, prep.vehicle,
+                                                       CHANNEL_NAMES))
+        self.last = np.zeros(self.detector.n, dtype=np.int8)   # the flags a row holds
+
+    def flags(self, a: int, b: int, ok: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """The flags (``(b - a, channels)`` int8) of input rows ``a:b``, whose accepted
+        ones (``ok``) have the smoothed body rates ``rates`` ((k, 2): heave, roll); a
+        rejected row holds the flags before it."""
+        det, prep = self.detector, self.prep
+        idx = np.flatnonzero(ok) + a
+        stamps = rows_of(prep.stamps_out, a, b)[ok].tolist()
+        values = np.column_stack([prep.q[idx], prep.phi[idx]]).tolist()
+        k0, seen = det.samples, len(det.events)
+        for stamp, v, r in zip(stamps, values, np.asarray(rates, dtype=float).tolist()):
+            det.step(stamp, v, r)
+        codes = np.empty((idx.size, det.n), dtype=np.int8)
+        codes[:] = self.last
+        for k, ch, code in det.events[seen:]:
+            codes[k - k0:, ch] = code
+        out = np.empty((b - a, det.n), dtype=np.int8)
+        src = np.where(ok, np.cumsum(ok) - 1, -1)
+        np.maximum.accumulate(src, out=src)
+        out[src < 0] = self.last
+        out[src >= 0] = codes[src[src >= 0]]
+        if idx.size:
+            self.last = codes[-1].copy()
+        return out
+
+    def fill_status(self, status: EstimatorStatus) -> None:
+        """The flags and counts into ``status`` (:class:`.EstimatorStatus`)."""
+        fc = self.detector.counts()
+        status.sensor_faults = fc.flags
+        status.stuck_episodes, status.stuck_samples = fc.stuck_episodes, fc.stuck_samples
+        status.drift_episodes, status.drift_samples = fc.drift_episodes, fc.drift_samples
+        status.fault_first_ns = fc.first_ns
 
 
 def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | None = None,
@@ -166,6 +220,8 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
     steps[1:] = np.diff(stamp_int[acc]) * 1e-9
     contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
     del steps
+    vehicle = fit_friction_velocity(vehicle, observer, stamp_int[acc], q[acc], phi[acc],
+                                    v_model, restart[acc])
     return SimpleNamespace(
         n=stamps.shape[0], stamps_out=output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
         last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
@@ -174,6 +230,48 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
         starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
 
 
+#: The friction-velocity fit (:func:`fit_friction_velocity`): the seconds of the first run it
+#: takes, and the v_f tried, relative to the file's.
+FIT_S = 20.0
+FIT_GRID = (0.5, 0.7, 1.0, 1.4, 2.0)
+
+
+def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParameters, stamps_ns,
+                          q, phi, speed, restart) -> VehicleParameters:
+    """``vehicle`` with the tanh friction's ``v_f`` (``vehicle.leaf_spring_friction_velocity``)
+    that makes the drive likeliest, with ``observer.friction_velocity_fit`` (else, and without
+    tanh friction, or under ``zero_load``, ``vehicle`` as it is).
+
+    The online observer (no latency) runs over the first run's first :data:`FIT_S` seconds
+    of the accepted samples (``stamps_ns``, ``q``, ``phi``, ``speed``, ``restart``: per
+    accepted sample) once per v_f of :data:`FIT_GRID` x the file's; the one whose converged
+    innovations have the least negative log-likelihood (steady-state Gaussian, ``nu^T S^-1 nu
+    + log det S``) is taken. The innovations depend on v_f: the friction is a known input
+    evaluated on the estimated rate, steep near zero rate (docs/method.md).
+    """
+    from dataclasses import replace
+
+    from road_force_estimator.estimation.estimator import BatchRun
+
+    if (not observer.friction_velocity_fit or not any(vehicle.leaf_spring_friction_n)
+            or vehicle.leaf_spring_friction_model != 'tanh' or vehicle.zero_load
+            or len(stamps_ns) == 0):
+        return vehicle
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    later = np.flatnonzero(np.asarray(restart, bool)[1:]) + 1      # the first run only
+    end = int(later[0]) if later.size else stamps.size
+    end = min(end, int(np.searchsorted(stamps, stamps[0] + round(FIT_S * 1e9))))
+    best = (math.inf, vehicle.leaf_spring_friction_velocity_mps)
+    obs = replace(observer, latency_s=0.0)
+    for factor in FIT_GRID:
+        v_f = factor * vehicle.leaf_spring_friction_velocity_mps
+        run = BatchRun(replace(vehicle, leaf_spring_friction_velocity_mps=v_f), obs)
+        run.estimator.core.nll = 0.0
+        run.feed(stamps[:end], q[:end], phi[:end], speed[:end])
+        nll = run.estimator.core.nll
+        if nll < best[0]:
+            best = (nll, v_f)
+    return replace(vehicle, leaf_spring_friction_velocity_mps=best[1])
 
 
 def rows_of(column, a: int, b: int) -> np.ndarray:

@@ -30,9 +30,9 @@ from road_force_estimator.core.parameters import ObserverParameters, VehiclePara
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
 from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
-    N_COLUMNS, EstimateArrays, EstimatorStatus, arrays_from_table)
+    N_COLUMNS, Column, EstimateArrays, EstimatorStatus, arrays_from_table)
 from road_force_estimator.estimation.offline import (
-    LAST_ROW_FIELDS, fill_status, prepare, rows_of, smoothed_rows)
+    LAST_ROW_FIELDS, FaultRows, fill_status, prepare, rows_of, smoothed_rows)
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['PIECE_ROWS', 'OfflineStream']
@@ -117,6 +117,7 @@ class OfflineStream:
         acc = prep.acc
         fill_status(self.status, acc.size, prep.contradicted, prep.last_stamp_ns,
                     out.last_accepted, smoother)
+        out.faults.fill_status(self.status)
         self.status.negative_load_samples = out.negative_load_samples
 
 
@@ -167,6 +168,7 @@ class _Pieces:
 
     def __init__(self, prep, status: EstimatorStatus) -> None:
         self.prep, self.status = prep, status
+        self.faults = FaultRows(prep)      # the sensors' flags (estimation.sensor_health)
         self.row = 0                      # the next input row
         self.done = 0                     # accepted rows handed out
         self.held = np.zeros(N_COLUMNS)   # the row a rejected sample holds
@@ -197,11 +199,13 @@ class _Pieces:
         self.held = table[-1].copy()
         flags = np.zeros(end - p0, bool)
         flags[ok] = prep.contradicted[self.done:self.done + k]
+        faults = self.faults.flags(p0, end, ok, accepted[:, [Column.DZS, Column.DPHI]])
         self.row, self.done = end, self.done + k
         for a in range(0, end - p0, PIECE_ROWS):
             b = min(end - p0, a + PIECE_ROWS)
             piece = arrays_from_table(table[a:b], rows_of(prep.stamps_out, p0 + a, p0 + b),
                                       ok[a:b], self.status, flags[a:b])
+            piece.fault_flags = faults[a:b]
             self.negative_load_samples += piece.negative_load_samples()
             rows = np.flatnonzero(piece.valid)
             if rows.size:

@@ -160,6 +160,15 @@ class EstimatorStatus:
     #: samples whose innovation the gate kept from the filter (``observer.innovation_gate``),
     #: per channel name (model method; a spike, not a rejected sample: the others were used)
     innovations_gated: dict = field(default_factory=dict)
+    #: per channel name: 'ok', 'stuck' or 'drift' now (:mod:`.sensor_health`)
+    sensor_faults: dict = field(default_factory=dict)
+    #: per channel name: stuck / drift flags raised (episodes) and samples flagged
+    stuck_episodes: dict = field(default_factory=dict)
+    stuck_samples: dict = field(default_factory=dict)
+    drift_episodes: dict = field(default_factory=dict)
+    drift_samples: dict = field(default_factory=dict)
+    #: per channel name: the stamp (ns) of its first flag of each kind
+    fault_first_ns: dict = field(default_factory=dict)
 
     @property
     def rejected(self) -> int:
@@ -216,6 +225,9 @@ class EstimateArrays:
     #: a GNSS fit was asked for or made (offline): the report gives ``odometer`` (None when
     #: the fixes were refused)
     fused: bool = False
+    #: (n, channels) int8: each sample's sensor flags (:mod:`.sensor_health` CODES: 0 ok,
+    #: 1 stuck, 2 drift; channels in the model's order), or None: not judged
+    fault_flags: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:

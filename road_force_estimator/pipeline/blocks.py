@@ -277,7 +277,7 @@ def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str
     its :class:`.OnlineStream` or :class:`.OfflineStream`)."""
     from road_force_estimator import __version__
     from road_force_estimator.report.summary import (
-        convergence_summary, notes, rejections, segment_counts)
+        convergence_summary, notes, rejections, segment_counts, sensor_summary)
 
     st = stream.status
     rejected = rejections(drive, st)
@@ -314,6 +314,7 @@ def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(notes(None, extra))
+    summary['sensors'] = sensor_summary(st, acc.first_stamp or 0)
     offline = options['mode'] == 'offline'
     if offline and stream.fused:                  # a GNSS fit was made
         summary['odometer'] = stream.odometer.as_dict() if stream.odometer is not None else None

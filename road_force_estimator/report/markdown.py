@@ -87,6 +87,7 @@ def write_markdown(path: str | Path, summary: dict[str, Any], segments: dict[str
     lines += _summary_rows(s, u)
     lines += _summary_notes(s, u)
     lines += _messages_section(s)
+    lines += _sensors_section(s)
     lines += _accuracy_section(s)
     lines += ['', f'## Segments ({u.segment_text(s["segment_length_m"])})', '',
               'Also in `segments.csv` (SI units, named in its columns). DLC = std/mean of the '
@@ -319,6 +320,27 @@ def _messages_section(s: dict[str, Any]) -> list[str]:
     if s['issues']:
         lines += ['', 'Breaks found while reading (everything before each break was used):', '']
         lines += [f'- {issue}' for issue in s['issues']]
+    return lines
+
+
+def _sensors_section(s: dict[str, Any]) -> list[str]:
+    """Per sensor: the innovations the gate kept from the filter (spikes), the stuck and
+    drift flags raised (estimation.sensor_health), when first, and the flag at the end."""
+    sensors = s.get('sensors') or {}
+    if not sensors:
+        return []
+    lines = ['', '### Sensors', '',
+             'Innovations gated: samples kept from the filter, beyond `observer.innovation_gate` '
+             'standard deviations (spikes). Stuck / drift: flags raised '
+             '(`observer.fault_*`), with the time of the first (s from the first sample).', '',
+             '| sensor | innovations gated | stuck flags (samples) | first stuck (s) | '
+             'drift flags (samples) | first drift (s) | at the end |',
+             '|---|---:|---:|---:|---:|---:|---|']
+    for name, v in sensors.items():
+        lines.append(f'| `{name}` | {v["innovations_gated"]} | {v["stuck_flags"]} '
+                     f'({v["stuck_samples"]}) | {_fmt(v["first_stuck_s"])} | '
+                     f'{v["drift_flags"]} ({v["drift_samples"]}) | {_fmt(v["first_drift_s"])} | '
+                     f'{v["flag"]} |')
     return lines
 
 

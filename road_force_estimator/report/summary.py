@@ -296,6 +296,8 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
         'parameters': {**vehicle.to_parameters(), **observer.to_parameters()},
     }
     summary.update(notes(est, extra))
+    stamps = np.asarray(est.stamp_ns, dtype=np.int64)
+    summary['sensors'] = sensor_summary(st, int(stamps[0]) if stamps.size else 0)
     summary.update(_odometer_summary(est))
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
@@ -327,6 +329,29 @@ def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segmen
     edges = (np.concatenate([segments['start_m'], segments['end_m'][-1:]])
              if len(segments['start_m']) else None)
     acc.update(correlation_figures(est, al, drive, edges, segment_length_m=segment_length_m))
+
+
+def sensor_summary(st, t0: int) -> dict[str, dict[str, Any]]:
+    """Per sensor (channel name) of an :class:`.EstimatorStatus`: ``innovations_gated``
+    (spikes kept from the filter), ``stuck_flags`` / ``stuck_samples``, ``drift_flags`` /
+    ``drift_samples`` (:mod:`~road_force_estimator.estimation.sensor_health`),
+    ``first_stuck_s`` / ``first_drift_s`` (s from ``t0``, the first sample's stamp (ns);
+    None: never) and ``flag`` (at the end)."""
+    names = list(getattr(st, 'sensor_faults', None) or getattr(st, 'innovations_gated', None)
+                 or {})
+    out: dict[str, dict[str, Any]] = {}
+    for name in names:
+        first = (getattr(st, 'fault_first_ns', None) or {}).get(name, {})
+        out[name] = {
+            'innovations_gated': int((st.innovations_gated or {}).get(name, 0)),
+            'stuck_flags': int((st.stuck_episodes or {}).get(name, 0)),
+            'stuck_samples': int((st.stuck_samples or {}).get(name, 0)),
+            'first_stuck_s': (first['stuck'] - t0) * 1e-9 if 'stuck' in first else None,
+            'drift_flags': int((st.drift_episodes or {}).get(name, 0)),
+            'drift_samples': int((st.drift_samples or {}).get(name, 0)),
+            'first_drift_s': (first['drift'] - t0) * 1e-9 if 'drift' in first else None,
+            'flag': (st.sensor_faults or {}).get(name, 'ok')}
+    return out
 
 
 def notes(est, extra: dict[str, Any] | None) -> dict[str, Any]:

@@ -385,6 +385,13 @@ class Observer(Node):
             values['speed_contradicted_samples'] = fresh['speed_contradicted']
         if fresh['negative_loads']:
             values['negative_load_samples'] = fresh['negative_loads']
+        gated = dict(getattr(st, 'innovations_gated', None) or {})    # (the model's core)
+        before, self.gated_reported = getattr(self, 'gated_reported', {}), gated
+        values.update(diagnostics.sensor_values(
+            getattr(st, 'sensor_faults', None) or {},
+            {name: n - before.get(name, 0) if n >= before.get(name, 0) else n
+             for name, n in gated.items()}))     # (a new estimator counts from 0)
+        values.update({f'total.{k}': v for k, v in diagnostics.sensor_totals(st).items()})
         gains = getattr(self.estimator.core, 'gains', None)   # the model's gains in use
         ratio = self.fit.ratio(fit_check.gains_sigma_nm(gains)) if gains else math.nan
         word = fit_check.verdict(ratio)

@@ -103,6 +103,9 @@ class DriveOutcome:
     lines: list | None = None
     warnings: list[str] = field(default_factory=list)
     input_path: str = ''
+    #: per sensor: the report's counts (``report.json`` ``sensors``: innovations gated,
+    #: stuck and drift flags; :func:`road_force_estimator.report.summary.sensor_summary`)
+    sensors: dict = field(default_factory=dict)
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -418,7 +421,8 @@ def process_drive(task: DriveTask) -> DriveOutcome:
                 shutil.rmtree(tmp, ignore_errors=True)
         return DriveOutcome(task.drive_id, 'processed', seconds=seconds, table=table,
                             lines=lines, warnings=list(result.warnings),
-                            input_path=task.input_path)
+                            input_path=task.input_path,
+                            sensors=dict(result.summary.get('sensors') or {}))
     except Exception as err:  # noqa: BLE001 - one bad drive never stops the fleet
         from road_force_estimator.bagio import BagReadError, BagWriteError
         # estimate_bag's own reasons as they are; anything else with its type (a bug).
@@ -446,4 +450,13 @@ def load_done(output_dir: str | Path, drive: DriveInput, key: str) -> DriveOutco
         return None
     return DriveOutcome(drive.drive_id, 'skipped', seconds=float(stamp.get('seconds', 0.0)),
                         table=table, lines=lines, warnings=list(stamp.get('warnings', [])),
-                        input_path=str(drive.path))
+                        input_path=str(drive.path), sensors=_report_sensors(folder))
+
+
+def _report_sensors(folder: Path) -> dict:
+    """The ``sensors`` of a drive's ``report/report.json`` ({} without one)."""
+    try:
+        return dict(json.loads((folder / 'report' / 'report.json').read_text())
+                    .get('sensors') or {})
+    except (OSError, ValueError, AttributeError):
+        return {}

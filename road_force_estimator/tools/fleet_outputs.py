@@ -137,6 +137,7 @@ def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_writ
 
     u = units(result.settings.get('units', 'si'))
     lines += _drives_section(result.outcomes, u)
+    lines += _sensors_section(result.outcomes)
     lines += _roughest_section(table, u)
     failed = [o for o in result.outcomes if o.status == 'failed']
     if failed:
@@ -237,6 +238,22 @@ def _drive_row(o: DriveOutcome, u) -> str:
         f'| {_md(o.drive_id)} | {o.status} | {k} | {dist:.3f} | {_iri_pair(u, il)}'
         f' | {_iri_pair(u, ir)} | {_f(peak_kn, ".1f")} | {_f(ltr, ".3f")} | '
         f'{int(np.sum(t["lift_offs"])) if k else 0} | {gnss} | {o.seconds:.1f} |')
+
+
+def _sensors_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+    """Per drive and sensor: innovations gated (spikes), stuck and drift flags raised
+    (each drive's ``report.json`` ``sensors``); the sensors with nothing are left out."""
+    rows = [(o.drive_id, name, v) for o in outcomes for name, v in sorted(o.sensors.items())
+            if v.get('innovations_gated') or v.get('stuck_flags') or v.get('drift_flags')]
+    lines = ['## Sensors', '']
+    if not rows:
+        return lines + ['No sensor had an innovation gated, a stuck or a drift flag.', '']
+    lines += ['| drive | sensor | innovations gated | stuck flags | drift flags | at the end |',
+              '|---|---|---:|---:|---:|---|']
+    lines += [f'| {_md(d)} | `{n}` | {int(v.get("innovations_gated", 0))} | '
+              f'{int(v.get("stuck_flags", 0))} | {int(v.get("drift_flags", 0))} | '
+              f'{v.get("flag", "ok")} |' for d, n, v in rows]
+    return lines + ['']
 
 
 def _roughest_section(table: dict[str, np.ndarray], u=None) -> list[str]:

@@ -79,6 +79,8 @@ def test_pieces_equal_one_piece(case, window, monkeypatch):
         np.testing.assert_array_equal(got, getattr(whole, name), err_msg=name)
     assert dataclasses.asdict(stream.status) == dataclasses.asdict(whole.status)
     assert stream.last_stamp_ns == whole.status.last_stamp_ns
+    np.testing.assert_array_equal(np.concatenate([p.fault_flags for p in pieces]),
+                                  whole.fault_flags)      # (estimation.sensor_health)
 
 
 def test_a_long_stretch_of_rejected_samples_comes_in_pieces(monkeypatch):

@@ -532,3 +532,43 @@ def test_a_flood_keeps_memory_and_diagnostics(tmp_path):
     assert summary['flood_longest_wait_for_diagnostics_s'] < 2.5, summary
     assert summary['flood_max_rss_mb'] - summary['steady_rss_mb'] < 50.0, summary
     assert summary['flood_published'] > 0
+
+
+def estimator_diagnostics(collector):
+    """Key-values of the newest 'observer: estimator' status, and its message."""
+    for msg in reversed(collector.messages['/diagnostics']):
+        for status in msg.status:
+            if status.name == 'observer: estimator':
+                return {kv.key: kv.value for kv in status.values}, status.message
+    return {}, ''
+
+
+def test_a_stuck_sensor_is_named_in_the_diagnostics(rig):
+    """The right deflection held for 1 s while the others move (estimation.sensor_health):
+    'sensor.right_suspension' reads 'stuck', the status WARNs naming it, the flag is counted;
+    the others read 'ok' and no innovation was gated."""
+    observer, feeder, collector, executor = rig
+    held = None
+    for k in range(1600):
+        q = (1e-3 * math.sin(0.05 * k), -1e-3 * math.cos(0.05 * k))
+        if k >= 500:
+            held = held or q[1]
+            q = (q[0], held)
+        if k % 100 == 0:
+            feeder.twist.publish(twist_msg(T0_NS + k * 1_000_000, 20.0))
+        feeder.deflections.publish(deflections_msg(T0_NS + k * 1_000_000, q, 1e-4 * k))
+        if k % 100 == 99:       # (best effort, 1000 deep: the observer keeps up)
+            assert spin_until(executor, lambda k=k: collector.count('/observer/states') > k,
+                              10.0), (k, collector.count('/observer/states'))
+
+    def flagged():
+        values, message = estimator_diagnostics(collector)
+        return values.get('sensor.right_suspension') == 'stuck'
+    assert spin_until(executor, flagged, 5.0), estimator_diagnostics(collector)
+    values, message = estimator_diagnostics(collector)
+    assert message == 'sensor fault: right_suspension stuck'
+    assert values['sensor.left_suspension'] == values['sensor.roll'] == 'ok'
+    assert values['total.stuck.right_suspension'] == '1'
+    assert values['total.stuck.left_suspension'] == values['total.drift.roll'] == '0'
+    assert values['innovations_gated.left_suspension'] == '0'
+    assert values['total.innovations_gated.right_suspension'] == '0'

@@ -498,6 +498,12 @@ class FrontAxleModel:
     outputs = OUTPUTS
     #: the channels' names (INTERFACES.md's joint names of /suspension/deflections)
     channel_names = CHANNEL_NAMES
+    #: the states of the body's heave and roll rates (:mod:`..sensor_health`'s momentum)
+    momentum_states = (State.DZ_S, State.DPHI)
+    #: channels the filter can do without (a stuck sensor left out): the deflections; not
+    #: the roll, which the unknown roll moment leaves unobservable from them (measured: a
+    #: stuck roll sensor costs more left out than fed)
+    droppable_channels = (0, 1)
     deflection_channels = (0, 1)
     roll_channels = (2,)
     load_outputs = LOAD_OUTPUTS

@@ -33,7 +33,8 @@ from road_force_estimator.estimation.models.protocol import (
 from road_force_estimator.estimation.observer.riccati import solve_dare, van_loan
 
 __all__ = [
-    'NOISE_FLOOR_M', 'MAX_NOISE_FLOOR_M', 'DT_QUANTUM', 'MAX_STEP_MATRICES', 'Gains', 'design',
+    'NOISE_FLOOR_M', 'MAX_NOISE_FLOOR_M', 'DT_QUANTUM', 'MAX_STEP_MATRICES',
+    'EXCLUDED_VARIANCE_FACTOR', 'Gains', 'design',
     'row_layout',
 ]
 
@@ -44,6 +45,8 @@ MAX_NOISE_FLOOR_M = 1e-6
 #: Relative quantum of the per-step transition matrices.
 DT_QUANTUM = 1e-3
 MAX_STEP_MATRICES = 512
+#: A channel left out of a design (:func:`design`, ``excluded``): its noise variance times this.
+EXCLUDED_VARIANCE_FACTOR = 1e12
 
 
 @dataclass
@@ -166,7 +169,7 @@ def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
            noise_deflection_m: float, noise_roll_rad: float, road_gd_m3: float,
            lag: int = 0, correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
            roll_moment_psd: float = ROLL_MOMENT_PSD, key: tuple = (),
-           friction_damping_nspm: tuple = ()) -> Gains:
+           friction_damping_nspm: tuple = (), excluded: tuple = ()) -> Gains:
     """Discretize the model and design the steady-state Kalman filter and smoothers.
 
     Parameters
@@ -190,6 +193,9 @@ def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
         Process-noise densities (see :meth:`.VehicleModel.continuous`).
     friction_damping_nspm : tuple
         The leaf-spring friction's equivalent damping (N s/m) per element in the design.
+    excluded : tuple of int
+        Channels not fed (a stuck sensor): designed as missing, their noise variance
+        :data:`EXCLUDED_VARIANCE_FACTOR` times larger (their gains about 0).
 
     Returns
     -------
@@ -205,7 +211,7 @@ def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
     nx, ny = cm.nx, cm.ny
     scale = model.state_scale(nx)
     sq, sp, r, p, s, k, ikc = _stable_gain(model, a, c, q, sq, sp, noise_deflection_m, dt_s,
-                                           scale)
+                                           scale, excluded)
     pf = ikc @ p @ ikc.T + k @ r @ k.T          # Joseph form, symmetric
     pf = 0.5 * (pf + pf.T)
     lag = int(lag)
@@ -222,7 +228,7 @@ def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
 
 
 def _stable_gain(model: VehicleModel, a, c, q, sq: float, sp: float, noise_deflection_m: float,
-                 dt_s: float, scale: np.ndarray):
+                 dt_s: float, scale: np.ndarray, excluded: tuple = ()):
     """The Kalman gain at the noise levels sq (m), sp (rad), raised threefold until the
     filter is stable; ``(sq, sp, R, P, S, K, I - K C)``."""
     while True:
@@ -230,6 +236,8 @@ def _stable_gain(model: VehicleModel, a, c, q, sq: float, sp: float, noise_defle
         # measured states known to ~1e-9 against road states of ~1), the noise levels are
         # raised threefold until it can (the measurement-noise floor a user would add).
         r = np.diag(model.measurement_variances(sq, sp))
+        for j in excluded:
+            r[j, j] *= EXCLUDED_VARIANCE_FACTOR
         nx = a.shape[0]
         try:
             p = solve_dare(a, c, q, r, scale=scale)

@@ -175,6 +175,10 @@ class ModelCore:
         self._compactions = 0
         #: samples whose innovation was gated, per channel
         self.gated = [0] * self._ny
+        #: the converged samples' innovation negative log-likelihood, when not None
+        #: (:func:`..offline.fit_friction_velocity` sets it to 0 to have it summed)
+        self.nll: float | None = None
+        self._nll_gains = None
         self._buf = np.zeros((0, self._row))
         self._i = 0
         self._block_start = 0
@@ -236,6 +240,24 @@ class ModelCore:
         status.statistics_blocks = sched.blocks
         status.gain_designs = sched.design_count
         status.innovations_gated = dict(zip(self.model.channel_names, self.gated))
+
+    def set_excluded(self, channels: tuple) -> None:
+        """Leave ``channels`` (indices) out of the filter from the next step on (a stuck
+        sensor, :mod:`..sensor_health`): the gains are those of a design without them
+        (:func:`.gains.design` ``excluded``, cached per set); () feeds every channel."""
+        sched = self.schedule
+        if tuple(channels) != sched.excluded:
+            sched.excluded = tuple(channels)
+            sched.stale = True
+
+    def body_rates(self) -> tuple[float, float] | None:
+        """The body's heave and roll rates of the newest state (m/s, rad/s; the model's
+        ``momentum_states``), or None (:mod:`..sensor_health`)."""
+        slots = getattr(self.model, 'momentum_states', None)
+        if slots is None or self._buf.shape[0] == 0:
+            return None
+        row = self._buf[self._i]
+        return float(row[self._x0i + slots[0]]), float(row[self._x0i + slots[1]])
 
     def settling_time_s(self, dt_s: float) -> float:
         """Time after a (re)start after which the estimate counts as converged (s); see
@@ -442,6 +464,8 @@ class ModelCore:
                 self._undo = (i, self._compactions, row.copy(), raw, self._m,
                               None if fr is None else fr.fm,
                               self._prow.copy() if self._profile else None)
+        if self.nll is not None and meta[3]:      # the innovations' likelihood (a fit)
+            self._add_nll(s)
         if fr is not None:
             fr.record(self._n, self.lag + 1)
         self._n += 1
@@ -487,6 +511,17 @@ class ModelCore:
         if i + 1 == buf.shape[0] or (sched.blocks == 0 and i == self._first_block):
             self._compact()
         return True
+
+    def _add_nll(self, s: list) -> None:
+        """Add this sample's negative log-likelihood ``(nu^T S^-1 nu + log det S) / 2`` of
+        its innovation (``s``: the step's product) under the gains in use to :attr:`nll`."""
+        g = self.schedule.gains
+        if g is not self._nll_gains:
+            self._nll_gains = g
+            self._nll_si = np.linalg.inv(g.s)
+            self._nll_logdet = float(np.linalg.slogdet(g.s)[1])
+        nu = np.array(s[self._nx:self._nx + self._ny])
+        self.nll += 0.5 * (float(nu @ self._nll_si @ nu) + self._nll_logdet)
 
     def _innovation_gate(self, y: tuple, s: list) -> tuple | None:
         """The sample with each channel whose innovation (in ``s``, the step's product) lies

@@ -134,6 +134,8 @@ class GainSchedule:
                                               'v': None, 'dt': None, 'dq': None}
         self.gains: Gains | None = None
         self.stale = True
+        #: channels the designs leave out (a stuck sensor: :meth:`.ModelCore.set_excluded`)
+        self.excluded: tuple = ()
         self.v_band = (math.inf, -math.inf)
         self.requantise_noise()
 
@@ -235,6 +237,8 @@ class GainSchedule:
             key += (mode,)
         if roll_moment_psd is not None:
             key += (roll_moment_psd,)
+        if self.excluded:
+            key += ('excluded', self.excluded)
         cache = self._profile_gains if mode else self._gains    # (apart: the load's cache
         g = cache.get(key)                                      # misses stay as they were)
         if g is None:
@@ -252,7 +256,7 @@ class GainSchedule:
                 corr = self.observer.road_correlation_length_m
             kwargs = dict(dt_s=dt, speed_mps=SPEED_LEVEL_RATIO ** lv['v'], lag=lag,
                           correlation_length_m=corr, force_psd=force_psd,
-                          roll_moment_psd=moment_psd, key=key)
+                          roll_moment_psd=moment_psd, key=key, excluded=self.excluded)
             if self.friction:
                 kwargs['friction_damping_nspm'] = model.friction_damping(self.dq_std_mps,
                                                                          delayed=lag > 0)

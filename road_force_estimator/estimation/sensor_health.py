@@ -1,0 +1,299 @@
+"""A stuck sensor and a slow offset drift, flagged by sensor name (issue 30; MODEL.md "Sensor
+faults"): one detector for the node and for the bags, sample by sample (:class:`FaultDetector`)
+or over whole arrays (:func:`detect_faults`, the same steps in order: the same flags).
+
+Stuck (``observer.fault_stuck_time``, ``observer.fault_stuck_tolerance``): a channel whose
+reading has not changed by more than the tolerance (0: exact repeats) for the stated time while
+every other channel moved within that time. A standing truck (every channel still, e.g. without
+noise) is not a stuck sensor, nor are two channels still at once (which one is wrong is not
+known: a synthetic drive with constant channels, or two failed sensors, flag nothing). The
+flag holds until the reading changes.
+
+Drift (``observer.fault_drift_window``, ``observer.fault_drift_offset``; the front axle's two
+deflection sensors): the body's momentum balance over the last window of T seconds, MODEL.md's
+heave and roll equations averaged over it,
+
+    H = mean(k_1 q_1 + k_2 q_2) + (c_1 dQ_1 + c_2 dQ_2) / T + M dV / T        (= 0)
+    R = mean(s (k_1 q_1 - k_2 q_2) - M g h phi) + s (c_1 dQ_1 - c_2 dQ_2) / T
+        + I_x dP / T                                                      (= M h a_y)
+
+(dQ_i, dV, dP: the change over the window of q_i, of the body's heave rate and of its roll
+rate, the observer's zero-latency estimates; the window moves, and is judged, a block of
+:data:`DRIFT_BLOCK` samples at a time). The road moves the deflections by millimetres,
+but its slow part, the mean force on the body over seconds, is its momentum's change: H is
+about 0 (tens of microns of deflection on class C over 10 s), whatever the road, the curves
+(a lateral acceleration enters R only) or a stop. An offset d on the left sensor adds k_1 d
+to H and s k_1 d to R, on the right k_2 d and -s k_2 d: |H| / k_i above the stated offset
+flags the sensor whose sign agrees (left when H and R have one sign). With
+``vehicle.deflection_reference: zero_load`` H is taken against its first window's value.
+Not detected: a drift of the roll sensor (it enters R only, as a curve does), drifts of both
+deflection sensors that cancel in H.
+
+A stuck deflection sensor is left out of the model observer while flagged (its gains
+designed without it, :meth:`.ModelCore.set_excluded`); a stuck roll sensor is flagged and
+still fed (the unknown roll moment leaves the roll unobservable from the deflections); a
+drifting sensor is flagged and fed (an offset of d costs k d of static load, 0.1 kN at
+0.3 mm; left out, the sensor's wheel would lose its dynamic load). While a channel is stuck
+the drift window starts again (a held reading is no evidence of a drift).
+
+Counts per channel: episodes (a flag's rising edges) and samples flagged.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
+           'GAP_S', 'FaultSettings', 'FaultDetector', 'detect_faults']
+
+STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
+#: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
+CODES = {OK: 0, STUCK: 1, DRIFT: 2}
+#: Time (s) after the first sample (or a gap) before a drift window is judged (the
+#: observer's start-up transient in its rate estimates).
+DRIFT_START_S = 3.0
+#: Samples per block of the drift's window (its sums are kept per block; the window moves,
+#: and is judged, a block at a time).
+DRIFT_BLOCK = 10
+#: A step longer than this (s) starts the drift window and the stuck runs again.
+GAP_S = 0.5
+
+
+@dataclass(frozen=True)
+class FaultSettings:
+    """The detector's parameters (``observer.fault_*``) and the vehicle's numbers it needs."""
+
+    channels: tuple                    #: channel names, in the order of the values
+    stuck_time_s: float = 0.5
+    stuck_tolerance: float = 0.0
+    drift_window_s: float = 6.0
+    drift_offset_m: float = 2e-4
+    #: (k_1, k_2, c_1, c_2, s, M, I_x, M g h) of the deflection pair (channels 0, 1) and roll
+    #: (channel 2); None: no drift detection
+    body: tuple | None = None
+    relative: bool = False             #: zero_load: H against its first window's value
+
+    @classmethod
+    def of(cls, observer, vehicle, channels: Sequence[str]) -> 'FaultSettings':
+        """From :class:`.ObserverParameters` and :class:`.VehicleParameters`."""
+        k, c = vehicle.suspension_stiffness_npm, vehicle.suspension_damping_nspm
+        m = vehicle.sprung_mass_kg
+        body = (k[0], k[1], c[0], c[1], 0.5 * vehicle.track_width_m, m,
+                vehicle.roll_inertia_kgm2, m * 9.81 * vehicle.cg_height_m)
+        if not observer.fault_drift_offset_m > 0.0:
+            body = None
+        return cls(tuple(channels), observer.fault_stuck_time_s,
+                   observer.fault_stuck_tolerance, observer.fault_drift_window_s,
+                   observer.fault_drift_offset_m, body, vehicle.zero_load)
+
+
+@dataclass
+class FaultCounts:
+    """Per channel: the flag now, episodes and samples flagged (stuck, drift)."""
+
+    flags: dict = field(default_factory=dict)
+    stuck_episodes: dict = field(default_factory=dict)
+    stuck_samples: dict = field(default_factory=dict)
+    drift_episodes: dict = field(default_factory=dict)
+    drift_samples: dict = field(default_factory=dict)
+    #: per channel, the stamp (ns) of the first flag of each kind: {'stuck': ns, 'drift': ns}
+    first_ns: dict = field(default_factory=dict)
+
+
+class FaultDetector:
+    """Stuck and drifting sensors, one accepted sample at a time (:meth:`step`)."""
+
+    def __init__(self, settings: FaultSettings) -> None:
+        self.settings = settings
+        self.n = len(settings.channels)
+        self.reset()
+
+    def reset(self) -> None:
+        n = self.n
+        self.flags = [OK] * n
+        self.stuck_episodes = [0] * n
+        self.stuck_samples = [0] * n
+        self.drift_episodes = [0] * n
+        self.drift_samples = [0] * n
+        self.first_ns: list = [{} for _ in range(n)]
+        #: samples stepped, and the flags' changes: (sample, channel, code) with code
+        #: :data:`CODES` (0 ok, 1 stuck, 2 drift)
+        self.samples = 0
+        self.events: list = []
+        self._last = None
+        self._restart(None)
+
+    def _restart(self, t: float | None) -> None:
+        self._t0 = t
+        self._last = None                 # the previous values
+        self._run = [t] * self.n          # when each channel's still run began
+        self._stuck = [False] * self.n
+        self._drift = [False] * self.n
+        self._flagged = False             # a flag is up (the bookkeeping runs)
+        #: the drift's window: blocks (t, q1, q2, vz, dphi of their first sample, their sums
+        #: of k q and of the roll balance, samples), and its sums; the block being summed
+        self._win: deque = deque()
+        self._sh = self._sr = 0.0
+        self._sn = 0
+        self._bh = self._br = 0.0
+        self._bn = 0
+        self._ref = None
+
+    def step(self, stamp_ns: int, values: Sequence[float],
+             rates: tuple[float, float] | None = None) -> None:
+        """One accepted sample: its stamp (ns), its readings (the channels' order; the
+        detector keeps the sequence, not a copy) and, for the drift, the body's heave and roll
+        rates estimated at it (m/s, rad/s), or None."""
+        t = stamp_ns * 1e-9
+        last = self._last
+        if last is None or t - self._tl > GAP_S:
+            self._restart(t)
+        self._tl = t
+        stuck = self._stuck
+        if last is not None and self._stuck_step(t, values, last):
+            self._win.clear()      # a held reading is no evidence of a drift: start again
+            self._sh = self._sr = self._bh = self._br = 0.0
+            self._sn = self._bn = 0
+            self._t0 = t
+            self._drift = [False] * self.n
+        elif rates is not None and self.settings.body is not None:
+            self._drift_step(t, values, rates)
+        self._last = values
+        if self._flagged or True in stuck or True in self._drift:
+            self._book(stamp_ns)
+        self.samples += 1
+
+    def _book(self, stamp_ns: int) -> None:
+        """The flags of this sample: counts, first stamps, events."""
+        flags, stuck, drift = self.flags, self._stuck, self._drift
+        up = False
+        for ch in range(self.n):
+            word = STUCK if stuck[ch] else DRIFT if drift[ch] else OK
+            if word != OK:
+                up = True
+                if word == STUCK:
+                    self.stuck_samples[ch] += 1
+                else:
+                    self.drift_samples[ch] += 1
+            if flags[ch] != word:
+                if word != OK:
+                    self.first_ns[ch].setdefault(word, int(stamp_ns))
+                    if word == STUCK:
+                        self.stuck_episodes[ch] += 1
+                    else:
+                        self.drift_episodes[ch] += 1
+                self.events.append((self.samples, ch, CODES[word]))
+                flags[ch] = word
+        self._flagged = up
+
+    @property
+    def stuck(self) -> list:
+        """Per channel: flagged stuck now (a list the detector keeps updating)."""
+        return self._stuck
+
+    def _stuck_step(self, t: float, values: Sequence[float], last: Sequence[float]) -> bool:
+        """The still runs and the stuck flags; True when a channel is flagged stuck."""
+        settings = self.settings
+        tol, begun = settings.stuck_tolerance, t - settings.stuck_time_s
+        run, stuck = self._run, self._stuck
+        still, which = 0, 0
+        for ch in range(self.n):
+            if abs(values[ch] - last[ch]) > tol:
+                run[ch] = t
+                stuck[ch] = False
+            elif run[ch] <= begun:
+                still += 1
+                which = ch
+        if still == 1:             # one channel still while every other one moves
+            stuck[which] = True
+        return True in stuck
+
+    def _drift_step(self, t: float, values: Sequence[float], rates: tuple) -> None:
+        """One sample into the drift's window: summed per block of :data:`DRIFT_BLOCK`
+        samples; at a block's end the window (whole blocks) is judged."""
+        k1, k2, c1, c2, s, m, ix, mgh = self.settings.body
+        q1, q2 = values[0], values[1]
+        self._bh += k1 * q1 + k2 * q2
+        self._br += s * (k1 * q1 - k2 * q2) - mgh * values[2]
+        self._bn += 1
+        if self._bn == 1:
+            self._b0 = (t, q1, q2, rates[0], rates[1])
+        if self._bn < DRIFT_BLOCK:
+            return
+        win = self._win
+        win.append((*self._b0, self._bh, self._br, self._bn))
+        self._sh += self._bh
+        self._sr += self._br
+        self._sn += self._bn
+        self._bh = self._br = 0.0
+        self._bn = 0
+        w = self.settings.drift_window_s
+        while t - win[0][0] > w:
+            old = win.popleft()
+            self._sh -= old[5]
+            self._sr -= old[6]
+            self._sn -= old[7]
+        a = win[0]
+        span = t - a[0]
+        if t - self._t0 < DRIFT_START_S + w or span < 0.99 * w:
+            return
+        n = self._sn
+        d1, d2 = q1 - a[1], q2 - a[2]
+        big_h = self._sh / n + (c1 * d1 + c2 * d2 + m * (rates[0] - a[3])) / span
+        big_r = self._sr / n + (s * (c1 * d1 - c2 * d2) + ix * (rates[1] - a[4])) / span
+        self._judge(big_h, big_r)
+
+    def _judge(self, big_h: float, big_r: float) -> None:
+        """The drift flags from the window's heave and roll balances (N, N m)."""
+        k1, k2 = self.settings.body[:2]
+        if self.settings.relative:
+            if self._ref is None:
+                self._ref = (big_h, big_r)
+            big_h -= self._ref[0]
+            big_r -= self._ref[1]
+        side = 0 if big_h * big_r > 0.0 else 1
+        offset = abs(big_h) / (k1, k2)[side]
+        limit = self.settings.drift_offset_m
+        drift = self._drift
+        if offset > limit:
+            drift[side], drift[1 - side] = True, False
+        elif offset < 0.5 * limit:
+            drift[0] = drift[1] = False
+
+    def counts(self) -> FaultCounts:
+        """The flags and counts, by channel name."""
+        names = self.settings.channels
+
+        def by(values: list) -> dict:
+            return dict(zip(names, values))
+
+        return FaultCounts(by(list(self.flags)), by(self.stuck_episodes), by(self.stuck_samples),
+                           by(self.drift_episodes), by(self.drift_samples),
+                           {n: dict(f) for n, f in zip(names, self.first_ns) if f})
+
+
+def flag_codes(events: list, n: int, channels: int) -> np.ndarray:
+    """The flags per sample, ``(n, channels)`` int8 (:data:`CODES`), from a detector's
+    :attr:`~FaultDetector.events` over its ``n`` samples."""
+    out = np.zeros((n, channels), dtype=np.int8)
+    for k, ch, code in events:
+        out[k:, ch] = code
+    return out
+
+
+def detect_faults(settings: FaultSettings, stamps_ns, values, rates=None
+                  ) -> tuple[FaultCounts, np.ndarray]:
+    """:class:`FaultDetector` over whole arrays (accepted samples, in order): the counts and
+    the flags per sample, ``(n, channels)`` int8 (:data:`CODES`: 0 ok, 1 stuck, 2 drift).
+
+    ``values`` (n, channels); ``rates`` (n, 2) the body's heave and roll rates, or None."""
+    det = FaultDetector(settings)
+    vals = np.asarray(values, dtype=float).tolist()
+    rts = None if rates is None else np.asarray(rates, dtype=float).tolist()
+    step = det.step
+    for j, (stamp, v) in enumerate(zip(np.asarray(stamps_ns, dtype=np.int64).tolist(), vals)):
+        step(stamp, v, None if rts is None else rts[j])
+    return det.counts(), flag_codes(det.events, len(vals), det.n)

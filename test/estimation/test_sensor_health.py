@@ -1,0 +1,177 @@
+"""Stuck and drifting sensors flagged by name (estimation.sensor_health; issue 30's acceptance:
+a sensor stuck for 2 s flagged within 1 s, one drifting by 1 mm/min within 30 s, no flag on
+the clean drives: class A, class C, a stop, five spikes).
+
+Truth: where the faults were put into the plant's readings here (core/plant.py, checked against
+solve_ivp in test/core/test_plant.py); the detector is never told.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.estimation import Estimator, estimate_batch
+from road_force_estimator.estimation.sensor_health import (
+    FaultDetector, FaultSettings, detect_faults)
+
+VEHICLE = VehicleParameters()
+DRIFT = 1e-3 / 60.0          # 1 mm/min (m/s)
+NAMES = ('left_suspension', 'right_suspension', 'roll')
+
+
+def _drive(road_class: str, duration_s: float, speed_profile=None, seed: int = 1):
+    road = iso8608_profile(road_class, 20.0 * duration_s + 60.0, seed=seed)
+    tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=duration_s,
+                  tire_envelope_m=0.25, speed_profile=speed_profile)
+    rng = np.random.default_rng(seed + 7)
+    q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
+    phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
+    speed = (np.full(tr.t_s.size, 20.0) if speed_profile is None
+             else np.interp(tr.t_s, *speed_profile))
+    return tr.t_s, np.round(tr.t_s * 1e9).astype(np.int64), q, phi, speed
+
+
+def _status(stamps, q, phi, speed, observer=None):
+    return estimate_batch(stamps, q, phi, speed, VEHICLE, observer or ObserverParameters()
+                          ).status
+
+
+def _flagged(st) -> dict:
+    return {n: k for n in NAMES for k in ('stuck', 'drift')
+            if (st.stuck_episodes if k == 'stuck' else st.drift_episodes)[n]}
+
+
+@pytest.fixture(scope='module')
+def class_c():
+    return _drive('C', 20.0)
+
+
+@pytest.mark.parametrize('channel', [0, 1, 2])
+def test_a_sensor_stuck_for_2_s_is_flagged_within_1_s_by_name(class_c, channel):
+    t, stamps, q, phi, speed = class_c
+    q, phi = q.copy(), phi.copy()
+    k0 = 8000                                  # stuck from 8 s for 2 s
+    if channel < 2:
+        q[k0:k0 + 2000, channel] = q[k0, channel]
+    else:
+        phi[k0:k0 + 2000] = phi[k0]
+    st = _status(stamps, q, phi, speed)
+    name = NAMES[channel]
+    assert _flagged(st) == {name: 'stuck'}
+    assert st.stuck_episodes[name] == 1
+    assert 0.0 < st.fault_first_ns[name]['stuck'] * 1e-9 - t[k0] <= 1.0
+    # flagged until the reading moves again (at 10 s): no sample of the stuck window after
+    # the flag is missed, none after it counted
+    assert st.stuck_samples[name] == 2000 - 500
+    assert st.sensor_faults[name] == 'ok'
+
+
+@pytest.mark.parametrize('road_class, channel, sign', [('C', 0, 1.0), ('C', 1, 1.0),
+                                                       ('A', 1, -1.0)])
+def test_a_drift_of_1_mm_per_min_is_flagged_within_30_s_by_name(road_class, channel, sign):
+    t, stamps, q, phi, speed = _drive(road_class, 50.0, seed=2)
+    q = q.copy()
+    q[:, channel] += sign * np.where(t > 10.0, (t - 10.0) * DRIFT, 0.0)
+    st = _status(stamps, q, phi, speed)
+    name = NAMES[channel]
+    assert _flagged(st) == {name: 'drift'}
+    assert st.fault_first_ns[name]['drift'] * 1e-9 - 10.0 <= 30.0
+    assert st.sensor_faults[name] == 'drift'        # still drifting at the end
+
+
+@pytest.mark.parametrize('drive', ['A', 'C', 'stop', 'spikes'])
+def test_clean_drives_raise_no_flag(class_c, drive):
+    if drive == 'C':
+        t, stamps, q, phi, speed = class_c
+    elif drive == 'stop':    # braking to a stand (8-12 s), 10 s standing, pulling away
+        t, stamps, q, phi, speed = _drive('C', 34.0, ((0.0, 8.0, 12.0, 22.0, 26.0, 34.0),
+                                                      (20.0, 20.0, 0.0, 0.0, 20.0, 20.0)))
+    else:
+        t, stamps, q, phi, speed = _drive('A' if drive == 'A' else 'C', 40.0, seed=3)
+    if drive == 'spikes':
+        q = q.copy()
+        for k, ch, sign in [(5000, 0, 1), (9000, 1, -1), (13000, 0, -1), (17000, 1, 1),
+                            (19500, 0, 1)]:
+            q[k, ch] += sign * 5e-4
+    st = _status(stamps, q, phi, speed)
+    assert _flagged(st) == {}
+
+
+def test_a_standing_truck_is_not_a_stuck_sensor():
+    """Every channel still (a truck standing, no noise) flags nothing, nor do two still while
+    one moves (which one is wrong is not known); one still while both others move does."""
+    det = FaultDetector(FaultSettings(NAMES))
+    for k in range(3000):
+        det.step(k * 1_000_000, (0.001, -0.002, 0.01))
+    for k in range(3000, 4000):
+        det.step(k * 1_000_000, (0.001, -0.002, 0.01 + 1e-6 * (k % 2)))
+    assert det.counts().stuck_episodes == dict.fromkeys(NAMES, 0)
+    for k in range(4000, 5000):
+        det.step(k * 1_000_000, (0.001, -0.002 + 1e-6 * (k % 2), 0.01 + 1e-6 * (k % 2)))
+    assert det.counts().stuck_episodes == {NAMES[0]: 1, NAMES[1]: 0, NAMES[2]: 0}
+    # flagged at the first sample at which both others had moved (it had been still 4 s)
+    assert det.counts().first_ns[NAMES[0]]['stuck'] == 4001 * 1_000_000
+
+
+def test_per_sample_and_batch_give_the_same_flags(class_c):
+    """The node's path (Estimator.update, sample by sample) and estimate_batch; and the
+    detector's own batch function against its steps."""
+    t, stamps, q, phi, speed = class_c
+    n = 12000
+    q, phi = q[:n].copy(), phi[:n].copy()
+    q[6000:7500, 1] = q[6000, 1]
+    obs = replace(ObserverParameters(), fault_drift_window_s=2.0, fault_drift_offset_m=1e-5)
+    est = Estimator(VEHICLE, obs)
+    for k in range(n):
+        est.update(int(stamps[k]), q[k], float(phi[k]), 20.0)
+    one, batch = est.status, _status(stamps[:n], q, phi, speed[:n], obs)
+    for key in ('sensor_faults', 'stuck_episodes', 'stuck_samples', 'drift_episodes',
+                'drift_samples', 'fault_first_ns'):
+        assert getattr(one, key) == getattr(batch, key), key
+    assert one.stuck_episodes['right_suspension'] == 1
+    values = np.column_stack([q, phi])
+    rates = np.column_stack([np.sin(np.arange(n) * 0.01), np.cos(np.arange(n) * 0.02)])
+    settings = FaultSettings.of(obs, VEHICLE, NAMES)
+    det = FaultDetector(settings)
+    flags = []
+    for k in range(n):
+        det.step(int(stamps[k]), values[k].tolist(), tuple(rates[k]))
+        flags.append(list(det.flags))
+    counts, codes = detect_faults(settings, stamps[:n], values, rates)
+    assert counts == det.counts()
+    assert codes.tolist() == [[{'ok': 0, 'stuck': 1, 'drift': 2}[f] for f in row]
+                              for row in flags]
+
+
+def test_the_bag_diagnostics_name_the_flagged_sensor_each_second():
+    """batch_diagnostics with the flags per sample: each second's status reads each sensor's
+    flag at its last row and WARNs naming the faulty ones; the totals on the last."""
+    from road_force_estimator.estimation.diagnostics import (
+        WARN, batch_diagnostics, sensor_totals)
+    from road_force_estimator.estimation.outputs import EstimatorStatus
+
+    n = 3000
+    stamps = np.arange(n, dtype=np.int64) * 1_000_000
+    codes = np.zeros((n, 3), np.int8)
+    codes[1500:2200, 0] = 1          # left stuck from 1.5 s to 2.2 s
+    codes[2500:, 1] = 2              # right drifting from 2.5 s
+    st = EstimatorStatus(innovations_gated={'left_suspension': 3, 'right_suspension': 2,
+                                            'roll': 0},
+                         stuck_episodes={'left_suspension': 1, 'right_suspension': 0, 'roll': 0},
+                         drift_episodes={'left_suspension': 0, 'right_suspension': 1, 'roll': 0})
+    out = batch_diagnostics(stamps, np.ones(n, bool), np.ones(n, bool), np.zeros((n, 2), bool),
+                            np.zeros(n), np.zeros(n), sensor_totals(st), 'est', 'hw',
+                            sensors=(NAMES, codes))
+    statuses = [s[1][0] for s in out]
+    vals = [dict(s.values) for s in statuses]
+    assert [v['sensor.left_suspension'] for v in vals] == ['ok', 'stuck', 'ok']
+    assert [v['sensor.right_suspension'] for v in vals] == ['ok', 'ok', 'drift']
+    assert statuses[1].message == 'sensor fault: left_suspension stuck'
+    assert statuses[1].level == WARN and statuses[0].message == 'ok'
+    assert statuses[2].message == 'sensor fault: right_suspension drift'
+    assert vals[2]['total.innovations_gated.left_suspension'] == '3'
+    assert vals[2]['total.stuck.left_suspension'] == '1'
+    assert vals[2]['total.drift.right_suspension'] == '1'
