@@ -1,29 +1,31 @@
 """The whole-vehicle observer on the articulated drive family (issue 32, in progress): every
-wheel's dynamic-load error per axle, in each mode, beside the front-axle estimator on the
-front axle (what a user does today).
+wheel's dynamic-load error per axle, in each mode, beside a Kalman peer tuned on the truth and
+the front-axle estimator run axle by axle (what a user does today).
 
 Run from the repository root::
 
     .venv/bin/python -m bench.articulated_observer [--duration 25] [--only A20 C20]
-        [--noise 1e-5] [--settle 5]
+        [--noise 1e-5] [--settle 5] [--no-peer]
 
 Each drive is :mod:`bench.articulated_drives`' (MODEL.md's 5-axle 40 t combination at 1 kHz,
 ISO 8608 roads seed 1), simulated by the core plant (:func:`.core.articulated_plant.
 simulate_articulated`) and read by its sensors (:class:`.core.articulated_sensors.
 ArticulatedSensors`) with ``--noise`` on every deflection (m) and the same over the front
-axle's half spring track on the rolls (rad). Estimates:
+axle's half spring track on the rolls (rad). Estimates, in each mode (zero latency, 10 ms,
+offline):
 
-- ``articulated``: :func:`road_force_estimator.estimation.articulated.estimate_articulated`
-  at zero latency, 10 ms and offline, every setting the package's (noise and roughness
-  estimated online);
-- ``front axle``: the front-axle estimator (``config/road_force_estimator.yaml``, the
-  model observer, :class:`.estimation.estimator.Estimator` / :func:`.estimation.offline.
-  smooth`) on the front axle's two deflections and the tractor's roll, the loads of its two
-  wheels.
+- ``articulated observer``: :func:`road_force_estimator.estimation.articulated.
+  estimate_articulated`, every setting the package's (noise and roughness estimated online);
+- ``Kalman peer (truth-tuned)``: :mod:`bench.articulated_peer` (the full linear model in
+  absolute coordinates, the true noise and ISO class, its two densities picked on the truth
+  per drive and mode; causal, exact 10-sample fixed lag, RTS);
+- ``front-axle estimator, axle by axle``: the package's front-axle estimator
+  (``config/road_force_estimator.yaml``, :class:`.estimation.estimator.Estimator` /
+  :func:`.estimation.offline.smooth`) on each axle's two deflections and its body's roll.
 
-Printed per drive and mode: per axle the RMS over both wheels of the dynamic-load error
-after ``--settle`` s, in % of the true dynamic-load RMS (the load less the static load) of
-the same samples.
+Printed per drive, mode and estimator: per axle the RMS over both wheels of the dynamic-load
+error after ``--settle`` s, in % of the true dynamic-load RMS (the load less the static load)
+of the same samples.
 """
 from __future__ import annotations
 
@@ -38,7 +40,7 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 MODES = (('0 ms', 0.0, False), ('10 ms', 0.01, False), ('offline', 0.0, True))
 
 
-def simulate(case, duration_s: float, noise_m: float) -> dict:
+def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
     """One drive of the family: the plant's truth and the sensors' readings."""
     from bench.articulated_drives import CONFIG
     from road_force_estimator.bagio import road_from_source
@@ -49,7 +51,7 @@ def simulate(case, duration_s: float, noise_m: float) -> dict:
 
     values = load_params_file(CONFIG)
     s_front = float(values.get('vehicle.axle.front.spring_half_track', 0.45))
-    values.update({'simulator.road': f'iso8608:{case.road}:seed=1',
+    values.update({'simulator.road': f'iso8608:{case.road}:seed={seed}',
                    'simulator.speed': case.speed_mps, 'simulator.duration': duration_s,
                    'simulator.noise.deflection': noise_m,
                    'simulator.noise.roll': noise_m / s_front, **case.values})
@@ -75,9 +77,10 @@ def error_pct(t, est_dyn: np.ndarray, true_dyn: np.ndarray, settle_s: float) -> 
     return 100.0 * np.sqrt(np.mean(err ** 2, axis=(1, 2)) / np.mean(ref ** 2, axis=(1, 2)))
 
 
-def front_axle(drive: dict, latency_s: float, offline: bool) -> np.ndarray:
-    """The front-axle estimator on the front axle: its two wheels' dynamic tire forces
-    (2, m)."""
+def front_axle(drive: dict, axle: int, latency_s: float, offline: bool) -> np.ndarray:
+    """The front-axle estimator (its package parameters) on one axle's two deflections and
+    its body's roll (the tractor's where the trailer has no roll sensor): that axle's two
+    dynamic tire forces (2, m)."""
     from road_force_estimator.core.parameters import (
         ObserverParameters, VehicleParameters, load_params_file)
     from road_force_estimator.estimation.estimator import Estimator
@@ -86,14 +89,16 @@ def front_axle(drive: dict, latency_s: float, offline: bool) -> np.ndarray:
     values = load_params_file(REPO / 'config' / 'road_force_estimator.yaml')
     vehicle = VehicleParameters.from_parameters(values)
     observer = ObserverParameters.from_parameters({**values, 'observer.latency': latency_s})
-    roll = drive['y'].shape[1] - (2 if drive['vehicle'].trailer_roll_sensor else 1)
-    q, phi = drive['y'][:, :2], drive['y'][:, roll]
-    stamps, v = drive['stamps'], drive['speed']
+    v = drive['vehicle']
+    n_q = 2 * sum(a.instrumented for a in v.axles)
+    trailer = v.axles[axle].body == 'trailer' and v.trailer_roll_sensor
+    q, phi = drive['y'][:, 2 * axle:2 * axle + 2], drive['y'][:, n_q + int(trailer)]
+    stamps, speed = drive['stamps'], drive['speed']
     if offline:
-        return smooth(stamps, q, phi, v, vehicle, observer).tire_force_dynamic_n.T
+        return smooth(stamps, q, phi, speed, vehicle, observer).tire_force_dynamic_n.T
     est = Estimator(vehicle, observer)
     out = {}
-    for s, qi, pi, vi in zip(stamps.tolist(), q.tolist(), phi.tolist(), v.tolist()):
+    for s, qi, pi, vi in zip(stamps.tolist(), q.tolist(), phi.tolist(), speed.tolist()):
         e = est.update(s, qi, pi, vi)
         if e is not None:
             out[e.stamp_ns] = e.tire_force_dynamic_n
@@ -102,22 +107,48 @@ def front_axle(drive: dict, latency_s: float, offline: bool) -> np.ndarray:
     return np.array([out[s] for s in stamps.tolist()]).T
 
 
+def peer(drive: dict, case, lag, noise_m: float, judged) -> tuple[np.ndarray, tuple]:
+    """The Kalman peer tuned on the truth (:mod:`bench.articulated_peer`)."""
+    from bench.articulated_peer import tuned
+    from road_force_estimator.core.road import iso8608_psd
+
+    gd = float(iso8608_psd(case.road, [0.1])[0])
+    return tuned(drive['vehicle'], drive['y'], drive['dynamic'], judged, lag,
+                 speed_mps=case.speed_mps, dt_s=1e-3, noise_m=noise_m,
+                 noise_rad=noise_m / drive['vehicle'].axles[0].spring_half_track_m,
+                 road_gd_m3=gd)
+
+
+def _line(case, label: str, who: str, pct: np.ndarray, extra: str = '') -> str:
+    cells = ' | '.join(f'{p:.1f}' for p in pct)
+    return f'| {case.name} | {label} | {who} | {cells} | {extra} |'
+
+
 def run(case, args) -> list[str]:
     """The table's lines of one drive."""
     from road_force_estimator.estimation.articulated import estimate_articulated
 
     drive = simulate(case, args.duration, args.noise)
+    t = drive['t']
+    judged = t >= t[0] + args.settle
     lines = []
     for label, latency, offline in MODES:
         start = time.perf_counter()
         est = estimate_articulated(drive['vehicle'], drive['stamps'], drive['y'],
                                    drive['speed'], latency_s=latency, offline=offline)
         wall = time.perf_counter() - start
-        pct = error_pct(drive['t'], est.dynamic_n, drive['dynamic'], args.settle)
-        front = front_axle(drive, latency, offline)
-        fpct = error_pct(drive['t'], front, drive['dynamic'][:2], args.settle)[0]
-        cells = ' | '.join(f'{p:.1f}' for p in pct)
-        lines.append(f'| {case.name} | {label} | {cells} | {fpct:.1f} | {wall:.1f} |')
+        pct = error_pct(t, est.dynamic_n, drive['dynamic'], args.settle)
+        lines.append(_line(case, label, 'articulated observer', pct, f'wall {wall:.1f} s'))
+        if not args.no_peer:
+            lag = None if offline else int(round(latency * 1e3))
+            est, (factor, psd) = peer(drive, case, lag, args.noise, judged)
+            pct = error_pct(t, est, drive['dynamic'], args.settle)
+            lines.append(_line(case, label, 'Kalman peer (truth-tuned)', pct,
+                               f'road x {factor:g}, force {psd:g} N^2 s'))
+        front = np.vstack([front_axle(drive, j, latency, offline)
+                           for j in range(len(drive['axles']))])
+        pct = error_pct(t, front, drive['dynamic'], args.settle)
+        lines.append(_line(case, label, 'front-axle estimator, axle by axle', pct))
     return lines
 
 
@@ -129,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--only', nargs='*', default=['A20', 'C20'], metavar='NAME')
     parser.add_argument('--noise', type=float, default=1e-5, help='deflection noise (m)')
     parser.add_argument('--settle', type=float, default=5.0, help='judged after (s)')
+    parser.add_argument('--no-peer', action='store_true', help='without the Kalman peer')
     args = parser.parse_args(argv)
     cases = [c for c in family() if c.name in args.only]
     out = []
@@ -142,8 +174,8 @@ def main(argv: list[str] | None = None) -> int:
           f'noise, judged after {args.settle:g} s: dynamic-load RMS error, % of the true '
           'dynamic-load RMS, per axle (both wheels)\n')
     head = ' | '.join(names)
-    print(f'| drive | mode | {head} | front-axle estimator, front axle | wall (s) |')
-    print('|---|---|' + '---:|' * (len(names) + 2))
+    print(f'| drive | mode | estimator | {head} | |')
+    print('|---|---|---|' + '---:|' * len(names) + '---|')
     print('\n'.join(out))
     return 0
 
