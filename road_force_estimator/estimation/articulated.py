@@ -9,7 +9,7 @@ latency) or offline, by the model observer on :mod:`.models.articulated`.
 smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Readings from a
 mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
 equilibrium (:func:`equilibrium_readings`). Not yet: gaps and rejected samples (one run, every
-sample finite), a speed of its own per axle, the road.
+sample finite), the road online and its fusion over the axles.
 """
 from __future__ import annotations
 
@@ -31,8 +31,9 @@ __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
 @dataclass(frozen=True)
 class ArticulatedEstimate:
     """A drive's estimate: per sample (m) the distance (m), converged flag, every wheel's
-    load and dynamic load (N; (nw, m), wheels ``<axle>_<side>`` of :attr:`wheel_names`) and
-    each unit's a_y (m/s^2; (2, m), tractor, trailer)."""
+    load and dynamic load (N; (nw, m), wheels ``<axle>_<side>`` of :attr:`wheel_names`),
+    each unit's a_y (m/s^2; (2, m), tractor, trailer) and, offline, the road under every
+    wheel (m; (nw, m), band-limited; None online)."""
 
     stamps_ns: np.ndarray
     distance_m: np.ndarray
@@ -41,14 +42,17 @@ class ArticulatedEstimate:
     load_n: np.ndarray
     dynamic_n: np.ndarray
     lateral_mps2: np.ndarray
+    road_m: np.ndarray | None = None
 
     @classmethod
     def from_rows(cls, stamps_ns, rows: np.ndarray, wheel_names) -> ArticulatedEstimate:
-        """From the rows (m, columns) of :mod:`.models.articulated_rows`."""
+        """From the rows (m, columns) of :mod:`.models.articulated_rows` (the road where the
+        rows hold it)."""
         cols = columns(len(wheel_names))
+        road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
         return cls(np.asarray(stamps_ns), rows[:, DIST], rows[:, CONV] > 0.5,
                    tuple(wheel_names), rows[:, cols['load']].T.copy(),
-                   rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy())
+                   rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road)
 
 
 def _wheel_names(vehicle: ArticulatedParameters) -> tuple:

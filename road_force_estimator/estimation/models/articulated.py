@@ -31,11 +31,13 @@ tire or coupling: checked at construction).
 
 Outputs (:data:`outputs` of a model): per wheel ``q``, ``dq``, ``w``, the dynamic tire force
 ``dF = kt w + ct dw`` and the spring force on the body, then the bodies' roll, each unit's
-``a_y`` and the bodies' heave and pitch accelerations. The wheel loads are the statics'
-(:meth:`~.core.articulated_model.ArticulatedModel.statics`, ``output_wheel_load_n``) plus
-``dF`` (:mod:`.articulated_rows`). Not modelled yet: the braking pitch ``a_x`` (the model has
-no known inputs but the friction; a constant speed needs none), the leaf-spring friction and
-the sensors' lag (refused), the tractor's IMU.
+``a_y``, the bodies' heave and pitch accelerations and every wheel's vertical acceleration.
+The wheel loads are the statics' (:meth:`~.core.articulated_model.ArticulatedModel.statics`,
+``output_wheel_load_n``) plus ``dF``; offline, the road under every wheel is ``w`` plus the
+wheel's heave, the band-limited double integral of its acceleration, from a second smoother
+tuned for the road as the front axle's (:mod:`.articulated_rows`). Not modelled yet: the
+braking pitch ``a_x`` (the model has no known inputs but the friction; a constant speed needs
+none), the leaf-spring friction and the sensors' lag (refused), the tractor's IMU.
 
 Tuning: the front axle's schedule on the deflection noise (:func:`.front_axle.scheduled`),
 force noise on every equation of motion (per wheel on the axles, heave, pitch and roll on the
@@ -85,11 +87,13 @@ class Layout:
 
 def output_names(axles) -> tuple[str, ...]:
     """The linear outputs' names: per wheel (``<axle>_<side>``) q, dq, w, df, fb; then the
-    bodies' roll, each unit's a_y and the bodies' heave and pitch accelerations."""
+    bodies' roll, each unit's a_y, the bodies' heave and pitch accelerations and every
+    wheel's vertical acceleration (``ddzw``: with ``w`` its road, offline)."""
     wheels = [f'{a}_{s}' for a in axles for s in SIDES]
     names = [f'{kind}_{wh}' for kind in ('q', 'dq', 'w', 'df', 'fb') for wh in wheels]
     names += [f'phi_{b}' for b in BODIES] + [f'ay_{b}' for b in BODIES]
     names += [f'{acc}_{b}' for b in BODIES for acc in ('ddz', 'ddtheta')]
+    names += [f'ddzw_{wh}' for wh in wheels]
     return tuple(names)
 
 
@@ -226,7 +230,8 @@ class ArticulatedObserverModel:
         q, dq, w, dw = eye[lay.q], a[lay.q], eye[lay.w], a[lay.w]
         df = kt[:, None] * w + ct[:, None] * dw
         fb = -(k[:, None] * q + c[:, None] * dq)
-        rows = [q, dq, w, df, fb, eye[lay.phi], eye[lay.ay], acc[[0, 1, 3, 4]]]
+        rows = [q, dq, w, df, fb, eye[lay.phi], eye[lay.ay], acc[[0, 1, 3, 4]],
+                self.wheel_rows @ acc]
         return np.vstack(rows)
 
     def _noise_inputs(self, force_psd: float, roll_moment_psd: float) -> tuple:
@@ -354,4 +359,4 @@ class ArticulatedObserverModel:
 
     def offline_rows(self, observer) -> ArticulatedOfflineRows:
         """Every wheel's load of smoothed runs (:class:`.ArticulatedOfflineRows`)."""
-        return ArticulatedOfflineRows(self)
+        return ArticulatedOfflineRows(self, observer)
