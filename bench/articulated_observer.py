@@ -25,7 +25,9 @@ offline):
 
 Printed per drive, mode and estimator: per axle the RMS over both wheels of the dynamic-load
 error after ``--settle`` s, in % of the true dynamic-load RMS (the load less the static load)
-of the same samples.
+of the same samples; offline also the road under each axle's two wheels (0.5-30 m band, RMS
+over both wheel paths of the error in % of the true road's, the last 60 m left out) of the
+articulated observer and of the front-axle estimator axle by axle.
 """
 from __future__ import annotations
 
@@ -66,7 +68,7 @@ def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
     return {'vehicle': drive.vehicle, 't': tr.t_s, 'stamps': np.round(tr.t_s * 1e9).astype(
         np.int64), 'y': readings, 'speed': np.asarray(tr.speed_mps, float) * np.ones(len(tr)),
         'load': tr.wheel_load_n.T, 'dynamic': tr.wheel_load_n.T - static[:, None],
-        'axles': drive.vehicle.axle_names}
+        'axles': drive.vehicle.axle_names, 'road': tr.road_m, 'distance': tr.distance_m}
 
 
 def error_pct(t, est_dyn: np.ndarray, true_dyn: np.ndarray, settle_s: float) -> np.ndarray:
@@ -77,10 +79,23 @@ def error_pct(t, est_dyn: np.ndarray, true_dyn: np.ndarray, settle_s: float) -> 
     return 100.0 * np.sqrt(np.mean(err ** 2, axis=(1, 2)) / np.mean(ref ** 2, axis=(1, 2)))
 
 
-def front_axle(drive: dict, axle: int, latency_s: float, offline: bool) -> np.ndarray:
+def road_pct(drive: dict, road: np.ndarray, settle_s: float) -> np.ndarray:
+    """Per axle (pairs of rows of ``road`` (nw, m)): the 0.5-30 m band's RMS error over both
+    wheel paths, % of the truth's, away from the drive's first ``settle_s`` s and last 60 m."""
+    from road_force_estimator.core import metrics
+
+    x = drive['distance'] - drive['distance'][0]
+    mask = (drive['t'] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
+    pe = metrics.profile_errors(x, road.T, drive['road'][:, :road.shape[0]], mask=mask)
+    err = np.asarray(pe.rms_pct).reshape(-1, 2)
+    return np.sqrt(np.mean(err ** 2, axis=1))
+
+
+def front_axle(drive: dict, axle: int, latency_s: float, offline: bool,
+               road: list | None = None) -> np.ndarray:
     """The front-axle estimator (its package parameters) on one axle's two deflections and
     its body's roll (the tractor's where the trailer has no roll sensor): that axle's two
-    dynamic tire forces (2, m)."""
+    dynamic tire forces (2, m); offline, its road (2, m) appended to ``road``."""
     from road_force_estimator.core.parameters import (
         ObserverParameters, VehicleParameters, load_params_file)
     from road_force_estimator.estimation.estimator import Estimator
@@ -95,7 +110,10 @@ def front_axle(drive: dict, axle: int, latency_s: float, offline: bool) -> np.nd
     q, phi = drive['y'][:, 2 * axle:2 * axle + 2], drive['y'][:, n_q + int(trailer)]
     stamps, speed = drive['stamps'], drive['speed']
     if offline:
-        return smooth(stamps, q, phi, speed, vehicle, observer).tire_force_dynamic_n.T
+        est = smooth(stamps, q, phi, speed, vehicle, observer)
+        if road is not None:
+            road.append(est.road_m.T)
+        return est.tire_force_dynamic_n.T
     est = Estimator(vehicle, observer)
     out = {}
     for s, qi, pi, vi in zip(stamps.tolist(), q.tolist(), phi.tolist(), speed.tolist()):
@@ -139,16 +157,25 @@ def run(case, args) -> list[str]:
         wall = time.perf_counter() - start
         pct = error_pct(t, est.dynamic_n, drive['dynamic'], args.settle)
         lines.append(_line(case, label, 'articulated observer', pct, f'wall {wall:.1f} s'))
+        ours_road = est.road_m
         if not args.no_peer:
             lag = None if offline else int(round(latency * 1e3))
             est, (factor, psd) = peer(drive, case, lag, args.noise, judged)
             pct = error_pct(t, est, drive['dynamic'], args.settle)
             lines.append(_line(case, label, 'Kalman peer (truth-tuned)', pct,
                                f'road x {factor:g}, force {psd:g} N^2 s'))
-        front = np.vstack([front_axle(drive, j, latency, offline)
+        roads: list = []
+        front = np.vstack([front_axle(drive, j, latency, offline, roads)
                            for j in range(len(drive['axles']))])
         pct = error_pct(t, front, drive['dynamic'], args.settle)
         lines.append(_line(case, label, 'front-axle estimator, axle by axle', pct))
+        if offline:
+            lines.append(_line(case, 'offline road', 'articulated observer',
+                               road_pct(drive, ours_road, args.settle),
+                               '0.5-30 m band error, % of the true road'))
+            lines.append(_line(case, 'offline road', 'front-axle estimator, axle by axle',
+                               road_pct(drive, np.vstack(roads), args.settle),
+                               '0.5-30 m band error, % of the true road'))
     return lines
 
 
