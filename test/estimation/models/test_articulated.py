@@ -142,7 +142,7 @@ def test_the_observer_finds_every_wheels_dynamic_load(drive):
     """Every wheel's dynamic-load RMS error after 4 s, % of its true dynamic RMS: the causal
     filter of an unknown road input lags (as the front axle's and the quarter car's,
     test_protocol.py), the 10 ms fixed lag and the smoother do not (measured: worst wheel
-    8.7 %, 1.56 %, 1.69 %; the smoother's gains are the run's, designed once, the fixed
+    8.5 %, 1.38 %, 1.58 %; the smoother's gains are the run's, designed once, the fixed
     lag's the online schedule's)."""
     vehicle, t, stamps, y, true, _ = drive
     worst = []
