@@ -8,8 +8,10 @@ latency) or offline, by the model observer on :mod:`.models.articulated`.
 :class:`.observer.online.ModelCore` and give the same numbers. ``offline=True`` runs the
 smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Readings from a
 mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
-equilibrium (:func:`equilibrium_readings`). Not yet: gaps and rejected samples (one run, every
-sample finite), the road online and its fusion over the axles.
+equilibrium (:func:`equilibrium_readings`). :func:`fuse_roads` averages the offline roads of
+every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front axle).
+Not yet: gaps and rejected samples (one run, every sample finite), the road online, a fusion
+that tells the bodies' heave and pitch from the road (the longer waves).
 """
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ from road_force_estimator.estimation.observer.online import ModelCore
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
-           'equilibrium_readings']
+           'equilibrium_readings', 'FusedProfile', 'fuse_roads']
 
 
 @dataclass(frozen=True)
@@ -154,3 +156,33 @@ def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np
     dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
     rows[:, DIST] = dist
     return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)
+
+
+@dataclass(frozen=True)
+class FusedProfile:
+    """Both wheel paths (m) on the front axle's distances ``distance_m`` (m,) of the points
+    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles averaged."""
+
+    distance_m: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    axles: int
+
+
+def fuse_roads(estimate: ArticulatedEstimate, positions_m) -> FusedProfile:
+    """The offline roads of every axle (``estimate.road_m``; axle j ``positions_m[j]`` behind
+    the front axle) averaged by distance: the point under the front axle at sample k is under
+    axle j when that axle has travelled ``xi_j`` further; each axle's road is interpolated
+    there (linear, in the front axle's distance), over the points the last axle has passed."""
+    if estimate.road_m is None:
+        raise ValueError('no road in the estimate: the road comes offline')
+    x = estimate.distance_m
+    xi = np.asarray(positions_m, float)
+    keep = x + xi.max() <= x[-1]
+    p = x[keep]
+    paths = np.zeros((2, p.size))
+    for j, lag in enumerate(xi):
+        for side in (0, 1):
+            paths[side] += np.interp(p + lag, x, estimate.road_m[2 * j + side])
+    paths /= xi.size
+    return FusedProfile(p, paths[0], paths[1], int(xi.size))

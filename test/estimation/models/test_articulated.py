@@ -13,7 +13,7 @@ from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.parameters import load_params_file
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.estimation.articulated import (
-    ArticulatedOnline, equilibrium_readings, estimate_articulated)
+    ArticulatedOnline, equilibrium_readings, estimate_articulated, fuse_roads)
 from road_force_estimator.estimation.models.articulated import (
     ArticulatedObserverModel, channel_names)
 from road_force_estimator.estimation.observer.schedule import difference_covariance
@@ -205,3 +205,32 @@ def test_the_smoothers_road_under_every_wheel_is_the_true_road_in_the_band(drive
     mask = (x > 60.0) & (x < x[-1] - 60.0)
     pe = metrics.profile_errors(x, est.road_m.T, road, mask=mask)
     assert float(np.max(pe.rms_pct)) < 1.0
+
+
+def test_the_fused_profile_averages_the_axles_noise_away():
+    """The offline roads of the five axles averaged by distance (fuse_roads) against the
+    front axle's wheel paths (the truth every axle drives): on class C at 10 um the 0.5-30 m
+    band error is below 0.8 x that of the front axle's own road (measured: 0.33 / 0.41 %
+    against 0.58 / 0.59 %, left / right; at 1 um both are ~0.3 %: the noise is what averages
+    away)."""
+    from road_force_estimator.core import metrics
+
+    d = _drive(**{'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
+                  'simulator.duration': 20.0})
+    road = iso8608_profile('C', d.road_length_m, seed=11)
+    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
+                              duration_s=20.0, tire_envelope_m=0.25, model=d.model)
+    y = d.sensors(channel_names(d.model)).measure(tr)
+    est = estimate_articulated(d.vehicle, np.round(tr.t_s * 1e9).astype(np.int64), y, 20.0,
+                               offline=True)
+    fused = fuse_roads(est, [a.position_m for a in d.vehicle.axles])
+    n = fused.distance_m.size
+    assert fused.axles == 5 and fused.distance_m[-1] <= est.distance_m[-1] - 12.22 + 1e-9
+    mask = (fused.distance_m > 60.0) & (fused.distance_m < fused.distance_m[-1] - 60.0)
+    truth = tr.road_m[:n, :2]
+    pf = metrics.profile_errors(fused.distance_m, np.column_stack([fused.left, fused.right]),
+                                truth, mask=mask).rms_pct
+    p1 = metrics.profile_errors(est.distance_m[:n], est.road_m[:2, :n].T, truth,
+                                mask=mask).rms_pct
+    assert np.all(np.asarray(pf) < 0.8 * np.asarray(p1))
+    assert float(np.max(pf)) < 0.6
