@@ -27,11 +27,14 @@ Printed per drive, mode and estimator: per axle the RMS over both wheels of the 
 error after ``--settle`` s, in % of the true dynamic-load RMS (the load less the static load)
 of the same samples; offline also the road under each axle's two wheels (0.5-30 m band, RMS
 over both wheel paths of the error in % of the true road's, the last 60 m left out) of the
-articulated observer and of the front-axle estimator axle by axle.
+articulated observer and of the front-axle estimator axle by axle, and the articulated
+observer's fused profile (every axle's road averaged by distance) against the front axle's
+wheel paths.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import pathlib
 import sys
 import time
@@ -91,6 +94,22 @@ def road_pct(drive: dict, road: np.ndarray, settle_s: float) -> np.ndarray:
     return np.sqrt(np.mean(err ** 2, axis=1))
 
 
+def fused_pct(drive: dict, est, settle_s: float) -> np.ndarray:
+    """The fused profile's (:func:`.estimation.articulated.fuse_roads`) 0.5-30 m band error
+    over both wheel paths against the front axle's road (% of its RMS), as :func:`road_pct`
+    (the points the last axle has passed, away from the last 60 m of them)."""
+    from road_force_estimator.core import metrics
+    from road_force_estimator.estimation.articulated import fuse_roads
+
+    fused = fuse_roads(est, [a.position_m for a in drive['vehicle'].axles])
+    n = fused.distance_m.size
+    x = fused.distance_m
+    mask = (drive['t'][:n] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
+    pe = metrics.profile_errors(x, np.column_stack([fused.left, fused.right]),
+                                drive['road'][:n, :2], mask=mask)
+    return np.array([math.sqrt(float(np.mean(np.square(pe.rms_pct))))])
+
+
 def front_axle(drive: dict, axle: int, latency_s: float, offline: bool,
                road: list | None = None) -> np.ndarray:
     """The front-axle estimator (its package parameters) on one axle's two deflections and
@@ -137,8 +156,9 @@ def peer(drive: dict, case, lag, noise_m: float, judged) -> tuple[np.ndarray, tu
                  road_gd_m3=gd)
 
 
-def _line(case, label: str, who: str, pct: np.ndarray, extra: str = '') -> str:
-    cells = ' | '.join(f'{p:.1f}' for p in pct)
+def _line(case, label: str, who: str, pct: np.ndarray, extra: str = '', axles: int = 5
+          ) -> str:
+    cells = ' | '.join([f'{p:.1f}' for p in pct] + [''] * (axles - len(pct)))
     return f'| {case.name} | {label} | {who} | {cells} | {extra} |'
 
 
@@ -157,7 +177,7 @@ def run(case, args) -> list[str]:
         wall = time.perf_counter() - start
         pct = error_pct(t, est.dynamic_n, drive['dynamic'], args.settle)
         lines.append(_line(case, label, 'articulated observer', pct, f'wall {wall:.1f} s'))
-        ours_road = est.road_m
+        ours_road = est
         if not args.no_peer:
             lag = None if offline else int(round(latency * 1e3))
             est, (factor, psd) = peer(drive, case, lag, args.noise, judged)
@@ -171,8 +191,12 @@ def run(case, args) -> list[str]:
         lines.append(_line(case, label, 'front-axle estimator, axle by axle', pct))
         if offline:
             lines.append(_line(case, 'offline road', 'articulated observer',
-                               road_pct(drive, ours_road, args.settle),
+                               road_pct(drive, ours_road.road_m, args.settle),
                                '0.5-30 m band error, % of the true road'))
+            lines.append(_line(case, 'offline road', 'articulated observer, fused',
+                               fused_pct(drive, ours_road, args.settle),
+                               'every axle averaged (fuse_roads), both paths',
+                               len(drive['axles'])))
             lines.append(_line(case, 'offline road', 'front-axle estimator, axle by axle',
                                road_pct(drive, np.vstack(roads), args.settle),
                                '0.5-30 m band error, % of the true road'))
