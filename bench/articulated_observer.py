@@ -37,6 +37,7 @@ import argparse
 import math
 import pathlib
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -60,11 +61,18 @@ def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
                    'simulator.speed': case.speed_mps, 'simulator.duration': duration_s,
                    'simulator.noise.deflection': noise_m,
                    'simulator.noise.roll': noise_m / s_front, **case.values})
-    drive = ArticulatedDrive.from_values(values)
+    with tempfile.TemporaryDirectory() as tmp:
+        if case.speed_profile is not None:       # as bench.articulated_drives writes it
+            path = pathlib.Path(tmp) / 'speed.csv'
+            path.write_text('time_s,speed_mps\n' + ''.join(
+                f'{t:.6f},{v:.6f}\n' for t, v in zip(*case.speed_profile)))
+            values['simulator.speed_profile'] = str(path)
+        drive = ArticulatedDrive.from_values(values)
     sim = drive.sim
     road = road_from_source(sim.road, length_m=drive.road_length_m)
     tr = simulate_articulated(drive.vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
-                              duration_s=duration_s, lateral_acceleration=drive.lateral,
+                              duration_s=duration_s, speed_profile=drive.speed_profile,
+                              lateral_acceleration=drive.lateral,
                               tire_envelope_m=sim.tire_envelope_length_m, model=drive.model)
     readings = drive.sensors(channel_names(drive.model)).measure(tr)
     static = drive.model.statics().output_wheel_load_n.reshape(-1)
