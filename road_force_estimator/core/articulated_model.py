@@ -231,6 +231,15 @@ class ArticulatedModel:
         roll5[2], roll5[5] = 1.0, -1.0
         return springs, tires, delta, roll5
 
+    def kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The linearised kinematics, rows over the coordinates of :meth:`dof_names`:
+        ``(springs (N, 2, n), wheels (N, 2, n), delta (n,), roll (n,))``: per axle and side
+        [left, right] the suspension extension q_j,i and the wheel's heave z_w,j,i, the fifth
+        wheel's vertical difference delta and the roll difference phi_t - phi_r (what the
+        linear model's springs see: :meth:`linearised`)."""
+        springs, tires, delta, roll5 = self._geometry()
+        return np.array(springs), np.array(tires), delta.copy(), roll5.copy()
+
     def _matrices(self, spring_scale: float = 1.0, extra_damping=None):
         """(mass, damping, stiffness, road_stiffness, road_damping) of the linear model."""
         n, v = self.n_dof, self.vehicle

@@ -30,7 +30,8 @@ __all__ = [
     'HISTORY_BLOCKS', 'ROUGHNESS_HISTORY_BLOCKS', 'NOISE_LEVEL_RATIO', 'ROUGHNESS_LEVEL_RATIO',
     'SPEED_LEVEL_RATIO', 'DT_LEVEL_RATIO', 'LEVEL_HYSTERESIS', 'MIN_SETTLE_S', 'MAX_GAINS',
     'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
-    'ROUGHNESS_CORRELATION_M', 'DEFAULT_DQ_STD_MPS', 'requantise', 'dt_level', 'GainSchedule',
+    'ROUGHNESS_CORRELATION_M', 'DEFAULT_DQ_STD_MPS', 'NEUTRAL_TOLERANCE', 'requantise',
+    'dt_level', 'difference_covariance', 'GainSchedule',
 ]
 
 #: Blocks whose median is the current noise estimate.
@@ -64,6 +65,9 @@ MIN_ROAD_GD_M3 = 4e-6
 #: a moving average of 0.25 m (the tire envelope) over a Brownian road has the variance of
 #: an Ornstein-Uhlenbeck velocity with this length (pi x 0.25 m).
 ROUGHNESS_CORRELATION_M = 0.8
+#: Distance |lambda - 1| below which a mode of a discretized model is neutral (a family of
+#: equilibria: :func:`difference_covariance`).
+NEUTRAL_TOLERANCE = 1e-7
 #: RMS suspension rate (m/s) assumed until the first block of data has been seen.
 DEFAULT_DQ_STD_MPS = 0.05
 
@@ -83,6 +87,29 @@ def requantise(current: int | None, x: float, ratio: float) -> int:
 def dt_level(dt: float) -> int:
     """Level of the step dt (s)."""
     return int(round(math.log(dt) / _LOG_DT_RATIO))
+
+
+def difference_covariance(a: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Covariance of the first difference ``x_k - x_(k-1)`` of ``x_(k+1) = a x_k + w_k``
+    (``Cov w = q``) in its stationary state: ``d P d^T + q``, ``d = a - I``, P the discrete
+    Lyapunov solution. Modes of ``a`` at 1 (within :data:`NEUTRAL_TOLERANCE`: a family of
+    equilibria, e.g. the road levels under the axles of a whole vehicle, which a random walk
+    moves without bound) have no stationary variance but do not move a difference: they are
+    left out (the stable modes' Lyapunov solution in the eigenvectors' coordinates); a model
+    without them (the front axle's stationary states) takes the direct solution as ever."""
+    lam, vecs = np.linalg.eig(a)
+    stable = np.abs(lam - 1.0) > NEUTRAL_TOLERANCE
+    if np.all(stable):
+        with warnings.catch_warnings():   # undamped models: no stationary variance
+            warnings.simplefilter('ignore')
+            p = linalg.solve_discrete_lyapunov(a, q, method='direct')
+        d = a - np.eye(a.shape[0])
+        return d @ p @ d.T + q
+    qm = np.linalg.solve(vecs, np.linalg.solve(vecs, q.T).conj().T)[np.ix_(stable, stable)]
+    ls = lam[stable]
+    p = qm / (1.0 - np.outer(ls, ls.conj()))
+    d = (a - np.eye(a.shape[0])) @ vecs[:, stable]
+    return (d @ p @ d.conj().T).real + q
 
 
 class GainSchedule:
@@ -294,12 +321,7 @@ class GainSchedule:
             # The states the road drives to a stationary variance (the model says which:
             # :meth:`.VehicleModel.stationary_states`); the deflections among them.
             keep = self.model.stationary_states(cm)
-            a, q = a[np.ix_(keep, keep)], q[np.ix_(keep, keep)]
-            with warnings.catch_warnings():   # undamped models: no stationary variance
-                warnings.simplefilter('ignore')
-                p = linalg.solve_discrete_lyapunov(a, q, method='direct')
-            d = a - np.eye(len(keep))
-            var = d @ p @ d.T + q
+            var = difference_covariance(a[np.ix_(keep, keep)], q[np.ix_(keep, keep)])
             idx = [keep.index(cm.measured[ch]) for ch in self.model.deflection_channels]
             val = float(sum(var[i, i] for i in idx) / len(idx))
             self._var_dq[key] = val

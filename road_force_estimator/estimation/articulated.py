@@ -1,0 +1,188 @@
+"""The whole vehicle's estimate from arrays (``vehicle.model: articulated``, issue 32): every
+wheel's vertical load of a tractor and semi-trailer, online (per sample, with or without a
+latency) or offline, by the model observer on :mod:`.models.articulated`.
+
+:class:`ArticulatedOnline` takes one sample at a time (the node's path to come) and
+:func:`estimate_articulated` a whole drive (``stamps``, the readings of
+``/suspension/deflections`` in the model's channel order, the speed); both run the same
+:class:`.observer.online.ModelCore` and give the same numbers. ``offline=True`` runs the
+smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Readings from a
+mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
+equilibrium (:func:`equilibrium_readings`). :func:`fuse_roads` averages the offline roads of
+every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front axle).
+Not yet: gaps and rejected samples (one run, every sample finite), the road online, a fusion
+that tells the bodies' heave and pitch from the road (the longer waves).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from road_force_estimator.core.articulated_parameters import ArticulatedParameters
+from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
+from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
+from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
+from road_force_estimator.estimation.observer.online import ModelCore
+from road_force_estimator.estimation.smoothing.smoother import Smoother
+
+__all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
+           'equilibrium_readings', 'FusedProfile', 'fuse_roads']
+
+
+@dataclass(frozen=True)
+class ArticulatedEstimate:
+    """A drive's estimate: per sample (m) the distance (m), converged flag, every wheel's
+    load and dynamic load (N; (nw, m), wheels ``<axle>_<side>`` of :attr:`wheel_names`),
+    each unit's a_y (m/s^2; (2, m), tractor, trailer) and, offline, the road under every
+    wheel (m; (nw, m), band-limited; None online)."""
+
+    stamps_ns: np.ndarray
+    distance_m: np.ndarray
+    converged: np.ndarray
+    wheel_names: tuple
+    load_n: np.ndarray
+    dynamic_n: np.ndarray
+    lateral_mps2: np.ndarray
+    road_m: np.ndarray | None = None
+
+    @classmethod
+    def from_rows(cls, stamps_ns, rows: np.ndarray, wheel_names) -> ArticulatedEstimate:
+        """From the rows (m, columns) of :mod:`.models.articulated_rows` (the road where the
+        rows hold it)."""
+        cols = columns(len(wheel_names))
+        road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
+        return cls(np.asarray(stamps_ns), rows[:, DIST], rows[:, CONV] > 0.5,
+                   tuple(wheel_names), rows[:, cols['load']].T.copy(),
+                   rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road)
+
+
+def _wheel_names(vehicle: ArticulatedParameters) -> tuple:
+    return tuple(f'{a}_{s}' for a in vehicle.axle_names for s in ('left', 'right'))
+
+
+def equilibrium_readings(model: ArticulatedObserverModel, readings: np.ndarray) -> np.ndarray:
+    """The readings (m, ny) from the equilibrium: as they are, or, read from a mechanical zero
+    (``zero_load``), less the zero's reading ``-(S_j,i - F_0,j,i) / k_j,i`` (S the static spring
+    load, F_0 ``deflection_zero_load``: the sensors' own formula)."""
+    y = np.array(readings, float, copy=True)
+    v = model.vehicle
+    if not v.zero_load:
+        return y
+    static = model.static_wheel_load_n.reshape(-1, 2)
+    for k, ch in enumerate(model.channels):
+        if ch[0] == 'q':
+            a = v.axles[ch[1]]
+            s_load = static[ch[1], ch[2]] - 0.5 * a.mass_kg * GRAVITY_MPS2
+            y[..., k] += (s_load - a.deflection_zero_load_n[ch[2]]) / \
+                a.suspension_stiffness_npm[ch[2]]
+    return y
+
+
+class ArticulatedOnline:
+    """The online estimate one sample at a time: :meth:`step` returns the rows finalized by
+    that sample (``(stamp_ns, row)``, a latency's samples late), :meth:`finish` the rest."""
+
+    def __init__(self, vehicle: ArticulatedParameters, latency_s: float = 0.0,
+                 observer: ObserverParameters | None = None) -> None:
+        self.model = ArticulatedObserverModel(vehicle)
+        obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
+        self.core = ModelCore(self.model, obs)
+        self.wheel_names = _wheel_names(vehicle)
+        self._last: int | None = None
+        self._x = 0.0
+
+    def step(self, stamp_ns: int, y, speed_mps: float) -> list:
+        """One sample: ``y`` the model's channels (m, rad; from the equilibrium)."""
+        core = self.core
+        first = self._last is None
+        dt = 0.0 if first else (stamp_ns - self._last) * 1e-9
+        self._x += abs(speed_mps) * dt
+        t = 0.0 if first else dt
+        if not core.step(int(stamp_ns), tuple(float(v) for v in y), float(speed_mps), dt,
+                         first, self._x, t, dt):
+            raise ValueError(f'sample at {stamp_ns} ns: not finite')
+        self._last = int(stamp_ns)
+        out = list(core.ready)
+        core.ready.clear()
+        return out
+
+    def finish(self) -> list:
+        """The samples a latency still held."""
+        self.core.finish()
+        out = list(self.core.ready)
+        self.core.ready.clear()
+        return out
+
+
+def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
+                         latency_s: float = 0.0, offline: bool = False,
+                         observer: ObserverParameters | None = None) -> ArticulatedEstimate:
+    """Every wheel's load over a drive (one run).
+
+    Parameters
+    ----------
+    vehicle : ArticulatedParameters
+    stamps_ns : (m,) int, increasing
+    readings : (m, ny) the model's channels (``/suspension/deflections``' order: both sides of
+        every instrumented axle, the tractor's roll, the trailer's where fitted), m and rad,
+        from the vehicle's ``deflection_reference``
+    speed_mps : (m,) or float
+    latency_s : the online estimate's latency (s; 0: the causal filter)
+    offline : the smoother instead (``latency_s`` ignored)
+    observer : the observer's settings (default: the package's, with ``latency_s``)
+    """
+    stamps = np.asarray(stamps_ns, np.int64)
+    v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
+    online = ArticulatedOnline(vehicle, latency_s, observer)
+    y = equilibrium_readings(online.model, readings)
+    if offline:
+        return _offline(online, stamps, y, v, observer)
+    rows = []
+    for s, yi, vi in zip(stamps.tolist(), y.tolist(), v.tolist()):
+        rows += [r for _, r in online.step(s, yi, vi)]
+    rows += [r for _, r in online.finish()]
+    return ArticulatedEstimate.from_rows(stamps, np.array(rows), online.wheel_names)
+
+
+def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np.ndarray,
+             observer: ObserverParameters | None) -> ArticulatedEstimate:
+    """The smoother over the drive as one run."""
+    smoother = Smoother(online.model, ObserverParameters() if observer is None else observer)
+    t = (stamps - stamps[0]) * 1e-9
+    rows = np.zeros((t.size, columns(len(online.wheel_names))['size']))
+    for a, b, cols in smoother.pieces(t, y, v):
+        rows[a:b] = np.column_stack(cols)
+    dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
+    rows[:, DIST] = dist
+    return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)
+
+
+@dataclass(frozen=True)
+class FusedProfile:
+    """Both wheel paths (m) on the front axle's distances ``distance_m`` (m,) of the points
+    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles averaged."""
+
+    distance_m: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    axles: int
+
+
+def fuse_roads(estimate: ArticulatedEstimate, positions_m) -> FusedProfile:
+    """The offline roads of every axle (``estimate.road_m``; axle j ``positions_m[j]`` behind
+    the front axle) averaged by distance: the point under the front axle at sample k is under
+    axle j when that axle has travelled ``xi_j`` further; each axle's road is interpolated
+    there (linear, in the front axle's distance), over the points the last axle has passed."""
+    if estimate.road_m is None:
+        raise ValueError('no road in the estimate: the road comes offline')
+    x = estimate.distance_m
+    xi = np.asarray(positions_m, float)
+    keep = x + xi.max() <= x[-1]
+    p = x[keep]
+    paths = np.zeros((2, p.size))
+    for j, lag in enumerate(xi):
+        for side in (0, 1):
+            paths[side] += np.interp(p + lag, x, estimate.road_m[2 * j + side])
+    paths /= xi.size
+    return FusedProfile(p, paths[0], paths[1], int(xi.size))

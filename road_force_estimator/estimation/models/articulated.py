@@ -1,0 +1,370 @@
+"""The model observer of the whole vehicle (``vehicle.model: articulated``, MODEL.md "The whole
+vehicle: tractor and semi-trailer"): the tractor and semi-trailer's linear model with the road
+under every wheel and each unit's lateral acceleration as unknown inputs, as a
+:class:`.protocol.VehicleModel` (the observer, its fixed lag and the smoother take it as they
+take the front axle).
+
+The linear model is the core's (:meth:`.core.articulated_model.ArticulatedModel.linearised`:
+``M ddx + C dx + K x = K_u u + C_u du + l a_y``, x the ``6 + 2 N`` coordinates of
+:meth:`~.core.articulated_model.ArticulatedModel.dof_names`) written in the states below, which
+carry no absolute level: the heave, the grade and every kink of the road under the trailer's
+axles move bodies, axles and road together, and no deflection sees them (the front axle's
+reason for ``w = u - z_u``, :mod:`.front_axle`). State (SI; :class:`Layout`)::
+
+    x = [q (2N) | phi_t, phi_r | delta | w (2N) | dx (6 + 2N) | du (2N) | a_y,t, a_y,r]
+
+``q_j,i`` every spring's extension (axle j front first, side i left, right; the measured
+ones of the instrumented axles), ``phi_t``, ``phi_r`` the bodies' roll (measured: the
+tractor's, the trailer's where fitted), ``delta`` the fifth wheel's vertical deflection,
+``w_j,i = u_j,i - z_w,j,i`` every tire's deflection, ``dx`` every coordinate's rate, ``du_j,i``
+the road velocity under every tire (an Ornstein-Uhlenbeck process per wheel path per axle,
+as the front axle's: the unknown input) and ``a_y,b`` the lateral acceleration of each unit
+(a random walk: it drives the body's roll ``M_b h_b a_y`` and its axles' ``(h_rc,j S_j / g
++ rho_j m_j) a_y``, the lateral load transfer the springs do not see; a cross wind or a
+crossfall shows as one). The road under axle j is the front axle's delayed by ``xi_j / v``
+(MODEL.md): this model does not use it, each axle's road is an input of its own (the
+fused profile is the next step). Positions enter the forces through the core's kinematics
+(:meth:`~.core.articulated_model.ArticulatedModel.kinematics`): the positional states are
+``P [x; u]`` and the forces ``[-K, K_u] = F P`` with ``F = [-K, K_u] P^+`` exactly (every
+motion P does not see, the rigid heave, grade and kinks with their road, moves no spring,
+tire or coupling: checked at construction).
+
+Outputs (:data:`outputs` of a model): per wheel ``q``, ``dq``, ``w``, the dynamic tire force
+``dF = kt w + ct dw`` and the spring force on the body, then the bodies' roll, each unit's
+``a_y``, the bodies' heave and pitch accelerations and every wheel's vertical acceleration.
+The wheel loads are the statics' (:meth:`~.core.articulated_model.ArticulatedModel.statics`,
+``output_wheel_load_n``) plus ``dF``; offline, the road under every wheel is ``w`` plus the
+wheel's heave, the band-limited double integral of its acceleration, from a second smoother
+tuned for the road as the front axle's (:mod:`.articulated_rows`). Not modelled yet: the
+braking pitch ``a_x`` (the model has no known inputs but the friction; a constant speed needs
+none), the leaf-spring friction and the sensors' lag (refused), the tractor's IMU.
+
+Tuning: the front axle's schedule on the deflection noise (:func:`.front_axle.scheduled`),
+force noise on every equation of motion (per wheel on the axles, heave, pitch and roll on the
+bodies), the roll-moment density over the tractor's ``M h`` squared as the density of each
+``a_y`` times :data:`AY_PSD_FACTOR`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from road_force_estimator.core.articulated_model import ArticulatedModel
+from road_force_estimator.core.articulated_parameters import ArticulatedParameters
+from road_force_estimator.core.articulated_sensors import channel_layout
+from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models import front_axle
+from road_force_estimator.estimation.models.articulated_rows import (
+    ArticulatedOfflineRows, ArticulatedOnlineRows)
+from road_force_estimator.estimation.models.protocol import (
+    FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
+
+__all__ = ['AY_PSD_FACTOR', 'Layout', 'ArticulatedObserverModel', 'output_names',
+           'channel_names']
+
+SIDES = ('left', 'right')
+#: The a_y random walks' density: this factor times the roll-moment density over the
+#: tractor's ``(M h)^2``. Tuned on separate drives (road seed 1001, 10 um, 12-16 s, judged
+#: after 4 s; worst axle's dynamic-load error at 10 ms): straight class A 8.98 % with 1,
+#: 6.74 % with 0.01, 6.71 % with 0.001; class C 3.52, 3.17, 3.16 %; through a curve to
+#: 3 m/s^2 on class C 1.87, 1.82, 1.97 % and on class A 1.28, 1.17, 1.49 %. (Each unit's own
+#: ``(M h)^2`` instead of the tractor's: the same to 0.01 point.)
+AY_PSD_FACTOR = 0.01
+BODIES = ('tractor', 'trailer')
+
+
+class Layout:
+    """The state's parts (slices, and the fifth wheel's index) for N axles and n = 6 + 2 N
+    coordinates (module notes)."""
+
+    def __init__(self, n_axles: int) -> None:
+        nw = 2 * n_axles
+        n = 6 + nw
+        self.n_axles, self.nw, self.n = n_axles, nw, n
+        self.q = slice(0, nw)
+        self.phi = slice(nw, nw + 2)
+        self.delta = nw + 2
+        self.w = slice(nw + 3, 2 * nw + 3)
+        self.pos = slice(0, 2 * nw + 3)            # the positional states
+        self.dx = slice(2 * nw + 3, 2 * nw + 3 + n)
+        self.du = slice(2 * nw + 3 + n, 3 * nw + 3 + n)
+        self.ay = slice(3 * nw + 3 + n, 3 * nw + 5 + n)
+        self.nx = 3 * nw + 5 + n
+
+
+def output_names(axles) -> tuple[str, ...]:
+    """The linear outputs' names: per wheel (``<axle>_<side>``) q, dq, w, df, fb; then the
+    bodies' roll, each unit's a_y, the bodies' heave and pitch accelerations and every
+    wheel's vertical acceleration (``ddzw``: with ``w`` its road, offline)."""
+    wheels = [f'{a}_{s}' for a in axles for s in SIDES]
+    names = [f'{kind}_{wh}' for kind in ('q', 'dq', 'w', 'df', 'fb') for wh in wheels]
+    names += [f'phi_{b}' for b in BODIES] + [f'ay_{b}' for b in BODIES]
+    names += [f'{acc}_{b}' for b in BODIES for acc in ('ddz', 'ddtheta')]
+    names += [f'ddzw_{wh}' for wh in wheels]
+    return tuple(names)
+
+
+def channel_names(model: ArticulatedModel) -> tuple[str, ...]:
+    """The measured channels' joint names (INTERFACES.md ``/suspension/deflections``)."""
+    out = []
+    for ch in channel_layout(model):
+        if ch[0] == 'q':
+            out.append(f'{model.axles[ch[1]].name}_{SIDES[ch[2]]}_suspension')
+        else:
+            out.append(f'{BODIES[ch[1]]}_roll')
+    return tuple(out)
+
+
+class ArticulatedObserverModel:
+    """MODEL.md's tractor and semi-trailer as the observer's vehicle model
+    (:class:`.protocol.VehicleModel`) for one :class:`.ArticulatedParameters`.
+
+    Channels: both deflections of every instrumented axle (front first), the tractor's roll
+    and, where fitted, the trailer's (``/suspension/deflections``' order); state and outputs:
+    the module notes; rows: :mod:`.articulated_rows`.
+
+    Raises
+    ------
+    ValueError
+        A vehicle the model does not carry yet: leaf-spring friction or lagging sensors.
+    """
+
+    friction_n: tuple = ()
+    friction_rate_states: tuple = ()
+    friction_rate_outputs: tuple = ()
+
+    def __init__(self, vehicle: ArticulatedParameters) -> None:
+        if any(f > 0.0 for a in vehicle.axles for f in a.leaf_spring_friction_n):
+            raise ValueError('the articulated observer does not model leaf-spring friction '
+                             'yet: set vehicle.leaf_spring_friction to [0, 0]')
+        if vehicle.roll_time_constant_s > 0.0 or any(a.sensor_time_constant_s > 0.0
+                                                     for a in vehicle.axles):
+            raise ValueError('the articulated observer does not model lagging sensors yet: '
+                             'set vehicle.sensor_time_constant to [0, 0]')
+        self.vehicle = vehicle
+        self.core = ArticulatedModel(vehicle)
+        self.layout = Layout(self.core.n_axles)
+        self.outputs = output_names(vehicle.axle_names)
+        self.channels = channel_layout(self.core)
+        self.channel_names = channel_names(self.core)
+        self.deflection_channels = tuple(k for k, ch in enumerate(self.channels)
+                                         if ch[0] == 'q')
+        self.roll_channels = tuple(k for k, ch in enumerate(self.channels) if ch[0] == 'roll')
+        nw = self.layout.nw
+        self.load_outputs = tuple(range(3 * nw, 4 * nw))
+        self.static_wheel_load_n = self.core.statics().output_wheel_load_n.reshape(-1).copy()
+        self._build()
+
+    def with_vehicle(self, vehicle: ArticulatedParameters) -> ArticulatedObserverModel:
+        """The model of other parameters."""
+        return ArticulatedObserverModel(vehicle)
+
+    # -- the linear model ------------------------------------------------------------------
+    def _build(self) -> None:
+        """The parts of A that do not depend on the operating point: kinematics, forces."""
+        core, lay = self.core, self.layout
+        n, nw = lay.n, lay.nw
+        lin = core.linearised()
+        springs, wheels, delta, roll = core.kinematics()
+        self.spring_rows = springs.reshape(nw, n)
+        self.wheel_rows = wheels.reshape(nw, n)
+        # P: the positional states over [x; u]
+        p = np.zeros((2 * nw + 3, n + nw))
+        p[lay.q, :n] = self.spring_rows
+        p[nw, 2] = p[nw + 1, 5] = 1.0
+        p[lay.delta, :n] = delta
+        p[lay.w, :n] = -self.wheel_rows
+        p[lay.w, n:] = np.eye(nw)
+        f_pos = np.hstack([-lin.stiffness, lin.road_stiffness])
+        f_rel = f_pos @ np.linalg.pinv(p)
+        err = float(np.max(np.abs(f_rel @ p - f_pos)))
+        if err > 1e-9 * float(np.max(np.abs(f_pos))):
+            raise ValueError(f'the forces are not a function of the relative positions '
+                             f'({err:.3g})')
+        self.minv = np.linalg.inv(lin.mass)
+        self.force_pos = f_rel
+        self.damping = lin.damping
+        self.road_damping = lin.road_damping
+        self.delta_row = delta
+        # each unit's lateral acceleration: its body's roll and its axles' roll equations
+        lateral = np.zeros((n, 2))
+        for b in (0, 1):
+            lateral[3 * b + 2, b] = lin.lateral[3 * b + 2]
+        for j, a in enumerate(core.axles):
+            ia = 6 + 2 * j + 1
+            lateral[ia, core.body_index(a)] = lin.lateral[ia]
+        self.lateral = lateral
+
+    def continuous(self, speed_mps: float, road_gd_m3: float, *,
+                   correlation_length_m: float = 0.8, force_psd: float = FORCE_PSD,
+                   roll_moment_psd: float = ROLL_MOMENT_PSD,
+                   friction_damping_nspm: tuple = ()) -> ContinuousModel:
+        """The augmented linear model (module notes) at a speed (m/s; its magnitude, floored
+        at :data:`.SPEED_FLOOR_MPS`), a roughness ``Gd(n0)`` (m^3) and a tuning."""
+        lay = self.layout
+        nw, nx = lay.nw, lay.nx
+        speed = max(abs(float(speed_mps)), SPEED_FLOOR_MPS)
+        w_v = 2.0 * math.pi * speed / correlation_length_m
+        acc = np.zeros((lay.n, nx))          # the coordinates' accelerations over the state
+        acc[:, lay.pos] = self.force_pos
+        acc[:, lay.dx] = -self.damping
+        acc[:, lay.du] = self.road_damping
+        acc[:, lay.ay] = self.lateral
+        acc = self.minv @ acc
+        a = np.zeros((nx, nx))
+        a[lay.q, lay.dx] = self.spring_rows
+        a[nw, lay.dx.start + 2] = a[nw + 1, lay.dx.start + 5] = 1.0
+        a[lay.delta, lay.dx] = self.delta_row
+        a[lay.w, lay.dx] = -self.wheel_rows
+        a[lay.w, lay.du] = np.eye(nw)
+        a[lay.dx] = acc
+        a[lay.du, lay.du] = -w_v * np.eye(nw)
+        h = self._outputs(a, acc)
+        g, psd = self._noise_inputs(force_psd, roll_moment_psd)
+        diffusion = road_diffusion(road_gd_m3) * speed
+        psd[6 + nw:6 + 2 * nw] = diffusion * w_v ** 2
+        road_g = g[:, 6 + nw:6 + 2 * nw] * (math.sqrt(speed) * w_v)
+        return ContinuousModel(a, g, np.diag(psd), self._measurement(), h, road_g)
+
+    def _outputs(self, a: np.ndarray, acc: np.ndarray) -> np.ndarray:
+        """H (outputs of :func:`output_names`, nx)."""
+        lay = self.layout
+        eye = np.eye(lay.nx)
+        kt = np.array([k for ax in self.vehicle.axles for k in ax.tire_stiffness_npm])
+        ct = np.array([c for ax in self.vehicle.axles for c in ax.tire_damping_nspm])
+        k = np.array([s for ax in self.vehicle.axles for s in ax.suspension_stiffness_npm])
+        c = np.array([s for ax in self.vehicle.axles for s in ax.suspension_damping_nspm])
+        q, dq, w, dw = eye[lay.q], a[lay.q], eye[lay.w], a[lay.w]
+        df = kt[:, None] * w + ct[:, None] * dw
+        fb = -(k[:, None] * q + c[:, None] * dq)
+        rows = [q, dq, w, df, fb, eye[lay.phi], eye[lay.ay], acc[[0, 1, 3, 4]],
+                self.wheel_rows @ acc]
+        return np.vstack(rows)
+
+    def _noise_inputs(self, force_psd: float, roll_moment_psd: float) -> tuple:
+        """G (nx, 6 + 2 nw + 2) and the densities: generalised forces on the bodies' heave,
+        pitch and roll (the pitch's over its longest lever squared, the roll's over the half
+        spring track squared, as the front axle's), a force under every wheel, the road
+        velocities' noise (density set by the caller), each unit's a_y random walk (the
+        roll-moment density over the tractor's ``(M h)^2`` times :data:`AY_PSD_FACTOR`)."""
+        lay, core, v = self.layout, self.core, self.vehicle
+        n, nw = lay.n, lay.nw
+        forces = np.zeros((n, 6 + nw))
+        psd = np.zeros(6 + 2 * nw + 2)
+        for b, body in enumerate((v.tractor, v.trailer)):
+            axles = [a for a in core.axles if core.body_index(a) == b]
+            lever = max(abs(core.lever_m(a)) for a in axles)
+            s = max(a.spring_half_track_m for a in axles)
+            for i, scale in enumerate((1.0, lever * lever, s * s)):
+                forces[3 * b + i, 3 * b + i] = 1.0
+                psd[3 * b + i] = force_psd * scale
+        forces[:, 6:6 + nw] = self.wheel_rows.T       # a force up under each wheel
+        psd[6:6 + nw] = force_psd
+        g = np.zeros((lay.nx, psd.size))
+        g[lay.dx, :6 + nw] = self.minv @ forces
+        g[lay.du, 6 + nw:6 + 2 * nw] = np.eye(nw)
+        g[lay.ay, 6 + 2 * nw:] = np.eye(2)
+        mh = v.tractor.mass_kg * v.tractor.cg_height_above_roll_axis_m
+        psd[6 + 2 * nw:] = AY_PSD_FACTOR * roll_moment_psd / (mh * mh)
+        return g, psd
+
+    def _measurement(self) -> np.ndarray:
+        """C (ny, nx): the measured springs' extensions and bodies' rolls."""
+        lay = self.layout
+        cm = np.zeros((len(self.channels), lay.nx))
+        for k, ch in enumerate(self.channels):
+            cm[k, 2 * ch[1] + ch[2] if ch[0] == 'q' else lay.nw + ch[1]] = 1.0
+        return cm
+
+    # -- design ----------------------------------------------------------------------------
+    def measurement_variances(self, noise_deflection_m: float,
+                              noise_roll_rad: float) -> list:
+        """``diag(R)``: m^2 per deflection, rad^2 per roll."""
+        return [noise_deflection_m ** 2 if ch[0] == 'q' else noise_roll_rad ** 2
+                for ch in self.channels]
+
+    def roll_noise_floor(self, deflection_floor_m: float) -> float:
+        """The deflection's floor over the front axle's half spring track (rad)."""
+        return deflection_floor_m / self.vehicle.axles[0].spring_half_track_m
+
+    def state_scale(self, nx: int) -> np.ndarray:
+        """Typical state magnitudes (m, rad, m/s, rad/s, m/s^2)."""
+        lay = self.layout
+        s = np.empty(lay.nx)
+        s[lay.q], s[lay.phi], s[lay.delta], s[lay.w] = 1e-2, 1e-2, 1e-3, 1e-3
+        s[lay.dx], s[lay.du], s[lay.ay] = 1e-1, 1e-1, 1.0
+        return s
+
+    def rest_state(self, y) -> np.ndarray:
+        """The state at rest closest to one measurement (least squares): the measured
+        extensions and rolls, every rate 0, the other positions and a_y that leave the
+        fewest accelerations."""
+        lay = self.layout
+        cm = self._measurement()
+        x = np.zeros(lay.nx)
+        measured = [int(np.argmax(row)) for row in cm]
+        x[measured] = np.asarray(y, float)
+        free = [j for j in range(lay.pos.stop) if j not in measured] + list(
+            range(lay.ay.start, lay.ay.stop))
+        known = np.hstack([self.force_pos, np.zeros((lay.n, lay.nx - lay.pos.stop))])
+        known[:, lay.ay] = self.lateral
+        x[free] = np.linalg.lstsq(known[:, free], -known @ x, rcond=None)[0]
+        return x
+
+    def sm_injection(self, nx: int) -> np.ndarray:
+        """T (nx, 3 ny): the sliding mode (off by default) corrects the measured states by
+        the output error only."""
+        t = np.zeros((nx, 3 * len(self.channels)))
+        for k, row in enumerate(self._measurement()):
+            t[int(np.argmax(row)), 3 * k] = 1.0
+        return t
+
+    def sm_lipschitz(self) -> tuple[float, ...]:
+        """L per channel: the stiffest tire over its axle's mass times 1 m/s (m/s^3), over
+        the front axle's half spring track for the rolls."""
+        lq = max(k / a.mass_kg for a in self.vehicle.axles for k in a.tire_stiffness_npm)
+        lr = lq / self.vehicle.axles[0].spring_half_track_m
+        return tuple(lq if ch[0] == 'q' else lr for ch in self.channels)
+
+    def stationary_states(self, cm: ContinuousModel) -> list[int]:
+        """All but the rolls (they follow the roads' cross levels) and the a_y random walks."""
+        lay = self.layout
+        drop = set(range(lay.phi.start, lay.phi.stop)) | set(range(lay.ay.start, lay.ay.stop))
+        return [j for j in range(cm.nx) if j not in drop]
+
+    # -- tuning ----------------------------------------------------------------------------
+    @staticmethod
+    def scheduled(noise_deflection_m: float, *, roll_moment: bool = False) -> tuple:
+        """The front axle's schedule (:func:`.front_axle.scheduled`)."""
+        return front_axle.scheduled(noise_deflection_m, roll_moment=roll_moment)
+
+    @staticmethod
+    def profile_scheduled(noise_deflection_m: float, mode: str) -> tuple:
+        """The front axle's (:func:`.front_axle.profile_scheduled`)."""
+        return front_axle.profile_scheduled(noise_deflection_m, mode)
+
+    # -- friction (none: refused) ----------------------------------------------------------
+    @staticmethod
+    def friction_forces(dq, ceq) -> np.ndarray:
+        """No friction: no known input."""
+        return np.zeros(0)
+
+    @staticmethod
+    def friction_forces_array(dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
+        """No friction: no known input."""
+        return np.zeros((0,) + np.shape(dq)[1:])
+
+    @staticmethod
+    def friction_damping(dq_std_mps: float, delayed: bool = False) -> tuple:
+        """No friction."""
+        return ()
+
+    # -- reconstruction --------------------------------------------------------------------
+    def online_rows(self, observer) -> ArticulatedOnlineRows:
+        """Every wheel's load, sample by sample (:class:`.ArticulatedOnlineRows`)."""
+        return ArticulatedOnlineRows(self)
+
+    def offline_rows(self, observer) -> ArticulatedOfflineRows:
+        """Every wheel's load of smoothed runs (:class:`.ArticulatedOfflineRows`)."""
+        return ArticulatedOfflineRows(self, observer)
