@@ -4,11 +4,11 @@ the front-axle estimator run axle by axle (what a user does today).
 
 Run from the repository root::
 
-    .venv/bin/python -m bench.articulated_observer [--duration 25] [--only A20 C20]
+    .venv/bin/python -m bench.accuracy.articulated_observer [--duration 25] [--only A20 C20]
         [--noise 1e-5] [--settle 5] [--no-peer]
 
-Each drive is :mod:`bench.articulated_drives`' (MODEL.md's 5-axle 40 t combination at 1 kHz,
-ISO 8608 roads seed 1), simulated by the core plant (:func:`.core.articulated_plant.
+Each drive is :mod:`bench.studies.articulated_drives`' (MODEL.md's 5-axle 40 t combination at
+1 kHz, ISO 8608 roads seed 1), simulated by the core plant (:func:`.core.articulated_plant.
 simulate_articulated`) and read by its sensors (:class:`.core.articulated_sensors.
 ArticulatedSensors`) with ``--noise`` on every deflection (m) and the same over the front
 axle's half spring track on the rolls (rad). Estimates, in each mode (zero latency, 10 ms,
@@ -16,7 +16,7 @@ offline):
 
 - ``articulated observer``: :func:`road_force_estimator.estimation.articulated.
   estimate_articulated`, every setting the package's (noise and roughness estimated online);
-- ``Kalman peer (truth-tuned)``: :mod:`bench.articulated_peer` (the full linear model in
+- ``Kalman peer (truth-tuned)``: :mod:`bench.accuracy.articulated_peer` (the full linear model in
   absolute coordinates, the true noise and ISO class, its two densities picked on the truth
   per drive and mode; causal, exact 10-sample fixed lag, RTS);
 - ``front-axle estimator, axle by axle``: the package's front-axle estimator
@@ -42,13 +42,13 @@ import time
 
 import numpy as np
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 MODES = (('0 ms', 0.0, False), ('10 ms', 0.01, False), ('offline', 0.0, True))
 
 
 def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
     """One drive of the family: the plant's truth and the sensors' readings."""
-    from bench.articulated_drives import CONFIG
+    from bench.studies.articulated_drives import CONFIG
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.articulated_plant import simulate_articulated
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
@@ -62,7 +62,7 @@ def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
                    'simulator.noise.deflection': noise_m,
                    'simulator.noise.roll': noise_m / s_front, **case.values})
     with tempfile.TemporaryDirectory() as tmp:
-        if case.speed_profile is not None:       # as bench.articulated_drives writes it
+        if case.speed_profile is not None:       # as bench.studies.articulated_drives writes it
             path = pathlib.Path(tmp) / 'speed.csv'
             path.write_text('time_s,speed_mps\n' + ''.join(
                 f'{t:.6f},{v:.6f}\n' for t, v in zip(*case.speed_profile)))
@@ -153,8 +153,8 @@ def front_axle(drive: dict, axle: int, latency_s: float, offline: bool,
 
 
 def peer(drive: dict, case, lag, noise_m: float, judged) -> tuple[np.ndarray, tuple]:
-    """The Kalman peer tuned on the truth (:mod:`bench.articulated_peer`)."""
-    from bench.articulated_peer import tuned
+    """The Kalman peer tuned on the truth (:mod:`bench.accuracy.articulated_peer`)."""
+    from bench.accuracy.articulated_peer import tuned
     from road_force_estimator.core.road import iso8608_psd
 
     gd = float(iso8608_psd(case.road, [0.1])[0])
@@ -212,7 +212,7 @@ def run(case, args) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bench.articulated_drives import family
+    from bench.studies.articulated_drives import family
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--duration', type=float, default=25.0, help='each drive (s)')
@@ -227,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         out += run(case, args)
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
     from road_force_estimator.core.parameters import load_params_file
-    from bench.articulated_drives import CONFIG
+    from bench.studies.articulated_drives import CONFIG
     names = ArticulatedDrive.from_values(load_params_file(CONFIG)).vehicle.axle_names
     print(f'Articulated observer, {args.duration:g} s drives at 1 kHz, {args.noise * 1e6:g} um '
           f'noise, judged after {args.settle:g} s: dynamic-load RMS error, % of the true '

@@ -5,7 +5,7 @@ truth; causal, exact fixed lag and Rauch-Tung-Striebel smoother.
 State ``[x (6 + 2N), dx (6 + 2N), u (2N), a_y,t, a_y,r]``: the coordinates of
 :meth:`road_force_estimator.core.articulated_model.ArticulatedModel.dof_names` from static
 equilibrium, their rates, the road under every tire (a random walk with a leak at 500 m of
-wavelength, as :class:`bench.peers.RollPlaneKalman`'s, so that the vehicle and road rising
+wavelength, as :class:`bench.accuracy.peers.RollPlaneKalman`'s, so that the vehicle and road rising
 together decay) and each unit's a_y (a random walk). ``M ddx + C dx + K x = K_u u + l a_y``
 (:meth:`~road_force_estimator.core.articulated_model.ArticulatedModel.linearised`; tire
 damping 0, so the road rate does not enter), white noise on the road's rate (density
