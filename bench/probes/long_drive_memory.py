@@ -10,7 +10,11 @@
    without a step), each with its own sensor noise (10 um / 0.1 mrad, seed = piece number),
    stamped on one 1 kHz clock, written piece after piece into one bag
    (``/suspension/deflections`` and ``/vehicle/twist``, no ground truth, no GNSS) with
-   :class:`bagio.BagWriter`. Its own peak RSS is printed.
+   :class:`bagio.BagWriter`. Its own peak RSS is printed. ``--truth`` adds simulate_bag's
+   four ground-truth topics (wheel loads and road under each wheel: such a drive goes in
+   blocks too, issue 27); ``--forward`` plays every piece forwards in time (a physical drive,
+   with a step where pieces join: a piece played backwards is no motion the model allows, and
+   the offline innovation gate then re-runs nearly every sample).
 2. ``estimate_bag`` runs on it as a process, figures on, once per mode, and on a 1 s drive of
    the same kind; per run the wall and CPU time and the peak RSS (``/usr/bin/time``), and the
    bytes per added sample. ``--drive BAG`` takes a long drive made before (``--keep``) instead.
@@ -28,6 +32,7 @@ import resource
 import shutil
 import sys
 import tempfile
+from typing import NamedTuple
 
 import numpy as np
 
@@ -47,13 +52,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--drive', metavar='BAG',
                    help='a long drive made before (by this command with --keep): not made again')
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
+    p.add_argument('--truth', action='store_true', help='with the ground-truth topics')
+    p.add_argument('--forward', action='store_true', help='every piece forwards in time')
     return p
 
 
-def make_drive(bag: Path, hours: float, piece_s: float) -> int:
+def make_drive(bag: Path, hours: float, piece_s: float, truth: bool = False,
+               forward: bool = False) -> int:
     """Write the long drive of the module notes into ``bag``; the samples written."""
     from road_force_estimator.bagio import BagWriter
-    from road_force_estimator.bagio.drive import measurement_streams
+    from road_force_estimator.bagio.drive import measurement_streams, truth_streams
     from road_force_estimator.serde.messages import DEFAULT_START_STAMP_NS, stamp_columns
     from road_force_estimator.core.parameters import VehicleParameters
     from road_force_estimator.core.plant import simulate as plant
@@ -66,6 +74,7 @@ def make_drive(bag: Path, hours: float, piece_s: float) -> int:
     tr = plant(VehicleParameters(), road, speed_mps=SPEED_MPS, rate_hz=RATE_HZ,
                duration_s=(m - 1) / RATE_HZ, tire_envelope_m=0.25)
     q_true, roll_true = np.array(tr.q_m), np.array(tr.roll_rad)
+    load, road_m = np.array(tr.wheel_load_n), np.array(tr.road_m)
     del tr
     total = int(round(hours * 3600.0 * RATE_HZ)) + 1
     step_ns = int(round(1e9 / RATE_HZ))
@@ -73,19 +82,31 @@ def make_drive(bag: Path, hours: float, piece_s: float) -> int:
         topics = None
         for k in range(int(math.ceil(total / m))):
             a, b = k * m, min(total, (k + 1) * m)
-            order = slice(None) if k % 2 == 0 else slice(None, None, -1)
+            order = slice(None) if k % 2 == 0 or forward else slice(None, None, -1)
             q_piece, roll_piece = q_true[order][:b - a], roll_true[order][:b - a]
             q, roll = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4,
                                   seed=k + 1).measure(q_piece, roll_piece)
             stamps = DEFAULT_START_STAMP_NS + step_ns * np.arange(a, b, dtype=np.int64)
-            streams = measurement_streams(stamps, stamp_columns(stamps), q, roll,
-                                           np.full(b - a, SPEED_MPS))
+            cols = stamp_columns(stamps)
+            streams = measurement_streams(stamps, cols, q, roll, np.full(b - a, SPEED_MPS))
+            if truth:
+                streams += truth_streams(TruthPiece(load[order][:b - a], road_m[order][:b - a],
+                                                    SPEED_MPS * np.arange(a, b) / RATE_HZ),
+                                         stamps, cols, VehicleParameters().track_width_m)
             if topics is None:
                 topics = [topic for topic, _, _ in streams]
                 for topic in topics:
                     out.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
             out.write_rows(streams)
     return total
+
+
+class TruthPiece(NamedTuple):
+    """A piece's ground truth as :func:`bagio.drive.truth_streams` takes it."""
+
+    wheel_load_n: np.ndarray
+    road_m: np.ndarray
+    distance_m: np.ndarray
 
 
 def _samples(bag: Path) -> int:
@@ -95,15 +116,15 @@ def _samples(bag: Path) -> int:
     return streamable(bag)
 
 
-def measure(hours: float, piece_s: float | None, modes, folder: Path, drive: Path | None = None
-            ) -> dict:
+def measure(hours: float, piece_s: float | None, modes, folder: Path, drive: Path | None = None,
+            truth: bool = False, forward: bool = False) -> dict:
     """Make the drives (``drive``: the long one given), run the command (see the module
     notes)."""
     long_bag, short_bag = folder / 'long_drive', folder / 'drive_1s'
     shutil.rmtree(short_bag, ignore_errors=True)
     if drive is None:
         shutil.rmtree(long_bag, ignore_errors=True)
-        n = make_drive(long_bag, hours, piece_s)
+        n = make_drive(long_bag, hours, piece_s, truth, forward)
     else:
         long_bag = Path(drive)
         n = _samples(long_bag)
@@ -149,10 +170,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.keep:
         folder = Path(args.keep)
         folder.mkdir(parents=True, exist_ok=True)
-        doc = measure(args.hours, args.piece, args.modes, folder, args.drive)
+        doc = measure(args.hours, args.piece, args.modes, folder, args.drive, args.truth,
+                      args.forward)
     else:
         with tempfile.TemporaryDirectory(prefix='long_drive_memory_') as tmp:
-            doc = measure(args.hours, args.piece, args.modes, Path(tmp), args.drive)
+            doc = measure(args.hours, args.piece, args.modes, Path(tmp), args.drive, args.truth,
+                          args.forward)
     doc['command'] = ('python -m bench.probes.long_drive_memory '
                       + ' '.join(argv if argv is not None else sys.argv[1:])).strip()
     print('\n'.join(markdown(doc)))

@@ -53,7 +53,7 @@ from road_force_estimator.interfaces import (
 )
 
 __all__ = ['GroundTruth', 'Fixes', 'Drive', 'write_drive_bag', 'read_drive_bag', 'fix_stream',
-           'measurement_streams']
+           'measurement_streams', 'truth_streams']
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -250,7 +250,7 @@ def write_drive_bag(path: str | Path, trajectory, q_meas: np.ndarray, roll_meas:
     with BagWriter(path, overwrite=overwrite, custom_data=custom) as bag:
         streams = measurement_streams(stamps, stamp_cols, q, roll, speed)
         if ground_truth:
-            streams += _truth_streams(trajectory, stamps, stamp_cols, track_width_m)
+            streams += truth_streams(trajectory, stamps, stamp_cols, track_width_m)
         if fixes is not None:
             streams.append(fix_stream(fixes, start_stamp_ns))
         for topic, _, _ in streams:
@@ -294,7 +294,7 @@ def measurement_streams(stamps, stamp_cols, q, roll, speed) -> list:
     return [(TWIST, stamps, twist), (DEFLECTIONS, stamps, deflections)]
 
 
-def _truth_streams(trajectory, stamps, stamp_cols, track_width_m: float) -> list:
+def truth_streams(trajectory, stamps, stamp_cols, track_width_m: float) -> list:
     """The ground-truth streams: wheel loads (left, right), then road points (left, right)."""
     n = stamps.size
     load = np.asarray(trajectory.wheel_load_n, dtype=float).reshape(n, 2)

@@ -106,7 +106,7 @@ def test_a_truth_that_ends_early_holds_no_sample_back(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
     from bag_samples import make_trajectory
-    from road_force_estimator.bagio.drive import _truth_streams, measurement_streams
+    from road_force_estimator.bagio.drive import truth_streams, measurement_streams
     from road_force_estimator.interfaces import TOPIC_TYPES, qos_kind
     from road_force_estimator.serde.messages import stamp_columns
 
@@ -117,7 +117,7 @@ def test_a_truth_that_ends_early_holds_no_sample_back(tmp_path, monkeypatch):
     meas = measurement_streams(stamps, cols, q, roll, np.full(600, 15.0))
     part = SimpleNamespace(wheel_load_n=traj.wheel_load_n[:200], road_m=traj.road_m[:200],
                            distance_m=traj.distance_m[:200])
-    truth = _truth_streams(part, stamps[:200], stamp_columns(stamps[:200]), 1.8)
+    truth = truth_streams(part, stamps[:200], stamp_columns(stamps[:200]), 1.8)
     with bagio.BagWriter(tmp_path / 'd') as bag:
         for topic, _, _ in meas + truth:
             bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
