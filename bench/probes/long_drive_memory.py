@@ -154,7 +154,7 @@ def markdown(doc: dict) -> list[str]:
                 f'{doc["making_peak_rss_mb"]:.0f} MB' if doc.get('piece_s') is not None
                 else 'made before (--drive)') + '; figures on '
              '(drives of at least 2^21 samples are estimated block by block, both modes: '
-             '`tools/estimate_stream.py`).', '',
+             '`pipeline/plan.py`).', '',
              '| mode | peak RSS (MB), long drive | peak RSS (MB), 1 s drive | added B/sample '
              '| wall (s) | CPU (s) | samples per CPU s |', '|---|---|---|---|---|---|---|']
     for mode, m in doc['modes'].items():
