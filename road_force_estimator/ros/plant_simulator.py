@@ -266,6 +266,7 @@ class PlantSimulator(Node):
             if self.first_stamp_ns is None:    # said at once: a late observer counts from it
                 self.first_stamp_ns = stamp_ns + self.last_jitter_ns
                 self.diagnostics_callback()
+                self.get_logger().info(f'first sample published: stamp {self.first_stamp_ns} ns')
         if self.k > self.last_index or self.plant.finished:
             self.finish()
 
