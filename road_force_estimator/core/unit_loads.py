@@ -49,13 +49,16 @@ class UnitLoadTransfer:
         self.units = unit_masks(bodies)
         static = np.asarray(static_load_n, float)
         self.floor = [_FLOOR_FRACTION * float(static[u].sum()) for u in self.units]
-        self.e = math.exp(-dt_s * 2.0 * math.pi * cutoff_hz / _CASCADE_3DB)
+        #: pole rate (1/s) of each lag of the low-pass
+        self.rate = 2.0 * math.pi * cutoff_hz / _CASCADE_3DB
+        self.e = math.exp(-dt_s * self.rate)
         self.state: list | None = None
 
-    def update(self, loads: Sequence[float]) -> list[float]:
+    def update(self, loads: Sequence[float], dt_s: float | None = None) -> list[float]:
         """``[LTR, quasi-static LTR]`` per unit (6 numbers) from one sample's wheel loads
-        [axle j left, right, ...] (N)."""
-        e = self.e
+        [axle j left, right, ...] (N); ``dt_s``: the step from the previous sample (s; None:
+        the step given at construction)."""
+        e = self.e if dt_s is None else math.exp(-dt_s * self.rate)
         g = 1.0 - e
         out = []
         first = self.state is None
