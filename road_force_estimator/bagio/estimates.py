@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -146,7 +146,8 @@ def write_estimate_bag(path: str | Path, estimates, *,
                        track_width_m: float = DEFAULT_TRACK_WIDTH_M,
                        diagnostics: Iterable[tuple[int, Any]] = (),
                        custom_data: Mapping[str, str] | None = None,
-                       overwrite: bool = False) -> dict[str, int]:
+                       overwrite: bool = False, extra_streams: Sequence = ()
+                       ) -> dict[str, int]:
     """Write the observer's output topics for a batch of estimates.
 
     Topics (INTERFACES.md): ``/wheel_load/left|right`` (WrenchStamped, ``force.z``, frames
@@ -175,6 +176,9 @@ def write_estimate_bag(path: str | Path, estimates, *,
         Extra ``custom_data``.
     overwrite : bool
         Replace an existing bag folder.
+    extra_streams : sequence of (topic, stamps, rows)
+        More topics of :data:`~road_force_estimator.interfaces.TOPIC_TYPES` written beside
+        (the whole vehicle's, :func:`.whole_vehicle_estimates.whole_vehicle_streams`).
 
     Returns
     -------
@@ -196,6 +200,7 @@ def write_estimate_bag(path: str | Path, estimates, *,
     with BagWriter(path, overwrite=overwrite, custom_data=custom) as bag:
         streams = estimate_streams(est, s, stamp_cols, index, 0.5 * float(track_width_m))
         streams += diagnostic_streams(diagnostics)
+        streams += list(extra_streams)
         for topic, _, _ in streams:
             bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
         bag.write_rows(streams)

@@ -150,9 +150,10 @@ def _model_fit(est, drive, vehicle, observer) -> tuple[float, str] | None:
 
 
 def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict, vehicle,
-          observer, options: dict, stages) -> EstimateResult:
+          observer, options: dict, stages, whole=None) -> EstimateResult:
     """The sinks in one call each: ``folder/bag`` and ``folder/report``; the result names
-    them in ``output``."""
+    them in ``output``. ``whole``: an articulated drive's whole-vehicle estimate
+    (:mod:`.whole_vehicle`: its topics and ``/diagnostics`` status in the bag), or None."""
     from road_force_estimator import bagio
     from road_force_estimator.report import raw_road, write_report
 
@@ -171,9 +172,14 @@ def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict,
     if fit is not None:
         extra['model fit'] = fit_note(fit)
     stages.next('writing the bag')
+    diagnostics, streams = _diagnostics(est, counts, mode, fit), []
+    if whole is not None:
+        from road_force_estimator.pipeline import whole_vehicle
+        diagnostics = whole_vehicle.add_diagnostics(diagnostics, whole)
+        streams = whole_vehicle.bag_streams(whole)
     written = bagio.write_estimate_bag(
-        bag_dir, est, track_width_m=vehicle.track_width_m,
-        diagnostics=_diagnostics(est, counts, mode, fit), custom_data=custom)
+        bag_dir, est, track_width_m=vehicle.track_width_m, diagnostics=diagnostics,
+        custom_data=custom, extra_streams=streams)
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']
     stages.next('writing the report' + (' and figures' if options['figures'] else ''))

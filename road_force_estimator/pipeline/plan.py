@@ -11,6 +11,12 @@ truth, fixes). Two stay one block: a drive compared with a ``--reference-profile
 alignment is found over the whole drive) and the offline differentiator chain
 (``observer.discretization`` other than ``model``: a zero-phase filter over the whole
 recording).
+
+An articulated drive (``vehicle.model: articulated``, :mod:`.whole_vehicle`) is one block,
+online and offline: offline the smoother runs over the whole drive; online the whole
+vehicle's estimator, its load-transfer filters and the report's per-axle segment columns
+would have to be carried from block to block, which nothing does yet (a 10-minute 5-axle drive
+at 1 kHz is 0.6 M samples, far below :data:`STREAM_MIN_SAMPLES`).
 """
 from __future__ import annotations
 
@@ -50,17 +56,20 @@ def stream_threshold(memory_limit_bytes: float | None = None) -> int:
 
 def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
                memory_limit_bytes: float | None = None,
-               min_samples: int | None = None) -> BlockPlan:
+               min_samples: int | None = None, vehicle=None) -> BlockPlan:
     """The :class:`BlockPlan` of a drive bag (see the module notes); ``reference``: the
     ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
-    :func:`stream_threshold` (tests)."""
+    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block."""
     from road_force_estimator.bagio.drive_blocks import listed_messages
     from road_force_estimator.interfaces import DEFLECTIONS
+    from road_force_estimator.pipeline.whole_vehicle import is_whole_vehicle
 
     listed = listed_messages(Path(input_path))
     samples = listed.get(DEFLECTIONS, 0)
     limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
+        return BlockPlan(False, samples)
+    if is_whole_vehicle(vehicle):                   # the whole vehicle: one block (notes)
         return BlockPlan(False, samples)
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain

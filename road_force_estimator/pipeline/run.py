@@ -6,8 +6,10 @@ offline, with or without a latency) -> sinks (the estimate bag, the diagnostics,
 report's segments, IRI and summary, the figures), closed once at the end. The plan
 (:func:`.plan.plan_drive`: one block or many, from the drive's length and the memory limit)
 picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
-block). Then an articulated drive's whole-vehicle truth joins the report
-(:mod:`~.report.whole_vehicle`).
+block). With articulated parameters the whole vehicle's stage (:mod:`.whole_vehicle`, one
+block) runs beside the front axle's and its estimate, with the truth where the drive has it,
+joins the bag and the report; with front-axle parameters an articulated drive's
+whole-vehicle truth joins the report (:mod:`~.report.whole_vehicle`).
 """
 from __future__ import annotations
 
@@ -34,11 +36,15 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
     InputError
         Not a drive bag, no usable sample or speed, no sample estimated, an output exists.
     """
-    from road_force_estimator.pipeline import blocks, one_block
+    from road_force_estimator.pipeline import blocks, one_block, whole_vehicle
     from road_force_estimator.pipeline.plan import plan_drive
 
+    whole = None
+    if whole_vehicle.is_whole_vehicle(vehicle):
+        whole, vehicle = vehicle, whole_vehicle.front_axle_vehicle()
     plan = plan_drive(input_path, options['mode'], observer, options['reference'],
-                      memory_limit_bytes=memory_limit_bytes)
+                      memory_limit_bytes=memory_limit_bytes, vehicle=whole)
+    wv = None
     if plan.blocks:
         result = blocks.run_blocks(folder, output, input_path, vehicle, observer, options,
                                    stages, progress, samples=plan.samples)
@@ -49,19 +55,33 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
         est = one_block.estimate(input_path, drive, speed, vehicle, observer, options['mode'],
                                  stages)
         extra = {'samples before the first twist (given its speed)': early} if early else {}
+        if whole is not None:
+            stages.next(f'estimating the whole vehicle ({options["mode"]})')
+            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'])
+            est = whole_vehicle.front_wheels(est, wv)
         result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
-                                 observer, options, stages)
-    return _whole_vehicle(result, input_path, folder)
+                                 observer, options, stages, whole=wv)
+    return _whole_vehicle(result, input_path, folder, wv)
 
 
-def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path) -> EstimateResult:
-    """An articulated drive: the note of what was estimated, and the truth of every axle
-    in the report (:mod:`~.report.whole_vehicle`)."""
+def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path,
+                   wv=None) -> EstimateResult:
+    """An articulated drive: the note of what was estimated, the whole vehicle's estimate
+    ``wv`` (None: not estimated) and the truth of every axle in the report
+    (:mod:`~.report.whole_vehicle`)."""
     from road_force_estimator import bagio
     from road_force_estimator.bagio.articulated_drive import read_articulated_truth
     from road_force_estimator.bagio.vehicle_layout import front_axle_joints, is_articulated
 
     custom = bagio.bag_custom_data(input_path)
+    if wv is not None:
+        from road_force_estimator.report.whole_vehicle import append_estimate
+        truth = read_articulated_truth(input_path)
+        append_estimate(folder / 'report', wv, truth, result.summary)
+        result.notes.append(f'the whole vehicle estimated ({len(wv.axle_names)} axles, '
+                            f"{len(wv.stamps_ns)} samples); the front axle's loads and load "
+                            'transfer from its wheels, its road by the front-axle estimator')
+        return result
     if result.drive.notes:
         result.notes += list(result.drive.notes)
     elif is_articulated(custom):

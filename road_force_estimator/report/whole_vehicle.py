@@ -1,6 +1,5 @@
-"""The whole vehicle's truth in a drive's report (an articulated drive, MODEL.md "The whole
-vehicle"), where the estimator gives the front axle only (the articulated observer is the
-next step).
+"""The whole vehicle in a drive's report (an articulated drive, MODEL.md "The whole vehicle"):
+its truth, and with articulated parameters its estimate (:func:`append_estimate`).
 
 From the drive's ``/ground_truth/wheel_loads`` and ``/ground_truth/load_transfer/*``: per
 wheel the static load the drive was simulated with, the mean, lowest and highest load, the
@@ -8,6 +7,15 @@ dynamic load's RMS, the DLC (std / mean) and the samples at zero load (lift-off)
 and for the gross vehicle weight the sums of the static loads; per unit the largest |LTR| and
 |quasi-static LTR|. ``report.md`` gains the section "The whole vehicle (ground truth)",
 ``report.json`` the key ``whole_vehicle``, the folder ``axles.csv`` (one row per wheel).
+
+The estimate (:func:`summarize_estimate`, over the converged samples): per axle the static
+load and the gross vehicle weight (the mean of the static loads' sums), per wheel the mean and
+peak load and the DLC, per unit the largest |LTR| and |quasi-static LTR|; with the truth per
+wheel the RMS of the load error in % of the true dynamic load's RMS (about the drive's static
+load) and the trailer's quasi-static LTR error (RMS and largest), at the stamps both have.
+``report.md`` gains "The whole vehicle (estimate)", ``report.json`` the key
+``whole_vehicle_estimate``, ``segments.csv`` the columns :func:`segment_columns` names
+(INTERFACES.md "The whole vehicle").
 """
 from __future__ import annotations
 
@@ -20,7 +28,9 @@ import numpy as np
 from road_force_estimator.core.parameters import GRAVITY_MPS2
 from road_force_estimator.report.folder import csv_cell, json_safe
 
-__all__ = ['summarize_truth', 'truth_markdown', 'append_to_report', 'AXLE_COLUMNS']
+__all__ = ['summarize_truth', 'truth_markdown', 'append_to_report', 'AXLE_COLUMNS',
+           'summarize_estimate', 'estimate_markdown', 'segment_columns', 'segment_table',
+           'append_estimate']
 
 #: Columns of axles.csv.
 AXLE_COLUMNS = ('wheel', 'axle', 'body', 'static_load_n', 'mean_load_n', 'min_load_n',
@@ -70,12 +80,15 @@ def _nanmax_abs(a: np.ndarray) -> float:
     return float(np.max(np.abs(a))) if a.size else float('nan')
 
 
-def truth_markdown(s: dict[str, Any]) -> list[str]:
-    """The report section (markdown lines)."""
+def truth_markdown(s: dict[str, Any], estimated: bool = False) -> list[str]:
+    """The report section (markdown lines); ``estimated``: the whole vehicle's estimate is in
+    the report too."""
+    what = ("the whole vehicle's estimate is in the section before" if estimated else
+            "the estimate above is the front axle's (a front-axle tool reads an articulated "
+            "drive's front axle); the other axles have no estimate")
     lines = ['', '## The whole vehicle (ground truth)', '',
-             f'The drive\'s truth for every axle ({s["samples"]} samples): the estimate above '
-             "is the front axle's (a front-axle tool reads an articulated drive's front axle); "
-             'the other axles have no estimate yet. Also in `axles.csv`.', '',
+             f'The drive\'s truth for every axle ({s["samples"]} samples): {what}. Also in '
+             '`axles.csv`.', '',
              '| axle | body | static load (t) |', '|---|---|---|']
     for axle, body, t in zip(s['axles'], s['axle_bodies'], s['axle_static_load_t']):
         lines.append(f'| {axle} | {body or "?"} | {t:.2f} |')
@@ -93,8 +106,8 @@ def truth_markdown(s: dict[str, Any]) -> list[str]:
     return lines
 
 
-def append_to_report(folder: str | Path, truth, summary: dict[str, Any] | None = None
-                     ) -> dict[str, Any]:
+def append_to_report(folder: str | Path, truth, summary: dict[str, Any] | None = None,
+                     estimated: bool = False) -> dict[str, Any]:
     """Add the section to the report folder (``report.md``, ``report.json``, ``axles.csv``);
     the section's numbers (also put in ``summary['whole_vehicle']`` when given)."""
     folder = Path(folder)
@@ -105,7 +118,8 @@ def append_to_report(folder: str | Path, truth, summary: dict[str, Any] | None =
             out.write(','.join(csv_cell(w[c]) for c in AXLE_COLUMNS) + '\n')
     md = folder / 'report.md'
     if md.exists():
-        md.write_text(md.read_text().rstrip('\n') + '\n' + '\n'.join(truth_markdown(s)) + '\n')
+        md.write_text(md.read_text().rstrip('\n') + '\n'
+                      + '\n'.join(truth_markdown(s, estimated)) + '\n')
     js = folder / 'report.json'
     if js.exists():
         data = json.loads(js.read_text())
@@ -113,4 +127,208 @@ def append_to_report(folder: str | Path, truth, summary: dict[str, Any] | None =
         js.write_text(json.dumps(data, indent=2) + '\n')
     if summary is not None:
         summary['whole_vehicle'] = s
+    return s
+
+
+def segment_columns(axle_names) -> tuple[str, ...]:
+    """The whole vehicle's columns of ``segments.csv`` (INTERFACES.md), after the front
+    axle's: per axle ``peak_load_<axle>_left_n`` / ``_right_n``, ``dlc_<axle>_left`` /
+    ``_right``, ``static_load_<axle>_n``, then ``gross_weight_n`` and
+    ``max_abs_ltr_trailer_quasi_static``."""
+    cols: list[str] = []
+    for a in axle_names:
+        cols += [f'peak_load_{a}_left_n', f'peak_load_{a}_right_n', f'dlc_{a}_left',
+                 f'dlc_{a}_right', f'static_load_{a}_n']
+    return tuple(cols) + ('gross_weight_n', 'max_abs_ltr_trailer_quasi_static')
+
+
+def _decimals(name: str) -> int:
+    return 4 if name.startswith(('dlc_', 'max_abs_ltr')) else 0
+
+
+def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
+    """The columns of :func:`segment_columns` for the segments ``[start_m, end_m)`` (the last
+    one's end inclusive) from the converged samples of ``wv`` (a
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`) by their distance (the front
+    axle's, m): peak load and DLC (std / mean) per wheel, mean static axle load and gross
+    weight, largest |quasi-static LTR| of the trailer; NaN in a segment without a sample.
+    Every sample counts, converged or not, as in the front axle's columns."""
+    start = np.asarray(start_m, float)
+    end = np.asarray(end_m, float)
+    k = start.size
+    use = np.isfinite(np.asarray(wv.distance_m, float))
+    x = np.asarray(wv.distance_m, float)[use]
+    seg = np.searchsorted(start, x, side='right') - 1
+    inside = (seg >= 0) & ((x < end[np.clip(seg, 0, max(k - 1, 0))]) |
+                           ((seg == k - 1) & (x <= end[-1] if k else False)))
+    inside &= seg >= 0
+    seg = seg[inside]
+    loads = np.asarray(wv.load_n, float)[:, use][:, inside]
+    static = np.asarray(wv.static_n, float)[:, use][:, inside]
+    qs = np.asarray(wv.ltr_quasi_static, float)[1, use][inside]
+    counts = np.bincount(seg, minlength=k)
+    table: dict[str, np.ndarray] = {}
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(counts > 0, np.bincount(seg, values, minlength=k) / counts, np.nan)
+
+    for j, a in enumerate(wv.axle_names):
+        for side, word in enumerate(('left', 'right')):
+            f = loads[2 * j + side]
+            peak = np.full(k, np.nan)
+            np.fmax.at(peak, seg, f)
+            m = mean(f)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                std = np.sqrt(np.maximum(mean(f * f) - m * m, 0.0))
+                table[f'dlc_{a}_{word}'] = np.where(counts > 1, std / m, np.nan)
+            table[f'peak_load_{a}_{word}_n'] = peak
+        table[f'static_load_{a}_n'] = mean(static[2 * j] + static[2 * j + 1])
+    table['gross_weight_n'] = mean(static.sum(axis=0))
+    peak_qs = np.full(k, np.nan)
+    np.fmax.at(peak_qs, seg, np.abs(qs))
+    table['max_abs_ltr_trailer_quasi_static'] = peak_qs
+    return {c: table[c] for c in segment_columns(wv.axle_names)}
+
+
+def _append_segments_csv(path: Path, wv) -> dict[str, np.ndarray]:
+    """Add the whole vehicle's columns to ``segments.csv`` (its segments' bounds)."""
+    import csv
+
+    with path.open(newline='') as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    start = [float(r[header.index('start_m')]) for r in body]
+    end = [float(r[header.index('end_m')]) for r in body]
+    table = segment_table(wv, start, end)
+    names = list(table)
+    with path.open('w', newline='') as f:
+        w = csv.writer(f, lineterminator='\n')
+        w.writerow(header + names)
+        for i, r in enumerate(body):
+            w.writerow(r + [csv_cell(table[c][i], _decimals(c)) for c in names])
+    return table
+
+
+def summarize_estimate(wv, truth=None) -> dict[str, Any]:
+    """The numbers of the estimate's section from ``wv`` (a
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`) and, when given, the drive's
+    :class:`~.bagio.articulated_drive.ArticulatedTruth` (its accuracy at the shared stamps)."""
+    from road_force_estimator.estimation.whole_vehicle import UNITS
+    from road_force_estimator.interfaces import wheel_joints
+
+    names = wheel_joints(wv.axle_names)
+    use = np.asarray(wv.converged, bool)
+    loads = np.asarray(wv.load_n, float)[:, use]
+    static = np.asarray(wv.static_n, float)[:, use]
+    axles = list(wv.axle_names)
+    axle_static = [float(np.mean(static[2 * j] + static[2 * j + 1])) if use.any()
+                   else float('nan') for j in range(len(axles))]
+    wheels = []
+    for i, name in enumerate(names):
+        f = loads[i]
+        mean = float(np.mean(f)) if f.size else float('nan')
+        wheels.append({'wheel': name, 'axle': axles[i // 2],
+                       'static_load_n': float(np.mean(static[i])) if f.size else float('nan'),
+                       'mean_load_n': mean,
+                       'max_load_n': float(np.max(f)) if f.size else float('nan'),
+                       'dlc': float(np.std(f)) / mean if f.size and mean > 0.0
+                       else float('nan')})
+    units = {u: {'max_abs_ltr': _nanmax_abs(np.asarray(wv.ltr, float)[k, use]),
+                 'max_abs_ltr_quasi_static': _nanmax_abs(
+                     np.asarray(wv.ltr_quasi_static, float)[k, use])}
+             for k, u in enumerate(UNITS)}
+    out: dict[str, Any] = {
+        'samples': int(len(wv.stamps_ns)), 'converged': int(np.count_nonzero(use)),
+        'axles': axles, 'axle_bodies': list(wv.axle_bodies),
+        'axle_static_load_n': axle_static,
+        'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units}
+    if truth is not None and len(truth.stamps_ns) and tuple(truth.wheel_names) == names:
+        out['accuracy'] = _accuracy(wv, truth, use, names)
+    return out
+
+
+def _accuracy(wv, truth, use: np.ndarray, names: tuple) -> dict[str, Any]:
+    """Per wheel the RMS load error (% of the true dynamic load's RMS) and the trailer's
+    quasi-static LTR error, over the converged samples whose stamps the truth has."""
+    stamps = np.asarray(wv.stamps_ns, np.int64)
+    at = np.clip(np.searchsorted(truth.stamps_ns, stamps), 0, len(truth.stamps_ns) - 1)
+    hit = use & (np.asarray(truth.stamps_ns)[at] == stamps)
+    est = np.asarray(wv.load_n, float)[:, hit]
+    true = np.asarray(truth.wheel_load_n, float)[at[hit]].T
+    static = np.asarray(truth.static_load_n, float)
+    pct = []
+    for i in range(est.shape[0]):
+        ref = static[i] if np.isfinite(static[i]) else np.mean(true[i])
+        dyn = float(np.sqrt(np.mean((true[i] - ref) ** 2))) if true.shape[1] else float('nan')
+        err = float(np.sqrt(np.mean((est[i] - true[i]) ** 2))) if true.shape[1] \
+            else float('nan')
+        pct.append(100.0 * err / dyn if dyn > 0.0 else float('nan'))
+    ltr_true = np.asarray(truth.unit_ltr, float)[at[hit], 3]
+    ltr_est = np.asarray(wv.ltr_quasi_static, float)[1, hit]
+    d = (ltr_est - ltr_true)[np.isfinite(ltr_true)]
+    return {'samples': int(np.count_nonzero(hit)),
+            'load_rms_pct_dynamic': dict(zip(names, pct)),
+            'ltr_trailer_quasi_static_rms_error': float(np.sqrt(np.mean(d ** 2))) if d.size
+            else float('nan'),
+            'ltr_trailer_quasi_static_max_error': _nanmax_abs(d)}
+
+
+def estimate_markdown(s: dict[str, Any]) -> list[str]:
+    """The estimate's report section (markdown lines)."""
+    lines = ['', '## The whole vehicle (estimate)', '',
+             f'Every wheel estimated from `/suspension/deflections` ({s["samples"]} samples, '
+             f'{s["converged"]} converged and summarized here); the front axle\'s loads and '
+             'load transfer above are its front wheels. Per segment in `segments.csv`.', '',
+             '| axle | body | static load (kN) |', '|---|---|---|']
+    for axle, body, f in zip(s['axles'], s['axle_bodies'], s['axle_static_load_n']):
+        lines.append(f'| {axle} | {body} | {f / 1e3:.2f} |')
+    lines += [f'| gross vehicle weight | | {s["gross_weight_n"] / 1e3:.2f} |', '']
+    acc = s.get('accuracy')
+    head = '| wheel | static (kN) | mean (kN) | peak (kN) | DLC |'
+    rule = '|---|---|---|---|---|'
+    if acc:
+        head += ' load error (% of true dynamic RMS) |'
+        rule += '---|'
+    lines += [head, rule]
+    for w in s['wheels']:
+        row = (f'| {w["wheel"]} | {w["static_load_n"] / 1e3:.2f} | {w["mean_load_n"] / 1e3:.2f} '
+               f'| {w["max_load_n"] / 1e3:.2f} | {w["dlc"]:.3f} |')
+        if acc:
+            row += f' {acc["load_rms_pct_dynamic"][w["wheel"]]:.1f} |'
+        lines.append(row)
+    lines += ['', '| unit | max abs LTR | max abs quasi-static LTR |', '|---|---|---|']
+    for unit, u in s['units'].items():
+        lines.append(f'| {unit} | {u["max_abs_ltr"]:.3f} | {u["max_abs_ltr_quasi_static"]:.3f} |')
+    if acc:
+        lines += ['', f'Against the drive\'s truth ({acc["samples"]} samples): the trailer\'s '
+                  'quasi-static LTR error RMS '
+                  f'{acc["ltr_trailer_quasi_static_rms_error"]:.4f}, largest '
+                  f'{acc["ltr_trailer_quasi_static_max_error"]:.4f}.']
+    return lines
+
+
+def append_estimate(folder: str | Path, wv, truth=None,
+                    summary: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Add the whole vehicle's estimate to the report folder (``report.md``,
+    ``report.json``'s ``whole_vehicle_estimate``, ``segments.csv``'s columns) and, with
+    ``truth``, the truth's section; the estimate's numbers (also in
+    ``summary['whole_vehicle_estimate']`` when given)."""
+    folder = Path(folder)
+    s = summarize_estimate(wv, truth)
+    if (folder / 'segments.csv').exists():
+        _append_segments_csv(folder / 'segments.csv', wv)
+    md = folder / 'report.md'
+    if md.exists():
+        md.write_text(md.read_text().rstrip('\n') + '\n' + '\n'.join(estimate_markdown(s))
+                      + '\n')
+    js = folder / 'report.json'
+    if js.exists():
+        data = json.loads(js.read_text())
+        data['whole_vehicle_estimate'] = json_safe(s)
+        js.write_text(json.dumps(data, indent=2) + '\n')
+    if summary is not None:
+        summary['whole_vehicle_estimate'] = s
+    if truth is not None and len(truth.stamps_ns):
+        append_to_report(folder, truth, summary, estimated=True)
     return s

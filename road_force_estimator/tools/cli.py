@@ -229,8 +229,10 @@ def parameter_values(path: str | None, node_names: Sequence[str],
 
 def load_estimator_parameters(path: str | None, node_names: Sequence[str],
                               overrides: Sequence[str] = ()):
-    """``(VehicleParameters, ObserverParameters)`` from a parameter file (defaults if None) and
-    the ``-p`` overrides (:func:`parameter_values`).
+    """``(vehicle, ObserverParameters)`` from a parameter file (defaults if None) and the
+    ``-p`` overrides (:func:`parameter_values`): the vehicle a ``VehicleParameters``, or with
+    ``vehicle.model: articulated`` an ``ArticulatedParameters`` (the whole vehicle's
+    estimator, :mod:`road_force_estimator.pipeline.whole_vehicle`).
 
     Raises
     ------
@@ -238,15 +240,13 @@ def load_estimator_parameters(path: str | None, node_names: Sequence[str],
         A bad or unreadable file, a bad override.
     """
     from road_force_estimator.core.articulated_parameters import (
-        check_model_names, vehicle_model)
+        ArticulatedParameters, check_model_names, vehicle_model)
     from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
     values = parameter_values(path, node_names, overrides)
-    if vehicle_model(values) == 'articulated':
-        raise ValueError('vehicle.model: articulated: the estimator models the front axle only '
-                         '(the articulated observer is not built yet); give a front-axle '
-                         'parameter file (e.g. config/road_force_estimator.yaml): an articulated '
-                         "drive's front axle is then estimated from its own sensors")
     check_model_names(values, values)
+    if vehicle_model(values) == 'articulated':
+        return (ArticulatedParameters.from_parameters(values),
+                ObserverParameters.from_parameters(values))
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
 
 

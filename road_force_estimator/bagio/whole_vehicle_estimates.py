@@ -1,0 +1,73 @@
+"""The whole vehicle's topics in an estimate bag (``vehicle.model: articulated``, INTERFACES.md
+"The whole vehicle"): the streams :func:`.estimates.write_estimate_bag` writes beside the
+front axle's.
+
+``/wheel_loads`` (JointState, one per sample: ``name`` = the wheels, ``effort`` = load, N),
+``/wheel_loads/static`` (the same with the static loads F_c, the first sample of each
+:data:`~road_force_estimator.interfaces.STATIC_LOAD_PERIOD_NS`, as the node publishes
+``/wheel_load/static/*``) and ``/load_transfer/tractor|trailer|combination``
+(Vector3Stamped, frame ``base_link``: x = LTR, right minus left over their sum, y =
+quasi-static LTR, z = 0). Header stamp = log time = the sample's stamp.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from road_force_estimator.interfaces import (
+    BASE_FRAME, JOINT_STATE, STATIC_LOAD_PERIOD_NS, STATIC_WHEEL_LOADS, UNIT_LOAD_TRANSFER,
+    VECTOR3_STAMPED, WHEEL_LOADS)
+from road_force_estimator.serde.cdr import ColumnRows
+from road_force_estimator.serde.messages import message_template, stamp_columns
+
+__all__ = ['static_rows', 'whole_vehicle_streams']
+
+
+def static_rows(stamps_ns: np.ndarray) -> np.ndarray:
+    """The rows opening a period of STATIC_LOAD_PERIOD_NS (the ~10 Hz topics' samples)."""
+    s = np.asarray(stamps_ns, np.int64)
+    if not s.size:
+        return np.zeros(0, np.int64)
+    period = s // STATIC_LOAD_PERIOD_NS
+    return np.flatnonzero(np.concatenate([[True], period[1:] != period[:-1]]))
+
+
+def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_n, ltr,
+                          ltr_quasi_static) -> list:
+    """The streams (topic, stamps, rows) of the samples ``stamps_ns`` (m,), strictly
+    increasing: ``load_n`` and ``static_n`` (wheels, m; N), ``ltr`` and ``ltr_quasi_static``
+    (3, m; tractor, trailer, combination).
+
+    Raises
+    ------
+    ValueError
+        Shapes that disagree, stamps not increasing or a value not finite (nothing
+        non-finite is published: the caller drops such samples first).
+    """
+    s = np.asarray(stamps_ns, np.int64).reshape(-1)
+    m, k = s.size, len(wheel_names)
+    loads = np.asarray(load_n, float).reshape(k, m).T
+    static = np.asarray(static_n, float).reshape(k, m).T
+    x = np.asarray(ltr, float).reshape(len(UNIT_LOAD_TRANSFER), m)
+    y = np.asarray(ltr_quasi_static, float).reshape(len(UNIT_LOAD_TRANSFER), m)
+    if m and np.any(np.diff(s) <= 0):
+        raise ValueError('whole-vehicle stamps must be strictly increasing')
+    for name, a in (('load', loads), ('static load', static), ('LTR', x),
+                    ('quasi-static LTR', y)):
+        if not np.isfinite(a).all():
+            raise ValueError(f'whole-vehicle {name}: not finite')
+    cols = stamp_columns(s)
+    streams = [(WHEEL_LOADS, s, ColumnRows(
+        JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
+        m, dict(cols, effort=np.ascontiguousarray(loads))))]
+    first = static_rows(s)
+    streams.append((STATIC_WHEEL_LOADS, s[first], ColumnRows(
+        JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
+        first.size, dict(stamp_columns(s[first]),
+                         effort=np.ascontiguousarray(static[first])))))
+    for u, topic in enumerate(UNIT_LOAD_TRANSFER):
+        streams.append((topic, s, ColumnRows(
+            VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), m,
+            dict(cols, **{'vector.x': x[u], 'vector.y': y[u]}))))
+    return streams

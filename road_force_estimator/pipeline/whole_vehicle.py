@@ -1,0 +1,158 @@
+"""The estimator stage of the whole vehicle (``vehicle.model: articulated``, issue 32): an
+articulated drive through :func:`~.estimation.whole_vehicle.estimate_whole_vehicle` beside the
+front axle's stage, in one block (:mod:`.plan` says why).
+
+Source: the readings of ``/suspension/deflections`` in the model's channel order and the
+twist's speed held at each sample (:func:`~.bagio.articulated_readings.
+read_articulated_readings`; samples before the first twist take its speed, as the node holds
+them). Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` sample by
+sample (the node's numbers), offline the smoother. Sinks: the estimate bag's whole-vehicle
+topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics from the front
+wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and
+the gross vehicle weight (:func:`add_diagnostics`), and the report's section and
+``segments.csv`` columns (:mod:`~.report.whole_vehicle`).
+
+The front axle's estimator still runs on the front axle's sensors (package defaults for the
+4-DOF model, :func:`front_axle_vehicle`) for what the whole vehicle's does not give yet: the
+road profile online, the IRI, the observer states.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+from pathlib import Path
+
+import numpy as np
+
+from road_force_estimator.pipeline.result import PROG, InputError
+
+__all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
+           'add_diagnostics', 'bag_streams', 'STATUS_NAME']
+
+#: The name of the whole vehicle's status in ``/diagnostics``.
+STATUS_NAME = f'{PROG}: whole vehicle'
+
+
+def is_whole_vehicle(vehicle) -> bool:
+    """``vehicle`` is the articulated model's (an ``ArticulatedParameters``)."""
+    from road_force_estimator.core.articulated_parameters import ArticulatedParameters
+
+    return isinstance(vehicle, ArticulatedParameters)
+
+
+def front_axle_vehicle():
+    """The front-axle estimator's vehicle on an articulated drive: the package defaults (what
+    a front-axle tool reads an articulated drive with)."""
+    from road_force_estimator.core.parameters import VehicleParameters
+
+    return VehicleParameters()
+
+
+def estimate(input_path: Path, vehicle, observer, mode: str):
+    """The stage in one call: the drive's
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline').
+
+    Raises
+    ------
+    InputError
+        No deflection topic, a channel missing from every message, no usable twist.
+    """
+    from road_force_estimator.bagio import BagReadError
+    from road_force_estimator.bagio.articulated_readings import read_articulated_readings
+    from road_force_estimator.estimation.whole_vehicle import (
+        WholeVehicleEstimator, estimate_whole_vehicle)
+
+    names = WholeVehicleEstimator(vehicle, observer).channel_names
+    try:
+        r = read_articulated_readings(input_path, names)
+    except BagReadError as err:
+        raise InputError(str(err)) from None
+    if r.stamps_ns.size == 0:
+        raise InputError(f'{input_path}: no /suspension/deflections message carries every '
+                         f'channel of the whole vehicle ({", ".join(names)})')
+    speed = np.array(r.speed_mps, float)
+    held = np.isfinite(speed)
+    if not held.any():
+        raise InputError('no usable /vehicle/twist message: the speed is unknown')
+    speed[~held] = speed[np.argmax(held)]      # before the first twist: its speed
+    return estimate_whole_vehicle(vehicle, r.stamps_ns, r.readings, speed, observer=observer,
+                                  offline=mode == 'offline')
+
+
+def front_wheels(est, wv):
+    """The front axle's estimate ``est`` (:class:`~.estimation.outputs.EstimateArrays`) with
+    its loads, static loads and load transfer (instantaneous and quasi-static,
+    :class:`~.core.unit_loads.UnitLoadTransfer` over the front axle alone) from the whole
+    vehicle's front wheels at the same stamps (and its lift-offs: a front wheel's load at
+    zero); a row the whole vehicle has not estimated
+    gets NaN (not written, counted)."""
+    from road_force_estimator.core.unit_loads import UnitLoadTransfer
+
+    loads = wv.load_n[:2].T
+    static = wv.static_n[:2].T
+    # the front axle as the tractor's only axle (the trailer's a copy of it, not used): the
+    # truth's filter over the front wheels alone
+    transfer = UnitLoadTransfer(['tractor', 'trailer'], np.vstack([static[:1]] * 2), 1e-3)
+    ltr = np.empty((loads.shape[0], 2))
+    last = None
+    for k, (stamp, pair) in enumerate(zip(wv.stamps_ns.tolist(), loads.tolist())):
+        dt = 0.0 if last is None else (stamp - last) * 1e-9
+        last = stamp
+        ltr[k] = transfer.update(pair + pair, dt)[:2]
+    stamps = np.asarray(est.stamp_ns, np.int64)
+    at = np.clip(np.searchsorted(wv.stamps_ns, stamps), 0, max(wv.stamps_ns.size - 1, 0))
+    hit = wv.stamps_ns[at] == stamps if wv.stamps_ns.size else np.zeros(stamps.size, bool)
+
+    def take(a: np.ndarray) -> np.ndarray:
+        out = np.full((stamps.size,) + a.shape[1:], np.nan)
+        out[hit] = a[at[hit]]
+        return out
+
+    lift = np.zeros((stamps.size, 2), bool)
+    lift[hit] = loads[at[hit]] <= 0.0
+    return replace(est, wheel_load_n=take(loads), static_load_n=take(static),
+                   ltr=take(ltr[:, 0]), ltr_quasi_static=take(ltr[:, 1]), lift_off=lift)
+
+
+def _status(wv, k: int) -> dict:
+    """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
+    weight (N) and each unit's quasi-static LTR."""
+    from road_force_estimator.estimation.whole_vehicle import UNITS
+
+    axle = wv.static_n[:, k].reshape(-1, 2).sum(axis=1)
+    values = {f'static_load_{name}_n': f'{float(a):.1f}' for name, a in
+              zip(wv.axle_names, axle)}
+    values['gross_weight_n'] = f'{float(axle.sum()):.1f}'
+    for u, unit in enumerate(UNITS):
+        values[f'ltr_{unit}_quasi_static'] = f'{float(wv.ltr_quasi_static[u, k]):.4f}'
+    gross = float(axle.sum())
+    return {'name': STATUS_NAME, 'hardware_id': PROG, 'level': 0 if math.isfinite(gross) else 1,
+            'message': f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles',
+            'values': values}
+
+
+def add_diagnostics(diagnostics: list, wv) -> list:
+    """``diagnostics`` ((stamp_ns, [status dicts]) per second) with the whole vehicle's
+    status at the last sample at or before each stamp added (none before its first)."""
+    if not wv.stamps_ns.size:
+        return diagnostics
+    out = []
+    for stamp, statuses in diagnostics:
+        k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
+        out.append((stamp, list(statuses) + ([_status(wv, k)] if k >= 0 else [])))
+    return out
+
+
+def bag_streams(wv) -> list:
+    """The whole vehicle's topics, the wheels named ``<axle>_left_wheel``,
+    ``<axle>_right_wheel`` (INTERFACES.md) (:func:`~.bagio.whole_vehicle_estimates.
+    whole_vehicle_streams`) of its samples with every value finite."""
+    from road_force_estimator.bagio.whole_vehicle_estimates import whole_vehicle_streams
+    from road_force_estimator.interfaces import wheel_joints
+
+    ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
+          & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
+    return whole_vehicle_streams(wv.stamps_ns[ok], wheel_joints(wv.axle_names),
+                                 wv.load_n[:, ok],
+                                 wv.static_n[:, ok], wv.ltr[:, ok],
+                                 wv.ltr_quasi_static[:, ok])
