@@ -30,6 +30,7 @@ from road_force_estimator.report.folder import csv_cell, json_safe
 
 __all__ = ['summarize_truth', 'truth_markdown', 'append_to_report', 'AXLE_COLUMNS',
            'summarize_estimate', 'estimate_markdown', 'segment_columns', 'segment_table',
+           'column_decimals',
            'append_estimate']
 
 #: Columns of axles.csv.
@@ -142,7 +143,9 @@ def segment_columns(axle_names) -> tuple[str, ...]:
     return tuple(cols) + ('gross_weight_n', 'max_abs_ltr_trailer_quasi_static')
 
 
-def _decimals(name: str) -> int:
+def column_decimals(name: str) -> int:
+    """Decimals of a whole-vehicle column in ``segments.csv``: 1 N of load, 1e-4 of DLC and
+    LTR."""
     return 4 if name.startswith(('dlc_', 'max_abs_ltr')) else 0
 
 
@@ -206,7 +209,7 @@ def _append_segments_csv(path: Path, wv) -> dict[str, np.ndarray]:
         w = csv.writer(f, lineterminator='\n')
         w.writerow(header + names)
         for i, r in enumerate(body):
-            w.writerow(r + [csv_cell(table[c][i], _decimals(c)) for c in names])
+            w.writerow(r + [csv_cell(table[c][i], column_decimals(c)) for c in names])
     return table
 
 

@@ -305,7 +305,10 @@ def drive_key(input_digest: str, settings: dict) -> str:
 
 
 def read_segments_csv(path: str | Path) -> dict[str, np.ndarray]:
-    """A report's ``segments.csv`` as ``{column: array}`` (floats; ``lift_offs`` int64).
+    """A report's ``segments.csv`` as ``{column: array}`` (floats; ``lift_offs`` int64):
+    :data:`FLEET_COLUMNS`, then the columns an articulated drive adds (INTERFACES.md "The
+    whole vehicle": every column of the file that a drive's :data:`~.core.segments.
+    SEGMENT_COLUMNS` does not name), in the file's order.
 
     Raises
     ------
@@ -320,8 +323,11 @@ def read_segments_csv(path: str | Path) -> dict[str, np.ndarray]:
     missing = [c for c in FLEET_COLUMNS[1:] if c not in header]
     if missing:
         raise ValueError(f'{path}: no column {", ".join(missing)}')
+    from road_force_estimator.core.segments import SEGMENT_COLUMNS
+
     out: dict[str, np.ndarray] = {}
-    for name in FLEET_COLUMNS[1:]:
+    extra = [c for c in header if c not in SEGMENT_COLUMNS and c not in FLEET_COLUMNS]
+    for name in list(FLEET_COLUMNS[1:]) + extra:
         j = header.index(name)
         values = [r[j] if j < len(r) else '' for r in body]
         if name in INT_COLUMNS:

@@ -53,14 +53,17 @@ class FleetResult:
 
 
 def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
-    """The fleet table (:data:`~.fleet_drives.FLEET_COLUMNS`): the segments of every drive
-    done, in the order of ``outcomes``."""
+    """The fleet table (:data:`~.fleet_drives.FLEET_COLUMNS`, then the whole vehicle's
+    columns of the articulated drives in the order first met, NaN in a drive without them):
+    the segments of every drive done, in the order of ``outcomes``."""
     done = [o for o in outcomes if o.status != 'failed' and o.table is not None]
     table: dict[str, np.ndarray] = {'drive': np.array(
         [o.drive_id for o in done for _ in range(len(o.table['start_m']))], dtype=object)}
-    for name in FLEET_COLUMNS[1:]:
+    names = list(dict.fromkeys([*FLEET_COLUMNS[1:], *(c for o in done for c in o.table)]))
+    for name in names:
         dtype = np.int64 if name in INT_COLUMNS else float
-        parts = [np.asarray(o.table[name], dtype=dtype) for o in done]
+        parts = [np.asarray(o.table[name], dtype=dtype) if name in o.table
+                 else np.full(len(o.table['start_m']), np.nan) for o in done]
         table[name] = np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
     return table
 
@@ -78,8 +81,10 @@ def _csv_text(header: Sequence[str], rows) -> str:
     """CSV text; the segment columns rounded as in a drive's ``segments.csv``
     (:data:`road_force_estimator.report.SEGMENT_DECIMALS`)."""
     from road_force_estimator.report import SEGMENT_DECIMALS, csv_cell
+    from road_force_estimator.report.whole_vehicle import column_decimals
 
-    decimals = [SEGMENT_DECIMALS.get(name) for name in header]
+    decimals = [SEGMENT_DECIMALS.get(name) if name in FLEET_COLUMNS else column_decimals(name)
+                for name in header]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
@@ -93,13 +98,13 @@ def _write_parquet(path: Path, table: dict[str, np.ndarray], settings: dict) -> 
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    columns = list(table)[1:]
     fields = [pa.field('drive', pa.string())] + [
-        pa.field(c, pa.int64() if c in INT_COLUMNS else pa.float64())
-        for c in FLEET_COLUMNS[1:]]
+        pa.field(c, pa.int64() if c in INT_COLUMNS else pa.float64()) for c in columns]
     meta = {b'road_force_estimator.settings': json.dumps(settings, sort_keys=True).encode()}
     schema = pa.schema(fields, metadata=meta)
     arrays = [pa.array(table['drive'].tolist(), type=pa.string())] + [
-        pa.array(table[c], type=f.type) for c, f in zip(FLEET_COLUMNS[1:], fields[1:])]
+        pa.array(table[c], type=f.type) for c, f in zip(columns, fields[1:])]
     tmp = path.with_name(f'.{path.name}.{uuid.uuid4().hex[:8]}.tmp')
     pq.write_table(pa.Table.from_arrays(arrays, schema=schema), tmp)
     os.replace(tmp, path)
@@ -287,17 +292,18 @@ def _roughest_section(table: dict[str, np.ndarray], u=None) -> list[str]:
 def write_outputs(output: str | Path, result: FleetResult, *,
                   params_file: str | None = None) -> dict[str, np.ndarray]:
     """Write the fleet tables, GeoJSON, map, failures and summary into ``output``; returns the
-    fleet table (:data:`FLEET_COLUMNS`)."""
+    fleet table (:data:`FLEET_COLUMNS` and an articulated drive's, :func:`fleet_table`)."""
     from road_force_estimator.report import plot_segments_map, segments_geojson
 
     out = Path(output)
     table = fleet_table(result.outcomes)
-    rows = zip(*(table[c].tolist() for c in FLEET_COLUMNS))
-    _atomic_write(out / 'segments.csv', _csv_text(FLEET_COLUMNS, rows))
+    columns = tuple(table)
+    rows = zip(*(table[c].tolist() for c in columns))
+    _atomic_write(out / 'segments.csv', _csv_text(columns, rows))
     _write_parquet(out / 'segments.parquet', table, result.settings)
     lines = [line for o in result.outcomes if o.status != 'failed' and o.table is not None
              for line in (o.lines or [None] * len(o.table['start_m']))]
-    doc = segments_geojson(table, lines, FLEET_COLUMNS)
+    doc = segments_geojson(table, lines, columns)
     _atomic_write(out / 'segments.geojson',
                   json.dumps(doc, allow_nan=False, separators=(',', ':')) + '\n')
     failed = [(o.drive_id, o.reason) for o in result.outcomes if o.status == 'failed']
