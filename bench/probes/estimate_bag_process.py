@@ -2,6 +2,7 @@
 
     .venv/bin/python -m bench.probes.estimate_bag_process [--duration 600] [--repeats 3]
                                                    [--modes offline online] [--json FILE]
+                                                   [--articulated]
 
 1. ``simulate_bag`` records two drives as a truck would (ISO 8608 class C, seed 1, 20 m/s,
    1 kHz, 10 um / 0.1 mrad sensor noise, GNSS at 10 Hz, no ground truth): 1 s and
@@ -13,6 +14,11 @@
 3. Start-up = the median wall time on the 1 s drive; throughput = (samples of the long drive
    - samples of the 1 s drive) / (median wall time on the long drive - that on the 1 s one),
    and the same with CPU times (on a shared machine the wall time waits for the others).
+
+``--articulated``: the drives are the 5-axle tractor and semi-trailer's
+(``config/tractor_semitrailer.yaml``, its own sensor noise, no GNSS), and ``estimate_bag``
+gets the same file: the whole vehicle's estimator beside the front axle's
+(:mod:`road_force_estimator.pipeline.whole_vehicle`).
 
 Numbers go to stdout (Markdown) and, with ``--json``, to a file.
 """
@@ -42,20 +48,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--modes', nargs='+', choices=('offline', 'online'),
                    default=['offline', 'online'])
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
+    p.add_argument('--articulated', action='store_true',
+                   help='a 5-axle articulated drive estimated whole (config/'
+                        'tractor_semitrailer.yaml)')
     return p
 
 
-def simulate(bag: Path, duration_s: float) -> None:
+#: The articulated drive's parameter file (``--articulated``).
+ARTICULATED = Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
+
+
+def simulate(bag: Path, duration_s: float, articulated: bool = False) -> None:
     """``simulate_bag`` in this process: the drive of the module notes."""
     from road_force_estimator.tools import simulate_bag
 
     sink = io.StringIO()
+    own = (['--params-file', str(ARTICULATED), '--gnss-rate', '0'] if articulated else
+           ['--noise-deflection', '1e-5', '--noise-roll', '1e-4'])
     with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
         code = simulate_bag.main([
             '--road', 'iso8608:C:seed=1', '--speed', '20', '--rate', '1000',
-            '--duration', f'{duration_s:g}', '--noise-deflection', '1e-5',
-            '--noise-roll', '1e-4', '--seed', '1', '--no-ground-truth', '--output', str(bag),
-            '--no-progress'])
+            '--duration', f'{duration_s:g}', *own, '--seed', '1', '--no-ground-truth',
+            '--output', str(bag), '--no-progress'])
     if code != 0:
         raise RuntimeError(f'simulate_bag exit {code}: {sink.getvalue().strip()[-300:]}')
 
@@ -101,11 +115,12 @@ def run_child(argv: list[str]) -> dict:
             'peak_rss_mb': usage.ru_maxrss / 1024.0}
 
 
-def estimate(bag: Path, out: Path, mode: str) -> dict:
+def estimate(bag: Path, out: Path, mode: str, articulated: bool = False) -> dict:
     """One ``estimate_bag`` run (figures on) into ``out`` (removed after)."""
+    own = ['--params-file', str(ARTICULATED)] if articulated else []
     try:
         return run_child([command('estimate_bag'), str(bag), '--output', str(out), '--mode',
-                          mode, '--no-progress'])
+                          mode, '--no-progress', *own])
     finally:
         shutil.rmtree(out, ignore_errors=True)
 
@@ -114,20 +129,21 @@ def _median(runs: list[dict]) -> dict:
     return {k: statistics.median(r[k] for r in runs) for k in runs[0]}
 
 
-def measure(duration_s: float, repeats: int, modes) -> dict:
+def measure(duration_s: float, repeats: int, modes, articulated: bool = False) -> dict:
     """Simulate the two drives and time the command on them (see the module notes)."""
     from road_force_estimator import bagio
 
-    doc: dict = {'duration_s': duration_s, 'repeats': repeats, 'modes': {}}
+    doc: dict = {'duration_s': duration_s, 'repeats': repeats, 'modes': {},
+                 'articulated': articulated}
     with tempfile.TemporaryDirectory(prefix='estimate_bag_process_') as tmp:
         tmp = Path(tmp)
         bags = {'short': tmp / 'drive_1s', 'long': tmp / 'drive_long'}
-        simulate(bags['short'], 1.0)
-        simulate(bags['long'], duration_s)
+        simulate(bags['short'], 1.0, articulated)
+        simulate(bags['long'], duration_s, articulated)
         n = {k: len(bagio.read_drive_bag(b).stamps_ns) for k, b in bags.items()}
         doc['samples'] = n
         for mode in modes:
-            runs = {k: [estimate(b, tmp / 'out', mode) for _ in range(repeats)]
+            runs = {k: [estimate(b, tmp / 'out', mode, articulated) for _ in range(repeats)]
                     for k, b in bags.items()}
             med = {k: _median(v) for k, v in runs.items()}
             added = n['long'] - n['short']
@@ -143,8 +159,11 @@ def measure(duration_s: float, repeats: int, modes) -> dict:
 
 def markdown(doc: dict) -> list[str]:
     n = doc['samples']
+    drive = ('the 5-axle tractor and semi-trailer (config/tractor_semitrailer.yaml, its '
+             'noise, no GNSS), estimated whole' if doc.get('articulated') else
+             '10 um / 0.1 mrad noise, GNSS 10 Hz')
     lines = [f'# estimate_bag as a process, figures on: `{doc["command"]}`', '',
-             f'Drives: ISO C, 20 m/s, 1 kHz, 10 um / 0.1 mrad noise, GNSS 10 Hz, no truth; '
+             f'Drives: ISO C, 20 m/s, 1 kHz, {drive}, no truth; '
              f'{n["short"]} and {n["long"]} samples; median of {doc["repeats"]} runs; one '
              'BLAS thread; start-up subtracted from the throughput.', '',
              '| mode | start-up (s, wall / CPU) | long drive (s, wall / CPU) | samples/s (wall) '
@@ -161,7 +180,7 @@ def markdown(doc: dict) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    doc = measure(args.duration, args.repeats, args.modes)
+    doc = measure(args.duration, args.repeats, args.modes, args.articulated)
     doc['command'] = ('python -m bench.probes.estimate_bag_process '
                       + ' '.join(argv if argv is not None else sys.argv[1:])).strip()
     print('\n'.join(markdown(doc)))

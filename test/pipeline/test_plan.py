@@ -34,3 +34,23 @@ def test_a_drive_with_truth_goes_in_blocks_from_the_threshold(tmp_path):
     assert not plan.plan_drive(tmp_path / 'd', 'offline', chain, min_samples=1).blocks
     assert plan.plan_drive(tmp_path / 'd', 'online', chain, min_samples=1).blocks
     assert not plan.plan_drive(tmp_path / 'missing', 'online', obs, min_samples=1).blocks
+
+
+def test_the_whole_vehicle_stays_one_block(tmp_path):
+    """With an articulated vehicle (the whole vehicle's stage) a drive past the threshold is
+    one block, online and offline; the same drive with a front-axle vehicle goes in blocks."""
+    from pathlib import Path
+
+    from road_force_estimator.core.articulated_parameters import ArticulatedParameters
+    from road_force_estimator.core.parameters import VehicleParameters, load_params_file
+
+    traj, q, roll = make_trajectory(300)
+    bagio.write_drive_bag(tmp_path / 'd', traj, q, roll)
+    obs = ObserverParameters()
+    config = Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
+    whole = ArticulatedParameters.from_parameters(load_params_file(config))
+    for mode in ('online', 'offline'):
+        assert plan.plan_drive(tmp_path / 'd', mode, obs, min_samples=1,
+                               vehicle=whole) == plan.BlockPlan(False, 300)
+        assert plan.plan_drive(tmp_path / 'd', mode, obs, min_samples=1,
+                               vehicle=VehicleParameters()).blocks

@@ -142,8 +142,9 @@ ARTICULATED = [p.name for p in CONFIGS if _articulated(p)]
 @pytest.mark.parametrize('name', ARTICULATED)
 def test_an_articulated_file_reads_the_same_in_the_plant_node_and_simulate_bag(name):
     """``vehicle.model: articulated``: the plant node and simulate_bag build the same drive;
-    the estimators (observer node, estimate_bag) refuse the file with one line naming the
-    model, as they estimate the front axle only."""
+    the observer node refuses the file with one line naming the model (it estimates the
+    front axle only); estimate_bag reads the plant's vehicle (the whole vehicle's
+    estimator)."""
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
     path = REPO / 'config' / name
     context = rcl_context('--params-file', str(path))
@@ -164,8 +165,7 @@ def test_an_articulated_file_reads_the_same_in_the_plant_node_and_simulate_bag(n
             Observer(context=context)
     finally:
         rclpy.try_shutdown(context=context)
-    with pytest.raises(ValueError, match='articulated'):
-        estimate_bag.load_parameters(str(path), [])
+    assert estimate_bag.load_parameters(str(path), [])[0] == drive.vehicle
 
 
 @pytest.mark.parametrize('name', FRONT_AXLE + ['numbers.yaml'])

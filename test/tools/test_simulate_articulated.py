@@ -139,12 +139,15 @@ def test_a_front_axle_tool_reads_the_front_axle_and_says_so(drive, tmp_path, cap
     assert summary['whole_vehicle']['units']['trailer']['max_abs_ltr_quasi_static'] > 0.2
 
 
-def test_an_articulated_parameter_file_is_refused_by_the_estimator(drive, tmp_path, capsys):
+def test_an_articulated_parameter_file_estimates_the_whole_vehicle(drive, tmp_path, capsys):
     bag, _ = drive
     code, _, err = run(estimate_bag, [bag, '--params-file', CONFIG, '--output',
-                                      tmp_path / 'est', '--no-progress'], capsys)
-    assert code == 1 and err.count('\n') == 1
-    assert 'vehicle.model: articulated: the estimator models the front axle only' in err
+                                      tmp_path / 'est', '--no-figures', '--no-progress'],
+                       capsys)
+    assert code == 0, err
+    assert 'note: the whole vehicle estimated (5 axles, 2001 samples)' in err
+    summary = json.loads((tmp_path / 'est' / 'report' / 'report.json').read_text())
+    assert len(summary['whole_vehicle_estimate']['wheels']) == 10
 
 
 def test_a_drive_without_front_axle_sensors_is_refused_by_a_front_axle_tool(tmp_path, capsys):

@@ -1,0 +1,220 @@
+"""estimate_bag and estimate_fleet with ``vehicle.model: articulated`` (issue 32, INTERFACES.md
+"The whole vehicle"): a short simulated 5-axle drive estimated online and offline; the
+estimate bag read by the mcap library (mcap + mcap-ros2-support, not the package's reader),
+its loads against :func:`estimate_whole_vehicle` on the inputs the mcap library decodes from
+the drive bag (online bit for bit) and against the drive's own ``/ground_truth/wheel_loads``,
+the report's columns against the bag's static loads and the test's own statics."""
+import csv
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from articulated_reference import defaults, statics
+from road_force_estimator.tools.estimate_bag import load_parameters, main as estimate_bag
+
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / 'config' / 'tractor_semitrailer.yaml'
+BIN = Path(sys.executable).parent
+AXLES = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
+WHEELS = tuple(f'{a}_{s}_wheel' for a in AXLES for s in ('left', 'right'))
+RATE_HZ = 1000
+DURATION_S = 3
+
+
+def decoded(bag: Path) -> dict:
+    """topic -> [(log time ns, message)], decoded by the mcap library and mcap-ros2-support."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    out: dict = {}
+    for path in sorted(bag.glob('*.mcap')):
+        with open(path, 'rb') as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, channel, message, msg in reader.iter_decoded_messages():
+                out.setdefault(channel.topic, []).append((message.log_time, msg))
+    return out
+
+
+def stamp(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+@pytest.fixture(scope='module')
+def runs(tmp_path_factory):
+    """The drive bag (3 s at 1 kHz, class C, 20 m/s, no GNSS) and estimate_bag's output
+    folders online and offline (segments of 20 m)."""
+    folder = tmp_path_factory.mktemp('whole_vehicle')
+    bag = folder / 'drive'
+    sim = subprocess.run([str(BIN / 'simulate_bag'), '--params-file', str(CONFIG), '--road',
+                          'iso8608:C:seed=5', '--speed', '20', '--rate', str(RATE_HZ),
+                          '--duration', str(DURATION_S), '--gnss-rate', '0', '--no-progress',
+                          '--output', str(bag)], capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    outs = {}
+    for mode in ('online', 'offline'):
+        outs[mode] = folder / f'est_{mode}'
+        code = estimate_bag([str(bag), '--params-file', str(CONFIG), '--output',
+                             str(outs[mode]), '--mode', mode, '--segment-length', '20',
+                             '--no-figures', '--no-progress'])
+        assert code == 0
+    return bag, outs, {m: decoded(o / 'bag') for m, o in outs.items()}
+
+
+def inputs(bag: Path, names):
+    """The drive's readings in the estimator's channel order and the twist's speed held at
+    each sample (the first twist's before it), decoded by the mcap library."""
+    topics = decoded(bag)
+    rows = topics['/suspension/deflections']
+    stamps = np.array([stamp(m) for _, m in rows], np.int64)
+    readings = np.array([[m.position[list(m.name).index(n)] for n in names] for _, m in rows])
+    twist = topics['/vehicle/twist']
+    t_ns = np.array([stamp(m) for _, m in twist], np.int64)
+    v = np.array([m.twist.linear.x for _, m in twist])
+    held = np.searchsorted(t_ns, stamps, side='right') - 1
+    return stamps, readings, v[np.maximum(held, 0)]
+
+
+def test_the_bag_has_the_whole_vehicles_topics(runs):
+    _, _, bags = runs
+    n = DURATION_S * RATE_HZ + 1
+    for topics in bags.values():
+        for topic in ('/wheel_loads', '/load_transfer/tractor', '/load_transfer/trailer',
+                      '/load_transfer/combination', '/wheel_load/left', '/wheel_load/right',
+                      '/load_transfer'):
+            assert len(topics[topic]) == n, topic
+        for _, msg in topics['/wheel_loads'][:3] + topics['/wheel_loads/static'][:3]:
+            assert tuple(msg.name) == WHEELS and len(msg.effort) == 10
+            assert len(msg.position) == 0 and len(msg.velocity) == 0
+        # ~10 Hz: the first sample of every 100 ms
+        for topic in ('/wheel_loads/static', '/wheel_load/static/left'):
+            assert len(topics[topic]) == 10 * DURATION_S + 1, topic
+        assert all(t == stamp(m) for t, m in topics['/wheel_loads'])
+        last = topics['/diagnostics'][-1][1]
+        whole = [s for s in last.status if s.name == 'estimate_bag: whole vehicle']
+        assert len(whole) == 1
+        values = {kv.key: float(kv.value) for kv in whole[0].values}
+        static = np.array(topics['/wheel_loads/static'][-1][1].effort)
+        assert values['gross_weight_n'] == pytest.approx(static.sum(), abs=0.1)
+        for j, a in enumerate(AXLES):
+            assert values[f'static_load_{a}_n'] == pytest.approx(static[2 * j:2 * j + 2].sum(),
+                                                                 abs=0.1)
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_the_loads_are_estimate_whole_vehicles_on_the_same_inputs(runs, mode):
+    from road_force_estimator.estimation.whole_vehicle import (
+        WholeVehicleEstimator, estimate_whole_vehicle)
+    bag, _, bags = runs
+    vehicle, observer = load_parameters(str(CONFIG))
+    names = WholeVehicleEstimator(vehicle, observer).channel_names
+    stamps, readings, speed = inputs(bag, names)
+    want = estimate_whole_vehicle(vehicle, stamps, readings, speed, observer=observer,
+                                  offline=mode == 'offline')
+    topics = bags[mode]
+    got = np.array([m.effort for _, m in topics['/wheel_loads']]).T
+    np.testing.assert_array_equal([stamp(m) for _, m in topics['/wheel_loads']], want.stamps_ns)
+    np.testing.assert_array_equal(got, want.load_n)       # bit for bit
+    for u, unit in enumerate(('tractor', 'trailer', 'combination')):
+        rows = topics[f'/load_transfer/{unit}']
+        np.testing.assert_array_equal([m.vector.x for _, m in rows], want.ltr[u])
+        np.testing.assert_array_equal([m.vector.y for _, m in rows], want.ltr_quasi_static[u])
+    for side, word in enumerate(('left', 'right')):
+        np.testing.assert_array_equal(
+            [m.wrench.force.z for _, m in topics[f'/wheel_load/{word}']], want.load_n[side])
+    first = np.searchsorted(want.stamps_ns, [stamp(m) for _, m in
+                                             topics['/wheel_loads/static']])
+    np.testing.assert_array_equal([m.effort for _, m in topics['/wheel_loads/static']],
+                                  want.static_n[:, first].T)
+
+
+#: Largest per-wheel RMS load error, % of the true dynamic load's RMS, after the first second
+#: (the observer's start): offline measured 2-3 %, online 14-28 % (zero latency) on such drives.
+TOLERANCE_PCT = {'offline': 8.0, 'online': 40.0}
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_the_loads_follow_the_drives_ground_truth(runs, mode):
+    bag, _, bags = runs
+    truth = decoded(bag)['/ground_truth/wheel_loads']
+    assert tuple(truth[0][1].name) == WHEELS
+    t_stamps = np.array([stamp(m) for _, m in truth])
+    true = np.array([m.effort for _, m in truth])
+    est = bags[mode]['/wheel_loads']
+    e_stamps = np.array([stamp(m) for _, m in est])
+    loads = np.array([m.effort for _, m in est])
+    common, ie, it = np.intersect1d(e_stamps, t_stamps, return_indices=True)
+    late = common >= common[0] + 1_000_000_000
+    err = loads[ie][late] - true[it][late]
+    dyn = true[it][late] - true[it][late].mean(axis=0)
+    pct = 100.0 * np.sqrt((err ** 2).mean(axis=0)) / np.sqrt((dyn ** 2).mean(axis=0))
+    assert np.all(pct < TOLERANCE_PCT[mode]), pct
+
+
+def read_csv(path: Path) -> dict:
+    with path.open(newline='') as f:
+        rows = list(csv.reader(f))
+    return {c: [r[j] for r in rows[1:]] for j, c in enumerate(rows[0])}
+
+
+def per_axle_columns() -> list:
+    cols = []
+    for a in AXLES:
+        cols += [f'peak_load_{a}_left_n', f'peak_load_{a}_right_n', f'dlc_{a}_left',
+                 f'dlc_{a}_right', f'static_load_{a}_n']
+    return cols + ['gross_weight_n', 'max_abs_ltr_trailer_quasi_static']
+
+
+@pytest.mark.parametrize('mode', ['online', 'offline'])
+def test_segments_csv_has_every_axles_columns_and_the_gross_weight(runs, mode):
+    _, outs, bags = runs
+    table = read_csv(outs[mode] / 'report' / 'segments.csv')
+    for c in ('peak_load_left_n', 'dlc_left', 'static_load_left_n', 'max_abs_ltr_quasi_static',
+              *per_axle_columns()):
+        assert c in table, c
+    assert len(table['start_m']) == 3                 # 60 m in 20 m segments
+    static = np.array([m.effort for _, m in bags[mode]['/wheel_loads/static']])
+    gross = static.sum(axis=1)
+    assert np.ptp(gross) < 1e-6 * gross[0]            # the statics hold the whole drive
+    for i in range(3):
+        assert float(table['gross_weight_n'][i]) == pytest.approx(gross[0], abs=0.5)
+        axles = [float(table[f'static_load_{a}_n'][i]) for a in AXLES]
+        assert sum(axles) == pytest.approx(gross[0], abs=3.0)
+        # against the test's own statics (MODEL.md's tables; 2 %: issue 32's axle figure)
+        np.testing.assert_allclose(axles, statics(defaults())['wheel'], rtol=0.02)
+        loads = np.array([m.effort for _, m in bags[mode]['/wheel_loads']])
+        for w, name in enumerate(WHEELS):
+            axle, side = name.rsplit('_', 2)[0], name.rsplit('_', 2)[1]
+            peak = float(table[f'peak_load_{axle}_{side}_n'][i])
+            assert 0.0 < peak <= loads[:, w].max() + 0.5
+        assert 0.0 <= float(table['max_abs_ltr_trailer_quasi_static'][i]) < 1.0
+    summary = json.loads((outs[mode] / 'report' / 'report.json').read_text())
+    est = summary['whole_vehicle_estimate']
+    assert est['gross_weight_n'] == pytest.approx(gross[0], rel=1e-9)
+    assert set(est['accuracy']['load_rms_pct_dynamic']) == set(WHEELS)
+    assert '## The whole vehicle (estimate)' in (outs[mode] / 'report' / 'report.md').read_text()
+
+
+def test_estimate_fleet_gets_every_axles_columns(runs, tmp_path):
+    import shutil
+
+    import pyarrow.parquet as pq
+    bag, outs, _ = runs
+    inputs_dir = tmp_path / 'in'
+    inputs_dir.mkdir()
+    for name in ('a', 'b'):
+        shutil.copytree(bag, inputs_dir / name)
+    fleet = subprocess.run([str(BIN / 'estimate_fleet'), str(inputs_dir), '--params-file',
+                            str(CONFIG), '--output', str(tmp_path / 'fleet'), '--workers', '1',
+                            '--mode', 'offline', '--segment-length', '20', '--no-figures',
+                            '--no-progress'], capture_output=True, text=True, timeout=600)
+    assert fleet.returncode == 0, fleet.stderr
+    table = read_csv(tmp_path / 'fleet' / 'segments.csv')
+    assert table['drive'] == ['a'] * 3 + ['b'] * 3
+    own = read_csv(outs['offline'] / 'report' / 'segments.csv')
+    parquet = pq.read_table(tmp_path / 'fleet' / 'segments.parquet').to_pydict()
+    for c in per_axle_columns():
+        assert table[c][:3] == own[c] and table[c][3:] == own[c], c
+        np.testing.assert_allclose(parquet[c], [float(v) for v in own[c]] * 2, atol=0.5)
