@@ -30,6 +30,13 @@ It writes ``DIR/bag`` (the observer's topics, :func:`~.bagio.write_estimate_bag`
 into place when complete, with ``DIR/.written-by-road-force-estimator.json`` listing the files
 written (:mod:`.output_folder`): a failure (out of space) leaves nothing behind, and
 ``--force`` replaces only what estimate_bag wrote there, never INPUT nor other files.
+With ``vehicle.model: articulated`` parameters (``config/tractor_semitrailer.yaml``) the whole
+vehicle is estimated beside the front axle (:mod:`road_force_estimator.pipeline.whole_vehicle`,
+one block): ``/wheel_loads``, ``/wheel_loads/static``, ``/load_transfer/tractor|trailer|
+combination`` in the bag, the front axle's loads and load transfer from its wheels, the axle
+loads and gross vehicle weight in ``/diagnostics``, the per-axle columns in ``segments.csv`` and
+the section in the report (INTERFACES.md "The whole vehicle").
+
 ``--export-profile FILE`` also writes the estimated profile, read back from ``DIR/bag``, as
 ProVAL and pavement-management systems read it (:mod:`.profile_export`).
 

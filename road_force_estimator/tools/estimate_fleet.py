@@ -38,8 +38,10 @@ same DIR refuses (exit status 2), or with ``--wait`` waits for the first to end.
 Outputs in DIR (:mod:`.fleet_outputs`): ``drives/<id>/`` (``bag/``, ``report/``,
 ``fleet.json``), ``segments.parquet`` and ``segments.csv`` (:data:`~.fleet_drives.FLEET_COLUMNS`,
 one row per segment of every drive done, drives in id order; coordinates NaN without
-``/fix``), ``segments.geojson`` (one LineString per segment, ``[lon, lat]``, a ``null``
-geometry for a segment without coordinates: :mod:`road_force_estimator.report.fleet_map`),
+``/fix``; with ``vehicle.model: articulated`` parameters the per-axle columns after them,
+INTERFACES.md "The whole vehicle"), ``segments.geojson`` (one LineString per segment,
+``[lon, lat]``, a ``null`` geometry for a segment without coordinates:
+:mod:`road_force_estimator.report.fleet_map`),
 ``segments_map.png`` (segments coloured by IRI, when any has coordinates), ``failures.csv``
 (``drive,reason``) and ``summary.md``.
 
