@@ -161,10 +161,11 @@ def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
     k = start.size
     use = np.isfinite(np.asarray(wv.distance_m, float))
     x = np.asarray(wv.distance_m, float)[use]
+    if k == 0:
+        return {c: np.zeros(0) for c in segment_columns(wv.axle_names)}
     seg = np.searchsorted(start, x, side='right') - 1
-    inside = (seg >= 0) & ((x < end[np.clip(seg, 0, max(k - 1, 0))]) |
-                           ((seg == k - 1) & (x <= end[-1] if k else False)))
-    inside &= seg >= 0
+    inside = (seg >= 0) & np.where(seg == k - 1, x <= end[-1],
+                                   x < end[np.clip(seg, 0, k - 1)])
     seg = seg[inside]
     loads = np.asarray(wv.load_n, float)[:, use][:, inside]
     static = np.asarray(wv.static_n, float)[:, use][:, inside]
