@@ -124,6 +124,10 @@ def test_the_loads_are_estimate_whole_vehicles_on_the_same_inputs(runs, mode):
     for side, word in enumerate(('left', 'right')):
         np.testing.assert_array_equal(
             [m.wrench.force.z for _, m in topics[f'/wheel_load/{word}']], want.load_n[side])
+    # the front axle's /load_transfer: its two wheels' right minus left over their sum
+    left, right = want.load_n[0], want.load_n[1]
+    np.testing.assert_allclose([m.vector.x for _, m in topics['/load_transfer']],
+                               (right - left) / (right + left), rtol=0, atol=1e-12)
     first = np.searchsorted(want.stamps_ns, [stamp(m) for _, m in
                                              topics['/wheel_loads/static']])
     np.testing.assert_array_equal([m.effort for _, m in topics['/wheel_loads/static']],
