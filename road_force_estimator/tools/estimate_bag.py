@@ -105,9 +105,10 @@ class _Stages:
 
     NAMES = ('read', 'estimate', 'write bag', 'report')
 
-    def __init__(self, enabled: bool) -> None:
+    def __init__(self, enabled: bool, whole_vehicle: bool = False) -> None:
         self.enabled = enabled
-        self.bar = cli.progress_bar(enabled, total=len(self.NAMES), desc=PROG, leave=False,
+        self.bar = cli.progress_bar(enabled, total=len(self.NAMES) + whole_vehicle,
+                                    desc=PROG, leave=False,
                                     bar_format='{desc} ({n}/{total} stages done)')
         self.started = False
 
@@ -176,7 +177,8 @@ def run(input_path: str | Path, output: str | Path, *, vehicle=None, observer=No
     target = output_folder.FolderOutput(output, ('bag', 'report'), PROG,
                                         force=force and standalone, inputs=[input_path])
     target.check()
-    stages = _Stages(progress)
+    from road_force_estimator.pipeline.whole_vehicle import is_whole_vehicle
+    stages = _Stages(progress, is_whole_vehicle(vehicle))     # + the whole vehicle's stage
     options = dict(mode=mode, reference=reference, reference_offset_m=reference_offset_m,
                    segment_length_m=segment_length_m, figures=figures, units=units,
                    run_info=run_info)
