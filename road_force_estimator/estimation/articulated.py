@@ -15,6 +15,7 @@ that tells the bodies' heave and pitch from the road (the longer waves).
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,28 +90,54 @@ class ArticulatedOnline:
         obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
         self.core = ModelCore(self.model, obs)
         self.wheel_names = _wheel_names(vehicle)
+        self.braking = self.model.braking_response()
         self._last: int | None = None
+        self._v = 0.0
         self._x = 0.0
+        self._held: deque = deque()    # the braking response's dynamic loads of held samples
 
     def step(self, stamp_ns: int, y, speed_mps: float) -> list:
-        """One sample: ``y`` the model's channels (m, rad; from the equilibrium)."""
+        """One sample: ``y`` the model's channels (m, rad; from the equilibrium).
+
+        ``a_x`` over the step: the change of speed over it (the known input,
+        :class:`.models.articulated.BrakingResponse`); its response is taken off the
+        readings and added to the loads."""
         core = self.core
         first = self._last is None
         dt = 0.0 if first else (stamp_ns - self._last) * 1e-9
         self._x += abs(speed_mps) * dt
         t = 0.0 if first else dt
-        if not core.step(int(stamp_ns), tuple(float(v) for v in y), float(speed_mps), dt,
-                         first, self._x, t, dt):
+        brake = self.braking
+        if first:
+            brake.restart()
+        elif dt > 0.0:
+            brake.step(dt, (float(speed_mps) - self._v) / dt)
+        off = brake.offset
+        if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
+                         float(speed_mps), dt, first, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
         self._last = int(stamp_ns)
-        out = list(core.ready)
-        core.ready.clear()
-        return out
+        self._v = float(speed_mps)
+        self._held.append(brake.dynamic_n.tolist())
+        return self._ready()
 
     def finish(self) -> list:
         """The samples a latency still held."""
         self.core.finish()
-        out = list(self.core.ready)
+        return self._ready()
+
+    def _ready(self) -> list:
+        """The finalized rows, the braking response's dynamic loads added."""
+        out = []
+        cols = columns(len(self.wheel_names))
+        load, dyn = cols['load'], cols['dynamic']
+        for stamp, row in self.core.ready:
+            d = self._held.popleft()
+            r = list(row)
+            for k, f in enumerate(d):
+                r[load.start + k] += f
+                r[dyn.start + k] += f
+            out.append((stamp, tuple(r)))
         self.core.ready.clear()
         return out
 
@@ -150,9 +177,14 @@ def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np
     """The smoother over the drive as one run."""
     smoother = Smoother(online.model, ObserverParameters() if observer is None else observer)
     t = (stamps - stamps[0]) * 1e-9
-    rows = np.zeros((t.size, columns(len(online.wheel_names))['size']))
-    for a, b, cols in smoother.pieces(t, y, v):
-        rows[a:b] = np.column_stack(cols)
+    nw = len(online.wheel_names)
+    cols = columns(nw)
+    rows = np.zeros((t.size, cols['size']))
+    off, dyn = online.braking.run(t, v)       # the known a_x (as online)
+    for a, b, pc in smoother.pieces(t, y - off, v):
+        rows[a:b] = np.column_stack(pc)
+    rows[:, cols['load']] += dyn.T
+    rows[:, cols['dynamic']] += dyn.T
     dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
     rows[:, DIST] = dist
     return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)

@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import linalg
 
 from road_force_estimator.core.articulated_model import ArticulatedModel
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
@@ -60,8 +61,8 @@ from road_force_estimator.estimation.models.articulated_rows import (
 from road_force_estimator.estimation.models.protocol import (
     FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 
-__all__ = ['AY_PSD_FACTOR', 'Layout', 'ArticulatedObserverModel', 'output_names',
-           'channel_names']
+__all__ = ['AY_PSD_FACTOR', 'Layout', 'ArticulatedObserverModel', 'BrakingResponse',
+           'output_names', 'channel_names']
 
 SIDES = ('left', 'right')
 #: The a_y random walks' density: this factor times the roll-moment density over the
@@ -368,3 +369,91 @@ class ArticulatedObserverModel:
     def offline_rows(self, observer) -> ArticulatedOfflineRows:
         """Every wheel's load of smoothed runs (:class:`.ArticulatedOfflineRows`)."""
         return ArticulatedOfflineRows(self, observer)
+
+    def braking_response(self) -> BrakingResponse:
+        """The response to the known ``a_x`` (:class:`BrakingResponse`)."""
+        return BrakingResponse(self)
+
+
+class BrakingResponse:
+    """The linear model's response to the longitudinal acceleration ``a_x = dv/dt`` (m/s^2),
+    the known input: the bodies' pitch moments ``-M_b H_b a_x`` (the core's
+    ``LinearSystem.longitudinal``), hence the load transfer between the axles and through the
+    fifth wheel.
+
+    The model is linear, so a known input adds its own response: with ``x = x_r + x_a``,
+    ``x_a`` the deterministic response to ``a_x`` from rest (no road, no noise), the filter,
+    its fixed lag and the smoother estimate ``x_r`` from ``y - C x_a`` and the estimate is
+    ``x_r + x_a``: the same numbers as ``a_x`` in the filter's prediction (``B a_x``), without
+    a branch in the observer. ``x_a`` moves no road (``du = 0``): ``w_a + z_w,a = 0``, the road
+    is ``x_r``'s alone. The mechanical part of the model does not depend on the speed, nor
+    does ``x_a``'s step: exact for ``a_x`` constant over each step (zero-order hold), as the
+    plant's (the mean over the step, the change of speed over the step).
+
+    :meth:`step` advances one step; :attr:`offset` is ``C x_a`` (the channels' share, m and
+    rad) and :attr:`dynamic_n` the dynamic tire forces' share (N, per wheel).
+    """
+
+    def __init__(self, model: ArticulatedObserverModel) -> None:
+        lay = model.layout
+        n = lay.n
+        lin = model.core.linearised()
+        a = lin.state_matrix()
+        self._ab = np.zeros((2 * n + 1, 2 * n + 1))
+        self._ab[:2 * n, :2 * n] = a
+        self._ab[n:2 * n, 2 * n] = model.minv @ lin.longitudinal
+        # the observer's state of coordinates and rates (road 0, a_y 0)
+        t = np.zeros((lay.nx, 2 * n))
+        t[lay.q, :n] = model.spring_rows
+        t[lay.nw, 2] = t[lay.nw + 1, 5] = 1.0
+        t[lay.delta, :n] = model.delta_row
+        t[lay.w, :n] = -model.wheel_rows
+        t[lay.dx, n:] = np.eye(n)
+        cm = model.continuous(1.0, 1e-6)
+        self._c = cm.c @ t
+        self._df = cm.h[list(model.load_outputs)] @ t
+        self._n2 = 2 * n
+        self._cache: dict = {}
+        self.restart()
+
+    def restart(self) -> None:
+        """At rest (the start of a run)."""
+        self.x = np.zeros(self._n2)
+        self.offset = np.zeros(self._c.shape[0])
+        self.dynamic_n = np.zeros(self._df.shape[0])
+
+    def _step_matrices(self, dt: float) -> tuple:
+        """(Phi, Gamma) of a step dt (s), zero-order hold; cached."""
+        key = round(dt, 9)
+        hit = self._cache.get(key)
+        if hit is None:
+            e = linalg.expm(self._ab * dt)
+            hit = (e[:self._n2, :self._n2], e[:self._n2, self._n2])
+            if len(self._cache) > 256:
+                self._cache.clear()
+            self._cache[key] = hit
+        return hit
+
+    def step(self, dt: float, ax_mps2: float) -> None:
+        """Advance by dt (s) under ``a_x`` (m/s^2) held over the step."""
+        if dt <= 0.0:
+            return
+        phi, gamma = self._step_matrices(dt)
+        self.x = phi @ self.x + gamma * ax_mps2
+        self.offset = self._c @ self.x
+        self.dynamic_n = self._df @ self.x
+
+    def run(self, t_s: np.ndarray, speed_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Over a run from rest: ``a_x`` of each step the change of speed over it;
+        ``(offset (m, ny), dynamic (nw, m))``."""
+        self.restart()
+        m = t_s.size
+        off = np.zeros((m, self._c.shape[0]))
+        dyn = np.zeros((self._df.shape[0], m))
+        for k in range(1, m):
+            dt = float(t_s[k] - t_s[k - 1])
+            self.step(dt, (float(speed_mps[k]) - float(speed_mps[k - 1])) / dt if dt > 0.0
+                      else 0.0)
+            off[k] = self.offset
+            dyn[:, k] = self.dynamic_n
+        return off, dyn
