@@ -92,7 +92,6 @@ class ArticulatedOnline:
         self.wheel_names = _wheel_names(vehicle)
         self.braking = self.model.braking_response()
         self._last: int | None = None
-        self._v = 0.0
         self._x = 0.0
         self._held: deque = deque()    # the braking response's dynamic loads of held samples
 
@@ -110,14 +109,12 @@ class ArticulatedOnline:
         brake = self.braking
         if first:
             brake.restart()
-        elif dt > 0.0:
-            brake.step(dt, (float(speed_mps) - self._v) / dt)
+        brake.feed(dt, float(speed_mps))
         off = brake.offset
         if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
                          float(speed_mps), dt, first, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
         self._last = int(stamp_ns)
-        self._v = float(speed_mps)
         self._held.append(brake.dynamic_n.tolist())
         return self._ready()
 
