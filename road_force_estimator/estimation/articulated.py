@@ -8,10 +8,14 @@ latency) or offline, by the model observer on :mod:`.models.articulated`.
 :class:`.observer.online.ModelCore` and give the same numbers. ``offline=True`` runs the
 smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Readings from a
 mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
-equilibrium (:func:`equilibrium_readings`). :func:`fuse_roads` averages the offline roads of
-every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front axle).
-Not yet: gaps and rejected samples (one run, every sample finite), the road online, a fusion
-that tells the bodies' heave and pitch from the road (the longer waves).
+equilibrium (:func:`equilibrium_readings`). The braking pitch: ``a_x`` from the change of
+speed, its response taken off the readings and added to the loads
+(:class:`.models.articulated.BrakingResponse`). :func:`fuse_roads` averages the offline roads
+of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
+axle); each axle's road holds the 30-100 m band (:data:`.models.articulated_rows.
+ROAD_CUTOFF_FACTOR`), so does their average. Not yet: gaps and rejected samples (one run,
+every sample finite), the road online (and so a streamed fused profile), a fusion that tells
+the bodies' heave and pitch from the road by the axles' differences.
 """
 from __future__ import annotations
 

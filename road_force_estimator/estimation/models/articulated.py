@@ -35,9 +35,11 @@ Outputs (:data:`outputs` of a model): per wheel ``q``, ``dq``, ``w``, the dynami
 The wheel loads are the statics' (:meth:`~.core.articulated_model.ArticulatedModel.statics`,
 ``output_wheel_load_n``) plus ``dF``; offline, the road under every wheel is ``w`` plus the
 wheel's heave, the band-limited double integral of its acceleration, from a second smoother
-tuned for the road as the front axle's (:mod:`.articulated_rows`). Not modelled yet: the
-braking pitch ``a_x`` (the model has no known inputs but the friction; a constant speed needs
-none), the leaf-spring friction and the sensors' lag (refused), the tractor's IMU.
+tuned for the road as the front axle's (:mod:`.articulated_rows`). The longitudinal
+acceleration ``a_x = dv/dt`` (the braking pitch, ``-M_b H_b a_x`` on each body) is a known
+input, the change of the speed the estimator is given: its response adds to the estimate
+(:class:`BrakingResponse`; a constant speed gives none, bit for bit). Not modelled yet: the
+leaf-spring friction and the sensors' lag (refused), the tractor's IMU.
 
 Tuning: the front axle's schedule on the deflection noise (:func:`.front_axle.scheduled`),
 force noise on every equation of motion (per wheel on the axles, heave, pitch and roll on the
@@ -61,8 +63,8 @@ from road_force_estimator.estimation.models.articulated_rows import (
 from road_force_estimator.estimation.models.protocol import (
     FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 
-__all__ = ['AX_TIME_CONSTANT_S', 'AY_PSD_FACTOR', 'Layout', 'ArticulatedObserverModel',
-           'BrakingResponse', 'output_names', 'channel_names']
+__all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR', 'Layout',
+           'ArticulatedObserverModel', 'BrakingResponse', 'output_names', 'channel_names']
 
 SIDES = ('left', 'right')
 #: The a_y random walks' density: this factor times the roll-moment density over the
@@ -73,13 +75,19 @@ SIDES = ('left', 'right')
 #: ``(M h)^2`` instead of the tractor's: the same to 0.01 point.)
 AY_PSD_FACTOR = 0.01
 BODIES = ('tractor', 'trailer')
-#: The time constant (s) of ``a_x``'s low-pass (the change of speed over each step; causal
-#: online, forward and backward offline): the speed a node is given (a wheel-speed or GNSS
-#: twist) is noisy, and its differences at 1 kHz are ``sqrt(2) sigma_v / dt``. Measured on the
-#: drive family's C20-stop (25 s; worst axle, the drive axle, with 10 ms; the speed exact, then
-#: with 0.01 m/s of white noise): 2.7 / 9.4 % with 0, 2.9 / 3.6 % with 0.02 s, 2.9 / 3.1 % with
-#: 0.05 s, 3.0 / 3.0 % with 0.1 s (zero latency 16.8 / 23.4, 16.5 / 16.5 % with 0.05 s).
+#: The time constant (s) of ``a_x``'s causal low-pass online (``a_x`` the change of speed over
+#: each step): the speed a node is given (a wheel-speed or GNSS twist) is noisy, and its
+#: differences at 1 kHz are ``sqrt(2) sigma_v / dt``. Measured on the drive family's C20-stop
+#: (25 s; worst axle, the drive axle, with 10 ms; the speed exact, then with 0.01 m/s of white
+#: noise): 2.7 / 9.4 % with 0, 2.9 / 3.6 % with 0.02 s, 2.9 / 3.1 % with 0.05 s, 3.0 / 3.0 %
+#: with 0.1 s (zero latency 16.8 / 23.4, 16.5 / 16.5 % with 0.05 s).
 AX_TIME_CONSTANT_S = 0.05
+#: Offline, the low-pass runs forward and backward (zero phase) with this time constant (s):
+#: the road takes what a smoothed step of ``a_x`` leaves. Measured on C20-stop offline (worst
+#: axle's load; the fused profile's 0.5-30 m band error; the speed exact / 0.01 m/s noise):
+#: 0 s 2.4 / 9.5 %, 0.16 / 0.71 %; 0.005 s 2.4 / 4.9 %, 0.16 / 0.44 %; 0.02 s 2.5 / 2.7 %,
+#: 0.37 / 0.34 %; 0.05 s 2.6 % and 1.84 % (exact speed).
+AX_OFFLINE_TIME_CONSTANT_S = 0.02
 
 
 class Layout:
@@ -402,8 +410,10 @@ class BrakingResponse:
     """
 
     def __init__(self, model: ArticulatedObserverModel,
-                 time_constant_s: float = AX_TIME_CONSTANT_S) -> None:
+                 time_constant_s: float = AX_TIME_CONSTANT_S,
+                 offline_time_constant_s: float = AX_OFFLINE_TIME_CONSTANT_S) -> None:
         self.time_constant_s = float(time_constant_s)
+        self.offline_time_constant_s = float(offline_time_constant_s)
         lay = model.layout
         n = lay.n
         lin = model.core.linearised()
@@ -467,7 +477,7 @@ class BrakingResponse:
 
     def run(self, t_s: np.ndarray, speed_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Over a run from rest, offline: ``a_x`` of each step the change of speed over it,
-        low-passed forward and backward (zero phase, :data:`AX_TIME_CONSTANT_S` each way);
+        low-passed forward and backward (zero phase, :data:`AX_OFFLINE_TIME_CONSTANT_S`);
         ``(offset (m, ny), dynamic (nw, m))``."""
         self.restart()
         t = np.asarray(t_s, float)
@@ -475,12 +485,13 @@ class BrakingResponse:
         m = t.size
         dts = np.diff(t)
         ax = np.divide(np.diff(v), dts, out=np.zeros(max(m - 1, 0)), where=dts > 0.0)
-        if self.time_constant_s > 0.0 and ax.size:
+        tau = self.offline_time_constant_s
+        if tau > 0.0 and ax.size:
             for order in (range(ax.size), range(ax.size - 1, -1, -1)):
                 f = float(ax[order[0]])         # each pass starts at its first value
                 for k in order:
                     if dts[k] > 0.0:
-                        f += _alpha(float(dts[k]), self.time_constant_s) * (ax[k] - f)
+                        f += _alpha(float(dts[k]), tau) * (ax[k] - f)
                     ax[k] = f
         off = np.zeros((m, self._c.shape[0]))
         dyn = np.zeros((self._df.shape[0], m))

@@ -277,7 +277,7 @@ def test_the_braking_response_is_the_plants_load_transfer_on_a_flat_road():
 
     vehicle, t, _, y, v, true = _stop_drive(flat_profile(800.0), 16.0, 0.0)
     model = ArticulatedObserverModel(vehicle)
-    off, dyn = BrakingResponse(model, time_constant_s=0.0).run(t, v)
+    off, dyn = BrakingResponse(model, 0.0, 0.0).run(t, v)
     swing = np.max(np.abs(true), axis=1)
     assert float(np.min(swing)) > 2e3             # braking moves every wheel's load
     assert np.all(np.max(np.abs(dyn - true), axis=1) < 1e-3 * swing)
