@@ -32,7 +32,8 @@ from road_force_estimator.estimation.observer.online import ModelCore
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
-           'equilibrium_readings', 'FusedProfile', 'fuse_roads']
+           'equilibrium_readings', 'LIFT_OFF_FRACTION', 'FUSION_SPLIT_WAVELENGTH_M',
+           'FusedProfile', 'fuse_roads']
 
 
 @dataclass(frozen=True)
@@ -191,10 +192,20 @@ def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np
     return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)
 
 
+#: The fused profile: a wheel's reading counts while its estimated load is at least this
+#: fraction of its static load (below, it may have lifted off, which the linear model does
+#: not carry; class D lifts every wheel at 20 m/s).
+LIFT_OFF_FRACTION = 0.1
+#: The fused profile's split (m): the waves longer than this are every axle's average, the
+#: shorter ones the average of the axles whose wheel is on the ground there (a split keeps
+#: an axle's long-wave offset from stepping in and out with it).
+FUSION_SPLIT_WAVELENGTH_M = 10.0
+
+
 @dataclass(frozen=True)
 class FusedProfile:
     """Both wheel paths (m) on the front axle's distances ``distance_m`` (m,) of the points
-    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles averaged."""
+    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles fused."""
 
     distance_m: np.ndarray
     left: np.ndarray
@@ -204,18 +215,46 @@ class FusedProfile:
 
 def fuse_roads(estimate: ArticulatedEstimate, positions_m) -> FusedProfile:
     """The offline roads of every axle (``estimate.road_m``; axle j ``positions_m[j]`` behind
-    the front axle) averaged by distance: the point under the front axle at sample k is under
+    the front axle) fused by distance: the point under the front axle at sample k is under
     axle j when that axle has travelled ``xi_j`` further; each axle's road is interpolated
-    there (linear, in the front axle's distance), over the points the last axle has passed."""
+    there (linear, in the front axle's distance), over the points the last axle has passed.
+    Per wheel path, the waves longer than :data:`FUSION_SPLIT_WAVELENGTH_M` are the axles'
+    average, the shorter ones the average of the axles whose wheel's estimated load is at
+    least :data:`LIFT_OFF_FRACTION` of its static load there (every axle's where none is)."""
     if estimate.road_m is None:
         raise ValueError('no road in the estimate: the road comes offline')
     x = estimate.distance_m
     xi = np.asarray(positions_m, float)
     keep = x + xi.max() <= x[-1]
     p = x[keep]
+    static = estimate.load_n - estimate.dynamic_n
+    grounded = (estimate.load_n >= LIFT_OFF_FRACTION * static).astype(float)
+    steps = np.diff(x)
+    dx = float(np.median(steps[steps > 0.0])) if np.any(steps > 0.0) else 0.0
     paths = np.zeros((2, p.size))
-    for j, lag in enumerate(xi):
-        for side in (0, 1):
-            paths[side] += np.interp(p + lag, x, estimate.road_m[2 * j + side])
-    paths /= xi.size
+    for side in (0, 1):
+        reads = np.array([np.interp(p + lag, x, estimate.road_m[2 * j + side])
+                          for j, lag in enumerate(xi)])
+        ok = np.array([np.interp(p + lag, x, grounded[2 * j + side]) > 0.999
+                       for j, lag in enumerate(xi)]).astype(float)
+        long = _low_pass(p, reads, dx)
+        short = reads - long
+        n_ok = ok.sum(axis=0)
+        paths[side] = long.mean(axis=0) + np.where(
+            n_ok > 0, (ok * short).sum(axis=0) / np.maximum(n_ok, 1.0), short.mean(axis=0))
     return FusedProfile(p, paths[0], paths[1], int(xi.size))
+
+
+def _low_pass(p: np.ndarray, reads: np.ndarray, dx: float) -> np.ndarray:
+    """The waves of ``reads`` (rows over the distances p, m) longer than
+    :data:`FUSION_SPLIT_WAVELENGTH_M`: a zero-phase second-order Butterworth on an even grid
+    of dx (m), interpolated back to p (all of them when the grid is too short)."""
+    from road_force_estimator.core.scipy_signal import signal as _signal
+
+    if dx <= 0.0 or p[-1] - p[0] < 4.0 * FUSION_SPLIT_WAVELENGTH_M:
+        return reads.copy()
+    grid = np.arange(p[0], p[-1] + 0.5 * dx, dx)
+    even = np.array([np.interp(grid, p, r) for r in reads])
+    sos = _signal().butter(2, 1.0 / FUSION_SPLIT_WAVELENGTH_M, fs=1.0 / dx, output='sos')
+    smooth = _signal().sosfiltfilt(sos, even, axis=-1)
+    return np.array([np.interp(p, grid, r) for r in smooth])

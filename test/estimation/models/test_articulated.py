@@ -208,20 +208,23 @@ def test_the_smoothers_road_under_every_wheel_is_the_true_road_in_the_band(drive
     assert float(np.max(pe.rms_pct)) < 1.0
 
 
-def test_the_fused_profile_holds_the_band_and_the_long_waves():
-    """The offline roads of the five axles averaged by distance (fuse_roads) against the
-    front axle's wheel paths (the truth every axle drives), class C at 10 um, issue 32's
-    acceptance: the 0.5-30 m band error below 0.7 x that of the front axle's own road
-    (measured: 0.15 / 0.15 % against 0.51 / 0.49 %, left / right), the 30-100 m band's within
-    10 % of its RMS (4.5 / 5.9 %; 21.5 / 21.0 % with the wheel heave's integral cut off at
-    100 m, not ROAD_CUTOFF_FACTOR x 100 m) and the IRI-filtered cross correlation >= 0.99
-    (0.9997 on both paths)."""
+@pytest.mark.parametrize('road_class', ['C', 'D'])
+def test_the_fused_profile_holds_the_band_and_the_long_waves(road_class):
+    """The offline roads of the five axles fused by distance (fuse_roads) against the front
+    axle's wheel paths (the truth every axle drives), 10 um, issue 32's acceptance: the
+    0.5-30 m band error below 0.7 x that of the front axle's own road, the 30-100 m band's
+    within 10 % of its RMS and the IRI-filtered cross correlation >= 0.99. Measured (left /
+    right): class C 0.15 / 0.15 % against 0.51 / 0.49 %, 4.5 / 5.9 % (21.5 / 21.0 % with the
+    wheel heave's integral cut off at 100 m, not ROAD_CUTOFF_FACTOR x 100 m), 0.9997;
+    class D, where every wheel lifts off now and then (0.2-2.2 % of the samples below 1 kN):
+    0.10 / 0.17 % against 0.97 / 0.42 %, 4.5 / 6.0 %, 0.9995 (every axle's reading averaged
+    whatever its load, LIFT_OFF_FRACTION left out: 0.77 / 1.20 %)."""
     from road_force_estimator.core import metrics
     from road_force_estimator.core import profile_correlation as pc
 
     d = _drive(**{'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
                   'simulator.duration': 20.0})
-    road = iso8608_profile('C', d.road_length_m, seed=11)
+    road = iso8608_profile(road_class, d.road_length_m, seed=11)
     tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
                               duration_s=20.0, tire_envelope_m=0.25, model=d.model)
     y = d.sensors(channel_names(d.model)).measure(tr)
@@ -237,7 +240,6 @@ def test_the_fused_profile_holds_the_band_and_the_long_waves():
     p1 = metrics.profile_errors(est.distance_m[:n], est.road_m[:2, :n].T, truth,
                                 mask=mask).rms_pct
     assert np.all(np.asarray(pf) < 0.7 * np.asarray(p1))
-    assert float(np.max(pf)) < 0.6
     long = metrics.profile_errors(fused.distance_m, paths, truth, mask=mask, short_m=30.0,
                                   long_m=100.0).rms_pct
     assert float(np.max(long)) < 10.0
