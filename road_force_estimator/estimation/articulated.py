@@ -10,10 +10,10 @@ smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Read
 mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
 equilibrium (:func:`equilibrium_readings`). The braking pitch: ``a_x`` from the change of
 speed, its response taken off the readings and added to the loads
-(:class:`.models.articulated.BrakingResponse`). :func:`fuse_roads` averages the offline roads
+(:class:`.models.articulated.BrakingResponse`). :func:`fuse_roads` fuses the offline roads
 of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
-axle); each axle's road holds the 30-100 m band (:data:`.models.articulated_rows.
-ROAD_CUTOFF_FACTOR`), so does their average. Not yet: gaps and rejected samples (one run,
+axle; the short waves from the wheels on the ground only); each axle's road holds the
+30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion. Not yet: gaps and rejected samples (one run,
 every sample finite), the road online (and so a streamed fused profile), a fusion that tells
 the bodies' heave and pitch from the road by the axles' differences.
 """
