@@ -13,9 +13,10 @@ speed, its response taken off the readings and added to the loads
 (:class:`.models.articulated.BrakingResponse`). :func:`fuse_roads` fuses the offline roads
 of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
 axle; the short waves from the wheels on the ground only); each axle's road holds the
-30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion. Not yet: gaps and rejected samples (one run,
-every sample finite), the road online (and so a streamed fused profile), a fusion that tells
-the bodies' heave and pitch from the road by the axles' differences.
+30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion.
+Not yet: gaps and rejected samples (one run, every sample finite), the road online (and so a
+streamed fused profile), a fusion that tells the bodies' heave and pitch from the road by the
+axles' differences.
 """
 from __future__ import annotations
 
