@@ -28,7 +28,7 @@ error after ``--settle`` s, in % of the true dynamic-load RMS (the load less the
 of the same samples; offline also the road under each axle's two wheels (0.5-30 m band, RMS
 over both wheel paths of the error in % of the true road's, the last 60 m left out) of the
 articulated observer and of the front-axle estimator axle by axle, and the articulated
-observer's fused profile (every axle's road averaged by distance) against the front axle's
+observer's fused profile (every axle's road fused by distance, fuse_roads) against the front axle's
 wheel paths.
 """
 from __future__ import annotations
@@ -203,7 +203,7 @@ def run(case, args) -> list[str]:
                                '0.5-30 m band error, % of the true road'))
             lines.append(_line(case, 'offline road', 'articulated observer, fused',
                                fused_pct(drive, ours_road, args.settle),
-                               'every axle averaged (fuse_roads), both paths',
+                               'every axle fused (fuse_roads), both paths',
                                len(drive['axles'])))
             lines.append(_line(case, 'offline road', 'front-axle estimator, axle by axle',
                                road_pct(drive, np.vstack(roads), args.settle),

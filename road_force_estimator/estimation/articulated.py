@@ -8,13 +8,19 @@ latency) or offline, by the model observer on :mod:`.models.articulated`.
 :class:`.observer.online.ModelCore` and give the same numbers. ``offline=True`` runs the
 smoother (:class:`.smoothing.smoother.Smoother`) over the drive as one run. Readings from a
 mechanical zero (``vehicle.deflection_reference: zero_load``) are taken back to the
-equilibrium (:func:`equilibrium_readings`). :func:`fuse_roads` averages the offline roads of
-every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front axle).
-Not yet: gaps and rejected samples (one run, every sample finite), the road online, a fusion
-that tells the bodies' heave and pitch from the road (the longer waves).
+equilibrium (:func:`equilibrium_readings`). The braking pitch: ``a_x`` from the change of
+speed, its response taken off the readings and added to the loads
+(:class:`.models.articulated.BrakingResponse`). :func:`fuse_roads` fuses the offline roads
+of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
+axle; the short waves from the wheels on the ground only); each axle's road holds the
+30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion.
+Not yet: gaps and rejected samples (one run, every sample finite), the road online (and so a
+streamed fused profile), a fusion that tells the bodies' heave and pitch from the road by the
+axles' differences.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +33,8 @@ from road_force_estimator.estimation.observer.online import ModelCore
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
-           'equilibrium_readings', 'FusedProfile', 'fuse_roads']
+           'equilibrium_readings', 'LIFT_OFF_FRACTION', 'FUSION_SPLIT_WAVELENGTH_M',
+           'FusedProfile', 'fuse_roads']
 
 
 @dataclass(frozen=True)
@@ -89,28 +96,51 @@ class ArticulatedOnline:
         obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
         self.core = ModelCore(self.model, obs)
         self.wheel_names = _wheel_names(vehicle)
+        self.braking = self.model.braking_response()
         self._last: int | None = None
         self._x = 0.0
+        self._held: deque = deque()    # the braking response's dynamic loads of held samples
 
     def step(self, stamp_ns: int, y, speed_mps: float) -> list:
-        """One sample: ``y`` the model's channels (m, rad; from the equilibrium)."""
+        """One sample: ``y`` the model's channels (m, rad; from the equilibrium).
+
+        ``a_x`` over the step: the change of speed over it (the known input,
+        :class:`.models.articulated.BrakingResponse`); its response is taken off the
+        readings and added to the loads."""
         core = self.core
         first = self._last is None
         dt = 0.0 if first else (stamp_ns - self._last) * 1e-9
         self._x += abs(speed_mps) * dt
         t = 0.0 if first else dt
-        if not core.step(int(stamp_ns), tuple(float(v) for v in y), float(speed_mps), dt,
-                         first, self._x, t, dt):
+        brake = self.braking
+        if first:
+            brake.restart()
+        brake.feed(dt, float(speed_mps))
+        off = brake.offset
+        if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
+                         float(speed_mps), dt, first, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
         self._last = int(stamp_ns)
-        out = list(core.ready)
-        core.ready.clear()
-        return out
+        self._held.append(brake.dynamic_n.tolist())
+        return self._ready()
 
     def finish(self) -> list:
         """The samples a latency still held."""
         self.core.finish()
-        out = list(self.core.ready)
+        return self._ready()
+
+    def _ready(self) -> list:
+        """The finalized rows, the braking response's dynamic loads added."""
+        out = []
+        cols = columns(len(self.wheel_names))
+        load, dyn = cols['load'], cols['dynamic']
+        for stamp, row in self.core.ready:
+            d = self._held.popleft()
+            r = list(row)
+            for k, f in enumerate(d):
+                r[load.start + k] += f
+                r[dyn.start + k] += f
+            out.append((stamp, tuple(r)))
         self.core.ready.clear()
         return out
 
@@ -150,18 +180,33 @@ def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np
     """The smoother over the drive as one run."""
     smoother = Smoother(online.model, ObserverParameters() if observer is None else observer)
     t = (stamps - stamps[0]) * 1e-9
-    rows = np.zeros((t.size, columns(len(online.wheel_names))['size']))
-    for a, b, cols in smoother.pieces(t, y, v):
-        rows[a:b] = np.column_stack(cols)
+    nw = len(online.wheel_names)
+    cols = columns(nw)
+    rows = np.zeros((t.size, cols['size']))
+    off, dyn = online.braking.run(t, v)       # the known a_x (as online)
+    for a, b, pc in smoother.pieces(t, y - off, v):
+        rows[a:b] = np.column_stack(pc)
+    rows[:, cols['load']] += dyn.T
+    rows[:, cols['dynamic']] += dyn.T
     dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
     rows[:, DIST] = dist
     return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)
 
 
+#: The fused profile: a wheel's reading counts while its estimated load is at least this
+#: fraction of its static load (below, it may have lifted off, which the linear model does
+#: not carry; class D lifts every wheel at 20 m/s).
+LIFT_OFF_FRACTION = 0.1
+#: The fused profile's split (m): the waves longer than this are every axle's average, the
+#: shorter ones the average of the axles whose wheel is on the ground there (a split keeps
+#: an axle's long-wave offset from stepping in and out with it).
+FUSION_SPLIT_WAVELENGTH_M = 10.0
+
+
 @dataclass(frozen=True)
 class FusedProfile:
     """Both wheel paths (m) on the front axle's distances ``distance_m`` (m,) of the points
-    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles averaged."""
+    every axle has passed: ``left``, ``right``, and ``axles`` the number of axles fused."""
 
     distance_m: np.ndarray
     left: np.ndarray
@@ -171,18 +216,46 @@ class FusedProfile:
 
 def fuse_roads(estimate: ArticulatedEstimate, positions_m) -> FusedProfile:
     """The offline roads of every axle (``estimate.road_m``; axle j ``positions_m[j]`` behind
-    the front axle) averaged by distance: the point under the front axle at sample k is under
+    the front axle) fused by distance: the point under the front axle at sample k is under
     axle j when that axle has travelled ``xi_j`` further; each axle's road is interpolated
-    there (linear, in the front axle's distance), over the points the last axle has passed."""
+    there (linear, in the front axle's distance), over the points the last axle has passed.
+    Per wheel path, the waves longer than :data:`FUSION_SPLIT_WAVELENGTH_M` are the axles'
+    average, the shorter ones the average of the axles whose wheel's estimated load is at
+    least :data:`LIFT_OFF_FRACTION` of its static load there (every axle's where none is)."""
     if estimate.road_m is None:
         raise ValueError('no road in the estimate: the road comes offline')
     x = estimate.distance_m
     xi = np.asarray(positions_m, float)
     keep = x + xi.max() <= x[-1]
     p = x[keep]
+    static = estimate.load_n - estimate.dynamic_n
+    grounded = (estimate.load_n >= LIFT_OFF_FRACTION * static).astype(float)
+    steps = np.diff(x)
+    dx = float(np.median(steps[steps > 0.0])) if np.any(steps > 0.0) else 0.0
     paths = np.zeros((2, p.size))
-    for j, lag in enumerate(xi):
-        for side in (0, 1):
-            paths[side] += np.interp(p + lag, x, estimate.road_m[2 * j + side])
-    paths /= xi.size
+    for side in (0, 1):
+        reads = np.array([np.interp(p + lag, x, estimate.road_m[2 * j + side])
+                          for j, lag in enumerate(xi)])
+        ok = np.array([np.interp(p + lag, x, grounded[2 * j + side]) > 0.999
+                       for j, lag in enumerate(xi)]).astype(float)
+        long = _low_pass(p, reads, dx)
+        short = reads - long
+        n_ok = ok.sum(axis=0)
+        paths[side] = long.mean(axis=0) + np.where(
+            n_ok > 0, (ok * short).sum(axis=0) / np.maximum(n_ok, 1.0), short.mean(axis=0))
     return FusedProfile(p, paths[0], paths[1], int(xi.size))
+
+
+def _low_pass(p: np.ndarray, reads: np.ndarray, dx: float) -> np.ndarray:
+    """The waves of ``reads`` (rows over the distances p, m) longer than
+    :data:`FUSION_SPLIT_WAVELENGTH_M`: a zero-phase second-order Butterworth on an even grid
+    of dx (m), interpolated back to p (all of them when the grid is too short)."""
+    from road_force_estimator.core.scipy_signal import signal as _signal
+
+    if dx <= 0.0 or p[-1] - p[0] < 4.0 * FUSION_SPLIT_WAVELENGTH_M:
+        return reads.copy()
+    grid = np.arange(p[0], p[-1] + 0.5 * dx, dx)
+    even = np.array([np.interp(grid, p, r) for r in reads])
+    sos = _signal().butter(2, 1.0 / FUSION_SPLIT_WAVELENGTH_M, fs=1.0 / dx, output='sos')
+    smooth = _signal().sosfiltfilt(sos, even, axis=-1)
+    return np.array([np.interp(p, grid, r) for r in smooth])

@@ -10,8 +10,9 @@ Columns of N axles (``nw = 2 N`` wheels, axle j front first, left then right)::
 Online rows stop after ``a_y``. Offline, the road under every wheel comes from the smoother's
 profile pass (:meth:`ArticulatedOfflineRows.road`): ``u = w + z_w``, ``z_w`` the zero-phase
 band-limited double integral (:func:`.body_heave.zero_phase`, cutoff
-``observer.profile_cutoff_wavelength``) of the wheel's vertical acceleration; each axle's road
-on its own (their fusion by distance comes next).
+:data:`ROAD_CUTOFF_FACTOR` x ``observer.profile_cutoff_wavelength``) of the wheel's vertical
+acceleration; each axle's road on its own (their fusion by distance:
+:func:`..articulated.fuse_roads`).
 """
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ from road_force_estimator.estimation import body_heave
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.front_axle import PROFILE_OFFLINE_ROLL_MOMENT_PSD
 
-__all__ = ['DIST', 'CONV', 'ROAD_START_S', 'ROAD_RAMP_S', 'columns', 'ArticulatedOnlineRows',
-           'ArticulatedOfflineRows']
+__all__ = ['DIST', 'CONV', 'ROAD_START_S', 'ROAD_RAMP_S', 'ROAD_CUTOFF_FACTOR', 'columns',
+           'ArticulatedOnlineRows', 'ArticulatedOfflineRows']
 
 #: The distance (m) and converged columns; the rest: :func:`columns`.
 DIST, CONV = 0, 1
@@ -36,6 +37,13 @@ DIST, CONV = 0, 1
 #: of metres.
 ROAD_START_S = 1.0
 ROAD_RAMP_S = 0.5
+#: The wheel heave's double integral is band-limited at this factor times
+#: ``observer.profile_cutoff_wavelength`` (the front axle's 100 m by default): the fused profile
+#: holds the 30-100 m band (issue 32). Measured on the drive family's C20 (25 s, 10 um,
+#: ``python -m bench.accuracy.articulated_fusion``): the front axle's road's 30-100 m band
+#: error 11.8 % of the band's RMS with 1 (the 100 m high-pass itself), 3.3 % with 2, 3.1 % with
+#: 3, 3.1 % with 10; its 0.5-30 m band 0.60 % with 1, 0.51 % with 2 and more.
+ROAD_CUTOFF_FACTOR = 3.0
 
 
 def columns(nw: int) -> dict[str, slice | int]:
@@ -104,7 +112,7 @@ class ArticulatedOfflineRows:
         road, accel = self.cols['road'], self.cols['wheel_accel']
         self.road_columns = tuple(range(road.start, road.stop))
         self.profile_columns = self.road_columns + tuple(range(accel.start, accel.stop))
-        self.cutoff_m = observer.profile_cutoff_wavelength_m
+        self.cutoff_m = ROAD_CUTOFF_FACTOR * observer.profile_cutoff_wavelength_m
 
     def field_columns(self, m: int) -> tuple[dict, list]:
         """m rows of every column."""

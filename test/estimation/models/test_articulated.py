@@ -15,7 +15,7 @@ from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, equilibrium_readings, estimate_articulated, fuse_roads)
 from road_force_estimator.estimation.models.articulated import (
-    ArticulatedObserverModel, channel_names)
+    ArticulatedObserverModel, BrakingResponse, channel_names)
 from road_force_estimator.estimation.observer.schedule import difference_covariance
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config' / 'tractor_semitrailer.yaml'
@@ -194,8 +194,9 @@ def test_zero_load_readings_come_back_to_the_equilibrium():
 def test_the_smoothers_road_under_every_wheel_is_the_true_road_in_the_band(drive):
     """Offline, the road under each of the ten wheels (its tire's deflection plus the wheel's
     band-limited heave, from the profile pass) against the plant's road under that tire: the
-    0.5-30 m band's RMS error, % of the truth's (measured: 0.32-0.55 %; without leaving out
-    the run's first second of wheel accelerations, ROAD_START_S: up to 51 %)."""
+    0.5-30 m band's RMS error, % of the truth's (measured: 0.06-0.13 %, 0.32-0.55 % with the
+    wheel heave's integral cut off at 100 m instead of ROAD_CUTOFF_FACTOR x 100 m; without
+    leaving out the run's first second of wheel accelerations, ROAD_START_S: up to 51 %)."""
     from road_force_estimator.core import metrics
 
     vehicle, t, stamps, y, _, road = drive
@@ -207,17 +208,23 @@ def test_the_smoothers_road_under_every_wheel_is_the_true_road_in_the_band(drive
     assert float(np.max(pe.rms_pct)) < 1.0
 
 
-def test_the_fused_profile_averages_the_axles_noise_away():
-    """The offline roads of the five axles averaged by distance (fuse_roads) against the
-    front axle's wheel paths (the truth every axle drives): on class C at 10 um the 0.5-30 m
-    band error is below 0.8 x that of the front axle's own road (measured: 0.33 / 0.41 %
-    against 0.58 / 0.59 %, left / right; at 1 um both are ~0.3 %: the noise is what averages
-    away)."""
+@pytest.mark.parametrize('road_class', ['C', 'D'])
+def test_the_fused_profile_holds_the_band_and_the_long_waves(road_class):
+    """The offline roads of the five axles fused by distance (fuse_roads) against the front
+    axle's wheel paths (the truth every axle drives), 10 um, issue 32's acceptance: the
+    0.5-30 m band error below 0.7 x that of the front axle's own road, the 30-100 m band's
+    within 10 % of its RMS and the IRI-filtered cross correlation >= 0.99. Measured (left /
+    right): class C 0.15 / 0.15 % against 0.51 / 0.49 %, 4.5 / 5.9 % (21.5 / 21.0 % with the
+    wheel heave's integral cut off at 100 m, not ROAD_CUTOFF_FACTOR x 100 m), 0.9997;
+    class D, where every wheel lifts off now and then (0.2-2.2 % of the samples below 1 kN):
+    0.10 / 0.17 % against 0.97 / 0.42 %, 4.5 / 6.0 %, 0.9995 (every axle's reading averaged
+    whatever its load, LIFT_OFF_FRACTION left out: 0.77 / 1.20 %)."""
     from road_force_estimator.core import metrics
+    from road_force_estimator.core import profile_correlation as pc
 
     d = _drive(**{'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
                   'simulator.duration': 20.0})
-    road = iso8608_profile('C', d.road_length_m, seed=11)
+    road = iso8608_profile(road_class, d.road_length_m, seed=11)
     tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
                               duration_s=20.0, tire_envelope_m=0.25, model=d.model)
     y = d.sensors(channel_names(d.model)).measure(tr)
@@ -228,9 +235,73 @@ def test_the_fused_profile_averages_the_axles_noise_away():
     assert fused.axles == 5 and fused.distance_m[-1] <= est.distance_m[-1] - 12.22 + 1e-9
     mask = (fused.distance_m > 60.0) & (fused.distance_m < fused.distance_m[-1] - 60.0)
     truth = tr.road_m[:n, :2]
-    pf = metrics.profile_errors(fused.distance_m, np.column_stack([fused.left, fused.right]),
-                                truth, mask=mask).rms_pct
+    paths = np.column_stack([fused.left, fused.right])
+    pf = metrics.profile_errors(fused.distance_m, paths, truth, mask=mask).rms_pct
     p1 = metrics.profile_errors(est.distance_m[:n], est.road_m[:2, :n].T, truth,
                                 mask=mask).rms_pct
-    assert np.all(np.asarray(pf) < 0.8 * np.asarray(p1))
-    assert float(np.max(pf)) < 0.6
+    assert np.all(np.asarray(pf) < 0.7 * np.asarray(p1))
+    long = metrics.profile_errors(fused.distance_m, paths, truth, mask=mask, short_m=30.0,
+                                  long_m=100.0).rms_pct
+    assert float(np.max(long)) < 10.0
+    xs = fused.distance_m[mask]
+    for side in (0, 1):
+        c = pc.cross_correlation(fused.distance_m, paths[:, side], fused.distance_m,
+                                 truth[:, side], start_m=float(xs[0]), end_m=float(xs[-1]))
+        assert c.rating >= 0.99
+
+
+#: A stop as the drive family's (bench.studies.articulated_drives): 20 m/s, braking at 3 m/s^2
+#: at 6 s to standstill, 2 s standing, back to 10 m/s at 1 m/s^2 (knots: time s, speed m/s).
+STOP = ((0.0, 6.0, 6.0 + 20.0 / 3.0, 8.0 + 20.0 / 3.0, 18.0 + 20.0 / 3.0),
+        (20.0, 20.0, 0.0, 0.0, 10.0))
+
+
+def _stop_drive(road, duration_s: float, noise_m: float):
+    d = _drive(**{'simulator.noise.deflection': noise_m,
+                  'simulator.noise.roll': noise_m / 0.45, 'simulator.duration': duration_s})
+    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
+                              duration_s=duration_s, speed_profile=STOP,
+                              tire_envelope_m=0.25, model=d.model)
+    y = d.sensors(channel_names(d.model)).measure(tr)
+    static = d.model.statics().output_wheel_load_n.reshape(-1)
+    return (d.vehicle, tr.t_s, np.round(tr.t_s * 1e9).astype(np.int64), y,
+            np.asarray(tr.speed_mps, float) * np.ones(len(tr)),
+            tr.wheel_load_n.T - static[:, None])
+
+
+def test_the_braking_response_is_the_plants_load_transfer_on_a_flat_road():
+    """On a flat road only a_x moves the vehicle: the linear model's response to the change
+    of speed (BrakingResponse) against the plant's (nonlinear, RK4) wheel loads and readings
+    through braking at 3 m/s^2, standing and pulling away, a_x not low-passed (measured: every
+    wheel within 3.3e-5 of its load transfer (7.3-11.2 kN), the deflections within 3.2e-5 of
+    their swing)."""
+    from road_force_estimator.core.road import flat_profile
+
+    vehicle, t, _, y, v, true = _stop_drive(flat_profile(800.0), 16.0, 0.0)
+    model = ArticulatedObserverModel(vehicle)
+    off, dyn = BrakingResponse(model, 0.0, 0.0).run(t, v)
+    swing = np.max(np.abs(true), axis=1)
+    assert float(np.min(swing)) > 2e3             # braking moves every wheel's load
+    assert np.all(np.max(np.abs(dyn - true), axis=1) < 1e-3 * swing)
+    y_swing = np.max(np.abs(y), axis=0)          # (the rolls stay 0 on a flat road)
+    assert np.all(np.max(np.abs(off - y), axis=0) <= 1e-3 * y_swing + 1e-12)
+
+
+@pytest.mark.parametrize('latency_s, offline, limit, speed_noise', [
+    (0.0, False, 30.0, 0.0), (0.01, False, 4.0, 0.0), (0.0, True, 3.0, 0.0),
+    (0.01, False, 4.0, 0.01), (0.0, True, 3.0, 0.01)])
+def test_the_observer_follows_every_wheel_through_a_stop(latency_s, offline, limit,
+                                                         speed_noise):
+    """Class C, braking at 3 m/s^2 to standstill and pulling away, 10 um of noise: every
+    wheel's dynamic-load RMS error after 4 s, % of its true dynamic RMS, with a_x the known
+    input, from the exact speed and from one with 0.01 m/s of white noise (a_x low-passed,
+    AX_TIME_CONSTANT_S). Measured, worst wheel: zero latency 22.5 % (the drive axle's, 25 %
+    over the 2 s before the braking too; the others 10-13 %), 10 ms 3.3 % (noisy speed 3.5 %),
+    offline 2.6 % (2.7 %); without a_x on the same drive 86-159 %, 18-39 % and 3.5-7.1 %."""
+    road = iso8608_profile('C', 800.0, seed=11)
+    vehicle, t, stamps, y, v, true = _stop_drive(road, 20.0, 1e-5)
+    if speed_noise:
+        v = np.maximum(v + speed_noise * np.random.default_rng(3).standard_normal(v.size), 0.0)
+    est = estimate_articulated(vehicle, stamps, y, v, latency_s=latency_s, offline=offline)
+    pct = _errors_pct(t, est.dynamic_n, true)
+    assert float(np.max(pct)) < limit
