@@ -7,7 +7,11 @@ front axle's.
 :data:`~road_force_estimator.interfaces.STATIC_LOAD_PERIOD_NS`, as the node publishes
 ``/wheel_load/static/*``) and ``/load_transfer/tractor|trailer|combination``
 (Vector3Stamped, frame ``base_link``: x = LTR, right minus left over their sum, y =
-quasi-static LTR, z = 0). Header stamp = log time = the sample's stamp.
+quasi-static LTR, z = 0). Header stamp = log time = the sample's stamp. Offline,
+``/road_profile/fused/left|right`` (PointStamped, frame ``road`` as ``/road_profile/*``: x = the
+point's distance in the front axle's frame, m; y = +/- the front wheels' half track, m; z = the
+fused elevation, m), stamped with the sample at
+which the front axle passed the point (:func:`fused_profile_streams`).
 """
 from __future__ import annotations
 
@@ -16,12 +20,12 @@ from typing import Sequence
 import numpy as np
 
 from road_force_estimator.interfaces import (
-    BASE_FRAME, JOINT_STATE, STATIC_LOAD_PERIOD_NS, STATIC_WHEEL_LOADS, UNIT_LOAD_TRANSFER,
-    VECTOR3_STAMPED, WHEEL_LOADS)
+    BASE_FRAME, JOINT_STATE, ROAD_FRAME, ROAD_FUSED, STATIC_LOAD_PERIOD_NS, STATIC_WHEEL_LOADS,
+    UNIT_LOAD_TRANSFER, VECTOR3_STAMPED, WHEEL_LOADS)
 from road_force_estimator.serde.cdr import ColumnRows
-from road_force_estimator.serde.messages import message_template, stamp_columns
+from road_force_estimator.serde.messages import message_template, points_rows, stamp_columns
 
-__all__ = ['static_rows', 'whole_vehicle_streams']
+__all__ = ['static_rows', 'whole_vehicle_streams', 'fused_profile_streams']
 
 
 def static_rows(stamps_ns: np.ndarray) -> np.ndarray:
@@ -71,3 +75,29 @@ def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_
             VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), m,
             dict(cols, **{'vector.x': x[u], 'vector.y': y[u]}))))
     return streams
+
+
+def fused_profile_streams(stamps_ns, distance_m, left_m, right_m,
+                          half_track_m: float) -> list:
+    """The two fused wheel paths' streams (topic, stamps, rows): one point per stamp (m,),
+    strictly increasing; distances (m) and elevations (m) finite; ``half_track_m``: y of the
+    left path (m), the right's its negative.
+
+    Raises
+    ------
+    ValueError
+        Shapes that disagree, stamps not increasing or a value not finite.
+    """
+    s = np.asarray(stamps_ns, np.int64).reshape(-1)
+    x = np.asarray(distance_m, float).reshape(-1)
+    paths = [np.asarray(p, float).reshape(-1) for p in (left_m, right_m)]
+    if any(a.size != s.size for a in (x, *paths)):
+        raise ValueError('fused profile: stamps, distances and elevations differ in length')
+    if s.size and np.any(np.diff(s) <= 0):
+        raise ValueError('fused profile stamps must be strictly increasing')
+    if not (np.isfinite(x).all() and all(np.isfinite(p).all() for p in paths)):
+        raise ValueError('fused profile: not finite')
+    cols = stamp_columns(s)
+    return [(ROAD_FUSED[side], s, points_rows(s, x, half_track_m if side == 0 else
+                                              -half_track_m, paths[side], ROAD_FRAME, cols))
+            for side in (0, 1)]

@@ -150,10 +150,11 @@ def _model_fit(est, drive, vehicle, observer) -> tuple[float, str] | None:
 
 
 def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict, vehicle,
-          observer, options: dict, stages, whole=None) -> EstimateResult:
+          observer, options: dict, stages, whole=None, fused=None) -> EstimateResult:
     """The sinks in one call each: ``folder/bag`` and ``folder/report``; the result names
     them in ``output``. ``whole``: an articulated drive's whole-vehicle estimate
-    (:mod:`.whole_vehicle`: its topics and ``/diagnostics`` status in the bag), or None."""
+    (:mod:`.whole_vehicle`: its topics and ``/diagnostics`` status in the bag), or None;
+    ``fused``: its fused profile (:class:`.whole_vehicle.FusedRoad`, offline), or None."""
     from road_force_estimator import bagio
     from road_force_estimator.report import raw_road, write_report
 
@@ -176,7 +177,7 @@ def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict,
     if whole is not None:
         from road_force_estimator.pipeline import whole_vehicle
         diagnostics = whole_vehicle.add_diagnostics(diagnostics, whole)
-        streams = whole_vehicle.bag_streams(whole)
+        streams = whole_vehicle.bag_streams(whole) + whole_vehicle.fused_streams(fused)
     written = bagio.write_estimate_bag(
         bag_dir, est, track_width_m=vehicle.track_width_m, diagnostics=diagnostics,
         custom_data=custom, extra_streams=streams)

@@ -44,7 +44,7 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
         whole, vehicle = vehicle, whole_vehicle.front_axle_vehicle()
     plan = plan_drive(input_path, options['mode'], observer, options['reference'],
                       memory_limit_bytes=memory_limit_bytes, vehicle=whole)
-    wv = None
+    wv = fused = None
     if plan.blocks:
         result = blocks.run_blocks(folder, output, input_path, vehicle, observer, options,
                                    stages, progress, samples=plan.samples)
@@ -59,13 +59,15 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
             stages.next(f'estimating the whole vehicle ({options["mode"]})')
             wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'])
             est = whole_vehicle.front_wheels(est, wv)
+            fused = whole_vehicle.fused_profile(wv, whole)
+            est = whole_vehicle.fused_road(est, wv, fused)
         result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
-                                 observer, options, stages, whole=wv)
-    return _whole_vehicle(result, input_path, folder, wv)
+                                 observer, options, stages, whole=wv, fused=fused)
+    return _whole_vehicle(result, input_path, folder, wv, fused)
 
 
 def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path,
-                   wv=None) -> EstimateResult:
+                   wv=None, fused=None) -> EstimateResult:
     """An articulated drive: the note of what was estimated, the whole vehicle's estimate
     ``wv`` (None: not estimated) and the truth of every axle in the report
     (:mod:`~.report.whole_vehicle`)."""
@@ -77,10 +79,12 @@ def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path,
     if wv is not None:
         from road_force_estimator.report.whole_vehicle import append_estimate
         truth = read_articulated_truth(input_path)
-        append_estimate(folder / 'report', wv, truth, result.summary)
+        append_estimate(folder / 'report', wv, truth, result.summary, fused=fused)
+        road = (f'the road fused over the {fused.axles} axles' if fused is not None
+                else 'its road by the front-axle estimator')
         result.notes.append(f'the whole vehicle estimated ({len(wv.axle_names)} axles, '
                             f"{len(wv.stamps_ns)} samples); the front axle's loads and load "
-                            'transfer from its wheels, its road by the front-axle estimator')
+                            f'transfer from its wheels, {road}')
         return result
     if result.drive.notes:
         result.notes += list(result.drive.notes)

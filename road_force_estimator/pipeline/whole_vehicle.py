@@ -14,11 +14,13 @@ the gross vehicle weight (:func:`add_diagnostics`), and the report's section and
 
 The front axle's estimator still runs on the front axle's sensors (package defaults for the
 4-DOF model, :func:`front_axle_vehicle`) for what the whole vehicle's does not give yet: the
-road profile online, the IRI, the observer states.
+road profile online, the observer states. Offline, the axles' roads fused by distance
+(:func:`fused_profile`) go to ``/road_profile/fused/left|right`` and are the drive's road
+(:func:`fused_road`: ``/road_profile/left|right``, the report's profile figures and IRI).
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 
@@ -27,7 +29,9 @@ import numpy as np
 from road_force_estimator.pipeline.result import PROG, InputError
 
 __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
-           'add_diagnostics', 'bag_streams', 'STATUS_NAME']
+           'add_diagnostics', 'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
+           'FusedRoad',
+           'STATUS_NAME']
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
 STATUS_NAME = f'{PROG}: whole vehicle'
@@ -156,3 +160,70 @@ def bag_streams(wv) -> list:
                                  wv.load_n[:, ok],
                                  wv.static_n[:, ok], wv.ltr[:, ok],
                                  wv.ltr_quasi_static[:, ok])
+
+
+@dataclass(frozen=True)
+class FusedRoad:
+    """The fused profile of a drive: both wheel paths (m) at the front axle's distances
+    ``distance_m`` (m), each point stamped with the sample at which the front axle passed it
+    (``stamps_ns``), fused over ``axles`` axles; ``half_track_m`` the front wheels' (m)."""
+
+    stamps_ns: np.ndarray
+    distance_m: np.ndarray
+    left_m: np.ndarray
+    right_m: np.ndarray
+    axles: int
+    half_track_m: float
+
+
+def fused_profile(wv, vehicle) -> FusedRoad | None:
+    """Every axle's offline road fused by distance (:func:`~.estimation.articulated.
+    fuse_roads`: the points the last axle has passed), or None when ``wv`` holds no road
+    (online) or no point is passed by every axle."""
+    from road_force_estimator.estimation.articulated import ArticulatedEstimate, fuse_roads
+
+    if wv.road_m is None or not len(wv.stamps_ns):
+        return None
+    est = ArticulatedEstimate(np.asarray(wv.stamps_ns), np.asarray(wv.distance_m, float),
+                              np.asarray(wv.converged, bool), tuple(wv.wheel_names),
+                              np.asarray(wv.load_n, float),
+                              np.asarray(wv.load_n, float) - np.asarray(wv.static_n, float),
+                              np.asarray(wv.lateral_mps2, float), np.asarray(wv.road_m, float))
+    fused = fuse_roads(est, [a.position_m for a in vehicle.axles])
+    if not fused.distance_m.size:
+        return None
+    keep = np.flatnonzero(est.distance_m + max(a.position_m for a in vehicle.axles)
+                          <= est.distance_m[-1])
+    ok = np.isfinite(fused.left) & np.isfinite(fused.right)
+    return FusedRoad(np.asarray(wv.stamps_ns, np.int64)[keep][ok], fused.distance_m[ok],
+                     fused.left[ok], fused.right[ok], fused.axles,
+                     float(vehicle.axles[0].wheel_half_track_m))
+
+
+def fused_streams(fused: FusedRoad | None) -> list:
+    """The streams of ``/road_profile/fused/left|right`` (none without a fused profile)."""
+    from road_force_estimator.bagio.whole_vehicle_estimates import fused_profile_streams
+
+    if fused is None:
+        return []
+    return fused_profile_streams(fused.stamps_ns, fused.distance_m, fused.left_m,
+                                 fused.right_m, fused.half_track_m)
+
+
+def fused_road(est, wv, fused: FusedRoad | None):
+    """The front axle's estimate ``est`` with the whole vehicle's road offline: the fused
+    profile at the samples it holds, the whole vehicle's front wheels' own road after them
+    (the last metres, where the trailer's axles have not passed); ``est`` as it is online."""
+    if wv.road_m is None:
+        return est
+    stamps = np.asarray(est.stamp_ns, np.int64)
+    road = np.array(est.road_m, float, copy=True)
+    at = np.clip(np.searchsorted(wv.stamps_ns, stamps), 0, len(wv.stamps_ns) - 1)
+    hit = np.asarray(wv.stamps_ns)[at] == stamps
+    road[hit] = np.asarray(wv.road_m, float)[:2, at[hit]].T
+    if fused is not None and len(fused.stamps_ns):
+        k = np.clip(np.searchsorted(fused.stamps_ns, stamps), 0, len(fused.stamps_ns) - 1)
+        on = fused.stamps_ns[k] == stamps
+        road[on, 0] = fused.left_m[k[on]]
+        road[on, 1] = fused.right_m[k[on]]
+    return replace(est, road_m=road)

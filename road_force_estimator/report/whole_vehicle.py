@@ -278,6 +278,22 @@ def _accuracy(wv, truth, use: np.ndarray, names: tuple) -> dict[str, Any]:
             'ltr_trailer_quasi_static_max_error': _nanmax_abs(d)}
 
 
+def _fused_iri(fused) -> dict[str, Any]:
+    """The fused profile's extent and IRI (m/km, left and right; NaN when too short)."""
+    from road_force_estimator.core import iri as iri_mod
+
+    x = np.asarray(fused.distance_m, float)
+    out: dict[str, Any] = {'axles': int(fused.axles), 'points': int(x.size),
+                           'length_m': float(x[-1] - x[0]) if x.size else 0.0,
+                           'iri_m_per_km': [float('nan')] * 2}
+    try:
+        out['iri_m_per_km'] = [float(v) for v in iri_mod.iri(
+            x, np.column_stack([fused.left_m, fused.right_m]))]
+    except ValueError:                   # shorter than the quarter car's start
+        pass
+    return out
+
+
 def estimate_markdown(s: dict[str, Any]) -> list[str]:
     """The estimate's report section (markdown lines)."""
     lines = ['', '## The whole vehicle (estimate)', '',
@@ -304,6 +320,14 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
     lines += ['', '| unit | max abs LTR | max abs quasi-static LTR |', '|---|---|---|']
     for unit, u in s['units'].items():
         lines.append(f'| {unit} | {u["max_abs_ltr"]:.3f} | {u["max_abs_ltr_quasi_static"]:.3f} |')
+    fp = s.get('fused_profile')
+    if fp:
+        left, right = fp['iri_m_per_km']
+        lines += ['', f'The road fused over the {fp["axles"]} axles (`/road_profile/fused/*`, '
+                  f'{fp["length_m"]:.0f} m every axle has passed): IRI {left:.2f} m/km left, '
+                  f"{right:.2f} m/km right. The road, its figures and the segments' IRI above "
+                  "are the fused profile's, the last metres (where the trailer's axles "
+                  "have not passed) the whole vehicle's front wheels' road."]
     if acc:
         lines += ['', f'Against the drive\'s truth ({acc["samples"]} samples): the trailer\'s '
                   'quasi-static LTR error RMS '
@@ -313,13 +337,18 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
 
 
 def append_estimate(folder: str | Path, wv, truth=None,
-                    summary: dict[str, Any] | None = None) -> dict[str, Any]:
+                    summary: dict[str, Any] | None = None, fused=None) -> dict[str, Any]:
     """Add the whole vehicle's estimate to the report folder (``report.md``,
     ``report.json``'s ``whole_vehicle_estimate``, ``segments.csv``'s columns) and, with
     ``truth``, the truth's section; the estimate's numbers (also in
-    ``summary['whole_vehicle_estimate']`` when given)."""
+    ``summary['whole_vehicle_estimate']`` when given). ``fused``: the fused profile
+    (``distance_m``, ``left_m``, ``right_m``, ``axles``; m): its IRI in the section (the
+    report's road, profile figures and segment IRI are already the fused profile's:
+    :func:`~.pipeline.whole_vehicle.fused_road`)."""
     folder = Path(folder)
     s = summarize_estimate(wv, truth)
+    if fused is not None:
+        s['fused_profile'] = _fused_iri(fused)
     if (folder / 'segments.csv').exists():
         _append_segments_csv(folder / 'segments.csv', wv)
     md = folder / 'report.md'
