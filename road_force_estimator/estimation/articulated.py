@@ -52,16 +52,20 @@ class ArticulatedEstimate:
     dynamic_n: np.ndarray
     lateral_mps2: np.ndarray
     road_m: np.ndarray | None = None
+    #: samples whose innovation the gate replaced, per channel (the model's channel order)
+    innovations_gated: tuple = ()
 
     @classmethod
-    def from_rows(cls, stamps_ns, rows: np.ndarray, wheel_names) -> ArticulatedEstimate:
+    def from_rows(cls, stamps_ns, rows: np.ndarray, wheel_names,
+                  gated: tuple = ()) -> ArticulatedEstimate:
         """From the rows (m, columns) of :mod:`.models.articulated_rows` (the road where the
-        rows hold it)."""
+        rows hold it) and the gated counts per channel."""
         cols = columns(len(wheel_names))
         road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
         return cls(np.asarray(stamps_ns), rows[:, DIST], rows[:, CONV] > 0.5,
                    tuple(wheel_names), rows[:, cols['load']].T.copy(),
-                   rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road)
+                   rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road,
+                   tuple(int(g) for g in gated))
 
 
 def _wheel_names(vehicle: ArticulatedParameters) -> tuple:
@@ -147,7 +151,8 @@ class ArticulatedOnline:
 
 def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                          latency_s: float = 0.0, offline: bool = False,
-                         observer: ObserverParameters | None = None) -> ArticulatedEstimate:
+                         observer: ObserverParameters | None = None,
+                         from_equilibrium: bool = False) -> ArticulatedEstimate:
     """Every wheel's load over a drive (one run).
 
     Parameters
@@ -161,18 +166,23 @@ def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, sp
     latency_s : the online estimate's latency (s; 0: the causal filter)
     offline : the smoother instead (``latency_s`` ignored)
     observer : the observer's settings (default: the package's, with ``latency_s``)
+    from_equilibrium : the readings are from the equilibrium already (a ``zero_load``
+        vehicle's taken back by the caller, e.g. by the static-load tracker of
+        :mod:`.whole_vehicle`): :func:`equilibrium_readings` not applied
     """
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     online = ArticulatedOnline(vehicle, latency_s, observer)
-    y = equilibrium_readings(online.model, readings)
+    y = (np.asarray(readings, float) if from_equilibrium
+         else equilibrium_readings(online.model, readings))
     if offline:
         return _offline(online, stamps, y, v, observer)
     rows = []
     for s, yi, vi in zip(stamps.tolist(), y.tolist(), v.tolist()):
         rows += [r for _, r in online.step(s, yi, vi)]
     rows += [r for _, r in online.finish()]
-    return ArticulatedEstimate.from_rows(stamps, np.array(rows), online.wheel_names)
+    return ArticulatedEstimate.from_rows(stamps, np.array(rows), online.wheel_names,
+                                         tuple(online.core.gated))
 
 
 def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np.ndarray,
@@ -190,7 +200,8 @@ def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np
     rows[:, cols['dynamic']] += dyn.T
     dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
     rows[:, DIST] = dist
-    return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names)
+    return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names,
+                                         tuple(smoother.gated.tolist()))
 
 
 #: The fused profile: a wheel's reading counts while its estimated load is at least this

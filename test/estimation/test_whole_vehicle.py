@@ -71,3 +71,104 @@ def test_static_loads_sum_to_the_statics_and_ltr_follows_the_truth(drive):
         assert np.all(qs < 0.005), qs
         assert np.all(inst < 0.03), inst
         assert offline is False or np.all(inst < 0.01)
+
+
+# -- weigh in motion: zero-load readings, the payload unknown ----------------------------------
+
+WIM_S = 20.0
+WIM_SKIP_M = 200.0
+
+
+def _drive(values: dict, duration_s: float, road_class: str = 'C', seed: int = 11):
+    """The plant and its sensors on the file's combination with ``values``: the plant's
+    vehicle, its truth, stamps, readings, its statics (axles, 2) and the sensors."""
+    base = load_params_file(CONFIG)
+    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
+                 'simulator.duration': duration_s, **values})
+    d = ArticulatedDrive.from_values(base)
+    road = iso8608_profile(road_class, d.road_length_m, seed=seed)
+    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
+                              duration_s=duration_s, tire_envelope_m=0.25, model=d.model)
+    sensors = d.sensors(channel_names(d.model))
+    y = sensors.measure(tr)
+    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    return d.vehicle, tr, stamps, y, d.model.statics().output_wheel_load_n, sensors
+
+
+def _file_vehicle(values: dict):
+    base = load_params_file(CONFIG)
+    base.update(values)
+    return ArticulatedDrive.from_values(base).vehicle
+
+
+@pytest.fixture(scope='module')
+def wim_drive():
+    """20 s of class C at 20 m/s read from the springs' zero, the plant's trailer 4 t lighter
+    than the file's and 1.5 kN of tanh friction on every spring (the file: none)."""
+    return _drive({'vehicle.deflection_reference': 'zero_load',
+                   'vehicle.trailer.mass': 25000.0,
+                   'vehicle.leaf_spring_friction': [1500.0, 1500.0]}, WIM_S)
+
+
+def test_weigh_in_motion_finds_an_unknown_payload(wim_drive):
+    """Gross weight within 1 % after 200 m, each axle's mean static load over 200-400 m within
+    2 % of the plant's statics (bench.accuracy.articulated_wim: 0.2 % and 0.1 % over 100 s),
+    where the file's statics are 10 % off the gross; 0 ms and 10 ms give the same statics,
+    and with 10 ms every wheel's mean load (static + dynamic) is the truth's to 1 %."""
+    _, tr, stamps, y, static, _ = wim_drive
+    vehicle = _file_vehicle({'vehicle.deflection_reference': 'zero_load'})
+    file_static = WholeVehicleEstimator(vehicle).static_n
+    assert abs(sum(file_static) / static.sum() - 1.0) > 0.1     # the payload is unknown
+    x = tr.distance_m - tr.distance_m[0]
+    after = x >= WIM_SKIP_M
+    a = estimate_whole_vehicle(vehicle, stamps, y, 20.0)
+    assert np.max(np.abs(a.gross_weight_n[after] / static.sum() - 1.0)) < 0.01
+    axle = a.axle_load_n[:, after].mean(axis=1)
+    np.testing.assert_allclose(axle, static.sum(axis=1), rtol=0.02)
+    b = estimate_whole_vehicle(vehicle, stamps, y, 20.0,
+                               observer=ObserverParameters(latency_s=0.01))
+    np.testing.assert_array_equal(a.static_n, b.static_n)
+    np.testing.assert_allclose(b.load_n[:, after].mean(axis=1),
+                               tr.wheel_load_n[after].mean(axis=0), rtol=0.01)
+
+
+def test_weigh_in_motion_per_sample_and_drive_give_the_same_bits(wim_drive):
+    """With the static-load tracker on: the per-sample path and the drive's, online, the same
+    bits; offline the same static loads (the same tracker)."""
+    _, _, stamps, y, static, _ = wim_drive
+    vehicle = _file_vehicle({'vehicle.deflection_reference': 'zero_load'})
+    m = 2000
+    obs = ObserverParameters(latency_s=0.01)
+    batch = estimate_whole_vehicle(vehicle, stamps[:m], y[:m], 20.0, observer=obs)
+    est = WholeVehicleEstimator(vehicle, obs)
+    samples = []
+    for s, yi in zip(stamps[:m].tolist(), y[:m].tolist()):
+        samples += est.step(s, yi, 20.0)
+    samples += est.finish()
+    assert [s.stamp_ns for s in samples] == stamps[:m].tolist()
+    np.testing.assert_array_equal(np.array([s.load_n for s in samples]).T, batch.load_n)
+    np.testing.assert_array_equal(np.array([s.static_n for s in samples]).T, batch.static_n)
+    assert est.static_n == samples[-1].static_n
+    offline = estimate_whole_vehicle(vehicle, stamps[:m], y[:m], 20.0, offline=True)
+    np.testing.assert_array_equal(offline.static_n, batch.static_n)
+
+
+# -- spikes: the innovation gate ---------------------------------------------------------------
+
+SPIKES = ('spikes@drive_left_suspension:count=3,size=5e-4,start=3;'
+          'spikes@trailer_2_right_suspension:count=2,size=5e-4,start=3')
+
+
+def test_every_spike_is_gated_on_its_channel_in_every_mode():
+    """Five 0.5 mm spikes (the plant's faults) on two deflections: each gated once on its
+    channel and nothing else gated, online (0 and 10 ms, also per sample) and offline."""
+    vehicle, _, stamps, y, _, sensors = _drive({'simulator.sensor_faults': SPIKES}, 8.0)
+    struck = {f['channel']: len(f['samples']) for f in sensors.faults.truth()}
+    assert struck == {'drive_left_suspension': 3, 'trailer_2_right_suspension': 2}
+    for obs, offline in ((ObserverParameters(), False),
+                         (ObserverParameters(latency_s=0.01), False),
+                         (ObserverParameters(), True)):
+        a = estimate_whole_vehicle(vehicle, stamps, y, 20.0, observer=obs, offline=offline)
+        assert a.channel_names == sensors.names
+        assert dict(zip(a.channel_names, a.innovations_gated)) == {
+            n: struck.get(n, 0) for n in sensors.names}
