@@ -7,6 +7,7 @@ Run from the repository root::
         [--sweep-seconds 4] [--json FILE]
     .venv/bin/python bench/probes/node_latency.py --plant 5000 [--seconds 10]
     python -m bench.probes.node_latency --articulated [--node observer|bare] [--sweep '']
+        [--warm-up 1]
 
 The observer runs in its own process (as ``ros2 run`` starts it: its ``main`` with the
 EventsExecutor, or ``--executor single`` for rclpy's SingleThreadedExecutor). This process is
@@ -92,6 +93,23 @@ def input_encoders(joints=api.DEFLECTION_JOINTS) -> tuple[CdrEncoder, CdrEncoder
         api.JOINT_STATE, api.BASE_FRAME, joints), ['position']),
             CdrEncoder(api.TWIST_STAMPED, message_template(api.TWIST_STAMPED, api.BASE_FRAME),
                        ['twist.linear.x']))
+
+
+def articulated_drive(seconds: float) -> list[tuple]:
+    """The readings of ``/suspension/deflections`` of MODEL.md's combination on class C at
+    20 m/s and 1 kHz (``simulate_bag``, sensor noise of the file), ``seconds`` long: what the
+    articulated observer takes in a drive (its noise and roughness estimates settle, as they
+    do on a road; sinusoids kept it designing new gains)."""
+    import tempfile
+
+    from road_force_estimator.bagio.articulated_readings import read_articulated_readings
+    from road_force_estimator.tools.simulate_bag import main as simulate_bag
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = pathlib.Path(tmp) / 'drive'
+        simulate_bag(['--params-file', str(ARTICULATED_CONFIG), '--road', 'iso8608:C:seed=1',
+                      '--duration', f'{seconds:g}', '--output', str(bag), '--no-progress'])
+        got = read_articulated_readings(bag, ARTICULATED_JOINTS)
+    return [tuple(r) for r in got.readings.tolist()]
 
 
 def stamp_ns_of(data: bytes) -> int:
@@ -212,6 +230,7 @@ class Driver(Node):
     def __init__(self, context, articulated: bool = False):
         super().__init__('latency_driver', context=context)
         self.articulated = articulated
+        self.drive: list[tuple] = []
         self.deflections = self.create_publisher(message_class(api.JOINT_STATE),
                                                  api.DEFLECTIONS, sensor_qos(1000))
         self.twist = self.create_publisher(message_class(api.TWIST_STAMPED), api.TWIST,
@@ -227,11 +246,13 @@ class Driver(Node):
                                  self.states_callback, reliable_qos(10000), raw=True)
 
     def readings(self, t: float) -> tuple:
-        """The deflections (m) and rolls (rad) at ``t`` (s): sinusoids inside the range."""
-        a, b = 2e-3 * math.sin(2 * math.pi * 2.0 * t), 1e-3 * math.sin(2 * math.pi * 1.0 * t)
-        if not self.articulated:
-            return a, 0.0, b
-        return (a, 0.0) * len(AXLES) + (b, 0.5 * b)
+        """The deflections (m) and rolls (rad) at ``t`` (s): sinusoids inside the range; the
+        articulated truck's: a simulated drive's readings (:func:`articulated_drive`),
+        sample ``round(t * 1000)``, from its start again at its end."""
+        if self.articulated:
+            return self.drive[round(t * 1000.0) % len(self.drive)]
+        return (2e-3 * math.sin(2 * math.pi * 2.0 * t), 0.0,
+                1e-3 * math.sin(2 * math.pi * 1.0 * t))
 
     def states_callback(self, data: bytes) -> None:
         now = time.perf_counter_ns()
@@ -368,6 +389,9 @@ def main(argv=None) -> int:
     parser.add_argument('--repeats', type=int, default=1)
     parser.add_argument('--executor', choices=('events', 'single'), default='events')
     parser.add_argument('--node', choices=('observer', 'bare'), default='observer')
+    parser.add_argument('--warm-up', type=float, default=1.0, metavar='S',
+                        help='seconds of input before the measurement (the articulated '
+                             "estimator's first gain designs take about 1 s of CPU)")
     parser.add_argument('--articulated', action='store_true',
                         help='vehicle.model: articulated, 5 axles, every output')
     parser.add_argument('--sweep', default='1000,2000,5000,8000,12000')
@@ -401,6 +425,8 @@ def measure_node(args) -> dict:
     from rclpy.experimental import EventsExecutor
     executor = EventsExecutor(context=context)
     driver = Driver(context, args.articulated)
+    if args.articulated:     # the warm-up, the repeats and the sweep, then from the start
+        driver.drive = articulated_drive(args.warm_up + args.seconds * args.repeats + 0.5)
     executor.add_node(driver)
     results = {'executor': args.executor, 'node': args.node,
                'vehicle': 'articulated' if args.articulated else 'front_axle'}
@@ -409,7 +435,7 @@ def measure_node(args) -> dict:
         while (driver.deflections.get_subscription_count() == 0
                or driver.twist.get_subscription_count() == 0) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        run(executor, driver, args.rate, 1.0)  # warm-up
+        run(executor, driver, args.rate, args.warm_up)  # warm-up
         results.update(measure(executor, driver, child.pid, args))
         results.update(sweep(executor, driver, args))
     finally:

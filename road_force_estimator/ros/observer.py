@@ -28,6 +28,10 @@ the core. Log lines and diagnostic values are bounded in size (:data:`.messages.
 Live parameter changes are vetted (:class:`.ros_parameters.ParameterGuard`); a good one
 rebuilds the estimator, which restarts.
 
+With ``vehicle.model: articulated`` given at start (``-p`` or ``--params-file``) the node
+estimates the whole tractor and semi-trailer instead (:mod:`.whole_vehicle_observer`: its
+parameters, inputs, outputs and diagnostics); a live set cannot switch the model.
+
 Started after its publisher, the observer says what it missed: when a publisher's
 ``/diagnostics`` give the stamp of its first measurement (``first_stamp_ns:<topic>``:
 plant_simulator, bag_player), the samples before the observer's first input (that gap over
