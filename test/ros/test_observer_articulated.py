@@ -147,7 +147,7 @@ def test_the_articulated_observer_beside_the_plant(ros_context):
     assert abs(len(statics) - 10 * DURATION_S) <= 2
     assert all(list(m.name) == list(WHEELS) for m in statics)
     np.testing.assert_array_equal(statics[0].effort, ref.static_n[:, 0])
-    assert sum(statics[0].effort) == pytest.approx(40.2e3 * 9.81, rel=2e-3)
+    assert sum(statics[0].effort) == pytest.approx(40.2e3 * 9.80665, rel=2e-3)
     left = [deserialize_message(d, WrenchStamped) for d in raw.data[api.STATIC_LOAD[0]]]
     assert len(left) == len(statics) and left[0].wrench.force.z == ref.static_n[0, 0]
 
@@ -201,11 +201,11 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
             feeder.deflections.publish(deflections(stamp, n, v))
             executor.spin_once(timeout_sec=0.002)
 
-        def totals() -> dict:
+        def totals(name: str = 'observer: input') -> dict:
             out = {}
             for arr in feeder.statuses:
                 for st in arr.status:
-                    if st.name == 'observer: input':
+                    if st.name == name:
                         out.update({kv.key: kv.value for kv in st.values})
             return out
 
@@ -218,3 +218,11 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
     assert got['total.published'] == '10'
     assert loads.stamps(api.WHEEL_LOADS) == [s for s, n, v in plan if n == names][:5] + [
         t0 + k * 10**6 for k in range(7, 12)]
+    # the weights: MODEL.md's axle loads (docs/articulated.md "Statics and modes": 6.624,
+    # 10.732, 8.004, 7.615, 7.225 t) and 40.2 t in all; every channel's gate count
+    est = totals('observer: estimator')
+    for axle, tonnes in zip(AXLES, (6.624, 10.732, 8.004, 7.615, 7.225)):
+        assert float(est[f'static_load_{axle}_n']) == pytest.approx(tonnes * 1e3 * 9.80665,
+                                                                     rel=1e-3)
+    assert float(est['gross_weight_n']) == pytest.approx(40.2e3 * 9.80665, rel=1e-3)
+    assert all(f'total.innovations_gated.{c}' in est for c in names)
