@@ -6,6 +6,8 @@ Run from the repository root::
         [--executor events] [--node observer|bare] [--sweep 1000,2000,5000,8000,12000]
         [--sweep-seconds 4] [--json FILE]
     .venv/bin/python bench/probes/node_latency.py --plant 5000 [--seconds 10]
+    python -m bench.probes.node_latency --articulated [--node observer|bare] [--sweep '']
+        [--warm-up 1]
 
 The observer runs in its own process (as ``ros2 run`` starts it: its ``main`` with the
 EventsExecutor, or ``--executor single`` for rclpy's SingleThreadedExecutor). This process is
@@ -34,6 +36,14 @@ and the two static loads every 100th: rclpy, rmw and DDS alone, no estimate.
 ``--plant RATE`` measures the plant_simulator node instead (``main`` in its own process, the
 default ISO road, ``--seconds`` of drive at ``RATE`` Hz, real time): its CPU share and whether
 it kept up (every sample arrived here within the drive's time, its lag in the diagnostics).
+
+``--articulated``: the observer with ``config/tractor_semitrailer.yaml`` (``vehicle.model:
+articulated``, 5 axles): the driver publishes the 12 joints of ``/suspension/deflections``
+(both sides of 5 axles and both rolls, sinusoids) and takes ``/load_transfer``, the last of the
+seven messages the node publishes per input (``/wheel_loads``, the three units' load
+transfer, the front axle's two loads and ``/load_transfer``); the bare node publishes seven
+cached messages of the same types and sizes (``/load_transfer`` last, the input's stamp
+copied in) and the three static-load messages every 100th.
 
 The machine is shared (other work may run): numbers vary by tens of percent between runs.
 """
@@ -67,16 +77,39 @@ MAX_MEDIAN_S = 0.005
 STAMP0_NS = 1_700_000_000 * 10**9
 STAMP = struct.Struct('<iI')   # header.stamp, right after the 4-byte CDR encapsulation header
 OUTPUTS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES)  # states last
+#: --articulated: MODEL.md's 5-axle combination and its channels
+ARTICULATED_CONFIG = REPO / 'config' / 'tractor_semitrailer.yaml'
+AXLES = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
+ARTICULATED_JOINTS = api.articulated_deflection_joints(AXLES, True)
+ARTICULATED_OUTPUTS = (api.WHEEL_LOADS, *api.UNIT_LOAD_TRANSFER, *api.LOAD,
+                       api.LOAD_TRANSFER)   # /load_transfer last, as the node sends them
 
 
-def input_encoders() -> tuple[CdrEncoder, CdrEncoder]:
-    """Encoders of ``/suspension/deflections`` and ``/vehicle/twist`` as our publishers send
-    them (test_wire: the bytes rmw sends for :func:`.messages.deflections_msg` and
-    :func:`.messages.twist_msg`)."""
+def input_encoders(joints=api.DEFLECTION_JOINTS) -> tuple[CdrEncoder, CdrEncoder]:
+    """Encoders of ``/suspension/deflections`` (of ``joints``) and ``/vehicle/twist`` as our
+    publishers send them (test_wire: the bytes rmw sends for
+    :func:`.messages.deflections_msg` and :func:`.messages.twist_msg`)."""
     return (CdrEncoder(api.JOINT_STATE, message_template(
-        api.JOINT_STATE, api.BASE_FRAME, api.DEFLECTION_JOINTS), ['position']),
+        api.JOINT_STATE, api.BASE_FRAME, joints), ['position']),
             CdrEncoder(api.TWIST_STAMPED, message_template(api.TWIST_STAMPED, api.BASE_FRAME),
                        ['twist.linear.x']))
+
+
+def articulated_drive(seconds: float) -> list[tuple]:
+    """The readings of ``/suspension/deflections`` of MODEL.md's combination on class C at
+    20 m/s and 1 kHz (``simulate_bag``, sensor noise of the file), ``seconds`` long: what the
+    articulated observer takes in a drive (its noise and roughness estimates settle, as they
+    do on a road; sinusoids kept it designing new gains)."""
+    import tempfile
+
+    from road_force_estimator.bagio.articulated_readings import read_articulated_readings
+    from road_force_estimator.tools.simulate_bag import main as simulate_bag
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = pathlib.Path(tmp) / 'drive'
+        simulate_bag(['--params-file', str(ARTICULATED_CONFIG), '--road', 'iso8608:C:seed=1',
+                      '--duration', f'{seconds:g}', '--output', str(bag), '--no-progress'])
+        got = read_articulated_readings(bag, ARTICULATED_JOINTS)
+    return [tuple(r) for r in got.readings.tolist()]
 
 
 def stamp_ns_of(data: bytes) -> int:
@@ -117,15 +150,64 @@ class BareNode(Node):
                 pub.publish(out)
 
 
-def serve_observer(executor_kind: str, bare: bool = False) -> int:
+class BareArticulatedNode(Node):
+    """The floor of the articulated observer: its subscriptions, seven cached messages of its
+    types and sizes per input, the three static-load messages every 100th; no estimate."""
+
+    def __init__(self):
+        super().__init__('observer')
+        base, t = api.BASE_FRAME, STAMP0_NS
+        wheels = api.wheel_joints(AXLES)
+        loads = CdrEncoder(api.JOINT_STATE, message_template(api.JOINT_STATE, base, wheels,
+                                                             effort=True), ['effort'])
+        vector = CdrEncoder(api.VECTOR3_STAMPED, message_template(api.VECTOR3_STAMPED, base),
+                            ['vector.x', 'vector.y', 'vector.z'])
+        wrench = [CdrEncoder(api.WRENCH, message_template(api.WRENCH, f), ['wrench.force.z'])
+                  for f in api.WHEEL_FRAMES]
+        self.cached = [loads.encode(t, (1.0,) * len(wheels)), *(
+            vector.encode(t, (0.0, 0.0, 0.0)) for _ in range(3)),
+            *(w.encode(t, (1.0,)) for w in wrench)]
+        self.last = vector.encode(t, (0.0, 0.0, 0.0))
+        self.static = [self.cached[0], *self.cached[4:6]]
+        types = {api.WHEEL_LOADS: api.JOINT_STATE, api.LOAD_TRANSFER: api.VECTOR3_STAMPED,
+                 **{u: api.VECTOR3_STAMPED for u in api.UNIT_LOAD_TRANSFER},
+                 **{w: api.WRENCH for w in api.LOAD}}
+        pubs = [self.create_publisher(message_class(types[topic]), topic, reliable_qos(1000))
+                for topic in ARTICULATED_OUTPUTS]
+        self.send = [p.handle.publish_raw for p in pubs[:-1]]
+        self.send_last = pubs[-1].handle.publish_raw
+        static = [self.create_publisher(message_class(api.JOINT_STATE),
+                                        api.STATIC_WHEEL_LOADS, reliable_qos(1000))]
+        static += [self.create_publisher(message_class(api.WRENCH), topic, reliable_qos(1000))
+                   for topic in api.STATIC_LOAD]
+        self.send_static = [p.handle.publish_raw for p in static]
+        self.k = 0
+        self.create_subscription(message_class(api.JOINT_STATE), api.DEFLECTIONS,
+                                 self.deflections_callback, sensor_qos(1000), raw=True)
+        self.create_subscription(message_class(api.TWIST_STAMPED), api.TWIST,
+                                 lambda data: None, sensor_qos(10), raw=True)
+
+    def deflections_callback(self, data: bytes) -> None:
+        for send, out in zip(self.send, self.cached):
+            send(out)
+        self.send_last(self.last[:4] + data[4:12] + self.last[12:])
+        self.k += 1
+        if self.k % 100 == 0:
+            for send, out in zip(self.send_static, self.static):
+                send(out)
+
+
+def serve_observer(executor_kind: str, bare: bool = False, articulated: bool = False) -> int:
     """The observer node (or the bare node), spun like its main() does, with the chosen
-    executor."""
+    executor; ``articulated``: with MODEL.md's combination (or its bare floor)."""
     if bare:
         from road_force_estimator.ros.node_runner import run_node
-        return run_node('bare', 'bare node', (), ['bare'], BareNode)
+        return run_node('bare', 'bare node', (), ['bare'],
+                        BareArticulatedNode if articulated else BareNode)
     if executor_kind == 'events':
         from road_force_estimator.ros.observer import main
-        return main(['observer'])
+        return main(['observer'] + (['--ros-args', '--params-file', str(ARTICULATED_CONFIG)]
+                                    if articulated else []))
     from rclpy.executors import SingleThreadedExecutor
 
     from road_force_estimator.ros.observer import Observer
@@ -145,18 +227,32 @@ def serve_observer(executor_kind: str, bare: bool = False) -> int:
 
 
 class Driver(Node):
-    def __init__(self, context):
+    def __init__(self, context, articulated: bool = False):
         super().__init__('latency_driver', context=context)
+        self.articulated = articulated
+        self.drive: list[tuple] = []
         self.deflections = self.create_publisher(message_class(api.JOINT_STATE),
                                                  api.DEFLECTIONS, sensor_qos(1000))
         self.twist = self.create_publisher(message_class(api.TWIST_STAMPED), api.TWIST,
                                            reliable_qos())
-        self.encoders = input_encoders()
+        self.encoders = input_encoders(ARTICULATED_JOINTS if articulated else
+                                       api.DEFLECTION_JOINTS)
         self.next_stamp_ns = STAMP0_NS
         self.sent: dict[int, int] = {}
         self.latency_ns: list[int] = []
-        self.create_subscription(message_class(api.JOINT_STATE), api.STATES,
+        last = ((api.VECTOR3_STAMPED, api.LOAD_TRANSFER) if articulated else
+                (api.JOINT_STATE, api.STATES))
+        self.create_subscription(message_class(last[0]), last[1],
                                  self.states_callback, reliable_qos(10000), raw=True)
+
+    def readings(self, t: float) -> tuple:
+        """The deflections (m) and rolls (rad) at ``t`` (s): sinusoids inside the range; the
+        articulated truck's: a simulated drive's readings (:func:`articulated_drive`),
+        sample ``round(t * 1000)``, from its start again at its end."""
+        if self.articulated:
+            return self.drive[round(t * 1000.0) % len(self.drive)]
+        return (2e-3 * math.sin(2 * math.pi * 2.0 * t), 0.0,
+                1e-3 * math.sin(2 * math.pi * 1.0 * t))
 
     def states_callback(self, data: bytes) -> None:
         now = time.perf_counter_ns()
@@ -180,8 +276,7 @@ def run(executor, driver: Driver, rate_hz: float, seconds: float) -> dict:
             executor.spin_once(timeout_sec=left * 1e-9)
         stamp = driver.next_stamp_ns + int(k * period_ns)
         t = (stamp - STAMP0_NS) * 1e-9
-        data = deflections.encode(stamp, (2e-3 * math.sin(2 * math.pi * 2.0 * t), 0.0,
-                                          1e-3 * math.sin(2 * math.pi * 1.0 * t)))
+        data = deflections.encode(stamp, driver.readings(t))
         speed = twist.encode(stamp, (20.0,))
         driver.sent[stamp] = time.perf_counter_ns()
         driver.twist.publish(speed)  # as the plant_simulator: every sample
@@ -294,6 +389,11 @@ def main(argv=None) -> int:
     parser.add_argument('--repeats', type=int, default=1)
     parser.add_argument('--executor', choices=('events', 'single'), default='events')
     parser.add_argument('--node', choices=('observer', 'bare'), default='observer')
+    parser.add_argument('--warm-up', type=float, default=1.0, metavar='S',
+                        help='seconds of input before the measurement (the articulated '
+                             "estimator's first gain designs take about 1 s of CPU)")
+    parser.add_argument('--articulated', action='store_true',
+                        help='vehicle.model: articulated, 5 axles, every output')
     parser.add_argument('--sweep', default='1000,2000,5000,8000,12000')
     parser.add_argument('--sweep-seconds', type=float, default=4.0)
     parser.add_argument('--plant', type=float, metavar='RATE')
@@ -303,7 +403,7 @@ def main(argv=None) -> int:
     parser.add_argument('--serve-bare', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve_observer or args.serve_bare:
-        return serve_observer(args.serve_observer, args.serve_bare)
+        return serve_observer(args.serve_observer, args.serve_bare, args.articulated)
     if args.plant:
         results = measure_plant(args.plant, args.seconds)
     else:
@@ -317,21 +417,25 @@ def measure_node(args) -> dict:
     """The observer (or bare) node in a child process, driven from this one."""
     isolated_ros()
     serve = ['--serve-bare'] if args.node == 'bare' else ['--serve-observer', args.executor]
+    serve += ['--articulated'] if args.articulated else []
     child = subprocess.Popen([sys.executable, __file__, *serve], cwd=REPO,
                              stderr=None if args.verbose else subprocess.DEVNULL)
     context = Context()
     rclpy.init(context=context)
     from rclpy.experimental import EventsExecutor
     executor = EventsExecutor(context=context)
-    driver = Driver(context)
+    driver = Driver(context, args.articulated)
+    if args.articulated:     # the warm-up, the repeats and the sweep, then from the start
+        driver.drive = articulated_drive(args.warm_up + args.seconds * args.repeats + 0.5)
     executor.add_node(driver)
-    results = {'executor': args.executor, 'node': args.node}
+    results = {'executor': args.executor, 'node': args.node,
+               'vehicle': 'articulated' if args.articulated else 'front_axle'}
     try:
         deadline = time.monotonic() + 30.0
         while (driver.deflections.get_subscription_count() == 0
                or driver.twist.get_subscription_count() == 0) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        run(executor, driver, args.rate, 1.0)  # warm-up
+        run(executor, driver, args.rate, args.warm_up)  # warm-up
         results.update(measure(executor, driver, child.pid, args))
         results.update(sweep(executor, driver, args))
     finally:

@@ -28,6 +28,10 @@ the core. Log lines and diagnostic values are bounded in size (:data:`.messages.
 Live parameter changes are vetted (:class:`.ros_parameters.ParameterGuard`); a good one
 rebuilds the estimator, which restarts.
 
+With ``vehicle.model: articulated`` given at start (``-p`` or ``--params-file``) the node
+estimates the whole tractor and semi-trailer instead (:mod:`.whole_vehicle_observer`: its
+parameters, inputs, outputs and diagnostics); a live set cannot switch the model.
+
 Started after its publisher, the observer says what it missed: when a publisher's
 ``/diagnostics`` give the stamp of its first measurement (``first_stamp_ns:<topic>``:
 plant_simulator, bag_player), the samples before the observer's first input (that gap over
@@ -55,8 +59,10 @@ from road_force_estimator.estimation import Estimator, diagnostics, fit_check
 from road_force_estimator.ros.messages import bounded, diagnostic_status, reliable_qos
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.observer_input import MAX_WAITING, ObserverInput
-from road_force_estimator.ros.ros_parameters import ParameterGuard, specs_with_prefix
+from road_force_estimator.ros.ros_parameters import (
+    ParameterGuard, articulated_requested, specs_with_prefix)
 from road_force_estimator.ros.start_gate import first_stamps
+from road_force_estimator.ros.whole_vehicle_observer import WholeVehicleObserver
 from road_force_estimator.ros.wire import Wire
 
 SPECS = specs_with_prefix('vehicle.', 'observer.')
@@ -87,9 +93,9 @@ MISSED_BEFORE_MAX_NS = 3600 * 10**9  # a publisher's first stamp further back: a
 
 def build(values):
     if values.get('vehicle.model') == 'articulated':
-        raise ValueError("vehicle.model = 'articulated': the observer models the front axle only "
-                         '(the articulated observer is not built yet); with front-axle '
-                         "parameters it estimates an articulated truck's front axle")
+        raise ValueError("vehicle.model = 'articulated': the vehicle model is set at start "
+                         '(-p or --params-file); with front-axle parameters the observer '
+                         "estimates an articulated truck's front axle")
     return VehicleParameters.from_parameters(values), ObserverParameters.from_parameters(values)
 
 
@@ -110,6 +116,11 @@ class Observer(Node):
 
     def __init__(self, **kwargs):
         super().__init__('observer', **kwargs)
+        #: vehicle.model: articulated given at start: the whole vehicle's mode, else None
+        self.whole = None
+        if articulated_requested(self):
+            self.whole = WholeVehicleObserver(self, SPECS)
+            return
         self.lock = threading.RLock()      # the estimator and counters: input thread, executor
         self.params = ParameterGuard(self, SPECS, build, self.reconfigure)
         self.period, self.total = Counter(), Counter()   # node-side counters
@@ -179,6 +190,9 @@ class Observer(Node):
     def finish(self) -> None:
         """Estimate what is still queued, publish the estimates still held back
         (``observer.latency`` > 0) before leaving."""
+        if self.whole is not None:
+            self.whole.finish()
+            return
         self.input.stop()
         with self.lock:
             for est in self.estimator.flush():
@@ -411,7 +425,7 @@ class Observer(Node):
 
 
     def destroy_node(self):
-        self.input.destroy()
+        (self.whole or self.input).destroy()
         super().destroy_node()
 
 

@@ -56,18 +56,25 @@ class ObserverInput:
     context : rclpy Context
     sample : callable
         ``sample(stamp_ns, (q1, q2), phi, speed_mps)`` for every sample to estimate, in
-        order (from the take thread).
+        order (from the take thread); with ``read``: ``sample(stamp_ns, *rest, speed_mps)``.
     reject : callable
         ``reject(reason, text)`` for every message not used (bounded text).
+    read : callable, optional
+        ``read(data) -> (stamp_ns, *rest)`` of a ``/suspension/deflections`` message's bytes
+        (raising :class:`.MessageRejected`); default the front axle's
+        (:meth:`.Wire.read_deflections`). The articulated observer reads every joint
+        (:mod:`.whole_vehicle_observer`).
     """
 
-    def __init__(self, owner: str, context, sample: Callable, reject: Callable) -> None:
+    def __init__(self, owner: str, context, sample: Callable, reject: Callable,
+                 read: Callable | None = None) -> None:
         self.loop = TakeLoop(owner, context, batch=QUEUE_DEPTH)
         self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH))
         self.deflection_index = self.loop.add(JointState, api.DEFLECTIONS,
                                               sensor_qos(QUEUE_DEPTH))
         self.sample, self.reject = sample, reject
         self.wire = Wire()
+        self.read = self.wire.read_deflections if read is None else read
         self.sources = Sources()
         self.twists: deque = deque(maxlen=TWISTS_KEPT)     # (stamp_ns, speed), as taken
         self.first_speed = None
@@ -98,8 +105,8 @@ class ObserverInput:
             self.first_speed = speed
         self.twists.append((stamp, speed))
         while self.waiting:
-            stamp, q, phi = self.waiting.popleft()
-            self.sample(stamp, q, phi, self.speed_at(stamp))
+            stamp, *rest = self.waiting.popleft()
+            self.sample(stamp, *rest, self.speed_at(stamp))
 
     def _deflection(self, m, now: float) -> None:
         self.received += 1
@@ -110,7 +117,7 @@ class ObserverInput:
                                          'its samples are not mixed in')
             return
         try:
-            stamp, q, phi = self.wire.read_deflections(m.data)
+            stamp, *rest = self.read(m.data)
         except MessageRejected as exc:
             self.reject(exc.reason, str(exc))
             return
@@ -118,9 +125,9 @@ class ObserverInput:
             if len(self.waiting) == MAX_WAITING:
                 self.waiting.popleft()
                 self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
-            self.waiting.append((stamp, q, phi))
+            self.waiting.append((stamp, *rest))
             return
-        self.sample(stamp, q, phi, self.speed_at(stamp))
+        self.sample(stamp, *rest, self.speed_at(stamp))
 
     def speed_at(self, stamp: int) -> float:
         """The speed of the latest twist stamped at or before ``stamp`` (the first twist's

@@ -42,12 +42,11 @@ from road_force_estimator.core.gnss import FixNoise, route
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.ros.messages import (
     diagnostic_status, ns_to_stamp, reliable_qos, sensor_qos)
-from road_force_estimator.core.articulated_parameters import axle_specs, check_model_names
+from road_force_estimator.core.articulated_parameters import check_model_names
 from road_force_estimator.core.articulated_plant import RowLayout
 from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.lateral_profile import parse_lateral_profile
-from road_force_estimator.core.parameters import (
-    ARTICULATED_PARAMETERS, SimulatorParameters, VehicleParameters, validate_parameter)
+from road_force_estimator.core.parameters import SimulatorParameters, VehicleParameters
 from road_force_estimator.core.plant import Plant
 from road_force_estimator.core.speed_profile import (profile_distance, read_speed_profile,
                                                      speed_knots)
@@ -56,7 +55,8 @@ from road_force_estimator.ros.articulated_outputs import ArticulatedOutputs
 from road_force_estimator.ros.live_road import TOPIC_ROAD, LiveRoad
 from road_force_estimator.ros.node_runner import run_node
 from road_force_estimator.ros.ros_parameters import (
-    ParameterError, ParameterGuard, local_spec, specs_with_prefix)
+    ParameterError, ParameterGuard, articulated_names, articulated_specs, local_spec,
+    specs_with_prefix)
 from road_force_estimator.ros.start_gate import SETTLE_S, SubscriberGate, first_stamp_values
 from road_force_estimator.ros.wire import SimulatorWire
 from road_force_estimator.core.sensors import SensorModel
@@ -65,8 +65,7 @@ from road_force_estimator.core.vehicle_model import SpringOptions
 MAX_SYNTHETIC_LENGTH_M = 200e3  # a synthetic road longer than this is cut (memory)
 #: vehicle.model: articulated: its names beside the shared ones (the per-axle names are
 #: declared from vehicle.axles, :func:`articulated_specs`)
-ARTICULATED = tuple(s for s in ARTICULATED_PARAMETERS
-                    if s.name.startswith(('vehicle.', 'simulator.')))
+ARTICULATED = articulated_names('vehicle.', 'simulator.')
 SPECS = specs_with_prefix('vehicle.', 'simulator.') + ARTICULATED + (local_spec(
     'realtime_factor', 'double', 1.0, '',
     'simulated seconds per wall-clock second (1 = real time)', 0.01, 100.0), local_spec(
@@ -101,29 +100,6 @@ def build(values, given=()):
         vehicle = VehicleParameters.from_parameters(values)
     return (vehicle, SimulatorParameters.from_parameters(values),
             values['realtime_factor'], values['start_timeout'], values['road_timeout'])
-
-
-def articulated_specs(node) -> tuple:
-    """The per-axle specs of an articulated vehicle given at start (``vehicle.model:
-    articulated`` among the start-up values: the axles of ``vehicle.axles``, defaults from
-    the whole-vehicle values given), else none.
-
-    Raises
-    ------
-    ParameterError
-        A name the vehicle does not have (one line).
-    """
-    overrides = {n: p.value for n, p in (getattr(node, '_parameter_overrides', None)
-                                         or {}).items()}
-    if overrides.get('vehicle.model') != 'articulated':
-        return ()
-    try:
-        values = {n: validate_parameter(n, v) for n, v in overrides.items()
-                  if n.startswith(('vehicle.', 'simulator.'))}
-        check_model_names(values, values)
-        return axle_specs(values)
-    except ValueError as exc:
-        raise ParameterError(f'plant_simulator: refused {exc}') from None
 
 
 class PlantSimulator(Node):

@@ -37,12 +37,15 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
+from road_force_estimator.core.articulated_parameters import axle_specs, check_model_names
 from road_force_estimator.core.parameters import (
-    PARAMETERS, SPECS, ParameterSpec, check_spec, spec_of)
+    ARTICULATED_PARAMETERS, PARAMETERS, SPECS, ParameterSpec, check_spec, spec_of,
+    validate_parameter)
 
 __all__ = [
     'ParameterError', 'NODE_LOCAL_NAMES', 'local_spec', 'specs_with_prefix', 'descriptor',
     'check_value', 'declare', 'refuse_unknown_names', 'ParameterGuard', 'init_ros',
+    'articulated_names', 'articulated_specs', 'articulated_requested',
 ]
 
 # Parameter kinds of parameters.ParameterSpec, plus node-local ones ('string_list', 'bool').
@@ -119,6 +122,44 @@ def _range_text(spec: ParameterSpec) -> str:
 def specs_with_prefix(*prefixes: str) -> tuple[ParameterSpec, ...]:
     """The shared parameters whose names start with one of ``prefixes`` (e.g. ``'vehicle.'``)."""
     return tuple(s for s in PARAMETERS if s.name.startswith(prefixes))
+
+
+def articulated_names(*prefixes: str) -> tuple[ParameterSpec, ...]:
+    """The articulated model's whole-vehicle names (``vehicle.axles``, ``vehicle.tractor.*``,
+    ...) whose names start with one of ``prefixes``: declared beside the shared ones by a node
+    that models ``vehicle.model: articulated`` (the per-axle ones: :func:`articulated_specs`)."""
+    return tuple(s for s in ARTICULATED_PARAMETERS if s.name.startswith(prefixes))
+
+
+def articulated_requested(node: Node) -> bool:
+    """True when the start-up values of ``node`` (``-p``, ``--params-file``,
+    ``parameter_overrides``) set ``vehicle.model: articulated``."""
+    given = getattr(node, '_parameter_overrides', None) or {}
+    p = given.get('vehicle.model')
+    return p is not None and p.value == 'articulated'
+
+
+def articulated_specs(node: Node) -> tuple[ParameterSpec, ...]:
+    """The per-axle specs of an articulated vehicle given at start (``vehicle.model:
+    articulated`` among the start-up values: the axles of ``vehicle.axles``, defaults from
+    the whole-vehicle values given), else none. The plant_simulator and the observer declare
+    the same (``vehicle.axle.<name>.*`` and ``simulator.axle.<name>.*``).
+
+    Raises
+    ------
+    ParameterError
+        A name the vehicle does not have (one line, naming the node).
+    """
+    if not articulated_requested(node):
+        return ()
+    overrides = {n: p.value for n, p in node._parameter_overrides.items()}
+    try:
+        values = {n: validate_parameter(n, v) for n, v in overrides.items()
+                  if n.startswith(('vehicle.', 'simulator.'))}
+        check_model_names(values, values)
+        return axle_specs(values)
+    except ValueError as exc:
+        raise ParameterError(f'{node.get_name()}: refused {exc}') from None
 
 
 def descriptor(spec: ParameterSpec, *, read_only: bool = False) -> ParameterDescriptor:

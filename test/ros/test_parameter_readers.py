@@ -141,10 +141,8 @@ ARTICULATED = [p.name for p in CONFIGS if _articulated(p)]
 
 @pytest.mark.parametrize('name', ARTICULATED)
 def test_an_articulated_file_reads_the_same_in_the_plant_node_and_simulate_bag(name):
-    """``vehicle.model: articulated``: the plant node and simulate_bag build the same drive;
-    the observer node refuses the file with one line naming the model (it estimates the
-    front axle only); estimate_bag reads the plant's vehicle (the whole vehicle's
-    estimator)."""
+    """``vehicle.model: articulated``: the plant node, the observer node, simulate_bag and
+    estimate_bag build the same vehicle (the whole vehicle's estimator in both)."""
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
     path = REPO / 'config' / name
     context = rcl_context('--params-file', str(path))
@@ -161,8 +159,9 @@ def test_an_articulated_file_reads_the_same_in_the_plant_node_and_simulate_bag(n
     assert offline.sim == dataclasses.replace(simulator, road='flat')
     context = rcl_context('--params-file', str(path))
     try:
-        with pytest.raises(ParameterError, match='articulated'):
-            Observer(context=context)
+        node = Observer(context=context)
+        assert node.whole.params.config[0] == drive.vehicle
+        node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
     assert estimate_bag.load_parameters(str(path), [])[0] == drive.vehicle

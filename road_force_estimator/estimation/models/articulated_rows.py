@@ -71,6 +71,10 @@ def _road_index(model) -> list:
 class ArticulatedOnlineRows:
     """Rows one sample at a time (:class:`.protocol.OnlineRows`)."""
 
+    #: the rows take no road online: the core runs no zero-latency profile filter for them
+    #: (its design and its product per sample saved; the loads are the same numbers)
+    uses_profile = False
+
     def __init__(self, model) -> None:
         self.static = [float(f) for f in model.static_wheel_load_n]
         self._df, self._ay = _output_index(model)

@@ -95,7 +95,9 @@ class OnlineRows(Protocol):
 
     def row(self, o: list, meta: tuple, op: list | None) -> tuple:
         """The row of one sample: ``o`` its outputs, ``meta`` = (distance (m), dt (s),
-        speed (m/s), converged), ``op`` the zero-latency profile filter's outputs or None."""
+        speed (m/s), converged), ``op`` the zero-latency profile filter's outputs or None
+        (always None when the class sets ``uses_profile = False``: then the core runs no
+        profile filter)."""
 
     def set_vehicle(self, vehicle: Any) -> None:
         """The parameters of the rows from now on (an estimated payload)."""

@@ -118,6 +118,9 @@ class ModelCore:
         self.model = model
         self.observer = observer
         self._recon = model.online_rows(observer)
+        # the rows read the zero-latency profile filter's outputs (OnlineRows.uses_profile,
+        # default True): if not, the filter is not run (nor designed)
+        self._rows_profile = bool(getattr(self._recon, 'uses_profile', True))
         self.sm_gain = float(observer.sliding_mode_gain)
         cm = model.continuous(1.0, DEFAULT_ROAD_GD_M3)
         self._h = cm.h
@@ -385,8 +388,8 @@ class ModelCore:
     def _profile_on(self) -> bool:
         """The zero-latency profile filter runs: no latency, and no friction (whose known
         input it does not carry: then the road is the load filter's); kept in ``_profile``
-        for the per-sample step."""
-        return self.lag == 0 and self._fr is None
+        for the per-sample step; and not when the rows do not read it."""
+        return self.lag == 0 and self._fr is None and self._rows_profile
 
     def _set_lag(self, dt: float) -> None:
         """The lag N = round(latency / dt) (samples) for a typical step dt (s)."""

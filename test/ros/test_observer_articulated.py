@@ -1,0 +1,228 @@
+"""observer with vehicle.model: articulated, spun in-process beside the plant_simulator driving
+MODEL.md's 5-axle combination: every wheel's load arrives, named by the contract; the loads
+follow the plant's truth; the numbers are those of estimate_whole_vehicle on the inputs the
+node took (recorded as it took them) and the bytes those rclpy serialises for the same
+messages; bad messages are counted and skipped, the node keeps running."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
+
+from node_harness import Collector, close, make_executor
+from road_force_estimator import interfaces as api
+from road_force_estimator.core.articulated_parameters import ArticulatedParameters
+from road_force_estimator.core.parameters import ObserverParameters, load_params_file
+from road_force_estimator.estimation.whole_vehicle import estimate_whole_vehicle
+from road_force_estimator.ros.bag_recorder import message_class
+from road_force_estimator.ros.messages import (
+    ns_to_stamp, reliable_qos, sensor_qos, stamp_to_ns, twist_msg, wrench_msg)
+from road_force_estimator.ros.observer import Observer
+from road_force_estimator.ros.plant_simulator import PlantSimulator
+from ros_helpers import spin_until
+from test_wire import assert_same_bytes
+
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / 'config' / 'tractor_semitrailer.yaml'
+AXLES = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
+WHEELS = tuple(f'{a}_{s}_wheel' for a in AXLES for s in ('left', 'right'))
+RAW = (api.WHEEL_LOADS, *api.UNIT_LOAD_TRANSFER, *api.LOAD, api.LOAD_TRANSFER,
+       api.STATIC_WHEEL_LOADS, *api.STATIC_LOAD)
+DURATION_S = 4.0
+SETTLED_S = 2.0
+#: each wheel's online dynamic-load error allowed from SETTLED_S on (RMS, of the true dynamic
+#: load's RMS): docs/articulated.md measures 16-27 % at zero latency after 5 s
+#: (bench.accuracy.articulated_observer, classes A and C); this drive's drive axle, the last
+#: to settle, is at 28 % (the same drive through simulate_bag and estimate_whole_vehicle)
+LOAD_TOLERANCE = 0.35
+
+
+def file_values(**extra) -> dict:
+    values = load_params_file(CONFIG)
+    values.update(extra)
+    return values
+
+
+def overrides(values: dict) -> list[Parameter]:
+    return [Parameter(n, value=list(v) if isinstance(v, tuple) else v)
+            for n, v in values.items()]
+
+
+class RawCollector(Node):
+    """The observer's outputs taken raw (the bytes rmw delivers)."""
+
+    def __init__(self, context):
+        super().__init__('raw_collector', context=context)
+        self.data: dict[str, list[bytes]] = {}
+        for topic in RAW:
+            self.data[topic] = []
+            self.create_subscription(message_class(api.TOPIC_TYPES[topic]), topic,
+                                     self.data[topic].append, reliable_qos(10000), raw=True)
+
+
+def record_inputs(observer: Observer) -> list:
+    """What the node's input hands its estimator, recorded as it goes in."""
+    taken = []
+    whole = observer.whole
+    sample = whole.input.sample
+
+    def recording(stamp_ns, readings, speed_mps):
+        taken.append((stamp_ns, readings, speed_mps))
+        sample(stamp_ns, readings, speed_mps)
+
+    whole.input.sample = recording
+    return taken
+
+
+def vector_bytes(stamp_ns: int, x: float, y: float) -> bytes:
+    msg = Vector3Stamped()
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.BASE_FRAME
+    msg.vector.x, msg.vector.y = float(x), float(y)
+    return serialize_message(msg)
+
+
+def joint_bytes(stamp_ns: int, names, effort) -> bytes:
+    msg = JointState(name=list(names), effort=[float(v) for v in effort])
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.BASE_FRAME
+    return serialize_message(msg)
+
+
+def test_the_articulated_observer_beside_the_plant(ros_context):
+    """4 s of class C at 20 m/s, 1 kHz: every estimate's messages, the truth followed, the
+    batch's numbers and rclpy's bytes."""
+    values = file_values(**{'simulator.duration': DURATION_S,
+                            'simulator.road': 'iso8608:C:seed=1'})
+    observer = Observer(context=ros_context, parameter_overrides=overrides(values))
+    taken = record_inputs(observer)
+    raw = RawCollector(ros_context)
+    # the truth's collector subscribes to the inputs too: the plant starts once it listens
+    truth = Collector(ros_context, [api.TRUE_WHEEL_LOADS, api.DEFLECTIONS, api.TWIST])
+    executor = make_executor(ros_context, observer, raw, truth)
+    outputs = (*observer.whole.pubs, *observer.whole.static_pubs)
+    assert spin_until(executor, lambda: all(p.get_subscription_count() for p in outputs), 30.0)
+    plant = PlantSimulator(context=ros_context, parameter_overrides=overrides({
+        **values, 'start_nodes': ['observer', 'collector']}))
+    executor.add_node(plant)
+    try:
+        assert spin_until(executor, lambda: plant.finished, 60.0)
+        n = plant.k
+        assert spin_until(executor, lambda: len(taken) == n and truth.count(
+            api.TRUE_WHEEL_LOADS) == n and all(len(raw.data[t]) == n for t in RAW[:7]), 20.0)
+    finally:
+        close(executor, observer, raw, truth, plant)
+    assert n == round(DURATION_S * 1000) + 1
+    stamps = np.array([s for s, _, _ in taken], np.int64)
+    readings = np.array([r for _, r, _ in taken])
+    speed = np.array([v for _, _, v in taken])
+    assert readings.shape == (n, 12) and np.all(np.diff(stamps) > 0)
+
+    # the batch on the same inputs: the same numbers, in rclpy's bytes
+    vehicle = ArticulatedParameters.from_parameters(values)
+    ref = estimate_whole_vehicle(vehicle, stamps, readings, speed,
+                                 observer=ObserverParameters.from_parameters(values))
+    front = ref.load_n[:2]
+    for k, t in enumerate(stamps.tolist()):
+        assert_same_bytes(api.JOINT_STATE, raw.data[api.WHEEL_LOADS][k],
+                          joint_bytes(t, WHEELS, ref.load_n[:, k]))
+        for u, topic in enumerate(api.UNIT_LOAD_TRANSFER):
+            assert_same_bytes(api.VECTOR3_STAMPED, raw.data[topic][k], vector_bytes(
+                t, ref.ltr[u, k], ref.ltr_quasi_static[u, k]))
+        for side, topic in enumerate(api.LOAD):
+            assert_same_bytes(api.WRENCH, raw.data[topic][k], serialize_message(
+                wrench_msg(t, api.WHEEL_FRAMES[side], front[side, k])))
+    # /load_transfer: the front axle's two wheels, right minus left over their sum
+    got = np.array([(m.vector.x, m.vector.y) for m in (deserialize_message(
+        d, Vector3Stamped) for d in raw.data[api.LOAD_TRANSFER])])
+    np.testing.assert_allclose(got[:, 0], (front[1] - front[0]) / front.sum(axis=0),
+                               rtol=0, atol=1e-12)
+    assert np.all(np.abs(got[:, 1]) < np.abs(got[:, 0]).max())   # low-passed
+    # the static loads ~10 Hz: the model's statics, summing to the gross weight
+    statics = [deserialize_message(d, JointState) for d in raw.data[api.STATIC_WHEEL_LOADS]]
+    assert abs(len(statics) - 10 * DURATION_S) <= 2
+    assert all(list(m.name) == list(WHEELS) for m in statics)
+    np.testing.assert_array_equal(statics[0].effort, ref.static_n[:, 0])
+    assert sum(statics[0].effort) == pytest.approx(40.2e3 * 9.80665, rel=2e-3)
+    left = [deserialize_message(d, WrenchStamped) for d in raw.data[api.STATIC_LOAD[0]]]
+    assert len(left) == len(statics) and left[0].wrench.force.z == ref.static_n[0, 0]
+
+    # against the plant's truth (independent): after SETTLED_S
+    true = {stamp_to_ns(m.header.stamp): m for m in truth.messages[api.TRUE_WHEEL_LOADS]}
+    assert list(true[stamps[0]].name) == list(WHEELS)
+    true_loads = np.array([true[t].effort for t in stamps.tolist()]).T
+    late = (stamps - stamps[0]) * 1e-9 >= SETTLED_S
+    err = ref.load_n[:, late] - true_loads[:, late]
+    dyn = true_loads[:, late] - true_loads[:, late].mean(axis=1, keepdims=True)
+    ratio = np.sqrt((err ** 2).mean(axis=1) / (dyn ** 2).mean(axis=1))
+    assert np.all(ratio < LOAD_TOLERANCE), ratio
+
+
+class Feeder(Node):
+    def __init__(self, context):
+        super().__init__('feeder', context=context)
+        self.deflections = self.create_publisher(JointState, api.DEFLECTIONS, sensor_qos(100))
+        self.twist = self.create_publisher(message_class(api.TWIST_STAMPED), api.TWIST,
+                                           sensor_qos(100))
+        self.statuses: list = []
+        self.create_subscription(message_class('diagnostic_msgs/msg/DiagnosticArray'),
+                                 api.DIAGNOSTICS, self.statuses.append, reliable_qos(100))
+
+
+def deflections(stamp_ns: int, names, values) -> JointState:
+    msg = JointState(name=list(names), position=[float(v) for v in values])
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.BASE_FRAME
+    return msg
+
+
+def test_bad_messages_are_counted_and_skipped(ros_context):
+    values = file_values()
+    observer = Observer(context=ros_context, parameter_overrides=overrides(values))
+    names = observer.whole.names
+    feeder = Feeder(ros_context)
+    loads = Collector(ros_context, [api.WHEEL_LOADS])
+    executor = make_executor(ros_context, observer, feeder, loads)
+    t0 = 1_700_000_000 * 10**9
+    good = [0.0] * len(names)
+    plan = [(t0 + k * 10**6, names, good) for k in range(5)]
+    plan += [(t0 + 5 * 10**6, names[1:], good[1:]),                 # a joint missing
+             (t0 + 6 * 10**6, names, [float('nan')] + good[1:]),    # non-finite
+             (t0 + 2 * 10**6, names, good)]                         # the stamp goes back
+    plan += [(t0 + k * 10**6, names, good) for k in range(7, 12)]
+    try:
+        assert spin_until(executor, lambda: feeder.deflections.get_subscription_count() > 0 and
+                          feeder.twist.get_subscription_count() > 0, 20.0)
+        for stamp, n, v in plan:
+            feeder.twist.publish(twist_msg(stamp, 15.0))
+            feeder.deflections.publish(deflections(stamp, n, v))
+            executor.spin_once(timeout_sec=0.002)
+
+        def totals(name: str = 'observer: input') -> dict:
+            out = {}
+            for arr in feeder.statuses:
+                for st in arr.status:
+                    if st.name == name:
+                        out.update({kv.key: kv.value for kv in st.values})
+            return out
+
+        assert spin_until(executor, lambda: loads.count(api.WHEEL_LOADS) == 10 and
+                          totals().get('total.received') == str(len(plan)), 20.0), totals()
+    finally:
+        close(executor, observer, feeder, loads)
+    got = totals()
+    assert (got['total.names'], got['total.nonfinite'], got['total.time']) == ('1', '1', '1')
+    assert got['total.published'] == '10'
+    assert loads.stamps(api.WHEEL_LOADS) == [s for s, n, v in plan if n == names][:5] + [
+        t0 + k * 10**6 for k in range(7, 12)]
+    # the weights: MODEL.md's axle loads (docs/articulated.md "Statics and modes": 6.624,
+    # 10.732, 8.004, 7.615, 7.225 t) and 40.2 t in all; every channel's gate count
+    est = totals('observer: estimator')
+    for axle, tonnes in zip(AXLES, (6.624, 10.732, 8.004, 7.615, 7.225)):
+        assert float(est[f'static_load_{axle}_n']) == pytest.approx(tonnes * 1e3 * 9.80665,
+                                                                     rel=1e-3)
+    assert float(est['gross_weight_n']) == pytest.approx(40.2e3 * 9.80665, rel=1e-3)
+    assert all(f'total.innovations_gated.{c}' in est for c in names)
