@@ -118,9 +118,10 @@ def front_wheels(est, wv):
                    ltr=take(ltr[:, 0]), ltr_quasi_static=take(ltr[:, 1]), lift_off=lift)
 
 
-def _status(wv, k: int) -> dict:
+def _status(wv, k: int, since: int = 0) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
-    weight (N) and each unit's quasi-static LTR."""
+    weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
+    ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period)."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
 
     axle = wv.static_n[:, k].reshape(-1, 2).sum(axis=1)
@@ -129,6 +130,9 @@ def _status(wv, k: int) -> dict:
     values['gross_weight_n'] = f'{float(axle.sum()):.1f}'
     for u, unit in enumerate(UNITS):
         values[f'ltr_{unit}_quasi_static'] = f'{float(wv.ltr_quasi_static[u, k]):.4f}'
+        period = np.abs(np.asarray(wv.ltr[u, since:k + 1], float))
+        period = period[np.isfinite(period)]
+        values[f'max_abs_ltr_{unit}'] = f'{float(period.max()) if period.size else 0.0:.4f}'
     gross = float(axle.sum())
     return {'name': STATUS_NAME, 'hardware_id': PROG, 'level': 0 if math.isfinite(gross) else 1,
             'message': f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles',
@@ -137,13 +141,16 @@ def _status(wv, k: int) -> dict:
 
 def add_diagnostics(diagnostics: list, wv) -> list:
     """``diagnostics`` ((stamp_ns, [status dicts]) per second) with the whole vehicle's
-    status at the last sample at or before each stamp added (none before its first)."""
+    status at the last sample at or before each stamp added (none before its first), its
+    period the samples since the previous status."""
     if not wv.stamps_ns.size:
         return diagnostics
     out = []
+    since = 0
     for stamp, statuses in diagnostics:
         k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
-        out.append((stamp, list(statuses) + ([_status(wv, k)] if k >= 0 else [])))
+        out.append((stamp, list(statuses) + ([_status(wv, k, since)] if k >= 0 else [])))
+        since = max(since, k + 1)
     return out
 
 

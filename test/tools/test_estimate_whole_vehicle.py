@@ -101,6 +101,13 @@ def test_the_bag_has_the_whole_vehicles_topics(runs):
         for j, a in enumerate(AXLES):
             assert values[f'static_load_{a}_n'] == pytest.approx(static[2 * j:2 * j + 2].sum(),
                                                                  abs=0.1)
+        # each unit's largest |LTR| of the status's period (the samples after the previous
+        # status), as the observer node's key, from the bag's own /load_transfer/<unit>
+        before, at = (stamp(m) for _, m in topics['/diagnostics'][-2:])
+        for unit in ('tractor', 'trailer', 'combination'):
+            period = [abs(m.vector.x) for _, m in topics[f'/load_transfer/{unit}']
+                      if before < stamp(m) <= at]
+            assert values[f'max_abs_ltr_{unit}'] == pytest.approx(max(period), abs=1e-4)
 
 
 @pytest.mark.parametrize('mode', ['online', 'offline'])
