@@ -117,18 +117,24 @@ def append_to_report(folder: str | Path, truth, summary: dict[str, Any] | None =
         out.write(','.join(AXLE_COLUMNS) + '\n')
         for w in s['wheels']:
             out.write(','.join(csv_cell(w[c]) for c in AXLE_COLUMNS) + '\n')
+    _append_section(folder, 'whole_vehicle', s, truth_markdown(s, estimated), summary)
+    return s
+
+
+def _append_section(folder: Path, key: str, s: dict[str, Any], lines: list[str],
+                    summary: dict[str, Any] | None) -> None:
+    """A section's ``lines`` at the end of ``report.md`` and its numbers ``s`` under ``key``
+    in ``report.json`` (the files that exist) and in ``summary`` (when given)."""
     md = folder / 'report.md'
     if md.exists():
-        md.write_text(md.read_text().rstrip('\n') + '\n'
-                      + '\n'.join(truth_markdown(s, estimated)) + '\n')
+        md.write_text(md.read_text().rstrip('\n') + '\n' + '\n'.join(lines) + '\n')
     js = folder / 'report.json'
     if js.exists():
         data = json.loads(js.read_text())
-        data['whole_vehicle'] = json_safe(s)
+        data[key] = json_safe(s)
         js.write_text(json.dumps(data, indent=2) + '\n')
     if summary is not None:
-        summary['whole_vehicle'] = s
-    return s
+        summary[key] = s
 
 
 def segment_columns(axle_names) -> tuple[str, ...]:
@@ -351,17 +357,7 @@ def append_estimate(folder: str | Path, wv, truth=None,
         s['fused_profile'] = _fused_iri(fused)
     if (folder / 'segments.csv').exists():
         _append_segments_csv(folder / 'segments.csv', wv)
-    md = folder / 'report.md'
-    if md.exists():
-        md.write_text(md.read_text().rstrip('\n') + '\n' + '\n'.join(estimate_markdown(s))
-                      + '\n')
-    js = folder / 'report.json'
-    if js.exists():
-        data = json.loads(js.read_text())
-        data['whole_vehicle_estimate'] = json_safe(s)
-        js.write_text(json.dumps(data, indent=2) + '\n')
-    if summary is not None:
-        summary['whole_vehicle_estimate'] = s
+    _append_section(folder, 'whole_vehicle_estimate', s, estimate_markdown(s), summary)
     if truth is not None and len(truth.stamps_ns):
         append_to_report(folder, truth, summary, estimated=True)
     return s

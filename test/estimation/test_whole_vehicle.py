@@ -38,16 +38,21 @@ def drive():
     return d.vehicle, tr, stamps, y, static, true
 
 
+def step_by_step(vehicle, obs, stamps, y) -> tuple:
+    """The estimator and every sample it gives, one input at a time at 20 m/s."""
+    est = WholeVehicleEstimator(vehicle, obs)
+    samples = []
+    for s, yi in zip(stamps.tolist(), y.tolist()):
+        samples += est.step(s, yi, 20.0)
+    return est, samples + est.finish()
+
+
 def test_per_sample_and_drive_give_the_same_bits(drive):
     vehicle, _, stamps, y, _, _ = drive
     m = 2000
     obs = ObserverParameters(latency_s=0.01)
     batch = estimate_whole_vehicle(vehicle, stamps[:m], y[:m], 20.0, observer=obs)
-    est = WholeVehicleEstimator(vehicle, obs)
-    samples = []
-    for s, yi in zip(stamps[:m].tolist(), y[:m].tolist()):
-        samples += est.step(s, yi, 20.0)
-    samples += est.finish()
+    est, samples = step_by_step(vehicle, obs, stamps[:m], y[:m])
     assert [s.stamp_ns for s in samples] == stamps[:m].tolist()
     np.testing.assert_array_equal(np.array([s.load_n for s in samples]).T, batch.load_n)
     np.testing.assert_array_equal(np.array([s.ltr_quasi_static for s in samples]).T,
@@ -140,11 +145,7 @@ def test_weigh_in_motion_per_sample_and_drive_give_the_same_bits(wim_drive):
     m = 2000
     obs = ObserverParameters(latency_s=0.01)
     batch = estimate_whole_vehicle(vehicle, stamps[:m], y[:m], 20.0, observer=obs)
-    est = WholeVehicleEstimator(vehicle, obs)
-    samples = []
-    for s, yi in zip(stamps[:m].tolist(), y[:m].tolist()):
-        samples += est.step(s, yi, 20.0)
-    samples += est.finish()
+    est, samples = step_by_step(vehicle, obs, stamps[:m], y[:m])
     assert [s.stamp_ns for s in samples] == stamps[:m].tolist()
     np.testing.assert_array_equal(np.array([s.load_n for s in samples]).T, batch.load_n)
     np.testing.assert_array_equal(np.array([s.static_n for s in samples]).T, batch.static_n)
