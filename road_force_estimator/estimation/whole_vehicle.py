@@ -26,6 +26,7 @@ samples the observer's innovation gate (``observer.innovation_gate``) replaced.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from typing import Sequence
 
 import numpy as np
@@ -34,7 +35,7 @@ from road_force_estimator.core.articulated_parameters import ArticulatedParamete
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation.articulated import (
-    ArticulatedEstimate, ArticulatedOnline, equilibrium_readings, estimate_articulated)
+    ArticulatedEstimate, ArticulatedOnline, estimate_articulated)
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
@@ -73,6 +74,8 @@ class WholeVehicleSample:
     ltr_quasi_static: tuple
     lateral_mps2: tuple
     innovations_gated: tuple = ()
+    #: the front axle's own (LTR, quasi-static LTR) from its two wheels (``/load_transfer``)
+    front_ltr: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -95,6 +98,8 @@ class WholeVehicleArrays:
     road_m: np.ndarray | None = None
     innovations_gated: tuple = ()
     channel_names: tuple = ()
+    #: (2, m): the front axle's own LTR and quasi-static LTR from its two wheels
+    front_ltr: np.ndarray | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -108,17 +113,23 @@ class WholeVehicleArrays:
 
 
 class _Transfer:
-    """Each unit's LTR from finalized rows, stepped by their stamps."""
+    """Each unit's LTR from finalized rows, stepped by their stamps, and the front axle's own
+    (the same recursion given the front axle alone: its wheels as both units, each needing
+    one): ``[LTR, quasi-static] per unit + front`` (8 numbers)."""
 
     def __init__(self, vehicle: ArticulatedParameters, static_n) -> None:
         bodies = [a.body for a in vehicle.axles]
-        self.ltr = UnitLoadTransfer(bodies, np.reshape(static_n, (-1, 2)), 1e-3)
+        static = np.reshape(static_n, (-1, 2))
+        self.ltr = UnitLoadTransfer(bodies, static, 1e-3)
+        self.front = UnitLoadTransfer(('tractor', 'trailer'), static[[0, 0]], 1e-3)
         self.last: int | None = None
 
     def update(self, stamp_ns: int, loads: Sequence[float]) -> list:
-        dt = None if self.last is None else (stamp_ns - self.last) * 1e-9
+        dt = 0.0 if self.last is None else (stamp_ns - self.last) * 1e-9
         self.last = stamp_ns
-        return self.ltr.update(loads, dt if dt is not None else 0.0)
+        left, right = loads[0], loads[1]
+        return self.ltr.update(loads, dt) + self.front.update((left, right, left, right),
+                                                              dt)[:2]
 
 
 class WheelStaticTracker:
@@ -216,11 +227,9 @@ class WholeVehicleEstimator:
             A reading or the speed not finite.
         """
         stamp = int(stamp_ns)
-        if self.tracker is None:
-            y = equilibrium_readings(self.model, np.asarray(readings, float)).tolist()
-        else:
-            y = [float(r) for r in readings]
-            if not all(np.isfinite(y)):
+        y = [float(r) for r in readings]      # from the equilibrium unless zero_load
+        if self.tracker is not None:
+            if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
             dt = 0.0 if self._last is None else (stamp - self._last) * 1e-9
             self.tracker.update(y, dt)
@@ -245,8 +254,9 @@ class WholeVehicleEstimator:
                 loads = [s + d for s, d in zip(static, row[self._dynamic])]
             t = self._transfer.update(int(stamp), loads)
             out.append(WholeVehicleSample(int(stamp), float(row[DIST]), bool(row[CONV] > 0.5),
-                                          tuple(loads), static, tuple(t[0::2]),
-                                          tuple(t[1::2]), tuple(row[self._ay]), gated))
+                                          tuple(loads), static, tuple(t[0:6:2]),
+                                          tuple(t[1:6:2]), tuple(row[self._ay]), gated,
+                                          tuple(t[6:])))
         return out
 
 
@@ -265,7 +275,7 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
         np.array([s.converged for s in samples], bool), est.wheel_names, est.axle_names,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
-        tuple(int(g) for g in gated), tuple(est.channel_names))
+        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'))
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
@@ -313,6 +323,6 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         t = est._transfer.update(stamp, loads)
         samples.append(WholeVehicleSample(
             stamp, float(smoothed.distance_m[k]), bool(smoothed.converged[k]), tuple(loads),
-            static, tuple(t[0::2]), tuple(t[1::2]), tuple(smoothed.lateral_mps2[:, k]),
-            smoothed.innovations_gated))
+            static, tuple(t[0:6:2]), tuple(t[1:6:2]), tuple(smoothed.lateral_mps2[:, k]),
+            smoothed.innovations_gated, tuple(t[6:])))
     return _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated)

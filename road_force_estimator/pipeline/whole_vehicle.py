@@ -85,24 +85,13 @@ def estimate(input_path: Path, vehicle, observer, mode: str):
 
 def front_wheels(est, wv):
     """The front axle's estimate ``est`` (:class:`~.estimation.outputs.EstimateArrays`) with
-    its loads, static loads and load transfer (instantaneous and quasi-static,
-    :class:`~.core.unit_loads.UnitLoadTransfer` over the front axle alone) from the whole
-    vehicle's front wheels at the same stamps (and its lift-offs: a front wheel's load at
-    zero); a row the whole vehicle has not estimated
-    gets NaN (not written, counted)."""
-    from road_force_estimator.core.unit_loads import UnitLoadTransfer
-
+    its loads, static loads and load transfer (instantaneous and quasi-static: the whole
+    vehicle's ``front_ltr``) from the whole vehicle's front wheels at the same stamps (and its
+    lift-offs: a front wheel's load at zero); a row the whole vehicle has not estimated gets
+    NaN (not written, counted)."""
     loads = wv.load_n[:2].T
     static = wv.static_n[:2].T
-    # the front axle as the tractor's only axle (the trailer's a copy of it, not used): the
-    # truth's filter over the front wheels alone
-    transfer = UnitLoadTransfer(['tractor', 'trailer'], np.vstack([static[:1]] * 2), 1e-3)
-    ltr = np.empty((loads.shape[0], 2))
-    last = None
-    for k, (stamp, pair) in enumerate(zip(wv.stamps_ns.tolist(), loads.tolist())):
-        dt = 0.0 if last is None else (stamp - last) * 1e-9
-        last = stamp
-        ltr[k] = transfer.update(pair + pair, dt)[:2]
+    ltr = np.asarray(wv.front_ltr, float).T
     stamps = np.asarray(est.stamp_ns, np.int64)
     at = np.clip(np.searchsorted(wv.stamps_ns, stamps), 0, max(wv.stamps_ns.size - 1, 0))
     hit = wv.stamps_ns[at] == stamps if wv.stamps_ns.size else np.zeros(stamps.size, bool)

@@ -15,8 +15,8 @@ Per estimate (stamped with its sample's stamp, reliable): ``/wheel_loads`` (Join
 ``<axle>_right_wheel``), ``/load_transfer/tractor|trailer|combination`` (Vector3Stamped,
 x = LTR = right minus left over their sum, y = quasi-static LTR) and the front axle's topics
 from the front axle's wheels: ``/wheel_load/left|right`` (WrenchStamped, N) and
-``/load_transfer`` (its two wheels' LTR and quasi-static LTR by the units' recursion,
-:class:`~road_force_estimator.core.unit_loads.UnitLoadTransfer`). With the first estimate of
+``/load_transfer`` (its two wheels' LTR and quasi-static LTR: the estimate's
+``front_ltr``). With the first estimate of
 every :data:`.interfaces.STATIC_LOAD_PERIOD_NS`: ``/wheel_loads/static`` and
 ``/wheel_load/static/left|right`` (the static loads F_c, N). Not published: the road
 (``/road_profile/*``: the articulated estimator has no road online yet), ``/load_transfer_ratio``
@@ -44,7 +44,6 @@ from sensor_msgs.msg import JointState
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import ObserverParameters
-from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.estimation.whole_vehicle import UNITS, WholeVehicleEstimator
 from road_force_estimator.ros.messages import (
@@ -137,32 +136,13 @@ class JointReader:
         return read_joints(deserialize(data, JointState), self.names)
 
 
-def output_values(sample, wheels: Sequence[int], front: Sequence[float]) -> tuple:
+def output_values(sample, wheels: Sequence[int]) -> tuple:
     """The numbers of one estimate's messages in :data:`OUTPUTS`' order: the loads of
     ``wheels`` (indices into the sample's), per unit (LTR, quasi-static LTR, 0), the front
-    wheels' loads, ``front`` = the front axle's (LTR, quasi-static LTR), 0."""
-    ld, ltr, qs = sample.load_n, sample.ltr, sample.ltr_quasi_static
+    wheels' loads, the front axle's (LTR, quasi-static LTR), 0."""
+    ld, ltr, qs, front = sample.load_n, sample.ltr, sample.ltr_quasi_static, sample.front_ltr
     return (*[ld[i] for i in wheels], ltr[0], qs[0], 0.0, ltr[1], qs[1], 0.0, ltr[2], qs[2],
             0.0, ld[0], ld[1], front[0], front[1], 0.0)
-
-
-class FrontAxleTransfer:
-    """The front axle's LTR and quasi-static LTR (``/load_transfer``) by the units' recursion
-    (:class:`.UnitLoadTransfer`: its tractor unit given the front axle alone), stepped by
-    the samples' stamps."""
-
-    def __init__(self, static_n: Sequence[float]) -> None:
-        left, right = static_n[0], static_n[1]
-        # both units the front axle: the recursion needs a wheel on each
-        self.ltr = UnitLoadTransfer(('tractor', 'trailer'), [[left, right], [left, right]],
-                                    1e-3)
-        self.last: int | None = None
-
-    def update(self, stamp_ns: int, left_n: float, right_n: float) -> tuple[float, float]:
-        dt = 0.0 if self.last is None else (stamp_ns - self.last) * 1e-9
-        self.last = stamp_ns
-        out = self.ltr.update((left_n, right_n, left_n, right_n), dt)
-        return out[0], out[1]
 
 
 class WholeVehicleObserver:
@@ -240,7 +220,6 @@ class WholeVehicleObserver:
                 self.node.get_logger().info('parameters changed: estimator rebuilt (it '
                                             'restarts)')
             self.estimator = config[2]
-            self.front = FrontAxleTransfer(self.estimator.static_n)
             self.last_stamp_ns: int | None = None
 
     def reject(self, reason: str, detail: str) -> None:
@@ -270,8 +249,7 @@ class WholeVehicleObserver:
     def publish(self, sample) -> None:
         """One estimate's messages, and the static loads when due."""
         t = sample.stamp_ns
-        values = output_values(sample, self.wheels, self.front.update(
-            t, sample.load_n[0], sample.load_n[1]))
+        values = output_values(sample, self.wheels)
         if not math.isfinite(sum(values)):
             self.period['nonfinite_output'] += 1
             self.last_rejection = f'non-finite estimate at {t} ns'
