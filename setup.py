@@ -69,7 +69,9 @@ setup(
     python_requires='>=3.10,<3.14',
     entry_points={
         'console_scripts': [
-            f'{name} = {PACKAGE}.{sub}.{name}:main' for name, sub in EXECUTABLES.items()
+            # the nodes through ros/launcher.py (SIGINT caught before their heavy imports)
+            f'{name} = {PACKAGE}.ros.launcher:{name}' if sub == 'ros'
+            else f'{name} = {PACKAGE}.{sub}.{name}:main' for name, sub in EXECUTABLES.items()
         ],
     },
 )

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import pathlib
+import signal
 import subprocess
 import sys
 
@@ -65,9 +66,13 @@ def finish(process: subprocess.Popen, timeout_s: float = 60.0) -> tuple[int, str
     try:
         out, err = process.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
-        process.kill()
-        out, err = process.communicate()
-        raise AssertionError(f'process did not exit within {timeout_s} s: {err[-2000:]}')
+        process.send_signal(signal.SIGUSR1)   # our nodes print every thread's stack on it
+        try:
+            out, err = process.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            out, err = process.communicate()
+        raise AssertionError(f'process did not exit within {timeout_s} s: {err[-6000:]}')
     return process.returncode, out, err
 
 
