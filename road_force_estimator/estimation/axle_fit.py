@@ -35,8 +35,8 @@ import math
 
 import numpy as np
 
-__all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'SKIP_S', 'MIN_LENGTH_M',
-           'MIN_SPEED_MPS', 'AxleFit', 'assess_axles']
+__all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE', 'SKIP_S',
+           'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'AxleFit', 'assess_axles']
 
 #: The wavelength bands judged (m): the axles' own modes (wheel hop, 9-12 Hz) and the
 #: bodies' coupling over them at highway speeds. Longer waves are the bodies' motion,
@@ -50,6 +50,9 @@ THRESHOLD = 0.015
 Z_SCORE = 3.0
 #: A wheel whose misfit is more than this times the other wheel's: its sensor.
 SENSOR_FACTOR = 2.0
+#: The words after the culprits of a mismatch (diagnostics, report).
+ADVICE = ("do(es) not fit the parameter file (the road under it disagrees with the other "
+          "axles' at the same distance): check the spring, damper and mass, or the sensor")
 #: The smoother's start left out (s).
 SKIP_S = 2.0
 #: The least distance every axle must have passed for a verdict (m).
