@@ -3,7 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python -m bench.studies.axle_fit [--duration 30] [--roads A C] [--only NAME ...]
-        [--limits]
+        [--limits | --family]
 
 MODEL.md's combination (``config/tractor_semitrailer.yaml``) at 20 m/s, 1 kHz, ISO 8608 roads
 seed 1, 10 um on every deflection and 10 um / 0.45 m on the rolls, simulated by the core
@@ -13,7 +13,9 @@ by :func:`road_force_estimator.estimation.axle_fit.assess_axles` (its ``axle_fit
 drive: each axle's worst misfit bound ``|H - 1| - 3 se`` (%), what the verdict names, and
 whether that is the plant's fault.
 The clean drives also through the family's curve (to 3 m/s^2) and stop. ``--limits``: half
-the faults, and a sensor offset, to show where the threshold lies (not judged).
+the faults, and a sensor offset, to show where the threshold lies (not judged); ``--family``:
+the family's other roads and speeds (B20, D20 clean and with a fault, C10, C30, more noise)
+and its stick drives (friction on every spring that the file does not state: not judged).
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import argparse
 import sys
 
 
-from bench.accuracy.articulated_wim import CURVE, file_vehicle, simulate
+from bench.accuracy.articulated_wim import CURVE, STICK, file_vehicle, simulate
 
 #: The family's stop (bench.studies.articulated_drives): braking at 3 m/s^2 to a stop, 5 s
 #: standing, 1 m/s^2 back to 20 m/s.
@@ -80,6 +82,22 @@ def limits(vehicle) -> list[tuple[str, dict, None, None]]:
     ]
 
 
+def family(vehicle) -> list[tuple[str, dict, tuple | None, None]]:
+    """The rest of the family's roads and speeds, and its stick drives (``--family``; the
+    road class and speed in the name; the stick friction on every spring is in no file: not
+    judged)."""
+    stiff = {'vehicle.axle.trailer_2.suspension_stiffness': [
+        1.2 * k for k in {a.name: a for a in vehicle.axles}['trailer_2'].suspension_stiffness_npm]}
+    return [
+        ('B20', {}, (), None), ('D20', {}, (), None),
+        ('D20, trailer_2 spring +20 %', stiff, ('trailer_2',), None),
+        ('C10', {'simulator.speed': 10.0}, (), None),
+        ('C30', {'simulator.speed': 30.0}, (), None),
+        ('C20, 30 um of noise', {'simulator.noise.deflection': 3e-5}, (), None),
+        ('A20-stick', STICK, None, None), ('C20-stick', STICK, None, None),
+    ]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m bench.studies.axle_fit',
                                 description=__doc__.splitlines()[0])
@@ -89,6 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--noise', type=float, default=1e-5, help='deflection noise (m)')
     p.add_argument('--limits', action='store_true',
                    help='smaller faults instead, not judged (where the threshold lies)')
+    p.add_argument('--family', action='store_true',
+                   help="the family's other drives instead (the road class in the name)")
     return p
 
 
@@ -104,12 +124,13 @@ def main(argv=None) -> int:
     print('| road | drive | ' + ' | '.join(names) + ' | named | right |')
     print('|---|---|' + '---:|' * len(names) + '---|---|')
     right = total = 0
-    for road in args.roads:
-        for name, values, expected, profile in (limits if args.limits else cases)(vehicle):
+    which = limits if args.limits else family if args.family else cases
+    for road in (['-'] if args.family else args.roads):
+        for name, values, expected, profile in which(vehicle):
             if args.only and not any(name.startswith(o) for o in args.only):
                 continue
-            drive = simulate(road, args.duration, args.noise, values,
-                             speed_profile=profile)
+            drive = simulate(name[0] if args.family else road, args.duration, args.noise,
+                             values, speed_profile=profile)
             est = estimate_whole_vehicle(vehicle, drive['stamps'], drive['y'], drive['speed'],
                                          offline=True)
             fit = est.axle_fit

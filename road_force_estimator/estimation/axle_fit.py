@@ -36,7 +36,7 @@ import math
 import numpy as np
 
 __all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE', 'SKIP_S',
-           'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'AxleFit', 'assess_axles']
+           'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'LIFT_OFF_MARGIN_M', 'AxleFit', 'assess_axles']
 
 #: The wavelength bands judged (m): the axles' own modes (wheel hop, 9-12 Hz) and the
 #: bodies' coupling over them at highway speeds. Longer waves are the bodies' motion,
@@ -57,6 +57,9 @@ ADVICE = ("do(es) not fit the parameter file (the road under it disagrees with t
 SKIP_S = 2.0
 #: The least distance every axle must have passed for a verdict (m).
 MIN_LENGTH_M = 100.0
+#: The points this close to a wheel's lift-off are left out too (m): the road the linear
+#: model reconstructs there is off, and the band-pass spreads it about a short wavelength.
+LIFT_OFF_MARGIN_M = 0.5
 #: A point counts when every axle passed it at this speed or faster (m/s): slower, the
 #: bands lie below the wheels' modes in time and the road's time-domain band limit
 #: (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`) reaches into them.
@@ -143,16 +146,14 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     grid = np.arange(start, end, GRID_M)
     grounded = np.asarray(load_n, float) >= LIFT_OFF_FRACTION * np.asarray(static_n, float)
     speed = np.gradient(x, t) if x.size > 1 else np.zeros_like(x)
-    moving = np.all([np.interp(grid + xi[j], x, (speed >= MIN_SPEED_MPS).astype(float))
-                     > 0.999 for j in range(n)], axis=0)
-    edge = int(math.ceil(BANDS_M[-1][1] / GRID_M))     # the filters' reach into a gap
+    moving = _eroded(np.all([np.interp(grid + xi[j], x, (speed >= MIN_SPEED_MPS).astype(float))
+                             > 0.999 for j in range(n)], axis=0), BANDS_M[-1][1])
     sig = signal()
     for side in (0, 1):
         reads = np.array([np.interp(grid + xi[j], x, road[2 * j + side]) for j in range(n)])
-        ok = moving & np.all([np.interp(grid + xi[j], x, grounded[2 * j + side].astype(float))
-                              > 0.999 for j in range(n)], axis=0)
-        ok = ~np.convolve(~ok, np.ones(2 * edge + 1), mode='same').astype(bool) if \
-            ok.size > 2 * edge else np.zeros_like(ok)
+        ok = moving & _eroded(np.all([np.interp(grid + xi[j], x,
+                                                grounded[2 * j + side].astype(float)) > 0.999
+                                      for j in range(n)], axis=0), LIFT_OFF_MARGIN_M)
         if np.count_nonzero(ok) * GRID_M < MIN_LENGTH_M:
             continue
         for b, (short, long) in enumerate(BANDS_M):
@@ -181,3 +182,11 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
             sensors.append(f'{names[j]}_{("left", "right")[hi]}_suspension')
     return AxleFit(names, misfit, spread, tuple(names[j] for j in bad), tuple(sensors),
                    float(end - start))
+
+
+def _eroded(ok: np.ndarray, margin_m: float) -> np.ndarray:
+    """``ok`` less the grid points within ``margin_m`` of a point that is not."""
+    edge = int(math.ceil(margin_m / GRID_M))
+    if ok.size <= 2 * edge:
+        return np.zeros_like(ok)
+    return ~np.convolve(~ok, np.ones(2 * edge + 1), mode='same').astype(bool)
