@@ -44,7 +44,8 @@ __all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE
 BANDS_M = ((0.5, 2.0), (2.0, 8.0))
 #: The even distance grid the roads are read on (m).
 GRID_M = 0.05
-#: Misfit ``|H - 1|`` above which an axle does not fit.
+#: The misfit's lower bound (``|H - 1|``, a fraction) above which an axle does not fit:
+#: between the clean drives' and a spring 20 % off (``python -m bench.studies.axle_fit``).
 THRESHOLD = 0.015
 #: The misfit judged is its lower bound: ``|H - 1|`` less this many standard errors.
 Z_SCORE = 3.0
@@ -60,9 +61,9 @@ MIN_LENGTH_M = 100.0
 #: The points this close to a wheel's lift-off are left out too (m): the road the linear
 #: model reconstructs there is off, and the band-pass spreads it about a short wavelength.
 LIFT_OFF_MARGIN_M = 0.5
-#: A point counts when every axle passed it at this speed or faster (m/s): slower, the
-#: bands lie below the wheels' modes in time and the road's time-domain band limit
-#: (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`) reaches into them.
+#: A point counts when every axle passed it at this speed or faster (m/s), and the points
+#: within the longest band's wavelength of a slower one are left out too: through a stop
+#: the slow points raised a clean drive's misfit past the threshold (the bench's stop).
 MIN_SPEED_MPS = 5.0
 
 
