@@ -21,11 +21,13 @@ payload unknown; the core gets each reading less a lagged offset
 dynamic tire force. The model's gains stay the file's (the
 payload moves no design here, unlike the front axle's ``MASS_REDESIGN_FRACTION``); an axle
 without sensors keeps the file's static load. ``innovations_gated`` counts, per channel, the
-samples the observer's innovation gate (``observer.innovation_gate``) replaced.
+samples the observer's innovation gate (``observer.innovation_gate``) replaced. Offline,
+``axle_fit`` says which axle or sensor does not fit (:mod:`.axle_fit`: each axle's road
+against the other axles' at the same distance).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import Sequence
 
@@ -36,12 +38,14 @@ from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameter
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation.articulated import (
     ArticulatedEstimate, ArticulatedOnline, estimate_articulated)
+from road_force_estimator.estimation.axle_fit import AxleFit, assess_axles
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
 
 __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'WholeVehicleSample', 'WholeVehicleArrays',
-           'WholeVehicleEstimator', 'WheelStaticTracker', 'estimate_whole_vehicle']
+           'WholeVehicleEstimator', 'WheelStaticTracker', 'estimate_whole_vehicle',
+           'fit_axles']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -100,6 +104,9 @@ class WholeVehicleArrays:
     channel_names: tuple = ()
     #: (2, m): the front axle's own LTR and quasi-static LTR from its two wheels
     front_ltr: np.ndarray | None = None
+    #: offline, the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor
+    #: does not fit) over the instrumented axles; None online or with fewer than 3 of them
+    axle_fit: AxleFit | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -260,8 +267,8 @@ class WholeVehicleEstimator:
         return out
 
 
-def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
-            ) -> WholeVehicleArrays:
+def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
+            fit: AxleFit | None = None) -> WholeVehicleArrays:
     m = len(samples)
     if gated is None:
         gated = samples[-1].innovations_gated if samples else ()
@@ -275,7 +282,7 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
         np.array([s.converged for s in samples], bool), est.wheel_names, est.axle_names,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
-        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'))
+        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'), fit)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
@@ -325,4 +332,18 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
             stamp, float(smoothed.distance_m[k]), bool(smoothed.converged[k]), tuple(loads),
             static, tuple(t[0:6:2]), tuple(t[1:6:2]), tuple(smoothed.lateral_mps2[:, k]),
             smoothed.innovations_gated, tuple(t[6:])))
-    return _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated)
+    out = _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated)
+    return replace(out, axle_fit=fit_axles(vehicle, out))
+
+
+def fit_axles(vehicle: ArticulatedParameters, wv: WholeVehicleArrays) -> AxleFit | None:
+    """The model fit per instrumented axle of an offline estimate
+    (:func:`.axle_fit.assess_axles` on its roads, loads and static loads); None without a
+    road (online) or with fewer than 3 instrumented axles (no median of the others)."""
+    axles = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
+    if wv.road_m is None or len(axles) < 3 or len(wv.stamps_ns) < 2:
+        return None
+    rows = [2 * j + s for j in axles for s in (0, 1)]
+    return assess_axles(wv.stamps_ns, wv.distance_m, wv.road_m[rows], wv.load_n[rows],
+                        wv.static_n[rows], [vehicle.axles[j].position_m for j in axles],
+                        [vehicle.axles[j].name for j in axles])

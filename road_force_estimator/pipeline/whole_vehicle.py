@@ -9,8 +9,9 @@ them). Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` s
 sample (the node's numbers), offline the smoother. Sinks: the estimate bag's whole-vehicle
 topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics from the front
 wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and
-the gross vehicle weight (:func:`add_diagnostics`), and the report's section and
-``segments.csv`` columns (:mod:`~.report.whole_vehicle`).
+the gross vehicle weight (:func:`add_diagnostics`; offline also the drive's model fit per
+axle, :func:`fit_values`: WARN naming the axle or sensor that does not fit), and the report's
+section and ``segments.csv`` columns (:mod:`~.report.whole_vehicle`).
 
 The front axle's estimator still runs on the front axle's sensors (package defaults for the
 4-DOF model, :func:`front_axle_vehicle`) for what the whole vehicle's does not give yet: the
@@ -30,7 +31,7 @@ from road_force_estimator.pipeline.result import PROG, InputError
 
 __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'add_diagnostics', 'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
-           'FusedRoad',
+           'FusedRoad', 'fit_values', 'MISMATCH',
            'STATUS_NAME']
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
@@ -123,9 +124,35 @@ def _status(wv, k: int, since: int = 0) -> dict:
         period = period[np.isfinite(period)]
         values[f'max_abs_ltr_{unit}'] = f'{float(period.max()) if period.size else 0.0:.4f}'
     gross = float(axle.sum())
-    return {'name': STATUS_NAME, 'hardware_id': PROG, 'level': 0 if math.isfinite(gross) else 1,
-            'message': f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles',
+    message = f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles'
+    level = 0 if math.isfinite(gross) else 1
+    fit = fit_values(wv.axle_fit)
+    values.update(fit)
+    if fit.get('model_fit') == MISMATCH:
+        level = 1
+        from road_force_estimator.estimation.axle_fit import ADVICE
+        message += f'; model fit: {fit["model_fit_culprits"]} {ADVICE}'
+    return {'name': STATUS_NAME, 'hardware_id': PROG, 'level': level, 'message': message,
             'values': values}
+
+
+MISMATCH = 'mismatch'
+
+
+def fit_values(fit) -> dict:
+    """The status values of the model fit per axle (:mod:`~.estimation.axle_fit`, offline; none
+    online or before enough distance): ``model_fit`` ('ok' | 'mismatch'),
+    ``model_fit_culprits`` (the axles, or ``<axle>_<side>_suspension`` where one sensor
+    explains it, worst first, comma-separated; '' when none) and per axle
+    ``model_fit_misfit_<axle>`` (the misfit's lower bound, a fraction; the verdict's
+    threshold :data:`~.estimation.axle_fit.THRESHOLD`)."""
+    if fit is None or not fit.measured:
+        return {}
+    out = {'model_fit': MISMATCH if fit.culprits else 'ok',
+           'model_fit_culprits': ', '.join(fit.culprits)}
+    for name, m in zip(fit.axle_names, fit.axle_misfit):
+        out[f'model_fit_misfit_{name}'] = f'{float(m):.4f}'
+    return out
 
 
 def add_diagnostics(diagnostics: list, wv) -> list:

@@ -12,7 +12,9 @@ The estimate (:func:`summarize_estimate`, over the converged samples): per axle 
 load and the gross vehicle weight (the mean of the static loads' sums), per wheel the mean and
 peak load and the DLC, per unit the largest |LTR| and |quasi-static LTR|; with the truth per
 wheel the RMS of the load error in % of the true dynamic load's RMS (about the drive's static
-load) and the trailer's quasi-static LTR error (RMS and largest), at the stamps both have.
+load) and the trailer's quasi-static LTR error (RMS and largest), at the stamps both have;
+offline the model fit per axle (:mod:`~.estimation.axle_fit`: which axle or sensor does not
+fit).
 ``report.md`` gains "The whole vehicle (estimate)", ``report.json`` the key
 ``whole_vehicle_estimate``, ``segments.csv`` the columns :func:`segment_columns` names
 (INTERFACES.md "The whole vehicle").
@@ -253,6 +255,14 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
         'axles': axles, 'axle_bodies': list(wv.axle_bodies),
         'axle_static_load_n': axle_static,
         'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units}
+    fit = getattr(wv, 'axle_fit', None)
+    if fit is not None and fit.measured:
+        from road_force_estimator.estimation.axle_fit import THRESHOLD
+        out['model_fit'] = {'verdict': 'mismatch' if fit.culprits else 'ok',
+                            'culprits': list(fit.culprits), 'threshold': THRESHOLD,
+                            'length_m': float(fit.length_m),
+                            'misfit': dict(zip(fit.axle_names,
+                                               (float(m) for m in fit.axle_misfit)))}
     if truth is not None and len(truth.stamps_ns) and tuple(truth.wheel_names) == names:
         out['accuracy'] = _accuracy(wv, truth, use, names)
     return out
@@ -334,6 +344,15 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
                   f"{right:.2f} m/km right. The road, its figures and the segments' IRI above "
                   "are the fused profile's, the last metres (where the trailer's axles "
                   "have not passed) the whole vehicle's front wheels' road."]
+    fit = s.get('model_fit')
+    if fit:
+        from road_force_estimator.estimation.axle_fit import ADVICE
+        cells = ', '.join(f'{a} {100 * m:.1f} %' for a, m in fit['misfit'].items())
+        verdict = (f'**{", ".join(fit["culprits"])}** {ADVICE}' if fit['culprits']
+                   else 'every axle fits')
+        lines += ['', f"Model fit per axle (each axle's road against the other axles' over "
+                  f'{fit["length_m"]:.0f} m; misfit bound, threshold '
+                  f'{100 * fit["threshold"]:g} %: {cells}): {verdict}.']
     if acc:
         lines += ['', f'Against the drive\'s truth ({acc["samples"]} samples): the trailer\'s '
                   'quasi-static LTR error RMS '

@@ -1,0 +1,104 @@
+"""The model fit per axle (estimation/axle_fit.py, issue 32): on drives of the articulated
+plant with one parameter off the file's (the estimator keeps the file's), the offline
+estimate's ``axle_fit`` names the axle or the sensor the plant was given the fault on, and
+none on the clean drive. The truth is the plant's configuration, independent of the
+estimator; ``python -m bench.studies.axle_fit`` measures the margins (classes A and C,
+20-60 s, also through a curve and a stop)."""
+import pathlib
+
+import numpy as np
+import pytest
+
+from road_force_estimator.core.articulated_plant import simulate_articulated
+from road_force_estimator.core.articulated_setup import ArticulatedDrive
+from road_force_estimator.core.parameters import load_params_file
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.estimation.axle_fit import THRESHOLD, assess_axles
+from road_force_estimator.estimation.models.articulated import channel_names
+from road_force_estimator.estimation.whole_vehicle import estimate_whole_vehicle
+
+CONFIG = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
+DURATION_S = 15.0
+
+
+def file_values() -> dict:
+    base = load_params_file(CONFIG)
+    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
+                 'simulator.duration': DURATION_S})
+    return base
+
+
+def estimate(plant_values: dict, road_class: str = 'C'):
+    """The offline estimate with the file's vehicle of a drive whose plant has
+    ``plant_values`` over the file's (15 s at 20 m/s, 1 kHz, 10 um of noise)."""
+    d = ArticulatedDrive.from_values({**file_values(), **plant_values})
+    road = iso8608_profile(road_class, d.road_length_m, seed=7)
+    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
+                              duration_s=DURATION_S, tire_envelope_m=0.25, model=d.model)
+    y = d.sensors(channel_names(d.model)).measure(tr)
+    vehicle = ArticulatedDrive.from_values(file_values()).vehicle
+    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    return estimate_whole_vehicle(vehicle, stamps, y, 20.0, offline=True)
+
+
+def scaled(key: str, factor: float) -> dict:
+    """The file's value of ``key`` times ``factor``, for the plant."""
+    return {key: np.multiply(file_values()[key], factor).tolist()}
+
+
+@pytest.mark.parametrize('fault, named', [
+    ({}, ()),
+    (('vehicle.axle.trailer_2.suspension_stiffness', 1.2), ('trailer_2',)),
+    (('vehicle.axle.drive.suspension_damping', 0.7), ('drive',)),
+    ({'simulator.axle.trailer_1.sensor_scale_error': [0.1, 0.0]},
+     ('trailer_1_left_suspension',)),
+    (('vehicle.axle.front.mass', 1.3), ('front',)),
+], ids=['clean', 'trailer_2-spring+20%', 'drive-damping-30%', 'trailer_1-left-gain+10%',
+        'front-mass+30%'])
+def test_the_axle_or_sensor_the_plant_was_given_is_named(fault, named):
+    plant = scaled(*fault) if isinstance(fault, tuple) else fault
+    fit = estimate(plant).axle_fit
+    assert fit is not None and fit.measured and fit.length_m > 200.0
+    assert fit.culprits == named, (fit.culprits, fit.axle_misfit)
+    others = [m for a, m in zip(fit.axle_names, fit.axle_misfit)
+              if not any(c == a or c.startswith(a + '_') for c in named)]
+    assert max(others) < THRESHOLD / 2, fit.axle_misfit
+
+
+def test_online_and_short_drives_give_no_verdict():
+    vehicle = ArticulatedDrive.from_values(file_values()).vehicle
+    stamps = np.arange(2001, dtype=np.int64) * 1_000_000
+    y = np.zeros((stamps.size, 12))
+    assert estimate_whole_vehicle(vehicle, stamps, y, 20.0).axle_fit is None
+    fit = estimate_whole_vehicle(vehicle, stamps, y, 20.0, offline=True).axle_fit
+    assert fit is not None and not fit.measured and fit.culprits == ()
+
+
+def test_a_road_scaled_on_one_wheel_is_that_sensor():
+    """Analytic: five axles read the same road (sines of 0.7-20 m); one wheel's 10 % larger is that
+    wheel's misfit 0.10 (the median of the others is the road itself); an axle's both
+    wheels 10 % larger name the axle."""
+    rng = np.random.default_rng(3)
+    t = np.arange(20001) * 1e-3            # 20 s at 20 m/s: 400 m
+    x = 20.0 * t
+    xi = np.array([0.0, 3.7, 9.6, 10.91, 12.22])
+    waves = rng.uniform(0.7, 20.0, size=(2, 40))       # wavelengths (m), random phases
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(2, 40))
+
+    def path(side: int, p: np.ndarray) -> np.ndarray:
+        return 1e-3 * np.sin(2.0 * np.pi * p[:, None] / waves[side] + phase[side]).sum(axis=1)
+
+    road = np.array([path(s, x - xi[j]) for j in range(5) for s in (0, 1)])   # axle j at x - xi_j
+    load = np.full_like(road, 4e4)
+    names = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
+    stamps = np.round(t * 1e9).astype(np.int64)
+    one = road.copy()
+    one[6] *= 1.1                          # trailer_2_left
+    fit = assess_axles(stamps, x, one, load, load, xi, names)
+    np.testing.assert_allclose(fit.misfit[3, 0], 0.1, atol=2e-3)
+    assert np.nanmax(np.delete(fit.misfit.reshape(10, -1), 6, axis=0)) < 0.03
+    assert fit.culprits == ('trailer_2_left_suspension',)
+    both = road.copy()
+    both[2:4] *= 1.1                       # drive, both wheels
+    assert assess_axles(stamps, x, both, load, load, xi, names).culprits == ('drive',)
+    assert assess_axles(stamps, x, road, load, load, xi, names).culprits == ()
