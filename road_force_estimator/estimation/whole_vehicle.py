@@ -22,9 +22,16 @@ dynamic tire force. The model's gains stay the file's (the
 payload moves no design here, unlike the front axle's ``MASS_REDESIGN_FRACTION``); an axle
 without sensors keeps the file's static load. ``innovations_gated`` counts, per channel, the
 samples the observer's innovation gate (``observer.innovation_gate``) replaced.
+
+Gaps (:mod:`.articulated`'s rule, the front axle's): a step longer than ``max(0.1 s, 10
+typical steps)`` restarts the observer (online and offline, each run smoothed on its own);
+the static-load tracker keeps its mean and offset over it (a step of 0: the load has not
+changed, as :mod:`.static_load`'s), the load transfer's filters step over it; ``gaps``
+counts them (per sample: the gaps so far).
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 import math
 from typing import Sequence
@@ -34,8 +41,9 @@ import numpy as np
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
+from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S
 from road_force_estimator.estimation.articulated import (
-    ArticulatedEstimate, ArticulatedOnline, estimate_articulated)
+    ArticulatedEstimate, ArticulatedOnline, estimate_articulated, run_starts)
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
@@ -76,6 +84,8 @@ class WholeVehicleSample:
     innovations_gated: tuple = ()
     #: the front axle's own (LTR, quasi-static LTR) from its two wheels (``/load_transfer``)
     front_ltr: tuple = ()
+    #: the gaps in the input so far, this sample's included (each restarted the estimate)
+    gaps: int = 0
 
 
 @dataclass(frozen=True)
@@ -100,6 +110,13 @@ class WholeVehicleArrays:
     channel_names: tuple = ()
     #: (2, m): the front axle's own LTR and quasi-static LTR from its two wheels
     front_ltr: np.ndarray | None = None
+    #: (m,) int: the gaps so far at each sample (each restarted the estimate)
+    gaps: np.ndarray | None = None
+
+    @property
+    def gap_count(self) -> int:
+        """The drive's gaps."""
+        return int(self.gaps[-1]) if self.gaps is not None and self.gaps.size else 0
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -197,10 +214,12 @@ class WholeVehicleEstimator:
     ``zero_load`` the tracker's after the last input (module notes)."""
 
     def __init__(self, vehicle: ArticulatedParameters,
-                 observer: ObserverParameters | None = None) -> None:
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
         obs = ObserverParameters() if observer is None else observer
         self.vehicle = vehicle
-        self.online = ArticulatedOnline(vehicle, obs.latency_s, obs)
+        self.online = ArticulatedOnline(vehicle, obs.latency_s, obs,
+                                        gap_threshold_s=gap_threshold_s)
         self.model = self.online.model
         self.wheel_names = self.online.wheel_names
         self.axle_names = vehicle.axle_names
@@ -214,6 +233,7 @@ class WholeVehicleEstimator:
         self._dynamic = cols['dynamic']
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
+        self._gaps: deque = deque()                # each held sample's gaps so far
         self._last: int | None = None
 
     def step(self, stamp_ns: int, readings: Sequence[float], speed_mps: float
@@ -231,11 +251,13 @@ class WholeVehicleEstimator:
         if self.tracker is not None:
             if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
-            dt = 0.0 if self._last is None else (stamp - self._last) * 1e-9
+            dt = 0.0 if self.online.starts_run(stamp) else (stamp - self._last) * 1e-9
             self.tracker.update(y, dt)
             self.static_n = tuple(self.tracker.static_n)
             self._pending[stamp] = self.static_n
-        out = self._samples(self.online.step(stamp, y, float(speed_mps)))
+        ready = self.online.step(stamp, y, float(speed_mps))
+        self._gaps.append(self.online.gaps)
+        out = self._samples(ready)
         self._last = stamp
         return out
 
@@ -256,12 +278,12 @@ class WholeVehicleEstimator:
             out.append(WholeVehicleSample(int(stamp), float(row[DIST]), bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
                                           tuple(t[1:6:2]), tuple(row[self._ay]), gated,
-                                          tuple(t[6:])))
+                                          tuple(t[6:]), self._gaps.popleft()))
         return out
 
 
-def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
-            ) -> WholeVehicleArrays:
+def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
+            gaps: np.ndarray | None = None) -> WholeVehicleArrays:
     m = len(samples)
     if gated is None:
         gated = samples[-1].innovations_gated if samples else ()
@@ -275,12 +297,14 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
         np.array([s.converged for s in samples], bool), est.wheel_names, est.axle_names,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
-        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'))
+        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'),
+        np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                            observer: ObserverParameters | None = None,
-                           offline: bool = False) -> WholeVehicleArrays:
+                           offline: bool = False,
+                           gap_threshold_s: float = GAP_THRESHOLD_S) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -290,8 +314,9 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     stamps_ns : (m,) int, increasing
     readings : (m, channels) as :meth:`WholeVehicleEstimator.step` takes them
     speed_mps : (m,) or float (m/s)
+    gap_threshold_s : the shortest step that is a gap (s; module notes)
     """
-    est = WholeVehicleEstimator(vehicle, observer)
+    est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
@@ -302,17 +327,22 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         return _arrays(est, samples)
     y = np.array(readings, float)
     statics = None
+    starts = run_starts(stamps, gap_threshold_s)
+    gaps = np.zeros(stamps.size, np.int64)
+    gaps[starts[1:]] = 1
+    np.cumsum(gaps, out=gaps)
     if est.tracker is not None:       # the online tracker's static loads and offsets
         statics = np.empty((stamps.size, len(est.wheel_names)))
         steps = np.zeros(stamps.size)
         steps[1:] = np.diff(stamps) * 1e-9
+        steps[starts] = 0.0           # a gap: the mean and the offset kept (module notes)
         update, tracked = est.tracker.update, est.tracker.static_n
         for k, dt in enumerate(steps.tolist()):
             y[k] = update(y[k].tolist(), dt)
             statics[k] = tracked
     smoothed: ArticulatedEstimate = estimate_articulated(
         vehicle, stamps, y, v, offline=True, observer=observer,
-        from_equilibrium=statics is not None)
+        from_equilibrium=statics is not None, gap_threshold_s=gap_threshold_s)
     samples = []
     for k, stamp in enumerate(stamps.tolist()):
         if statics is None:
@@ -324,5 +354,5 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         samples.append(WholeVehicleSample(
             stamp, float(smoothed.distance_m[k]), bool(smoothed.converged[k]), tuple(loads),
             static, tuple(t[0:6:2]), tuple(t[1:6:2]), tuple(smoothed.lateral_mps2[:, k]),
-            smoothed.innovations_gated, tuple(t[6:])))
-    return _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated)
+            smoothed.innovations_gated, tuple(t[6:]), int(gaps[k])))
+    return _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated, gaps)
