@@ -55,9 +55,10 @@ def streamed(vehicle, stamps, y, block: int = 777, **kwargs) -> list:
     return list(stream.finish())
 
 
-def test_blocks_without_windows_are_the_one_block_estimate(drive):
+@pytest.mark.parametrize('block', [777, 1000])     # 1000: a block starts at the gap
+def test_blocks_without_windows_are_the_one_block_estimate(drive, block):
     vehicle, stamps, y = drive
-    pieces = streamed(vehicle, stamps, y, window=(10 ** 9, 0), piece_rows=1000)
+    pieces = streamed(vehicle, stamps, y, block, window=(10 ** 9, 0), piece_rows=1000)
     assert len(pieces) >= 8 and max(len(p.stamps_ns) for p in pieces) <= 1000
     got = concatenate_arrays(pieces)
     one = estimate_articulated(vehicle, stamps, y, 20.0, offline=True)
