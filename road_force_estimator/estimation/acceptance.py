@@ -26,7 +26,9 @@ is) at every restart.
 
 :class:`SampleGate` applies the rules one sample at a time (the per-sample path and
 :func:`.estimate_batch`); :func:`accept_arrays` over whole arrays (the offline smoothers), with
-the same result.
+the same result. The gap rule alone, for a model whose samples are not the front axle's
+three readings (the whole vehicle's, :mod:`.articulated`): :class:`StepGaps` one step at a
+time, :func:`gap_samples` over a drive's steps.
 """
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ __all__ = [
     'GAP_THRESHOLD_S', 'GAP_PERIODS', 'MAX_DEFLECTION_M', 'MAX_ROLL_RAD', 'MAX_SPEED_MPS',
     'MAX_STAMP_JUMP_S', 'BEHIND_SAMPLES', 'FROZEN_REPEATS', 'TYPICAL_STEP_WEIGHT',
     'check_gap_threshold',
-    'batch_inputs', 'SampleGate',
+    'batch_inputs', 'SampleGate', 'StepGaps',
     'accept_arrays', 'gap_samples', 'output_stamps',
 ]
 
@@ -240,6 +242,31 @@ class SampleGate:
         if stamp > self.clock or dt_typ == 0.0:     # (a run starting behind: the clock too)
             self.clock = stamp
         self.dt_typ = dt_typ
+
+
+class StepGaps:
+    """The gap rule of :class:`SampleGate` alone, one step at a time (what
+    :func:`gap_samples` finds over a drive's steps): a step longer than ``max(gap_threshold_s,``
+    :data:`GAP_PERIODS` ``typical steps)`` is a gap, the typical step the running average of
+    the steps since the last restart (the first taken as it is)."""
+
+    def __init__(self, gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
+        self.gap_threshold_s = check_gap_threshold(gap_threshold_s)
+        #: the typical step (s; 0: none since the last restart)
+        self.dt_typ = 0.0
+
+    def is_gap(self, dt: float) -> bool:
+        """Whether a step of dt (s) after the last one taken is a gap (nothing changed)."""
+        return dt > self.gap_threshold_s and dt > GAP_PERIODS * self.dt_typ
+
+    def take(self, dt: float) -> bool:
+        """Take a step of dt (s): True when it is a gap (the typical step restarts)."""
+        if self.is_gap(dt):
+            self.dt_typ = 0.0
+            return True
+        typ = self.dt_typ
+        self.dt_typ = dt if typ == 0.0 else typ + TYPICAL_STEP_WEIGHT * (dt - typ)
+        return False
 
 
 def accept_arrays(stamps, q, phi, v, gap_threshold_s: float):

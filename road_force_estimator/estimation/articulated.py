@@ -14,7 +14,12 @@ speed, its response taken off the readings and added to the loads
 of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
 axle; the short waves from the wheels on the ground only); each axle's road holds the
 30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion.
-Not yet: gaps and rejected samples (one run, every sample finite), the road online (and so a
+Gaps: a step longer than ``max(gap_threshold_s, 10 typical steps)`` (the front axle's rule,
+:class:`.acceptance.StepGaps` per sample, :func:`.acceptance.gap_samples` offline) ends a
+run; the next sample restarts the observer at rest on its readings (the braking response
+too), offline each run is smoothed on its own (the noise and roughness schedule carried over
+runs), the distance continues over the gap (``|v|`` times the step); ``gaps`` counts them.
+Not yet: rejected samples (every sample finite, stamps increasing), the road online (and so a
 streamed fused profile), a fusion that tells the bodies' heave and pitch from the road by the
 axles' differences.
 """
@@ -27,12 +32,13 @@ import numpy as np
 
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
+from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, StepGaps, gap_samples
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.observer.online import ModelCore
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
-__all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated',
+__all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated', 'run_starts',
            'equilibrium_readings', 'LIFT_OFF_FRACTION', 'FUSION_SPLIT_WAVELENGTH_M',
            'FusedProfile', 'fuse_roads']
 
@@ -54,18 +60,20 @@ class ArticulatedEstimate:
     road_m: np.ndarray | None = None
     #: samples whose innovation the gate replaced, per channel (the model's channel order)
     innovations_gated: tuple = ()
+    #: gaps in the drive (each restarted the estimate; module notes)
+    gaps: int = 0
 
     @classmethod
     def from_rows(cls, stamps_ns, rows: np.ndarray, wheel_names,
-                  gated: tuple = ()) -> ArticulatedEstimate:
+                  gated: tuple = (), gaps: int = 0) -> ArticulatedEstimate:
         """From the rows (m, columns) of :mod:`.models.articulated_rows` (the road where the
-        rows hold it) and the gated counts per channel."""
+        rows hold it), the gated counts per channel and the gaps."""
         cols = columns(len(wheel_names))
         road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
         return cls(np.asarray(stamps_ns), rows[:, DIST], rows[:, CONV] > 0.5,
                    tuple(wheel_names), rows[:, cols['load']].T.copy(),
                    rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road,
-                   tuple(int(g) for g in gated))
+                   tuple(int(g) for g in gated), int(gaps))
 
 
 def _wheel_names(vehicle: ArticulatedParameters) -> tuple:
@@ -92,21 +100,31 @@ def equilibrium_readings(model: ArticulatedObserverModel, readings: np.ndarray) 
 
 class ArticulatedOnline:
     """The online estimate one sample at a time: :meth:`step` returns the rows finalized by
-    that sample (``(stamp_ns, row)``, a latency's samples late), :meth:`finish` the rest."""
+    that sample (``(stamp_ns, row)``, a latency's samples late), :meth:`finish` the rest.
+    A step that is a gap (``gap_threshold_s``, module notes) restarts the run (:attr:`gaps`)."""
 
     def __init__(self, vehicle: ArticulatedParameters, latency_s: float = 0.0,
-                 observer: ObserverParameters | None = None) -> None:
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
         self.model = ArticulatedObserverModel(vehicle)
         obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
         self.core = ModelCore(self.model, obs)
         self.wheel_names = _wheel_names(vehicle)
         self.braking = self.model.braking_response()
+        self.clock = StepGaps(gap_threshold_s)
+        #: gaps so far (each restarted the run)
+        self.gaps = 0
         self._last: int | None = None
         self._x = 0.0
         self._held: deque = deque()    # the braking response's dynamic loads of held samples
 
+    def starts_run(self, stamp_ns: int) -> bool:
+        """Whether a sample at ``stamp_ns`` would start a run (the first, or after a gap)."""
+        return self._last is None or self.clock.is_gap((int(stamp_ns) - self._last) * 1e-9)
+
     def step(self, stamp_ns: int, y, speed_mps: float) -> list:
-        """One sample: ``y`` the model's channels (m, rad; from the equilibrium).
+        """One sample: ``y`` the model's channels (m, rad; from the equilibrium), stamps
+        increasing.
 
         ``a_x`` over the step: the change of speed over it (the known input,
         :class:`.models.articulated.BrakingResponse`); its response is taken off the
@@ -114,16 +132,19 @@ class ArticulatedOnline:
         core = self.core
         first = self._last is None
         dt = 0.0 if first else (stamp_ns - self._last) * 1e-9
+        restart = first or self.clock.is_gap(dt)
         self._x += abs(speed_mps) * dt
-        t = 0.0 if first else dt
+        t = 0.0 if restart else dt
         brake = self.braking
-        if first:
+        if restart:
             brake.restart()
-        brake.feed(dt, float(speed_mps))
+        brake.feed(t, float(speed_mps))
         off = brake.offset
         if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
-                         float(speed_mps), dt, first, self._x, t, dt):
+                         float(speed_mps), dt, restart, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
+        if not first and self.clock.take(dt):
+            self.gaps += 1
         self._last = int(stamp_ns)
         self._held.append(brake.dynamic_n.tolist())
         return self._ready()
@@ -152,8 +173,9 @@ class ArticulatedOnline:
 def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                          latency_s: float = 0.0, offline: bool = False,
                          observer: ObserverParameters | None = None,
-                         from_equilibrium: bool = False) -> ArticulatedEstimate:
-    """Every wheel's load over a drive (one run).
+                         from_equilibrium: bool = False,
+                         gap_threshold_s: float = GAP_THRESHOLD_S) -> ArticulatedEstimate:
+    """Every wheel's load over a drive (a new run after each gap: module notes).
 
     Parameters
     ----------
@@ -169,39 +191,50 @@ def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, sp
     from_equilibrium : the readings are from the equilibrium already (a ``zero_load``
         vehicle's taken back by the caller, e.g. by the static-load tracker of
         :mod:`.whole_vehicle`): :func:`equilibrium_readings` not applied
+    gap_threshold_s : the shortest step that is a gap (s; module notes)
     """
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
-    online = ArticulatedOnline(vehicle, latency_s, observer)
+    online = ArticulatedOnline(vehicle, latency_s, observer, gap_threshold_s=gap_threshold_s)
     y = (np.asarray(readings, float) if from_equilibrium
          else equilibrium_readings(online.model, readings))
     if offline:
-        return _offline(online, stamps, y, v, observer)
+        return _offline(online, stamps, y, v, observer, run_starts(stamps, gap_threshold_s))
     rows = []
     for s, yi, vi in zip(stamps.tolist(), y.tolist(), v.tolist()):
         rows += [r for _, r in online.step(s, yi, vi)]
     rows += [r for _, r in online.finish()]
     return ArticulatedEstimate.from_rows(stamps, np.array(rows), online.wheel_names,
-                                         tuple(online.core.gated))
+                                         tuple(online.core.gated), online.gaps)
+
+
+def run_starts(stamps_ns, gap_threshold_s: float = GAP_THRESHOLD_S) -> np.ndarray:
+    """The first sample of every run of a drive (its stamps, ns, increasing): 0 and each
+    sample after a gap (:func:`.acceptance.gap_samples`, the per-sample rule's gaps)."""
+    stamps = np.asarray(stamps_ns, np.int64)
+    if stamps.size < 2:
+        return np.zeros(min(stamps.size, 1), np.int64)
+    return np.concatenate([[0], gap_samples(np.diff(stamps) * 1e-9, gap_threshold_s) + 1])
 
 
 def _offline(online: ArticulatedOnline, stamps: np.ndarray, y: np.ndarray, v: np.ndarray,
-             observer: ObserverParameters | None) -> ArticulatedEstimate:
-    """The smoother over the drive as one run."""
+             observer: ObserverParameters | None, starts: np.ndarray) -> ArticulatedEstimate:
+    """The smoother over each run of the drive (``starts``: the first sample of each)."""
     smoother = Smoother(online.model, ObserverParameters() if observer is None else observer)
-    t = (stamps - stamps[0]) * 1e-9
     nw = len(online.wheel_names)
     cols = columns(nw)
-    rows = np.zeros((t.size, cols['size']))
-    off, dyn = online.braking.run(t, v)       # the known a_x (as online)
-    for a, b, pc in smoother.pieces(t, y - off, v):
-        rows[a:b] = np.column_stack(pc)
-    rows[:, cols['load']] += dyn.T
-    rows[:, cols['dynamic']] += dyn.T
-    dist = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * np.diff(t))])
-    rows[:, DIST] = dist
+    rows = np.zeros((stamps.size, cols['size']))
+    for a0, b0 in zip(starts.tolist(), starts[1:].tolist() + [stamps.size]):
+        t = (stamps[a0:b0] - stamps[a0]) * 1e-9
+        off, dyn = online.braking.run(t, v[a0:b0])       # the known a_x (as online)
+        for a, b, pc in smoother.pieces(t, y[a0:b0] - off, v[a0:b0]):
+            rows[a0 + a:a0 + b] = np.column_stack(pc)
+        rows[a0:b0, cols['load']] += dyn.T
+        rows[a0:b0, cols['dynamic']] += dyn.T
+    steps = np.diff(stamps) * 1e-9
+    rows[:, DIST] = np.concatenate([[0.0], np.cumsum(np.abs(v[1:]) * steps)])
     return ArticulatedEstimate.from_rows(stamps, rows, online.wheel_names,
-                                         tuple(smoother.gated.tolist()))
+                                         tuple(smoother.gated.tolist()), starts.size - 1)
 
 
 #: The fused profile: a wheel's reading counts while its estimated load is at least this

@@ -24,27 +24,37 @@ without sensors keeps the file's static load. ``innovations_gated`` counts, per 
 samples the observer's innovation gate (``observer.innovation_gate``) replaced. Offline,
 ``axle_fit`` says which axle or sensor does not fit (:mod:`.axle_fit`: each axle's road
 against the other axles' at the same distance).
+
+Gaps (:mod:`.articulated`'s rule, the front axle's): a step longer than ``max(0.1 s, 10
+typical steps)`` restarts the observer (online and offline, each run smoothed on its own);
+the static-load tracker keeps its mean and offset over it (a step of 0: the load has not
+changed, as :mod:`.static_load`'s), the load transfer's filters step over it; ``gaps``
+counts them (per sample: the gaps so far).
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, replace
 import math
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
+from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, StepGaps
 from road_force_estimator.estimation.articulated import (
-    ArticulatedEstimate, ArticulatedOnline, estimate_articulated)
+    ArticulatedOnline, run_starts)
 from road_force_estimator.estimation.axle_fit import AxleFit, assess_axles
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
 
-__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'WholeVehicleSample', 'WholeVehicleArrays',
-           'WholeVehicleEstimator', 'WheelStaticTracker', 'estimate_whole_vehicle',
+__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS', 'STREAM_WINDOW_SAMPLES',
+           'STREAM_OVERLAP_S', 'WholeVehicleSample',
+           'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
+           'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
            'fit_axles']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
@@ -80,6 +90,8 @@ class WholeVehicleSample:
     innovations_gated: tuple = ()
     #: the front axle's own (LTR, quasi-static LTR) from its two wheels (``/load_transfer``)
     front_ltr: tuple = ()
+    #: the gaps in the input so far, this sample's included (each restarted the estimate)
+    gaps: int = 0
 
 
 @dataclass(frozen=True)
@@ -104,6 +116,14 @@ class WholeVehicleArrays:
     channel_names: tuple = ()
     #: (2, m): the front axle's own LTR and quasi-static LTR from its two wheels
     front_ltr: np.ndarray | None = None
+    #: (m,) int: the gaps so far at each sample (each restarted the estimate)
+    gaps: np.ndarray | None = None
+
+    @property
+    def gap_count(self) -> int:
+        """The drive's gaps."""
+        return int(self.gaps[-1]) if self.gaps is not None and self.gaps.size else 0
+
     #: offline, the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor
     #: does not fit) over the instrumented axles; None online or with fewer than 3 of them
     axle_fit: AxleFit | None = None
@@ -204,10 +224,12 @@ class WholeVehicleEstimator:
     ``zero_load`` the tracker's after the last input (module notes)."""
 
     def __init__(self, vehicle: ArticulatedParameters,
-                 observer: ObserverParameters | None = None) -> None:
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
         obs = ObserverParameters() if observer is None else observer
         self.vehicle = vehicle
-        self.online = ArticulatedOnline(vehicle, obs.latency_s, obs)
+        self.online = ArticulatedOnline(vehicle, obs.latency_s, obs,
+                                        gap_threshold_s=gap_threshold_s)
         self.model = self.online.model
         self.wheel_names = self.online.wheel_names
         self.axle_names = vehicle.axle_names
@@ -221,6 +243,7 @@ class WholeVehicleEstimator:
         self._dynamic = cols['dynamic']
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
+        self._gaps: deque = deque()                # each held sample's gaps so far
         self._last: int | None = None
 
     def step(self, stamp_ns: int, readings: Sequence[float], speed_mps: float
@@ -238,11 +261,13 @@ class WholeVehicleEstimator:
         if self.tracker is not None:
             if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
-            dt = 0.0 if self._last is None else (stamp - self._last) * 1e-9
+            dt = 0.0 if self.online.starts_run(stamp) else (stamp - self._last) * 1e-9
             self.tracker.update(y, dt)
             self.static_n = tuple(self.tracker.static_n)
             self._pending[stamp] = self.static_n
-        out = self._samples(self.online.step(stamp, y, float(speed_mps)))
+        ready = self.online.step(stamp, y, float(speed_mps))
+        self._gaps.append(self.online.gaps)
+        out = self._samples(ready)
         self._last = stamp
         return out
 
@@ -263,12 +288,12 @@ class WholeVehicleEstimator:
             out.append(WholeVehicleSample(int(stamp), float(row[DIST]), bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
                                           tuple(t[1:6:2]), tuple(row[self._ay]), gated,
-                                          tuple(t[6:])))
+                                          tuple(t[6:]), self._gaps.popleft()))
         return out
 
 
 def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
-            fit: AxleFit | None = None) -> WholeVehicleArrays:
+            gaps: np.ndarray | None = None) -> WholeVehicleArrays:
     m = len(samples)
     if gated is None:
         gated = samples[-1].innovations_gated if samples else ()
@@ -282,12 +307,14 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
         np.array([s.converged for s in samples], bool), est.wheel_names, est.axle_names,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
-        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'), fit)
+        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'),
+        np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                            observer: ObserverParameters | None = None,
-                           offline: bool = False) -> WholeVehicleArrays:
+                           offline: bool = False,
+                           gap_threshold_s: float = GAP_THRESHOLD_S) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -297,8 +324,9 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     stamps_ns : (m,) int, increasing
     readings : (m, channels) as :meth:`WholeVehicleEstimator.step` takes them
     speed_mps : (m,) or float (m/s)
+    gap_threshold_s : the shortest step that is a gap (s; module notes)
     """
-    est = WholeVehicleEstimator(vehicle, observer)
+    est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
@@ -307,33 +335,242 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
             samples += est.step(s, y, vi)
         samples += est.finish()
         return _arrays(est, samples)
-    y = np.array(readings, float)
-    statics = None
-    if est.tracker is not None:       # the online tracker's static loads and offsets
-        statics = np.empty((stamps.size, len(est.wheel_names)))
-        steps = np.zeros(stamps.size)
-        steps[1:] = np.diff(stamps) * 1e-9
-        update, tracked = est.tracker.update, est.tracker.static_n
-        for k, dt in enumerate(steps.tolist()):
-            y[k] = update(y[k].tolist(), dt)
-            statics[k] = tracked
-    smoothed: ArticulatedEstimate = estimate_articulated(
-        vehicle, stamps, y, v, offline=True, observer=observer,
-        from_equilibrium=statics is not None)
-    samples = []
-    for k, stamp in enumerate(stamps.tolist()):
-        if statics is None:
-            static, loads = est.static_n, smoothed.load_n[:, k].tolist()
-        else:
-            static = tuple(statics[k].tolist())
-            loads = (statics[k] + smoothed.dynamic_n[:, k]).tolist()
-        t = est._transfer.update(stamp, loads)
-        samples.append(WholeVehicleSample(
-            stamp, float(smoothed.distance_m[k]), bool(smoothed.converged[k]), tuple(loads),
-            static, tuple(t[0:6:2]), tuple(t[1:6:2]), tuple(smoothed.lateral_mps2[:, k]),
-            smoothed.innovations_gated, tuple(t[6:])))
-    out = _arrays(est, samples, smoothed.road_m, smoothed.innovations_gated)
+    stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
+                                       eager=False)
+    stream.feed(stamps, readings, v)
+    out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
+
+
+def concatenate_arrays(pieces: Sequence[WholeVehicleArrays]) -> WholeVehicleArrays:
+    """Pieces of one drive's estimate (:meth:`WholeVehicleOfflineStream.finish`'s, in order)
+    as one: the per-sample fields joined, the counts the last piece's."""
+    if not pieces:
+        raise ValueError('no piece: nothing estimated')
+    last = pieces[-1]
+
+    def join(name: str):
+        parts = [getattr(p, name) for p in pieces]
+        if any(a is None for a in parts):
+            return None
+        return np.concatenate(parts, axis=-1)
+
+    return WholeVehicleArrays(
+        join('stamps_ns'), join('distance_m'), join('converged'), last.wheel_names,
+        last.axle_names, last.axle_bodies, join('load_n'), join('static_n'), join('ltr'),
+        join('ltr_quasi_static'), join('lateral_mps2'), join('road_m'),
+        last.innovations_gated, last.channel_names, join('front_ltr'), join('gaps'))
+
+
+#: Most samples of a piece :meth:`WholeVehicleOfflineStream.finish` hands out.
+PIECE_ROWS = 1 << 16
+#: The stream's smoother windows (samples; :class:`.smoothing.smoother.Smoother`'s
+#: ``window``): the load pass's rows are held a window and its overlaps at a time (~60
+#: columns, ~75 MB at 1 kHz), not the run's.
+STREAM_WINDOW_SAMPLES = 1 << 17
+#: The overlap of the stream's windows on each side (s). The smoother's own rule (16 time
+#: constants of the filter's slowest mode) would be 445 s here: the articulated model's
+#: slowest mode is 27.8 s (the road levels under the axles, neutral, :mod:`.articulated`),
+#: but what it moves in the loads is small: on 40 s of class C at 20 m/s, 1 kHz, windows of
+#: 10 s took each field within 3.1e-4 of its RMS of the one-block estimate with 2 s of
+#: overlap, 2.2e-4 with 5 s, 1.3e-4 with 10 s (the loads' error against the truth the same
+#: to 1e-6 of a point: 2.79 %).
+STREAM_OVERLAP_S = 10.0
+
+
+class _Columns:
+    """Growable per-sample columns (doubling, trimmed by :meth:`arrays`): one array per
+    ``(dtype, row shape)``."""
+
+    def __init__(self, specs: Sequence[tuple], capacity: int) -> None:
+        self.n = 0
+        self.cols = [np.empty((max(int(capacity), 1),) + tuple(shape), dtype)
+                     for dtype, shape in specs]
+
+    def append(self, *blocks) -> None:
+        k = np.shape(blocks[0])[0]
+        if self.n + k > self.cols[0].shape[0]:
+            size = max(2 * self.cols[0].shape[0], self.n + k)
+            self.cols = [np.concatenate([c[:self.n], np.empty((size - self.n,) + c.shape[1:],
+                                                              c.dtype)]) for c in self.cols]
+        for c, b in zip(self.cols, blocks):
+            c[self.n:self.n + k] = b
+        self.n += k
+
+    def arrays(self) -> list:
+        cols, self.cols = self.cols, []
+        return [c[:self.n] for c in cols]
+
+
+class WholeVehicleOfflineStream:
+    """:func:`estimate_whole_vehicle` offline over blocks of samples, its estimate handed out
+    in pieces (:class:`WholeVehicleArrays` of at most :data:`PIECE_ROWS` samples, in order):
+    a long drive's per-sample outputs are never held whole.
+
+    :meth:`feed` gathers a block (the smoother needs the whole run first: its noise and
+    roughness statistics, the road's profile pass), running the static-load tracker as it
+    comes (zero-load readings: the readings kept less its offsets, its static loads kept or,
+    with ``spill``, in a temporary file there); :meth:`finish` smooths run after run
+    (:class:`.smoothing.smoother.Smoother`: with ``eager`` a run longer than one window and
+    its overlap goes in windows of :data:`STREAM_WINDOW_SAMPLES` and
+    :data:`STREAM_OVERLAP_S`; ``window`` = ``(window, overlap)`` samples instead; without
+    ``eager`` and ``window`` the smoother's own rule, :func:`estimate_whole_vehicle`'s),
+    the braking response chunk by chunk, the load transfer carried from piece to piece. What
+    is held whole: the stamps, readings, speeds and ``a_x`` of the drive (the smoother's
+    inputs, 8 (3 + channels) bytes a sample), the road's profile pass columns and the static
+    loads unless spilled. Without windows the pieces are :func:`estimate_whole_vehicle`'s
+    numbers bit for bit; with them within ~3e-4 of each field's RMS
+    (:data:`STREAM_OVERLAP_S`; the road the same bits: its profile pass is over the whole
+    run).
+    """
+
+    def __init__(self, vehicle: ArticulatedParameters,
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S,
+                 window: tuple[int, int] | None = None, eager: bool = True,
+                 capacity: int = 0, spill=None, piece_rows: int = PIECE_ROWS) -> None:
+        self.est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
+        self.observer = ObserverParameters() if observer is None else observer
+        self.gap_threshold_s = gap_threshold_s
+        self.window, self.eager, self.spill = window, eager, spill
+        self.piece_rows = max(int(piece_rows), 1)
+        ny, nw = len(self.est.channel_names), len(self.est.wheel_names)
+        self._in = _Columns([(np.int64, ()), (float, (ny,)), (float, ())], capacity)
+        tracker = self.est.tracker
+        self._statics = None
+        if tracker is not None:
+            if spill:
+                from road_force_estimator.core.spill import SpillColumn
+                self._statics = SpillColumn(float, nw, spill)
+            else:
+                self._statics = _Columns([(float, (nw,))], capacity)
+        self._clock = StepGaps(gap_threshold_s)
+        self._last: int | None = None
+        self._last_row = None
+        #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
+        self.innovations_gated: tuple = ()
+
+    @property
+    def fed(self) -> int:
+        """Samples fed so far."""
+        return self._in.n
+
+    def feed(self, stamps_ns, readings, speed_mps) -> list:
+        """One block: stamps (k,) ns increasing (over the blocks too), readings (k, channels)
+        as :meth:`WholeVehicleEstimator.step` takes them, speed (k,) or float (m/s); no
+        piece (see the class notes)."""
+        stamps = np.asarray(stamps_ns, np.int64).reshape(-1)
+        k = stamps.size
+        y = np.array(readings, float, copy=True).reshape(k, -1)
+        v = np.broadcast_to(np.asarray(speed_mps, float), (k,))
+        tracker = self.est.tracker
+        if tracker is not None and k:
+            statics = np.empty((k, len(self.est.wheel_names)))
+            update, tracked, clock = tracker.update, tracker.static_n, self._clock
+            last = self._last
+            for i, s in enumerate(stamps.tolist()):
+                dt = 0.0 if last is None else (s - last) * 1e-9
+                if last is not None and clock.take(dt):
+                    dt = 0.0              # a gap: the mean and the offset kept
+                y[i] = update(y[i].tolist(), dt)
+                statics[i] = tracked
+                last = s
+            self._statics.append(statics)
+        if k:
+            self._last = int(stamps[-1])
+        self._in.append(stamps, y, v)
+        return []
+
+    def finish(self) -> Iterator[WholeVehicleArrays]:
+        """The estimate, piece after piece (see the class notes)."""
+        from road_force_estimator.estimation.smoothing.smoother import Smoother
+        from road_force_estimator.estimation.models.articulated_rows import columns as cols_of
+
+        stamps, y, v = self._in.arrays()
+        statics = self._statics
+        if isinstance(statics, _Columns):
+            statics = statics.arrays()[0]
+        est = self.est
+        online = est.online
+        window = self.window
+        if window is None and self.eager and stamps.size > 1:
+            dt = float(np.median(np.diff(stamps))) * 1e-9
+            window = (STREAM_WINDOW_SAMPLES, int(math.ceil(STREAM_OVERLAP_S / dt)))
+        smoother = Smoother(online.model, self.observer, window, eager=self.eager)
+        cols = cols_of(len(est.wheel_names))
+        nw = len(est.wheel_names)
+        starts = run_starts(stamps, self.gap_threshold_s)
+        bounds = list(zip(starts.tolist(), starts[1:].tolist() + [stamps.size]))
+        dist = 0.0
+        prev: int | None = None
+        for run, (a0, b0) in enumerate(bounds):
+            t = (stamps[a0:b0] - stamps[a0]) * 1e-9
+            tdts = np.diff(t)
+            ax = online.braking.offline_ax(t, v[a0:b0])
+            for a, b, off, _ in online.braking.responses(tdts, ax, self.piece_rows):
+                y[a0 + a:a0 + b] -= off                       # the known a_x's share
+            response = online.braking.responses(tdts, ax, self.piece_rows)
+            held = None                                      # (a, dynamic) not used yet
+            for a, b, pc in smoother.pieces(t, y[a0:b0], v[a0:b0]):
+                rows = np.column_stack(pc)
+                dyn = np.empty((nw, b - a))
+                k = a
+                while k < b:
+                    if held is None:
+                        ra, rb, _, d = next(response)
+                        held = (ra, d)
+                    ra, d = held
+                    hi = min(b, ra + d.shape[1])
+                    dyn[:, k - a:hi - a] = d[:, k - ra:hi - ra]
+                    if hi == ra + d.shape[1]:
+                        held = None
+                    k = hi
+                rows[:, cols['load']] += dyn.T
+                rows[:, cols['dynamic']] += dyn.T
+                for c0 in range(0, b - a, self.piece_rows):
+                    c1 = min(b - a, c0 + self.piece_rows)
+                    g0, g1 = a0 + a + c0, a0 + a + c1
+                    st = stamps[g0:g1]
+                    steps = np.diff(st) * 1e-9
+                    first = (0.0 if prev is None else (int(st[0]) - prev) * 1e-9)
+                    inc = np.abs(v[g0 + 1:g1]) * steps
+                    d_run = np.cumsum(np.concatenate([[dist + abs(v[g0]) * first], inc]))
+                    dist = float(d_run[-1])
+                    prev = int(st[-1])
+                    static = (None if statics is None else
+                              np.asarray(statics[g0:g1] if isinstance(statics, np.ndarray)
+                                         else statics.read(g0, g1)))
+                    yield self._piece(st, rows[c0:c1], d_run, static, run, g0 == a0,
+                                      smoother)
+        self.innovations_gated = tuple(int(g) for g in smoother.gated.tolist())
+        if self._statics is not None and not isinstance(self._statics, _Columns):
+            self._statics.close()                           # the spilled file
+
+    def _piece(self, stamps: np.ndarray, rows: np.ndarray, dist: np.ndarray, static,
+               gaps: int, starts_run: bool, smoother) -> WholeVehicleArrays:
+        """One piece from the smoother's rows (the braking response added), the distance
+        (m), the static loads ((k, wheels) or None: the file's) and the gaps before it."""
+        est = self.est
+        nw = len(est.wheel_names)
+        cols = columns(nw)
+        k = stamps.size
+        road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
+        if static is None:
+            static = np.broadcast_to(np.asarray(est.static_n, float), (k, nw))
+            loads = rows[:, cols['load']]
+        else:
+            loads = static + rows[:, cols['dynamic']]
+        ltr = np.empty((8, k))
+        update = est._transfer.update
+        for i, (s, f) in enumerate(zip(stamps.tolist(), loads.tolist())):
+            ltr[:, i] = update(s, f)
+        g = np.full(k, gaps, np.int64)
+        return WholeVehicleArrays(
+            stamps.copy(), dist.copy(), rows[:, CONV] > 0.5, est.wheel_names, est.axle_names,
+            est.axle_bodies, np.ascontiguousarray(loads.T), np.array(static, float).T.copy(),
+            ltr[0:6:2].copy(), ltr[1:6:2].copy(), rows[:, cols['ay']].T.copy(), road,
+            tuple(int(x) for x in smoother.gated.tolist()), tuple(est.channel_names),
+            ltr[6:].copy(), g)
 
 
 def fit_axles(vehicle: ArticulatedParameters, wv: WholeVehicleArrays) -> AxleFit | None:

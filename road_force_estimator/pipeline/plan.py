@@ -13,10 +13,14 @@ alignment is found over the whole drive) and the offline differentiator chain
 recording).
 
 An articulated drive (``vehicle.model: articulated``, :mod:`.whole_vehicle`) is one block,
-online and offline: offline the smoother runs over the whole drive; online the whole
-vehicle's estimator, its load-transfer filters and the report's per-axle segment columns
-would have to be carried from block to block, which nothing does yet (a 10-minute 5-axle drive
-at 1 kHz is 0.6 M samples, far below :data:`STREAM_MIN_SAMPLES`).
+online and offline: the estimation layer streams it offline
+(:class:`~.estimation.whole_vehicle.WholeVehicleOfflineStream`: fed in blocks, handed out in
+pieces; ``estimate_whole_vehicle`` offline runs it in one feed), but the stages around it do
+not yet: the front axle's stage beside it, the whole vehicle's sinks (its topics, its
+``/diagnostics`` status, the report's per-axle segment columns) and the fused profile take
+whole arrays; online the whole vehicle's estimator and load-transfer filters would have to be
+carried from block to block (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
+:data:`STREAM_MIN_SAMPLES`).
 """
 from __future__ import annotations
 

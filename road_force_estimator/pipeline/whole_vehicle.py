@@ -111,7 +111,9 @@ def front_wheels(est, wv):
 def _status(wv, k: int, since: int = 0) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
     weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
-    ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period)."""
+    ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period); ``gaps``: those
+    of the period (each restarted the estimate), ``total.gaps`` the drive's so far (the node's
+    keys)."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
 
     axle = wv.static_n[:, k].reshape(-1, 2).sum(axis=1)
@@ -123,6 +125,10 @@ def _status(wv, k: int, since: int = 0) -> dict:
         period = np.abs(np.asarray(wv.ltr[u, since:k + 1], float))
         period = period[np.isfinite(period)]
         values[f'max_abs_ltr_{unit}'] = f'{float(period.max()) if period.size else 0.0:.4f}'
+    if getattr(wv, 'gaps', None) is not None:
+        total = int(wv.gaps[k])
+        values['gaps'] = str(total - (int(wv.gaps[since - 1]) if since > 0 else 0))
+        values['total.gaps'] = str(total)
     gross = float(axle.sum())
     message = f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles'
     level = 0 if math.isfinite(gross) else 1

@@ -254,7 +254,8 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
         'samples': int(len(wv.stamps_ns)), 'converged': int(np.count_nonzero(use)),
         'axles': axles, 'axle_bodies': list(wv.axle_bodies),
         'axle_static_load_n': axle_static,
-        'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units}
+        'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units,
+        'gaps': int(wv.gap_count) if hasattr(wv, 'gap_count') else 0}
     fit = getattr(wv, 'axle_fit', None)
     if fit is not None and fit.measured:
         from road_force_estimator.estimation.axle_fit import THRESHOLD
@@ -314,8 +315,10 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
     """The estimate's report section (markdown lines)."""
     lines = ['', '## The whole vehicle (estimate)', '',
              f'Every wheel estimated from `/suspension/deflections` ({s["samples"]} samples, '
-             f'{s["converged"]} converged and summarized here); the front axle\'s loads and '
-             'load transfer above are its front wheels. Per segment in `segments.csv`.', '',
+             f'{s["converged"]} converged and summarized here; '
+             f'{s.get("gaps", 0)} gaps in the stamps, each restarting the estimate); the front '
+             "axle's loads and load transfer above are its front wheels. Per segment in "
+             '`segments.csv`.', '',
              '| axle | body | static load (kN) |', '|---|---|---|']
     for axle, body, f in zip(s['axles'], s['axle_bodies'], s['axle_static_load_n']):
         lines.append(f'| {axle} | {body} | {f / 1e3:.2f} |')

@@ -25,8 +25,9 @@ vehicle). Messages go out as CDR bytes (one :class:`.serde.CdrEncoderGroup` per 
 
 ``/diagnostics`` at 1 Hz: ``observer: input`` (counts of the period, ``total.*``),
 ``observer: estimator`` (``static_load_<axle>_n`` per axle, ``gross_weight_n``,
-``max_abs_ltr_<unit>``, ``innovations_gated.<channel>`` of the period and ``total.`` of the
-run) and ``observer: configuration``.
+``max_abs_ltr_<unit>``, ``innovations_gated.<channel>`` and ``gaps`` (steps that restarted
+the estimate, :mod:`~.estimation.whole_vehicle`) of the period and ``total.`` of the run)
+and ``observer: configuration``.
 """
 from __future__ import annotations
 
@@ -168,6 +169,7 @@ class WholeVehicleObserver:
         self.period, self.total = Counter(), Counter()
         self.gated_before = [0] * len(self.names)
         self.gated_base: Counter = Counter()
+        self.gaps_base = self.gaps_before = 0      # gaps of estimators rebuilt, and reported
         self.max_abs_ltr = [0.0, 0.0, 0.0]
         self.last_rejection = ''
         self.last_report = time.monotonic()
@@ -216,6 +218,7 @@ class WholeVehicleObserver:
                     self.publish(sample)
                 self.gated_base.update(dict(zip(self.names, old.online.core.gated)))
                 self.gated_before = [0] * len(self.names)
+                self.gaps_base += old.online.gaps
                 self.total['rebuilds'] += 1
                 self.node.get_logger().info('parameters changed: estimator rebuilt (it '
                                             'restarts)')
@@ -341,6 +344,9 @@ class WholeVehicleObserver:
         values.update({f'innovations_gated.{c}': g - b for c, g, b in
                        zip(self.names, gated, self.gated_before)})
         self.gated_before = gated
+        gaps = self.gaps_base + est.online.gaps
+        values['gaps'], values['total.gaps'] = gaps - self.gaps_before, gaps
+        self.gaps_before = gaps
         total = self.gated_base + Counter(dict(zip(self.names, gated)))
         values.update({f'total.innovations_gated.{c}': total[c] for c in self.names})
         return diagnostics.status('observer: estimator', name,

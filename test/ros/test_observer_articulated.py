@@ -193,6 +193,7 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
              (t0 + 6 * 10**6, names, [float('nan')] + good[1:]),    # non-finite
              (t0 + 2 * 10**6, names, good)]                         # the stamp goes back
     plan += [(t0 + k * 10**6, names, good) for k in range(7, 12)]
+    plan += [(t0 + k * 10**6, names, good) for k in range(400, 403)]   # 0.39 s lost: a gap
     try:
         assert spin_until(executor, lambda: feeder.deflections.get_subscription_count() > 0 and
                           feeder.twist.get_subscription_count() > 0, 20.0)
@@ -209,15 +210,15 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
                         out.update({kv.key: kv.value for kv in st.values})
             return out
 
-        assert spin_until(executor, lambda: loads.count(api.WHEEL_LOADS) == 10 and
+        assert spin_until(executor, lambda: loads.count(api.WHEEL_LOADS) == 13 and
                           totals().get('total.received') == str(len(plan)), 20.0), totals()
     finally:
         close(executor, observer, feeder, loads)
     got = totals()
     assert (got['total.names'], got['total.nonfinite'], got['total.time']) == ('1', '1', '1')
-    assert got['total.published'] == '10'
+    assert got['total.published'] == '13'
     assert loads.stamps(api.WHEEL_LOADS) == [s for s, n, v in plan if n == names][:5] + [
-        t0 + k * 10**6 for k in range(7, 12)]
+        t0 + k * 10**6 for k in (*range(7, 12), *range(400, 403))]
     # the weights: MODEL.md's axle loads (docs/articulated.md "Statics and modes": 6.624,
     # 10.732, 8.004, 7.615, 7.225 t) and 40.2 t in all; every channel's gate count
     est = totals('observer: estimator')
@@ -226,3 +227,4 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
                                                                      rel=1e-3)
     assert float(est['gross_weight_n']) == pytest.approx(40.2e3 * 9.80665, rel=1e-3)
     assert all(f'total.innovations_gated.{c}' in est for c in names)
+    assert est['total.gaps'] == '1'       # the step over the lost samples restarted it

@@ -98,6 +98,7 @@ def test_the_bag_has_the_whole_vehicles_topics(runs):
         values = {kv.key: float(kv.value) for kv in whole[0].values}
         static = np.array(topics['/wheel_loads/static'][-1][1].effort)
         assert values['gross_weight_n'] == pytest.approx(static.sum(), abs=0.1)
+        assert values['total.gaps'] == 0 and values['gaps'] == 0     # (a drive without)
         for j, a in enumerate(AXLES):
             assert values[f'static_load_{a}_n'] == pytest.approx(static[2 * j:2 * j + 2].sum(),
                                                                  abs=0.1)

@@ -49,6 +49,7 @@ bodies), the roll-moment density over the tractor's ``M h`` squared as the densi
 from __future__ import annotations
 
 import math
+from typing import Iterator
 
 import numpy as np
 from scipy import linalg
@@ -479,7 +480,20 @@ class BrakingResponse:
         """Over a run from rest, offline: ``a_x`` of each step the change of speed over it,
         low-passed forward and backward (zero phase, :data:`AX_OFFLINE_TIME_CONSTANT_S`);
         ``(offset (m, ny), dynamic (nw, m))``."""
-        self.restart()
+        t = np.asarray(t_s, float)
+        dts = np.diff(t)
+        ax = self.offline_ax(t, speed_mps)
+        m = t.size
+        off = np.zeros((m, self._c.shape[0]))
+        dyn = np.zeros((self._df.shape[0], m))
+        for a, b, o, d in self.responses(dts, ax, m):
+            off[a:b] = o
+            dyn[:, a:b] = d
+        return off, dyn
+
+    def offline_ax(self, t_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+        """A run's ``a_x`` offline (m/s^2, (m - 1,): step k -> k + 1), as :meth:`run` takes
+        it: the change of speed over each step, low-passed forward and backward."""
         t = np.asarray(t_s, float)
         v = np.asarray(speed_mps, float)
         m = t.size
@@ -493,14 +507,25 @@ class BrakingResponse:
                     if dts[k] > 0.0:
                         f += _alpha(float(dts[k]), tau) * (ax[k] - f)
                     ax[k] = f
-        off = np.zeros((m, self._c.shape[0]))
-        dyn = np.zeros((self._df.shape[0], m))
-        for k in range(1, m):
-            self.step(float(dts[k - 1]), float(ax[k - 1]))
-            off[k] = self.offset
-            dyn[:, k] = self.dynamic_n
+        return ax
+
+    def responses(self, dts: np.ndarray, ax: np.ndarray, chunk: int
+                  ) -> Iterator[tuple[int, int, np.ndarray, np.ndarray]]:
+        """The response over a run from rest to ``ax`` (:meth:`offline_ax`) over its steps
+        ``dts`` (s), ``chunk`` samples at a time: ``(a, b, offset (b - a, ny), dynamic (nw,
+        b - a))`` of samples ``a:b`` (the first at rest); at rest again once exhausted."""
         self.restart()
-        return off, dyn
+        m = int(np.size(dts)) + 1
+        for a in range(0, m, max(int(chunk), 1)):
+            b = min(m, a + max(int(chunk), 1))
+            off = np.zeros((b - a, self._c.shape[0]))
+            dyn = np.zeros((self._df.shape[0], b - a))
+            for k in range(max(a, 1), b):
+                self.step(float(dts[k - 1]), float(ax[k - 1]))
+                off[k - a] = self.offset
+                dyn[:, k - a] = self.dynamic_n
+            yield a, b, off, dyn
+        self.restart()
 
 
 def _alpha(dt: float, tau: float) -> float:

@@ -150,7 +150,10 @@ class ArticulatedOfflineRows:
 
     def road(self, cols, dt: float, speed: float, dts, uniform: bool, pos, v) -> tuple:
         """The road under every wheel (m): ``w + z_w`` (module notes), on the grid ``pos``
-        when given."""
+        when given. ``cols`` is the profile pass's scratch: each wheel's road is built in its
+        tire-deflection column and, where ``cols`` keeps its columns in a dict (``kept``,
+        :class:`.smoothing.smoother.KeptColumns`), its acceleration column let go once used
+        (a long run's road takes no memory beyond the pass's columns)."""
         w_c = 2.0 * math.pi * max(speed, SPEED_FLOOR_MPS) / self.cutoff_m
         road, accel = self.cols['road'].start, self.cols['wheel_accel'].start
         m = cols[road].size
@@ -160,7 +163,11 @@ class ArticulatedOfflineRows:
         n1 = min(int(round(ROAD_RAMP_S / dt)), m - n0)
         ramp[n0:n0 + n1] = 0.5 - 0.5 * np.cos(np.pi * np.arange(n1) / max(n1, 1))
         out = []
+        kept = getattr(cols, 'kept', None)
         for k in range(self.static.size):
-            u = cols[road + k] + body_heave.zero_phase(cols[accel + k] * ramp, dt, w_c)
+            u = cols[road + k]
+            u += body_heave.zero_phase(cols[accel + k] * ramp, dt, w_c)
+            if isinstance(kept, dict):
+                kept.pop(accel + k, None)
             out.append(u if pos is None else u[pos])
         return tuple(out)
