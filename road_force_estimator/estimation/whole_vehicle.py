@@ -22,6 +22,11 @@ dynamic tire force. The model's gains stay the file's (the
 payload moves no design here, unlike the front axle's ``MASS_REDESIGN_FRACTION``); an axle
 without sensors keeps the file's static load. ``innovations_gated`` counts, per channel, the
 samples the observer's innovation gate (``observer.innovation_gate``) replaced.
+
+The road online: every wheel's road per finalized sample (the causal one at zero latency, the
+fixed-lag one with ``observer.latency``: :class:`.models.articulated_rows.WheelRoads`) and
+the fused profile streamed (:class:`.fused_stream.FusedStream`: each point once the last axle
+has passed it, the rule of :func:`.articulated.fuse_roads` made causal).
 """
 from __future__ import annotations
 
@@ -36,6 +41,7 @@ from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameter
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation.articulated import (
     ArticulatedEstimate, ArticulatedOnline, estimate_articulated)
+from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
@@ -63,7 +69,9 @@ class WholeVehicleSample:
     :attr:`WholeVehicleEstimator.wheel_names`), ``ltr`` and ``ltr_quasi_static`` per unit of
     :data:`UNITS`, ``lateral_mps2`` of the tractor and the trailer (m/s^2);
     ``innovations_gated`` per channel (:attr:`WholeVehicleEstimator.channel_names`) the
-    samples gated so far."""
+    samples gated so far; ``road_m`` every wheel's road (m, the wheels' order; online the
+    causal or fixed-lag one), ``fused`` the fused profile's points the last axle passed with
+    this sample, each ``(stamp_ns, distance_m, left_m, right_m)`` (online)."""
 
     stamp_ns: int
     distance_m: float
@@ -76,13 +84,17 @@ class WholeVehicleSample:
     innovations_gated: tuple = ()
     #: the front axle's own (LTR, quasi-static LTR) from its two wheels (``/load_transfer``)
     front_ltr: tuple = ()
+    road_m: tuple = ()
+    fused: tuple = ()
 
 
 @dataclass(frozen=True)
 class WholeVehicleArrays:
     """A drive's estimate, the fields of :class:`WholeVehicleSample` as arrays: per sample
-    (m,), per wheel or unit (k, m); ``road_m`` offline (every wheel's road, m), else None;
-    ``innovations_gated`` the drive's gated samples per channel (``channel_names``' order)."""
+    (m,), per wheel or unit (k, m); ``road_m`` every wheel's road (m; offline the smoother's,
+    online the per-sample one); ``innovations_gated`` the drive's gated samples per channel
+    (``channel_names``' order); ``fused`` online the streamed fused profile (every point the
+    last axle passed), None offline (:func:`.articulated.fuse_roads` there)."""
 
     stamps_ns: np.ndarray
     distance_m: np.ndarray
@@ -100,6 +112,7 @@ class WholeVehicleArrays:
     channel_names: tuple = ()
     #: (2, m): the front axle's own LTR and quasi-static LTR from its two wheels
     front_ltr: np.ndarray | None = None
+    fused: FusedPoints | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -212,6 +225,9 @@ class WholeVehicleEstimator:
         self._load, self._ay = cols['load'], cols['ay']
         self._transfer = _Transfer(vehicle, self.static_n)
         self._dynamic = cols['dynamic']
+        self._road = cols['road']
+        #: the fused profile streamed (every axle of the vehicle, front first)
+        self.fused = FusedStream([a.position_m for a in vehicle.axles])
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
         self._last: int | None = None
@@ -253,18 +269,26 @@ class WholeVehicleEstimator:
                 static = self._pending.pop(int(stamp))
                 loads = [s + d for s, d in zip(static, row[self._dynamic])]
             t = self._transfer.update(int(stamp), loads)
-            out.append(WholeVehicleSample(int(stamp), float(row[DIST]), bool(row[CONV] > 0.5),
+            road = row[self._road]
+            x = float(row[DIST])
+            out.append(WholeVehicleSample(int(stamp), x, bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
                                           tuple(t[1:6:2]), tuple(row[self._ay]), gated,
-                                          tuple(t[6:])))
+                                          tuple(t[6:]), tuple(road),
+                                          tuple(self.fused.push(stamp, x, road, loads,
+                                                                static))))
         return out
 
 
 def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
             ) -> WholeVehicleArrays:
     m = len(samples)
-    if gated is None:
+    fused = None
+    if gated is None:             # online: the samples' roads and the streamed points
         gated = samples[-1].innovations_gated if samples else ()
+        road = np.array([s.road_m for s in samples], float).reshape(
+            m, len(est.wheel_names)).T.copy()
+        fused = FusedPoints.from_points([p for s in samples for p in s.fused])
 
     def field(name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in samples], float).reshape(m, -1).T.copy()
@@ -275,7 +299,7 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None
         np.array([s.converged for s in samples], bool), est.wheel_names, est.axle_names,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
-        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'))
+        tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'), fused)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
