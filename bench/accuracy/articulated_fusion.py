@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         out += run(case, args) if args.online is None else run_online(case, args)
     if args.online is not None:
         print(f'The road online, {args.duration:g} s drives at 1 kHz, {args.noise * 1e6:g} um '
-              f'noise, judged after {args.settle:g} s: band errors in % of the true band\'s '
+              f"noise, judged after {args.settle:g} s: band errors in % of the true band's "
               'RMS (both wheel paths)\n')
         print('| drive | mode | road | 0.5-30 m | x front axle | 30-100 m | IRI-filtered xcorr |')
         print('|---|---|---|---:|---:|---:|---:|')

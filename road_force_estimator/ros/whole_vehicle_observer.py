@@ -350,7 +350,7 @@ class WholeVehicleObserver:
         return [input_status, self.estimator_status(name), diagnostics.status(
             'observer: configuration', name, 'ok', {
                 'vehicle.model': 'articulated', 'axles': ', '.join(self.axles),
-                'channels': len(self.names), 'road_online': 'every axle, fused once the last axle passed',
+                'channels': len(self.names), 'road_online': 'every axle, fused',
                 'refused_parameter_sets': len(self.params.refusals)})]
 
     def estimator_status(self, name: str) -> diagnostics.Status:
