@@ -13,12 +13,15 @@ waves: each axle's read through two first-order lags in distance at that wavelen
 offline rule's zero-phase Butterworth cannot look ahead); the split only matters while a wheel
 is off the ground (with every wheel down the point is the axles' plain average).
 
-A point is emitted with the front axle's stamp and distance at sample k, when the sample
-whose distance reaches ``x_k + max(xi)`` comes in: the same points as :func:`.fuse_roads`'s
-over a drive (its ``x + max(xi) <= x[-1]``).
+The points: a sample is one when the front axle has travelled at least
+:data:`FUSED_SPACING_M` since the last point (the first sample is one; none while standing),
+emitted with the front axle's stamp and distance at that sample k when the sample whose
+distance reaches ``x_k + max(xi)`` comes in: of :func:`.fuse_roads`'s points over a drive
+(its ``x + max(xi) <= x[-1]``, one per sample), one every :data:`FUSED_SPACING_M`.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 import math
 from typing import Sequence
@@ -28,7 +31,14 @@ import numpy as np
 from road_force_estimator.estimation.articulated import (
     FUSION_SPLIT_WAVELENGTH_M, LIFT_OFF_FRACTION)
 
-__all__ = ['FusedPoints', 'FusedStream']
+__all__ = ['FusedPoints', 'FusedStream', 'FUSED_SPACING_M']
+
+#: The fused profile's points are this far apart at least (m, the front axle's distance): a
+#: point every 5th sample at 1 kHz and 20 m/s (200 Hz), every 3rd to 4th at 30 m/s, for the
+#: node's CPU (the fusion and two messages per point; every sample cost the observer node
+#: 60.4 % of a core against 48.1 % without the road, ``python -m bench.probes.node_latency
+#: --articulated``); the 0.5-30 m band and the IRI (its 0.25 m sampling) need no finer.
+FUSED_SPACING_M = 0.1
 
 #: History samples dropped at once when no pending point needs them (bounds the lists).
 TRIM_SAMPLES = 4096
@@ -58,21 +68,26 @@ class FusedStream:
     Parameters
     ----------
     positions_m : the axles' distances behind the front axle (m), front first (0)
+    spacing_m : the points' least spacing (m, :data:`FUSED_SPACING_M`; 0: every sample)
     """
 
-    def __init__(self, positions_m: Sequence[float]) -> None:
+    def __init__(self, positions_m: Sequence[float],
+                 spacing_m: float = FUSED_SPACING_M) -> None:
         xi = [float(p) for p in positions_m]
         if not xi or xi[0] != 0.0 or any(b < a for a, b in zip(xi, xi[1:])):
             raise ValueError(f'axle positions {xi!r} m: the front axle at 0, then in order')
+        if not spacing_m >= 0.0:
+            raise ValueError(f'spacing {spacing_m!r} m: must be >= 0')
+        self.spacing = float(spacing_m)
+        self._mark: float | None = None   # the last point's distance (m)
+        self._points: deque = deque()     # absolute indices of the points not yet emitted
         self.xi = xi
         self.reach = max(xi)
         self.n = len(xi)
         self._x: list = []          # the samples' distances (m)
         self._stamp: list = []
-        self._road: list = []       # per sample the wheels' roads (m), 2 per axle
-        self._down: list = []       # per sample the wheels on the ground (bools)
+        self._rows: list = []       # per sample the wheels' (roads, loads, static loads)
         self._base = 0              # the absolute index of the lists' first sample
-        self._next = 0              # the absolute index of the next point to emit
         self._ptr = [0] * self.n    # per axle: the first sample at or past its last read
         self._k = 2.0 * math.pi / FUSION_SPLIT_WAVELENGTH_M   # rad/m
         self._lag1 = [0.0] * (2 * self.n)
@@ -87,20 +102,22 @@ class FusedStream:
         x = float(distance_m)
         self._x.append(x)
         self._stamp.append(int(stamp_ns))
-        self._road.append(list(road_m))
-        self._down.append([f >= LIFT_OFF_FRACTION * s for f, s in zip(load_n, static_n)])
+        self._rows.append((road_m, load_n, static_n))
+        mark = self._mark
+        if mark is None or x >= mark + self.spacing and x > mark:
+            self._mark = x
+            self._points.append(self._base + len(self._x) - 1)
         out = []
-        xs, base = self._x, self._base
-        while self._next - base < len(xs) and xs[self._next - base] + self.reach <= x:
-            out.append(self._point(self._next - base))
-            self._next += 1
+        xs, base, points = self._x, self._base, self._points
+        while points and xs[points[0] - base] + self.reach <= x:
+            out.append(self._point(points.popleft() - base))
         if self._ptr[0] - base > TRIM_SAMPLES:
             self._trim()
         return out
 
     def _point(self, i: int) -> tuple:
         """The point of the sample at list index i (every axle past it)."""
-        xs, roads, down = self._x, self._road, self._down
+        xs, rows = self._x, self._rows
         p = xs[i]
         last = len(xs) - 1
         reads, ok = [], []
@@ -113,19 +130,21 @@ class FusedStream:
                 m += 1
             self._ptr[j] = m + self._base
             x1 = xs[m]
+            kl, kr = 2 * j, 2 * j + 1
+            r1, f1, s1 = rows[m]
             if m == i or x1 <= target:
-                r = roads[m]
-                reads.append((r[2 * j], r[2 * j + 1]))
-                d = down[m]
-                ok.append((d[2 * j], d[2 * j + 1]))
+                reads.append((r1[kl], r1[kr]))
+                ok.append((f1[kl] >= LIFT_OFF_FRACTION * s1[kl],
+                           f1[kr] >= LIFT_OFF_FRACTION * s1[kr]))
                 continue
             x0 = xs[m - 1]
             a = (target - x0) / (x1 - x0)
-            r0, r1 = roads[m - 1], roads[m]
-            reads.append((r0[2 * j] + a * (r1[2 * j] - r0[2 * j]),
-                          r0[2 * j + 1] + a * (r1[2 * j + 1] - r0[2 * j + 1])))
-            d0, d1 = down[m - 1], down[m]
-            ok.append((d0[2 * j] and d1[2 * j], d0[2 * j + 1] and d1[2 * j + 1]))
+            r0, f0, s0 = rows[m - 1]
+            reads.append((r0[kl] + a * (r1[kl] - r0[kl]), r0[kr] + a * (r1[kr] - r0[kr])))
+            ok.append((f0[kl] >= LIFT_OFF_FRACTION * s0[kl] and
+                       f1[kl] >= LIFT_OFF_FRACTION * s1[kl],
+                       f0[kr] >= LIFT_OFF_FRACTION * s0[kr] and
+                       f1[kr] >= LIFT_OFF_FRACTION * s1[kr]))
         # the long waves: two first-order lags in distance per axle and path
         px = self._px
         if px is None:
@@ -159,9 +178,10 @@ class FusedStream:
 
     def _trim(self) -> None:
         """Drop the samples no pending point reads."""
-        keep_from = min(min(self._ptr) - 1, self._next) - self._base
+        keep_from = min(min(self._ptr) - 1, self._points[0] if self._points else
+                        self._base + len(self._x)) - self._base
         if keep_from <= 0:
             return
-        for lst in (self._x, self._stamp, self._road, self._down):
+        for lst in (self._x, self._stamp, self._rows):
             del lst[:keep_from]
         self._base += keep_from

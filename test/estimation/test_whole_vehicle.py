@@ -207,9 +207,11 @@ def test_the_road_online_follows_the_truth(drive):
 
 def test_fused_points_come_once_the_last_axle_has_passed(drive):
     """Every sample's fused points: passed by the last axle with that sample and not before,
-    in order, one per sample of the points passed over the drive; with every wheel on the
-    ground the axles' plain average of their roads read at the point (np.interp); the drive's
-    arrays are the samples' bits."""
+    in order, one every FUSED_SPACING_M of the front axle's distance over the points passed
+    (the first sample one, then the first sample at least that far on); with every wheel on
+    the ground the axles' plain average of their roads read at the point (np.interp); the
+    drive's arrays are the samples' bits."""
+    from road_force_estimator.estimation.fused_stream import FUSED_SPACING_M
     vehicle, _, stamps, y, _, _ = drive
     m = 3000
     obs = ObserverParameters(latency_s=0.01)
@@ -223,7 +225,13 @@ def test_fused_points_come_once_the_last_axle_has_passed(drive):
             assert prev < p + reach <= s.distance_m
             got.append((stamp, p, left, right))
         prev = s.distance_m
-    passed = x + reach <= x[-1]
+    marked, last = [], None
+    for k, xk in enumerate(x.tolist()):
+        if last is None or (xk >= last + FUSED_SPACING_M and xk > last):
+            marked.append(k)
+            last = xk
+    passed = np.array([k for k in marked if x[k] + reach <= x[-1]])
+    assert 0.9 * (x[-1] - reach) / FUSED_SPACING_M < passed.size
     assert [g[0] for g in got] == stamps[:m][passed].tolist()
     np.testing.assert_array_equal([g[1] for g in got], x[passed])
     road = np.array([s.road_m for s in samples]).T
