@@ -36,15 +36,17 @@ import numpy as np
 BANDS = ((0.5, 30.0), (30.0, 100.0))
 
 
-def figures(drive: dict, x: np.ndarray, paths: np.ndarray, settle_s: float) -> tuple:
+def figures(drive: dict, x: np.ndarray, paths: np.ndarray, settle_s: float,
+            at: np.ndarray | None = None) -> tuple:
     """``(0.5-30 m error %, 30-100 m error %, cross correlation)`` of both wheel paths
-    ``paths`` (n, 2) at the front axle's distances ``x`` (the drive's first n samples)."""
+    ``paths`` (n, 2) at the front axle's distances ``x`` (the drive's samples ``at``, by
+    default its first n)."""
     from road_force_estimator.core import metrics
     from road_force_estimator.core import profile_correlation as pc
 
-    n = x.size
-    mask = (drive['t'][:n] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
-    truth = drive['road'][:n, :2]
+    at = np.arange(x.size) if at is None else np.asarray(at)
+    mask = (drive['t'][at] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
+    truth = drive['road'][at, :2]
     out = []
     for lo, hi in BANDS:
         pe = metrics.profile_errors(x, paths, truth, mask=mask, short_m=lo, long_m=hi)
@@ -88,7 +90,7 @@ def run_online(case, args, drive=None) -> list[str]:
         own = figures(drive, wv.distance_m, wv.road_m[:2].T, args.settle)
         f = wv.fused
         fus = figures(drive, f.distance_m, np.column_stack([f.left_m, f.right_m]),
-                      args.settle)
+                      args.settle, np.searchsorted(drive['stamps'], f.stamps_ns))
         out += [f'| {case.name} | {mode} | front axle | {own[0]:.2f} | | {own[1]:.1f} | '
                 f'{own[2]:.4f} |',
                 f'| {case.name} | {mode} | fused ({len(wv.axle_names)} axles) | {fus[0]:.2f} | '

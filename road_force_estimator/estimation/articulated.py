@@ -14,9 +14,10 @@ speed, its response taken off the readings and added to the loads
 of every axle by distance (the same two wheel paths, each axle ``xi_j`` behind the front
 axle; the short waves from the wheels on the ground only); each axle's road holds the
 30-100 m band (:data:`.models.articulated_rows.ROAD_CUTOFF_FACTOR`), so does the fusion.
-Not yet: gaps and rejected samples (one run, every sample finite), the road online (and so a
-streamed fused profile), a fusion that tells the bodies' heave and pitch from the road by the
-axles' differences.
+Online, every wheel's road comes with each row (:class:`.models.articulated_rows.WheelRoads`;
+the streamed fusion: :mod:`.fused_stream`). Not yet: gaps and rejected samples (one run, every
+sample finite), a fusion that tells the bodies' heave and pitch from the road by the axles'
+differences.
 """
 from __future__ import annotations
 
