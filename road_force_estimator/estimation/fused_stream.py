@@ -68,7 +68,8 @@ class FusedStream:
     Parameters
     ----------
     positions_m : the axles' distances behind the front axle (m), front first (0)
-    spacing_m : the points' least spacing (m, :data:`FUSED_SPACING_M`; 0: every sample)
+    spacing_m : the points' least spacing (m, :data:`FUSED_SPACING_M`; 0: every sample that
+        moved)
     """
 
     def __init__(self, positions_m: Sequence[float],
