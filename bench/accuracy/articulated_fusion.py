@@ -5,7 +5,7 @@ against the front axle's own road, on the articulated drive family.
 Run from the repository root::
 
     .venv/bin/python -m bench.accuracy.articulated_fusion [--duration 25]
-        [--only C20 A20 C20-stop] [--cutoff-factor 3]
+        [--only C20 A20 C20-stop] [--cutoff-factor 3] [--online 0 0.01]
 
 Each drive is :mod:`bench.accuracy.articulated_observer`'s (MODEL.md's 5-axle combination at
 1 kHz, road seed 1, 10 um of noise), estimated offline with the package's settings; the
@@ -18,6 +18,12 @@ the points every axle has passed, after ``--settle`` s and away from the last 60
 front axle's (issue 32: <= 0.7), the 30-100 m band's error the same way (<= 10 %) and the
 IRI-filtered cross correlation (:func:`road_force_estimator.core.profile_correlation.
 cross_correlation`, the lower of the two paths; >= 0.99).
+
+``--online LATENCY...`` judges the road online instead, per latency (s; 0: zero latency):
+:func:`road_force_estimator.estimation.whole_vehicle.estimate_whole_vehicle` with
+``offline=False`` (the node's numbers), the front axle's own per-sample road and the fused
+profile streamed (every point once the last axle has passed it, ``WholeVehicleArrays.
+fused``), with the same figures.
 """
 from __future__ import annotations
 
@@ -30,15 +36,17 @@ import numpy as np
 BANDS = ((0.5, 30.0), (30.0, 100.0))
 
 
-def figures(drive: dict, x: np.ndarray, paths: np.ndarray, settle_s: float) -> tuple:
+def figures(drive: dict, x: np.ndarray, paths: np.ndarray, settle_s: float,
+            at: np.ndarray | None = None) -> tuple:
     """``(0.5-30 m error %, 30-100 m error %, cross correlation)`` of both wheel paths
-    ``paths`` (n, 2) at the front axle's distances ``x`` (the drive's first n samples)."""
+    ``paths`` (n, 2) at the front axle's distances ``x`` (the drive's samples ``at``, by
+    default its first n)."""
     from road_force_estimator.core import metrics
     from road_force_estimator.core import profile_correlation as pc
 
-    n = x.size
-    mask = (drive['t'][:n] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
-    truth = drive['road'][:n, :2]
+    at = np.arange(x.size) if at is None else np.asarray(at)
+    mask = (drive['t'][at] >= drive['t'][0] + settle_s) & (x < x[-1] - 60.0)
+    truth = drive['road'][at, :2]
     out = []
     for lo, hi in BANDS:
         pe = metrics.profile_errors(x, paths, truth, mask=mask, short_m=lo, long_m=hi)
@@ -66,6 +74,30 @@ def run(case, args) -> list[str]:
             f'{fus[0] / own[0]:.2f} | {fus[1]:.1f} | {fus[2]:.4f} |']
 
 
+def run_online(case, args, drive=None) -> list[str]:
+    """The table's lines of one drive online, per latency of ``args.online``."""
+    from bench.accuracy.articulated_observer import simulate
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.whole_vehicle import estimate_whole_vehicle
+
+    drive = simulate(case, args.duration, args.noise) if drive is None else drive
+    out = []
+    for latency in args.online:
+        wv = estimate_whole_vehicle(drive['vehicle'], drive['stamps'], drive['y'],
+                                    drive['speed'],
+                                    observer=ObserverParameters(latency_s=latency))
+        mode = f'{latency * 1e3:g} ms'
+        own = figures(drive, wv.distance_m, wv.road_m[:2].T, args.settle)
+        f = wv.fused
+        fus = figures(drive, f.distance_m, np.column_stack([f.left_m, f.right_m]),
+                      args.settle, np.searchsorted(drive['stamps'], f.stamps_ns))
+        out += [f'| {case.name} | {mode} | front axle | {own[0]:.2f} | | {own[1]:.1f} | '
+                f'{own[2]:.4f} |',
+                f'| {case.name} | {mode} | fused ({len(wv.axle_names)} axles) | {fus[0]:.2f} | '
+                f'{fus[0] / own[0]:.2f} | {fus[1]:.1f} | {fus[2]:.4f} |']
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     from bench.studies.articulated_drives import family
     from road_force_estimator.estimation.models import articulated_rows
@@ -79,12 +111,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--cutoff-factor', type=float, default=None,
                         help="the road integral's cutoff over the observer's (default: the "
                         "package's ROAD_CUTOFF_FACTOR)")
+    parser.add_argument('--online', nargs='+', type=float, default=None, metavar='LATENCY_S',
+                        help='the road online at these latencies (s) instead of offline')
     args = parser.parse_args(argv)
     if args.cutoff_factor is not None:
         articulated_rows.ROAD_CUTOFF_FACTOR = args.cutoff_factor
     out = []
     for case in [c for c in family() if c.name in args.only]:
-        out += run(case, args)
+        out += run(case, args) if args.online is None else run_online(case, args)
+    if args.online is not None:
+        print(f'The road online, {args.duration:g} s drives at 1 kHz, {args.noise * 1e6:g} um '
+              f"noise, judged after {args.settle:g} s: band errors in % of the true band's "
+              'RMS (both wheel paths)\n')
+        print('| drive | mode | road | 0.5-30 m | x front axle | 30-100 m | IRI-filtered xcorr |')
+        print('|---|---|---|---:|---:|---:|---:|')
+        print('\n'.join(out))
+        return 0
     print(f'The fused profile offline, {args.duration:g} s drives at 1 kHz, '
           f'{args.noise * 1e6:g} um noise, judged after {args.settle:g} s, road cutoff '
           f"{articulated_rows.ROAD_CUTOFF_FACTOR:g} x the observer's: band errors in % of the "

@@ -19,8 +19,9 @@ Gaps: a step longer than ``max(gap_threshold_s, 10 typical steps)`` (the front a
 run; the next sample restarts the observer at rest on its readings (the braking response
 too), offline each run is smoothed on its own (the noise and roughness schedule carried over
 runs), the distance continues over the gap (``|v|`` times the step); ``gaps`` counts them.
-Not yet: rejected samples (every sample finite, stamps increasing), the road online (and so a
-streamed fused profile), a fusion that tells the bodies' heave and pitch from the road by the
+Online, every wheel's road comes with each row (:class:`.models.articulated_rows.WheelRoads`;
+the streamed fusion: :mod:`.fused_stream`). Not yet: rejected samples (every sample finite,
+stamps increasing), a fusion that tells the bodies' heave and pitch from the road by the
 axles' differences.
 """
 from __future__ import annotations
@@ -47,8 +48,9 @@ __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated', '
 class ArticulatedEstimate:
     """A drive's estimate: per sample (m) the distance (m), converged flag, every wheel's
     load and dynamic load (N; (nw, m), wheels ``<axle>_<side>`` of :attr:`wheel_names`),
-    each unit's a_y (m/s^2; (2, m), tractor, trailer) and, offline, the road under every
-    wheel (m; (nw, m), band-limited; None online)."""
+    each unit's a_y (m/s^2; (2, m), tractor, trailer) and the road under every wheel (m;
+    (nw, m), band-limited: offline the smoother's, online the causal or fixed-lag one of
+    :class:`.models.articulated_rows.WheelRoads`)."""
 
     stamps_ns: np.ndarray
     distance_m: np.ndarray
@@ -69,7 +71,8 @@ class ArticulatedEstimate:
         """From the rows (m, columns) of :mod:`.models.articulated_rows` (the road where the
         rows hold it), the gated counts per channel and the gaps."""
         cols = columns(len(wheel_names))
-        road = rows[:, cols['road']].T.copy() if rows.shape[1] >= cols['size'] else None
+        road = (rows[:, cols['road']].T.copy() if rows.ndim == 2
+                and rows.shape[1] >= cols['road'].stop else None)
         return cls(np.asarray(stamps_ns), rows[:, DIST], rows[:, CONV] > 0.5,
                    tuple(wheel_names), rows[:, cols['load']].T.copy(),
                    rows[:, cols['dynamic']].T.copy(), rows[:, cols['ay']].T.copy(), road,

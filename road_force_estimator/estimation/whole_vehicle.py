@@ -30,6 +30,11 @@ typical steps)`` restarts the observer (online and offline, each run smoothed on
 the static-load tracker keeps its mean and offset over it (a step of 0: the load has not
 changed, as :mod:`.static_load`'s), the load transfer's filters step over it; ``gaps``
 counts them (per sample: the gaps so far).
+
+The road online: every wheel's road per finalized sample (the causal one at zero latency, the
+fixed-lag one with ``observer.latency``: :class:`.models.articulated_rows.WheelRoads`) and
+the fused profile streamed (:class:`.fused_stream.FusedStream`: each point once the last axle
+has passed it, the rule of :func:`.articulated.fuse_roads` made causal).
 """
 from __future__ import annotations
 
@@ -47,6 +52,7 @@ from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, StepGaps
 from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, run_starts)
 from road_force_estimator.estimation.axle_fit import AxleFit, assess_axles
+from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
@@ -77,7 +83,9 @@ class WholeVehicleSample:
     :attr:`WholeVehicleEstimator.wheel_names`), ``ltr`` and ``ltr_quasi_static`` per unit of
     :data:`UNITS`, ``lateral_mps2`` of the tractor and the trailer (m/s^2);
     ``innovations_gated`` per channel (:attr:`WholeVehicleEstimator.channel_names`) the
-    samples gated so far."""
+    samples gated so far; ``road_m`` every wheel's road (m, the wheels' order; online the
+    causal or fixed-lag one), ``fused`` the fused profile's points the last axle passed with
+    this sample, each ``(stamp_ns, distance_m, left_m, right_m)`` (online)."""
 
     stamp_ns: int
     distance_m: float
@@ -92,13 +100,19 @@ class WholeVehicleSample:
     front_ltr: tuple = ()
     #: the gaps in the input so far, this sample's included (each restarted the estimate)
     gaps: int = 0
+    #: every wheel's road (m; online, the finalized sample's), wheels in ``wheel_names``
+    road_m: tuple = ()
+    #: the fused profile's points this sample completed (:class:`.fused_stream.FusedStream`)
+    fused: tuple = ()
 
 
 @dataclass(frozen=True)
 class WholeVehicleArrays:
     """A drive's estimate, the fields of :class:`WholeVehicleSample` as arrays: per sample
-    (m,), per wheel or unit (k, m); ``road_m`` offline (every wheel's road, m), else None;
-    ``innovations_gated`` the drive's gated samples per channel (``channel_names``' order)."""
+    (m,), per wheel or unit (k, m); ``road_m`` every wheel's road (m; offline the smoother's,
+    online the per-sample one); ``innovations_gated`` the drive's gated samples per channel
+    (``channel_names``' order); ``fused`` online the streamed fused profile (every point the
+    last axle passed), None offline (:func:`.articulated.fuse_roads` there)."""
 
     stamps_ns: np.ndarray
     distance_m: np.ndarray
@@ -127,6 +141,8 @@ class WholeVehicleArrays:
     #: offline, the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor
     #: does not fit) over the instrumented axles; None online or with fewer than 3 of them
     axle_fit: AxleFit | None = None
+    #: online, the fused profile's points streamed (:class:`.fused_stream.FusedPoints`)
+    fused: FusedPoints | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -241,6 +257,9 @@ class WholeVehicleEstimator:
         self._load, self._ay = cols['load'], cols['ay']
         self._transfer = _Transfer(vehicle, self.static_n)
         self._dynamic = cols['dynamic']
+        self._road = cols['road']
+        #: the fused profile streamed (every axle of the vehicle, front first)
+        self.fused = FusedStream([a.position_m for a in vehicle.axles])
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
         self._gaps: deque = deque()                # each held sample's gaps so far
@@ -285,18 +304,27 @@ class WholeVehicleEstimator:
                 static = self._pending.pop(int(stamp))
                 loads = [s + d for s, d in zip(static, row[self._dynamic])]
             t = self._transfer.update(int(stamp), loads)
-            out.append(WholeVehicleSample(int(stamp), float(row[DIST]), bool(row[CONV] > 0.5),
+            road = row[self._road]
+            x = float(row[DIST])
+            out.append(WholeVehicleSample(int(stamp), x, bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
                                           tuple(t[1:6:2]), tuple(row[self._ay]), gated,
-                                          tuple(t[6:]), self._gaps.popleft()))
+                                          tuple(t[6:]), self._gaps.popleft(),
+                                          road_m=tuple(road),
+                                          fused=tuple(self.fused.push(stamp, x, road,
+                                                                      loads, static))))
         return out
 
 
 def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
             gaps: np.ndarray | None = None) -> WholeVehicleArrays:
     m = len(samples)
-    if gated is None:
+    fused = None
+    if gated is None:             # online: the samples' roads and the streamed points
         gated = samples[-1].innovations_gated if samples else ()
+        road = np.array([s.road_m for s in samples], float).reshape(
+            m, len(est.wheel_names)).T.copy()
+        fused = FusedPoints.from_points([p for s in samples for p in s.fused])
 
     def field(name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in samples], float).reshape(m, -1).T.copy()
@@ -308,7 +336,8 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
         est.axle_bodies, field('load_n'), field('static_n'), field('ltr'),
         field('ltr_quasi_static'), field('lateral_mps2'), road,
         tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'),
-        np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps)
+        np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps,
+        fused=fused)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,

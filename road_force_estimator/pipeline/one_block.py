@@ -150,11 +150,14 @@ def _model_fit(est, drive, vehicle, observer) -> tuple[float, str] | None:
 
 
 def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict, vehicle,
-          observer, options: dict, stages, whole=None, fused=None) -> EstimateResult:
+          observer, options: dict, stages, whole=None, fused=None,
+          road_half_track_m: float | None = None) -> EstimateResult:
     """The sinks in one call each: ``folder/bag`` and ``folder/report``; the result names
     them in ``output``. ``whole``: an articulated drive's whole-vehicle estimate
     (:mod:`.whole_vehicle`: its topics and ``/diagnostics`` status in the bag), or None;
-    ``fused``: its fused profile (:class:`.whole_vehicle.FusedRoad`, offline), or None."""
+    ``fused``: its fused profile (:class:`.whole_vehicle.FusedRoad`), or None;
+    ``road_half_track_m``: the y of ``/road_profile/*`` (m; the articulated truck's front
+    wheels', as the node publishes them), else half the front-axle vehicle's track."""
     from road_force_estimator import bagio
     from road_force_estimator.report import raw_road, write_report
 
@@ -179,7 +182,8 @@ def write(folder: Path, output: Path, input_path: Path, drive, est, extra: dict,
         diagnostics = whole_vehicle.add_diagnostics(diagnostics, whole)
         streams = whole_vehicle.bag_streams(whole) + whole_vehicle.fused_streams(fused)
     written = bagio.write_estimate_bag(
-        bag_dir, est, track_width_m=vehicle.track_width_m, diagnostics=diagnostics,
+        bag_dir, est, track_width_m=vehicle.track_width_m if road_half_track_m is None
+        else 2.0 * road_half_track_m, diagnostics=diagnostics,
         custom_data=custom, extra_streams=streams)
     if written.get('nonfinite'):
         extra['estimates not written (non-finite)'] = written['nonfinite']

@@ -62,7 +62,9 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
             fused = whole_vehicle.fused_profile(wv, whole)
             est = whole_vehicle.fused_road(est, wv, fused)
         result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
-                                 observer, options, stages, whole=wv, fused=fused)
+                                 observer, options, stages, whole=wv, fused=fused,
+                                 road_half_track_m=None if whole is None else
+                                 float(whole.axles[0].wheel_half_track_m))
     return _whole_vehicle(result, input_path, folder, wv, fused)
 
 

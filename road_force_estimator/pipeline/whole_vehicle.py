@@ -15,9 +15,11 @@ section and ``segments.csv`` columns (:mod:`~.report.whole_vehicle`).
 
 The front axle's estimator still runs on the front axle's sensors (package defaults for the
 4-DOF model, :func:`front_axle_vehicle`) for what the whole vehicle's does not give yet: the
-road profile online, the observer states. Offline, the axles' roads fused by distance
-(:func:`fused_profile`) go to ``/road_profile/fused/left|right`` and are the drive's road
-(:func:`fused_road`: ``/road_profile/left|right``, the report's profile figures and IRI).
+observer states. The axles' roads fused by distance (:func:`fused_profile`: offline
+:func:`~.estimation.articulated.fuse_roads`, online the points the estimator streamed, the
+node's) go to ``/road_profile/fused/left|right``; the drive's road (:func:`fused_road`:
+``/road_profile/left|right``, the report's profile figures and IRI) is offline the fused one,
+online the whole vehicle's front wheels' own per sample (the node's ``/road_profile/*``).
 """
 from __future__ import annotations
 
@@ -206,13 +208,22 @@ class FusedRoad:
 
 
 def fused_profile(wv, vehicle) -> FusedRoad | None:
-    """Every axle's offline road fused by distance (:func:`~.estimation.articulated.
-    fuse_roads`: the points the last axle has passed), or None when ``wv`` holds no road
-    (online) or no point is passed by every axle."""
+    """Every axle's road fused by distance: online the points the estimator streamed
+    (``wv.fused``, the node's), offline :func:`~.estimation.articulated.fuse_roads` (the
+    points the last axle has passed); None when ``wv`` holds no road or no point is passed by
+    every axle."""
     from road_force_estimator.estimation.articulated import ArticulatedEstimate, fuse_roads
 
     if wv.road_m is None or not len(wv.stamps_ns):
         return None
+    half_track = float(vehicle.axles[0].wheel_half_track_m)
+    if wv.fused is not None:
+        f = wv.fused
+        ok = np.isfinite(f.distance_m) & np.isfinite(f.left_m) & np.isfinite(f.right_m)
+        if not ok.any():
+            return None
+        return FusedRoad(f.stamps_ns[ok], f.distance_m[ok], f.left_m[ok], f.right_m[ok],
+                         len(vehicle.axles), half_track)
     est = ArticulatedEstimate(np.asarray(wv.stamps_ns), np.asarray(wv.distance_m, float),
                               np.asarray(wv.converged, bool), tuple(wv.wheel_names),
                               np.asarray(wv.load_n, float),
@@ -240,9 +251,10 @@ def fused_streams(fused: FusedRoad | None) -> list:
 
 
 def fused_road(est, wv, fused: FusedRoad | None):
-    """The front axle's estimate ``est`` with the whole vehicle's road offline: the fused
+    """The front axle's estimate ``est`` with the whole vehicle's road: offline the fused
     profile at the samples it holds, the whole vehicle's front wheels' own road after them
-    (the last metres, where the trailer's axles have not passed); ``est`` as it is online."""
+    (the last metres, where the trailer's axles have not passed); online the front wheels'
+    own road at every sample (the node's ``/road_profile/*``: the fused points come later)."""
     if wv.road_m is None:
         return est
     stamps = np.asarray(est.stamp_ns, np.int64)
@@ -250,7 +262,7 @@ def fused_road(est, wv, fused: FusedRoad | None):
     at = np.clip(np.searchsorted(wv.stamps_ns, stamps), 0, len(wv.stamps_ns) - 1)
     hit = np.asarray(wv.stamps_ns)[at] == stamps
     road[hit] = np.asarray(wv.road_m, float)[:2, at[hit]].T
-    if fused is not None and len(fused.stamps_ns):
+    if wv.fused is None and fused is not None and len(fused.stamps_ns):
         k = np.clip(np.searchsorted(fused.stamps_ns, stamps), 0, len(fused.stamps_ns) - 1)
         on = fused.stamps_ns[k] == stamps
         road[on, 0] = fused.left_m[k[on]]

@@ -344,9 +344,14 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
         left, right = fp['iri_m_per_km']
         lines += ['', f'The road fused over the {fp["axles"]} axles (`/road_profile/fused/*`, '
                   f'{fp["length_m"]:.0f} m every axle has passed): IRI {left:.2f} m/km left, '
-                  f"{right:.2f} m/km right. The road, its figures and the segments' IRI above "
-                  "are the fused profile's, the last metres (where the trailer's axles "
-                  "have not passed) the whole vehicle's front wheels' road."]
+                  f'{right:.2f} m/km right. ' + (
+                      "Streamed online, each point once the last axle had passed it; the road, "
+                      "its figures and the segments' IRI above are the whole vehicle's front "
+                      "wheels' own road per sample (the node's `/road_profile/*`)."
+                      if fp.get('streamed') else
+                      "The road, its figures and the segments' IRI above are the fused "
+                      "profile's, the last metres (where the trailer's axles have not passed) "
+                      "the whole vehicle's front wheels' road.")]
     fit = s.get('model_fit')
     if fit:
         from road_force_estimator.estimation.axle_fit import ADVICE
@@ -370,13 +375,14 @@ def append_estimate(folder: str | Path, wv, truth=None,
     ``report.json``'s ``whole_vehicle_estimate``, ``segments.csv``'s columns) and, with
     ``truth``, the truth's section; the estimate's numbers (also in
     ``summary['whole_vehicle_estimate']`` when given). ``fused``: the fused profile
-    (``distance_m``, ``left_m``, ``right_m``, ``axles``; m): its IRI in the section (the
-    report's road, profile figures and segment IRI are already the fused profile's:
-    :func:`~.pipeline.whole_vehicle.fused_road`)."""
+    (``distance_m``, ``left_m``, ``right_m``, ``axles``; m): its IRI in the section (offline
+    the report's road, profile figures and segment IRI are already the fused profile's,
+    online the front wheels' own road: :func:`~.pipeline.whole_vehicle.fused_road`)."""
     folder = Path(folder)
     s = summarize_estimate(wv, truth)
     if fused is not None:
         s['fused_profile'] = _fused_iri(fused)
+        s['fused_profile']['streamed'] = getattr(wv, 'fused', None) is not None
     if (folder / 'segments.csv').exists():
         _append_segments_csv(folder / 'segments.csv', wv)
     _append_section(folder, 'whole_vehicle_estimate', s, estimate_markdown(s), summary)

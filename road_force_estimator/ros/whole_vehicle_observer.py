@@ -18,10 +18,15 @@ from the front axle's wheels: ``/wheel_load/left|right`` (WrenchStamped, N) and
 ``/load_transfer`` (its two wheels' LTR and quasi-static LTR: the estimate's
 ``front_ltr``). With the first estimate of
 every :data:`.interfaces.STATIC_LOAD_PERIOD_NS`: ``/wheel_loads/static`` and
-``/wheel_load/static/left|right`` (the static loads F_c, N). Not published: the road
-(``/road_profile/*``: the articulated estimator has no road online yet), ``/load_transfer_ratio``
-and ``/observer/states`` (front-axle model topics INTERFACES.md does not keep for the whole
-vehicle). Messages go out as CDR bytes (one :class:`.serde.CdrEncoderGroup` per estimate).
+``/wheel_load/static/left|right`` (the static loads F_c, N). The road: per estimate
+``/road_profile/left|right`` (PointStamped, frame ``road``: x = distance (m), y = +- the front
+wheels' half track (m), z = the front axle's own road under each wheel (m), after the loads),
+and ``/road_profile/fused/left|right`` for every point of the fused profile the last axle has
+passed with that estimate (the same, z fused over every axle, stamped with the sample at which
+the front axle passed the point: :class:`~road_force_estimator.estimation.fused_stream.
+FusedStream`). Not published: ``/load_transfer_ratio`` and ``/observer/states`` (front-axle
+model topics INTERFACES.md does not keep for the whole vehicle). Messages go out as CDR bytes
+(one :class:`.serde.CdrEncoderGroup` per estimate).
 
 ``/diagnostics`` at 1 Hz: ``observer: input`` (counts of the period, ``total.*``),
 ``observer: estimator`` (``static_load_<axle>_n`` per axle, ``gross_weight_n``,
@@ -38,7 +43,7 @@ import time
 from typing import Any, Iterable, Mapping, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
 from sensor_msgs.msg import JointState
 
@@ -184,6 +189,11 @@ class WholeVehicleObserver:
                   for f in api.WHEEL_FRAMES]
         group += [*wrench, group[1]]
         self.group = CdrEncoderGroup(group)
+        point = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                           ['point.x', 'point.y', 'point.z'])
+        #: both wheel paths' points of one stamp (``/road_profile/*`` and the fused ones)
+        self.road_group = CdrEncoderGroup([point, point])
+        self.half_track_m = float(vehicle.axles[0].wheel_half_track_m)
         self.static_group = CdrEncoderGroup([group[0], *wrench])
         qos = reliable_qos(OUTPUT_DEPTH)
         types = {api.WHEEL_LOADS: JointState, api.STATIC_WHEEL_LOADS: JointState}
@@ -195,6 +205,10 @@ class WholeVehicleObserver:
         # rclpy's publish of serialized bytes without Publisher.publish's Python
         self.send = [p.handle.publish_raw for p in self.pubs]
         self.send_static = [p.handle.publish_raw for p in self.static_pubs]
+        self.road_pubs = [node.create_publisher(PointStamped, t, qos) for t in api.ROAD]
+        self.fused_pubs = [node.create_publisher(PointStamped, t, qos) for t in api.ROAD_FUSED]
+        self.send_road = [p.handle.publish_raw for p in self.road_pubs]
+        self.send_fused = [p.handle.publish_raw for p in self.fused_pubs]
         self.static_stamp_ns: int | None = None
         self.diagnostics_pub = node.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
@@ -259,6 +273,17 @@ class WholeVehicleObserver:
             return
         for send, data in zip(self.send, self.group.encode(t, values)):
             send(data)
+        x, s, road = sample.distance_m, self.half_track_m, sample.road_m
+        u1, u2 = road[0], road[1]
+        if math.isfinite(x + u1 + u2):
+            for send, data in zip(self.send_road, self.road_group.encode(
+                    t, (x, s, u1, x, -s, u2))):
+                send(data)
+        for stamp, px, left, right in sample.fused:
+            if math.isfinite(px + left + right):
+                for send, data in zip(self.send_fused, self.road_group.encode(
+                        stamp, (px, s, left, px, -s, right))):
+                    send(data)
         if api.static_load_due(t, self.static_stamp_ns):
             st = sample.static_n
             loads = [st[i] for i in self.wheels]
@@ -283,7 +308,7 @@ class WholeVehicleObserver:
         with self.lock:
             for sample in self.estimator.finish():
                 self.publish(sample)
-        for pub in (*self.pubs, *self.static_pubs):
+        for pub in (*self.pubs, *self.static_pubs, *self.road_pubs, *self.fused_pubs):
             pub.wait_for_all_acked(Duration(seconds=1.0))
 
     def destroy(self) -> None:
@@ -328,7 +353,7 @@ class WholeVehicleObserver:
         return [input_status, self.estimator_status(name), diagnostics.status(
             'observer: configuration', name, 'ok', {
                 'vehicle.model': 'articulated', 'axles': ', '.join(self.axles),
-                'channels': len(self.names), 'road_online': 'none (not estimated online)',
+                'channels': len(self.names), 'road_online': 'every axle, fused',
                 'refused_parameter_sets': len(self.params.refusals)})]
 
     def estimator_status(self, name: str) -> diagnostics.Status:

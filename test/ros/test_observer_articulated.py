@@ -2,14 +2,15 @@
 MODEL.md's 5-axle combination: every wheel's load arrives, named by the contract; the loads
 follow the plant's truth; the numbers are those of estimate_whole_vehicle on the inputs the
 node took (recorded as it took them) and the bytes those rclpy serialises for the same
-messages; bad messages are counted and skipped, the node keeps running."""
+messages, the road (/road_profile/left|right per sample, /road_profile/fused/* per point the
+last axle passed) among them; bad messages are counted and skipped, the node keeps running."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
@@ -19,6 +20,7 @@ from node_harness import Collector, close, make_executor
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import ObserverParameters, load_params_file
+from road_force_estimator.estimation.fused_stream import FUSED_SPACING_M
 from road_force_estimator.estimation.whole_vehicle import estimate_whole_vehicle
 from road_force_estimator.ros.bag_recorder import message_class
 from road_force_estimator.ros.messages import (
@@ -33,7 +35,7 @@ CONFIG = REPO / 'config' / 'tractor_semitrailer.yaml'
 AXLES = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
 WHEELS = tuple(f'{a}_{s}_wheel' for a in AXLES for s in ('left', 'right'))
 RAW = (api.WHEEL_LOADS, *api.UNIT_LOAD_TRANSFER, *api.LOAD, api.LOAD_TRANSFER,
-       api.STATIC_WHEEL_LOADS, *api.STATIC_LOAD)
+       api.STATIC_WHEEL_LOADS, *api.STATIC_LOAD, *api.ROAD, *api.ROAD_FUSED)
 DURATION_S = 4.0
 SETTLED_S = 2.0
 #: each wheel's online dynamic-load error allowed from SETTLED_S on (RMS, of the true dynamic
@@ -80,6 +82,29 @@ def record_inputs(observer: Observer) -> list:
     return taken
 
 
+def record_published(observer: Observer) -> list:
+    """How many samples the node has published, and their fused points (a cheap count for the
+    waits: the node's input thread shares the GIL with them)."""
+    published = [0, 0]
+    whole = observer.whole
+    publish = whole.publish
+
+    def recording(sample):
+        publish(sample)
+        published[0] += 1
+        published[1] += len(sample.fused)
+
+    whole.publish = recording
+    return published
+
+
+def point_bytes(stamp_ns: int, x: float, y: float, z: float) -> bytes:
+    msg = PointStamped()
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.ROAD_FRAME
+    msg.point.x, msg.point.y, msg.point.z = float(x), float(y), float(z)
+    return serialize_message(msg)
+
+
 def vector_bytes(stamp_ns: int, x: float, y: float) -> bytes:
     msg = Vector3Stamped()
     msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.BASE_FRAME
@@ -100,11 +125,13 @@ def test_the_articulated_observer_beside_the_plant(ros_context):
                             'simulator.road': 'iso8608:C:seed=1'})
     observer = Observer(context=ros_context, parameter_overrides=overrides(values))
     taken = record_inputs(observer)
+    published = record_published(observer)
     raw = RawCollector(ros_context)
     # the truth's collector subscribes to the inputs too: the plant starts once it listens
     truth = Collector(ros_context, [api.TRUE_WHEEL_LOADS, api.DEFLECTIONS, api.TWIST])
     executor = make_executor(ros_context, observer, raw, truth)
-    outputs = (*observer.whole.pubs, *observer.whole.static_pubs)
+    outputs = (*observer.whole.pubs, *observer.whole.static_pubs, *observer.whole.road_pubs,
+               *observer.whole.fused_pubs)
     assert spin_until(executor, lambda: all(p.get_subscription_count() for p in outputs), 30.0)
     plant = PlantSimulator(context=ros_context, parameter_overrides=overrides({
         **values, 'start_nodes': ['observer', 'collector']}))
@@ -113,7 +140,10 @@ def test_the_articulated_observer_beside_the_plant(ros_context):
         assert spin_until(executor, lambda: plant.finished, 60.0)
         n = plant.k
         assert spin_until(executor, lambda: len(taken) == n and truth.count(
-            api.TRUE_WHEEL_LOADS) == n and all(len(raw.data[t]) == n for t in RAW[:7]), 20.0)
+            api.TRUE_WHEEL_LOADS) == n and all(len(raw.data[t]) == n for t in (
+                *RAW[:7], *api.ROAD)) and published[0] == n and all(
+                len(raw.data[t]) == published[1] for t in api.ROAD_FUSED), 20.0), (
+            n, len(taken), published, {t: len(raw.data[t]) for t in RAW})
     finally:
         close(executor, observer, raw, truth, plant)
     assert n == round(DURATION_S * 1000) + 1
@@ -136,6 +166,23 @@ def test_the_articulated_observer_beside_the_plant(ros_context):
         for side, topic in enumerate(api.LOAD):
             assert_same_bytes(api.WRENCH, raw.data[topic][k], serialize_message(
                 wrench_msg(t, api.WHEEL_FRAMES[side], front[side, k])))
+    # the road: the front wheels' own per sample, the fused profile per point passed by the
+    # last axle (stamped with the sample at which the front axle passed it)
+    w = vehicle.axles[0].wheel_half_track_m
+    for k, t in enumerate(stamps.tolist()):
+        for side, topic in enumerate(api.ROAD):
+            assert_same_bytes(api.POINT, raw.data[topic][k], point_bytes(
+                t, ref.distance_m[k], w if side == 0 else -w, ref.road_m[side, k]))
+    f = ref.fused
+    reach = max(a.position_m for a in vehicle.axles)
+    assert np.all(f.distance_m + reach <= ref.distance_m[-1]) and np.isin(f.stamps_ns,
+                                                                          stamps).all()
+    assert f.stamps_ns.size > 0.9 * (ref.distance_m[-1] - reach) / FUSED_SPACING_M
+    for side, topic in enumerate(api.ROAD_FUSED):
+        assert len(raw.data[topic]) == f.stamps_ns.size
+        for k, t in enumerate(f.stamps_ns.tolist()):
+            assert_same_bytes(api.POINT, raw.data[topic][k], point_bytes(
+                t, f.distance_m[k], w if side == 0 else -w, (f.left_m, f.right_m)[side][k]))
     # /load_transfer: the front axle's two wheels, right minus left over their sum
     got = np.array([(m.vector.x, m.vector.y) for m in (deserialize_message(
         d, Vector3Stamped) for d in raw.data[api.LOAD_TRANSFER])])

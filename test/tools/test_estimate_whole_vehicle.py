@@ -140,6 +140,26 @@ def test_the_loads_are_estimate_whole_vehicles_on_the_same_inputs(runs, mode):
                                              topics['/wheel_loads/static']])
     np.testing.assert_array_equal([m.effort for _, m in topics['/wheel_loads/static']],
                                   want.static_n[:, first].T)
+    if mode == 'online':
+        from road_force_estimator.estimation.fused_stream import FUSED_SPACING_M
+        # the road as the node publishes it: the front wheels' own per sample (y = +- the
+        # front wheels' half track) and the streamed fused points, bit for bit
+        w = vehicle.axles[0].wheel_half_track_m
+        f = want.fused
+        assert f.stamps_ns.size > 0.9 * (want.distance_m[-1] - 12.22) / FUSED_SPACING_M
+        for side, word in enumerate(('left', 'right')):
+            rows = topics[f'/road_profile/{word}']
+            np.testing.assert_array_equal([stamp(m) for _, m in rows], want.stamps_ns)
+            np.testing.assert_array_equal([m.point.x for _, m in rows], want.distance_m)
+            np.testing.assert_array_equal([m.point.z for _, m in rows], want.road_m[side])
+            assert {m.point.y for _, m in rows} == {w if side == 0 else -w}
+            rows = topics[f'/road_profile/fused/{word}']
+            np.testing.assert_array_equal([stamp(m) for _, m in rows], f.stamps_ns)
+            np.testing.assert_array_equal([t for t, _ in rows], f.stamps_ns)
+            np.testing.assert_array_equal([m.point.x for _, m in rows], f.distance_m)
+            np.testing.assert_array_equal([m.point.z for _, m in rows],
+                                          (f.left_m, f.right_m)[side])
+            assert {m.point.y for _, m in rows} == {w if side == 0 else -w}
 
 
 #: Largest per-wheel RMS load error, % of the true dynamic load's RMS, after the first second
@@ -239,12 +259,12 @@ def test_offline_the_fused_profile_is_published_and_is_the_reports_road(runs):
     IRI-filtered cross-correlation against the drive's own ``/ground_truth/road_profile/*``
     over the 20-40 m segment (every axle has passed it, the start's second is behind) is the
     fused road's (measured 0.991-0.997; the front-axle estimator's own road, the package's
-    defaults on this truck's beam axle, gave 0.71-0.73 over a 6 s drive). Online: no fused
-    profile (no road online)."""
+    defaults on this truck's beam axle, gave 0.71-0.73 over a 6 s drive). Online the fused
+    profile is the streamed one (test_the_loads_are_estimate_whole_vehicles_on_the_same_inputs)
+    and the report counts its points."""
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
     from road_force_estimator.core.parameters import load_params_file
     _, outs, bags = runs
-    assert '/road_profile/fused/left' not in bags['online']
     topics = bags['offline']
     xi = max(a.position_m for a in ArticulatedDrive.from_values(
         load_params_file(CONFIG)).vehicle.axles)
@@ -268,3 +288,6 @@ def test_offline_the_fused_profile_is_published_and_is_the_reports_road(runs):
     fused = json.loads((outs['offline'] / 'report' / 'report.json').read_text())[
         'whole_vehicle_estimate']['fused_profile']
     assert fused['axles'] == 5 and fused['points'] == len(topics['/road_profile/fused/left'])
+    online = json.loads((outs['online'] / 'report' / 'report.json').read_text())[
+        'whole_vehicle_estimate']['fused_profile']
+    assert online['points'] == len(bags['online']['/road_profile/fused/left'])

@@ -380,7 +380,7 @@ class ArticulatedObserverModel:
     # -- reconstruction --------------------------------------------------------------------
     def online_rows(self, observer) -> ArticulatedOnlineRows:
         """Every wheel's load, sample by sample (:class:`.ArticulatedOnlineRows`)."""
-        return ArticulatedOnlineRows(self)
+        return ArticulatedOnlineRows(self, observer)
 
     def offline_rows(self, observer) -> ArticulatedOfflineRows:
         """Every wheel's load of smoothed runs (:class:`.ArticulatedOfflineRows`)."""

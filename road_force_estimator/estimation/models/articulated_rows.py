@@ -7,7 +7,12 @@ Columns of N axles (``nw = 2 N`` wheels, axle j front first, left then right)::
 
     [distance, converged, F_n (nw), dF (nw), a_y,t, a_y,r, road (nw), dd z_w (nw)]
 
-Online rows stop after ``a_y``. Offline, the road under every wheel comes from the smoother's
+Online rows stop after the road: every wheel's road ``u = w + z_w`` with ``z_w`` the causal
+band-limited double integral (:func:`.body_heave.step`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
+``observer.profile_cutoff_wavelength``) of the wheel's acceleration from the finalized outputs
+(the load filter's: the causal one at zero latency, the fixed-lag one with
+``observer.latency``), the run's start ramped in as offline, held at a stop
+(:class:`WheelRoads`). Offline, the road under every wheel comes from the smoother's
 profile pass (:meth:`ArticulatedOfflineRows.road`): ``u = w + z_w``, ``z_w`` the zero-phase
 band-limited double integral (:func:`.body_heave.zero_phase`, cutoff
 :data:`ROAD_CUTOFF_FACTOR` x ``observer.profile_cutoff_wavelength``) of the wheel's vertical
@@ -26,7 +31,7 @@ from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.front_axle import PROFILE_OFFLINE_ROLL_MOMENT_PSD
 
 __all__ = ['DIST', 'CONV', 'ROAD_START_S', 'ROAD_RAMP_S', 'ROAD_CUTOFF_FACTOR', 'columns',
-           'ArticulatedOnlineRows', 'ArticulatedOfflineRows']
+           'WheelRoads', 'ArticulatedOnlineRows', 'ArticulatedOfflineRows']
 
 #: The distance (m) and converged columns; the rest: :func:`columns`.
 DIST, CONV = 0, 1
@@ -68,19 +73,81 @@ def _road_index(model) -> list:
     return [names.index(f'w_{w}') for w in wheels] + [names.index(f'ddzw_{w}') for w in wheels]
 
 
-class ArticulatedOnlineRows:
-    """Rows one sample at a time (:class:`.protocol.OnlineRows`)."""
+class WheelRoads:
+    """Every wheel's road (m) one finalized sample at a time: ``u = w + z_w``, ``z_w`` the
+    causal band-limited double integral of the wheel's acceleration (:func:`.body_heave.step`,
+    ``wc_per_speed`` rad/m; the speed floored at :data:`.body_heave.SPEED_FLOOR_MPS`), the
+    acceleration left out for :data:`ROAD_START_S` of a run and ramped in over
+    :data:`ROAD_RAMP_S` (the offline road's start); at a stop (the distance stands still and
+    the speed below the floor) the road holds (what the integral does then is no road, as
+    the front axle's :class:`.front_axle_rows.OnlineRoad`)."""
 
-    #: the rows take no road online: the core runs no zero-latency profile filter for them
-    #: (its design and its product per sample saved; the loads are the same numbers)
-    uses_profile = False
-
-    def __init__(self, model) -> None:
-        self.static = [float(f) for f in model.static_wheel_load_n]
-        self._df, self._ay = _output_index(model)
+    def __init__(self, nw: int, wc_per_speed: float) -> None:
+        self.nw = int(nw)
+        self.wc = float(wc_per_speed)
+        self.restart()
 
     def restart(self) -> None:
-        """Nothing carries over a sample."""
+        """The next sample starts a run."""
+        self._t = -1.0                  # time since the run's start (s); < 0: not started
+        self._state = [body_heave.start(0.0)] * self.nw
+        self._prev: list | None = None
+        self._x = math.nan
+        self._off = [0.0] * self.nw
+
+    def road(self, w: list, accel: list, dt: float, v: float, x: float) -> list:
+        """The roads (m) from the tires' deflections ``w`` (m) and the wheels' accelerations
+        ``accel`` (m/s^2, up) after a step ``dt`` (s) at speed ``v`` (m/s), distance ``x``
+        (m)."""
+        t = self._t
+        if t < 0.0:
+            t = self._t = 0.0
+            self._state = [body_heave.start(0.0)] * self.nw
+            self._prev = None
+            self._off = [0.0] * self.nw
+        else:
+            t = self._t = t + dt
+        if t < ROAD_START_S:
+            ramp = 0.0
+        elif t < ROAD_START_S + ROAD_RAMP_S:
+            ramp = 0.5 - 0.5 * math.cos(math.pi * (t - ROAD_START_S) / ROAD_RAMP_S)
+        else:
+            ramp = 1.0
+        states, wc, off = self._state, self.wc, self._off
+        u = [0.0] * self.nw
+        for k in range(self.nw):
+            h = states[k] = body_heave.step(states[k], ramp * accel[k], dt, v, wc) \
+                if self._prev is not None else body_heave.start(ramp * accel[k])
+            u[k] = w[k] + h[-2]
+        prev, px = self._prev, self._x
+        self._prev, self._x = u, x
+        if prev is not None and x == px and -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
+            for k in range(self.nw):
+                off[k] += u[k] - prev[k]
+        return [a - b for a, b in zip(u, off)]
+
+
+class ArticulatedOnlineRows:
+    """Rows one sample at a time (:class:`.protocol.OnlineRows`): loads, a_y and every
+    wheel's road (:class:`WheelRoads`) from the finalized outputs."""
+
+    #: the rows take their road from the load filter's outputs: the core runs no zero-latency
+    #: profile filter for them (its design and its product per sample saved)
+    uses_profile = True
+
+    def __init__(self, model, observer=None) -> None:
+        self.static = [float(f) for f in model.static_wheel_load_n]
+        self._df, self._ay = _output_index(model)
+        idx = _road_index(model)
+        nw = len(self.static)
+        self._w, self._acc = idx[:nw], idx[nw:]
+        cutoff = ROAD_CUTOFF_FACTOR * (100.0 if observer is None
+                                       else observer.profile_cutoff_wavelength_m)
+        self.roads = WheelRoads(nw, body_heave.cutoff_per_speed(cutoff))
+
+    def restart(self) -> None:
+        """The next row starts a run (the roads' integrals restart)."""
+        self.roads.restart()
 
     def set_vehicle(self, vehicle) -> None:
         """The static loads of other parameters."""
@@ -94,11 +161,13 @@ class ArticulatedOnlineRows:
         self.static = [float(f) for f in static_n]
 
     def row(self, o: list, meta: tuple, op) -> tuple:
-        """``(distance, converged, F_n..., dF..., a_y,t, a_y,r)``."""
-        x, _, _, conv = meta
+        """``(distance, converged, F_n..., dF..., a_y,t, a_y,r, u...)``."""
+        x, dt, v, conv = meta
         df = [o[i] for i in self._df]
+        r = o if op is None else op
+        u = self.roads.road([r[i] for i in self._w], [r[i] for i in self._acc], dt, v, x)
         return (x, conv, *[s + d for s, d in zip(self.static, df)], *df,
-                *[o[i] for i in self._ay])
+                *[o[i] for i in self._ay], *u)
 
 
 class ArticulatedOfflineRows:
