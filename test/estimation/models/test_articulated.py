@@ -69,14 +69,15 @@ def test_the_linear_model_is_the_plants_linearisation_at_equilibrium(model):
     s[lay.delta, :n] = delta
     s[lay.w, :n] = -wheels.reshape(nw, n)
     s[lay.w, 2 * n:2 * n + nw] = np.eye(nw)
-    s[lay.dx, n:2 * n] = np.eye(n)
+    s[lay.dx, n:2 * n] = model.rate_rows
     s[lay.du, 2 * n + nw:2 * n + 2 * nw] = np.eye(nw)
     s[lay.ay, -1] = 1.0
     cm = model.continuous(20.0, 64e-6)
     names = model.outputs
     h_rows = [names.index(f'{k}_{a}_{side}') for k in ('q', 'dq', 'df')
               for a in model.vehicle.axle_names for side in ('left', 'right')]
-    got = np.vstack([cm.h[h_rows], cm.a[lay.dx]]) @ s
+    # (the rate states are T dx: the coordinates' accelerations are T^-1 of theirs)
+    got = np.vstack([cm.h[h_rows], model.rate_inverse @ cm.a[lay.dx]]) @ s
     scale = np.max(np.abs(expected), axis=1, keepdims=True)
     assert np.max(np.abs(got - expected) / scale) < 1e-6
 
