@@ -4,8 +4,8 @@ through a curve, and the cost of five 0.5 mm spikes, in every mode.
 
 Run from the repository root::
 
-    .venv/bin/python -m bench.accuracy.articulated_wim [--parts wim stick rollover spikes]
-        [--duration 100] [--noise 1e-5]
+    .venv/bin/python -m bench.accuracy.articulated_wim [--parts wim stick rollover spikes
+        friction] [--duration 100] [--noise 1e-5] [--file-friction]
 
 MODEL.md's combination (``config/tractor_semitrailer.yaml``) at 1 kHz, ISO 8608 roads seed 1,
 10 um on every deflection and 10 um / 0.45 m on the rolls, simulated by the core plant and
@@ -24,7 +24,13 @@ offline).
   dynamic RMS, the worst axle, after 5 s) and the samples gated beside it. Zero latency and
   10 ms: offline the static loads are the same tracker's (the same numbers), and the
   smoother's gate, which the unmodelled friction keeps busy, recomputes chunk after chunk
-  (more than 10 minutes for 100 s on a loaded machine).
+  (more than 10 minutes for 100 s on a loaded machine). ``--file-friction``: the estimator's
+  file states the plant's friction (and offline is run too).
+- ``friction``: the WIM drives (classes C and A, ``--duration`` s, zero-load readings, the
+  payload unknown) with 1.5 kN of tanh friction per spring, then with a 3 ms lag on every
+  sensor on top, and the same drive without either: per mode and axle the dynamic-load error
+  (% of the true dynamic RMS after 5 s, RMS over both wheels) with the estimator's file
+  stating the plant's friction (and lag) and stating none.
 - ``stick``: the same with the ``stick`` friction, the sliders loaded as parked
   (``simulator.leaf_spring_friction_start: 1``, MODEL.md "Friction that sticks") at the start
   of a drive at 20 m/s, zero latency (the static estimate is the same in every mode): each
@@ -45,6 +51,7 @@ import argparse
 import pathlib
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -152,18 +159,20 @@ def wim_figures(drive: dict, est) -> dict:
 def part_wim(args) -> list[str]:
     """Weigh in motion with tanh friction, payload unknown."""
     payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
-    vehicle = file_vehicle(ZERO_LOAD)
+    vehicle = file_vehicle({**ZERO_LOAD, **TANH} if args.file_friction else ZERO_LOAD)
+    modes = MODES if args.file_friction else MODES[:2]
     lines = [f'Weigh in motion: {args.duration:g} s at 20 m/s, zero-load readings, the '
              f"plant's trailer {29000.0 + args.payload_change:g} kg (the file: 29000), "
-             '1.5 kN tanh friction per spring in the plant (none in the file); after the '
-             f'first {SKIP_M:g} m, {SEGMENT_M:g} m segments\n',
+             '1.5 kN tanh friction per spring in the plant '
+             f'({"the file states it" if args.file_friction else "none in the file"}); '
+             f'after the first {SKIP_M:g} m, {SEGMENT_M:g} m segments\n',
              '| road | mode | gross worst (%) | axle: segments within 2 % (%), worst segment '
              '(%) | dynamic-load error, worst axle (%) | samples gated (all channels) |',
              '|---|---|---:|---|---:|---:|']
     for road in ('C', 'A'):
         drive = simulate(road, args.duration, args.noise, {**ZERO_LOAD, **TANH, **payload})
         gross_true = drive['static'].sum() / 9.80665
-        for label, lat, off in MODES[:2]:       # offline: the same static loads (module notes)
+        for label, lat, off in modes:       # offline: the same static loads (module notes)
             est = estimate(vehicle, drive, lat, off)
             f = wim_figures(drive, est)
             axles = ', '.join(f'{n} {s:.0f} / {w:.2f}' for n, s, w in
@@ -257,8 +266,41 @@ def part_spikes(args) -> list[str]:
     return lines
 
 
+LAG = {'vehicle.sensor_time_constant': [0.003, 0.003]}
+
+
+def part_friction(args) -> list[str]:
+    """The dynamic loads with the friction (and a lag) stated in the file or not."""
+    payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
+    lines = [f'\nFriction and lag: the WIM drives ({args.duration:g} s at 20 m/s, zero-load '
+             'readings, payload unknown); per axle the dynamic-load error (% of the true '
+             'dynamic RMS after 5 s)\n',
+             '| road | plant | file | mode | front, drive, trailer_1..3 (%) | wall (s) |',
+             '|---|---|---|---|---|---:|']
+    cases = (('1.5 kN tanh', {**TANH}, (('states it', TANH), ('none', {}))),
+             ('1.5 kN tanh + 3 ms lag', {**TANH, **LAG},
+              (('states both', {**TANH, **LAG}), ('states the friction', TANH),
+               ('none', {}))),
+             ('no friction', {}, (('none', {}),)))
+    for road in ('C', 'A'):
+        for plant, values, files in cases:
+            drive = simulate(road, args.duration, args.noise, {**ZERO_LOAD, **values,
+                                                               **payload})
+            for file, fvalues in files:
+                vehicle = file_vehicle({**ZERO_LOAD, **fvalues})
+                for label, lat, off in MODES:
+                    t0 = time.perf_counter()
+                    est = estimate(vehicle, drive, lat, off)
+                    wall = time.perf_counter() - t0
+                    pct = ', '.join(f'{v:.1f}' for v in dynamic_pct(drive, est))
+                    lines.append(f'| {road} | {plant} | {file} | {label} | {pct} | '
+                                 f'{wall:.1f} |')
+                    print(lines[-1], file=sys.stderr, flush=True)
+    return lines
+
+
 PARTS = {'wim': part_wim, 'stick': part_stick, 'rollover': part_rollover,
-         'spikes': part_spikes}
+         'spikes': part_spikes, 'friction': part_friction}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -269,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--noise', type=float, default=1e-5, help='deflection noise (m)')
     parser.add_argument('--payload-change', type=float, default=-4000.0,
                         help="the plant's trailer mass less the file's (kg)")
+    parser.add_argument('--file-friction', action='store_true',
+                        help="wim: the estimator's file states the plant's friction")
     args = parser.parse_args(argv)
     for part in args.parts:
         print('\n'.join(PARTS[part](args)), flush=True)

@@ -112,10 +112,66 @@ def test_difference_covariance_leaves_neutral_modes_out():
     np.testing.assert_allclose(difference_covariance(a, q), d @ p @ d.T + q, rtol=1e-12)
 
 
-def test_the_model_refuses_what_it_does_not_carry():
-    with pytest.raises(ValueError, match='leaf-spring friction'):
-        ArticulatedObserverModel(_drive(**{'vehicle.leaf_spring_friction': [800.0, 800.0]}
-                                        ).vehicle)
+def test_friction_acts_where_the_dampers_act_and_its_damping_is_a_damper():
+    """Each spring's friction force enters as its damper's force does: against the core's own
+    linearisation of a vehicle whose every damper is 1 N s/m stiffer (C' - C = S^T S when the
+    input per newton is M^-1 S^T), and the model designed with an equivalent damping c_eq is
+    the model of a vehicle with c + c_eq (its A and its outputs); the friction's direct part
+    is in the spring forces and accelerations, never in the dynamic tire forces."""
+    import dataclasses
+    from road_force_estimator.core.articulated_model import ArticulatedModel
+
+    vehicle = _drive(**{'vehicle.leaf_spring_friction': [1500.0, 1500.0]}).vehicle
+    model = ArticulatedObserverModel(vehicle)
+    lay, nw = model.layout, model.layout.nw
+    stiffer = dataclasses.replace(vehicle, axles=tuple(
+        dataclasses.replace(a, suspension_damping_nspm=tuple(c + 1.0 for c in
+                                                             a.suspension_damping_nspm))
+        for a in vehicle.axles))
+    lin, lin1 = ArticulatedModel(vehicle).linearised(), ArticulatedModel(stiffer).linearised()
+    cm = model.continuous(20.0, 64e-6, friction_damping_nspm=(0.0,) * nw)
+    per_newton = model.rate_inverse @ cm.friction_b[lay.dx]      # coordinates' accelerations
+    springs = model.spring_rows
+    np.testing.assert_allclose(per_newton @ springs,
+                               np.linalg.solve(lin.mass, lin1.damping - lin.damping),
+                               atol=1e-12 * float(np.max(np.abs(per_newton @ springs))))
+    assert model.friction_n == (1500.0,) * nw and cm.friction_n == model.friction_n
+    free = ArticulatedObserverModel(dataclasses.replace(stiffer, axles=tuple(
+        dataclasses.replace(a, leaf_spring_friction_n=(0.0, 0.0)) for a in stiffer.axles)))
+    ref = free.continuous(20.0, 64e-6)
+    eq = model.continuous(20.0, 64e-6, friction_damping_nspm=(1.0,) * nw)
+    assert ref.friction_b is None and ref.friction_n == ()
+    np.testing.assert_allclose(eq.a, ref.a, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref.a))))
+    np.testing.assert_allclose(eq.h, ref.h, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref.h))))
+    names = model.outputs
+    fb = [names.index(f'fb_{a}_{s}') for a in vehicle.axle_names for s in ('left', 'right')]
+    np.testing.assert_array_equal(cm.friction_d[fb], np.eye(nw))
+    assert not cm.friction_d[list(model.load_outputs)].any()
+    assert [names[j] for j in model.friction_rate_outputs] == [
+        f'dq_{a}_{s}' for a in vehicle.axle_names for s in ('left', 'right')]
+    assert all(cm.h[j].tolist() == np.eye(cm.nx)[i].tolist() for i, j in
+               zip(model.friction_rate_states, model.friction_rate_outputs))
+
+
+def test_a_lagged_sensor_measures_its_first_order_lag():
+    """A 3 ms lag on every deflection and 5 ms on the rolls: one state per channel, which its
+    sensor measures, with the pole -1/tau beside the model's own (the lag is driven, never
+    driving); at rest the lag states read the sensors."""
+    vehicle = _drive(**{'vehicle.sensor_time_constant': [0.003, 0.005]}).vehicle
+    model = ArticulatedObserverModel(vehicle)
+    plain = ArticulatedObserverModel(_drive().vehicle)
+    cm, ref = model.continuous(20.0, 64e-6), plain.continuous(20.0, 64e-6)
+    ny, nx0 = cm.ny, ref.nx
+    assert cm.nx == nx0 + ny and cm.lagged == tuple(range(ny))
+    assert cm.measured == tuple(range(nx0, nx0 + ny))
+    np.testing.assert_allclose(cm.a[:nx0, :nx0], ref.a, rtol=1e-12,
+                               atol=1e-12 * float(np.max(np.abs(ref.a))))
+    assert not cm.a[:nx0, nx0:].any()
+    tau = np.array([0.005 if n.endswith('_roll') else 0.003 for n in model.channel_names])
+    np.testing.assert_allclose(np.diag(cm.a)[nx0:], -1.0 / tau, rtol=1e-12)
+    np.testing.assert_allclose(cm.a[nx0:, :nx0], ref.c / tau[:, None], rtol=1e-12)
+    y = np.linspace(-0.01, 0.01, ny)
+    np.testing.assert_array_equal(model.rest_state(y)[nx0:], y)
 
 
 @pytest.fixture(scope='module')
