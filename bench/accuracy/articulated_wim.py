@@ -31,6 +31,9 @@ offline).
   sensor on top, and the same drive without either: per mode and axle the dynamic-load error
   (% of the true dynamic RMS after 5 s, RMS over both wheels) with the estimator's file
   stating the plant's friction (and lag) and stating none.
+- ``damping``: the articulated model's factors on the friction's equivalent damping
+  (``FRICTION_DAMPING_FACTORS``) on separate drives (road seed 1001, 30 s, classes A and C,
+  the WIM drives' settings with and without a 3 ms lag): the worst axle per factor.
 - ``stick``: the same with the ``stick`` friction, the sliders loaded as parked
   (``simulator.leaf_spring_friction_start: 1``, MODEL.md "Friction that sticks") at the start
   of a drive at 20 m/s, zero latency (the static estimate is the same in every mode): each
@@ -299,8 +302,41 @@ def part_friction(args) -> list[str]:
     return lines
 
 
+def part_damping(args) -> list[str]:
+    """The articulated model's factors on the friction's equivalent damping, on separate
+    drives (road seed 1001, 30 s)."""
+    from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
+
+    payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
+    lines = ["\nThe equivalent damping's factors (FRICTION_DAMPING_FACTORS): tuning drives "
+             '(road seed 1001, 30 s, zero-load readings, payload unknown, 1.5 kN tanh per '
+             "spring); the worst axle's dynamic-load error (%)\n",
+             '| road | lag | mode | factor | worst axle (%) | axles (%) |',
+             '|---|---|---|---:|---:|---|']
+    kept = ArticulatedObserverModel.friction_damping_factors
+    try:
+        for road in ('A', 'C'):
+            for lag in ({}, LAG):
+                drive = simulate(road, 30.0, args.noise, {**ZERO_LOAD, **TANH, **lag,
+                                                          **payload}, seed=1001)
+                vehicle = file_vehicle({**ZERO_LOAD, **TANH, **lag})
+                for label, lat, factors in (('10 ms', 0.01, (0.0, 0.25, 0.5)),
+                                            ('0 ms', 0.0, (0.0, 0.5, 1.5))):
+                    for f in factors:
+                        ArticulatedObserverModel.friction_damping_factors = (
+                            (kept[0], f) if lat else (f, kept[1]))
+                        p = dynamic_pct(drive, estimate(vehicle, drive, lat, False))
+                        lines.append(f'| {road} | {"3 ms" if lag else "none"} | {label} | '
+                                     f'{f:g} | {p.max():.1f} | '
+                                     f'{", ".join(f"{v:.1f}" for v in p)} |')
+                        print(lines[-1], file=sys.stderr, flush=True)
+    finally:
+        ArticulatedObserverModel.friction_damping_factors = kept
+    return lines
+
+
 PARTS = {'wim': part_wim, 'stick': part_stick, 'rollover': part_rollover,
-         'spikes': part_spikes, 'friction': part_friction}
+         'spikes': part_spikes, 'friction': part_friction, 'damping': part_damping}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -79,7 +79,8 @@ from road_force_estimator.estimation.models.articulated_rows import (
 from road_force_estimator.estimation.models.protocol import (
     FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 
-__all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR', 'Layout',
+__all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR',
+           'FRICTION_DAMPING_FACTORS', 'Layout',
            'ArticulatedObserverModel', 'BrakingResponse', 'output_names', 'channel_names']
 
 SIDES = ('left', 'right')
@@ -104,6 +105,17 @@ AX_TIME_CONSTANT_S = 0.05
 #: 0 s 2.4 / 9.5 %, 0.16 / 0.71 %; 0.005 s 2.4 / 4.9 %, 0.16 / 0.44 %; 0.02 s 2.5 / 2.7 %,
 #: 0.37 / 0.34 %; 0.05 s 2.6 % and 1.84 % (exact speed).
 AX_OFFLINE_TIME_CONSTANT_S = 0.02
+#: The factors on the friction's equivalent damping (:func:`.leaf_friction.friction_damping`)
+#: at zero latency and with a latency, the articulated model's own: the front axle's (1.5,
+#: 0.5) made the 10 ms filter unstable on class A (the gains designed for springs nearly
+#: locked by the damping, the trailer's axles growing without bound: worst axle 101 % over
+#: 30 s with a 3 ms lag, 12 % without). Tuned on separate drives (road seed 1001, 30 s,
+#: zero-load readings, payload unknown, 1.5 kN tanh per spring, with and without a 3 ms lag;
+#: worst axle, classes A / C): with a latency 0 the best (no lag 8.1 / 4.0 %, lag 10.1 /
+#: 5.7 %; 0.25: 8.8 / 4.1, 11.4 / 6.1 %); at zero latency 0.5 (no lag 41.1 / 32.8 %, lag
+#: 53.4 / 50.4 %; 0: 44.4 / 31.8, 57.8 / 46.1 %; 1.5: 46.2 / 35.2, 87.4 / 62.3 %):
+#: ``python -m bench.accuracy.articulated_wim --parts damping``.
+FRICTION_DAMPING_FACTORS = (0.5, 0.0)
 
 
 class Layout:
@@ -159,6 +171,9 @@ class ArticulatedObserverModel(LeafSpringFriction):
     The friction of every spring (F_f per element in the order of the springs' states, front
     axle first, left then right) and the channels' lags (s) come from the parameters.
     """
+
+    #: the equivalent damping's factors (:data:`FRICTION_DAMPING_FACTORS`)
+    friction_damping_factors = FRICTION_DAMPING_FACTORS
 
     def __init__(self, vehicle: ArticulatedParameters) -> None:
         self.vehicle = vehicle

@@ -54,10 +54,13 @@ def friction_damping(friction_n, dq_std_mps: float, factor: float | None = None,
 class LeafSpringFriction:
     """The friction part of :class:`.protocol.VehicleModel` for a model that sets
     ``friction_n`` (F_f per element, N, the springs in the order of its
-    ``friction_rate_states``) and ``friction_velocity_mps`` (v_f, m/s)."""
+    ``friction_rate_states``) and ``friction_velocity_mps`` (v_f, m/s), and may set its own
+    ``friction_damping_factors`` (zero latency, with a latency; None: this module's
+    :data:`FRICTION_DAMPING_FACTOR` and :data:`FRICTION_DAMPING_FACTOR_LATENCY`)."""
 
     friction_n: tuple = ()
     friction_velocity_mps: float = 0.01
+    friction_damping_factors: tuple[float, float] | None = None
 
     def friction_forces(self, dq, ceq) -> np.ndarray:
         """The friction's known input (N) per spring at its rates dq (m/s): ``-F_f,i
@@ -77,7 +80,11 @@ class LeafSpringFriction:
     def friction_damping(self, dq_std_mps: float, delayed: bool = False) -> tuple:
         """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s);
         ``delayed``: with a latency, whose friction is corrected at the smoothed rates
-        (:data:`FRICTION_DAMPING_FACTOR_LATENCY`)."""
-        return friction_damping(self.friction_n, dq_std_mps,
-                                FRICTION_DAMPING_FACTOR_LATENCY if delayed else None,
+        (:data:`FRICTION_DAMPING_FACTOR_LATENCY`, or the model's factors)."""
+        own = self.friction_damping_factors
+        if own is not None:
+            factor = own[1] if delayed else own[0]
+        else:
+            factor = FRICTION_DAMPING_FACTOR_LATENCY if delayed else None
+        return friction_damping(self.friction_n, dq_std_mps, factor,
                                 self.friction_velocity_mps)
