@@ -46,7 +46,8 @@ input, the change of the speed the estimator is given: its response adds to the 
 tractor's IMU.
 
 Friction and sensor lag, as the front axle's (:mod:`.front_axle`, "Friction and sensor lag";
-the law and its tuning :mod:`.leaf_friction`, shared): every spring's
+the law shared, :mod:`.leaf_friction`; the equivalent damping's factors this model's own,
+:data:`FRICTION_DAMPING_FACTORS`): every spring's
 ``-F_f,j,i tanh(dq_j,i / v_f)`` (``vehicle.axle.<name>.leaf_spring_friction``) is a known
 input acting where its spring and damper act (generalised force ``S^T f``, S the springs'
 kinematic rows), evaluated on the estimated ``dq_j,i``; the gains' linear model carries its
