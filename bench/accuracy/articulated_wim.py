@@ -4,8 +4,8 @@ through a curve, and the cost of five 0.5 mm spikes, in every mode.
 
 Run from the repository root::
 
-    .venv/bin/python -m bench.accuracy.articulated_wim [--parts wim stick rollover spikes]
-        [--duration 100] [--noise 1e-5]
+    .venv/bin/python -m bench.accuracy.articulated_wim [--parts wim stick rollover spikes
+        friction] [--duration 100] [--noise 1e-5] [--file-friction]
 
 MODEL.md's combination (``config/tractor_semitrailer.yaml``) at 1 kHz, ISO 8608 roads seed 1,
 10 um on every deflection and 10 um / 0.45 m on the rolls, simulated by the core plant and
@@ -24,7 +24,16 @@ offline).
   dynamic RMS, the worst axle, after 5 s) and the samples gated beside it. Zero latency and
   10 ms: offline the static loads are the same tracker's (the same numbers), and the
   smoother's gate, which the unmodelled friction keeps busy, recomputes chunk after chunk
-  (more than 10 minutes for 100 s on a loaded machine).
+  (more than 10 minutes for 100 s on a loaded machine). ``--file-friction``: the estimator's
+  file states the plant's friction (and offline is run too).
+- ``friction``: the WIM drives (classes C and A, ``--duration`` s, zero-load readings, the
+  payload unknown) with 1.5 kN of tanh friction per spring, then with a 3 ms lag on every
+  sensor on top, and the same drive without either: per mode and axle the dynamic-load error
+  (% of the true dynamic RMS after 5 s, RMS over both wheels) with the estimator's file
+  stating the plant's friction (and lag) and stating none.
+- ``damping``: the articulated model's factors on the friction's equivalent damping
+  (``FRICTION_DAMPING_FACTORS``) on separate drives (road seed 1001, 30 s, classes A and C,
+  the WIM drives' settings with and without a 3 ms lag): the worst axle per factor.
 - ``stick``: the same with the ``stick`` friction, the sliders loaded as parked
   (``simulator.leaf_spring_friction_start: 1``, MODEL.md "Friction that sticks") at the start
   of a drive at 20 m/s, zero latency (the static estimate is the same in every mode): each
@@ -45,6 +54,7 @@ import argparse
 import pathlib
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -152,18 +162,20 @@ def wim_figures(drive: dict, est) -> dict:
 def part_wim(args) -> list[str]:
     """Weigh in motion with tanh friction, payload unknown."""
     payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
-    vehicle = file_vehicle(ZERO_LOAD)
+    vehicle = file_vehicle({**ZERO_LOAD, **TANH} if args.file_friction else ZERO_LOAD)
+    modes = MODES if args.file_friction else MODES[:2]
     lines = [f'Weigh in motion: {args.duration:g} s at 20 m/s, zero-load readings, the '
              f"plant's trailer {29000.0 + args.payload_change:g} kg (the file: 29000), "
-             '1.5 kN tanh friction per spring in the plant (none in the file); after the '
-             f'first {SKIP_M:g} m, {SEGMENT_M:g} m segments\n',
+             '1.5 kN tanh friction per spring in the plant '
+             f'({"the file states it" if args.file_friction else "none in the file"}); '
+             f'after the first {SKIP_M:g} m, {SEGMENT_M:g} m segments\n',
              '| road | mode | gross worst (%) | axle: segments within 2 % (%), worst segment '
              '(%) | dynamic-load error, worst axle (%) | samples gated (all channels) |',
              '|---|---|---:|---|---:|---:|']
     for road in ('C', 'A'):
         drive = simulate(road, args.duration, args.noise, {**ZERO_LOAD, **TANH, **payload})
         gross_true = drive['static'].sum() / 9.80665
-        for label, lat, off in MODES[:2]:       # offline: the same static loads (module notes)
+        for label, lat, off in modes:       # offline: the same static loads (module notes)
             est = estimate(vehicle, drive, lat, off)
             f = wim_figures(drive, est)
             axles = ', '.join(f'{n} {s:.0f} / {w:.2f}' for n, s, w in
@@ -257,8 +269,74 @@ def part_spikes(args) -> list[str]:
     return lines
 
 
+LAG = {'vehicle.sensor_time_constant': [0.003, 0.003]}
+
+
+def part_friction(args) -> list[str]:
+    """The dynamic loads with the friction (and a lag) stated in the file or not."""
+    payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
+    lines = [f'\nFriction and lag: the WIM drives ({args.duration:g} s at 20 m/s, zero-load '
+             'readings, payload unknown); per axle the dynamic-load error (% of the true '
+             'dynamic RMS after 5 s)\n',
+             '| road | plant | file | mode | front, drive, trailer_1..3 (%) | wall (s) |',
+             '|---|---|---|---|---|---:|']
+    cases = (('1.5 kN tanh', {**TANH}, (('states it', TANH), ('none', {}))),
+             ('1.5 kN tanh + 3 ms lag', {**TANH, **LAG},
+              (('states both', {**TANH, **LAG}), ('states the friction', TANH),
+               ('none', {}))),
+             ('no friction', {}, (('none', {}),)))
+    for road in ('C', 'A'):
+        for plant, values, files in cases:
+            drive = simulate(road, args.duration, args.noise, {**ZERO_LOAD, **values,
+                                                               **payload})
+            for file, fvalues in files:
+                vehicle = file_vehicle({**ZERO_LOAD, **fvalues})
+                for label, lat, off in MODES:
+                    t0 = time.perf_counter()
+                    est = estimate(vehicle, drive, lat, off)
+                    wall = time.perf_counter() - t0
+                    pct = ', '.join(f'{v:.1f}' for v in dynamic_pct(drive, est))
+                    lines.append(f'| {road} | {plant} | {file} | {label} | {pct} | '
+                                 f'{wall:.1f} |')
+                    print(lines[-1], file=sys.stderr, flush=True)
+    return lines
+
+
+def part_damping(args) -> list[str]:
+    """The articulated model's factors on the friction's equivalent damping, on separate
+    drives (road seed 1001, 30 s)."""
+    from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
+
+    payload = {'vehicle.trailer.mass': 29000.0 + args.payload_change}
+    lines = ["\nThe equivalent damping's factors (FRICTION_DAMPING_FACTORS): tuning drives "
+             '(road seed 1001, 30 s, zero-load readings, payload unknown, 1.5 kN tanh per '
+             "spring); the worst axle's dynamic-load error (%)\n",
+             '| road | lag | mode | factor | worst axle (%) | axles (%) |',
+             '|---|---|---|---:|---:|---|']
+    kept = ArticulatedObserverModel.friction_damping_factors
+    try:
+        for road in ('A', 'C'):
+            for lag in ({}, LAG):
+                drive = simulate(road, 30.0, args.noise, {**ZERO_LOAD, **TANH, **lag,
+                                                          **payload}, seed=1001)
+                vehicle = file_vehicle({**ZERO_LOAD, **TANH, **lag})
+                for label, lat, factors in (('10 ms', 0.01, (0.0, 0.25, 0.5)),
+                                            ('0 ms', 0.0, (0.0, 0.5, 1.5))):
+                    for f in factors:
+                        ArticulatedObserverModel.friction_damping_factors = (
+                            (kept[0], f) if lat else (f, kept[1]))
+                        p = dynamic_pct(drive, estimate(vehicle, drive, lat, False))
+                        lines.append(f'| {road} | {"3 ms" if lag else "none"} | {label} | '
+                                     f'{f:g} | {p.max():.1f} | '
+                                     f'{", ".join(f"{v:.1f}" for v in p)} |')
+                        print(lines[-1], file=sys.stderr, flush=True)
+    finally:
+        ArticulatedObserverModel.friction_damping_factors = kept
+    return lines
+
+
 PARTS = {'wim': part_wim, 'stick': part_stick, 'rollover': part_rollover,
-         'spikes': part_spikes}
+         'spikes': part_spikes, 'friction': part_friction, 'damping': part_damping}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -269,6 +347,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--noise', type=float, default=1e-5, help='deflection noise (m)')
     parser.add_argument('--payload-change', type=float, default=-4000.0,
                         help="the plant's trailer mass less the file's (kg)")
+    parser.add_argument('--file-friction', action='store_true',
+                        help="wim: the estimator's file states the plant's friction")
     args = parser.parse_args(argv)
     for part in args.parts:
         print('\n'.join(PARTS[part](args)), flush=True)

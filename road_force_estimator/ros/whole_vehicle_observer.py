@@ -80,8 +80,8 @@ def specs(node, front_axle_specs: tuple) -> tuple:
 
 def build(values: Mapping[str, Any], given: Iterable[str], channels: Sequence[str] = ()
           ) -> tuple[ArticulatedParameters, ObserverParameters, WholeVehicleEstimator]:
-    """The vehicle, the observer's settings and a new estimator (which refuses what it does
-    not model: friction, lagging sensors). ``channels``: those of the running estimator (a
+    """The vehicle, the observer's settings and a new estimator (leaf-spring friction and
+    lagging sensors as the file states them). ``channels``: those of the running estimator (a
     live set), which must stay.
 
     Raises

@@ -143,9 +143,9 @@ def test_delayed_friction_correction_is_the_filter_driven_by_the_corrected_force
     # (the equivalent damping off, so that the known input is the law alone); and a step
     # corrected at the full lag carries the law at the two rates the estimates were
     # published with.
-    import road_force_estimator.estimation.models.front_axle as front_axle
+    import road_force_estimator.estimation.models.leaf_friction as leaf_friction
     v_f = BOTH.leaf_spring_friction_velocity_mps
-    monkeypatch.setattr(front_axle, 'FRICTION_DAMPING_FACTOR_LATENCY', 1e-12)
+    monkeypatch.setattr(leaf_friction, 'FRICTION_DAMPING_FACTOR_LATENCY', 1e-12)
     tr, q, phi = _drive(BOTH, 1.5)
     stamps = np.round(tr.t_s * 1e9).astype(np.int64)
     obs = ObserverParameters(latency_s=0.01, noise_deflection_m=1e-5, noise_roll_rad=1e-4,

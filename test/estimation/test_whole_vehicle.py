@@ -249,3 +249,63 @@ def test_fused_points_come_once_the_last_axle_has_passed(drive):
     np.testing.assert_array_equal(batch.fused.stamps_ns, [g[0] for g in got])
     np.testing.assert_array_equal(batch.fused.left_m, [g[2] for g in got])
     np.testing.assert_array_equal(batch.fused.right_m, [g[3] for g in got])
+
+
+# -- leaf-spring friction and lagging sensors, stated in the file ------------------------------
+
+FRICTION = {'vehicle.leaf_spring_friction': [1500.0, 1500.0]}
+LAG = {'vehicle.sensor_time_constant': [0.003, 0.003]}
+MODES = ((ObserverParameters(), False), (ObserverParameters(latency_s=0.01), False),
+         (ObserverParameters(), True))
+
+
+def _worst_dynamic_pct(tr, static, a) -> float:
+    """The worst wheel's load error after SETTLE_S, % of its true dynamic RMS."""
+    judged = tr.t_s >= SETTLE_S
+    true = tr.wheel_load_n[judged].T
+    dyn = true - static.reshape(-1)[:, None]
+    err = a.load_n[:, judged] - true
+    return float(np.max(100.0 * np.sqrt(np.mean(err ** 2, axis=1) / np.mean(dyn ** 2, axis=1))))
+
+
+def test_a_file_stating_the_friction_finds_the_loads_it_moves():
+    """8 s of class C with 1.5 kN of tanh friction on every spring: the file stating it
+    against the file stating none, against the plant's truth in every mode (measured, worst
+    wheel: 0 ms 19.5 against 33.6 %, 10 ms 3.7 against 26.6 %, offline 3.1 against 27.0 %)."""
+    vehicle, tr, stamps, y, static, _ = _drive(FRICTION, 8.0)
+    assert vehicle.axles[0].leaf_spring_friction_n == (1500.0, 1500.0)
+    stated, none = _file_vehicle(FRICTION), _file_vehicle({})
+    for (obs, offline), bound in zip(MODES, (26.0, 5.5, 5.0)):
+        got = [_worst_dynamic_pct(tr, static, estimate_whole_vehicle(
+            v, stamps, y, 20.0, observer=obs, offline=offline)) for v in (stated, none)]
+        assert got[0] < bound and got[0] < 0.8 * got[1], (obs.latency_s, offline, got)
+
+
+@pytest.fixture(scope='module')
+def lag_drive():
+    """8 s of class C, 1.5 kN of tanh friction per spring and a 3 ms lag on every sensor."""
+    return _drive({**FRICTION, **LAG}, 8.0)
+
+
+def test_friction_and_lag_per_sample_and_drive_give_the_same_bits(lag_drive):
+    """The file stating both: the per-sample path (the node's) and the drive's (estimate_bag's)
+    the same bits with 10 ms and at zero latency."""
+    _, _, stamps, y, _, _ = lag_drive
+    vehicle = _file_vehicle({**FRICTION, **LAG})
+    m = 2000
+    for obs in MODES[1][0], MODES[0][0]:
+        batch = estimate_whole_vehicle(vehicle, stamps[:m], y[:m], 20.0, observer=obs)
+        _, samples = step_by_step(vehicle, obs, stamps[:m], y[:m])
+        assert [s.stamp_ns for s in samples] == stamps[:m].tolist()
+        np.testing.assert_array_equal(np.array([s.load_n for s in samples]).T, batch.load_n)
+
+
+def test_a_file_stating_the_lag_too_finds_the_loads_better(lag_drive):
+    """The lag on top of the friction: the file stating both against stating none (measured,
+    worst wheel, 10 ms: 4.6 against 29.0 %; offline 3.7 against 29.2 %)."""
+    vehicle, tr, stamps, y, static, _ = lag_drive
+    both, none = _file_vehicle({**FRICTION, **LAG}), _file_vehicle({})
+    for obs, offline in MODES[1:]:
+        got = [_worst_dynamic_pct(tr, static, estimate_whole_vehicle(
+            v, stamps, y, 20.0, observer=obs, offline=offline)) for v in (both, none)]
+        assert got[0] < 6.0 and got[0] < 0.5 * got[1], (obs.latency_s, offline, got)

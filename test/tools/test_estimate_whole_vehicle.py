@@ -291,3 +291,37 @@ def test_offline_the_fused_profile_is_published_and_is_the_reports_road(runs):
     online = json.loads((outs['online'] / 'report' / 'report.json').read_text())[
         'whole_vehicle_estimate']['fused_profile']
     assert online['points'] == len(bags['online']['/road_profile/fused/left'])
+
+
+def test_a_file_stating_friction_and_lag_is_estimated(tmp_path):
+    """A drive with 1.5 kN of tanh friction per spring and a 3 ms lag on every sensor, and the
+    same file for estimate_bag (it used to be refused): accepted, and its /wheel_loads are
+    estimate_whole_vehicle's on the inputs the mcap library decodes, bit for bit."""
+    from road_force_estimator.estimation.whole_vehicle import (
+        WholeVehicleEstimator, estimate_whole_vehicle)
+    text = CONFIG.read_text(encoding='utf-8')
+    for old, new in (('leaf_spring_friction: [0.0, 0.0]',
+                      'leaf_spring_friction: [1500.0, 1500.0]'),
+                     ('sensor_time_constant: [0.0, 0.0]',
+                      'sensor_time_constant: [0.003, 0.003]')):
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    params = tmp_path / 'friction_lag.yaml'
+    params.write_text(text, encoding='utf-8')
+    bag = tmp_path / 'drive'
+    sim = subprocess.run([str(BIN / 'simulate_bag'), '--params-file', str(params), '--road',
+                          'iso8608:C:seed=5', '--speed', '20', '--rate', str(RATE_HZ),
+                          '--duration', '2', '--gnss-rate', '0', '--no-progress',
+                          '--output', str(bag)], capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    out = tmp_path / 'est'
+    assert estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
+                         '--mode', 'online', '--no-figures', '--no-progress']) == 0
+    vehicle, observer = load_parameters(str(params))
+    assert vehicle.axles[1].leaf_spring_friction_n == (1500.0, 1500.0)
+    assert vehicle.axles[1].sensor_time_constant_s == 0.003
+    names = WholeVehicleEstimator(vehicle, observer).channel_names
+    stamps, readings, speed = inputs(bag, names)
+    want = estimate_whole_vehicle(vehicle, stamps, readings, speed, observer=observer)
+    got = np.array([m.effort for _, m in decoded(out / 'bag')['/wheel_loads']]).T
+    np.testing.assert_array_equal(got, want.load_n)

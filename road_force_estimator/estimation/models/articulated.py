@@ -11,12 +11,16 @@ carry no absolute level: the heave, the grade and every kink of the road under t
 axles move bodies, axles and road together, and no deflection sees them (the front axle's
 reason for ``w = u - z_u``, :mod:`.front_axle`). State (SI; :class:`Layout`)::
 
-    x = [q (2N) | phi_t, phi_r | delta | w (2N) | dx (6 + 2N) | du (2N) | a_y,t, a_y,r]
+    x = [q (2N) | phi_t, phi_r | delta | w (2N) | dq (2N), dx_b (6) | du (2N) | a_y,t, a_y,r
+         | l (lagged channels)]
 
 ``q_j,i`` every spring's extension (axle j front first, side i left, right; the measured
 ones of the instrumented axles), ``phi_t``, ``phi_r`` the bodies' roll (measured: the
 tractor's, the trailer's where fitted), ``delta`` the fifth wheel's vertical deflection,
-``w_j,i = u_j,i - z_w,j,i`` every tire's deflection, ``dx`` every coordinate's rate, ``du_j,i``
+``w_j,i = u_j,i - z_w,j,i`` every tire's deflection, the rates of the ``6 + 2 N`` coordinates
+as every spring's extension rate ``dq_j,i`` and the bodies' six rates ``dx_b`` (the axles'
+rates follow from them: :attr:`ArticulatedObserverModel.rate_rows`; the friction's rates are
+states, as the front axle's), ``du_j,i``
 the road velocity under every tire (an Ornstein-Uhlenbeck process per wheel path per axle,
 as the front axle's: the unknown input) and ``a_y,b`` the lateral acceleration of each unit
 (a random walk: it drives the body's roll ``M_b h_b a_y`` and its axles' ``(h_rc,j S_j / g
@@ -39,7 +43,19 @@ tuned for the road as the front axle's (:mod:`.articulated_rows`). The longitudi
 acceleration ``a_x = dv/dt`` (the braking pitch, ``-M_b H_b a_x`` on each body) is a known
 input, the change of the speed the estimator is given: its response adds to the estimate
 (:class:`BrakingResponse`; a constant speed gives none, bit for bit). Not modelled yet: the
-leaf-spring friction and the sensors' lag (refused), the tractor's IMU.
+tractor's IMU.
+
+Friction and sensor lag, as the front axle's (:mod:`.front_axle`, "Friction and sensor lag";
+the law shared, :mod:`.leaf_friction`; the equivalent damping's factors this model's own,
+:data:`FRICTION_DAMPING_FACTORS`): every spring's
+``-F_f,j,i tanh(dq_j,i / v_f)`` (``vehicle.axle.<name>.leaf_spring_friction``) is a known
+input acting where its spring and damper act (generalised force ``S^T f``, S the springs'
+kinematic rows), evaluated on the estimated ``dq_j,i``; the gains' linear model carries its
+equivalent damping. Every lagged channel (an axle's ``sensor_time_constant``, the rolls'
+``vehicle.sensor_time_constant[1]``) has a first-order state ``tau dl = y - l`` appended
+after ``a_y``, which the sensor measures; the braking response is read through the same lag.
+The friction is evaluated on the rates the filter estimates, without the braking response's
+(whose rates are slow).
 
 Tuning: the front axle's schedule on the deflection noise (:func:`.front_axle.scheduled`),
 force noise on every equation of motion (per wheel on the axles, heave, pitch and roll on the
@@ -59,12 +75,14 @@ from road_force_estimator.core.articulated_parameters import ArticulatedParamete
 from road_force_estimator.core.articulated_sensors import channel_layout
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models import front_axle
+from road_force_estimator.estimation.models.leaf_friction import LeafSpringFriction
 from road_force_estimator.estimation.models.articulated_rows import (
     ArticulatedOfflineRows, ArticulatedOnlineRows)
 from road_force_estimator.estimation.models.protocol import (
     FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 
-__all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR', 'Layout',
+__all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR',
+           'FRICTION_DAMPING_FACTORS', 'Layout',
            'ArticulatedObserverModel', 'BrakingResponse', 'output_names', 'channel_names']
 
 SIDES = ('left', 'right')
@@ -89,6 +107,17 @@ AX_TIME_CONSTANT_S = 0.05
 #: 0 s 2.4 / 9.5 %, 0.16 / 0.71 %; 0.005 s 2.4 / 4.9 %, 0.16 / 0.44 %; 0.02 s 2.5 / 2.7 %,
 #: 0.37 / 0.34 %; 0.05 s 2.6 % and 1.84 % (exact speed).
 AX_OFFLINE_TIME_CONSTANT_S = 0.02
+#: The factors on the friction's equivalent damping (:func:`.leaf_friction.friction_damping`)
+#: at zero latency and with a latency, the articulated model's own: the front axle's (1.5,
+#: 0.5) made the 10 ms filter unstable on class A (the gains designed for springs nearly
+#: locked by the damping, the trailer's axles growing without bound: worst axle 101 % over
+#: 30 s with a 3 ms lag, 12 % without). Tuned on separate drives (road seed 1001, 30 s,
+#: zero-load readings, payload unknown, 1.5 kN tanh per spring, with and without a 3 ms lag;
+#: worst axle, classes A / C): with a latency 0 the best (no lag 8.1 / 4.0 %, lag 10.1 /
+#: 5.7 %; 0.25: 8.8 / 4.1, 11.4 / 6.1 %); at zero latency 0.5 (no lag 41.1 / 32.8 %, lag
+#: 53.4 / 50.4 %; 0: 44.4 / 31.8, 57.8 / 46.1 %; 1.5: 46.2 / 35.2, 87.4 / 62.3 %):
+#: ``python -m bench.accuracy.articulated_wim --parts damping``.
+FRICTION_DAMPING_FACTORS = (0.5, 0.0)
 
 
 class Layout:
@@ -133,7 +162,7 @@ def channel_names(model: ArticulatedModel) -> tuple[str, ...]:
     return tuple(out)
 
 
-class ArticulatedObserverModel:
+class ArticulatedObserverModel(LeafSpringFriction):
     """MODEL.md's tractor and semi-trailer as the observer's vehicle model
     (:class:`.protocol.VehicleModel`) for one :class:`.ArticulatedParameters`.
 
@@ -141,24 +170,14 @@ class ArticulatedObserverModel:
     and, where fitted, the trailer's (``/suspension/deflections``' order); state and outputs:
     the module notes; rows: :mod:`.articulated_rows`.
 
-    Raises
-    ------
-    ValueError
-        A vehicle the model does not carry yet: leaf-spring friction or lagging sensors.
+    The friction of every spring (F_f per element in the order of the springs' states, front
+    axle first, left then right) and the channels' lags (s) come from the parameters.
     """
 
-    friction_n: tuple = ()
-    friction_rate_states: tuple = ()
-    friction_rate_outputs: tuple = ()
+    #: the equivalent damping's factors (:data:`FRICTION_DAMPING_FACTORS`)
+    friction_damping_factors = FRICTION_DAMPING_FACTORS
 
     def __init__(self, vehicle: ArticulatedParameters) -> None:
-        if any(f > 0.0 for a in vehicle.axles for f in a.leaf_spring_friction_n):
-            raise ValueError('the articulated observer does not model leaf-spring friction '
-                             'yet: set vehicle.leaf_spring_friction to [0, 0]')
-        if vehicle.roll_time_constant_s > 0.0 or any(a.sensor_time_constant_s > 0.0
-                                                     for a in vehicle.axles):
-            raise ValueError('the articulated observer does not model lagging sensors yet: '
-                             'set vehicle.sensor_time_constant to [0, 0]')
         self.vehicle = vehicle
         self.core = ArticulatedModel(vehicle)
         self.layout = Layout(self.core.n_axles)
@@ -171,6 +190,20 @@ class ArticulatedObserverModel:
         nw = self.layout.nw
         self.load_outputs = tuple(range(3 * nw, 4 * nw))
         self.static_wheel_load_n = self.core.statics().output_wheel_load_n.reshape(-1).copy()
+        #: every spring's friction F_f (N), the tanh law's v_f (m/s), the springs' rate
+        #: states and outputs (:class:`.leaf_friction.LeafSpringFriction`)
+        self.friction_n = tuple(float(f) for a in vehicle.axles
+                                for f in a.leaf_spring_friction_n)
+        self.friction_velocity_mps = float(vehicle.leaf_spring_friction_velocity_mps)
+        self.friction_rate_states = tuple(range(self.layout.dx.start,
+                                                self.layout.dx.start + nw))
+        self.friction_rate_outputs = tuple(range(nw, 2 * nw))
+        #: each channel's sensor time constant (s; 0: none) and the lagged channels
+        self.sensor_time_constant_s = tuple(
+            vehicle.axles[ch[1]].sensor_time_constant_s if ch[0] == 'q'
+            else vehicle.roll_time_constant_s for ch in self.channels)
+        self.lagged = tuple(k for k, tau in enumerate(self.sensor_time_constant_s)
+                            if tau > 0.0)
         self._build()
 
     def with_vehicle(self, vehicle: ArticulatedParameters) -> ArticulatedObserverModel:
@@ -204,6 +237,11 @@ class ArticulatedObserverModel:
         self.damping = lin.damping
         self.road_damping = lin.road_damping
         self.delta_row = delta
+        #: T (n, n): the rate states over the coordinates' rates, every spring's extension
+        #: rate then the bodies' six (invertible: each axle's two springs hold its heave and
+        #: roll), and its inverse
+        self.rate_rows = np.vstack([self.spring_rows, np.eye(n)[:6]])
+        self.rate_inverse = np.linalg.inv(self.rate_rows)
         # each unit's lateral acceleration: its body's roll and its axles' roll equations
         lateral = np.zeros((n, 2))
         for b in (0, 1):
@@ -220,41 +258,70 @@ class ArticulatedObserverModel:
         """The augmented linear model (module notes) at a speed (m/s; its magnitude, floored
         at :data:`.SPEED_FLOOR_MPS`), a roughness ``Gd(n0)`` (m^3) and a tuning."""
         lay = self.layout
-        nw, nx = lay.nw, lay.nx
+        nw = lay.nw
+        nx = lay.nx + len(self.lagged)
         speed = max(abs(float(speed_mps)), SPEED_FLOOR_MPS)
         w_v = 2.0 * math.pi * speed / correlation_length_m
+        friction = any(self.friction_n)
+        ceq = np.zeros(nw)
+        if friction and friction_damping_nspm:   # its equivalent damping in the linear part
+            ceq = np.asarray(friction_damping_nspm, float)
+        damping = self.damping + self.spring_rows.T @ (ceq[:, None] * self.spring_rows)
+        tinv = self.rate_inverse
         acc = np.zeros((lay.n, nx))          # the coordinates' accelerations over the state
         acc[:, lay.pos] = self.force_pos
-        acc[:, lay.dx] = -self.damping
+        acc[:, lay.dx] = -damping @ tinv
         acc[:, lay.du] = self.road_damping
         acc[:, lay.ay] = self.lateral
         acc = self.minv @ acc
         a = np.zeros((nx, nx))
-        a[lay.q, lay.dx] = self.spring_rows
-        a[nw, lay.dx.start + 2] = a[nw + 1, lay.dx.start + 5] = 1.0
-        a[lay.delta, lay.dx] = self.delta_row
-        a[lay.w, lay.dx] = -self.wheel_rows
+        a[lay.q, lay.dx] = np.eye(nw, lay.n)        # (spring_rows T^-1: the rates' first)
+        a[nw, lay.dx] = tinv[2]
+        a[nw + 1, lay.dx] = tinv[5]
+        a[lay.delta, lay.dx] = self.delta_row @ tinv
+        a[lay.w, lay.dx] = -self.wheel_rows @ tinv
         a[lay.w, lay.du] = np.eye(nw)
-        a[lay.dx] = acc
+        a[lay.dx] = self.rate_rows @ acc
         a[lay.du, lay.du] = -w_v * np.eye(nw)
-        h = self._outputs(a, acc)
+        unlagged = self.unlagged_measurement()
+        for m, k in enumerate(self.lagged):      # tau dl = y - l
+            tau = self.sensor_time_constant_s[k]
+            a[lay.nx + m] = unlagged[k] / tau
+            a[lay.nx + m, lay.nx + m] -= 1.0 / tau
+        h = self._outputs(a, acc, np.eye(nx), ceq)
         g, psd = self._noise_inputs(force_psd, roll_moment_psd)
+        g = np.vstack([g, np.zeros((nx - lay.nx, g.shape[1]))])
         diffusion = road_diffusion(road_gd_m3) * speed
         psd[6 + nw:6 + 2 * nw] = diffusion * w_v ** 2
         road_g = g[:, 6 + nw:6 + 2 * nw] * (math.sqrt(speed) * w_v)
-        return ContinuousModel(a, g, np.diag(psd), self._measurement(), h, road_g)
+        fb_, fd_, ff = None, None, ()
+        if friction:       # a force f per spring where its damper acts: S^T f
+            acc_f = self.minv @ self.spring_rows.T
+            fb_ = np.zeros((nx, nw))
+            fb_[lay.dx] = self.rate_rows @ acc_f
+            fd_ = self._outputs(np.zeros((nx, nw)), acc_f, np.zeros((nx, nw)), np.zeros(nw),
+                                direct=np.eye(nw))
+            ff = self.friction_n
+        return ContinuousModel(a, g, np.diag(psd), self._measurement(), h, road_g, fb_, fd_,
+                               self.lagged, ff, tuple(float(c) for c in ceq) if friction else ())
 
-    def _outputs(self, a: np.ndarray, acc: np.ndarray) -> np.ndarray:
-        """H (outputs of :func:`output_names`, nx)."""
+    def _outputs(self, a: np.ndarray, acc: np.ndarray, eye: np.ndarray, ceq: np.ndarray,
+                 direct: np.ndarray | None = None) -> np.ndarray:
+        """H (outputs of :func:`output_names`, columns of ``a``): ``a`` the state's rates and
+        ``acc`` the coordinates' accelerations per column, ``eye`` the states per column,
+        ``ceq`` the friction's equivalent damping (N s/m) per spring; ``direct``: the columns
+        are forces on the springs (:attr:`.ContinuousModel.friction_d`)."""
         lay = self.layout
-        eye = np.eye(lay.nx)
         kt = np.array([k for ax in self.vehicle.axles for k in ax.tire_stiffness_npm])
         ct = np.array([c for ax in self.vehicle.axles for c in ax.tire_damping_nspm])
         k = np.array([s for ax in self.vehicle.axles for s in ax.suspension_stiffness_npm])
         c = np.array([s for ax in self.vehicle.axles for s in ax.suspension_damping_nspm])
+        c = c + ceq
         q, dq, w, dw = eye[lay.q], a[lay.q], eye[lay.w], a[lay.w]
         df = kt[:, None] * w + ct[:, None] * dw
         fb = -(k[:, None] * q + c[:, None] * dq)
+        if direct is not None:
+            fb = fb + direct
         rows = [q, dq, w, df, fb, eye[lay.phi], eye[lay.ay], acc[[0, 1, 3, 4]],
                 self.wheel_rows @ acc]
         return np.vstack(rows)
@@ -279,19 +346,28 @@ class ArticulatedObserverModel:
         forces[:, 6:6 + nw] = self.wheel_rows.T       # a force up under each wheel
         psd[6:6 + nw] = force_psd
         g = np.zeros((lay.nx, psd.size))
-        g[lay.dx, :6 + nw] = self.minv @ forces
+        g[lay.dx, :6 + nw] = self.rate_rows @ self.minv @ forces
         g[lay.du, 6 + nw:6 + 2 * nw] = np.eye(nw)
         g[lay.ay, 6 + 2 * nw:] = np.eye(2)
         mh = v.tractor.mass_kg * v.tractor.cg_height_above_roll_axis_m
         psd[6 + 2 * nw:] = AY_PSD_FACTOR * roll_moment_psd / (mh * mh)
         return g, psd
 
-    def _measurement(self) -> np.ndarray:
-        """C (ny, nx): the measured springs' extensions and bodies' rolls."""
+    def unlagged_measurement(self) -> np.ndarray:
+        """(ny, nx with the lag states): the measured springs' extensions and bodies' rolls."""
         lay = self.layout
-        cm = np.zeros((len(self.channels), lay.nx))
+        cm = np.zeros((len(self.channels), lay.nx + len(self.lagged)))
         for k, ch in enumerate(self.channels):
             cm[k, 2 * ch[1] + ch[2] if ch[0] == 'q' else lay.nw + ch[1]] = 1.0
+        return cm
+
+    def _measurement(self) -> np.ndarray:
+        """C (ny, nx): the measured springs' extensions and bodies' rolls; a lagged sensor
+        measures its lag state."""
+        cm = self.unlagged_measurement()
+        for m, k in enumerate(self.lagged):
+            cm[k] = 0.0
+            cm[k, self.layout.nx + m] = 1.0
         return cm
 
     # -- design ----------------------------------------------------------------------------
@@ -306,9 +382,10 @@ class ArticulatedObserverModel:
         return deflection_floor_m / self.vehicle.axles[0].spring_half_track_m
 
     def state_scale(self, nx: int) -> np.ndarray:
-        """Typical state magnitudes (m, rad, m/s, rad/s, m/s^2)."""
+        """Typical state magnitudes (m, rad, m/s, rad/s, m/s^2; a lag state as the
+        measured ones, 1e-2)."""
         lay = self.layout
-        s = np.empty(lay.nx)
+        s = np.full(nx, 1e-2)
         s[lay.q], s[lay.phi], s[lay.delta], s[lay.w] = 1e-2, 1e-2, 1e-3, 1e-3
         s[lay.dx], s[lay.du], s[lay.ay] = 1e-1, 1e-1, 1.0
         return s
@@ -318,13 +395,13 @@ class ArticulatedObserverModel:
         extensions and rolls, every rate 0, the other positions and a_y that leave the
         fewest accelerations."""
         lay = self.layout
-        cm = self._measurement()
-        x = np.zeros(lay.nx)
-        measured = [int(np.argmax(row)) for row in cm]
+        x = np.zeros(lay.nx + len(self.lagged))
+        measured = [int(np.argmax(row)) for row in self.unlagged_measurement()]
         x[measured] = np.asarray(y, float)
+        x[lay.nx:] = [float(y[k]) for k in self.lagged]     # a lag state as its sensor
         free = [j for j in range(lay.pos.stop) if j not in measured] + list(
             range(lay.ay.start, lay.ay.stop))
-        known = np.hstack([self.force_pos, np.zeros((lay.n, lay.nx - lay.pos.stop))])
+        known = np.hstack([self.force_pos, np.zeros((lay.n, x.size - lay.pos.stop))])
         known[:, lay.ay] = self.lateral
         x[free] = np.linalg.lstsq(known[:, free], -known @ x, rcond=None)[0]
         return x
@@ -345,9 +422,11 @@ class ArticulatedObserverModel:
         return tuple(lq if ch[0] == 'q' else lr for ch in self.channels)
 
     def stationary_states(self, cm: ContinuousModel) -> list[int]:
-        """All but the rolls (they follow the roads' cross levels) and the a_y random walks."""
+        """All but the rolls (they follow the roads' cross levels), the a_y random walks and
+        the roll sensors' lag states (they follow the rolls)."""
         lay = self.layout
         drop = set(range(lay.phi.start, lay.phi.stop)) | set(range(lay.ay.start, lay.ay.stop))
+        drop |= {cm.measured[k] for k in self.roll_channels}
         return [j for j in range(cm.nx) if j not in drop]
 
     # -- tuning ----------------------------------------------------------------------------
@@ -360,22 +439,6 @@ class ArticulatedObserverModel:
     def profile_scheduled(noise_deflection_m: float, mode: str) -> tuple:
         """The front axle's (:func:`.front_axle.profile_scheduled`)."""
         return front_axle.profile_scheduled(noise_deflection_m, mode)
-
-    # -- friction (none: refused) ----------------------------------------------------------
-    @staticmethod
-    def friction_forces(dq, ceq) -> np.ndarray:
-        """No friction: no known input."""
-        return np.zeros(0)
-
-    @staticmethod
-    def friction_forces_array(dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
-        """No friction: no known input."""
-        return np.zeros((0,) + np.shape(dq)[1:])
-
-    @staticmethod
-    def friction_damping(dq_std_mps: float, delayed: bool = False) -> tuple:
-        """No friction."""
-        return ()
 
     # -- reconstruction --------------------------------------------------------------------
     def online_rows(self, observer) -> ArticulatedOnlineRows:
@@ -419,20 +482,28 @@ class BrakingResponse:
         n = lay.n
         lin = model.core.linearised()
         a = lin.state_matrix()
-        self._ab = np.zeros((2 * n + 1, 2 * n + 1))
-        self._ab[:2 * n, :2 * n] = a
-        self._ab[n:2 * n, 2 * n] = model.minv @ lin.longitudinal
-        # the observer's state of coordinates and rates (road 0, a_y 0)
-        t = np.zeros((lay.nx, 2 * n))
+        nl = len(model.lagged)
+        n2 = 2 * n + nl           # coordinates, rates and the sensors' lag states
+        # the observer's state of coordinates, rates and lag states (road 0, a_y 0)
+        t = np.zeros((lay.nx + nl, n2))
         t[lay.q, :n] = model.spring_rows
         t[lay.nw, 2] = t[lay.nw + 1, 5] = 1.0
         t[lay.delta, :n] = model.delta_row
         t[lay.w, :n] = -model.wheel_rows
-        t[lay.dx, n:] = np.eye(n)
+        t[lay.dx, n:2 * n] = model.rate_rows
+        t[lay.nx:, 2 * n:] = np.eye(nl)
+        self._ab = np.zeros((n2 + 1, n2 + 1))
+        self._ab[:2 * n, :2 * n] = a
+        self._ab[n:2 * n, n2] = model.minv @ lin.longitudinal
         cm = model.continuous(1.0, 1e-6)
+        unlagged = model.unlagged_measurement() @ t
+        for m, k in enumerate(model.lagged):     # the sensors read the response lagged
+            tau = model.sensor_time_constant_s[k]
+            self._ab[2 * n + m, :n2] = unlagged[k] / tau
+            self._ab[2 * n + m, 2 * n + m] -= 1.0 / tau
         self._c = cm.c @ t
         self._df = cm.h[list(model.load_outputs)] @ t
-        self._n2 = 2 * n
+        self._n2 = n2
         self._cache: dict = {}
         self.restart()
 

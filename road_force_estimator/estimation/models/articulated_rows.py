@@ -180,7 +180,8 @@ class ArticulatedOfflineRows:
     def __init__(self, model, observer) -> None:
         self.static = np.asarray(model.static_wheel_load_n, float)
         df, ay = _output_index(model)
-        self.outputs = df + ay + _road_index(model)
+        # (then the springs' rates, whose friction the smoother evaluates: no column)
+        self.outputs = df + ay + _road_index(model) + list(model.friction_rate_outputs)
         self.cols = columns(self.static.size)
         road, accel = self.cols['road'], self.cols['wheel_accel']
         self.road_columns = tuple(range(road.start, road.stop))

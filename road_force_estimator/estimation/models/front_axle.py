@@ -118,6 +118,9 @@ from road_force_estimator.estimation.models.protocol import (
 # The speed floor of the model (m/s) is the body heave's: one floor for every speed-scheduled
 # part of the estimate.
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.models.leaf_friction import (
+    FRICTION_DAMPING_FACTOR, FRICTION_DAMPING_FACTOR_LATENCY, LeafSpringFriction,
+    friction_damping)
 from road_force_estimator.estimation.models.front_axle_rows import (
     PROFILE_CUTOFF_RATIO, PROFILE_ONLINE_CUTOFF_RATIO, OfflineRows, OnlineRows)
 
@@ -131,7 +134,8 @@ __all__ = [
     'PROFILE_OFFLINE_ROLL_MOMENT_MIN_PSD', 'ROLL_MOMENT_BLOCK_S', 'offline_roll_moment_psd',
     'profile_scheduled',
     'scheduled', 'road_diffusion', 'ContinuousModel', 'continuous_model', 'rest_state',
-    'FRICTION_DAMPING_FACTOR', 'friction_damping', 'STATE_SCALE', 'LOAD_OUTPUTS',
+    'FRICTION_DAMPING_FACTOR', 'FRICTION_DAMPING_FACTOR_LATENCY', 'friction_damping',
+    'STATE_SCALE', 'LOAD_OUTPUTS',
     'CHANNEL_NAMES', 'FRICTION_RATE_STATES', 'FRICTION_RATE_OUTPUTS', 'sm_lipschitz',
     'sm_injection', 'FrontAxleModel',
 ]
@@ -379,37 +383,6 @@ def _noise_inputs(v: VehicleParameters, nx: int) -> np.ndarray:
     return g
 
 
-#: Equivalent damping of the friction (:func:`friction_damping`): the factor on the
-#: statistical linearisation, tuned on bench/studies/truck_effects.py (classes A and C, 20 m/s,
-#: 10 um, 1.5 kN; of 1, 1.5, 2 and 3, 1.5 the best 10 ms load error over both classes:
-#: ``python -m bench.studies.truck_effects``).
-FRICTION_DAMPING_FACTOR = 1.5
-#: The same factor with a latency (``observer.latency`` > 0), where the friction of every
-#: step is evaluated again at the smoothed rates (:mod:`..observer.friction`, "Delayed
-#: correction"): the forward filter's friction errors are then corrected, and the error
-#: dynamics want less of the damping they would add (10 ms, friction + 3 ms lag, against the
-#: matched drive: 0.5 the best of 1.5, 1.0 and 0.5; ``python -m bench.studies.friction_lag``).
-FRICTION_DAMPING_FACTOR_LATENCY = 0.5
-
-
-def friction_damping(friction_n, dq_std_mps: float, factor: float | None = None,
-                     velocity_mps: float = 0.01) -> tuple[float, float]:
-    """The friction's equivalent damping c_eq,i (N s/m) at an RMS suspension rate (m/s).
-
-    Statistical linearisation of ``-F_f tanh(dq / v_f)`` over a Gaussian dq of std sigma:
-    ``E[d f / d dq] ~ F_f sqrt(2 / pi) / sqrt(sigma^2 + 2 v_f^2 / pi)`` (``F_f / v_f`` at
-    sigma = 0, ``F_f sqrt(2 / pi) / sigma`` for sigma >> v_f), times
-    ``factor`` (default :data:`FRICTION_DAMPING_FACTOR`). The gains are designed with it; the
-    friction itself stays the known input, so it changes the gains, not the model.
-    """
-    v_f = velocity_mps
-    if factor is None:
-        factor = FRICTION_DAMPING_FACTOR
-    scale = factor * math.sqrt(2.0 / math.pi) / math.sqrt(
-        dq_std_mps ** 2 + 2.0 * v_f ** 2 / math.pi)
-    return tuple(float(f) * scale for f in friction_n)
-
-
 def rest_state(vehicle: VehicleParameters, q1: float, q2: float, phi: float) -> np.ndarray:
     """The state at rest that reproduces a sample (m, m, rad): no acceleration.
 
@@ -485,7 +458,7 @@ def sm_injection(vehicle: VehicleParameters, nx: int = NX) -> np.ndarray:
     return t
 
 
-class FrontAxleModel:
+class FrontAxleModel(LeafSpringFriction):
     """MODEL.md's roll-plane front axle as the observer's vehicle model
     (:class:`.protocol.VehicleModel`): the functions of this module bound to one
     :class:`VehicleParameters`.
@@ -574,30 +547,6 @@ class FrontAxleModel:
     def profile_scheduled(noise_deflection_m: float, mode: str) -> tuple:
         """:func:`profile_scheduled`."""
         return profile_scheduled(noise_deflection_m, mode)
-
-    # -- friction --------------------------------------------------------------------------
-    def friction_forces(self, dq, ceq) -> np.ndarray:
-        """The friction's known input (N) per spring at its rates dq (m/s): ``-F_f,i
-        tanh(dq_i / v_f)`` less the share ``-c_eq,i dq_i`` of the equivalent damping that the
-        gains' linear model carries (:func:`friction_damping`)."""
-        v_f = self.friction_velocity_mps
-        return np.array([-f * math.tanh(d / v_f) + c * d
-                         for f, c, d in zip(self.friction_n, ceq, dq)])
-
-    def friction_forces_array(self, dq: np.ndarray, ceq: np.ndarray) -> np.ndarray:
-        """:meth:`friction_forces` over arrays: dq (nf, ...) (m/s), ceq (nf,) (N s/m)."""
-        v_f = self.friction_velocity_mps
-        shape = (len(self.friction_n),) + (1,) * (np.ndim(dq) - 1)
-        ff = np.asarray(self.friction_n).reshape(shape)
-        return -ff * np.tanh(dq / v_f) + np.asarray(ceq).reshape(ff.shape) * dq
-
-    def friction_damping(self, dq_std_mps: float, delayed: bool = False) -> tuple:
-        """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s);
-        ``delayed``: with a latency, whose friction is corrected at the smoothed rates
-        (:data:`FRICTION_DAMPING_FACTOR_LATENCY`)."""
-        return friction_damping(self.friction_n, dq_std_mps,
-                                FRICTION_DAMPING_FACTOR_LATENCY if delayed else None,
-                                self.friction_velocity_mps)
 
     # -- reconstruction --------------------------------------------------------------------
     def online_rows(self, observer) -> OnlineRows:
