@@ -16,22 +16,13 @@ from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, estimate_whole_vehicle)
 
 CONFIG = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
-DURATION_S = 8.0
 SETTLE_S = 3.0
 
 
 @pytest.fixture(scope='module')
-def drive():
-    """8 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise."""
-    base = load_params_file(CONFIG)
-    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
-                 'simulator.duration': DURATION_S})
-    d = ArticulatedDrive.from_values(base)
-    road = iso8608_profile('C', d.road_length_m, seed=11)
-    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
-                              duration_s=DURATION_S, tire_envelope_m=0.25, model=d.model)
-    y = d.sensors(channel_names(d.model)).measure(tr)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+def drive(articulated_c):
+    """8 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise (conftest)."""
+    d, tr, stamps, y = articulated_c
     static = d.model.statics().output_wheel_load_n
     true = unit_load_transfer([a.body for a in d.vehicle.axles], static, 1e-3,
                               tr.wheel_load_n)

@@ -3,38 +3,24 @@
 against the plant's truth is back to the gapless drive's within 0.3 s of the gap; the
 samples before the gap keep theirs (with a latency or offline, the gap taken as one long
 step would smear it over them)."""
-import pathlib
-
 import numpy as np
 import pytest
 
-from road_force_estimator.core.articulated_plant import simulate_articulated
-from road_force_estimator.core.articulated_setup import ArticulatedDrive
-from road_force_estimator.core.parameters import ObserverParameters, load_params_file
-from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.acceptance import StepGaps, gap_samples
-from road_force_estimator.estimation.models.articulated import channel_names
 from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, estimate_whole_vehicle)
 
-CONFIG = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
 DURATION_S = 8.0
 GAP_S = (4.0, 4.2)           # the samples lost
 BACK_S = 0.3                 # the estimate is judged again from this long after the gap
 
 
 @pytest.fixture(scope='module')
-def drive():
-    """8 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise; ``keep`` drops 0.2 s."""
-    base = load_params_file(CONFIG)
-    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
-                 'simulator.duration': DURATION_S})
-    d = ArticulatedDrive.from_values(base)
-    road = iso8608_profile('C', d.road_length_m, seed=11)
-    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
-                              duration_s=DURATION_S, tire_envelope_m=0.25, model=d.model)
-    y = d.sensors(channel_names(d.model)).measure(tr)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+def drive(articulated_c):
+    """8 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise (conftest); ``keep`` drops
+    0.2 s."""
+    d, tr, stamps, y = articulated_c
     keep = (tr.t_s < GAP_S[0]) | (tr.t_s >= GAP_S[1])
     return d.vehicle, tr, stamps, y, keep
 

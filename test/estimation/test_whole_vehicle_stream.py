@@ -9,18 +9,14 @@ import pathlib
 import numpy as np
 import pytest
 
-from road_force_estimator.core.articulated_plant import simulate_articulated
 from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.parameters import load_params_file
-from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation.articulated import estimate_articulated
-from road_force_estimator.estimation.models.articulated import channel_names
 from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, WholeVehicleOfflineStream, concatenate_arrays)
 
 CONFIG = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
-DURATION_S = 8.0
 FIELDS = ('load_n', 'static_n', 'ltr', 'ltr_quasi_static', 'lateral_mps2', 'road_m',
           'front_ltr', 'distance_m')
 
@@ -32,18 +28,11 @@ def _vehicle(values: dict):
 
 
 @pytest.fixture(scope='module')
-def drive():
-    """8 s of class C at 20 m/s, 1 kHz, 10 um, with 0.2 s lost at 5 s."""
-    base = load_params_file(CONFIG)
-    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
-                 'simulator.duration': DURATION_S})
-    d = ArticulatedDrive.from_values(base)
-    road = iso8608_profile('C', d.road_length_m, seed=11)
-    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
-                              duration_s=DURATION_S, tire_envelope_m=0.25, model=d.model)
-    y = d.sensors(channel_names(d.model)).measure(tr)
+def drive(articulated_c):
+    """8 s of class C at 20 m/s, 1 kHz, 10 um (conftest), with 0.2 s lost at 5 s."""
+    d, tr, stamps, y = articulated_c
     keep = (tr.t_s < 5.0) | (tr.t_s >= 5.2)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)[keep]
+    stamps = stamps[keep]
     return d.vehicle, stamps, y[keep]
 
 
