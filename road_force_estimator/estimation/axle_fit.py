@@ -26,17 +26,23 @@ wheel's deflection sensor (a gain error scales one side), else the axle.
 Measured with the plant (``python -m bench.studies.axle_fit``): clean drives stay well below
 the threshold, and a 20 % stiffer spring, 30 % less damping, 30 % more axle mass and a
 sensor 10 % off each name their axle or sensor; a trailer payload off the file's (a body's
-mass) names none. Offline only: the road comes from the smoother.
+mass) names none. Online (:class:`OnlineAxleFit`, with ``observer.latency``): the same
+statistic over the last :data:`ONLINE_WINDOW_M` of the fixed-lag road, at its own threshold
+(``python -m bench.studies.axle_fit --online 0.01``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Generator
 
 import numpy as np
 
 __all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE', 'SKIP_S',
-           'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'LIFT_OFF_MARGIN_M', 'AxleFit', 'assess_axles']
+           'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'LIFT_OFF_MARGIN_M', 'ONLINE_MIN_LATENCY_S',
+           'ONLINE_WINDOW_M', 'ONLINE_EVERY_M', 'ONLINE_THRESHOLD', 'ONLINE_SLICE_SAMPLES',
+           'AxleFit', 'OnlineAxleFit',
+           'assess_axles', 'assess_steps']
 
 #: The wavelength bands judged (m): the axles' own modes (wheel hop, 9-12 Hz) and the
 #: bodies' coupling over them at highway speeds. Longer waves are the bodies' motion,
@@ -65,6 +71,18 @@ LIFT_OFF_MARGIN_M = 0.5
 #: within the longest band's wavelength of a slower one are left out too: through a stop
 #: the slow points raised a clean drive's misfit past the threshold (the bench's stop).
 MIN_SPEED_MPS = 5.0
+
+#: Online: the least ``observer.latency`` (s) for a verdict (at zero latency the causal road
+#: is too far from the truth: ``python -m bench.studies.axle_fit --online 0``), the window
+#: judged and the distance between verdicts (m of the front axle's distance), and the
+#: threshold (the fixed-lag road's misfit on clean drives lies above the offline one's).
+ONLINE_MIN_LATENCY_S = 0.01
+ONLINE_WINDOW_M = 800.0
+ONLINE_EVERY_M = 400.0
+ONLINE_THRESHOLD = 0.06
+#: Online, one slice of the verdict's work (:func:`assess_steps`: about 1-3 ms over an
+#: 800 m window) every this many samples, so that a 1 kHz node keeps its pace.
+ONLINE_SLICE_SAMPLES = 10
 
 
 @dataclass(frozen=True)
@@ -103,6 +121,21 @@ class AxleFit:
         """Enough distance for a verdict."""
         return bool(np.isfinite(self.misfit).any())
 
+    def status_values(self) -> dict:
+        """The ``/diagnostics`` values of this verdict (none when not :attr:`measured`):
+        ``model_fit`` ('ok' | 'mismatch'), ``model_fit_culprits`` (:attr:`culprits`,
+        comma-separated; '' when none) and per axle ``model_fit_misfit_<axle>`` (the misfit's
+        lower bound, a fraction)."""
+        from road_force_estimator.estimation.fit_check import MISMATCH
+
+        if not self.measured:
+            return {}
+        out = {'model_fit': MISMATCH if self.culprits else 'ok',
+               'model_fit_culprits': ', '.join(self.culprits)}
+        for name, m in zip(self.axle_names, self.axle_misfit):
+            out[f'model_fit_misfit_{name}'] = f'{float(m):.4f}'
+        return out
+
     @property
     def culprits(self) -> tuple:
         """What ``model_fit`` names: each axle that does not fit, or its sensor where one
@@ -113,7 +146,7 @@ class AxleFit:
 
 def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, axle_names,
                  *, threshold: float = THRESHOLD, skip_s: float = SKIP_S) -> AxleFit:
-    """The axles' misfits and verdict (module notes).
+    """The axles' misfits and verdict (module notes): :func:`assess_steps` run through.
 
     Parameters
     ----------
@@ -126,6 +159,26 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     threshold : the misfit above which an axle does not fit
     skip_s : the start left out (s)
     """
+    steps = assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m,
+                         axle_names, threshold=threshold, skip_s=skip_s)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
+
+
+def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, axle_names,
+                 *, threshold: float = THRESHOLD, skip_s: float = SKIP_S,
+                 grounded: np.ndarray | None = None, fast_grid: bool = False
+                 ) -> Generator[None, None, AxleFit]:
+    """:func:`assess_axles` in slices: a generator that yields after each step over the grid
+    (a band of one wheel path, one axle's gain) and returns the :class:`AxleFit`, so that
+    a caller that must keep its pace (:class:`OnlineAxleFit` in the node) can spread it.
+    ``grounded`` (2 N, m) bool: whether each wheel carried its share at each sample (then
+    ``load_n`` and ``static_n`` are not read); ``fast_grid``: the grid's oldest points
+    dropped down to a length of factors 2, 3 and 5 (at most a few %: the FFTs of the
+    analytic signals several times faster; online)."""
     from road_force_estimator.core.scipy_signal import signal
     from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
 
@@ -145,13 +198,19 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     if not end - start >= MIN_LENGTH_M:
         return AxleFit(names, misfit, spread, (), (), max(end - start, 0.0))
     grid = np.arange(start, end, GRID_M)
-    grounded = np.asarray(load_n, float) >= LIFT_OFF_FRACTION * np.asarray(static_n, float)
+    if fast_grid:
+        grid = grid[grid.size - _smooth_below(grid.size):]
+    if grounded is None:
+        grounded = (np.asarray(load_n, float)
+                    >= LIFT_OFF_FRACTION * np.asarray(static_n, float))
     speed = np.gradient(x, t) if x.size > 1 else np.zeros_like(x)
     moving = _eroded(np.all([np.interp(grid + xi[j], x, (speed >= MIN_SPEED_MPS).astype(float))
                              > 0.999 for j in range(n)], axis=0), BANDS_M[-1][1])
+    yield
     sig = signal()
     for side in (0, 1):
         reads = np.array([np.interp(grid + xi[j], x, road[2 * j + side]) for j in range(n)])
+        yield
         ok = moving & _eroded(np.all([np.interp(grid + xi[j], x,
                                                 grounded[2 * j + side].astype(float)) > 0.999
                                       for j in range(n)], axis=0), LIFT_OFF_MARGIN_M)
@@ -160,9 +219,13 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
         for b, (short, long) in enumerate(BANDS_M):
             sos = sig.butter(2, (1.0 / long, 1.0 / short), btype='bandpass', fs=1.0 / GRID_M,
                              output='sos')
-            band = sig.sosfiltfilt(sos, reads, axis=-1)
+            band = np.empty_like(reads)
+            for j in range(n):            # (row by row: a slice each)
+                band[j] = sig.sosfiltfilt(sos, reads[j])
+                yield
             for j in range(n):
                 ref = sig.hilbert(np.median(np.delete(band, j, axis=0), axis=0))[ok]
+                yield
                 own = sig.hilbert(band[j])[ok]
                 power = float(np.vdot(ref, ref).real)
                 if power > 0.0:
@@ -172,6 +235,7 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
                     misfit[j, side, b] = abs(h - 1.0)
                     spread[j, side, b] = math.sqrt(float(np.vdot(rest, rest).real)
                                                    / power / dof)
+                yield
     fit = AxleFit(names, misfit, spread, (), (), float(end - start))
     worst = fit.axle_misfit
     bad = [j for j in np.argsort(-np.nan_to_num(worst, nan=-1.0)) if worst[j] > threshold]
@@ -183,6 +247,114 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
             sensors.append(f'{names[j]}_{("left", "right")[hi]}_suspension')
     return AxleFit(names, misfit, spread, tuple(names[j] for j in bad), tuple(sensors),
                    float(end - start))
+
+
+class OnlineAxleFit:
+    """The model fit per axle online (``observer.latency`` of :data:`ONLINE_MIN_LATENCY_S` or
+    more): :func:`assess_steps` over the last :data:`ONLINE_WINDOW_M` of the front axle's
+    distance, started every :data:`ONLINE_EVERY_M`, one slice every
+    :data:`ONLINE_SLICE_SAMPLES` finalized samples (a 1 kHz node keeps its pace), judged at
+    :data:`ONLINE_THRESHOLD`. A sample's row is kept once the front axle has moved
+    :data:`GRID_M` / 2 since the last kept one (a stop keeps nothing), in a ring of fixed
+    size: the memory does not grow with the drive.
+
+    Parameters
+    ----------
+    positions_m : (N,) each axle's distance behind the front axle (m)
+    axle_names : (N,) names
+    window_m, every_m : the window judged and the distance between verdicts (m)
+    threshold : the misfit above which an axle does not fit
+    """
+
+    def __init__(self, positions_m, axle_names, *, window_m: float = ONLINE_WINDOW_M,
+                 every_m: float = ONLINE_EVERY_M, threshold: float = ONLINE_THRESHOLD) -> None:
+        from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
+
+        self.positions_m = np.asarray(positions_m, float)
+        self.axle_names = tuple(axle_names)
+        if self.positions_m.size != len(self.axle_names) or self.positions_m.size < 3:
+            raise ValueError(f'{self.positions_m.size} positions for {len(self.axle_names)} '
+                             'axles: need one each, 3 axles or more (a median of the others)')
+        if not (window_m >= MIN_LENGTH_M and 0.0 < every_m and threshold > 0.0):
+            raise ValueError(f'window {window_m!r} m (>= {MIN_LENGTH_M:g}), every '
+                             f'{every_m!r} m (> 0), threshold {threshold!r} (> 0)')
+        self.window_m, self.every_m, self.threshold = float(window_m), float(every_m), threshold
+        self._fraction = LIFT_OFF_FRACTION
+        size = int(math.ceil((window_m + self.positions_m.max() + 1.0) / (0.5 * GRID_M))) + 2
+        wheels = 2 * self.positions_m.size
+        self._stamp = np.zeros(size, np.int64)
+        self._x = np.zeros(size)
+        self._road = np.zeros((wheels, size))
+        self._grounded = np.zeros((wheels, size), bool)
+        self._n = 0                   # rows kept so far (the ring's next is _n % size)
+        self._first_ns: int | None = None
+        self._last_x = -math.inf
+        self._next_x: float | None = None
+        self._job = None
+        self._wait = 0
+        #: the last verdict (None before the first), and how many there were
+        self.fit: AxleFit | None = None
+        self.verdicts = 0
+
+    def push(self, stamp_ns: int, distance_m: float, road_m, load_n, static_n
+             ) -> AxleFit | None:
+        """One finalized sample: its stamp (ns), the front axle's distance (m), the
+        instrumented wheels' road (m), loads and static loads (N), in ``axle_names``' order,
+        left then right. Returns the verdict this sample completed, else None."""
+        if not math.isfinite(distance_m):
+            return None
+        if self._first_ns is None:
+            self._first_ns = int(stamp_ns)
+            self._next_x = float(distance_m) + self.window_m + self.positions_m.max()
+        if distance_m - self._last_x >= 0.5 * GRID_M:
+            k = self._n % self._x.size
+            self._stamp[k] = stamp_ns
+            self._x[k] = self._last_x = distance_m
+            self._road[:, k] = road_m
+            self._grounded[:, k] = np.greater_equal(load_n, np.multiply(self._fraction,
+                                                                        static_n))
+            self._n += 1
+        if self._job is not None:
+            self._wait -= 1
+            if self._wait > 0:
+                return None
+            self._wait = ONLINE_SLICE_SAMPLES
+            try:
+                next(self._job)
+            except StopIteration as done:
+                self._job = None
+                self.fit = done.value
+                self.verdicts += 1
+                return self.fit
+        elif distance_m >= self._next_x:
+            self._next_x = float(distance_m) + self.every_m
+            self._job = self._start()
+            self._wait = ONLINE_SLICE_SAMPLES
+        return None
+
+    def _start(self):
+        size = self._x.size
+        m = min(self._n, size)
+        order = (np.arange(self._n - m, self._n) % size)
+        x = self._x[order]
+        keep = x >= x[-1] - self.window_m - self.positions_m.max()
+        order = order[keep]
+        stamps = self._stamp[order]
+        skip = max(0.0, SKIP_S - (int(stamps[0]) - self._first_ns) * 1e-9)
+        return assess_steps(stamps, x[keep], self._road[:, order], None, None,
+                            self.positions_m, self.axle_names, threshold=self.threshold,
+                            skip_s=skip, grounded=self._grounded[:, order], fast_grid=True)
+
+def _smooth_below(n: int) -> int:
+    """The largest number <= ``n`` whose only prime factors are 2, 3 and 5."""
+    for k in range(n, 0, -1):
+        m = k
+        for p in (2, 3, 5):
+            while m % p == 0:
+                m //= p
+        if m == 1:
+            return k
+    return 0
 
 
 def _eroded(ok: np.ndarray, margin_m: float) -> np.ndarray:

@@ -51,7 +51,8 @@ from road_force_estimator.core.unit_loads import UnitLoadTransfer
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, StepGaps
 from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, run_starts)
-from road_force_estimator.estimation.axle_fit import AxleFit, assess_axles
+from road_force_estimator.estimation.axle_fit import (
+    ONLINE_MIN_LATENCY_S, AxleFit, OnlineAxleFit, assess_axles)
 from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
@@ -104,6 +105,8 @@ class WholeVehicleSample:
     road_m: tuple = ()
     #: the fused profile's points this sample completed (:class:`.fused_stream.FusedStream`)
     fused: tuple = ()
+    #: the model fit per axle this sample completed online (:class:`.axle_fit.OnlineAxleFit`)
+    axle_fit: AxleFit | None = None
 
 
 @dataclass(frozen=True)
@@ -138,11 +141,15 @@ class WholeVehicleArrays:
         """The drive's gaps."""
         return int(self.gaps[-1]) if self.gaps is not None and self.gaps.size else 0
 
-    #: offline, the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor
-    #: does not fit) over the instrumented axles; None online or with fewer than 3 of them
+    #: the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor does not
+    #: fit) over the instrumented axles: offline the drive's, online the last verdict (with
+    #: a latency); None with fewer than 3 of them, or online before the first verdict
     axle_fit: AxleFit | None = None
     #: online, the fused profile's points streamed (:class:`.fused_stream.FusedPoints`)
     fused: FusedPoints | None = None
+    #: online, each verdict of the model fit per axle as ``(stamp_ns, AxleFit)`` at the
+    #: sample that completed it (:class:`.axle_fit.OnlineAxleFit`; ``axle_fit`` the last)
+    axle_fits: tuple = ()
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -261,6 +268,13 @@ class WholeVehicleEstimator:
         #: the fused profile streamed (every axle of the vehicle, front first)
         self.fused = FusedStream([a.position_m for a in vehicle.axles])
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
+        #: the model fit per instrumented axle online (with a latency and 3 such axles)
+        inst = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
+        self._fit_rows = [2 * j + side for j in inst for side in (0, 1)]
+        self.axle_fit_online = (
+            OnlineAxleFit([vehicle.axles[j].position_m for j in inst],
+                          [vehicle.axles[j].name for j in inst])
+            if len(inst) >= 3 and obs.latency_s >= ONLINE_MIN_LATENCY_S else None)
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
         self._gaps: deque = deque()                # each held sample's gaps so far
         self._last: int | None = None
@@ -306,13 +320,20 @@ class WholeVehicleEstimator:
             t = self._transfer.update(int(stamp), loads)
             road = row[self._road]
             x = float(row[DIST])
+            fit = None
+            if self.axle_fit_online is not None:
+                rows = self._fit_rows
+                fit = self.axle_fit_online.push(int(stamp), x, np.asarray(road)[rows],
+                                                np.asarray(loads)[rows],
+                                                np.asarray(static)[rows])
             out.append(WholeVehicleSample(int(stamp), x, bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
                                           tuple(t[1:6:2]), tuple(row[self._ay]), gated,
                                           tuple(t[6:]), self._gaps.popleft(),
                                           road_m=tuple(road),
                                           fused=tuple(self.fused.push(stamp, x, road,
-                                                                      loads, static))))
+                                                                      loads, static)),
+                                          axle_fit=fit))
         return out
 
 
@@ -320,11 +341,13 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
             gaps: np.ndarray | None = None) -> WholeVehicleArrays:
     m = len(samples)
     fused = None
+    fits: tuple = ()
     if gated is None:             # online: the samples' roads and the streamed points
         gated = samples[-1].innovations_gated if samples else ()
         road = np.array([s.road_m for s in samples], float).reshape(
             m, len(est.wheel_names)).T.copy()
         fused = FusedPoints.from_points([p for s in samples for p in s.fused])
+        fits = tuple((s.stamp_ns, s.axle_fit) for s in samples if s.axle_fit is not None)
 
     def field(name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in samples], float).reshape(m, -1).T.copy()
@@ -337,7 +360,7 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
         field('ltr_quasi_static'), field('lateral_mps2'), road,
         tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'),
         np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps,
-        fused=fused)
+        fused=fused, axle_fits=fits, axle_fit=fits[-1][1] if fits else None)
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,

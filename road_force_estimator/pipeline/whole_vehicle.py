@@ -134,7 +134,7 @@ def _status(wv, k: int, since: int = 0) -> dict:
     gross = float(axle.sum())
     message = f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles'
     level = 0 if math.isfinite(gross) else 1
-    fit = fit_values(wv.axle_fit)
+    fit = fit_values(_fit_at(wv, k))
     values.update(fit)
     if fit.get('model_fit') == MISMATCH:
         level = 1
@@ -147,20 +147,23 @@ def _status(wv, k: int, since: int = 0) -> dict:
 MISMATCH = 'mismatch'
 
 
+def _fit_at(wv, k: int):
+    """The model fit per axle known at sample ``k``: offline the drive's, online the last
+    verdict completed at or before it (the node's)."""
+    fits = getattr(wv, 'axle_fits', ())
+    if not fits:
+        return wv.axle_fit
+    stamp = int(wv.stamps_ns[k])
+    known = [fit for s, fit in fits if s <= stamp]
+    return known[-1] if known else None
+
+
 def fit_values(fit) -> dict:
-    """The status values of the model fit per axle (:mod:`~.estimation.axle_fit`, offline; none
-    online or before enough distance): ``model_fit`` ('ok' | 'mismatch'),
-    ``model_fit_culprits`` (the axles, or ``<axle>_<side>_suspension`` where one sensor
-    explains it, worst first, comma-separated; '' when none) and per axle
-    ``model_fit_misfit_<axle>`` (the misfit's lower bound, a fraction; the verdict's
-    threshold :data:`~.estimation.axle_fit.THRESHOLD`)."""
-    if fit is None or not fit.measured:
-        return {}
-    out = {'model_fit': MISMATCH if fit.culprits else 'ok',
-           'model_fit_culprits': ', '.join(fit.culprits)}
-    for name, m in zip(fit.axle_names, fit.axle_misfit):
-        out[f'model_fit_misfit_{name}'] = f'{float(m):.4f}'
-    return out
+    """The status values of the model fit per axle (:meth:`.axle_fit.AxleFit.status_values`;
+    none without a verdict, or before enough distance): ``model_fit``,
+    ``model_fit_culprits``, ``model_fit_misfit_<axle>`` (the verdict's threshold
+    :data:`~.estimation.axle_fit.THRESHOLD` offline, ``ONLINE_THRESHOLD`` online)."""
+    return {} if fit is None else fit.status_values()
 
 
 def add_diagnostics(diagnostics: list, wv) -> list:

@@ -258,12 +258,16 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
         'gaps': int(wv.gap_count) if hasattr(wv, 'gap_count') else 0}
     fit = getattr(wv, 'axle_fit', None)
     if fit is not None and fit.measured:
-        from road_force_estimator.estimation.axle_fit import THRESHOLD
+        from road_force_estimator.estimation.axle_fit import ONLINE_THRESHOLD, THRESHOLD
+        fits = [f for _, f in getattr(wv, 'axle_fits', ())]    # online: every verdict
         out['model_fit'] = {'verdict': 'mismatch' if fit.culprits else 'ok',
-                            'culprits': list(fit.culprits), 'threshold': THRESHOLD,
+                            'culprits': list(fit.culprits),
+                            'threshold': ONLINE_THRESHOLD if fits else THRESHOLD,
                             'length_m': float(fit.length_m),
                             'misfit': dict(zip(fit.axle_names,
-                                               (float(m) for m in fit.axle_misfit)))}
+                                               (float(m) for m in fit.axle_misfit))),
+                            'online_verdicts': len(fits),
+                            'online_mismatches': sum(bool(f.culprits) for f in fits)}
     if truth is not None and len(truth.stamps_ns) and tuple(truth.wheel_names) == names:
         out['accuracy'] = _accuracy(wv, truth, use, names)
     return out
@@ -358,8 +362,11 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
         cells = ', '.join(f'{a} {100 * m:.1f} %' for a, m in fit['misfit'].items())
         verdict = (f'**{", ".join(fit["culprits"])}** {ADVICE}' if fit['culprits']
                    else 'every axle fits')
-        lines += ['', f"Model fit per axle (each axle's road against the other axles' over "
-                  f'{fit["length_m"]:.0f} m; misfit bound, threshold '
+        online = (f'online, the last of {fit["online_verdicts"]} verdicts '
+                  f'({fit["online_mismatches"]} named an axle or sensor), '
+                  if fit.get('online_verdicts') else '')
+        lines += ['', f"Model fit per axle ({online}each axle's road against the other axles' "
+                  f'over {fit["length_m"]:.0f} m; misfit bound, threshold '
                   f'{100 * fit["threshold"]:g} %: {cells}): {verdict}.']
     if acc:
         lines += ['', f'Against the drive\'s truth ({acc["samples"]} samples): the trailer\'s '

@@ -51,6 +51,7 @@ from road_force_estimator import interfaces as api
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation import diagnostics
+from road_force_estimator.estimation.axle_fit import ADVICE
 from road_force_estimator.estimation.whole_vehicle import UNITS, WholeVehicleEstimator
 from road_force_estimator.ros.messages import (
     MessageRejected, bounded, diagnostic_status, reliable_qos)
@@ -238,6 +239,7 @@ class WholeVehicleObserver:
                                             'restarts)')
             self.estimator = config[2]
             self.last_stamp_ns: int | None = None
+            self.axle_fit = None          # the model fit per axle: the new estimator's
 
     def reject(self, reason: str, detail: str) -> None:
         with self.lock:
@@ -300,6 +302,8 @@ class WholeVehicleObserver:
                 m[u] = a
         self.static_n = sample.static_n
         self.converged = sample.converged
+        if sample.axle_fit is not None:
+            self.axle_fit = sample.axle_fit
 
     def finish(self) -> None:
         """Estimate what is still queued, publish what a latency held, wait for the
@@ -374,5 +378,10 @@ class WholeVehicleObserver:
         self.gaps_before = gaps
         total = self.gated_base + Counter(dict(zip(self.names, gated)))
         values.update({f'total.innovations_gated.{c}': total[c] for c in self.names})
-        return diagnostics.status('observer: estimator', name,
-                                  'ok' if values['converged'] else 'converging', values)
+        fit = self.axle_fit
+        message = 'ok' if values['converged'] else 'converging'
+        if fit is not None:
+            values.update(fit.status_values())
+            if fit.culprits:
+                message += f'; model fit: {", ".join(fit.culprits)} {ADVICE}'
+        return diagnostics.status('observer: estimator', name, message, values)

@@ -13,7 +13,9 @@ from road_force_estimator.core.articulated_plant import simulate_articulated
 from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.parameters import load_params_file
 from road_force_estimator.core.road import iso8608_profile
-from road_force_estimator.estimation.axle_fit import THRESHOLD, assess_axles
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.estimation.axle_fit import (
+    ONLINE_THRESHOLD, THRESHOLD, OnlineAxleFit, assess_axles)
 from road_force_estimator.estimation.models.articulated import channel_names
 from road_force_estimator.estimation.whole_vehicle import estimate_whole_vehicle
 
@@ -28,16 +30,22 @@ def file_values() -> dict:
     return base
 
 
-def estimate(plant_values: dict, road_class: str = 'C'):
-    """The offline estimate with the file's vehicle of a drive whose plant has
-    ``plant_values`` over the file's (15 s at 20 m/s, 1 kHz, 10 um of noise)."""
-    d = ArticulatedDrive.from_values({**file_values(), **plant_values})
+def estimate(plant_values: dict, road_class: str = 'C', *, duration_s: float = DURATION_S,
+             latency_s: float | None = None):
+    """The offline estimate (online at ``latency_s`` when given) with the file's vehicle of
+    a drive whose plant has ``plant_values`` over the file's (15 s at 20 m/s, 1 kHz, 10 um
+    of noise)."""
+    values = {**file_values(), 'simulator.duration': duration_s}
+    d = ArticulatedDrive.from_values({**values, **plant_values})
     road = iso8608_profile(road_class, d.road_length_m, seed=7)
     tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
-                              duration_s=DURATION_S, tire_envelope_m=0.25, model=d.model)
+                              duration_s=duration_s, tire_envelope_m=0.25, model=d.model)
     y = d.sensors(channel_names(d.model)).measure(tr)
-    vehicle = ArticulatedDrive.from_values(file_values()).vehicle
+    vehicle = ArticulatedDrive.from_values(values).vehicle
     stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    if latency_s is not None:
+        return estimate_whole_vehicle(vehicle, stamps, y, 20.0,
+                                      observer=ObserverParameters(latency_s=latency_s))
     return estimate_whole_vehicle(vehicle, stamps, y, 20.0, offline=True)
 
 
@@ -65,7 +73,7 @@ def test_the_axle_or_sensor_the_plant_was_given_is_named(fault, named):
     assert max(others) < THRESHOLD / 2, fit.axle_misfit
 
 
-def test_online_and_short_drives_give_no_verdict():
+def test_zero_latency_and_short_drives_give_no_verdict():
     vehicle = ArticulatedDrive.from_values(file_values()).vehicle
     stamps = np.arange(2001, dtype=np.int64) * 1_000_000
     y = np.zeros((stamps.size, 12))
@@ -102,3 +110,57 @@ def test_a_road_scaled_on_one_wheel_is_that_sensor():
     both[2:4] *= 1.1                       # drive, both wheels
     assert assess_axles(stamps, x, both, load, load, xi, names).culprits == ('drive',)
     assert assess_axles(stamps, x, road, load, load, xi, names).culprits == ()
+
+
+@pytest.mark.parametrize('fault, named', [
+    ({}, ()), (('vehicle.axle.drive.suspension_damping', 0.7), ('drive',)),
+], ids=['clean', 'drive-damping-30%'])
+def test_online_at_10_ms_the_damper_the_plant_was_given_is_named(fault, named):
+    """Online (``observer.latency`` 10 ms, as the node): 45 s at 20 m/s give the first
+    verdict over the last 800 m; a damper 30 % softer than the file's is named, nothing on
+    the clean drive (``python -m bench.studies.axle_fit --online 0.01``: what is and is not
+    caught online)."""
+    plant = scaled(*fault) if isinstance(fault, tuple) else fault
+    wv = estimate(plant, duration_s=45.0, latency_s=0.01)
+    assert len(wv.axle_fits) == 1 and wv.axle_fit is wv.axle_fits[0][1]
+    stamp, fit = wv.axle_fits[0]
+    assert fit.measured and fit.length_m > 700.0 and stamp > wv.stamps_ns[0] + 40e9
+    assert fit.culprits == named, (fit.culprits, fit.axle_misfit)
+    others = [m for a, m in zip(fit.axle_names, fit.axle_misfit) if a not in named]
+    assert max(others) < ONLINE_THRESHOLD / 2, fit.axle_misfit
+
+
+def test_online_windows_name_the_wheel_scaled_and_keep_their_memory():
+    """Analytic, as above, sample by sample: five axles read the same road; from 600 m on one
+    wheel reads it 10 % larger. The windows of 200 m every 100 m name nothing before, that
+    wheel's sensor once the window lies past it; a stop keeps no row, and the memory is the
+    ring's, however long the drive."""
+    rng = np.random.default_rng(4)
+    xi = np.array([0.0, 3.7, 9.6, 10.91, 12.22])
+    waves = rng.uniform(0.7, 20.0, size=(2, 40))
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(2, 40))
+    names = ('front', 'drive', 'trailer_1', 'trailer_2', 'trailer_3')
+    fit = OnlineAxleFit(xi, names, window_m=200.0, every_m=100.0, threshold=THRESHOLD)
+    size = fit._x.size
+    t = np.arange(60001) * 1e-3            # 60 s at 20 m/s: 1200 m, a 5 s stop at 30 s
+    x = 20.0 * np.minimum(t, 30.0) + 20.0 * np.maximum(t - 35.0, 0.0)
+    kept = []
+    verdicts = []
+    for k in range(t.size):
+        road = np.array([1e-3 * np.sin(2.0 * np.pi * (x[k] - xi[j]) / waves[s]
+                                       + phase[s]).sum() for j in range(5) for s in (0, 1)])
+        if x[k] >= 600.0 + xi[3]:
+            road[6] *= 1.1                 # trailer_2_left, from 600 m of its own distance
+        n = fit._n
+        got = fit.push(int(round(t[k] * 1e9)), x[k], road, np.full(10, 4e4), np.full(10, 4e4))
+        if 30.0 < t[k] <= 35.0:
+            kept.append(fit._n - n)
+        if got is not None:
+            verdicts.append((x[k], got.culprits))
+    assert sum(kept) == 0 and fit._x.size == size
+    assert len(verdicts) >= 8, verdicts
+    for at, named in verdicts:
+        if at < 600.0:
+            assert named == (), verdicts
+        elif at > 600.0 + 200.0 + xi[-1] + 20.0:
+            assert named == ('trailer_2_left_suspension',), verdicts
