@@ -38,6 +38,7 @@ import rclpy
 from rclpy.node import Node
 
 from bench.probes.node_latency import input_encoders
+from road_force_estimator.ros.take_loop import Taken
 from road_force_estimator import interfaces as api
 from road_force_estimator.ros.bag_recorder import message_class
 from road_force_estimator.ros.messages import topic_qos
@@ -134,9 +135,11 @@ def report(observer, estimator_class, args) -> None:
     data = [(deflections.encode(t, (*q, phi)), twist.encode(t, (20.0,)))
             for t, q, phi in inputs]
 
-    def callbacks(pair):
-        observer.twist_callback(pair[1])
-        observer.deflections_callback(pair[0])
+    taken = observer.input
+
+    def callbacks(pair):   # one round of the input thread: the twist and the deflections
+        taken.take([Taken(taken.twist_index, pair[1], 0, None),
+                    Taken(taken.deflection_index, pair[0], 0, None)])
 
     for pair in data[:n]:   # warm: past the model fit's skip and the first designs
         callbacks(pair)

@@ -74,6 +74,9 @@ class TakeLoop:
         self._sink: Callable | None = None
         self._idle: Callable | None = None
         self.rounds = 0
+        #: waits on the wait set (each at most ``period_s``): an idle loop waits about once
+        #: per ``period_s``, it does not poll
+        self.waits = 0
         self.error: BaseException | None = None
 
     def add(self, msg_class, topic: str, qos) -> int:
@@ -128,9 +131,10 @@ class TakeLoop:
                     self.rounds += 1
                     self._sink(batch)
                 now = time.monotonic()
-                if self._idle is not None and now >= next_idle:
+                if now >= next_idle:   # (also without idle: else the wait below is 0 s, a spin)
                     next_idle = now + self._period_s
-                    self._idle()
+                    if self._idle is not None:
+                        self._idle()
                 if batch:
                     continue          # more may be queued: take again before waiting
                 self._wait(max(0.0, min(next_idle - now, self._period_s)))
@@ -138,6 +142,7 @@ class TakeLoop:
             self.error = exc
 
     def _wait(self, timeout_s: float) -> None:
+        self.waits += 1
         subs = list(self.subscriptions)
         with ExitStack() as stack:
             stack.enter_context(self.context.handle)
