@@ -43,7 +43,9 @@ articulated``, 5 axles): the driver publishes the 12 joints of ``/suspension/def
 seven messages the node publishes per input (``/wheel_loads``, the three units' load
 transfer, the front axle's two loads and ``/load_transfer``); the bare node publishes seven
 cached messages of the same types and sizes (``/load_transfer`` last, the input's stamp
-copied in) and the three static-load messages every 100th.
+copied in), the three static-load messages every 100th, and the road as the observer does at
+20 m/s (``/road_profile/left|right`` with every input, ``/road_profile/fused/left|right``
+with every 5th: a point per 0.1 m).
 
 The machine is shared (other work may run): numbers vary by tens of percent between runs.
 """
@@ -152,7 +154,10 @@ class BareNode(Node):
 
 class BareArticulatedNode(Node):
     """The floor of the articulated observer: its subscriptions, seven cached messages of its
-    types and sizes per input, the three static-load messages every 100th; no estimate."""
+    types and sizes per input, the three static-load messages every 100th; the road as the
+    observer publishes it at the driver's 20 m/s: ``/road_profile/left|right`` per input,
+    ``/road_profile/fused/left|right`` every 5th (a point per 0.1 m,
+    :data:`.fused_stream.FUSED_SPACING_M`); no estimate."""
 
     def __init__(self):
         super().__init__('observer')
@@ -181,6 +186,15 @@ class BareArticulatedNode(Node):
         static += [self.create_publisher(message_class(api.WRENCH), topic, reliable_qos(1000))
                    for topic in api.STATIC_LOAD]
         self.send_static = [p.handle.publish_raw for p in static]
+        point = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                           ['point.x', 'point.y', 'point.z'])
+        self.road = [point.encode(t, (1.0, y, 0.0)) for y in (1.0, -1.0)]
+        self.send_road = [self.create_publisher(message_class(api.POINT), topic,
+                                                reliable_qos(1000)).handle.publish_raw
+                          for topic in api.ROAD]
+        self.send_fused = [self.create_publisher(message_class(api.POINT), topic,
+                                                 reliable_qos(1000)).handle.publish_raw
+                           for topic in api.ROAD_FUSED]
         self.k = 0
         self.create_subscription(message_class(api.JOINT_STATE), api.DEFLECTIONS,
                                  self.deflections_callback, sensor_qos(1000), raw=True)
@@ -191,7 +205,12 @@ class BareArticulatedNode(Node):
         for send, out in zip(self.send, self.cached):
             send(out)
         self.send_last(self.last[:4] + data[4:12] + self.last[12:])
+        for send, out in zip(self.send_road, self.road):
+            send(out)
         self.k += 1
+        if self.k % 5 == 0:
+            for send, out in zip(self.send_fused, self.road):
+                send(out)
         if self.k % 100 == 0:
             for send, out in zip(self.send_static, self.static):
                 send(out)

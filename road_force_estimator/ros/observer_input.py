@@ -69,7 +69,8 @@ class ObserverInput:
     def __init__(self, owner: str, context, sample: Callable, reject: Callable,
                  read: Callable | None = None) -> None:
         self.loop = TakeLoop(owner, context, batch=QUEUE_DEPTH)
-        self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH))
+        self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH),
+                                         wakes=False)   # taken with the deflections
         self.deflection_index = self.loop.add(JointState, api.DEFLECTIONS,
                                               sensor_qos(QUEUE_DEPTH))
         self.sample, self.reject = sample, reject

@@ -70,6 +70,7 @@ class TakeLoop:
         self.subscriptions: list = []
         self._guard = None
         self._wait_set = None     # (the subscriptions it is for, the rcl wait set, by pointer)
+        self._riders: frozenset = frozenset()   # indices of the subscriptions that do not wake
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._sink: Callable | None = None
@@ -80,11 +81,16 @@ class TakeLoop:
         self.waits = 0
         self.error: BaseException | None = None
 
-    def add(self, msg_class, topic: str, qos) -> int:
+    def add(self, msg_class, topic: str, qos, *, wakes: bool = True) -> int:
         """Subscribe (raw) to ``topic``; the subscription's index (also while running: the
-        thread takes from it from its next round on)."""
-        self.subscriptions = [*self.subscriptions, self.node.create_subscription(
-            msg_class, topic, _never, qos, raw=True)]      # (a new list: the thread's stays)
+        thread takes from it from its next round on). ``wakes=False``: its messages do not
+        wake the thread; they are taken with every round (what another subscription woke,
+        and at least every ``period_s``): for a topic that comes with another's messages
+        (the observer's twist with its deflections), one wake-up a sample instead of two."""
+        sub = self.node.create_subscription(msg_class, topic, _never, qos, raw=True)
+        self.subscriptions = [*self.subscriptions, sub]   # (a new list: the thread's stays)
+        if not wakes:
+            self._riders = self._riders | {len(self.subscriptions) - 1}
         return len(self.subscriptions) - 1
 
     def start(self, sink: Callable[[list[Taken]], None],
@@ -160,20 +166,25 @@ class TakeLoop:
             for sub in subs:
                 stack.enter_context(sub.handle)
             if self._wait_set is None or self._wait_set[0] is not subs:
-                # one wait set while the subscriptions stay (made anew: 20-50 us a wait)
-                ws = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, self.context.handle)
-                self._wait_set = (subs, ws, {sub.handle.pointer: (i, sub)
-                                             for i, sub in enumerate(subs)})
-            _, wait_set, by_pointer = self._wait_set
+                # one wait set while the subscriptions stay (riders left out)
+                riders = [(i, sub) for i, sub in enumerate(subs) if i in self._riders]
+                wakers = [(i, sub) for i, sub in enumerate(subs) if i not in self._riders]
+                ws = _rclpy.WaitSet(len(wakers), 1, 0, 0, 0, 0, self.context.handle)
+                self._wait_set = (subs, ws, {sub.handle.pointer: (i, sub) for i, sub in wakers},
+                                  riders)
+            _, wait_set, by_pointer, riders = self._wait_set
             wait_set.clear_entities()
-            for sub in subs:
+            for _, sub in by_pointer.values():
                 wait_set.add_subscription(sub.handle)
             wait_set.add_guard_condition(self._guard)
             wait_set.wait(int(timeout_s * 1e9))
             if wait_set.get_ready_entities('guard_condition'):
                 return list(enumerate(subs))
-            return [by_pointer[p] for p in wait_set.get_ready_entities('subscription')
-                    if p in by_pointer]
+            ready = [by_pointer[p] for p in wait_set.get_ready_entities('subscription')
+                     if p in by_pointer]
+            if not ready:      # the period passed: every subscription once
+                return list(enumerate(subs))
+            return riders + sorted(ready, key=lambda pair: pair[0]) if riders else ready
 
     def request_stop(self) -> None:
         """Ask the thread to end after its round (callable from the thread itself)."""
