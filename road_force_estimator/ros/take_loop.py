@@ -13,6 +13,14 @@ each round to ``sink(batch)`` in that thread. What waits is bounded by the subsc
 own history depth (DDS drops the oldest beyond it); the node that uses it keeps its timers and
 services on its executor, on time.
 
+Cost: one rcl wait set, kept while the subscriptions stay; after a wait only the subscriptions
+it found ready are taken from; the wait lasts ``period_s`` at most, never less unless woken
+(an idle loop does not poll: :attr:`TakeLoop.waits`). A subscription added with
+``wakes=False`` (the observer's ``/vehicle/twist``, which comes with every deflection
+message) does not wake the thread: one wake-up a sample instead of two. The observer's
+thread costs no more CPU than an executor's callbacks for the same messages
+(``python -m bench.probes.node_latency --node take`` against ``--node bare``).
+
 The two users: the bag recorder (:mod:`.bag_recorder`: the receive time is the log time, a
 stop drains exactly what was received before it) and the observer (:mod:`.observer`: what
 queued up is estimated in one go).
