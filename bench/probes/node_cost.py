@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    .venv/bin/python -m bench.probes.node_cost [--samples 3000] [--repeats 7]
+    .venv/bin/python -m bench.probes.node_cost [--samples 3000] [--repeats 7] [--articulated]
 
 The observer runs in this process; its outputs go to a subscriber in a child process (every
 topic, raw, reliable), as in bench/probes/node_latency.py. The inputs are the bytes our publishers
@@ -23,6 +23,11 @@ a wall clock), min and median over ``--repeats`` blocks of ``--samples``:
 
 The node's own Python is the second figure less the third; rclpy's share the first less
 the second.
+
+``--articulated``: the observer with ``config/tractor_semitrailer.yaml`` (5 axles), fed the
+readings of a simulated class C drive at 20 m/s (:func:`.node_latency.articulated_drive`);
+the parts as above with ``WholeVehicleEstimator.step`` for the numeric core (the plant's
+sample is left out), the child subscribing to every output of the articulated node.
 """
 from __future__ import annotations
 
@@ -37,13 +42,16 @@ import time
 import rclpy
 from rclpy.node import Node
 
-from bench.probes.node_latency import input_encoders
+from bench.probes.node_latency import (
+    ARTICULATED_CONFIG, ARTICULATED_JOINTS, articulated_drive, input_encoders)
+from road_force_estimator.ros.take_loop import Taken
 from road_force_estimator import interfaces as api
 from road_force_estimator.ros.bag_recorder import message_class
 from road_force_estimator.ros.messages import topic_qos
 
 TOPICS = (*api.LOAD, *api.ROAD, api.LTR, api.LOAD_TRANSFER, api.STATES, *api.STATIC_LOAD,
-          api.DEFLECTIONS, api.TWIST, *api.TRUE_LOAD, *api.TRUE_ROAD)
+          api.DEFLECTIONS, api.TWIST, *api.TRUE_LOAD, *api.TRUE_ROAD, api.WHEEL_LOADS,
+          *api.UNIT_LOAD_TRANSFER, api.STATIC_WHEEL_LOADS, *api.ROAD_FUSED)
 T0_NS = 1_700_000_000 * 10**9
 
 
@@ -86,24 +94,34 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--samples', type=int, default=3000)
     parser.add_argument('--repeats', type=int, default=7)
+    parser.add_argument('--articulated', action='store_true',
+                        help='vehicle.model: articulated (config/tractor_semitrailer.yaml)')
     parser.add_argument('--serve', type=float, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve:
         return serve_subscriber(args.serve)
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    drive = []
+    if args.articulated:     # (simulated before the child starts: its 600 s run from here)
+        drive = articulated_drive(args.samples * (2 * args.repeats + 2) / 1000.0 + 0.5)
     child = subprocess.Popen([sys.executable, '-m', 'bench.probes.node_cost', '--serve', '600'],
                              stderr=subprocess.DEVNULL)
-    rclpy.init()
+    rclpy.init(args=['--ros-args', '--params-file', str(ARTICULATED_CONFIG)]
+               if args.articulated else None)
     from road_force_estimator.estimation import Estimator
     from road_force_estimator.ros.observer import Observer
     observer = Observer()
     try:
         deadline = time.monotonic() + 30.0
-        while observer.states_pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+        last = observer.whole.pubs[-1] if args.articulated else observer.states_pub
+        while last.get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
         time.sleep(0.5)
-        report(observer, Estimator, args)
+        if args.articulated:
+            report_articulated(observer, drive, args)
+        else:
+            report(observer, Estimator, args)
     finally:
         child.kill()
         rclpy.try_shutdown()
@@ -134,9 +152,11 @@ def report(observer, estimator_class, args) -> None:
     data = [(deflections.encode(t, (*q, phi)), twist.encode(t, (20.0,)))
             for t, q, phi in inputs]
 
-    def callbacks(pair):
-        observer.twist_callback(pair[1])
-        observer.deflections_callback(pair[0])
+    taken = observer.input
+
+    def callbacks(pair):   # one round of the input thread: the twist and the deflections
+        taken.take([Taken(taken.twist_index, pair[1], 0, None),
+                    Taken(taken.deflection_index, pair[0], 0, None)])
 
     for pair in data[:n]:   # warm: past the model fit's skip and the first designs
         callbacks(pair)
@@ -165,6 +185,47 @@ def report(observer, estimator_class, args) -> None:
         lambda _: raw(states), lambda r: range(n), args.repeats)))
     observer.destroy_node()   # the plant's inputs go to the child alone
     rows.append(('plant_simulator sample', plant_sample_us(args)))
+    for name, (low, mid) in rows:
+        print(f'{name:32s} min {low:7.2f} us   median {mid:7.2f} us per sample')
+    (cb, _), (py, _), (core, _) = rows[0][1], rows[1][1], rows[2][1]
+    print(f"node's own Python (min) {py - core:.1f} us, rclpy publish (min) {cb - py:.1f} us "
+          f'per sample')
+
+
+def report_articulated(observer, drive: list, args) -> None:
+    """The parts of the articulated node (see the module docstring) and print them."""
+    from road_force_estimator.estimation.whole_vehicle import WholeVehicleEstimator
+    whole, n = observer.whole, args.samples
+    deflections, twist = input_encoders(ARTICULATED_JOINTS)
+    data = [(deflections.encode(T0_NS + k * 10**6, r), twist.encode(T0_NS + k * 10**6, (20.0,)))
+            for k, r in enumerate(drive)]
+    taken = whole.input
+
+    def callbacks(pair):   # one round of the input thread: the twist and the deflections
+        taken.take([Taken(taken.twist_index, pair[1], 0, None),
+                    Taken(taken.deflection_index, pair[0], 0, None)])
+
+    for pair in data[:n]:   # warm: past the first gain designs
+        callbacks(pair)
+    rows = [('callbacks', per_sample_us(callbacks, lambda r: data[n * (r + 1):n * (r + 2)],
+                                        args.repeats))]
+    names = ('send', 'send_static', 'send_road', 'send_fused')
+    kept = {k: getattr(whole, k) for k in names}
+    for k, v in kept.items():
+        setattr(whole, k, [_NoPublish().publish_raw] * len(v))
+    off = n * (args.repeats + 1)
+    rows.append(('callbacks, publish a no-op', per_sample_us(
+        callbacks, lambda r: data[off + n * r:off + n * (r + 1)], args.repeats)))
+    for k, v in kept.items():
+        setattr(whole, k, v)
+    vehicle, settings = whole.params.config[:2]
+    estimator = WholeVehicleEstimator(vehicle, settings)
+    for k in range(n):
+        estimator.step(T0_NS + k * 10**6, drive[k], 20.0)
+    rows.append(('WholeVehicleEstimator.step', per_sample_us(
+        lambda k: estimator.step(T0_NS + k * 10**6, drive[k], 20.0),
+        lambda r: range(n * (r + 1), n * (r + 2)), args.repeats)))
+    observer.destroy_node()
     for name, (low, mid) in rows:
         print(f'{name:32s} min {low:7.2f} us   median {mid:7.2f} us per sample')
     (cb, _), (py, _), (core, _) = rows[0][1], rows[1][1], rows[2][1]

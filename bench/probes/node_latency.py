@@ -3,10 +3,10 @@
 Run from the repository root::
 
     .venv/bin/python bench/probes/node_latency.py [--rate 1000] [--seconds 10] [--repeats 1]
-        [--executor events] [--node observer|bare] [--sweep 1000,2000,5000,8000,12000]
+        [--executor events] [--node observer|bare|take] [--sweep 1000,2000,5000,8000,12000]
         [--sweep-seconds 4] [--json FILE]
     .venv/bin/python bench/probes/node_latency.py --plant 5000 [--seconds 10]
-    python -m bench.probes.node_latency --articulated [--node observer|bare] [--sweep '']
+    python -m bench.probes.node_latency --articulated [--node observer|bare|take] [--sweep '']
         [--warm-up 1]
 
 The observer runs in its own process (as ``ros2 run`` starts it: its ``main`` with the
@@ -21,6 +21,10 @@ inside the estimator's range, as serialized bytes (the bytes rmw sends for the m
 topics: it takes both inputs raw and publishes, per deflection message, seven cached messages
 of the observer's types and QoS (``/observer/states`` last, with the input's stamp copied in)
 and the two static loads every 100th: rclpy, rmw and DDS alone, no estimate.
+``--node take`` is the bare node with its inputs taken as the observer takes them (a
+:class:`.take_loop.TakeLoop` thread: ``/vehicle/twist`` riding with the deflections), not
+by the executor's callbacks: the floor of the observer's input design; the observer less it
+is the estimate and its Python.
 ``--repeats`` runs the main measurement that many times and reports each and their medians.
 
 - latency: from the driver's ``publish`` of a sample to its receipt of ``/observer/states`` with
@@ -43,7 +47,9 @@ articulated``, 5 axles): the driver publishes the 12 joints of ``/suspension/def
 seven messages the node publishes per input (``/wheel_loads``, the three units' load
 transfer, the front axle's two loads and ``/load_transfer``); the bare node publishes seven
 cached messages of the same types and sizes (``/load_transfer`` last, the input's stamp
-copied in) and the three static-load messages every 100th.
+copied in), the three static-load messages every 100th, and the road as the observer does at
+20 m/s (``/road_profile/left|right`` with every input, ``/road_profile/fused/left|right``
+with every 5th: a point per 0.1 m).
 
 The machine is shared (other work may run): numbers vary by tens of percent between runs.
 """
@@ -119,9 +125,10 @@ def stamp_ns_of(data: bytes) -> int:
 
 
 class BareNode(Node):
-    """The floor: the observer's subscriptions and publishers, cached bytes out, no estimate."""
+    """The floor: the observer's subscriptions and publishers, cached bytes out, no estimate
+    (``take``: the inputs taken by :func:`take_inputs`)."""
 
-    def __init__(self):
+    def __init__(self, take: bool = False):
         super().__init__('observer')
         from road_force_estimator.ros.wire import Wire
         wire, t = Wire(), 1_700_000_000 * 10**9
@@ -135,6 +142,9 @@ class BareNode(Node):
         self.static = self.cached[:2]
         self.states = wire.states.encode(t, (0.0,) * 12)
         self.k = 0
+        if take:
+            take_inputs(self, self.deflections_callback)
+            return
         self.create_subscription(message_class(api.JOINT_STATE), api.DEFLECTIONS,
                                  self.deflections_callback, sensor_qos(1000), raw=True)
         self.create_subscription(message_class(api.TWIST_STAMPED), api.TWIST,
@@ -150,11 +160,33 @@ class BareNode(Node):
                 pub.publish(out)
 
 
+def take_inputs(node: Node, callback) -> None:
+    """``node``'s two inputs taken as the observer takes them (its :class:`.TakeLoop`, the
+    twist riding with the deflections, the same depths), ``callback(data)`` per deflection
+    message (in the loop's thread); the executor's subscriptions are not made."""
+    from road_force_estimator.ros.observer_input import QUEUE_DEPTH, TWIST_DEPTH
+    from road_force_estimator.ros.take_loop import TakeLoop
+    loop = TakeLoop(node.get_name(), node.context, batch=QUEUE_DEPTH)
+    loop.add(message_class(api.TWIST_STAMPED), api.TWIST, sensor_qos(TWIST_DEPTH), wakes=False)
+    index = loop.add(message_class(api.JOINT_STATE), api.DEFLECTIONS, sensor_qos(QUEUE_DEPTH))
+
+    def sink(batch) -> None:
+        for m in batch:
+            if m.index == index:
+                callback(m.data)
+
+    loop.start(sink)
+    node.take_loop = loop
+
+
 class BareArticulatedNode(Node):
     """The floor of the articulated observer: its subscriptions, seven cached messages of its
-    types and sizes per input, the three static-load messages every 100th; no estimate."""
+    types and sizes per input, the three static-load messages every 100th; the road as the
+    observer publishes it at the driver's 20 m/s: ``/road_profile/left|right`` per input,
+    ``/road_profile/fused/left|right`` every 5th (a point per 0.1 m,
+    :data:`.fused_stream.FUSED_SPACING_M`); no estimate."""
 
-    def __init__(self):
+    def __init__(self, take: bool = False):
         super().__init__('observer')
         base, t = api.BASE_FRAME, STAMP0_NS
         wheels = api.wheel_joints(AXLES)
@@ -181,7 +213,19 @@ class BareArticulatedNode(Node):
         static += [self.create_publisher(message_class(api.WRENCH), topic, reliable_qos(1000))
                    for topic in api.STATIC_LOAD]
         self.send_static = [p.handle.publish_raw for p in static]
+        point = CdrEncoder(api.POINT, message_template(api.POINT, api.ROAD_FRAME),
+                           ['point.x', 'point.y', 'point.z'])
+        self.road = [point.encode(t, (1.0, y, 0.0)) for y in (1.0, -1.0)]
+        self.send_road = [self.create_publisher(message_class(api.POINT), topic,
+                                                reliable_qos(1000)).handle.publish_raw
+                          for topic in api.ROAD]
+        self.send_fused = [self.create_publisher(message_class(api.POINT), topic,
+                                                 reliable_qos(1000)).handle.publish_raw
+                           for topic in api.ROAD_FUSED]
         self.k = 0
+        if take:
+            take_inputs(self, self.deflections_callback)
+            return
         self.create_subscription(message_class(api.JOINT_STATE), api.DEFLECTIONS,
                                  self.deflections_callback, sensor_qos(1000), raw=True)
         self.create_subscription(message_class(api.TWIST_STAMPED), api.TWIST,
@@ -191,19 +235,26 @@ class BareArticulatedNode(Node):
         for send, out in zip(self.send, self.cached):
             send(out)
         self.send_last(self.last[:4] + data[4:12] + self.last[12:])
+        for send, out in zip(self.send_road, self.road):
+            send(out)
         self.k += 1
+        if self.k % 5 == 0:
+            for send, out in zip(self.send_fused, self.road):
+                send(out)
         if self.k % 100 == 0:
             for send, out in zip(self.send_static, self.static):
                 send(out)
 
 
-def serve_observer(executor_kind: str, bare: bool = False, articulated: bool = False) -> int:
+def serve_observer(executor_kind: str, bare: bool = False, articulated: bool = False,
+                   take: bool = False) -> int:
     """The observer node (or the bare node), spun like its main() does, with the chosen
-    executor; ``articulated``: with MODEL.md's combination (or its bare floor)."""
+    executor; ``articulated``: with MODEL.md's combination (or its bare floor); ``take``: the
+    bare node taking its inputs as the observer does."""
     if bare:
         from road_force_estimator.ros.node_runner import run_node
-        return run_node('bare', 'bare node', (), ['bare'],
-                        BareArticulatedNode if articulated else BareNode)
+        cls = BareArticulatedNode if articulated else BareNode
+        return run_node('bare', 'bare node', (), ['bare'], lambda: cls(take=take))
     if executor_kind == 'events':
         from road_force_estimator.ros.observer import main
         return main(['observer'] + (['--ros-args', '--params-file', str(ARTICULATED_CONFIG)]
@@ -388,7 +439,7 @@ def main(argv=None) -> int:
     parser.add_argument('--seconds', type=float, default=10.0)
     parser.add_argument('--repeats', type=int, default=1)
     parser.add_argument('--executor', choices=('events', 'single'), default='events')
-    parser.add_argument('--node', choices=('observer', 'bare'), default='observer')
+    parser.add_argument('--node', choices=('observer', 'bare', 'take'), default='observer')
     parser.add_argument('--warm-up', type=float, default=1.0, metavar='S',
                         help='seconds of input before the measurement (the articulated '
                              "estimator's first gain designs take about 1 s of CPU)")
@@ -401,9 +452,11 @@ def main(argv=None) -> int:
     parser.add_argument('--verbose', action='store_true', help="the node's log on stderr")
     parser.add_argument('--serve-observer', choices=('events', 'single'), help=argparse.SUPPRESS)
     parser.add_argument('--serve-bare', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--serve-take', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.serve_observer or args.serve_bare:
-        return serve_observer(args.serve_observer, args.serve_bare, args.articulated)
+    if args.serve_observer or args.serve_bare or args.serve_take:
+        return serve_observer(args.serve_observer, args.serve_bare or args.serve_take,
+                              args.articulated, args.serve_take)
     if args.plant:
         results = measure_plant(args.plant, args.seconds)
     else:
@@ -416,7 +469,8 @@ def main(argv=None) -> int:
 def measure_node(args) -> dict:
     """The observer (or bare) node in a child process, driven from this one."""
     isolated_ros()
-    serve = ['--serve-bare'] if args.node == 'bare' else ['--serve-observer', args.executor]
+    serve = {'bare': ['--serve-bare'], 'take': ['--serve-take']}.get(
+        args.node, ['--serve-observer', args.executor])
     serve += ['--articulated'] if args.articulated else []
     child = subprocess.Popen([sys.executable, __file__, *serve], cwd=REPO,
                              stderr=None if args.verbose else subprocess.DEVNULL)

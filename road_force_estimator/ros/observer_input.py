@@ -2,7 +2,8 @@
 
 :class:`ObserverInput` takes ``/suspension/deflections`` and ``/vehicle/twist`` with a
 :class:`.take_loop.TakeLoop` (a thread of its own: every queued message in one round, the
-twists of a round before its deflections), so that a node that falls behind estimates what
+twists of a round before its deflections; a deflection message wakes it, the twists are
+taken with them and at least every 0.1 s), so that a node that falls behind estimates what
 queued up in one go, and what it cannot take is dropped by DDS from the oldest end of a
 queue of :data:`QUEUE_DEPTH`: whole runs of samples, which the estimator's stamp rules take
 as the long steps or gaps they are (:mod:`road_force_estimator.estimation.acceptance`),
@@ -69,7 +70,8 @@ class ObserverInput:
     def __init__(self, owner: str, context, sample: Callable, reject: Callable,
                  read: Callable | None = None) -> None:
         self.loop = TakeLoop(owner, context, batch=QUEUE_DEPTH)
-        self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH))
+        self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH),
+                                         wakes=False)   # taken with the deflections
         self.deflection_index = self.loop.add(JointState, api.DEFLECTIONS,
                                               sensor_qos(QUEUE_DEPTH))
         self.sample, self.reject = sample, reject

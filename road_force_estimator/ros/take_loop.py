@@ -13,6 +13,14 @@ each round to ``sink(batch)`` in that thread. What waits is bounded by the subsc
 own history depth (DDS drops the oldest beyond it); the node that uses it keeps its timers and
 services on its executor, on time.
 
+Cost: one rcl wait set, kept while the subscriptions stay; after a wait only the subscriptions
+it found ready are taken from; the wait lasts ``period_s`` at most, never less unless woken
+(an idle loop does not poll: :attr:`TakeLoop.waits`). A subscription added with
+``wakes=False`` (the observer's ``/vehicle/twist``, which comes with every deflection
+message) does not wake the thread: one wake-up a sample instead of two. The observer's
+thread costs no more CPU than an executor's callbacks for the same messages
+(``python -m bench.probes.node_latency --node take`` against ``--node bare``).
+
 The two users: the bag recorder (:mod:`.bag_recorder`: the receive time is the log time, a
 stop drains exactly what was received before it) and the observer (:mod:`.observer`: what
 queued up is estimated in one go).
@@ -69,18 +77,28 @@ class TakeLoop:
         self.batch = int(batch)
         self.subscriptions: list = []
         self._guard = None
+        self._wait_set = None     # (the subscriptions it is for, the rcl wait set, by pointer)
+        self._riders: frozenset = frozenset()   # indices of the subscriptions that do not wake
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._sink: Callable | None = None
         self._idle: Callable | None = None
         self.rounds = 0
+        #: waits on the wait set (each at most ``period_s``): an idle loop waits about once
+        #: per ``period_s``, it does not poll
+        self.waits = 0
         self.error: BaseException | None = None
 
-    def add(self, msg_class, topic: str, qos) -> int:
+    def add(self, msg_class, topic: str, qos, *, wakes: bool = True) -> int:
         """Subscribe (raw) to ``topic``; the subscription's index (also while running: the
-        thread takes from it from its next round on)."""
-        self.subscriptions = [*self.subscriptions, self.node.create_subscription(
-            msg_class, topic, _never, qos, raw=True)]      # (a new list: the thread's stays)
+        thread takes from it from its next round on). ``wakes=False``: its messages do not
+        wake the thread; they are taken with every round (what another subscription woke,
+        and at least every ``period_s``): for a topic that comes with another's messages
+        (the observer's twist with its deflections), one wake-up a sample instead of two."""
+        sub = self.node.create_subscription(msg_class, topic, _never, qos, raw=True)
+        self.subscriptions = [*self.subscriptions, sub]   # (a new list: the thread's stays)
+        if not wakes:
+            self._riders = self._riders | {len(self.subscriptions) - 1}
         return len(self.subscriptions) - 1
 
     def start(self, sink: Callable[[list[Taken]], None],
@@ -101,12 +119,17 @@ class TakeLoop:
         ``until_ns`` only what was received up to that time (ns, system clock) and, with it,
         the first message received after it (taken, so not left for later: the caller drops
         it). For the thread, and for a drain once the thread is stopped."""
+        return self._take(list(enumerate(self.subscriptions)), until_ns)
+
+    def _take(self, subs: list, until_ns: int | None = None) -> list[Taken]:
+        """What is queued on ``subs`` (``(index, subscription)`` pairs): see :meth:`take_all`."""
         out: list[Taken] = []
-        for index, sub in enumerate(list(self.subscriptions)):
+        for index, sub in subs:
             try:
                 with sub.handle:
+                    take = sub.handle.take_message
                     for _ in range(self.batch):
-                        got = sub.handle.take_message(sub.msg_type, True)
+                        got = take(sub.msg_type, True)
                         if got is None:
                             break
                         data, info = got
@@ -121,37 +144,55 @@ class TakeLoop:
 
     def _run(self) -> None:
         next_idle = time.monotonic() + self._period_s
+        ready = list(enumerate(self.subscriptions))      # at first: every subscription
         try:
             while not self._stop.is_set():
-                batch = self.take_all()
+                batch = self._take(ready)
                 if batch:
                     self.rounds += 1
                     self._sink(batch)
                 now = time.monotonic()
-                if self._idle is not None and now >= next_idle:
+                if now >= next_idle:   # (also without idle: else the wait below is 0 s, a spin)
                     next_idle = now + self._period_s
-                    self._idle()
-                if batch:
-                    continue          # more may be queued: take again before waiting
-                self._wait(max(0.0, min(next_idle - now, self._period_s)))
+                    if self._idle is not None:
+                        self._idle()
+                # what came meanwhile makes the wait return at once, with what is ready
+                ready = self._wait(max(0.0, min(next_idle - now, self._period_s)))
         except BaseException as exc:  # noqa: BLE001 - kept for the owner (never a crash here)
             self.error = exc
 
-    def _wait(self, timeout_s: float) -> None:
-        subs = list(self.subscriptions)
+    def _wait(self, timeout_s: float) -> list:
+        """Wait up to ``timeout_s`` for a message or the guard; the ``(index, subscription)``
+        pairs that have messages (every one when the guard woke it)."""
+        self.waits += 1
+        subs = self.subscriptions
         with ExitStack() as stack:
             stack.enter_context(self.context.handle)
             if not self.context.ok():
                 self._stop.set()
-                return
+                return []
             for sub in subs:
                 stack.enter_context(sub.handle)
-            wait_set = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, self.context.handle)
+            if self._wait_set is None or self._wait_set[0] is not subs:
+                # one wait set while the subscriptions stay (riders left out)
+                riders = [(i, sub) for i, sub in enumerate(subs) if i in self._riders]
+                wakers = [(i, sub) for i, sub in enumerate(subs) if i not in self._riders]
+                ws = _rclpy.WaitSet(len(wakers), 1, 0, 0, 0, 0, self.context.handle)
+                self._wait_set = (subs, ws, {sub.handle.pointer: (i, sub) for i, sub in wakers},
+                                  riders)
+            _, wait_set, by_pointer, riders = self._wait_set
             wait_set.clear_entities()
-            for sub in subs:
+            for _, sub in by_pointer.values():
                 wait_set.add_subscription(sub.handle)
             wait_set.add_guard_condition(self._guard)
             wait_set.wait(int(timeout_s * 1e9))
+            if wait_set.get_ready_entities('guard_condition'):
+                return list(enumerate(subs))
+            ready = [by_pointer[p] for p in wait_set.get_ready_entities('subscription')
+                     if p in by_pointer]
+            if not ready:      # the period passed: every subscription once
+                return list(enumerate(subs))
+            return riders + sorted(ready, key=lambda pair: pair[0]) if riders else ready
 
     def request_stop(self) -> None:
         """Ask the thread to end after its round (callable from the thread itself)."""
@@ -172,6 +213,9 @@ class TakeLoop:
     def destroy(self) -> None:
         """Stop and destroy the hidden node."""
         self.stop()
+        if self._wait_set is not None and not self.running:
+            self._wait_set[1].destroy_when_not_in_use()
+            self._wait_set = None
         self.node.destroy_node()
 
     @property
