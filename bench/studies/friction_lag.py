@@ -34,10 +34,13 @@ rate, N RMS per spring) and the part of it that is the law's own (the file's law
 truth's rate); then the causal candidates for the friction input (``--candidates``): the
 tanh law's expectation over the rate's Gaussian error, ``tanh(m / sqrt(v_f^2 + pi/2 s^2))``,
 with s the forward filter's posterior std (``expect-forward``) or the fixed-lag estimate's
-(``expect-correction``, at each delayed correction's lag), against the package's law; and how
+(``expect-correction``, at each delayed correction's lag), and the equivalent damping's
+factor at 10 ms (``damping F``; the package's 0.5), against the package's law; and how
 fast a causal v_f fit could decide: the innovations' log-likelihood lead (nats) of each v_f of
 :data:`road_force_estimator.estimation.offline.FIT_GRID` over the file's, zero-latency
-filters over the drive's first seconds (as ``observer.friction_velocity_fit`` offline).
+filters over the drive's first seconds (as ``observer.friction_velocity_fit`` offline),
+and what switching once at that moment could give at most: the 10 ms loads of the file's v_f
+before it and of the truth's after it, spliced (the switch's transient ignored).
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
@@ -175,7 +178,7 @@ DECOMPOSED = (
     ('friction+lag, truth v_f 0.005', BOTH, 0.005, 0.01),
 )
 #: The causal candidates for the friction input (:func:`candidate`).
-CANDIDATES = ('package', 'expect-forward', 'expect-correction')
+CANDIDATES = ('package', 'expect-forward', 'expect-correction', 'damping 0.25', 'damping 1')
 #: The spread of the rate's error in the law's expectation: ``E[tanh(dq / v)]`` over dq ~ N(m,
 #: s^2) ~ ``tanh(m / sqrt(v^2 + pi/2 s^2))`` (tanh ~ erf(sqrt(pi) x / 2) and the probit
 #: integral).
@@ -233,8 +236,13 @@ class candidate:
     def __enter__(self):
         from road_force_estimator.estimation.observer.friction import KnownFriction
 
+        from road_force_estimator.estimation.models import leaf_friction
+
         self.saved = (KnownFriction.select, KnownFriction.update, KnownFriction.correction)
-        if self.name == 'package':
+        self.factor = leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY
+        if self.name.startswith('damping '):     # the equivalent damping's factor at 10 ms
+            leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY = float(self.name.split()[1])
+        if self.name == 'package' or self.name.startswith('damping '):
             return self
         select, update, correction = self.saved
 
@@ -294,9 +302,11 @@ class candidate:
         return self
 
     def __exit__(self, *exc) -> None:
+        from road_force_estimator.estimation.models import leaf_friction
         from road_force_estimator.estimation.observer.friction import KnownFriction
 
         KnownFriction.select, KnownFriction.update, KnownFriction.correction = self.saved
+        leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY = self.factor
 
 
 def candidates(duration_s: float, road_seeds) -> list[str]:
@@ -360,10 +370,35 @@ def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
                           "file's")
             else:
                 at_end = f"the file's, {-lead[best][-1]:.0f} nats ahead of the next"
-            lines.append(f'- {name}, road seed {s}: after {duration_s:g} s the likeliest v_f '
-                         f'is {at_end}; any other v_f {LEAD_NATS:g} nats ahead of the '
-                         f"file's: {when}")
+            line = (f'- {name}, road seed {s}: after {duration_s:g} s the likeliest v_f '
+                    f'is {at_end}; any other v_f {LEAD_NATS:g} nats ahead of the '
+                    f"file's: {when}")
+            if over.size and v_true != 0.01:
+                line += '; ' + _spliced(drive, truck, v_true, (over[0] + 1) * step, duration_s, s)
+            lines.append(line)
     return lines
+
+
+def _spliced(drive, truck: VehicleParameters, v_true: float, k: int, duration_s: float,
+             road_seed: int) -> str:
+    """The 10 ms load error, relative to the matched drive's on the same road, of the file's
+    v_f before sample k and the truth's from it (outputs spliced), beside each alone."""
+    from types import SimpleNamespace
+
+    from bench.accuracy.scenarios import score
+
+    matched = build(NOMINAL, 0.01, duration_s, road_seed)
+    ref = score(matched, _estimate(matched, NOMINAL, 0.01)[1])['load_rms_pct_dyn']
+    _, file_ = _estimate(drive, truck, 0.01)
+    _, told = _estimate(drive, replace(truck, leaf_spring_friction_velocity_mps=v_true), 0.01)
+    load = np.array(file_.wheel_load_n)
+    load[k:] = np.asarray(told.wheel_load_n)[k:]
+    spliced = SimpleNamespace(stamp_ns=file_.stamp_ns, wheel_load_n=load, road_m=file_.road_m,
+                              ltr=file_.ltr)
+    ratio = {n: score(drive, e)['load_rms_pct_dyn'] / ref
+             for n, e in (('file', file_), ('told', told), ('spliced', spliced))}
+    return (f"10 ms: the file's v_f {ratio['file']:.3f} x matched, the truth's "
+            f"{ratio['told']:.3f} x, switched there {ratio['spliced']:.3f} x")
 
 
 def main(argv: list[str] | None = None) -> int:
