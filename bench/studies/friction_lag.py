@@ -42,6 +42,12 @@ filters over the drive's first seconds (as ``observer.friction_velocity_fit`` of
 and what switching once at that moment could give at most: the 10 ms loads of the file's v_f
 before it and of the truth's after it, spliced (the switch's transient ignored).
 
+``--whole-vehicle``: the same question on MODEL.md's tractor and semi-trailer (the drives of
+:mod:`bench.accuracy.articulated_wim`'s ``friction`` part: class C, road seed 1, 20 m/s,
+zero-load readings, the payload unknown, ``--duration`` s), at 10 ms: per axle the
+dynamic-load error with neither, with the 3 ms lag, with both (v_f 0.01), and with the
+truth's v_f 0.005 against the file's 0.01 and told it, each against the drive with neither.
+
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
 the seeds) and the ratio to the matched drive (the mean of the per-seed ratios, and the
@@ -401,6 +407,30 @@ def _spliced(drive, truck: VehicleParameters, v_true: float, k: int, duration_s:
             f"{ratio['told']:.3f} x, switched there {ratio['spliced']:.3f} x")
 
 
+def whole_vehicle(duration_s: float) -> list[str]:
+    """The ``--whole-vehicle`` table (Markdown rows)."""
+    from bench.accuracy import articulated_wim as wim
+
+    both = {**wim.TANH, **wim.LAG}
+    sharp = {'vehicle.leaf_spring_friction_velocity': 0.005}
+    base = {**wim.ZERO_LOAD, 'vehicle.trailer.mass': 25000.0}
+    drives = (('neither', {}, {}), ('lag', wim.LAG, wim.LAG), ('friction+lag', both, both),
+              ('friction+lag, truth v_f 0.005', {**both, **sharp}, both),
+              ('friction+lag, truth v_f 0.005, file v_f 0.005', {**both, **sharp},
+               {**both, **sharp}))
+    lines = ['| drive (whole vehicle, C, 10 ms) | front, drive, trailer_1..3 (% dyn) | '
+             'x neither, per axle |', '|---|---|---|']
+    ref = None
+    for name, plant, file_ in drives:
+        drive = wim.simulate('C', duration_s, 1e-5, {**base, **plant})
+        est = wim.estimate(wim.file_vehicle({**wim.ZERO_LOAD, **file_}), drive, 0.01, False)
+        pct = wim.dynamic_pct(drive, est)
+        ref = pct if ref is None else ref
+        lines.append(f'| {name} | ' + ', '.join(f'{v:.2f}' for v in pct) + ' | '
+                     + ', '.join(f'{v:.2f}' for v in pct / ref) + ' |')
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog='python -m bench.studies.friction_lag',
                                 description=__doc__.splitlines()[0])
@@ -411,7 +441,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--decompose', action='store_true',
                    help="where the cost comes from, the causal candidates and the fit's lead "
                         'only (road seeds as given)')
+    p.add_argument('--whole-vehicle', action='store_true',
+                   help='the whole vehicle at 10 ms only (--duration s)')
     args = p.parse_args(argv)
+    if args.whole_vehicle:
+        t0 = time.perf_counter()
+        print('\n'.join(whole_vehicle(args.duration)))
+        print(f'\n({time.perf_counter() - t0:.0f} s; {args.duration:g} s drives)')
+        return 0
     if args.decompose:
         t0 = time.perf_counter()
         print('\n'.join(decompose(args.duration) + [''] + candidates(args.duration,
