@@ -2,7 +2,7 @@
 error at zero latency, at 10 ms and offline against the matched drive (no friction, no lag).
 
 ``.venv/bin/python -m bench.studies.friction_lag [--duration S] [--road-seeds N ...] [--only NAME
-...]``
+...] [--decompose | --whole-vehicle]``
 
 Drives (:func:`bench.studies.truck_effects.build`): ISO 8608 class C, 20 m/s, 1 kHz, 10 um of
 deflection noise (100 urad of roll), the scoring of :func:`bench.accuracy.scenarios.score` (load
@@ -31,8 +31,8 @@ sticking) and elsewhere.
 10 ms: the load error, the smoothed rate's error against the truth's (mm/s), the friction
 force's error (the file's law at the estimated rate against the truth's law at the truth's
 rate, N RMS per spring) and the part of it that is the law's own (the file's law at the
-truth's rate); then the causal candidates for the friction input (``--candidates``): the
-tanh law's expectation over the rate's Gaussian error, ``tanh(m / sqrt(v_f^2 + pi/2 s^2))``,
+truth's rate); then, on the road seeds given, the causal candidates for the friction input:
+the tanh law's expectation over the rate's Gaussian error, ``tanh(m / sqrt(v_f^2 + pi/2 s^2))``,
 with s the forward filter's posterior std (``expect-forward``) or the fixed-lag estimate's
 (``expect-correction``, at each delayed correction's lag), and the equivalent damping's
 factor at 10 ms (``damping F``; the package's 0.5), against the package's law; and how
