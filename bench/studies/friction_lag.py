@@ -2,7 +2,7 @@
 error at zero latency, at 10 ms and offline against the matched drive (no friction, no lag).
 
 ``.venv/bin/python -m bench.studies.friction_lag [--duration S] [--road-seeds N ...] [--only NAME
-...]``
+...] [--decompose | --whole-vehicle]``
 
 Drives (:func:`bench.studies.truck_effects.build`): ISO 8608 class C, 20 m/s, 1 kHz, 10 um of
 deflection noise (100 urad of roll), the scoring of :func:`bench.accuracy.scenarios.score` (load
@@ -26,6 +26,27 @@ Then where the cost comes from: the forward filter's posterior std of the suspen
 (its design at 10 um and 20 m/s) without and with the lag, and on the ``friction+lag`` drive
 (road seed 1) the 10 ms load error where the true rate is below 2 cm/s (the spring near
 sticking) and elsewhere.
+
+``--decompose``: where the cost of the sharper truth comes from, per drive (road seed 1) at
+10 ms: the load error, the smoothed rate's error against the truth's (mm/s), the friction
+force's error (the file's law at the estimated rate against the truth's law at the truth's
+rate, N RMS per spring) and the part of it that is the law's own (the file's law at the
+truth's rate); then, on the road seeds given, the causal candidates for the friction input:
+the tanh law's expectation over the rate's Gaussian error, ``tanh(m / sqrt(v_f^2 + pi/2 s^2))``,
+with s the forward filter's posterior std (``expect-forward``) or the fixed-lag estimate's
+(``expect-correction``, at each delayed correction's lag), and the equivalent damping's
+factor at 10 ms (``damping F``; the package's 0.5), against the package's law; and how
+fast a causal v_f fit could decide: the innovations' log-likelihood lead (nats) of each v_f of
+:data:`road_force_estimator.estimation.offline.FIT_GRID` over the file's, zero-latency
+filters over the drive's first seconds (as ``observer.friction_velocity_fit`` offline),
+and what switching once at that moment could give at most: the 10 ms loads of the file's v_f
+before it and of the truth's after it, spliced (the switch's transient ignored).
+
+``--whole-vehicle``: the same question on MODEL.md's tractor and semi-trailer (the drives of
+:mod:`bench.accuracy.articulated_wim`'s ``friction`` part: class C, road seed 1, 20 m/s,
+zero-load readings, the payload unknown, ``--duration`` s), at 10 ms: per axle the
+dynamic-load error with neither, with the 3 ms lag, with both (v_f 0.01), and with the
+truth's v_f 0.005 against the file's 0.01 and told it, each against the drive with neither.
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
@@ -151,6 +172,265 @@ def diagnostics(duration_s: float) -> list[str]:
     return lines
 
 
+#: The drives of the decomposition: (name, its truth, the plant's v_f, the file's v_f).
+DECOMPOSED = (
+    ('matched', NOMINAL, 0.01, 0.01),
+    ('lag', LAG, 0.01, 0.01),
+    ('friction', FRICTION, 0.01, 0.01),
+    ('friction+lag', BOTH, 0.01, 0.01),
+    ('friction, truth v_f 0.005, file v_f 0.005', FRICTION, 0.005, 0.005),
+    ('friction, truth v_f 0.005', FRICTION, 0.005, 0.01),
+    ('friction+lag, truth v_f 0.005, file v_f 0.005', BOTH, 0.005, 0.005),
+    ('friction+lag, truth v_f 0.005', BOTH, 0.005, 0.01),
+)
+#: The causal candidates for the friction input (:func:`candidate`).
+CANDIDATES = ('package', 'expect-forward', 'expect-correction', 'damping 0.25', 'damping 1')
+#: The spread of the rate's error in the law's expectation: ``E[tanh(dq / v)]`` over dq ~ N(m,
+#: s^2) ~ ``tanh(m / sqrt(v^2 + pi/2 s^2))`` (tanh ~ erf(sqrt(pi) x / 2) and the probit
+#: integral).
+RATE_SPREAD = np.pi / 2
+#: The log-likelihood lead (nats) taken as a decision of a causal fit (:func:`fit_lead`).
+LEAD_NATS = 10.0
+
+
+def _estimate(drive, vehicle: VehicleParameters, latency_s: float):
+    from bench.accuracy.run_benchmark import per_sample
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation import estimate_batch
+
+    est = estimate_batch(drive.stamps_ns, drive.q_m, drive.roll_rad, drive.speed_mps, vehicle,
+                         ObserverParameters(latency_s=latency_s))
+    return est, per_sample(est, drive.stamps_ns)
+
+
+def decompose(duration_s: float) -> list[str]:
+    """The 10 ms figures of :data:`DECOMPOSED` on road seed 1 (Markdown table rows)."""
+    from bench.accuracy.scenarios import score
+
+    lines = ['| drive (10 ms, road seed 1) | load error (% dyn) | ratio to matched | rate error '
+             '(mm/s) | friction error (N) | of it the law at the true rate (N) |',
+             '|---|---:|---:|---:|---:|---:|']
+    ref = None
+    for name, truck, v_true, v_file in DECOMPOSED:
+        drive = build(truck, v_true, duration_s, 1)
+        est, ps = _estimate(drive, replace(truck, leaf_spring_friction_velocity_mps=v_file),
+                            0.01)
+        err = score(drive, ps)['load_rms_pct_dyn']
+        ref = err if ref is None else ref
+        k0 = drive.skip
+        dq_true = np.gradient(drive.truth['q_m'], drive.t_s, axis=0)[k0:]
+        dq_est = np.asarray(est.dq)[k0:]
+        f_n = float(truck.leaf_spring_friction_n[0])
+        f_true = -f_n * np.tanh(dq_true / v_true)
+        f_est = -f_n * np.tanh(dq_est / v_file)
+        f_law = -f_n * np.tanh(dq_true / v_file)
+        rms = lambda a: float(np.sqrt(np.mean(a ** 2)))     # noqa: E731
+        lines.append(f'| {name} | {err:.2f} | {err / ref:.3f} | '
+                     f'{1000 * rms(dq_est - dq_true):.1f} | {rms(f_est - f_true):.0f} | '
+                     f'{rms(f_law - f_true):.0f} |')
+    return lines
+
+
+class candidate:
+    """Within it, the observer's friction input is the candidate ``name`` of
+    :data:`CANDIDATES` (public methods of :class:`.observer.friction.KnownFriction` wrapped;
+    put back on exit)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __enter__(self):
+        from road_force_estimator.estimation.observer.friction import KnownFriction
+
+        from road_force_estimator.estimation.models import leaf_friction
+
+        self.saved = (KnownFriction.select, KnownFriction.update, KnownFriction.correction)
+        self.factor = leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY
+        if self.name.startswith('damping '):     # the equivalent damping's factor at 10 ms
+            leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY = float(self.name.split()[1])
+        if self.name == 'package' or self.name.startswith('damping '):
+            return self
+        select, update, correction = self.saved
+
+        def law(fr, velocities):
+            f_n = np.asarray(fr.model_friction_n)
+            v = np.asarray(velocities)
+
+            def forces(dq, ceq):
+                dq = np.asarray(dq, dtype=float)
+                return -f_n * np.tanh(dq / v) + np.asarray(ceq) * dq
+            return forces
+
+        def spread(fr, p):
+            s2 = np.maximum(np.diag(p)[list(fr.rates)], 0.0)
+            return np.sqrt(fr.v_f ** 2 + RATE_SPREAD * s2)
+
+        def new_select(fr, g, dt):
+            # the forward filter's law (posterior std) and each lag's, of the gains g
+            select(fr, g, dt)
+            if not hasattr(fr, 'package_law'):
+                fr.package_law = fr.law
+                fr.v_f = fr.package_law.__self__.friction_velocity_mps
+                fr.model_friction_n = fr.package_law.__self__.friction_n
+            if getattr(fr, 'laws_of', None) is not g:
+                fr.laws_of, fr.lag_laws = g, {}
+                fr.forward_law = law(fr, spread(fr, g.p_post))
+
+        def lag_law(fr, g, lag):
+            if lag not in fr.lag_laws:
+                p = g.p_post.copy()
+                for i in range(min(lag, g.lag_gains.shape[0])):
+                    b = g.lag_gains[i]
+                    p -= b @ g.s @ b.T
+                fr.lag_laws[lag] = law(fr, spread(fr, p))
+            return fr.lag_laws[lag]
+
+        def new_update(fr, sv, x):
+            if self.name != 'expect-forward':
+                return update(fr, sv, x)
+            fr.law = fr.forward_law
+            try:
+                return update(fr, sv, x)
+            finally:
+                fr.law = fr.package_law
+
+        def new_correction(fr, g, dt, lag, index, dq):
+            if self.name != 'expect-correction':
+                return correction(fr, g, dt, lag, index, dq)
+            fr.law = lag_law(fr, g, lag)
+            try:
+                return correction(fr, g, dt, lag, index, dq)
+            finally:
+                fr.law = fr.package_law
+
+        KnownFriction.select, KnownFriction.update = new_select, new_update
+        KnownFriction.correction = new_correction
+        return self
+
+    def __exit__(self, *exc) -> None:
+        from road_force_estimator.estimation.models import leaf_friction
+        from road_force_estimator.estimation.observer.friction import KnownFriction
+
+        KnownFriction.select, KnownFriction.update, KnownFriction.correction = self.saved
+        leaf_friction.FRICTION_DAMPING_FACTOR_LATENCY = self.factor
+
+
+def candidates(duration_s: float, road_seeds) -> list[str]:
+    """The 10 ms ratio to the matched drive per candidate (:data:`CANDIDATES`) on the
+    ``friction+lag`` drives (Markdown table rows)."""
+    from bench.accuracy.scenarios import score
+
+    drives = [('friction+lag', BOTH, 0.01, 0.01),
+              ('friction+lag, truth v_f 0.005', BOTH, 0.005, 0.01),
+              ('friction+lag, truth v_f 0.005, file v_f 0.005', BOTH, 0.005, 0.005)]
+    ref = {s: score(d, _estimate(d, NOMINAL, 0.01)[1])['load_rms_pct_dyn']
+           for s, d in ((s, build(NOMINAL, 0.01, duration_s, s)) for s in road_seeds)}
+    lines = ['| drive (10 ms) | ' + ' | '.join(CANDIDATES) + ' |',
+             '|---|' + '---:|' * len(CANDIDATES)]
+    for name, truck, v_true, v_file in drives:
+        ratios = {c: [] for c in CANDIDATES}
+        for s in road_seeds:
+            drive = build(truck, v_true, duration_s, s)
+            for c in CANDIDATES:
+                with candidate(c):
+                    _, ps = _estimate(
+                        drive, replace(truck, leaf_spring_friction_velocity_mps=v_file), 0.01)
+                ratios[c].append(score(drive, ps)['load_rms_pct_dyn'] / ref[s])
+        lines.append(f'| {name} | ' + ' | '.join(
+            f'{np.mean(ratios[c]):.3f} ({max(ratios[c]):.3f})' for c in CANDIDATES) + ' |')
+    return lines
+
+
+def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
+    """When the truth's v_f leads the file's by :data:`LEAD_NATS` in the innovations'
+    log-likelihood (zero-latency filters, one per v_f of the offline fit's grid), per drive
+    and road seed."""
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.estimator import BatchRun
+    from road_force_estimator.estimation.offline import FIT_GRID
+
+    lines = []
+    for name, truck, v_true in (('friction+lag, truth v_f 0.005', BOTH, 0.005),
+                                ('friction+lag', BOTH, 0.01)):
+        for s in road_seeds:
+            drive = build(truck, v_true, duration_s, s)
+            n, step = drive.stamps_ns.size, int(round(chunk_s * drive.scenario.rate_hz))
+            traces = {}
+            for factor in FIT_GRID:
+                run = BatchRun(replace(truck, leaf_spring_friction_velocity_mps=0.01 * factor),
+                               ObserverParameters())
+                run.estimator.core.nll = 0.0
+                trace = []
+                for a in range(0, n, step):
+                    run.feed(drive.stamps_ns[a:a + step], drive.q_m[a:a + step],
+                             drive.roll_rad[a:a + step], drive.speed_mps[a:a + step])
+                    trace.append(run.estimator.core.nll)
+                traces[factor] = np.asarray(trace)
+            lead = {f: traces[1.0] - t for f, t in traces.items() if f != 1.0}
+            best = max(lead, key=lambda f: lead[f][-1])
+            over = np.flatnonzero(np.max(list(lead.values()), axis=0) >= LEAD_NATS)
+            when = (f'first at {(over[0] + 1) * chunk_s:g} s' if over.size
+                    else 'never')
+            if lead[best][-1] > 0.0:
+                at_end = (f'{0.01 * best:g} m/s, {lead[best][-1]:.0f} nats ahead of the '
+                          "file's")
+            else:
+                at_end = f"the file's, {-lead[best][-1]:.0f} nats ahead of the next"
+            line = (f'- {name}, road seed {s}: after {duration_s:g} s the likeliest v_f '
+                    f'is {at_end}; any other v_f {LEAD_NATS:g} nats ahead of the '
+                    f"file's: {when}")
+            if over.size and v_true != 0.01:
+                line += '; ' + _spliced(drive, truck, v_true, (over[0] + 1) * step, duration_s, s)
+            lines.append(line)
+    return lines
+
+
+def _spliced(drive, truck: VehicleParameters, v_true: float, k: int, duration_s: float,
+             road_seed: int) -> str:
+    """The 10 ms load error, relative to the matched drive's on the same road, of the file's
+    v_f before sample k and the truth's from it (outputs spliced), beside each alone."""
+    from types import SimpleNamespace
+
+    from bench.accuracy.scenarios import score
+
+    matched = build(NOMINAL, 0.01, duration_s, road_seed)
+    ref = score(matched, _estimate(matched, NOMINAL, 0.01)[1])['load_rms_pct_dyn']
+    _, file_ = _estimate(drive, truck, 0.01)
+    _, told = _estimate(drive, replace(truck, leaf_spring_friction_velocity_mps=v_true), 0.01)
+    load = np.array(file_.wheel_load_n)
+    load[k:] = np.asarray(told.wheel_load_n)[k:]
+    spliced = SimpleNamespace(stamp_ns=file_.stamp_ns, wheel_load_n=load, road_m=file_.road_m,
+                              ltr=file_.ltr)
+    ratio = {n: score(drive, e)['load_rms_pct_dyn'] / ref
+             for n, e in (('file', file_), ('told', told), ('spliced', spliced))}
+    return (f"10 ms: the file's v_f {ratio['file']:.3f} x matched, the truth's "
+            f"{ratio['told']:.3f} x, switched there {ratio['spliced']:.3f} x")
+
+
+def whole_vehicle(duration_s: float) -> list[str]:
+    """The ``--whole-vehicle`` table (Markdown rows)."""
+    from bench.accuracy import articulated_wim as wim
+
+    both = {**wim.TANH, **wim.LAG}
+    sharp = {'vehicle.leaf_spring_friction_velocity': 0.005}
+    base = {**wim.ZERO_LOAD, 'vehicle.trailer.mass': 25000.0}
+    drives = (('neither', {}, {}), ('lag', wim.LAG, wim.LAG), ('friction+lag', both, both),
+              ('friction+lag, truth v_f 0.005', {**both, **sharp}, both),
+              ('friction+lag, truth v_f 0.005, file v_f 0.005', {**both, **sharp},
+               {**both, **sharp}))
+    lines = ['| drive (whole vehicle, C, 10 ms) | front, drive, trailer_1..3 (% dyn) | '
+             'x neither, per axle |', '|---|---|---|']
+    ref = None
+    for name, plant, file_ in drives:
+        drive = wim.simulate('C', duration_s, 1e-5, {**base, **plant})
+        est = wim.estimate(wim.file_vehicle({**wim.ZERO_LOAD, **file_}), drive, 0.01, False)
+        pct = wim.dynamic_pct(drive, est)
+        ref = pct if ref is None else ref
+        lines.append(f'| {name} | ' + ', '.join(f'{v:.2f}' for v in pct) + ' | '
+                     + ', '.join(f'{v:.2f}' for v in pct / ref) + ' |')
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog='python -m bench.studies.friction_lag',
                                 description=__doc__.splitlines()[0])
@@ -158,7 +438,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--road-seeds', type=int, nargs='+', default=[1, 2, 3], metavar='N')
     p.add_argument('--only', nargs='+', default=None, metavar='NAME',
                    help='drives to run (matched always runs)')
+    p.add_argument('--decompose', action='store_true',
+                   help="where the cost comes from, the causal candidates and the fit's lead "
+                        'only (road seeds as given)')
+    p.add_argument('--whole-vehicle', action='store_true',
+                   help='the whole vehicle at 10 ms only (--duration s)')
     args = p.parse_args(argv)
+    if args.whole_vehicle:
+        t0 = time.perf_counter()
+        print('\n'.join(whole_vehicle(args.duration)))
+        print(f'\n({time.perf_counter() - t0:.0f} s; {args.duration:g} s drives)')
+        return 0
+    if args.decompose:
+        t0 = time.perf_counter()
+        print('\n'.join(decompose(args.duration) + [''] + candidates(args.duration,
+                                                                     args.road_seeds)
+                        + [''] + fit_lead(args.duration, args.road_seeds)))
+        print(f'\n({time.perf_counter() - t0:.0f} s; {args.duration:g} s drives)')
+        return 0
     if args.duration < 5.0:
         print('friction_lag: --duration must be >= 5 s', file=sys.stderr)
         return 2
