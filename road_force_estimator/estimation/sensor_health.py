@@ -67,8 +67,9 @@ GAP_S = 0.5
 UNIT_WINDOW_FACTOR = 2.0
 #: The whole vehicle's drift window starts again below this speed (m/s; :class:`UnitDrift`).
 UNIT_MIN_SPEED_MPS = 8.0
-#: A whole-vehicle drift flag clears below this fraction of the offset (:class:`UnitDrift`;
-#: half, the front axle's, let a 1 mm/min drift's flag drop for 0.4 s on class C).
+#: A whole-vehicle drift flag clears a window after it fell below this fraction of the
+#: offset (:class:`UnitDrift`; at once below half, the front axle's rule, let a 1 mm/min
+#: drift's flag drop for 0.4 s on class C).
 UNIT_CLEAR_FRACTION = 0.25
 #: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
 UNIT_MIN_AXLES = 3
@@ -338,8 +339,8 @@ class UnitDrift:
     divided by ``sqrt(1 + h_i)`` (h_i: the fit's variance at channel i, in units of a
     channel's, so that r_i / sqrt(1 + h_i) is the least-squares test of an offset on channel i
     alone): the channel whose |r_i| / sqrt(1 + h_i) is largest, above ``limit_m``, is
-    flagged, and stays so (no other of its unit) until its own falls below
-    :data:`UNIT_CLEAR_FRACTION` of it. The mean spring force
+    flagged, and stays so (no other of its unit) until its own has been below
+    :data:`UNIT_CLEAR_FRACTION` of it for a window. The mean spring force
     over seconds is its body's momentum change, and the rigid fit takes up the bodies' mean
     heave, pitch and roll (a curve, a braking, a payload off-centre); a sensor's offset d is
     not a rigid body's pattern and shows as d in its own r_i. A standing truck carries the
@@ -360,6 +361,7 @@ class UnitDrift:
         self.units = [(tuple(idx), [where[k] for k in idx], _deleted(np.asarray(rows, float)))
                       for idx, rows in units]
         self._ref = None
+        self._seen = [0.0] * len(self.units)   # per unit: when its flag was last up (s)
         self.restart()
 
     def forget(self) -> None:
@@ -415,16 +417,20 @@ class UnitDrift:
                 self._ref = [r.copy() for r in z]
             z = [r - f for r, f in zip(z, self._ref)]
         limit = self.limit_m
-        for (idx, _, _), r in zip(self.units, z):
+        seen = self._seen
+        for u, ((idx, _, _), r) in enumerate(zip(self.units, z)):
             a = np.abs(r)
             up = [j for j, k in enumerate(idx) if drift[k]]
             if up and a[up[0]] >= UNIT_CLEAR_FRACTION * limit:
-                continue                        # a flag holds until its own r_i falls
+                seen[u] = t                     # the flag's own r_i still up
+            if up and t - seen[u] <= w:
+                continue                        # a flag holds a window after it was last up
             for k in idx:
                 drift[k] = False
             i = int(np.argmax(a))
             if a[i] > limit:
                 drift[idx[i]] = True
+                seen[u] = t
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:
