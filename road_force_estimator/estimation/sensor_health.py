@@ -37,6 +37,13 @@ drifting sensor is flagged and fed (an offset of d costs k d of static load, 0.1
 the drift window starts again (a held reading is no evidence of a drift).
 
 Counts per channel: episodes (a flag's rising edges) and samples flagged.
+
+The whole vehicle (:meth:`FaultSettings.of_whole_vehicle`): the same detector over its
+channels (every deflection, the tractor's and the trailer's roll), stuck by the same rule;
+the drift of a deflection judged against its unit's other deflections (:class:`UnitDrift`:
+a rigid body's heave, pitch and roll, on units with :data:`UNIT_MIN_AXLES` instrumented
+axles or more; the kingpin's force is unknown, so no unit's momentum balances alone), from
+the readings and the speed (``rates`` is the speed there): the same flags in every mode.
 """
 from __future__ import annotations
 
