@@ -391,7 +391,8 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                            observer: ObserverParameters | None = None,
                            offline: bool = False,
-                           gap_threshold_s: float = GAP_THRESHOLD_S) -> WholeVehicleArrays:
+                           gap_threshold_s: float = GAP_THRESHOLD_S,
+                           windows: bool = False) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -402,6 +403,10 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     readings : (m, channels) as :meth:`WholeVehicleEstimator.step` takes them
     speed_mps : (m,) or float (m/s)
     gap_threshold_s : the shortest step that is a gap (s; module notes)
+    windows : offline, smooth a run longer than :data:`STREAM_WINDOW_SAMPLES` and its
+        overlap in windows (:class:`WholeVehicleOfflineStream` ``eager``: the load pass's
+        rows held a window at a time; each field within ~3e-4 of its RMS of the one-block
+        estimate); False: the smoother's own rule (the one-block numbers)
     """
     est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     stamps = np.asarray(stamps_ns, np.int64)
@@ -413,7 +418,7 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         samples += est.finish()
         return _arrays(est, samples)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
-                                       eager=False)
+                                       eager=bool(windows))
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))

@@ -58,9 +58,10 @@ def front_axle_vehicle():
     return VehicleParameters()
 
 
-def estimate(input_path: Path, vehicle, observer, mode: str):
+def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False):
     """The stage in one call: the drive's
-    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline').
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline';
+    ``windows``: offline, the smoother in windows, as :mod:`.plan` decides).
 
     Raises
     ------
@@ -86,7 +87,7 @@ def estimate(input_path: Path, vehicle, observer, mode: str):
         raise InputError('no usable /vehicle/twist message: the speed is unknown')
     speed[~held] = speed[np.argmax(held)]      # before the first twist: its speed
     return estimate_whole_vehicle(vehicle, r.stamps_ns, r.readings, speed, observer=observer,
-                                  offline=mode == 'offline')
+                                  offline=mode == 'offline', windows=windows)
 
 
 def sensor_report(est, wv):
