@@ -89,7 +89,7 @@ OFFSET_TIME_CONSTANT_S = 1.0
 #: on class C and A at 20 m/s (``python -m bench.studies.articulated_sensor_faults``'s
 #: drives), a deflection stuck 2 s and left out cost its axle's dynamic load 114-649 % at
 #: 10 ms (the fixed lag's design without it loses that wheel's road), fed 43-79 %; at zero
-#: latency left out 41-47 %, fed 61-84 %.
+#: latency left out 41-48 %, fed 61-84 %.
 EXCLUDE_STUCK_AT_LATENCY = False
 
 #: The units whose load transfer is estimated, in the order of the LTR fields.
