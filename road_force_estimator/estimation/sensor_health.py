@@ -37,17 +37,27 @@ drifting sensor is flagged and fed (an offset of d costs k d of static load, 0.1
 the drift window starts again (a held reading is no evidence of a drift).
 
 Counts per channel: episodes (a flag's rising edges) and samples flagged.
+
+The whole vehicle (:meth:`FaultSettings.of_whole_vehicle`): the same detector over its
+channels (every deflection, the tractor's and the trailer's roll), stuck by the same rule;
+the drift of a deflection judged against its unit's other deflections (:class:`UnitDrift`:
+a rigid body's heave, pitch and roll, on units with :data:`UNIT_MIN_AXLES` instrumented
+axles or more; the kingpin's force is unknown, so no unit's momentum balances alone), from
+the readings and the speed (``rates`` is the speed there): the same flags in every mode.
 """
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+import math
 from typing import Sequence
 
 import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
-           'GAP_S', 'FaultSettings', 'FaultDetector', 'detect_faults']
+           'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
+           'UNIT_MIN_AXLES',
+           'FaultSettings', 'FaultDetector', 'UnitDrift', 'detect_faults']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -60,6 +70,16 @@ DRIFT_START_S = 3.0
 DRIFT_BLOCK = 10
 #: A step longer than this (s) starts the drift window and the stuck runs again.
 GAP_S = 0.5
+#: The whole vehicle's drift window (:class:`UnitDrift`) in ``observer.fault_drift_window``s.
+UNIT_WINDOW_FACTOR = 2.0
+#: The whole vehicle's drift window starts again below this speed (m/s; :class:`UnitDrift`).
+UNIT_MIN_SPEED_MPS = 8.0
+#: A whole-vehicle drift flag clears a window after it fell below this fraction of the
+#: offset (:class:`UnitDrift`; at once below half, the front axle's rule, let a 1 mm/min
+#: drift's flag drop for 0.4 s on class C).
+UNIT_CLEAR_FRACTION = 0.25
+#: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
+UNIT_MIN_AXLES = 3
 
 
 @dataclass(frozen=True)
@@ -75,6 +95,10 @@ class FaultSettings:
     #: (channel 2); None: no drift detection
     body: tuple | None = None
     relative: bool = False             #: zero_load: H against its first window's value
+    #: the whole vehicle's drift check (:class:`UnitDrift`): per rigid unit judged, its
+    #: deflection channels' indices and their rows ``(1, x, +-s)`` (m: position behind the
+    #: front axle, half the spring track, + left); None: none (the front axle's ``body``)
+    units: tuple | None = None
 
     @classmethod
     def of(cls, observer, vehicle, channels: Sequence[str]) -> 'FaultSettings':
@@ -88,6 +112,28 @@ class FaultSettings:
         return cls(tuple(channels), observer.fault_stuck_time_s,
                    observer.fault_stuck_tolerance, observer.fault_drift_window_s,
                    observer.fault_drift_offset_m, body, vehicle.zero_load)
+
+    @classmethod
+    def of_whole_vehicle(cls, observer, model) -> 'FaultSettings':
+        """The whole vehicle's (:class:`.models.articulated.ArticulatedObserverModel`
+        ``model``: its channels and vehicle): every channel for the stuck flag, the
+        deflections of each unit with at least :data:`UNIT_MIN_AXLES` instrumented axles for
+        the drift (:class:`UnitDrift`)."""
+        axles = model.vehicle.axles
+        units = []
+        for body in ('tractor', 'trailer'):
+            idx = [k for k, ch in enumerate(model.channels)
+                   if ch[0] == 'q' and axles[ch[1]].body == body]
+            if len({model.channels[k][1] for k in idx}) < UNIT_MIN_AXLES:
+                continue
+            rows = tuple((1.0, axles[model.channels[k][1]].position_m,
+                          (1.0 if model.channels[k][2] == 0 else -1.0)
+                          * axles[model.channels[k][1]].spring_half_track_m) for k in idx)
+            units.append((tuple(idx), rows))
+        return cls(tuple(model.channel_names), observer.fault_stuck_time_s,
+                   observer.fault_stuck_tolerance, observer.fault_drift_window_s,
+                   observer.fault_drift_offset_m, None, model.vehicle.zero_load,
+                   tuple(units) or None)
 
 
 @dataclass
@@ -109,6 +155,10 @@ class FaultDetector:
     def __init__(self, settings: FaultSettings) -> None:
         self.settings = settings
         self.n = len(settings.channels)
+        #: the whole vehicle's drift check, or None (the front axle's momentum balance)
+        self.units = (UnitDrift(settings.units, UNIT_WINDOW_FACTOR * settings.drift_window_s,
+                                settings.drift_offset_m, settings.relative)
+                      if settings.units and settings.drift_offset_m > 0.0 else None)
         self.reset()
 
     def reset(self) -> None:
@@ -124,6 +174,8 @@ class FaultDetector:
         self.samples = 0
         self.events: list = []
         self._last = None
+        if self.units is not None:
+            self.units.forget()
         self._restart(None)
 
     def _restart(self, t: float | None) -> None:
@@ -141,12 +193,15 @@ class FaultDetector:
         self._bh = self._br = 0.0
         self._bn = 0
         self._ref = None
+        if self.units is not None:
+            self.units.restart()
 
     def step(self, stamp_ns: int, values: Sequence[float],
              rates: tuple[float, float] | None = None) -> None:
         """One accepted sample: its stamp (ns), its readings (the channels' order; the
         detector keeps the sequence, not a copy) and, for the drift, the body's heave and roll
-        rates estimated at it (m/s, rad/s), or None."""
+        rates estimated at it (m/s, rad/s; the whole vehicle's :class:`UnitDrift`: the speed
+        (m/s) as a 1-tuple), or None."""
         t = stamp_ns * 1e-9
         last = self._last
         if last is None or t - self._tl > GAP_S:
@@ -159,8 +214,12 @@ class FaultDetector:
             self._sn = self._bn = 0
             self._t0 = t
             self._drift = [False] * self.n
+            if self.units is not None:
+                self.units.restart()
         elif rates is not None and self.settings.body is not None:
             self._drift_step(t, values, rates)
+        elif rates is not None and self.units is not None:
+            self.units.step(t, values, rates[0], self._drift)
         self._last = values
         if self._flagged or True in stuck or True in self._drift:
             self._book(stamp_ns)
@@ -273,6 +332,129 @@ class FaultDetector:
         return FaultCounts(by(list(self.flags)), by(self.stuck_episodes), by(self.stuck_samples),
                            by(self.drift_episodes), by(self.drift_samples),
                            {n: dict(f) for n, f in zip(names, self.first_ns) if f})
+
+
+class UnitDrift:
+    """The whole vehicle's slow offset drift, per rigid unit against its neighbours: each
+    deflection's mean over the last window (``window_s``, s; summed per block of
+    :data:`DRIFT_BLOCK` samples, judged at a block's end) against what the unit's other
+    deflections make of a rigid body's heave, pitch and roll,
+
+        mean(q_i) ~ a + b x_i + c (+-s_i)       (+ left; x_i behind the front axle, m)
+
+    fitted to the unit's deflections but channel i (its deleted residual r_i, m), each
+    divided by ``sqrt(1 + h_i)`` (h_i: the fit's variance at channel i, in units of a
+    channel's, so that r_i / sqrt(1 + h_i) is the least-squares test of an offset on channel i
+    alone): the channel whose |r_i| / sqrt(1 + h_i) is largest, above ``limit_m``, is
+    flagged, and stays so (no other of its unit) until its own has been below
+    :data:`UNIT_CLEAR_FRACTION` of it for a window. The mean spring force
+    over seconds is its body's momentum change, and the rigid fit takes up the bodies' mean
+    heave, pitch and roll (a curve, a braking, a payload off-centre); a sensor's offset d is
+    not a rigid body's pattern and shows as d in its own r_i. A standing truck carries the
+    road's shape under the group (statically indeterminate: mm), so the window starts again
+    below :data:`UNIT_MIN_SPEED_MPS`. With ``relative`` (``zero_load``) each r_i is taken
+    against its first judged window's.
+
+    ``units``: per unit ``(channel indices, rows (1, x, +-s))`` (:meth:`FaultSettings.
+    of_whole_vehicle`)."""
+
+    def __init__(self, units: Sequence, window_s: float, limit_m: float,
+                 relative: bool = False) -> None:
+        self.window_s, self.limit_m, self.relative = float(window_s), float(limit_m), relative
+        self.channels = sorted({k for idx, _ in units for k in idx})
+        where = {k: j for j, k in enumerate(self.channels)}
+        #: per unit: its channels, their places in :attr:`channels`, the scaled deleted
+        #: residuals' operator (n, n)
+        self.units = [(tuple(idx), [where[k] for k in idx], _deleted(np.asarray(rows, float)))
+                      for idx, rows in units]
+        self._ref = None
+        self._seen = [0.0] * len(self.units)   # per unit: when its flag was last up (s)
+        self.restart()
+
+    def forget(self) -> None:
+        """The window and the relative reference forgotten."""
+        self._ref = None
+        self.restart()
+
+    def restart(self) -> None:
+        """The window starts again (a gap, a stuck sensor, a stop)."""
+        m = len(self.channels)
+        self._win: deque = deque()
+        self._sum = [0.0] * m
+        self._sn = 0
+        self._blk = [0.0] * m
+        self._bn = 0
+        self._b0 = 0.0
+
+    def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
+        """One sample (s, the readings, m/s) into the window; the flags into ``drift``
+        (per channel of the detector) at a judged block's end."""
+        if not abs(speed_mps) >= UNIT_MIN_SPEED_MPS:
+            if self._sn or self._bn:
+                self.restart()
+            return
+        blk = self._blk
+        for j, k in enumerate(self.channels):
+            blk[j] += values[k]
+        self._bn += 1
+        if self._bn == 1:
+            self._b0 = t
+        if self._bn < DRIFT_BLOCK:
+            return
+        win = self._win
+        win.append((self._b0, blk, self._bn))
+        sums = self._sum
+        for j, b in enumerate(blk):
+            sums[j] += b
+        self._sn += self._bn
+        self._blk = [0.0] * len(blk)
+        self._bn = 0
+        w = self.window_s
+        while t - win[0][0] > w:
+            _, old, n = win.popleft()
+            for j, b in enumerate(old):
+                sums[j] -= b
+            self._sn -= n
+        if t - win[0][0] < 0.99 * w:
+            return
+        mean = np.asarray(sums) / self._sn
+        z = [p @ mean[places] for _, places, p in self.units]
+        if self.relative:
+            if self._ref is None:
+                self._ref = [r.copy() for r in z]
+            z = [r - f for r, f in zip(z, self._ref)]
+        limit = self.limit_m
+        seen = self._seen
+        for u, ((idx, _, _), r) in enumerate(zip(self.units, z)):
+            a = np.abs(r)
+            up = [j for j, k in enumerate(idx) if drift[k]]
+            if up and a[up[0]] >= UNIT_CLEAR_FRACTION * limit:
+                seen[u] = t                     # the flag's own r_i still up
+            if up and t - seen[u] <= w:
+                continue                        # a flag holds a window after it was last up
+            for k in idx:
+                drift[k] = False
+            i = int(np.argmax(a))
+            if a[i] > limit:
+                drift[idx[i]] = True
+                seen[u] = t
+
+
+def _deleted(rows: np.ndarray) -> np.ndarray:
+    """The operator (n, n) taking a unit's deflection means to their deleted residuals,
+    each divided by ``sqrt(1 + h_i)`` (:class:`UnitDrift`); ``rows`` (n, p)."""
+    n = rows.shape[0]
+    out = np.zeros((n, n))
+    for i in range(n):
+        keep = [j for j in range(n) if j != i]
+        a = rows[keep]
+        pinv = np.linalg.pinv(a)
+        coef = rows[i] @ pinv                      # the fit's prediction at i from the others
+        h = float(rows[i] @ np.linalg.pinv(a.T @ a) @ rows[i])
+        out[i, i] = 1.0
+        out[i, keep] = -coef
+        out[i] /= math.sqrt(1.0 + h)
+    return out
 
 
 def flag_codes(events: list, n: int, channels: int) -> np.ndarray:

@@ -35,6 +35,16 @@ The road online: every wheel's road per finalized sample (the causal one at zero
 fixed-lag one with ``observer.latency``: :class:`.models.articulated_rows.WheelRoads`) and
 the fused profile streamed (:class:`.fused_stream.FusedStream`: each point once the last axle
 has passed it, the rule of :func:`.articulated.fuse_roads` made causal).
+
+Sensor health (:mod:`.sensor_health`, :meth:`.FaultSettings.of_whole_vehicle`): every
+channel flagged ``stuck`` when it alone stays still, each deflection of a unit with three
+instrumented axles or more flagged ``drift`` against its neighbours (:class:`.UnitDrift`),
+from the readings as they come (before the static-load tracker) and the speed: the same flags
+online, at a latency and offline. At zero latency a stuck deflection is left out of the
+filter while flagged (:meth:`.ModelCore.set_excluded`; with a latency it stays fed,
+:data:`EXCLUDE_STUCK_AT_LATENCY`); a stuck roll sensor and a drifting deflection stay fed;
+offline the smoother is fed every channel. ``sensor_flags`` per sample
+(:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 """
 from __future__ import annotations
 
@@ -56,10 +66,12 @@ from road_force_estimator.estimation.axle_fit import (
 from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
+from road_force_estimator.estimation.sensor_health import (
+    CODES, FaultCounts, FaultDetector, FaultSettings)
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
 
-__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS', 'STREAM_WINDOW_SAMPLES',
-           'STREAM_OVERLAP_S', 'WholeVehicleSample',
+__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'EXCLUDE_STUCK_AT_LATENCY', 'PIECE_ROWS',
+           'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
            'fit_axles']
@@ -73,6 +85,13 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS', 'STREAM_WINDOW_SAMPL
 #: 4.5 / 3.3 with 1 s, 4.2 / 3.3 with 0.3 s; class A: 24.5 / 7.4 with 10 s, 7.1 / 6.6 with
 #: 1 s (the payload 4 t off the file's: the same to 0.4 point).
 OFFSET_TIME_CONSTANT_S = 1.0
+
+#: Whether a stuck deflection is left out of the filter with ``observer.latency`` > 0 too. No:
+#: on class C and A at 20 m/s (``python -m bench.studies.articulated_sensor_faults``'s
+#: drives), a deflection stuck 2 s and left out cost its axle's dynamic load 114-649 % at
+#: 10 ms (the fixed lag's design without it loses that wheel's road), fed 43-79 %; at zero
+#: latency left out 41-48 %, fed 61-84 %.
+EXCLUDE_STUCK_AT_LATENCY = False
 
 #: The units whose load transfer is estimated, in the order of the LTR fields.
 UNITS = ('tractor', 'trailer', 'combination')
@@ -107,6 +126,9 @@ class WholeVehicleSample:
     fused: tuple = ()
     #: the model fit per axle this sample completed online (:class:`.axle_fit.OnlineAxleFit`)
     axle_fit: AxleFit | None = None
+    #: each channel's sensor flag at this sample (:data:`.sensor_health.CODES`: 0 ok, 1
+    #: stuck, 2 drift; ``channel_names``' order)
+    sensor_flags: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -150,6 +172,11 @@ class WholeVehicleArrays:
     #: online, each verdict of the model fit per axle as ``(stamp_ns, AxleFit)`` at the
     #: sample that completed it (:class:`.axle_fit.OnlineAxleFit`; ``axle_fit`` the last)
     axle_fits: tuple = ()
+    #: (channels, m) int8: each sample's sensor flags (:data:`.sensor_health.CODES`: 0 ok,
+    #: 1 stuck, 2 drift), or None
+    fault_flags: np.ndarray | None = None
+    #: the drive's sensor flags and counts by channel (:class:`.sensor_health.FaultCounts`)
+    faults: FaultCounts | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -278,6 +305,15 @@ class WholeVehicleEstimator:
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
         self._gaps: deque = deque()                # each held sample's gaps so far
         self._last: int | None = None
+        #: stuck and drifting sensors (:mod:`.sensor_health`; module notes)
+        self.faults = FaultDetector(FaultSettings.of_whole_vehicle(obs, self.model))
+        #: the deflections left out of the filter while stuck: at zero latency only
+        #: (:data:`EXCLUDE_STUCK_AT_LATENCY`)
+        self._droppable = (tuple(k for k, ch in enumerate(self.model.channels) if ch[0] == 'q')
+                           if obs.latency_s == 0.0 or EXCLUDE_STUCK_AT_LATENCY else ())
+        self._codes: deque = deque()               # each held sample's sensor flags
+        self._flags = (0,) * len(self.channel_names)
+        self._events = 0
 
     def step(self, stamp_ns: int, readings: Sequence[float], speed_mps: float
              ) -> list[WholeVehicleSample]:
@@ -291,6 +327,11 @@ class WholeVehicleEstimator:
         """
         stamp = int(stamp_ns)
         y = [float(r) for r in readings]      # from the equilibrium unless zero_load
+        raw = y if self.tracker is None else list(y)
+        faults = self.faults
+        stuck = faults.stuck
+        if self._droppable and (True in stuck or self.online.core.schedule.excluded):
+            self.online.core.set_excluded(tuple(k for k in self._droppable if stuck[k]))
         if self.tracker is not None:
             if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
@@ -300,6 +341,11 @@ class WholeVehicleEstimator:
             self._pending[stamp] = self.static_n
         ready = self.online.step(stamp, y, float(speed_mps))
         self._gaps.append(self.online.gaps)
+        faults.step(stamp, raw, (float(speed_mps),))
+        if len(faults.events) != self._events:
+            self._events = len(faults.events)
+            self._flags = tuple(CODES[f] for f in faults.flags)
+        self._codes.append(self._flags)
         out = self._samples(ready)
         self._last = stamp
         return out
@@ -333,7 +379,8 @@ class WholeVehicleEstimator:
                                           road_m=tuple(road),
                                           fused=tuple(self.fused.push(stamp, x, road,
                                                                       loads, static)),
-                                          axle_fit=fit))
+                                          axle_fit=fit,
+                                          sensor_flags=self._codes.popleft()))
         return out
 
 
@@ -360,13 +407,16 @@ def _arrays(est: WholeVehicleEstimator, samples: list, road=None, gated=None,
         field('ltr_quasi_static'), field('lateral_mps2'), road,
         tuple(int(g) for g in gated), tuple(est.channel_names), field('front_ltr'),
         np.array([s.gaps for s in samples], np.int64) if gaps is None else gaps,
-        fused=fused, axle_fits=fits, axle_fit=fits[-1][1] if fits else None)
+        fused=fused, axle_fits=fits, axle_fit=fits[-1][1] if fits else None,
+        fault_flags=np.array([s.sensor_flags for s in samples], np.int8).reshape(
+            m, len(est.channel_names)).T.copy(), faults=est.faults.counts())
 
 
 def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, speed_mps, *,
                            observer: ObserverParameters | None = None,
                            offline: bool = False,
-                           gap_threshold_s: float = GAP_THRESHOLD_S) -> WholeVehicleArrays:
+                           gap_threshold_s: float = GAP_THRESHOLD_S,
+                           windows: bool = False) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -377,6 +427,10 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     readings : (m, channels) as :meth:`WholeVehicleEstimator.step` takes them
     speed_mps : (m,) or float (m/s)
     gap_threshold_s : the shortest step that is a gap (s; module notes)
+    windows : offline, smooth a run longer than :data:`STREAM_WINDOW_SAMPLES` and its
+        overlap in windows (:class:`WholeVehicleOfflineStream` ``eager``: the load pass's
+        rows held a window at a time; each field within ~3e-4 of its RMS of the one-block
+        estimate); False: the smoother's own rule (the one-block numbers)
     """
     est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
     stamps = np.asarray(stamps_ns, np.int64)
@@ -388,7 +442,7 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         samples += est.finish()
         return _arrays(est, samples)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
-                                       eager=False)
+                                       eager=bool(windows))
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
@@ -411,7 +465,8 @@ def concatenate_arrays(pieces: Sequence[WholeVehicleArrays]) -> WholeVehicleArra
         join('stamps_ns'), join('distance_m'), join('converged'), last.wheel_names,
         last.axle_names, last.axle_bodies, join('load_n'), join('static_n'), join('ltr'),
         join('ltr_quasi_static'), join('lateral_mps2'), join('road_m'),
-        last.innovations_gated, last.channel_names, join('front_ltr'), join('gaps'))
+        last.innovations_gated, last.channel_names, join('front_ltr'), join('gaps'),
+        fault_flags=join('fault_flags'), faults=last.faults)
 
 
 #: Most samples of a piece :meth:`WholeVehicleOfflineStream.finish` hands out.
@@ -499,6 +554,8 @@ class WholeVehicleOfflineStream:
         self._clock = StepGaps(gap_threshold_s)
         self._last: int | None = None
         self._last_row = None
+        self._codes = _Columns([(np.int8, (ny,))], capacity)    # each sample's sensor flags
+        self._flags_before = list(self.est.faults.flags)
         #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
         self.innovations_gated: tuple = ()
 
@@ -515,6 +572,8 @@ class WholeVehicleOfflineStream:
         k = stamps.size
         y = np.array(readings, float, copy=True).reshape(k, -1)
         v = np.broadcast_to(np.asarray(speed_mps, float), (k,))
+        if k:
+            self._codes.append(self._fault_codes(stamps, y, v))
         tracker = self.est.tracker
         if tracker is not None and k:
             statics = np.empty((k, len(self.est.wheel_names)))
@@ -533,12 +592,28 @@ class WholeVehicleOfflineStream:
         self._in.append(stamps, y, v)
         return []
 
+    def _fault_codes(self, stamps: np.ndarray, y: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The sensor flags ((k, channels) int8) of a block's readings (before the tracker)
+        and speeds: the online estimator's detector, sample by sample."""
+        det = self.est.faults
+        k0, seen = det.samples, len(det.events)
+        step = det.step
+        for s, row, vi in zip(stamps.tolist(), y.tolist(), v.tolist()):
+            step(s, row, (vi,))
+        codes = np.empty((stamps.size, det.n), np.int8)
+        codes[:] = [CODES[f] for f in self._flags_before]
+        for i, ch, code in det.events[seen:]:
+            codes[i - k0:, ch] = code
+        self._flags_before = list(det.flags)
+        return codes
+
     def finish(self) -> Iterator[WholeVehicleArrays]:
         """The estimate, piece after piece (see the class notes)."""
         from road_force_estimator.estimation.smoothing.smoother import Smoother
         from road_force_estimator.estimation.models.articulated_rows import columns as cols_of
 
         stamps, y, v = self._in.arrays()
+        codes = self._codes.arrays()[0]
         statics = self._statics
         if isinstance(statics, _Columns):
             statics = statics.arrays()[0]
@@ -593,13 +668,14 @@ class WholeVehicleOfflineStream:
                               np.asarray(statics[g0:g1] if isinstance(statics, np.ndarray)
                                          else statics.read(g0, g1)))
                     yield self._piece(st, rows[c0:c1], d_run, static, run, g0 == a0,
-                                      smoother)
+                                      smoother, codes[g0:g1])
         self.innovations_gated = tuple(int(g) for g in smoother.gated.tolist())
         if self._statics is not None and not isinstance(self._statics, _Columns):
             self._statics.close()                           # the spilled file
 
     def _piece(self, stamps: np.ndarray, rows: np.ndarray, dist: np.ndarray, static,
-               gaps: int, starts_run: bool, smoother) -> WholeVehicleArrays:
+               gaps: int, starts_run: bool, smoother, codes: np.ndarray | None = None
+               ) -> WholeVehicleArrays:
         """One piece from the smoother's rows (the braking response added), the distance
         (m), the static loads ((k, wheels) or None: the file's) and the gaps before it."""
         est = self.est
@@ -622,7 +698,8 @@ class WholeVehicleOfflineStream:
             est.axle_bodies, np.ascontiguousarray(loads.T), np.array(static, float).T.copy(),
             ltr[0:6:2].copy(), ltr[1:6:2].copy(), rows[:, cols['ay']].T.copy(), road,
             tuple(int(x) for x in smoother.gated.tolist()), tuple(est.channel_names),
-            ltr[6:].copy(), g)
+            ltr[6:].copy(), g, fault_flags=None if codes is None else codes.T.copy(),
+            faults=est.faults.counts())
 
 
 def fit_axles(vehicle: ArticulatedParameters, wv: WholeVehicleArrays) -> AxleFit | None:

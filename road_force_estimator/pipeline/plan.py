@@ -20,7 +20,10 @@ not yet: the front axle's stage beside it, the whole vehicle's sinks (its topics
 ``/diagnostics`` status, the report's per-axle segment columns) and the fused profile take
 whole arrays; online the whole vehicle's estimator and load-transfer filters would have to be
 carried from block to block (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
-:data:`STREAM_MIN_SAMPLES`).
+:data:`STREAM_MIN_SAMPLES`). Offline its smoother goes in windows
+(``BlockPlan.whole_vehicle_windows``: ``estimate_whole_vehicle(..., windows=True)``, a run
+longer than :data:`~.estimation.whole_vehicle.STREAM_WINDOW_SAMPLES` and its overlap smoothed
+a window at a time), so the load pass's rows are held a window at a time, not the drive's.
 """
 from __future__ import annotations
 
@@ -40,10 +43,13 @@ ONE_BLOCK_BYTES_PER_SAMPLE = 1000
 @dataclass(frozen=True)
 class BlockPlan:
     """A drive's way through the pipeline: ``blocks`` False (one block) or True (many);
-    ``samples``: the deflection messages metadata.yaml lists (0: unknown)."""
+    ``samples``: the deflection messages metadata.yaml lists (0: unknown);
+    ``whole_vehicle_windows``: an articulated drive offline, the whole vehicle's smoother in
+    windows (module notes)."""
 
     blocks: bool
     samples: int
+    whole_vehicle_windows: bool = False
 
 
 def stream_threshold(memory_limit_bytes: float | None = None) -> int:
@@ -74,7 +80,7 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
         return BlockPlan(False, samples)
     if is_whole_vehicle(vehicle):                   # the whole vehicle: one block (notes)
-        return BlockPlan(False, samples)
+        return BlockPlan(False, samples, mode == 'offline')
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain
     return BlockPlan(samples >= limit, samples)

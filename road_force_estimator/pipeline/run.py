@@ -57,10 +57,12 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
         extra = {'samples before the first twist (given its speed)': early} if early else {}
         if whole is not None:
             stages.next(f'estimating the whole vehicle ({options["mode"]})')
-            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'])
+            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'],
+                                        windows=plan.whole_vehicle_windows)
             est = whole_vehicle.front_wheels(est, wv)
             fused = whole_vehicle.fused_profile(wv, whole)
             est = whole_vehicle.fused_road(est, wv, fused)
+            est = whole_vehicle.sensor_report(est, wv)     # the report's "Sensors"
         result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
                                  observer, options, stages, whole=wv, fused=fused,
                                  road_half_track_m=None if whole is None else

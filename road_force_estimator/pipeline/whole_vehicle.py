@@ -10,8 +10,10 @@ sample (the node's numbers), offline the smoother. Sinks: the estimate bag's who
 topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics from the front
 wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and
 the gross vehicle weight (:func:`add_diagnostics`; offline also the drive's model fit per
-axle, :func:`fit_values`: WARN naming the axle or sensor that does not fit), and the report's
-section and ``segments.csv`` columns (:mod:`~.report.whole_vehicle`).
+axle, :func:`fit_values`: WARN naming the axle or sensor that does not fit; every channel's
+sensor flag, :func:`sensor_status_values`: WARN naming a stuck or drifting sensor), and the
+report's section and ``segments.csv`` columns (:mod:`~.report.whole_vehicle`); the report's
+"Sensors" are the whole vehicle's channels (:func:`sensor_report`).
 
 The front axle's estimator still runs on the front axle's sensors (package defaults for the
 4-DOF model, :func:`front_axle_vehicle`) for what the whole vehicle's does not give yet: the
@@ -32,7 +34,8 @@ import numpy as np
 from road_force_estimator.pipeline.result import PROG, InputError
 
 __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
-           'add_diagnostics', 'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
+           'add_diagnostics', 'sensor_edges', 'sensor_status_values', 'sensor_report',
+           'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'MISMATCH',
            'STATUS_NAME']
 
@@ -55,9 +58,10 @@ def front_axle_vehicle():
     return VehicleParameters()
 
 
-def estimate(input_path: Path, vehicle, observer, mode: str):
+def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False):
     """The stage in one call: the drive's
-    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline').
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline';
+    ``windows``: offline, the smoother in windows, as :mod:`.plan` decides).
 
     Raises
     ------
@@ -83,7 +87,24 @@ def estimate(input_path: Path, vehicle, observer, mode: str):
         raise InputError('no usable /vehicle/twist message: the speed is unknown')
     speed[~held] = speed[np.argmax(held)]      # before the first twist: its speed
     return estimate_whole_vehicle(vehicle, r.stamps_ns, r.readings, speed, observer=observer,
-                                  offline=mode == 'offline')
+                                  offline=mode == 'offline', windows=windows)
+
+
+def sensor_report(est, wv):
+    """The front axle's estimate ``est`` with its status' sensor fields (the report's
+    "Sensors", ``report.json`` ``sensors``, the fleet's tables) those of the whole vehicle's
+    channels: the flags and counts of ``wv.faults`` (:mod:`~.estimation.sensor_health`), the
+    innovations gated per channel."""
+    fc = getattr(wv, 'faults', None)
+    if fc is None:
+        return est
+    st = replace(est.status, sensor_faults=dict(fc.flags),
+                 stuck_episodes=dict(fc.stuck_episodes), stuck_samples=dict(fc.stuck_samples),
+                 drift_episodes=dict(fc.drift_episodes), drift_samples=dict(fc.drift_samples),
+                 fault_first_ns={n: dict(f) for n, f in fc.first_ns.items()},
+                 innovations_gated=dict(zip(wv.channel_names,
+                                            (int(g) for g in wv.innovations_gated))))
+    return replace(est, status=st)
 
 
 def front_wheels(est, wv):
@@ -110,7 +131,40 @@ def front_wheels(est, wv):
                    ltr=take(ltr[:, 0]), ltr_quasi_static=take(ltr[:, 1]), lift_off=lift)
 
 
-def _status(wv, k: int, since: int = 0) -> dict:
+def sensor_edges(wv) -> list | None:
+    """Per channel of ``wv`` (its ``fault_flags``): the samples where a stuck and where a
+    drift flag rose (sorted index arrays), or None without flags."""
+    from road_force_estimator.estimation.sensor_health import CODES
+
+    flags = getattr(wv, 'fault_flags', None)
+    if flags is None:
+        return None
+    out = []
+    for row in np.asarray(flags):
+        prev = np.concatenate([[0], row[:-1]])
+        rose = row != prev
+        out.append(tuple(np.flatnonzero(rose & (row == CODES[w])) for w in ('stuck', 'drift')))
+    return out
+
+
+def sensor_status_values(wv, k: int, edges: list) -> tuple[dict, str]:
+    """The sensors' status values at sample ``k`` (the node's keys: ``sensor.<channel>``,
+    ``total.stuck.<channel>``, ``total.drift.<channel>``: flags raised so far) and the
+    fault message ('' when every sensor is ok; :func:`~.estimation.diagnostics.
+    fault_message`)."""
+    from road_force_estimator.estimation.diagnostics import fault_message, sensor_values
+    from road_force_estimator.estimation.sensor_health import CODES
+
+    words = {c: w for w, c in CODES.items()}
+    flags = {n: words[int(c)] for n, c in zip(wv.channel_names, wv.fault_flags[:, k])}
+    values = sensor_values(flags)
+    for n, (stuck, drift) in zip(wv.channel_names, edges):
+        values[f'total.stuck.{n}'] = str(int(np.searchsorted(stuck, k, side='right')))
+        values[f'total.drift.{n}'] = str(int(np.searchsorted(drift, k, side='right')))
+    return values, fault_message(flags)
+
+
+def _status(wv, k: int, since: int = 0, edges: list | None = None) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
     weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
     ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period); ``gaps``: those
@@ -134,6 +188,12 @@ def _status(wv, k: int, since: int = 0) -> dict:
     gross = float(axle.sum())
     message = f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles'
     level = 0 if math.isfinite(gross) else 1
+    if edges is not None:
+        sensors, fault = sensor_status_values(wv, k, edges)
+        values.update(sensors)
+        if fault:
+            level = 1
+            message += f'; {fault}'
     fit = fit_values(_fit_at(wv, k))
     values.update(fit)
     if fit.get('model_fit') == MISMATCH:
@@ -174,9 +234,11 @@ def add_diagnostics(diagnostics: list, wv) -> list:
         return diagnostics
     out = []
     since = 0
+    edges = sensor_edges(wv)
     for stamp, statuses in diagnostics:
         k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
-        out.append((stamp, list(statuses) + ([_status(wv, k, since)] if k >= 0 else [])))
+        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges)] if k >= 0
+                                             else [])))
         since = max(since, k + 1)
     return out
 

@@ -31,8 +31,10 @@ model topics INTERFACES.md does not keep for the whole vehicle). Messages go out
 ``/diagnostics`` at 1 Hz: ``observer: input`` (counts of the period, ``total.*``),
 ``observer: estimator`` (``static_load_<axle>_n`` per axle, ``gross_weight_n``,
 ``max_abs_ltr_<unit>``, ``innovations_gated.<channel>`` and ``gaps`` (steps that restarted
-the estimate, :mod:`~.estimation.whole_vehicle`) of the period and ``total.`` of the run)
-and ``observer: configuration``.
+the estimate, :mod:`~.estimation.whole_vehicle`) of the period and ``total.`` of the run;
+``sensor.<channel>`` ('ok' | 'stuck' | 'drift', :mod:`~.estimation.sensor_health`) and
+``total.stuck.<channel>`` / ``total.drift.<channel>``, flags raised: a fault WARNs naming the
+sensor) and ``observer: configuration``.
 """
 from __future__ import annotations
 
@@ -378,8 +380,13 @@ class WholeVehicleObserver:
         self.gaps_before = gaps
         total = self.gated_base + Counter(dict(zip(self.names, gated)))
         values.update({f'total.innovations_gated.{c}': total[c] for c in self.names})
+        fc = est.faults.counts()               # stuck and drifting sensors (sensor_health)
+        values.update(diagnostics.sensor_values(fc.flags))
+        values.update({f'total.stuck.{c}': n for c, n in fc.stuck_episodes.items()})
+        values.update({f'total.drift.{c}': n for c, n in fc.drift_episodes.items()})
+        message = diagnostics.fault_message(fc.flags) or (
+            'ok' if values['converged'] else 'converging')
         fit = self.axle_fit
-        message = 'ok' if values['converged'] else 'converging'
         if fit is not None:
             values.update(fit.status_values())
             if fit.culprits:

@@ -97,3 +97,25 @@ def test_small_windows_are_within_1e_3_of_each_field_s_rms(drive):
         assert np.all(np.abs(a - b) <= 1e-3 * np.maximum(rms, 1e-12)), name
     assert not np.array_equal(got.load_n, one.load_n)      # (the windows are there)
     np.testing.assert_array_equal(got.gaps, one.gaps)
+
+
+def test_estimate_whole_vehicle_with_windows_is_the_eager_stream(drive, monkeypatch):
+    """``estimate_whole_vehicle(..., offline=True, windows=True)`` (what estimate_bag runs
+    offline on an articulated drive, pipeline/plan.py's ``whole_vehicle_windows``): the
+    stream's own windows (made 2 s and 1 s here) over the drive, each field within 1e-3 of its
+    RMS of the one-block estimate, the road the same bits; the sensor flags the same."""
+    from road_force_estimator.estimation import whole_vehicle
+    vehicle, stamps, y = drive
+    one = whole_vehicle.estimate_whole_vehicle(vehicle, stamps, y, 20.0, offline=True)
+    monkeypatch.setattr(whole_vehicle, 'STREAM_WINDOW_SAMPLES', 2000)
+    monkeypatch.setattr(whole_vehicle, 'STREAM_OVERLAP_S', 1.0)
+    got = whole_vehicle.estimate_whole_vehicle(vehicle, stamps, y, 20.0, offline=True,
+                                               windows=True)
+    np.testing.assert_array_equal(got.road_m, one.road_m)
+    np.testing.assert_array_equal(got.fault_flags, one.fault_flags)
+    for name in FIELDS:
+        a, b = np.asarray(getattr(got, name), float), np.asarray(getattr(one, name), float)
+        rms = np.sqrt(np.mean((b - b.mean(axis=-1, keepdims=True)) ** 2, axis=-1,
+                              keepdims=True))
+        assert np.all(np.abs(a - b) <= 1e-3 * np.maximum(rms, 1e-12)), name
+    assert not np.array_equal(got.load_n, one.load_n)      # (the windows are there)

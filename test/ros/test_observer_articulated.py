@@ -274,4 +274,8 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
                                                                      rel=1e-3)
     assert float(est['gross_weight_n']) == pytest.approx(40.2e3 * 9.80665, rel=1e-3)
     assert all(f'total.innovations_gated.{c}' in est for c in names)
+    # the sensors' flags (estimation.sensor_health; docs/topics.md): nothing stuck or drifting
+    assert {est[f'sensor.{c}'] for c in names} == {'ok'}
+    assert {est[f'total.stuck.{c}'] for c in names} == {'0'}
+    assert {est[f'total.drift.{c}'] for c in names} == {'0'}
     assert est['total.gaps'] == '1'       # the step over the lost samples restarted it

@@ -95,7 +95,10 @@ def test_the_bag_has_the_whole_vehicles_topics(runs):
         last = topics['/diagnostics'][-1][1]
         whole = [s for s in last.status if s.name == 'estimate_bag: whole vehicle']
         assert len(whole) == 1
-        values = {kv.key: float(kv.value) for kv in whole[0].values}
+        values = {kv.key: float(kv.value) for kv in whole[0].values
+                  if not kv.key.startswith('sensor.')}
+        words = {kv.key: kv.value for kv in whole[0].values if kv.key.startswith('sensor.')}
+        assert len(words) == 12 and set(words.values()) == {'ok'}    # (a clean drive)
         static = np.array(topics['/wheel_loads/static'][-1][1].effort)
         assert values['gross_weight_n'] == pytest.approx(static.sum(), abs=0.1)
         assert values['total.gaps'] == 0 and values['gaps'] == 0     # (a drive without)
@@ -325,3 +328,49 @@ def test_a_file_stating_friction_and_lag_is_estimated(tmp_path):
     want = estimate_whole_vehicle(vehicle, stamps, readings, speed, observer=observer)
     got = np.array([m.effort for _, m in decoded(out / 'bag')['/wheel_loads']]).T
     np.testing.assert_array_equal(got, want.load_n)
+
+
+def test_a_stuck_sensor_is_named_in_the_report_and_the_diagnostics(tmp_path):
+    """A drive whose trailer_1_right_suspension the plant holds for 1.5 s from 1 s
+    (``simulator.sensor_faults``; where it struck read from the bag's metadata.yaml): the
+    report's Sensors (report.json) and the whole vehicle's /diagnostics status (decoded by the
+    mcap library) name it stuck, its flag raised within 1 s of the hold, once; no other
+    sensor flagged."""
+    import yaml
+    text = CONFIG.read_text(encoding='utf-8')
+    old = 'sensor_faults: ""'
+    assert text.count(old) == 1
+    params = tmp_path / 'stuck.yaml'
+    params.write_text(text.replace(
+        old, 'sensor_faults: "stuck@trailer_1_right_suspension:start=1,duration=1.5"'),
+        encoding='utf-8')
+    bag = tmp_path / 'drive'
+    sim = subprocess.run([str(BIN / 'simulate_bag'), '--params-file', str(params), '--road',
+                          'iso8608:C:seed=5', '--speed', '20', '--rate', str(RATE_HZ),
+                          '--duration', str(DURATION_S), '--gnss-rate', '0', '--no-progress',
+                          '--output', str(bag)], capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text(encoding='utf-8'))
+    custom = info['rosbag2_bagfile_information']['custom_data']
+    (fault,) = json.loads(custom['road_force_estimator.sensor_faults'])
+    assert fault['channel'] == 'trailer_1_right_suspension'
+    out = tmp_path / 'est'
+    assert estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
+                         '--mode', 'online', '--no-figures', '--no-progress']) == 0
+    rows = decoded(bag)['/suspension/deflections']
+    t0 = stamp(rows[0][1])
+    began_s = (stamp(rows[fault['window'][0]][1]) - t0) * 1e-9
+    sensors = json.loads((out / 'report' / 'report.json').read_text())['sensors']
+    flagged = {n: v for n, v in sensors.items() if v['stuck_flags'] or v['drift_flags']}
+    assert set(flagged) == {'trailer_1_right_suspension'}
+    assert flagged['trailer_1_right_suspension']['stuck_flags'] == 1
+    assert 0 < flagged['trailer_1_right_suspension']['first_stuck_s'] - began_s <= 1.0
+    assert len(sensors) == 12                      # every channel of the whole vehicle
+    statuses = [{kv.key: kv.value for kv in st.values}
+                for _, m in decoded(out / 'bag')['/diagnostics'] for st in m.status
+                if st.name.endswith('whole vehicle')]
+    assert any(s['sensor.trailer_1_right_suspension'] == 'stuck' for s in statuses)
+    last = statuses[-1]
+    assert last['total.stuck.trailer_1_right_suspension'] == '1'
+    assert {last[f'total.stuck.{n}'] for n in sensors
+            if n != 'trailer_1_right_suspension'} == {'0'}

@@ -1,0 +1,148 @@
+"""The whole vehicle's stuck and drifting sensors (issue 30 on the articulated model;
+estimation.sensor_health's FaultDetector over the whole vehicle's channels, UnitDrift): the
+faults put into the plant's readings by the plant's own fault module (core.sensor_faults),
+the flags judged against where it says they struck; the drift check against a rigid body's
+pattern computed here."""
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters
+from road_force_estimator.core.sensor_faults import FaultPlan, parse_faults
+from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
+from road_force_estimator.estimation.sensor_health import (
+    CODES, UNIT_MIN_SPEED_MPS, FaultSettings, detect_faults)
+from road_force_estimator.estimation.whole_vehicle import (
+    WholeVehicleEstimator, estimate_whole_vehicle)
+
+from conftest import ARTICULATED_CONFIG
+
+DRIFT_DURATION_S = 36.0
+
+
+def faulted(names, readings, spec: str, duration_s: float):
+    """The readings with ``spec``'s faults (the plant's module) and its truth."""
+    plan = FaultPlan(parse_faults(spec, names), names, 1000.0, duration_s, 1)
+    return plan.hold(plan.apply(np.array(readings, float))), plan.truth()
+
+
+def settings_of(vehicle) -> FaultSettings:
+    return FaultSettings.of_whole_vehicle(ObserverParameters(),
+                                          ArticulatedObserverModel(vehicle))
+
+
+@pytest.fixture(scope='module')
+def long_drive():
+    """36 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise (the whole vehicle):
+    ``(vehicle, stamps ns, readings, channel names)``."""
+    from road_force_estimator.core.articulated_plant import simulate_articulated
+    from road_force_estimator.core.articulated_setup import ArticulatedDrive
+    from road_force_estimator.core.parameters import load_params_file
+    from road_force_estimator.core.road import iso8608_profile
+    from road_force_estimator.estimation.models.articulated import channel_names
+
+    base = load_params_file(ARTICULATED_CONFIG)
+    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
+                 'simulator.duration': DRIFT_DURATION_S})
+    d = ArticulatedDrive.from_values(base)
+    road = iso8608_profile('C', d.road_length_m, seed=11)
+    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
+                              duration_s=DRIFT_DURATION_S, tire_envelope_m=0.25, model=d.model)
+    names = channel_names(d.model)
+    return (d.vehicle, np.round(tr.t_s * 1e9).astype(np.int64),
+            d.sensors(names).measure(tr), tuple(names))
+
+
+def raised(counts) -> dict:
+    return {n: (counts.stuck_episodes[n], counts.drift_episodes[n])
+            for n in counts.flags if counts.stuck_episodes[n] or counts.drift_episodes[n]}
+
+
+def test_the_drift_check_takes_up_a_rigid_bodys_pattern_and_names_an_offset(articulated_c):
+    """Readings that are a rigid unit's heave, pitch and roll (10 mm, 5 mrad, 8 mrad: a
+    braking in a curve) raise nothing; 0.5 mm more on one trailer deflection names it; below
+    the speed at which the window runs, nothing is judged."""
+    vehicle = articulated_c[0].vehicle
+    model = ArticulatedObserverModel(vehicle)
+    settings = settings_of(vehicle)
+    rigid = []
+    for ch in model.channels:
+        if ch[0] == 'q':
+            a = vehicle.axles[ch[1]]
+            side = 1.0 if ch[2] == 0 else -1.0
+            rigid.append(0.01 + 5e-3 * a.position_m + side * a.spring_half_track_m * 8e-3)
+        else:
+            rigid.append(8e-3)
+    n = 20000
+    stamps = np.arange(n, dtype=np.int64) * 1_000_000
+    rng = np.random.default_rng(3)
+    values = np.asarray(rigid) + 1e-5 * rng.standard_normal((n, len(rigid)))
+    speed = np.full((n, 1), 20.0)
+    counts, _ = detect_faults(settings, stamps, values, speed)
+    assert raised(counts) == {}
+    target = model.channel_names.index('trailer_2_left_suspension')
+    off = values.copy()
+    off[:, target] += 5e-4
+    counts, codes = detect_faults(settings, stamps, off, speed)
+    assert raised(counts) == {'trailer_2_left_suspension': (0, 1)}
+    assert codes[-1, target] == CODES['drift']
+    slow = np.full((n, 1), 0.9 * UNIT_MIN_SPEED_MPS)
+    counts, _ = detect_faults(settings, stamps, off, slow)
+    assert raised(counts) == {}
+
+
+def test_a_clean_drive_raises_nothing_and_a_drift_is_named_within_30_s(long_drive):
+    """36 s of class C: clean, no flag; 1 mm/min on each place of the trailer's tri-axle group
+    from 3 s (the plant's drift): that sensor alone flagged drift, within 30 s of the drift's
+    start (the plant's ``first_sample``)."""
+    vehicle, stamps, y, names = long_drive
+    settings = settings_of(vehicle)
+    speed = np.full((stamps.size, 1), 20.0)
+    counts, _ = detect_faults(settings, stamps, y, speed)
+    assert raised(counts) == {}
+    for ch in ('trailer_1_left_suspension', 'trailer_2_right_suspension',
+               'trailer_3_left_suspension'):
+        bad, truth = faulted(names, y, f'drift@{ch}:rate={1e-3 / 60:.6g},start=3',
+                             DRIFT_DURATION_S)
+        (fault,) = truth
+        counts, _ = detect_faults(settings, stamps, bad, speed)
+        assert raised(counts) == {ch: (0, 1)}, ch
+        began = stamps[fault['first_sample']]
+        assert 0 < counts.first_ns[ch]['drift'] - began <= 30e9, ch
+
+
+@pytest.mark.parametrize('channel', ['trailer_1_right_suspension', 'tractor_roll'])
+def test_a_stuck_sensor_is_named_within_1_s_in_every_mode(articulated_c, channel):
+    """8 s of class C, a deflection and a roll sensor stuck 2 s from 3 s (the plant's hold):
+    flagged stuck within 1 s of the hold's start, that sensor alone, the same per-sample flags
+    online, at 10 ms and offline; online the stuck deflection is left out of the filter while
+    flagged, and fed again after."""
+    d, tr, stamps, y = articulated_c
+    names = ArticulatedObserverModel(d.vehicle).channel_names
+    bad, truth = faulted(names, y, f'stuck@{channel}:start=3,duration=2', 8.0)
+    (fault,) = truth
+    began = int(stamps[fault['window'][0]])
+    flags = {}
+    for mode, obs, offline in (('online', ObserverParameters(), False),
+                               ('10 ms', ObserverParameters(latency_s=0.01), False),
+                               ('offline', ObserverParameters(), True)):
+        wv = estimate_whole_vehicle(d.vehicle, stamps, bad, tr.speed_mps, observer=obs,
+                                    offline=offline)
+        assert raised(wv.faults) == {channel: (1, 0)}, mode
+        assert 0 < wv.faults.first_ns[channel]['stuck'] - began <= 1e9, mode
+        assert np.isfinite(wv.load_n).all(), mode
+        flags[mode] = wv.fault_flags
+    np.testing.assert_array_equal(flags['online'], flags['10 ms'])
+    np.testing.assert_array_equal(flags['online'], flags['offline'])
+    est = WholeVehicleEstimator(d.vehicle, ObserverParameters())
+    k = names.index(channel)
+    left_out = []
+    for s, r, v in zip(stamps.tolist(), bad, tr.speed_mps):
+        est.step(s, r, v)
+        left_out.append(est.online.core.schedule.excluded)
+    held = np.array([k in x for x in left_out])
+    if channel.endswith('_suspension'):
+        stuck = flags['online'][k] == CODES['stuck']
+        # excluded from the sample after the flag rose until the one after it fell
+        np.testing.assert_array_equal(held[1:], stuck[:-1])
+    else:
+        assert not held.any()          # a roll sensor stays fed
