@@ -22,8 +22,9 @@ RMS, after 2 s; the whole vehicle's worst axle. Modes: zero latency, ``observer.
   A and C, straight and curve, each sensor with the file told nothing (for the front axle
   ``vehicle.roll_sensor: pendulum`` is the same model: docs/sensors.md).
 - ``whole``: the same with the whole vehicle (``config/tractor_semitrailer.yaml``; both units'
-  roll sensors of the kind), and the pendulums again with the file stating them
-  (``vehicle.roll_sensor: pendulum``), without and with the tractor IMU's a_y.
+  roll sensors of the kind), and the pendulums again with the tractor IMU's a_y, the file
+  told nothing and stating them (``vehicle.roll_sensor: pendulum``; without the IMU the
+  statement reads them as phi, as told nothing).
 - ``warning``: the trailer's 0.6 warning on its quasi-static LTR and on the predictor
   (:mod:`road_force_estimator.estimation.rollover_warning`), without and with the IMU, and
   the predictor's largest rise over the quasi-static LTR on straight drives.
@@ -200,7 +201,7 @@ def part_whole(args) -> list[str]:
         for curve in (False, True):
             for label, values in SENSORS:
                 drive = whole_drive(road, curve, values, args.duration)
-                files = ((('ideal', False), ('pendulum', False), ('pendulum', True))
+                files = ((('ideal', False), ('ideal', True), ('pendulum', True))
                          if label == 'pendulum' else (('ideal', False),))
                 for file, imu in files:
                     vehicle = file_vehicle({'vehicle.roll_sensor': file})
