@@ -149,6 +149,8 @@ class ArticulatedParameters:
     leaf_spring_friction_velocity_mps: float = 0.01
     leaf_spring_friction_stiffness_ratio: float = 8.0
     roll_time_constant_s: float = 0.0           #: lag of the roll sensors
+    #: what the roll sensors read, the observer's measurement model (``vehicle.roll_sensor``)
+    roll_sensor: str = 'ideal'
 
     @property
     def axle_names(self) -> tuple[str, ...]:
@@ -201,7 +203,8 @@ class ArticulatedParameters:
                        'vehicle.leaf_spring_friction_velocity', values),
                    leaf_spring_friction_stiffness_ratio=_value(
                        'vehicle.leaf_spring_friction_stiffness', values),
-                   roll_time_constant_s=tau[1])
+                   roll_time_constant_s=tau[1],
+                   roll_sensor=_value('vehicle.roll_sensor', values))
 
     def to_parameters(self) -> dict[str, Any]:
         """Every parameter of the vehicle by dotted name (pairs as lists), as a file has them:
@@ -225,6 +228,8 @@ class ArticulatedParameters:
                     'vehicle.leaf_spring_friction_stiffness':
                         self.leaf_spring_friction_stiffness_ratio,
                     'vehicle.sensor_time_constant': [0.0, self.roll_time_constant_s]})
+        if self.roll_sensor != 'ideal':     # (added later: what earlier files wrote stays)
+            out['vehicle.roll_sensor'] = self.roll_sensor
         return out
 
 

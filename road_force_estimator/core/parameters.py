@@ -94,6 +94,13 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('vehicle.sensor_time_constant', 'double_pair', [0.0, 0.0], 's',
        'first-order lag of the sensors [deflection, roll]; 0 = none (plant and observer '
        'alike)', 0.0, 0.1),
+    _p('vehicle.roll_sensor', 'string', 'ideal', '',
+       'what the roll sensors read, the measurement model of the observer (the plant: '
+       'simulator.roll_sensor): "ideal" = phi; "pendulum" = an inclinometer, phi + a_y / g '
+       '(articulated with the tractor IMU: a row on the a_y state of each unit; without it, '
+       'and on the front axle, read as phi: docs/sensors.md); "gyro" = an integrated rate '
+       'gyro, read as phi (its drift is no state)',
+       choices=('ideal', 'pendulum', 'gyro')),
     # The whole vehicle and the friction that sticks (MODEL.md "The whole vehicle", "What the
     # model leaves out"); the articulated model's own names are in ARTICULATED_PARAMETERS.
     _p('vehicle.model', 'string', 'front_axle', '',
@@ -568,6 +575,7 @@ class VehicleParameters(_FromParameters):
                                                          quiet_default=True)
     sensor_time_constant_s: tuple[float, float] = _param('vehicle.sensor_time_constant',
                                                          quiet_default=True)
+    roll_sensor: str = _param('vehicle.roll_sensor', quiet_default=True)
     leaf_spring_friction_model: str = _param('vehicle.leaf_spring_friction_model',
                                              quiet_default=True)
     leaf_spring_friction_velocity_mps: float = _param('vehicle.leaf_spring_friction_velocity',

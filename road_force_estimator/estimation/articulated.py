@@ -104,12 +104,14 @@ def equilibrium_readings(model: ArticulatedObserverModel, readings: np.ndarray) 
 class ArticulatedOnline:
     """The online estimate one sample at a time: :meth:`step` returns the rows finalized by
     that sample (``(stamp_ns, row)``, a latency's samples late), :meth:`finish` the rest.
-    A step that is a gap (``gap_threshold_s``, module notes) restarts the run (:attr:`gaps`)."""
+    A step that is a gap (``gap_threshold_s``, module notes) restarts the run (:attr:`gaps`).
+    ``imu``: the tractor IMU's a_y (m/s^2) is the readings' last channel
+    (:data:`.models.articulated.IMU_CHANNEL`)."""
 
     def __init__(self, vehicle: ArticulatedParameters, latency_s: float = 0.0,
                  observer: ObserverParameters | None = None, *,
-                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
-        self.model = ArticulatedObserverModel(vehicle)
+                 gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False) -> None:
+        self.model = ArticulatedObserverModel(vehicle, imu)
         obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
         self.core = ModelCore(self.model, obs)
         self.wheel_names = _wheel_names(vehicle)
@@ -177,7 +179,8 @@ def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, sp
                          latency_s: float = 0.0, offline: bool = False,
                          observer: ObserverParameters | None = None,
                          from_equilibrium: bool = False,
-                         gap_threshold_s: float = GAP_THRESHOLD_S) -> ArticulatedEstimate:
+                         gap_threshold_s: float = GAP_THRESHOLD_S,
+                         imu: bool = False) -> ArticulatedEstimate:
     """Every wheel's load over a drive (a new run after each gap: module notes).
 
     Parameters
@@ -195,10 +198,12 @@ def estimate_articulated(vehicle: ArticulatedParameters, stamps_ns, readings, sp
         vehicle's taken back by the caller, e.g. by the static-load tracker of
         :mod:`.whole_vehicle`): :func:`equilibrium_readings` not applied
     gap_threshold_s : the shortest step that is a gap (s; module notes)
+    imu : the readings' last column is the tractor IMU's a_y (m/s^2)
     """
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
-    online = ArticulatedOnline(vehicle, latency_s, observer, gap_threshold_s=gap_threshold_s)
+    online = ArticulatedOnline(vehicle, latency_s, observer, gap_threshold_s=gap_threshold_s,
+                               imu=imu)
     y = (np.asarray(readings, float) if from_equilibrium
          else equilibrium_readings(online.model, readings))
     if offline:

@@ -271,15 +271,17 @@ class WholeVehicleEstimator:
     """Every output of the whole vehicle one sample at a time: :meth:`step` returns the samples
     finalized by that input (an ``observer.latency``'s samples late), :meth:`finish` the
     rest. ``static_n``: every wheel's static load (N), the file's statics, or under
-    ``zero_load`` the tracker's after the last input (module notes)."""
+    ``zero_load`` the tracker's after the last input (module notes). ``imu``: the readings'
+    last channel is the tractor IMU's a_y (m/s^2, ``/imu/tractor``'s
+    ``linear_acceleration.y``; :data:`.models.articulated.IMU_CHANNEL`)."""
 
     def __init__(self, vehicle: ArticulatedParameters,
                  observer: ObserverParameters | None = None, *,
-                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
+                 gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False) -> None:
         obs = ObserverParameters() if observer is None else observer
         self.vehicle = vehicle
         self.online = ArticulatedOnline(vehicle, obs.latency_s, obs,
-                                        gap_threshold_s=gap_threshold_s)
+                                        gap_threshold_s=gap_threshold_s, imu=imu)
         self.model = self.online.model
         self.wheel_names = self.online.wheel_names
         self.axle_names = vehicle.axle_names
@@ -416,7 +418,8 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
                            observer: ObserverParameters | None = None,
                            offline: bool = False,
                            gap_threshold_s: float = GAP_THRESHOLD_S,
-                           windows: bool = False) -> WholeVehicleArrays:
+                           windows: bool = False,
+                           imu: bool = False) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -431,8 +434,9 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         overlap in windows (:class:`WholeVehicleOfflineStream` ``eager``: the load pass's
         rows held a window at a time; each field within ~3e-4 of its RMS of the one-block
         estimate); False: the smoother's own rule (the one-block numbers)
+    imu : the readings' last column is the tractor IMU's a_y (m/s^2)
     """
-    est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
+    est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s, imu=imu)
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
@@ -442,7 +446,7 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         samples += est.finish()
         return _arrays(est, samples)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
-                                       eager=bool(windows))
+                                       eager=bool(windows), imu=imu)
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
@@ -535,8 +539,10 @@ class WholeVehicleOfflineStream:
                  observer: ObserverParameters | None = None, *,
                  gap_threshold_s: float = GAP_THRESHOLD_S,
                  window: tuple[int, int] | None = None, eager: bool = True,
-                 capacity: int = 0, spill=None, piece_rows: int = PIECE_ROWS) -> None:
-        self.est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
+                 capacity: int = 0, spill=None, piece_rows: int = PIECE_ROWS,
+                 imu: bool = False) -> None:
+        self.est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s,
+                                         imu=imu)
         self.observer = ObserverParameters() if observer is None else observer
         self.gap_threshold_s = gap_threshold_s
         self.window, self.eager, self.spill = window, eager, spill

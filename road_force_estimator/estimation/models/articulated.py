@@ -42,8 +42,18 @@ wheel's heave, the band-limited double integral of its acceleration, from a seco
 tuned for the road as the front axle's (:mod:`.articulated_rows`). The longitudinal
 acceleration ``a_x = dv/dt`` (the braking pitch, ``-M_b H_b a_x`` on each body) is a known
 input, the change of the speed the estimator is given: its response adds to the estimate
-(:class:`BrakingResponse`; a constant speed gives none, bit for bit). Not modelled yet: the
-tractor's IMU.
+(:class:`BrakingResponse`; a constant speed gives none, bit for bit).
+
+The roll sensors and the IMU (docs/sensors.md "The roll sensor in the observer"): with
+``imu=True`` a last channel, the tractor IMU's lateral acceleration (``/imu/tractor``'s
+``linear_acceleration.y``, m/s^2), measures ``a_y,t`` with :data:`IMU_AY_NOISE_MPS2` of noise;
+with it and ``vehicle.roll_sensor: pendulum`` each unit's roll channel reads ``phi_b + a_y,b /
+g`` (a row on existing states, :attr:`ArticulatedObserverModel.pendulum`). Without the IMU
+that row leaves a mode no reading sees (the whole vehicle tilted by d with ``a_y = -g d``:
+the tilt / lateral-acceleration ambiguity; the Riccati equation has no stabilising
+solution), and a leak on the a_y states that removes it measured worse than reading the
+pendulum as phi on a straight road (``python -m bench.studies.roll_sensors --parts whole``):
+a pendulum without the IMU is read as phi.
 
 Friction and sensor lag, as the front axle's (:mod:`.front_axle`, "Friction and sensor lag";
 the law shared, :mod:`.leaf_friction`; the equivalent damping's factors this model's own,
@@ -73,6 +83,7 @@ from scipy import linalg
 from road_force_estimator.core.articulated_model import ArticulatedModel
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.articulated_sensors import channel_layout
+from road_force_estimator.core.parameters import GRAVITY_MPS2
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models import front_axle
 from road_force_estimator.estimation.models.leaf_friction import LeafSpringFriction
@@ -82,7 +93,7 @@ from road_force_estimator.estimation.models.protocol import (
     FORCE_PSD, ROLL_MOMENT_PSD, ContinuousModel, road_diffusion)
 
 __all__ = ['AX_TIME_CONSTANT_S', 'AX_OFFLINE_TIME_CONSTANT_S', 'AY_PSD_FACTOR',
-           'FRICTION_DAMPING_FACTORS', 'Layout',
+           'FRICTION_DAMPING_FACTORS', 'IMU_AY_NOISE_MPS2', 'IMU_CHANNEL', 'Layout',
            'ArticulatedObserverModel', 'BrakingResponse', 'output_names', 'channel_names']
 
 SIDES = ('left', 'right')
@@ -118,6 +129,11 @@ AX_OFFLINE_TIME_CONSTANT_S = 0.02
 #: 53.4 / 50.4 %; 0: 44.4 / 31.8, 57.8 / 46.1 %; 1.5: 46.2 / 35.2, 87.4 / 62.3 %):
 #: ``python -m bench.accuracy.articulated_wim --parts damping``.
 FRICTION_DAMPING_FACTORS = (0.5, 0.0)
+#: The IMU's lateral-acceleration noise the observer assumes (m/s^2, standard deviation): the
+#: plant's default ``simulator.noise.imu_acceleration`` (an ESC unit's accelerometer).
+IMU_AY_NOISE_MPS2 = 0.05
+#: The IMU channel's name (after /suspension/deflections' channels, ``imu=True``).
+IMU_CHANNEL = 'tractor_imu_accel_y'
 
 
 class Layout:
@@ -171,19 +187,26 @@ class ArticulatedObserverModel(LeafSpringFriction):
     the module notes; rows: :mod:`.articulated_rows`.
 
     The friction of every spring (F_f per element in the order of the springs' states, front
-    axle first, left then right) and the channels' lags (s) come from the parameters.
+    axle first, left then right) and the channels' lags (s) come from the parameters; what the
+    roll sensors read from ``vehicle.roll_sensor`` (module notes). ``imu``: the tractor IMU's
+    ``a_y`` is a last channel (:data:`IMU_CHANNEL`).
     """
 
     #: the equivalent damping's factors (:data:`FRICTION_DAMPING_FACTORS`)
     friction_damping_factors = FRICTION_DAMPING_FACTORS
 
-    def __init__(self, vehicle: ArticulatedParameters) -> None:
+    def __init__(self, vehicle: ArticulatedParameters, imu: bool = False) -> None:
         self.vehicle = vehicle
+        self.imu = bool(imu)
         self.core = ArticulatedModel(vehicle)
         self.layout = Layout(self.core.n_axles)
         self.outputs = output_names(vehicle.axle_names)
-        self.channels = channel_layout(self.core)
-        self.channel_names = channel_names(self.core)
+        self.channels = channel_layout(self.core) + ([('ay', 0)] if self.imu else [])
+        self.channel_names = channel_names(self.core) + ((IMU_CHANNEL,) if self.imu else ())
+        #: what a roll channel reads per m/s^2 of its unit's a_y (s^2/m): 1/g with a pendulum
+        #: and the IMU; without the IMU a pendulum is read as phi (module notes)
+        self.pendulum = (1.0 / GRAVITY_MPS2 if vehicle.roll_sensor == 'pendulum' and self.imu
+                         else 0.0)
         self.deflection_channels = tuple(k for k, ch in enumerate(self.channels)
                                          if ch[0] == 'q')
         self.roll_channels = tuple(k for k, ch in enumerate(self.channels) if ch[0] == 'roll')
@@ -201,14 +224,15 @@ class ArticulatedObserverModel(LeafSpringFriction):
         #: each channel's sensor time constant (s; 0: none) and the lagged channels
         self.sensor_time_constant_s = tuple(
             vehicle.axles[ch[1]].sensor_time_constant_s if ch[0] == 'q'
-            else vehicle.roll_time_constant_s for ch in self.channels)
+            else vehicle.roll_time_constant_s if ch[0] == 'roll' else 0.0
+            for ch in self.channels)
         self.lagged = tuple(k for k, tau in enumerate(self.sensor_time_constant_s)
                             if tau > 0.0)
         self._build()
 
     def with_vehicle(self, vehicle: ArticulatedParameters) -> ArticulatedObserverModel:
-        """The model of other parameters."""
-        return ArticulatedObserverModel(vehicle)
+        """The model of other parameters (the same channels)."""
+        return ArticulatedObserverModel(vehicle, self.imu)
 
     # -- the linear model ------------------------------------------------------------------
     def _build(self) -> None:
@@ -354,11 +378,18 @@ class ArticulatedObserverModel(LeafSpringFriction):
         return g, psd
 
     def unlagged_measurement(self) -> np.ndarray:
-        """(ny, nx with the lag states): the measured springs' extensions and bodies' rolls."""
+        """(ny, nx with the lag states): the measured springs' extensions, bodies' rolls (with
+        a pendulum ``+ a_y,b / g``) and the IMU's ``a_y,t``."""
         lay = self.layout
         cm = np.zeros((len(self.channels), lay.nx + len(self.lagged)))
         for k, ch in enumerate(self.channels):
-            cm[k, 2 * ch[1] + ch[2] if ch[0] == 'q' else lay.nw + ch[1]] = 1.0
+            if ch[0] == 'q':
+                cm[k, 2 * ch[1] + ch[2]] = 1.0
+            elif ch[0] == 'roll':
+                cm[k, lay.nw + ch[1]] = 1.0
+                cm[k, lay.ay.start + ch[1]] = self.pendulum
+            else:
+                cm[k, lay.ay.start + ch[1]] = 1.0
         return cm
 
     def _measurement(self) -> np.ndarray:
@@ -373,9 +404,10 @@ class ArticulatedObserverModel(LeafSpringFriction):
     # -- design ----------------------------------------------------------------------------
     def measurement_variances(self, noise_deflection_m: float,
                               noise_roll_rad: float) -> list:
-        """``diag(R)``: m^2 per deflection, rad^2 per roll."""
+        """``diag(R)``: m^2 per deflection, rad^2 per roll, (m/s^2)^2 for the IMU
+        (:data:`IMU_AY_NOISE_MPS2`)."""
         return [noise_deflection_m ** 2 if ch[0] == 'q' else noise_roll_rad ** 2
-                for ch in self.channels]
+                if ch[0] == 'roll' else IMU_AY_NOISE_MPS2 ** 2 for ch in self.channels]
 
     def roll_noise_floor(self, deflection_floor_m: float) -> float:
         """The deflection's floor over the front axle's half spring track (rad)."""
@@ -399,8 +431,8 @@ class ArticulatedObserverModel(LeafSpringFriction):
         measured = [int(np.argmax(row)) for row in self.unlagged_measurement()]
         x[measured] = np.asarray(y, float)
         x[lay.nx:] = [float(y[k]) for k in self.lagged]     # a lag state as its sensor
-        free = [j for j in range(lay.pos.stop) if j not in measured] + list(
-            range(lay.ay.start, lay.ay.stop))
+        free = [j for j in list(range(lay.pos.stop)) + list(range(lay.ay.start, lay.ay.stop))
+                if j not in measured]
         known = np.hstack([self.force_pos, np.zeros((lay.n, x.size - lay.pos.stop))])
         known[:, lay.ay] = self.lateral
         x[free] = np.linalg.lstsq(known[:, free], -known @ x, rcond=None)[0]
@@ -419,7 +451,8 @@ class ArticulatedObserverModel(LeafSpringFriction):
         the front axle's half spring track for the rolls."""
         lq = max(k / a.mass_kg for a in self.vehicle.axles for k in a.tire_stiffness_npm)
         lr = lq / self.vehicle.axles[0].spring_half_track_m
-        return tuple(lq if ch[0] == 'q' else lr for ch in self.channels)
+        return tuple(lq if ch[0] == 'q' else lr if ch[0] == 'roll' else 1e3
+                     for ch in self.channels)
 
     def stationary_states(self, cm: ContinuousModel) -> list[int]:
         """All but the rolls (they follow the roads' cross levels), the a_y random walks and
