@@ -14,9 +14,13 @@ estimate: the quasi-static LTR itself is unchanged. Dimensionless, > 0 = load to
 """
 from __future__ import annotations
 
+from collections import deque
+from typing import Sequence
+
 import numpy as np
 
-__all__ = ['LEAD_S', 'RATE_WINDOW_S', 'WARNING_THRESHOLD', 'predicted_ltr', 'first_reached']
+__all__ = ['LEAD_S', 'RATE_WINDOW_S', 'WARNING_THRESHOLD', 'predicted_ltr', 'first_reached',
+           'LtrPredictor']
 
 #: The predictor's lead (s): the largest lateness measured on the family's curves (3 ms at
 #: zero latency, ``bench.studies.roll_sensors --parts warning``) with a margin for the
@@ -53,3 +57,32 @@ def first_reached(values, threshold: float = WARNING_THRESHOLD) -> int | None:
     """The first sample at which ``values`` (m,) reach ``threshold``, or None."""
     hit = np.nonzero(np.asarray(values, float) >= threshold)[0]
     return int(hit[0]) if hit.size else None
+
+
+class LtrPredictor:
+    """:func:`predicted_ltr` one sample at a time (the node's; the same numbers): ``update``
+    with a sample's stamp (ns, increasing) and each unit's quasi-static LTR returns each
+    unit's predicted LTR. Holds the samples of the last ``rate_window_s``."""
+
+    def __init__(self, lead_s: float = LEAD_S, rate_window_s: float = RATE_WINDOW_S) -> None:
+        if lead_s < 0.0 or rate_window_s <= 0.0:
+            raise ValueError(f'lead {lead_s!r} s, rate window {rate_window_s!r} s: must be '
+                             '>= 0 and > 0')
+        self.lead_s, self.rate_window_s = float(lead_s), float(rate_window_s)
+        self._first: int | None = None
+        self._held: deque = deque()          # (seconds since the first, the LTRs)
+
+    def update(self, stamp_ns: int, ltr_quasi_static: Sequence[float]) -> tuple:
+        if self._first is None:
+            self._first = int(stamp_ns)
+        ts = float(np.int64(int(stamp_ns) - self._first) * 1e-9)
+        qs = tuple(float(v) for v in ltr_quasi_static)
+        held = self._held
+        held.append((ts, qs))
+        while held[0][0] < ts - self.rate_window_s:
+            held.popleft()
+        t0, q0 = held[0]
+        span = ts - t0
+        if not span > 0.0:
+            return qs
+        return tuple(q + self.lead_s * ((q - b) / span) for q, b in zip(qs, q0))

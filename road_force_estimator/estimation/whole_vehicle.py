@@ -64,6 +64,7 @@ from road_force_estimator.estimation.articulated import (
 from road_force_estimator.estimation.axle_fit import (
     ONLINE_MIN_LATENCY_S, AxleFit, OnlineAxleFit, assess_axles)
 from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
+from road_force_estimator.estimation.rollover_warning import LtrPredictor, predicted_ltr
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.sensor_health import (
@@ -126,6 +127,9 @@ class WholeVehicleSample:
     fused: tuple = ()
     #: the model fit per axle this sample completed online (:class:`.axle_fit.OnlineAxleFit`)
     axle_fit: AxleFit | None = None
+    #: each unit's predicted LTR (:class:`.rollover_warning.LtrPredictor`: the quasi-static
+    #: LTR a lead ahead, for a rollover warning), the order of :data:`UNITS`
+    ltr_predicted: tuple = ()
     #: each channel's sensor flag at this sample (:data:`.sensor_health.CODES`: 0 ok, 1
     #: stuck, 2 drift; ``channel_names``' order)
     sensor_flags: tuple = ()
@@ -182,6 +186,12 @@ class WholeVehicleArrays:
     def axle_load_n(self) -> np.ndarray:
         """The static axle loads (N; (axles, m)): both wheels' static loads."""
         return self.static_n.reshape(len(self.axle_names), 2, -1).sum(axis=1)
+
+    @property
+    def ltr_predicted(self) -> np.ndarray:
+        """Each unit's predicted LTR ((units, m); :func:`.rollover_warning.predicted_ltr` of
+        the quasi-static LTR: online the samples' ``ltr_predicted`` exactly)."""
+        return predicted_ltr(self.stamps_ns, self.ltr_quasi_static)
 
     @property
     def gross_weight_n(self) -> np.ndarray:
@@ -292,6 +302,7 @@ class WholeVehicleEstimator:
         cols = columns(nw)
         self._load, self._ay = cols['load'], cols['ay']
         self._transfer = _Transfer(vehicle, self.static_n)
+        self._predictor = LtrPredictor()
         self._dynamic = cols['dynamic']
         self._road = cols['road']
         #: the fused profile streamed (every axle of the vehicle, front first)
@@ -366,6 +377,7 @@ class WholeVehicleEstimator:
                 static = self._pending.pop(int(stamp))
                 loads = [s + d for s, d in zip(static, row[self._dynamic])]
             t = self._transfer.update(int(stamp), loads)
+            quasi_static = tuple(t[1:6:2])
             road = row[self._road]
             x = float(row[DIST])
             fit = None
@@ -376,12 +388,14 @@ class WholeVehicleEstimator:
                                                 np.asarray(static)[rows])
             out.append(WholeVehicleSample(int(stamp), x, bool(row[CONV] > 0.5),
                                           tuple(loads), static, tuple(t[0:6:2]),
-                                          tuple(t[1:6:2]), tuple(row[self._ay]), gated,
+                                          quasi_static, tuple(row[self._ay]), gated,
                                           tuple(t[6:]), self._gaps.popleft(),
                                           road_m=tuple(road),
                                           fused=tuple(self.fused.push(stamp, x, road,
                                                                       loads, static)),
                                           axle_fit=fit,
+                                          ltr_predicted=self._predictor.update(
+                                              int(stamp), quasi_static),
                                           sensor_flags=self._codes.popleft()))
         return out
 

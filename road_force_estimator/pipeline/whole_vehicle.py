@@ -164,10 +164,14 @@ def sensor_status_values(wv, k: int, edges: list) -> tuple[dict, str]:
     return values, fault_message(flags)
 
 
-def _status(wv, k: int, since: int = 0, edges: list | None = None) -> dict:
+def _status(wv, k: int, since: int = 0, edges: list | None = None,
+            ltr_predicted: np.ndarray | None = None) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
     weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
-    ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period); ``gaps``: those
+    ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period), and of its
+    predicted LTR (``max_abs_ltr_<unit>_predicted``, :mod:`~.estimation.rollover_warning`:
+    WARN from :data:`~.estimation.rollover_warning.WARNING_THRESHOLD`; ``ltr_predicted`` the
+    drive's, computed once by the caller); ``gaps``: those
     of the period (each restarted the estimate), ``total.gaps`` the drive's so far (the node's
     keys)."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
@@ -176,11 +180,22 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None) -> dict:
     values = {f'static_load_{name}_n': f'{float(a):.1f}' for name, a in
               zip(wv.axle_names, axle)}
     values['gross_weight_n'] = f'{float(axle.sum()):.1f}'
+    from road_force_estimator.estimation.rollover_warning import WARNING_THRESHOLD
+
+    # each unit's predicted LTR over the period (causal: the node's numbers)
+    predicted = (wv.ltr_predicted if ltr_predicted is None else ltr_predicted)[:, since:k + 1]
+    warned: list = []
     for u, unit in enumerate(UNITS):
         values[f'ltr_{unit}_quasi_static'] = f'{float(wv.ltr_quasi_static[u, k]):.4f}'
         period = np.abs(np.asarray(wv.ltr[u, since:k + 1], float))
         period = period[np.isfinite(period)]
         values[f'max_abs_ltr_{unit}'] = f'{float(period.max()) if period.size else 0.0:.4f}'
+        ahead = np.abs(predicted[u])
+        ahead = ahead[np.isfinite(ahead)]
+        peak = float(ahead.max()) if ahead.size else 0.0
+        values[f'max_abs_ltr_{unit}_predicted'] = f'{peak:.4f}'
+        if peak >= WARNING_THRESHOLD:
+            warned.append(unit)
     if getattr(wv, 'gaps', None) is not None:
         total = int(wv.gaps[k])
         values['gaps'] = str(total - (int(wv.gaps[since - 1]) if since > 0 else 0))
@@ -188,6 +203,10 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None) -> dict:
     gross = float(axle.sum())
     message = f'gross vehicle weight {gross / 1e3:.1f} kN over {len(axle)} axles'
     level = 0 if math.isfinite(gross) else 1
+    if warned:
+        level = 1
+        message += (f'; rollover warning: {", ".join(warned)} predicted |LTR| >= '
+                    f'{WARNING_THRESHOLD:g}')
     if edges is not None:
         sensors, fault = sensor_status_values(wv, k, edges)
         values.update(sensors)
@@ -235,10 +254,11 @@ def add_diagnostics(diagnostics: list, wv) -> list:
     out = []
     since = 0
     edges = sensor_edges(wv)
+    predicted = wv.ltr_predicted
     for stamp, statuses in diagnostics:
         k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
-        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges)] if k >= 0
-                                             else [])))
+        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges, predicted)]
+                                             if k >= 0 else [])))
         since = max(since, k + 1)
     return out
 

@@ -54,6 +54,7 @@ from road_force_estimator.core.articulated_parameters import ArticulatedParamete
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.estimation.axle_fit import ADVICE
+from road_force_estimator.estimation.rollover_warning import WARNING_THRESHOLD
 from road_force_estimator.estimation.whole_vehicle import UNITS, WholeVehicleEstimator
 from road_force_estimator.ros.messages import (
     MessageRejected, bounded, diagnostic_status, reliable_qos)
@@ -179,6 +180,7 @@ class WholeVehicleObserver:
         self.gated_base: Counter = Counter()
         self.gaps_base = self.gaps_before = 0      # gaps of estimators rebuilt, and reported
         self.max_abs_ltr = [0.0, 0.0, 0.0]
+        self.max_abs_ltr_predicted = [0.0, 0.0, 0.0]
         self.last_rejection = ''
         self.last_report = time.monotonic()
         self.speed_mps: float | None = None
@@ -297,7 +299,11 @@ class WholeVehicleObserver:
                         t, (*loads, st[0], st[1]))):
                     send(data)
         self.period['published'] += 1
-        m = self.max_abs_ltr
+        m, mp, pred = self.max_abs_ltr, self.max_abs_ltr_predicted, sample.ltr_predicted
+        for u in range(3):
+            a = abs(pred[u])
+            if a > mp[u]:
+                mp[u] = a
         for u in range(3):
             a = abs(sample.ltr[u])
             if a > m[u]:
@@ -371,6 +377,8 @@ class WholeVehicleObserver:
         values['gross_weight_n'] = sum(static)
         m, self.max_abs_ltr = self.max_abs_ltr, [0.0, 0.0, 0.0]
         values.update({f'max_abs_ltr_{u}': v for u, v in zip(UNITS, m)})
+        mp, self.max_abs_ltr_predicted = self.max_abs_ltr_predicted, [0.0, 0.0, 0.0]
+        values.update({f'max_abs_ltr_{u}_predicted': v for u, v in zip(UNITS, mp)})
         gated = list(est.online.core.gated)
         values.update({f'innovations_gated.{c}': g - b for c, g, b in
                        zip(self.names, gated, self.gated_before)})
@@ -386,6 +394,10 @@ class WholeVehicleObserver:
         values.update({f'total.drift.{c}': n for c, n in fc.drift_episodes.items()})
         message = diagnostics.fault_message(fc.flags) or (
             'ok' if values['converged'] else 'converging')
+        warned = [u for u, v in zip(UNITS, mp) if v >= WARNING_THRESHOLD]
+        if warned:
+            message += (f'; rollover warning: {", ".join(warned)} predicted |LTR| >= '
+                        f'{WARNING_THRESHOLD:g}')
         fit = self.axle_fit
         if fit is not None:
             values.update(fit.status_values())

@@ -53,3 +53,31 @@ def test_online_statuses_carry_the_last_verdict_known_at_their_stamp():
     offline = replace(wv, axle_fit=bad)          # no history: the drive's verdict throughout
     for _, statuses in add_diagnostics(diagnostics, offline):
         assert statuses[-1]['values']['model_fit'] == 'mismatch'
+
+
+def test_a_predicted_ltr_past_the_threshold_warns_in_its_period():
+    """The trailer's quasi-static LTR a ramp 0.3 /s from 0.3 at 0 s (0.6 at 1.0 s): its
+    predicted LTR (5 ms ahead: 0.0015 more) reaches 0.6 at 0.995 s, so the status at 1.0 s
+    warns naming the trailer and the one at 0.5 s does not; the period's peak is the
+    prediction's (analytic)."""
+    from road_force_estimator.estimation.rollover_warning import (
+        LEAD_S, WARNING_THRESHOLD, LtrPredictor)
+
+    vehicle = ArticulatedDrive.from_values(load_params_file(CONFIG)).vehicle
+    stamps = np.arange(1101, dtype=np.int64) * 1_000_000
+    wv = estimate_whole_vehicle(vehicle, stamps, np.zeros((stamps.size, 12)), 20.0)
+    t = stamps * 1e-9
+    qs = np.zeros((3, t.size))
+    qs[1] = 0.3 + 0.3 * t
+    ramp = replace(wv, ltr_quasi_static=qs)
+    got = [s[-1] for _, s in add_diagnostics([(500_000_000, []), (1_000_000_000, [])], ramp)]
+    assert got[0]['level'] == 0 and 'rollover' not in got[0]['message']
+    assert got[1]['level'] == 1 and 'rollover warning: trailer' in got[1]['message']
+    peak = float(got[1]['values']['max_abs_ltr_trailer_predicted'])
+    np.testing.assert_allclose(peak, 0.6 + 0.3 * LEAD_S, atol=1e-4)
+    assert peak >= WARNING_THRESHOLD > float(got[1]['values']['ltr_trailer_quasi_static']) - 1e-9
+    # the per-sample predictor (the node's) gives the same numbers
+    p = LtrPredictor()
+    np.testing.assert_array_equal(
+        np.array([p.update(int(s), qs[:, k]) for k, s in enumerate(stamps)]).T,
+        ramp.ltr_predicted)
