@@ -33,7 +33,6 @@ What it found: docs/notes/articulated_sensor_faults.md.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -168,30 +167,10 @@ def clean_table(roads, modes, log) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--roads', nargs='+', default=['C', 'A'])
-    ap.add_argument('--modes', nargs='+', default=list(MODES), choices=MODES)
-    ap.add_argument('--only', nargs='+', default=['spikes', 'latency', 'clean'],
-                    choices=['spikes', 'latency', 'clean'])
-    args = ap.parse_args(argv)
+    from bench.studies import sensor_faults
 
-    def log(text: str) -> None:
-        print(text, file=sys.stderr, flush=True)
-
-    t0 = time.perf_counter()
-    out = []
-    if 'spikes' in args.only:
-        out += ['### Five 0.5 mm spikes on two sensors', ''] + spikes_table(
-            args.roads, args.modes, log) + ['']
-    if 'latency' in args.only:
-        out += ['### Stuck and drifting sensors: flag latency', ''] + latency_table(
-            args.roads, args.modes, log) + ['']
-    if 'clean' in args.only:
-        out += ['### Clean drives: flags raised', ''] + clean_table(
-            args.roads, args.modes, log) + ['']
-    print('\n'.join(out))
-    print(f'({time.perf_counter() - t0:.0f} s)')
-    return 0
+    return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
+                              description=__doc__.splitlines()[0])
 
 
 if __name__ == '__main__':

@@ -150,8 +150,12 @@ def clean_table(roads, modes, log) -> list[str]:
     return lines
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None, *, tables=None, description: str | None = None) -> int:
+    """The three tables of the arguments (``tables``: the spikes', the flag latency's and the
+    clean drives' table functions, this module's by default; the whole vehicle's study passes
+    its own)."""
+    spikes_of, latency_of, clean_of = tables or (spikes_table, latency_table, clean_table)
+    ap = argparse.ArgumentParser(description=description or __doc__.splitlines()[0])
     ap.add_argument('--roads', nargs='+', default=['C', 'A'])
     ap.add_argument('--modes', nargs='+', default=list(MODES), choices=MODES)
     ap.add_argument('--only', nargs='+', default=['spikes', 'latency', 'clean'],
@@ -164,13 +168,13 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     out = []
     if 'spikes' in args.only:
-        out += ['### Five 0.5 mm spikes on two sensors', ''] + spikes_table(
+        out += ['### Five 0.5 mm spikes on two sensors', ''] + spikes_of(
             args.roads, args.modes, log) + ['']
     if 'latency' in args.only:
-        out += ['### Stuck and drifting sensors: flag latency', ''] + latency_table(
+        out += ['### Stuck and drifting sensors: flag latency', ''] + latency_of(
             args.roads, args.modes, log) + ['']
     if 'clean' in args.only:
-        out += ['### Clean drives: flags raised', ''] + clean_table(
+        out += ['### Clean drives: flags raised', ''] + clean_of(
             args.roads, args.modes, log) + ['']
     print('\n'.join(out))
     print(f'({time.perf_counter() - t0:.0f} s)')
