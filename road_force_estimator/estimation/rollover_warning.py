@@ -75,7 +75,7 @@ class LtrPredictor:
     def update(self, stamp_ns: int, ltr_quasi_static: Sequence[float]) -> tuple:
         if self._first is None:
             self._first = int(stamp_ns)
-        ts = float(np.int64(int(stamp_ns) - self._first) * 1e-9)
+        ts = (int(stamp_ns) - self._first) * 1e-9     # (as the array form's float64)
         qs = tuple(float(v) for v in ltr_quasi_static)
         held = self._held
         held.append((ts, qs))
