@@ -13,14 +13,13 @@ error in % of the true dynamic-load RMS after the 2 s skip), per road seed (defa
 - ``lag``: a 3 ms first-order lag of every sensor, stated in the file;
 - ``friction+lag``: both, stated in the file (the truth's tanh ``v_f`` = 0.01 m/s, the
   package's);
-- ``friction+lag, truth v_f 0.005``: the same truck whose friction is steeper (``v_f`` =
-  0.005 m/s in the plant only: :data:`road_force_estimator.core.vehicle_model.
-  FRICTION_VELOCITY_MPS` is patched while this script simulates, and put back before the
-  observer runs), the file as before (the package's 0.01);
+- ``friction+lag, truth v_f 0.005``: the same truck whose friction is steeper (the plant's
+  ``vehicle.leaf_spring_friction_velocity`` 0.005 m/s), the file as before (the package's
+  0.01);
 - ``friction, truth v_f 0.005``: the friction alone with that steeper truth;
-- ``... , file v_f 0.005``: those two drives again with the observer told the truth's v_f
-  (the observer's constant patched for the run, :mod:`.observer.friction` and :mod:`.smoother`,
-  as a file that states v_f would tell it): what is left when the law is right.
+- ``... , file v_f 0.005``: those two drives again with the file stating the truth's v_f
+  (``vehicle.leaf_spring_friction_velocity`` 0.005 in the observer's file too): what is left
+  when the law is right.
 
 Then where the cost comes from: the forward filter's posterior std of the suspension rate
 (its design at 10 um and 20 m/s) without and with the lag, and on the ``friction+lag`` drive
