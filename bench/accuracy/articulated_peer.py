@@ -14,6 +14,12 @@ equation (density ``force_psd``). Measured: the springs' extensions of the instr
 and the rolls, with the true noise. The steady-state gains from the first sample (the exact
 filter and smoothers for a stationary prior). Loads: ``dF_j,i = kt (u_j,i - z_w,j,i)``.
 
+``lag_s``: each measured channel's first-order lag (s; 0 = none), as the plant's sensors
+apply it (:func:`road_force_estimator.core.sensors.lag_step`, exact for a reading linear over
+the step): a lag state per lagged channel, ``m_k = a m_(k-1) + (b - c) y_(k-1) + c y_k`` with
+``y = C x`` the true reading, so that the state ``[x, m]`` is exact for the plant's discrete
+lag and the measurement is ``m`` (the peer knows the lag as well as the truth).
+
 :func:`tuned` picks ``factor`` and ``force_psd`` per drive and mode from a grid on the truth
 (the best a user with the truth could tune: a bound for the package's defaults).
 """
@@ -38,7 +44,8 @@ class ArticulatedKalmanPeer:
 
     def __init__(self, vehicle, *, speed_mps: float, dt_s: float, noise_m: float,
                  noise_rad: float, road_gd_m3: float, factor: float = 1.0,
-                 force_psd: float = 1.0, ay_psd: float = 1e-3) -> None:
+                 force_psd: float = 1.0, ay_psd: float = 1e-3,
+                 lag_s: tuple[float, ...] = ()) -> None:
         core = ArticulatedModel(vehicle)
         lin = core.linearised()
         springs, wheels, _, _ = core.kinematics()
@@ -78,6 +85,10 @@ class ArticulatedKalmanPeer:
                                                                                len(instrumented)))
         scale = np.concatenate([np.full(n, 1e-2), np.full(n, 1e-1), np.full(nw, 1e-2),
                                 [1.0, 1.0]])
+        h = np.hstack([-wheels.reshape(nw, n), np.zeros((nw, n)), np.eye(nw), np.zeros((nw, 2))])
+        if any(t > 0.0 for t in lag_s):
+            ad, qd, c, scale, h = _with_lag(ad, qd, c, scale, h, lag_s, dt_s)
+            nx = ad.shape[0]
         p = solve_dare(ad, c, qd, r, scale=scale)
         s = c @ p @ c.T + r
         k = np.linalg.solve(s, c @ p).T
@@ -85,8 +96,7 @@ class ArticulatedKalmanPeer:
         self.a, self.c, self.k = ad, c, k
         self.j = np.linalg.solve(p, ad @ pf).T              # RTS: P+ A^T P^-1
         kt = np.array([t for ax in core.axles for t in ax.tire_stiffness_npm])
-        self.h = kt[:, None] * np.hstack([-wheels.reshape(nw, n), np.zeros((nw, n)),
-                                          np.eye(nw), np.zeros((nw, 2))])
+        self.h = kt[:, None] * h
 
     def dynamic_loads(self, y: np.ndarray, lag: int | None = 0) -> np.ndarray:
         """Every wheel's dynamic load (nw, m) from the readings y (m, ny): causal (lag 0),
@@ -117,6 +127,34 @@ class ArticulatedKalmanPeer:
             hj = hj @ self.j
             out[:, :m - i] += hj @ d[i - 1:].T
         return out
+
+
+def _with_lag(ad, qd, c, scale, h, lag_s, dt_s):
+    """The model with a lag state per lagged channel (module notes): ``(A, Q, C, scale, H)``
+    of the state ``[x, m]``."""
+    from road_force_estimator.core.sensors import lag_coefficients
+
+    lagged = [i for i, t in enumerate(lag_s) if t > 0.0]
+    nx, nm = ad.shape[0], len(lagged)
+    coef = [lag_coefficients(lag_s[i], dt_s) for i in lagged]
+    a_m = np.diag([co[0] for co in coef])
+    cl = c[lagged]
+    gain_c = np.diag([co[2] for co in coef]) @ cl                 # c C
+    a = np.zeros((nx + nm, nx + nm))
+    a[:nx, :nx] = ad
+    a[nx:, :nx] = np.diag([co[1] - co[2] for co in coef]) @ cl + gain_c @ ad
+    a[nx:, nx:] = a_m
+    q = np.zeros_like(a)                         # the noise enters x and, through c C, m
+    q[:nx, :nx] = qd
+    q[:nx, nx:] = qd @ gain_c.T
+    q[nx:, :nx] = gain_c @ qd
+    q[nx:, nx:] = gain_c @ qd @ gain_c.T
+    c_new = np.hstack([c, np.zeros((c.shape[0], nm))])
+    for r, i in enumerate(lagged):
+        c_new[i] = 0.0
+        c_new[i, nx + r] = 1.0
+    scale = np.concatenate([scale, np.full(nm, 1e-2)])
+    return a, q, c_new, scale, np.hstack([h, np.zeros((h.shape[0], nm))])
 
 
 def tuned(vehicle, y, true_dyn, judged, lag, **design) -> tuple[np.ndarray, tuple]:

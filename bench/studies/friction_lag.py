@@ -46,6 +46,12 @@ before it and of the truth's after it, spliced (the switch's transient ignored).
 zero-load readings, the payload unknown, ``--duration`` s), at 10 ms: per axle the
 dynamic-load error with neither, with the 3 ms lag, with both (v_f 0.01), and with the
 truth's v_f 0.005 against the file's 0.01 and told it, each against the drive with neither.
+Then whether the lag's cost is the information's (``--whole-vehicle``'s second table): the
+same class C drives with the file's vehicle and readings from the equilibrium (no payload
+change, no zero-load readings, so that the peer's model is the truth's), neither and the lag,
+ours at 10 ms beside :class:`bench.accuracy.articulated_peer.ArticulatedKalmanPeer` at its
+exact 10-sample fixed lag, tuned on the truth, with a lag state per channel on the lag drive
+(the plant's discrete lag exactly): per axle each one's lag / neither ratio.
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
@@ -427,7 +433,48 @@ def whole_vehicle(duration_s: float) -> list[str]:
         ref = pct if ref is None else ref
         lines.append(f'| {name} | ' + ', '.join(f'{v:.2f}' for v in pct) + ' | '
                      + ', '.join(f'{v:.2f}' for v in pct / ref) + ' |')
+    return lines + [''] + lag_limit(duration_s)
+
+
+def lag_limit(duration_s: float) -> list[str]:
+    """The ``--whole-vehicle`` lag drives beside the truth-tuned peer (module notes)."""
+    from bench.accuracy import articulated_wim as wim
+    from bench.accuracy.articulated_peer import tuned
+    from road_force_estimator.core.road import iso8608_psd
+    from road_force_estimator.core.articulated_model import ArticulatedModel
+    from road_force_estimator.core.articulated_sensors import channel_layout
+
+    lines = ["| drive (whole vehicle, C, 10 ms, the file's truck) | who | front, drive, "
+             'trailer_1..3 (% dyn) | lag / neither, per axle |', '|---|---|---|---|']
+    ref: dict = {}
+    for name, values in (('neither', {}), ('lag', wim.LAG)):
+        drive = wim.simulate('C', duration_s, 1e-5, values)
+        vehicle = drive['vehicle']
+        judged = drive['t'] >= drive['t'][0] + 5.0
+        dyn = drive['load'] - drive['static'][:, None]
+        model = ArticulatedModel(vehicle)     # each channel's lag, as the plant's sensors
+        lag_s = tuple(model.axles[ch[1]].sensor_time_constant_s if ch[0] == 'q'
+                      else vehicle.roll_time_constant_s for ch in channel_layout(model))
+        est_peer, _ = tuned(vehicle, drive['y'], dyn, judged, 10, speed_mps=20.0, dt_s=1e-3,
+                            noise_m=1e-5,
+                            noise_rad=1e-5 / vehicle.axles[0].spring_half_track_m,
+                            road_gd_m3=float(iso8608_psd('C', [0.1])[0]), lag_s=lag_s)
+        ours = wim.estimate(wim.file_vehicle(values), drive, 0.01, False)
+        for who, load in (('ours', ours.load_n),
+                          ('peer', est_peer + drive['static'][:, None])):
+            pct = wim.dynamic_pct(drive, _Loads(load))
+            ref.setdefault(who, pct)
+            lines.append(f'| {name} | {who} | ' + ', '.join(f'{v:.2f}' for v in pct) + ' | '
+                         + ', '.join(f'{v:.2f}' for v in pct / ref[who]) + ' |')
     return lines
+
+
+class _Loads:
+    """Loads (wheels x samples, N) as :func:`bench.accuracy.articulated_wim.dynamic_pct`
+    takes an estimate."""
+
+    def __init__(self, load_n: np.ndarray) -> None:
+        self.load_n = load_n
 
 
 def main(argv: list[str] | None = None) -> int:
