@@ -108,6 +108,13 @@ def static_findings(vehicle: VehicleParameters, observer: ObserverParameters) ->
     if observer.latency_s > 0.0:
         found.append(f'observer.latency = {observer.latency_s:g} s: estimates are published '
                      f'with the stamp of the sample they are for')
+    if vehicle.roll_sensor == 'pendulum':
+        found.append("vehicle.roll_sensor = 'pendulum': the front-axle model has no lateral "
+                     'acceleration to read it with, so it is read as plain roll; in curves the '
+                     'loads err (docs/sensors.md)')
+    elif vehicle.roll_sensor == 'gyro':
+        found.append("vehicle.roll_sensor = 'gyro': read as roll; its drift is not estimated "
+                     '(docs/sensors.md)')
     return found
 
 

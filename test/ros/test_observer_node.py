@@ -572,3 +572,13 @@ def test_a_stuck_sensor_is_named_in_the_diagnostics(rig):
     assert values['total.stuck.left_suspension'] == values['total.drift.roll'] == '0'
     assert values['innovations_gated.left_suspension'] == '0'
     assert values['total.innovations_gated.right_suspension'] == '0'
+
+
+@pytest.mark.parametrize('kind, word', [('pendulum', 'plain roll'), ('gyro', 'drift')])
+def test_a_roll_sensor_the_front_axle_cannot_model_is_a_finding(kind, word):
+    from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+    from road_force_estimator.ros.observer import static_findings
+
+    assert static_findings(VehicleParameters(), ObserverParameters()) == []
+    found = static_findings(VehicleParameters(roll_sensor=kind), ObserverParameters())
+    assert len(found) == 1 and kind in found[0] and word in found[0]
