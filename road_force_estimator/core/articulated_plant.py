@@ -34,7 +34,9 @@ from road_force_estimator.core.articulated_parameters import ArticulatedParamete
 from road_force_estimator.core.friction import Sliders
 from road_force_estimator.core.lateral_profile import LateralProfile
 from road_force_estimator.core.road import RoadProfile
-from road_force_estimator.core.speed_profile import profile_distance, speed_knots
+from road_force_estimator.core.sampled_plant import (
+    STABLE_LAMBDA_H, SampledPlant, checked_rates, checked_substeps)
+from road_force_estimator.core.speed_profile import speed_knots
 
 __all__ = ['ArticulatedPlant', 'ArticulatedSample', 'ArticulatedTrajectory', 'RowLayout',
            'simulate_articulated', 'articulated_substeps', 'MAX_ARTICULATED_STEP_S']
@@ -44,17 +46,14 @@ __all__ = ['ArticulatedPlant', 'ArticulatedSample', 'ArticulatedTrajectory', 'Ro
 #: solve_ivp on a class C road with a stop and a curve stays below 1e-4 of the dynamic load
 #: RMS (test_articulated_plant.py).
 MAX_ARTICULATED_STEP_S = 1e-3
-_STABLE_LAMBDA_H = 2.0
 _CHUNK_SAMPLES = 256
-_END_TOLERANCE_M = 1e-9
-_NO_END_SAMPLE = 2 ** 62
 
 
 def articulated_substeps(rate_hz: float, fastest_pole: float) -> int:
     """RK4 steps per sample: a step of at most :data:`MAX_ARTICULATED_STEP_S` and within
     RK4's stability on the fastest pole (1/s)."""
     n = max(1, int(math.ceil(1.0 / (rate_hz * MAX_ARTICULATED_STEP_S) - 1e-9)))
-    return max(n, int(math.ceil(fastest_pole / (_STABLE_LAMBDA_H * rate_hz))))
+    return max(n, int(math.ceil(fastest_pole / (STABLE_LAMBDA_H * rate_hz))))
 
 
 class RowLayout:
@@ -128,7 +127,7 @@ class ArticulatedTrajectory:
         raise AttributeError(name)
 
 
-class ArticulatedPlant:
+class ArticulatedPlant(SampledPlant):
     """The articulated plant, one output sample at a time (the interface of
     :class:`.plant.Plant`: :meth:`step`, :meth:`extend_road`, :attr:`road`, ...).
 
@@ -162,13 +161,7 @@ class ArticulatedPlant:
                  start_m: float | None = None, substeps: int | None = None,
                  tire_envelope_m: float = 0.0, crossfall_rad: float = 0.0,
                  friction_start: float = 0.0, model: ArticulatedModel | None = None) -> None:
-        if not isinstance(road, RoadProfile):
-            raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
-        speed_mps, rate_hz = float(speed_mps), float(rate_hz)
-        if not (math.isfinite(speed_mps) and speed_mps > 0.0):
-            raise ValueError(f'speed_mps = {speed_mps!r} must be > 0 m/s')
-        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
-            raise ValueError(f'rate_hz = {rate_hz!r} must be > 0 Hz')
+        speed_mps, rate_hz = checked_rates(road, speed_mps, rate_hz)
         self.vehicle = vehicle
         self.model = model if model is not None else ArticulatedModel.from_vehicle_springs(
             vehicle)
@@ -185,15 +178,7 @@ class ArticulatedPlant:
         fastest = m.max_pole_magnitude()
         if substeps is None:
             substeps = articulated_substeps(rate_hz, fastest)
-        elif isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f'substeps = {substeps!r} must be an integer >= 1')
-        self.substeps = int(substeps)
-        self.step_s = 1.0 / (rate_hz * self.substeps)
-        if fastest * self.step_s > _STABLE_LAMBDA_H:
-            need = int(math.ceil(fastest / (_STABLE_LAMBDA_H * rate_hz)))
-            raise ValueError(f'substeps = {substeps} at {rate_hz:g} Hz is unstable for this '
-                             f'vehicle (fastest pole {fastest:.4g} 1/s); use at least {need}')
+        self.substeps, self.step_s = checked_substeps(substeps, fastest, rate_hz)
         self.offsets = np.array([a.position_m for a in vehicle.axles])
         self.lengths_m = m.length_m
         x0 = self.road.start_m + self.lengths_m if start_m is None else float(start_m)
@@ -229,71 +214,14 @@ class ArticulatedPlant:
         self.sliders.base = list(fb)
         self.stop_reason = ''
 
-    @property
-    def sample_index(self) -> int:
-        return self._k
-
-    @property
-    def last_sample_index(self) -> int:
-        return self._last_sample
-
-    @property
-    def finished(self) -> bool:
-        return bool(self.stop_reason)
-
-    @property
-    def state(self) -> np.ndarray:
-        return np.array(self._state)
-
-    def step(self) -> ArticulatedSample | None:
-        """The next sample, or None at the end of the road (:attr:`stop_reason`)."""
-        row = self._next_row()
-        return None if row is None else ArticulatedSample(row, self.layout)
-
-    def extend_road(self, road: RoadProfile) -> None:
-        """Drive on over ``road``, the current road and more (as :meth:`.Plant.extend_road`)."""
-        new = road.enveloped(self.tire_envelope_m)
-        if new.start_m != self.road.start_m or new.end_m < self.road.end_m:
-            raise ValueError(f'extend_road: [{new.start_m:g}, {new.end_m:g}] m does not extend '
-                             f'[{self.road.start_m:g}, {self.road.end_m:g}] m')
-        self.road = new
-        self._last_sample = self._find_last_sample()
-        self._chunk_last = min(self._chunk_last, max(self._k, 0))
-        self.stop_reason = ''
-
-    def speed_at(self, t_s):
-        """The speed (m/s) at time(s) t_s."""
-        if self.speed_profile is None:
-            return np.full(np.shape(t_s), self.speed_mps) if np.ndim(t_s) else self.speed_mps
-        ts, vs, _ = self.speed_profile
-        return np.interp(t_s, ts, vs)
+    def _sample(self, row: tuple) -> ArticulatedSample:
+        return ArticulatedSample(row, self.layout)
 
     def lateral_at(self, t_s):
         """a_y (m/s^2) at time(s) t_s."""
         return self._lateral(np.asarray(t_s, float))
 
     # ----------------------------------------------------------------------------------------
-
-    def _distance(self, j):
-        t = j / self._half_rate
-        if self.speed_profile is not None:
-            return self.start_m + profile_distance(self.speed_profile, t)
-        return self.start_m + self.speed_mps * t
-
-    def _find_last_sample(self) -> int:
-        per = 2 * self.substeps
-        limit = self.road.end_m + _END_TOLERANCE_M
-        if self.speed_profile is not None:
-            ts, vs, xs = self.speed_profile
-            if self.start_m + xs[-1] <= limit and vs[-1] <= 0.0:
-                return _NO_END_SAMPLE
-        lo, hi = 0, 1
-        while self._distance(per * hi) <= limit:
-            lo, hi = hi, 2 * hi
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            lo, hi = (mid, hi) if self._distance(per * mid) <= limit else (lo, mid)
-        return lo
 
     def _start_rates(self) -> np.ndarray:
         """The road rate under each tire at the start (m/s): the speed times the slope of the
@@ -345,19 +273,7 @@ class ArticulatedPlant:
         head = (self._times[i], self._dist[i], self._speed[i], ax, self._ay[i])
         return head + self._state + out[:5 * m2] + out[5 * m2:] + tuple(self._u[i])
 
-    def _next_row(self) -> tuple | None:
-        if self._k < 0:
-            self._k = 0
-            return self._row(0)
-        k = self._k
-        if k >= self._last_sample:
-            if not self.stop_reason:
-                self.stop_reason = (f'end of road: {self.road.end_m:g} m reached after sample '
-                                    f'{k} (t = {k / self.rate_hz:g} s); never extrapolated')
-            return None
-        if k + 1 > self._chunk_last:
-            self._prepare(k)
-        base = 2 * self.substeps * (k - self._chunk_first)
+    def _advance(self, base: int) -> None:
         state, acc, h = self._state, self._acc, self.step_s
         u, du, ay, ax = self._u, self._du, self._ay, self._ax
         sliders = self.sliders
@@ -370,8 +286,6 @@ class ArticulatedPlant:
             if sticks:
                 sliders.advance(self._q_rows(state))
         self._state = state
-        self._k = k + 1
-        return self._row(k + 1)
 
 
 def _lateral(value):

@@ -23,7 +23,9 @@ import numpy as np
 from road_force_estimator.core.friction import Sliders
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.core.road import RoadProfile
-from road_force_estimator.core.speed_profile import profile_distance, speed_knots
+from road_force_estimator.core.sampled_plant import (
+    STABLE_LAMBDA_H, SampledPlant, checked_rates, checked_substeps)
+from road_force_estimator.core.speed_profile import speed_knots
 from road_force_estimator.core.vehicle_model import SpringOptions, VehicleModel
 
 __all__ = ['Plant', 'PlantSample', 'Trajectory', 'simulate', 'default_substeps',
@@ -34,16 +36,9 @@ __all__ = ['Plant', 'PlantSample', 'Trajectory', 'simulate', 'default_substeps',
 #: dynamic tire force stays far below the sensor-noise and estimator errors.
 MAX_SUBSTEP_S = 2.5e-4
 
-#: RK4 is stable for |lambda| h up to about 2.8 (real axis) and 2.8 (imaginary axis): the
-#: step is refused beyond this bound on the linear model's fastest pole.
-_STABLE_LAMBDA_H = 2.0
-
 #: Samples whose road and lateral acceleration are prepared at once (the numbers do not
 #: depend on it).
 _CHUNK_SAMPLES = 512
-
-#: Tolerance on the end of the road for round-off in x0 + v t (m).
-_END_TOLERANCE_M = 1e-9
 
 # Flat per-sample record: (field, width). Width 2 = [left, right].
 _LAYOUT = (
@@ -168,7 +163,7 @@ def default_substeps(rate_hz: float, max_substep_s: float = MAX_SUBSTEP_S) -> in
     return max(1, int(math.ceil(1.0 / (rate_hz * max_substep_s) - 1e-9)))
 
 
-class Plant:
+class Plant(SampledPlant):
     """The plant, one output sample at a time.
 
     Parameters
@@ -223,13 +218,7 @@ class Plant:
                  speed_profile: tuple | None = None,
                  springs: SpringOptions | None = None, friction_start: float = 0.0,
                  crossfall_rad: float = 0.0) -> None:
-        if not isinstance(road, RoadProfile):
-            raise TypeError(f'road must be a RoadProfile, got {type(road).__name__}')
-        speed_mps, rate_hz = float(speed_mps), float(rate_hz)
-        if not (math.isfinite(speed_mps) and speed_mps > 0.0):
-            raise ValueError(f'speed_mps = {speed_mps!r} must be > 0 m/s')
-        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
-            raise ValueError(f'rate_hz = {rate_hz!r} must be > 0 Hz')
+        speed_mps, rate_hz = checked_rates(road, speed_mps, rate_hz)
         self.model = VehicleModel(vehicle, springs)
         self.vehicle = vehicle
         self.friction_start = float(friction_start)
@@ -253,19 +242,8 @@ class Plant:
         fastest = self.model.max_pole_magnitude()
         if substeps is None:
             substeps = default_substeps(rate_hz)
-            substeps = max(substeps, int(math.ceil(fastest / (_STABLE_LAMBDA_H * rate_hz))))
-        elif isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f'substeps = {substeps!r} must be an integer >= 1')
-        substeps = int(substeps)
-        step_s = 1.0 / (rate_hz * substeps)
-        if fastest * step_s > _STABLE_LAMBDA_H:
-            need = int(math.ceil(fastest / (_STABLE_LAMBDA_H * rate_hz)))
-            raise ValueError(f'substeps = {substeps} at {rate_hz:g} Hz: RK4 step {step_s:.3g} s '
-                             f'is unstable for this vehicle (fastest pole {fastest:.4g} 1/s); '
-                             f'use at least {need}')
-        self.substeps = substeps
-        self.step_s = step_s
+            substeps = max(substeps, int(math.ceil(fastest / (STABLE_LAMBDA_H * rate_hz))))
+        self.substeps, self.step_s = checked_substeps(substeps, fastest, rate_hz)
         x0 = self.road.start_m if start_m is None else float(start_m)
         if not (math.isfinite(x0) and self.road.start_m <= x0 < self.road.end_m):
             raise ValueError(f'start_m = {start_m!r} must lie in [{self.road.start_m:g}, '
@@ -312,96 +290,11 @@ class Plant:
             self.model.slider_base[:] = self.sliders.base
         self.stop_reason = ''
 
-    @property
-    def sample_index(self) -> int:
-        """Index of the last sample returned (-1 before the first :meth:`step`)."""
-        return self._k
+    def _sample(self, row: tuple) -> PlantSample:
+        return PlantSample._from_row(row)
 
-    @property
-    def last_sample_index(self) -> int:
-        """Index of the last sample the road allows."""
-        return self._last_sample
-
-    @property
-    def state(self) -> np.ndarray:
-        """The current state (z_s, phi, z_u1, z_u2 and rates), a copy, shape (8,)."""
-        return np.array(self._state)
-
-    @property
-    def finished(self) -> bool:
-        """True once :meth:`step` has returned None (end of the road)."""
-        return bool(self.stop_reason)
-
-    def step(self) -> PlantSample | None:
-        """The next sample, or None at the end of the road (:attr:`stop_reason` says so)."""
-        row = self._next_row()
-        return None if row is None else PlantSample._from_row(row)
-
-    def extend_road(self, road: RoadProfile) -> None:
-        """Drive on over ``road``, the current road and more (a profile that arrives as it is
-        measured: :mod:`.road_stream`).
-
-        The samples already returned keep their numbers; the next ones are prepared on the
-        longer road (the enveloped profile of a prefix is that of the whole road up to
-        ``L/2`` before the prefix's end, where the tires can be). :attr:`last_sample_index`
-        grows with it and a drive that had stopped at the end of the road goes on.
-
-        Raises
-        ------
-        ValueError
-            ``road`` does not start where the current one starts, or is shorter.
-        """
-        new = road.enveloped(self.tire_envelope_m)
-        if new.start_m != self.road.start_m or new.end_m < self.road.end_m:
-            raise ValueError(f'extend_road: [{new.start_m:g}, {new.end_m:g}] m does not extend '
-                             f'[{self.road.start_m:g}, {self.road.end_m:g}] m')
-        self.road = new
-        self._slopes = new.segment_slopes()
-        self._last_sample = self._find_last_sample()
-        self._chunk_last = min(self._chunk_last, max(self._k, 0))  # prepare again from here
-        self.stop_reason = ''
-
-    # ----------------------------------------------------------------------------------------
-
-    def _distance(self, j):
-        """Distance (m) at stage-time index j (int or int array): x0 + v t_j, or x0 + the
-        integral of the speed profile."""
-        if self.speed_profile is not None:
-            return self.start_m + profile_distance(self.speed_profile, j / self._half_rate)
-        return self.start_m + self.speed_mps * (j / self._half_rate)
-
-    def speed_at(self, t_s):
-        """The speed (m/s) at time(s) t_s (s): constant, or the profile interpolated."""
-        if self.speed_profile is None:
-            return np.full(np.shape(t_s), self.speed_mps) if np.ndim(t_s) else self.speed_mps
-        ts, vs, _ = self.speed_profile
-        return np.interp(t_s, ts, vs)
-
-    def _find_last_sample(self) -> int:
-        per = 2 * self.substeps
-        limit = self.road.end_m + _END_TOLERANCE_M
-        if self.speed_profile is not None:
-            return self._find_last_sample_profile(per, limit)
-        k = int((self.road.end_m - self.start_m) / self.speed_mps * self.rate_hz)
-        while k > 0 and self._distance(per * k) > limit:
-            k -= 1
-        while self._distance(per * (k + 1)) <= limit:
-            k += 1
-        return k
-
-    def _find_last_sample_profile(self, per: int, limit: float) -> int:
-        """The last sample on the road with a speed profile (bisection: the distance never
-        decreases); a drive that stops for good before the end has no last sample (huge)."""
-        ts, vs, xs = self.speed_profile
-        if self.start_m + xs[-1] <= limit and vs[-1] <= 0.0:
-            return _NO_END_SAMPLE
-        lo, hi = 0, 1
-        while self._distance(per * hi) <= limit:
-            lo, hi = hi, 2 * hi
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            lo, hi = (mid, hi) if self._distance(per * mid) <= limit else (lo, mid)
-        return lo
+    def _road_changed(self) -> None:
+        self._slopes = self.road.segment_slopes()
 
     def _prepare(self, first: int) -> None:
         """Road, road rate and a_y at the stage times of samples first .. first + block."""
@@ -455,19 +348,7 @@ class Plant:
         return (self._times[i], self._dist[i], q1, q2, dq1, dq2, ph, vp, zs, vs, z1, z2, v1, v2,
                 u1, u2, d1, d2, fb1, fb2, f1, f2, n1, n2, ay, a_s, a_p, a_1, a_2)
 
-    def _next_row(self) -> tuple[float, ...] | None:
-        if self._k < 0:
-            self._k = 0
-            return self._row(0)
-        k = self._k
-        if k >= self._last_sample:
-            if not self.stop_reason:
-                self.stop_reason = (f'end of road: {self.road.end_m:g} m reached after sample '
-                                    f'{k} (t = {k / self.rate_hz:g} s); never extrapolated')
-            return None
-        if k + 1 > self._chunk_last:
-            self._prepare(k)
-        base = 2 * self.substeps * (k - self._chunk_first)
+    def _advance(self, base: int) -> None:
         if self.sliders is None:
             self._state = _rk4_sample(self._accelerations, self._state, self._inputs, base,
                                       self.substeps, self.step_s, self._g1, self._g2)
@@ -477,8 +358,6 @@ class Plant:
                                           base + 2 * n, 1, self.step_s, self._g1, self._g2)
                 self.sliders.advance(self._extensions(self._state))
                 self.model.slider_base[:] = self.sliders.base
-        self._k = k + 1
-        return self._row(k + 1)
 
     def _extensions(self, state) -> tuple[float, float]:
         """q_1, q_2 (m) of a state (MODEL.md's kinematics)."""
@@ -561,10 +440,6 @@ def _rk4_sample(acc, state, inputs, base, substeps, h, g1, g2):
         v1 += h6 * (a11 + 2.0 * (a12 + a13) + a14)
         v2 += h6 * (a21 + 2.0 * (a22 + a23) + a24)
     return zs, ph, z1, z2, vs, vp, v1, v2
-
-
-#: The last sample index of a drive that never reaches the end of its road.
-_NO_END_SAMPLE = 2 ** 62
 
 
 def simulate(vehicle: VehicleParameters, road: RoadProfile, *, speed_mps: float,
