@@ -161,7 +161,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
        'offline: 1 = fit v_f of the tanh leaf-spring friction (vehicle.leaf_spring_friction_'
        'velocity x 0.5-2) by the likelihood of the innovations of the online observer over the '
        'first 20 s (estimation.offline.fit_friction_velocity); 0 = the v_f of the file', 0, 1),
-    _p('observer.fault_stuck_time', 'double', 0.5, 's',
+    _p('observer.fault_stuck_time', 'double', 0.05, 's',
        'a sensor whose reading has not changed (by more than observer.fault_stuck_tolerance) '
        'for this long while every other sensor moved is flagged stuck (estimation.sensor_health)',
        0.01, 1000.0),

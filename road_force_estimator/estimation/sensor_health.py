@@ -29,10 +29,11 @@ flags the sensor whose sign agrees (left when H and R have one sign). With
 Not detected: a drift of the roll sensor (it enters R only, as a curve does), drifts of both
 deflection sensors that cancel in H.
 
-A stuck deflection sensor is left out of the model observer while flagged (its gains
-designed without it, :meth:`.ModelCore.set_excluded`); a stuck roll sensor is flagged and
-still fed (the unknown roll moment leaves the roll unobservable from the deflections); a
-drifting sensor is flagged and fed (an offset of d costs k d of static load, 0.1 kN at
+A stuck sensor, deflection or roll, is left out of the model observer while flagged (its
+gains designed without it and its prediction taken for its reading,
+:meth:`.ModelCore.set_excluded`; the sooner the better: the held readings fed before the flag
+leave an error the filter cannot see once the sensor is out, hence 0.05 s); a drifting sensor
+is flagged and fed (an offset of d costs k d of static load, 0.1 kN at
 0.3 mm; left out, the sensor's wheel would lose its dynamic load). While a channel is stuck
 the drift window starts again (a held reading is no evidence of a drift).
 
@@ -87,7 +88,7 @@ class FaultSettings:
     """The detector's parameters (``observer.fault_*``) and the vehicle's numbers it needs."""
 
     channels: tuple                    #: channel names, in the order of the values
-    stuck_time_s: float = 0.5
+    stuck_time_s: float = 0.05
     stuck_tolerance: float = 0.0
     drift_window_s: float = 6.0
     drift_offset_m: float = 2e-4

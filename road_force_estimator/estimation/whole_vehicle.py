@@ -40,10 +40,10 @@ Sensor health (:mod:`.sensor_health`, :meth:`.FaultSettings.of_whole_vehicle`): 
 channel flagged ``stuck`` when it alone stays still, each deflection of a unit with three
 instrumented axles or more flagged ``drift`` against its neighbours (:class:`.UnitDrift`),
 from the readings as they come (before the static-load tracker) and the speed: the same flags
-online, at a latency and offline. At zero latency a stuck deflection is left out of the
-filter while flagged (:meth:`.ModelCore.set_excluded`; with a latency it stays fed,
-:data:`EXCLUDE_STUCK_AT_LATENCY`); a stuck roll sensor and a drifting deflection stay fed;
-offline the smoother is fed every channel. ``sensor_flags`` per sample
+online, at a latency and offline. Online (every latency) a stuck channel, deflection or
+roll, is left out of the filter while flagged (:meth:`.ModelCore.set_excluded`,
+:data:`EXCLUDE_STUCK_AT_LATENCY`); a drifting deflection stays fed; offline the smoother is
+fed every channel. ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 """
 from __future__ import annotations
@@ -87,12 +87,13 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'EXCLUDE_STUCK_AT_LATENCY', 'PIECE
 #: 1 s (the payload 4 t off the file's: the same to 0.4 point).
 OFFSET_TIME_CONSTANT_S = 1.0
 
-#: Whether a stuck deflection is left out of the filter with ``observer.latency`` > 0 too. No:
-#: on class C and A at 20 m/s (``python -m bench.studies.articulated_sensor_faults``'s
-#: drives), a deflection stuck 2 s and left out cost its axle's dynamic load 114-649 % at
-#: 10 ms (the fixed lag's design without it loses that wheel's road), fed 43-79 %; at zero
-#: latency left out 41-48 %, fed 61-84 %.
-EXCLUDE_STUCK_AT_LATENCY = False
+#: Whether a stuck channel is left out of the filter with ``observer.latency`` > 0 too. Yes,
+#: since each step takes a left-out channel's prediction for its reading (no fixed-lag output
+#: is given the held reading) and ``observer.fault_stuck_time`` is 0.05 s: on class C and A
+#: at 20 m/s (``python -m bench.studies.articulated_sensor_faults``'s drives), a channel stuck
+#: for 2 s cost the worst axle 17.8-25.4 % (deflections) and 3.2-9.4 % (rolls) at 10 ms against
+#: 3.2 / 6.4 % clean; fed, 43-79 % and 238-285 %.
+EXCLUDE_STUCK_AT_LATENCY = True
 
 #: The units whose load transfer is estimated, in the order of the LTR fields.
 UNITS = ('tractor', 'trailer', 'combination')
@@ -320,9 +321,8 @@ class WholeVehicleEstimator:
         self._last: int | None = None
         #: stuck and drifting sensors (:mod:`.sensor_health`; module notes)
         self.faults = FaultDetector(FaultSettings.of_whole_vehicle(obs, self.model))
-        #: the deflections left out of the filter while stuck: at zero latency only
-        #: (:data:`EXCLUDE_STUCK_AT_LATENCY`)
-        self._droppable = (tuple(k for k, ch in enumerate(self.model.channels) if ch[0] == 'q')
+        #: the channels left out of the filter while stuck (:data:`EXCLUDE_STUCK_AT_LATENCY`)
+        self._droppable = (tuple(range(len(self.model.channels)))
                            if obs.latency_s == 0.0 or EXCLUDE_STUCK_AT_LATENCY else ())
         self._codes: deque = deque()               # each held sample's sensor flags
         self._flags = (0,) * len(self.channel_names)

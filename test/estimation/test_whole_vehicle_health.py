@@ -110,12 +110,19 @@ def test_a_clean_drive_raises_nothing_and_a_drift_is_named_within_30_s(long_driv
         assert 0 < counts.first_ns[ch]['drift'] - began <= 30e9, ch
 
 
+#: The load error (every wheel, RMS) at 10 ms with the sensor stuck 2 s, at most this times the
+#: clean drive's (a stuck deflection leaves its wheel's load to the model for those seconds).
+#: Measured on this drive: 4.93 and 1.40; fed instead of left out, 7.49 and 19.1.
+BOUND_10MS = {'trailer_1_right_suspension': 6.0, 'tractor_roll': 2.0}
+
+
 @pytest.mark.parametrize('channel', ['trailer_1_right_suspension', 'tractor_roll'])
 def test_a_stuck_sensor_is_named_within_1_s_in_every_mode(articulated_c, channel):
     """8 s of class C, a deflection and a roll sensor stuck 2 s from 3 s (the plant's hold):
     flagged stuck within 1 s of the hold's start, that sensor alone, the same per-sample flags
-    online, at 10 ms and offline; online the stuck deflection is left out of the filter while
-    flagged, and fed again after."""
+    online, at 10 ms and offline; online the stuck sensor, deflection or roll, is left out of
+    the filter while flagged, and fed again after; at 10 ms the loads against the plant's stay
+    near the clean drive's (:data:`BOUND_10MS`)."""
     d, tr, stamps, y = articulated_c
     names = ArticulatedObserverModel(d.vehicle).channel_names
     bad, truth = faulted(names, y, f'stuck@{channel}:start=3,duration=2', 8.0)
@@ -131,6 +138,12 @@ def test_a_stuck_sensor_is_named_within_1_s_in_every_mode(articulated_c, channel
         assert 0 < wv.faults.first_ns[channel]['stuck'] - began <= 1e9, mode
         assert np.isfinite(wv.load_n).all(), mode
         flags[mode] = wv.fault_flags
+        if mode == '10 ms':
+            clean = estimate_whole_vehicle(d.vehicle, stamps, y, tr.speed_mps, observer=obs)
+            judged = tr.t_s >= 1.0
+            err = [float(np.sqrt(np.mean((e.load_n[:, judged] - tr.wheel_load_n.T[:, judged])
+                                         ** 2))) for e in (clean, wv)]
+            assert err[1] <= BOUND_10MS[channel] * err[0], err
     np.testing.assert_array_equal(flags['online'], flags['10 ms'])
     np.testing.assert_array_equal(flags['online'], flags['offline'])
     est = WholeVehicleEstimator(d.vehicle, ObserverParameters())
@@ -140,9 +153,6 @@ def test_a_stuck_sensor_is_named_within_1_s_in_every_mode(articulated_c, channel
         est.step(s, r, v)
         left_out.append(est.online.core.schedule.excluded)
     held = np.array([k in x for x in left_out])
-    if channel.endswith('_suspension'):
-        stuck = flags['online'][k] == CODES['stuck']
-        # excluded from the sample after the flag rose until the one after it fell
-        np.testing.assert_array_equal(held[1:], stuck[:-1])
-    else:
-        assert not held.any()          # a roll sensor stays fed
+    stuck = flags['online'][k] == CODES['stuck']
+    # excluded from the sample after the flag rose until the one after it fell
+    np.testing.assert_array_equal(held[1:], stuck[:-1])

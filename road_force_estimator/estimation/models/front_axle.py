@@ -473,10 +473,10 @@ class FrontAxleModel(LeafSpringFriction):
     channel_names = CHANNEL_NAMES
     #: the states of the body's heave and roll rates (:mod:`..sensor_health`'s momentum)
     momentum_states = (State.DZ_S, State.DPHI)
-    #: channels the filter can do without (a stuck sensor left out): the deflections; not
-    #: the roll, which the unknown roll moment leaves unobservable from them (measured: a
-    #: stuck roll sensor costs more left out than fed)
-    droppable_channels = (0, 1)
+    #: channels the filter can do without (a stuck sensor left out): every one. A stuck roll
+    #: sensor left out costs almost nothing over 30 s (the roll moment's model carries the
+    #: roll; ``python -m bench.studies.sensor_faults --only latency``), fed it cost 4-15 x
+    droppable_channels = (0, 1, 2)
     deflection_channels = (0, 1)
     roll_channels = (2,)
     load_outputs = LOAD_OUTPUTS

@@ -247,7 +247,9 @@ class ModelCore:
     def set_excluded(self, channels: tuple) -> None:
         """Leave ``channels`` (indices) out of the filter from the next step on (a stuck
         sensor, :mod:`..sensor_health`): the gains are those of a design without them
-        (:func:`.gains.design` ``excluded``, cached per set); () feeds every channel."""
+        (:func:`.gains.design` ``excluded``, cached per set), and each step takes their
+        prediction for their reading (innovation 0), so that no fixed-lag output, under this
+        design or the next, is given a reading the filter left out; () feeds every channel."""
         sched = self.schedule
         if tuple(channels) != sched.excluded:
             sched.excluded = tuple(channels)
@@ -446,6 +448,17 @@ class ModelCore:
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
+        excluded = sched.excluded
+        if excluded:            # left out: its prediction in the row (its innovation 0)
+            y = list(y)
+            for ch in excluded:
+                y[ch] -= s[self._nx + ch]
+            row[y0:y0 + ny] = y
+            sv = _dot(self._m, row, out=self._sv)
+            if fr is not None:
+                sv = fr.update(sv, row[x0:y0 - ny])
+            s = sv.tolist()
+            y = tuple(y)
         if self._gate is not None and self._t >= GATE_START_S and meta[3]:
             # innovations far outside their spread: not fed (not in a run's start-up
             # transient, whose innovations the steady-state spread does not describe)
