@@ -5,7 +5,10 @@ front axle's stage, in one block (:mod:`.plan` says why).
 Source: the readings of ``/suspension/deflections`` in the model's channel order and the
 twist's speed held at each sample (:func:`~.bagio.articulated_readings.
 read_articulated_readings`; samples before the first twist take its speed, as the node holds
-them). Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` sample by
+them); with ``vehicle.tractor_imu`` the IMU's a_y of ``/imu/tractor`` as the last channel, the
+latest at or before each sample (:func:`~.estimation.imu_hold.pair_imu`, the node's rule; the
+samples stale or missing counted: :func:`imu_values`, the report's ``tractor_imu``).
+Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` sample by
 sample (the node's numbers), offline the smoother. Sinks: the estimate bag's whole-vehicle
 topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics from the front
 wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and

@@ -310,3 +310,59 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
     assert {est[f'total.stuck.{c}'] for c in names} == {'0'}
     assert {est[f'total.drift.{c}'] for c in names} == {'0'}
     assert est['total.gaps'] == '1'       # the step over the lost samples restarted it
+
+
+def imu_msg(stamp_ns: int, ay: float):
+    msg = message_class(api.IMU_MSG)()
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.IMU_FRAME
+    msg.linear_acceleration.y = float(ay)
+    return msg
+
+
+def test_an_imu_at_its_own_rate_is_held_and_counted(ros_context):
+    """``vehicle.tractor_imu: true``, the IMU every 50 ms from the 5th sample of 10 ms steps
+    and a 0.2 s hole: each sample fed the latest a_y at or before its stamp (0 before the
+    first), the samples before it missing, those 0.1 s past the last message stale (counted
+    here by hand), every sample estimated."""
+    values = file_values(**{'vehicle.tractor_imu': True})
+    observer = Observer(context=ros_context, parameter_overrides=overrides(values))
+    assert observer.whole.names[-1] == 'tractor_imu_accel_y'
+    joints = observer.whole.names[:-1]
+    taken = record_inputs(observer)
+    feeder = Feeder(ros_context)
+    imu_pub = feeder.create_publisher(message_class(api.IMU_MSG), api.IMU, sensor_qos(100))
+    loads = Collector(ros_context, [api.WHEEL_LOADS])
+    executor = make_executor(ros_context, observer, feeder, loads)
+    t0 = 1_700_000_000 * 10**9
+    step = 10 * 10**6
+    imu_at = [k for k in range(5, 60, 5) if not 25 < k < 45]      # the hole: 0.25 to 0.45 s
+    try:
+        assert spin_until(executor, lambda: imu_pub.get_subscription_count() > 0 and
+                          feeder.deflections.get_subscription_count() > 0, 20.0)
+        for k in imu_at:                 # every IMU message first: the node holds them
+            imu_pub.publish(imu_msg(t0 + k * step, 0.1 * k))
+        held = observer.whole.input.imu_hold.held
+        assert spin_until(executor, lambda: len(held) == len(imu_at), 20.0)
+        for k in range(60):
+            feeder.twist.publish(twist_msg(t0 + k * step, 15.0))
+            feeder.deflections.publish(deflections(t0 + k * step, joints, [0.0] * len(joints)))
+            executor.spin_once(timeout_sec=0.002)
+        assert spin_until(executor, lambda: loads.count(api.WHEEL_LOADS) == 60, 20.0)
+        status = observer.whole.estimator_status('observer')
+    finally:
+        close(executor, observer, feeder, loads)
+    want = []
+    for k in range(60):                  # the rule, by hand
+        last = [j for j in imu_at if j <= k]
+        if not last:
+            want.append((0.0, 2))
+        else:
+            want.append((0.1 * last[-1], 1 if (k - last[-1]) * step > 10**8 else 0))
+    assert [s[3] for s in taken] == want
+    missing = sum(c == 2 for _, c in want)
+    stale = sum(c == 1 for _, c in want)
+    assert (missing, stale) == (5, 9)       # k 0-4; k 36-44 (k 35 is 100 ms: still fresh)
+    values = dict(status.values)
+    assert (values['total.imu.missing'], values['total.imu.stale']) == ('5', '9')
+    assert 'tractor IMU: 9 stale, 5 missing samples' in status.message
+    assert status.level == 1
