@@ -5,7 +5,7 @@ a_y does for the trailer's rollover estimate.
 
 Run from the repository root::
 
-    .venv/bin/python -m bench.studies.roll_sensors [--parts front whole rollover warning]
+    .venv/bin/python -m bench.studies.roll_sensors [--parts front whole rollover warning bag]
         [--duration 20]
 
 Drives at 20 m/s, 1 kHz, 10 um on every deflection and 10 um over the front half spring track
@@ -34,6 +34,13 @@ RMS, after 2 s; the whole vehicle's worst axle. Modes: zero latency, ``observer.
   (the plant's loads through :mod:`road_force_estimator.core.unit_loads`), its instantaneous
   LTR's RMS error, the worst axle's load error, and when the estimate and the truth first
   reach 0.6.
+
+- ``bag``: the pendulums with the tractor IMU through ``estimate_bag``: the curve on classes
+  A and C written by ``simulate_bag`` (the same plant, sensors and IMU, ``vehicle.tractor_imu:
+  true`` and ``vehicle.roll_sensor: pendulum`` in the file it is given), estimated by
+  ``estimate_bag`` from that bag in each mode (its ``/wheel_loads``, the IMU read from
+  ``/imu/tractor``): the worst axle's load error beside ``whole``'s in-process figure, the
+  samples without a fresh a_y, and whether the two estimates are the same numbers.
 
 What it found: docs/notes/roll_sensors.md.
 """
@@ -301,13 +308,94 @@ def part_warning(args) -> list[str]:
     return lines
 
 
+def params_yaml(values: dict, path: pathlib.Path) -> pathlib.Path:
+    """A parameter file (every node's) holding the flat ``values``."""
+    import yaml
+
+    nested: dict = {}
+    for name, value in values.items():
+        node = nested
+        *parents, leaf = name.split('.')
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[leaf] = list(value) if isinstance(value, tuple) else value
+    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': nested}}))
+    return path
+
+
+def bag_loads(folder: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
+    """``/wheel_loads``' stamps (ns) and loads ((wheels, m), N) of an estimate bag."""
+    from road_force_estimator.bagio.reader import read_topic_columns
+    from road_force_estimator.interfaces import JOINT_STATE, WHEEL_LOADS
+
+    cols = read_topic_columns(folder, {WHEEL_LOADS: JOINT_STATE})[WHEEL_LOADS]
+    stamps = np.asarray(cols.stamps_ns()[0], np.int64)
+    loads = np.full((cols.count, 10), np.nan)
+    for g in cols.groups:
+        loads[g.index] = g.columns['effort']
+    return stamps, loads.T
+
+
+def part_bag(args) -> list[str]:
+    """The pendulums and the IMU through simulate_bag and estimate_bag, beside in process."""
+    from road_force_estimator.core.parameters import load_params_file
+    from road_force_estimator.tools import estimate_bag, simulate_bag
+
+    lines = ["\nThe whole vehicle through estimate_bag (pendulum roll sensors, the tractor IMU, "
+             "the curve): the worst axle's load error (% of its true dynamic RMS, after 2 s)\n",
+             '| road | mode | in process | estimate_bag | samples without a fresh a_y | '
+             'same numbers |', '|---|---|---:|---:|---:|---|']
+    stated = {'vehicle.roll_sensor': 'pendulum'}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        for road in ('A', 'C'):
+            drive = whole_drive(road, True, {'simulator.roll_sensor': 'pendulum'},
+                                args.duration)
+            base = load_params_file(CONFIG)
+            s_front = float(base.get('vehicle.axle.front.spring_half_track', 0.45))
+            base.update({'simulator.noise.deflection': NOISE_M,
+                         'simulator.noise.roll': NOISE_M / s_front,
+                         'simulator.lateral_profile': CURVE, 'vehicle.tractor_imu': True,
+                         'simulator.roll_sensor': 'pendulum', **stated})
+            params = params_yaml(base, tmp / f'{road}.yaml')
+            bag = tmp / f'drive_{road}'
+            code = simulate_bag.main([
+                '--params-file', str(params), '--road', f'iso8608:{road}:seed=1', '--speed',
+                '20', '--rate', '1000', '--duration', str(args.duration), '--gnss-rate', '0',
+                '--no-progress', '--output', str(bag)])
+            assert code == 0, code
+            vehicle = file_vehicle(stated)
+            for label, lat, off in MODES:
+                ref = whole_estimate(vehicle, drive, lat, off, imu=True)
+                out = tmp / f'est_{road}_{label.replace(" ", "")}'
+                code = estimate_bag.main([
+                    str(bag), '--params-file', str(params), '-p', f'observer.latency:={lat}',
+                    '--output', str(out), '--mode', 'offline' if off else 'online',
+                    '--no-figures', '--no-progress'])
+                assert code == 0, code
+                import json
+                report = json.loads((out / 'report' / 'report.json').read_text())
+                imu = report['whole_vehicle_estimate']['tractor_imu']
+                stamps, loads = bag_loads(out / 'bag')
+                assert stamps.size == drive['stamps'].size
+                via = replace(ref, load_n=loads)
+                cells = [float(np.max(whole_errors(drive, e))) for e in (ref, via)]
+                same = ('bit for bit' if np.array_equal(loads, ref.load_n) else
+                        f'within {np.max(np.abs(loads - ref.load_n)):.2g} N')
+                lines.append(f'| {road} | {label} | {cells[0]:.2f} | {cells[1]:.2f} | '
+                             f'{imu["stale"] + imu["missing"]} | {same} |')
+                print(lines[-1], file=sys.stderr, flush=True)
+    return lines
+
+
 PARTS = {'front': part_front, 'whole': part_whole, 'rollover': part_rollover,
-         'warning': part_warning}
+         'warning': part_warning, 'bag': part_bag}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--parts', nargs='*', default=list(PARTS), choices=list(PARTS))
+    parser.add_argument('--parts', nargs='*', default=[p for p in PARTS if p != 'bag'],
+                        choices=list(PARTS))
     parser.add_argument('--duration', type=float, default=20.0,
                         help='seconds per drive of front and whole (rollover: 20)')
     args = parser.parse_args(argv)

@@ -182,6 +182,9 @@ class WholeVehicleArrays:
     fault_flags: np.ndarray | None = None
     #: the drive's sensor flags and counts by channel (:class:`.sensor_health.FaultCounts`)
     faults: FaultCounts | None = None
+    #: (m,) int8: each sample's tractor IMU pairing (:mod:`.imu_hold`: 0 fresh, 1 stale, 2
+    #: missing) where the caller paired it, or None
+    imu_codes: np.ndarray | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:

@@ -5,7 +5,10 @@ front axle's stage, in one block (:mod:`.plan` says why).
 Source: the readings of ``/suspension/deflections`` in the model's channel order and the
 twist's speed held at each sample (:func:`~.bagio.articulated_readings.
 read_articulated_readings`; samples before the first twist take its speed, as the node holds
-them). Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` sample by
+them); with ``vehicle.tractor_imu`` the IMU's a_y of ``/imu/tractor`` as the last channel, the
+latest at or before each sample (:func:`~.estimation.imu_hold.pair_imu`, the node's rule; the
+samples stale or missing counted: :func:`imu_values`, the report's ``tractor_imu``).
+Stage: online :class:`~.estimation.whole_vehicle.WholeVehicleEstimator` sample by
 sample (the node's numbers), offline the smoother. Sinks: the estimate bag's whole-vehicle
 topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics from the front
 wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and
@@ -36,7 +39,7 @@ from road_force_estimator.pipeline.result import PROG, InputError
 __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'add_diagnostics', 'sensor_edges', 'sensor_status_values', 'sensor_report',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
-           'FusedRoad', 'fit_values', 'MISMATCH',
+           'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
            'STATUS_NAME']
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
@@ -73,9 +76,10 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
     from road_force_estimator.estimation.whole_vehicle import (
         WholeVehicleEstimator, estimate_whole_vehicle)
 
-    names = WholeVehicleEstimator(vehicle, observer).channel_names
+    imu = bool(getattr(vehicle, 'tractor_imu', False))
+    names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
     try:
-        r = read_articulated_readings(input_path, names)
+        r = read_articulated_readings(input_path, names, imu=imu)
     except BagReadError as err:
         raise InputError(str(err)) from None
     if r.stamps_ns.size == 0:
@@ -86,8 +90,36 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
     if not held.any():
         raise InputError('no usable /vehicle/twist message: the speed is unknown')
     speed[~held] = speed[np.argmax(held)]      # before the first twist: its speed
-    return estimate_whole_vehicle(vehicle, r.stamps_ns, r.readings, speed, observer=observer,
-                                  offline=mode == 'offline', windows=windows)
+    readings, codes = r.readings, None
+    if imu:                                    # the IMU's a_y by the node's rule, counted
+        from road_force_estimator.estimation.imu_hold import pair_imu
+
+        ay, codes = pair_imu(r.stamps_ns, r.imu_stamps_ns, r.imu_ay_mps2)
+        readings = np.column_stack([readings, ay])
+    wv = estimate_whole_vehicle(vehicle, r.stamps_ns, readings, speed, observer=observer,
+                                offline=mode == 'offline', windows=windows, imu=imu)
+    return wv if codes is None else replace(wv, imu_codes=codes)
+
+
+def imu_values(wv, k: int, since: int = 0) -> tuple[dict, str]:
+    """The tractor IMU's counts at sample ``k`` (the node's keys, :mod:`~.estimation.imu_hold`:
+    ``imu.stale``, ``imu.missing`` the samples of the period ``since`` .. ``k`` fed a held or
+    no a_y, ``total.imu.*`` the drive's so far) and a message ('' when the period had none);
+    none without the IMU."""
+    from road_force_estimator.estimation.imu_hold import MISSING, STALE
+
+    codes = getattr(wv, 'imu_codes', None)
+    if codes is None:
+        return {}, ''
+    values = {}
+    words = []
+    for code, word in ((STALE, 'stale'), (MISSING, 'missing')):
+        n = int(np.count_nonzero(codes[since:k + 1] == code))
+        values[f'imu.{word}'] = str(n)
+        values[f'total.imu.{word}'] = str(int(np.count_nonzero(codes[:k + 1] == code)))
+        if n:
+            words.append(f'{n} {word}')
+    return values, (f'tractor IMU: {", ".join(words)} samples' if words else '')
 
 
 def sensor_report(est, wv):
@@ -207,6 +239,11 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None,
         level = 1
         message += (f'; rollover warning: {", ".join(warned)} predicted |LTR| >= '
                     f'{WARNING_THRESHOLD:g}')
+    imu, late = imu_values(wv, k, since)
+    values.update(imu)
+    if late:
+        level = 1
+        message += f'; {late}'
     if edges is not None:
         sensors, fault = sensor_status_values(wv, k, edges)
         values.update(sensors)

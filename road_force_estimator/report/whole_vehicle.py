@@ -256,6 +256,11 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
         'axle_static_load_n': axle_static,
         'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units,
         'gaps': int(wv.gap_count) if hasattr(wv, 'gap_count') else 0}
+    codes = getattr(wv, 'imu_codes', None)
+    if codes is not None:       # the tractor IMU's pairing (:mod:`~.estimation.imu_hold`)
+        from road_force_estimator.estimation.imu_hold import IMU_MAX_AGE_S, STATES
+        out['tractor_imu'] = {'max_age_s': IMU_MAX_AGE_S, **{
+            w: int(np.count_nonzero(np.asarray(codes) == c)) for c, w in enumerate(STATES)}}
     fit = getattr(wv, 'axle_fit', None)
     if fit is not None and fit.measured:
         from road_force_estimator.estimation.axle_fit import ONLINE_THRESHOLD, THRESHOLD
@@ -343,6 +348,12 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
     lines += ['', '| unit | max abs LTR | max abs quasi-static LTR |', '|---|---|---|']
     for unit, u in s['units'].items():
         lines.append(f'| {unit} | {u["max_abs_ltr"]:.3f} | {u["max_abs_ltr_quasi_static"]:.3f} |')
+    imu = s.get('tractor_imu')
+    if imu:
+        lines += ['', f"The tractor IMU's a_y (`/imu/tractor`, the latest at or before each "
+                  f"sample): {imu['fresh']} samples fresh, {imu['stale']} stale (older than "
+                  f"{imu['max_age_s']:g} s: the last a_y held) and {imu['missing']} missing "
+                  '(none yet: fed 0).']
     fp = s.get('fused_profile')
     if fp:
         left, right = fp['iri_m_per_km']

@@ -99,11 +99,11 @@ class ArticulatedOutputs:
         road = row[self.road_slice]
         x = row[self.x_col]
         self.send_twist(self.twist.encode(stamp_ns, (speed_mps,)))
-        self.send_deflections(self.deflections.encode(stamp_ns, readings))
-        if self.imu is not None:
+        if self.imu is not None:     # before the deflections: the observer pairs it with them
             a = self.imu(row)
             self.imu_pub.handle.publish_raw(self.imu_encoder.encode(
                 stamp_ns, (a[3], a[4], a[5], a[0], a[1], a[2])))
+        self.send_deflections(self.deflections.encode(stamp_ns, readings))
         ltr = self.ltr.update(loads)
         values = (loads[0], loads[1], x, self.half, road[0], x, -self.half, road[1], *loads,
                   ltr[0], ltr[2], ltr[4], ltr[1], ltr[3], ltr[5])

@@ -17,6 +17,12 @@ read_drive_bag` gives it; samples that come before any twist wait (:data:`MAX_WA
 oldest dropped beyond). A second publisher on ``/suspension/deflections`` (two sources:
 :mod:`.sources`) is not mixed in: the first one is followed, the other's samples rejected and
 counted (``second_source``), until the first has been silent for :data:`SWITCH_SILENCE_S`.
+
+With ``imu`` (the articulated observer, ``vehicle.tractor_imu: true``) ``/imu/tractor`` is
+taken too (sensor-data QoS, taken with the deflections as the twist is, before them in each
+round) and each sample gets the tractor IMU's ``(a_y, code)`` by the rule of
+:class:`road_force_estimator.estimation.imu_hold.ImuHold` (the latest a_y at or before its
+stamp; stale or missing counted by the caller).
 """
 from __future__ import annotations
 
@@ -24,10 +30,11 @@ from collections import deque
 import time
 from typing import Callable
 
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from geometry_msgs.msg import TwistStamped
 
 from road_force_estimator import interfaces as api
+from road_force_estimator.estimation.imu_hold import ImuHold
 from road_force_estimator.ros.messages import MessageRejected, sensor_qos
 from road_force_estimator.ros.sources import Sources
 from road_force_estimator.ros.take_loop import TakeLoop
@@ -45,6 +52,8 @@ MAX_WAITING = 2000
 SWITCH_SILENCE_S = 0.5
 #: Twists kept to give each sample the speed at its stamp.
 TWISTS_KEPT = 4096
+#: IMU messages held by DDS for the node (as the twists: cheap, none lost).
+IMU_DEPTH = 10_000
 
 
 class ObserverInput:
@@ -65,13 +74,23 @@ class ObserverInput:
         (raising :class:`.MessageRejected`); default the front axle's
         (:meth:`.Wire.read_deflections`). The articulated observer reads every joint
         (:mod:`.whole_vehicle_observer`).
+    imu : callable, optional
+        ``imu(data) -> (stamp_ns, a_y)`` of an ``/imu/tractor`` message's bytes (raising
+        :class:`.MessageRejected`): the topic is subscribed and ``sample`` gets a last
+        argument, the sample's ``(a_y (m/s^2), code)`` (:class:`.imu_hold.ImuHold`).
     """
 
     def __init__(self, owner: str, context, sample: Callable, reject: Callable,
-                 read: Callable | None = None) -> None:
+                 read: Callable | None = None, imu: Callable | None = None) -> None:
         self.loop = TakeLoop(owner, context, batch=QUEUE_DEPTH)
         self.twist_index = self.loop.add(TwistStamped, api.TWIST, sensor_qos(TWIST_DEPTH),
                                          wakes=False)   # taken with the deflections
+        self.imu_index = -1
+        self.read_imu = imu
+        #: the tractor IMU's a_y held for the samples (None: no IMU)
+        self.imu_hold = None if imu is None else ImuHold()
+        if imu is not None:                                # taken with the deflections
+            self.imu_index = self.loop.add(Imu, api.IMU, sensor_qos(IMU_DEPTH), wakes=False)
         self.deflection_index = self.loop.add(JointState, api.DEFLECTIONS,
                                               sensor_qos(QUEUE_DEPTH))
         self.sample, self.reject = sample, reject
@@ -88,11 +107,14 @@ class ObserverInput:
         self.loop.start(self.take)
 
     def take(self, batch) -> None:
-        """One round (the take thread): the twists, then the deflections, in order."""
+        """One round (the take thread): the twists and IMU messages, then the deflections, in
+        order."""
         now = time.monotonic()
         for m in batch:
             if m.index == self.twist_index:
                 self._twist(m.data)
+            elif m.index == self.imu_index:
+                self._imu(m.data)
         for m in batch:
             if m.index == self.deflection_index:
                 self._deflection(m, now)
@@ -108,7 +130,21 @@ class ObserverInput:
         self.twists.append((stamp, speed))
         while self.waiting:
             stamp, *rest = self.waiting.popleft()
+            self._sample(stamp, rest)
+
+    def _imu(self, data: bytes) -> None:
+        try:
+            stamp, ay = self.read_imu(data)
+        except MessageRejected as exc:
+            self.reject('imu_' + exc.reason, str(exc))
+            return
+        self.imu_hold.push(stamp, ay)
+
+    def _sample(self, stamp: int, rest: list) -> None:
+        if self.imu_hold is None:
             self.sample(stamp, *rest, self.speed_at(stamp))
+        else:
+            self.sample(stamp, *rest, self.speed_at(stamp), self.imu_hold.at(stamp))
 
     def _deflection(self, m, now: float) -> None:
         self.received += 1
@@ -129,7 +165,7 @@ class ObserverInput:
                 self.reject('no_speed', 'no /vehicle/twist yet: oldest waiting sample dropped')
             self.waiting.append((stamp, *rest))
             return
-        self.sample(stamp, *rest, self.speed_at(stamp))
+        self._sample(stamp, rest)
 
     def speed_at(self, stamp: int) -> float:
         """The speed of the latest twist stamped at or before ``stamp`` (the first twist's

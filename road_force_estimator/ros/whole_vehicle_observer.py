@@ -35,6 +35,14 @@ the estimate, :mod:`~.estimation.whole_vehicle`) of the period and ``total.`` of
 ``sensor.<channel>`` ('ok' | 'stuck' | 'drift', :mod:`~.estimation.sensor_health`) and
 ``total.stuck.<channel>`` / ``total.drift.<channel>``, flags raised: a fault WARNs naming the
 sensor) and ``observer: configuration``.
+
+The tractor IMU (``vehicle.tractor_imu: true`` in the observer's file, the parameter the plant
+reads): ``/imu/tractor`` is subscribed (sensor-data QoS) and read from its bytes
+(:class:`ImuReader`, ``linear_acceleration.y`` = a_y, m/s^2); each sample takes the latest a_y
+at or before its stamp (:mod:`~.estimation.imu_hold`) as the estimator's last channel
+(``imu=True``). ``observer: estimator`` counts ``imu.stale`` and ``imu.missing`` (samples fed
+a held a_y older than :data:`~.estimation.imu_hold.IMU_MAX_AGE_S`, or 0 before any IMU
+message) of the period and ``total.imu.*``, WARN when the period had any.
 """
 from __future__ import annotations
 
@@ -47,13 +55,15 @@ from typing import Any, Iterable, Mapping, Sequence
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 
 from road_force_estimator import interfaces as api
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.estimation.axle_fit import ADVICE
+from road_force_estimator.estimation.imu_hold import MISSING, STALE, STATES
+from road_force_estimator.estimation.models.articulated import IMU_CHANNEL
 from road_force_estimator.estimation.rollover_warning import WARNING_THRESHOLD
 from road_force_estimator.estimation.whole_vehicle import UNITS, WholeVehicleEstimator
 from road_force_estimator.ros.messages import (
@@ -96,10 +106,11 @@ def build(values: Mapping[str, Any], given: Iterable[str], channels: Sequence[st
     vehicle = ArticulatedParameters.from_parameters(values, [
         n for n in given if n.startswith(('vehicle.', 'simulator.'))])
     observer = ObserverParameters.from_parameters(values)
-    estimator = WholeVehicleEstimator(vehicle, observer)
+    estimator = WholeVehicleEstimator(vehicle, observer, imu=vehicle.tractor_imu)
     if channels and tuple(estimator.channel_names) != tuple(channels):
-        raise ValueError('vehicle.axles, .instrumented, vehicle.trailer_roll_sensor: the '
-                         'channels are set at start (restart the node to change them)')
+        raise ValueError('vehicle.axles, .instrumented, vehicle.trailer_roll_sensor, '
+                         'vehicle.tractor_imu: the channels are set at start (restart the '
+                         'node to change them)')
     return vehicle, observer, estimator
 
 
@@ -144,6 +155,29 @@ class JointReader:
         if fast is not None and math.isfinite(sum(fast[1])):
             return fast
         return read_joints(deserialize(data, JointState), self.names)
+
+
+class ImuReader:
+    """The tractor IMU's ``(stamp_ns, a_y)`` (m/s^2, ``linear_acceleration.y``) from an
+    ``/imu/tractor`` message's bytes: straight from the bytes in the plant's layout (frame
+    ``base_link``), else by rclpy."""
+
+    def __init__(self) -> None:
+        self.fast = CdrReader(api.IMU_MSG, message_template(api.IMU_MSG, api.IMU_FRAME),
+                              ['linear_acceleration.y'])
+
+    def read(self, data: bytes) -> tuple[int, float]:
+        """Raises :class:`.MessageRejected` 'nonfinite' for a non-finite a_y."""
+        fast = self.fast.read(data)
+        if fast is not None:
+            stamp_ns, (ay,) = fast
+        else:
+            msg = deserialize(data, Imu)
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            ay = float(msg.linear_acceleration.y)
+        if not math.isfinite(ay):
+            raise MessageRejected('nonfinite', 'Imu with a non-finite linear_acceleration.y')
+        return stamp_ns, ay
 
 
 def output_values(sample, wheels: Sequence[int]) -> tuple:
@@ -217,9 +251,13 @@ class WholeVehicleObserver:
         self.static_stamp_ns: int | None = None
         self.diagnostics_pub = node.create_publisher(DiagnosticArray, api.DIAGNOSTICS,
                                                      reliable_qos(10))
-        self.reader = JointReader(self.names)
+        self.imu = bool(vehicle.tractor_imu)
+        self.imu_period, self.imu_total = [0, 0, 0], [0, 0, 0]   # samples by imu_hold code
+        self.reader = JointReader([n for n in self.names if n != IMU_CHANNEL]
+                                  if self.imu else self.names)
         self.input = ObserverInput(node.get_name(), node.context, self.estimate, self.reject,
-                                   read=self.reader.read)
+                                   read=self.reader.read,
+                                   imu=ImuReader().read if self.imu else None)
         self.input.start()
         node.create_timer(1.0, self.diagnostics_callback)
         node.get_logger().info(
@@ -250,8 +288,13 @@ class WholeVehicleObserver:
             self.period[reason] += 1
             self.last_rejection = bounded(detail)
 
-    def estimate(self, stamp_ns: int, readings: tuple, speed_mps: float) -> None:
-        """One sample (the input thread): estimated, its estimates published."""
+    def estimate(self, stamp_ns: int, readings: tuple, speed_mps: float,
+                 imu: tuple | None = None) -> None:
+        """One sample (the input thread): estimated, its estimates published. ``imu``: the
+        tractor IMU's ``(a_y, code)`` at the sample (:mod:`~.estimation.imu_hold`), the
+        estimator's last channel."""
+        if imu is not None:
+            readings = (*readings, imu[0])
         with self.lock:
             self.speed_mps = speed_mps
             last = self.last_stamp_ns
@@ -266,6 +309,8 @@ class WholeVehicleObserver:
                 self.last_rejection = bounded(str(exc))
                 return
             self.last_stamp_ns = stamp_ns
+            if imu is not None:
+                self.imu_period[imu[1]] += 1
             for sample in samples:
                 self.publish(sample)
 
@@ -398,6 +443,17 @@ class WholeVehicleObserver:
         if warned:
             message += (f'; rollover warning: {", ".join(warned)} predicted |LTR| >= '
                         f'{WARNING_THRESHOLD:g}')
+        if self.imu:            # the tractor IMU's pairing (estimation.imu_hold)
+            period, self.imu_period = self.imu_period, [0, 0, 0]
+            self.imu_total = [a + b for a, b in zip(self.imu_total, period)]
+            late = []
+            for code in (STALE, MISSING):
+                values[f'imu.{STATES[code]}'] = period[code]
+                values[f'total.imu.{STATES[code]}'] = self.imu_total[code]
+                if period[code]:
+                    late.append(f'{period[code]} {STATES[code]}')
+            if late:
+                message += f'; tractor IMU: {", ".join(late)} samples'
         fit = self.axle_fit
         if fit is not None:
             values.update(fit.status_values())

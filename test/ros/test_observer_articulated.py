@@ -3,7 +3,11 @@ MODEL.md's 5-axle combination: every wheel's load arrives, named by the contract
 follow the plant's truth; the numbers are those of estimate_whole_vehicle on the inputs the
 node took (recorded as it took them) and the bytes those rclpy serialises for the same
 messages, the road (/road_profile/left|right per sample, /road_profile/fused/* per point the
-last axle passed) among them; bad messages are counted and skipped, the node keeps running."""
+last axle passed) among them; bad messages are counted and skipped, the node keeps running.
+Again with the tractor IMU (``vehicle.tractor_imu: true``, pendulum roll sensors, a curve to
+3 m/s^2): the node subscribes ``/imu/tractor`` and gives each sample the plant's a_y of its
+own stamp (or the one before, as it arrives: counted), the numbers those of
+``estimate_whole_vehicle(..., imu=True)`` on what it took."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -74,9 +78,9 @@ def record_inputs(observer: Observer) -> list:
     whole = observer.whole
     sample = whole.input.sample
 
-    def recording(stamp_ns, readings, speed_mps):
-        taken.append((stamp_ns, readings, speed_mps))
-        sample(stamp_ns, readings, speed_mps)
+    def recording(stamp_ns, readings, speed_mps, *imu):
+        taken.append((stamp_ns, readings, speed_mps, *imu))
+        sample(stamp_ns, readings, speed_mps, *imu)
 
     whole.input.sample = recording
     return taken
@@ -118,17 +122,29 @@ def joint_bytes(stamp_ns: int, names, effort) -> bytes:
     return serialize_message(msg)
 
 
-def test_the_articulated_observer_beside_the_plant(ros_context):
+#: the tractor IMU's drive: pendulum roll sensors (plant and observer) through a curve
+IMU_VALUES = {'vehicle.tractor_imu': True, 'vehicle.roll_sensor': 'pendulum',
+              'simulator.roll_sensor': 'pendulum',
+              'simulator.lateral_profile': 'curve:start=0.5,ramp=1.5,hold=2,ay=3'}
+
+
+@pytest.mark.parametrize('imu', [False, True], ids=['no_imu', 'imu'])
+def test_the_articulated_observer_beside_the_plant(ros_context, imu):
     """4 s of class C at 20 m/s, 1 kHz: every estimate's messages, the truth followed, the
-    batch's numbers and rclpy's bytes."""
+    batch's numbers and rclpy's bytes; with ``imu`` the tractor IMU's drive."""
     values = file_values(**{'simulator.duration': DURATION_S,
-                            'simulator.road': 'iso8608:C:seed=1'})
+                            'simulator.road': 'iso8608:C:seed=1',
+                            **(IMU_VALUES if imu else {})})
     observer = Observer(context=ros_context, parameter_overrides=overrides(values))
     taken = record_inputs(observer)
     published = record_published(observer)
     raw = RawCollector(ros_context)
     # the truth's collector subscribes to the inputs too: the plant starts once it listens
     truth = Collector(ros_context, [api.TRUE_WHEEL_LOADS, api.DEFLECTIONS, api.TWIST])
+    imu_raw: list[bytes] = []         # the plant's IMU, taken raw (decoded after the drive)
+    if imu:
+        truth.create_subscription(message_class(api.IMU_MSG), api.IMU, imu_raw.append,
+                                  sensor_qos(10000), raw=True)
     executor = make_executor(ros_context, observer, raw, truth)
     outputs = (*observer.whole.pubs, *observer.whole.static_pubs, *observer.whole.road_pubs,
                *observer.whole.fused_pubs)
@@ -147,15 +163,34 @@ def test_the_articulated_observer_beside_the_plant(ros_context):
     finally:
         close(executor, observer, raw, truth, plant)
     assert n == round(DURATION_S * 1000) + 1
-    stamps = np.array([s for s, _, _ in taken], np.int64)
-    readings = np.array([r for _, r, _ in taken])
-    speed = np.array([v for _, _, v in taken])
+    stamps = np.array([s[0] for s in taken], np.int64)
+    readings = np.array([s[1] for s in taken])
+    speed = np.array([s[2] for s in taken])
     assert readings.shape == (n, 12) and np.all(np.diff(stamps) > 0)
+    if imu:
+        # each sample's a_y: the plant's IMU message of its own stamp, or the one before
+        # when that one came after the deflections (fresh either way); every one counted
+        ay = np.array([s[3][0] for s in taken])
+        codes = np.array([s[3][1] for s in taken])
+        plant = {stamp_to_ns(m.header.stamp): m.linear_acceleration.y
+                 for m in (deserialize_message(d, message_class(api.IMU_MSG))
+                           for d in imu_raw)}
+        own = np.array([plant.get(t) == a for t, a in zip(stamps.tolist(), ay)])
+        prev = np.array([plant.get(t - 10**6) == a for t, a in zip(stamps.tolist(), ay)])
+        assert np.all(own | prev | (codes == 2)) and own.mean() > 0.9, own.mean()
+        assert np.all(codes[1:] == 0) and codes[0] in (0, 2)
+        # /diagnostics' observer: estimator (its values as the timer would publish them)
+        status = dict(observer.whole.estimator_status('observer').values)
+        assert status['total.imu.missing'] == str(np.count_nonzero(codes == 2))
+        assert status['total.imu.stale'] == '0'
+        assert np.abs(ay).max() > 2.5               # the curve's a_y reached the node
+        readings = np.column_stack([readings, ay])
 
     # the batch on the same inputs: the same numbers, in rclpy's bytes
     vehicle = ArticulatedParameters.from_parameters(values)
+    assert vehicle.tractor_imu == imu
     ref = estimate_whole_vehicle(vehicle, stamps, readings, speed,
-                                 observer=ObserverParameters.from_parameters(values))
+                                 observer=ObserverParameters.from_parameters(values), imu=imu)
     front = ref.load_n[:2]
     for k, t in enumerate(stamps.tolist()):
         assert_same_bytes(api.JOINT_STATE, raw.data[api.WHEEL_LOADS][k],
@@ -279,3 +314,59 @@ def test_bad_messages_are_counted_and_skipped(ros_context):
     assert {est[f'total.stuck.{c}'] for c in names} == {'0'}
     assert {est[f'total.drift.{c}'] for c in names} == {'0'}
     assert est['total.gaps'] == '1'       # the step over the lost samples restarted it
+
+
+def imu_msg(stamp_ns: int, ay: float):
+    msg = message_class(api.IMU_MSG)()
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), api.IMU_FRAME
+    msg.linear_acceleration.y = float(ay)
+    return msg
+
+
+def test_an_imu_at_its_own_rate_is_held_and_counted(ros_context):
+    """``vehicle.tractor_imu: true``, the IMU every 50 ms from the 5th sample of 10 ms steps
+    and a 0.2 s hole: each sample fed the latest a_y at or before its stamp (0 before the
+    first), the samples before it missing, those 0.1 s past the last message stale (counted
+    here by hand), every sample estimated."""
+    values = file_values(**{'vehicle.tractor_imu': True})
+    observer = Observer(context=ros_context, parameter_overrides=overrides(values))
+    assert observer.whole.names[-1] == 'tractor_imu_accel_y'
+    joints = observer.whole.names[:-1]
+    taken = record_inputs(observer)
+    feeder = Feeder(ros_context)
+    imu_pub = feeder.create_publisher(message_class(api.IMU_MSG), api.IMU, sensor_qos(100))
+    loads = Collector(ros_context, [api.WHEEL_LOADS])
+    executor = make_executor(ros_context, observer, feeder, loads)
+    t0 = 1_700_000_000 * 10**9
+    step = 10 * 10**6
+    imu_at = [k for k in range(5, 60, 5) if not 25 < k < 45]      # the hole: 0.25 to 0.45 s
+    try:
+        assert spin_until(executor, lambda: imu_pub.get_subscription_count() > 0 and
+                          feeder.deflections.get_subscription_count() > 0, 20.0)
+        for k in imu_at:                 # every IMU message first: the node holds them
+            imu_pub.publish(imu_msg(t0 + k * step, 0.1 * k))
+        held = observer.whole.input.imu_hold.held
+        assert spin_until(executor, lambda: len(held) == len(imu_at), 20.0)
+        for k in range(60):
+            feeder.twist.publish(twist_msg(t0 + k * step, 15.0))
+            feeder.deflections.publish(deflections(t0 + k * step, joints, [0.0] * len(joints)))
+            executor.spin_once(timeout_sec=0.002)
+        assert spin_until(executor, lambda: loads.count(api.WHEEL_LOADS) == 60, 20.0)
+        status = observer.whole.estimator_status('observer')
+    finally:
+        close(executor, observer, feeder, loads)
+    want = []
+    for k in range(60):                  # the rule, by hand
+        last = [j for j in imu_at if j <= k]
+        if not last:
+            want.append((0.0, 2))
+        else:
+            want.append((0.1 * last[-1], 1 if (k - last[-1]) * step > 10**8 else 0))
+    assert [s[3] for s in taken] == want
+    missing = sum(c == 2 for _, c in want)
+    stale = sum(c == 1 for _, c in want)
+    assert (missing, stale) == (5, 9)       # k 0-4; k 36-44 (k 35 is 100 ms: still fresh)
+    values = dict(status.values)
+    assert (values['total.imu.missing'], values['total.imu.stale']) == ('5', '9')
+    assert 'tractor IMU: 9 stale, 5 missing samples' in status.message
+    assert status.level == 1
