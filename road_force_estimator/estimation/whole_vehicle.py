@@ -75,7 +75,7 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'EXCLUDE_STUCK_AT_LATENCY', 'PIECE
            'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
-           'fit_axles']
+           'fit_axles', 'CHUNK_ROWS']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -436,7 +436,8 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
                            offline: bool = False,
                            gap_threshold_s: float = GAP_THRESHOLD_S,
                            windows: bool = False,
-                           imu: bool = False) -> WholeVehicleArrays:
+                           imu: bool = False,
+                           chunk_rows: int | None = None) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -452,21 +453,119 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
         rows held a window at a time; each field within ~3e-4 of its RMS of the one-block
         estimate); False: the smoother's own rule (the one-block numbers)
     imu : the readings' last column is the tractor IMU's a_y (m/s^2)
+    chunk_rows : online, the samples turned into arrays at a time (no per-sample object
+        held longer; :data:`CHUNK_ROWS`; the same numbers whatever it is)
     """
     est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s, imu=imu)
+    chunk_rows = max(int(chunk_rows or CHUNK_ROWS), 1)
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
-        samples = []
+        gathered = _OnlineArrays(est, stamps.size, chunk_rows)
+        step, add = est.step, gathered.add
         for s, y, vi in zip(stamps.tolist(), np.asarray(readings, float), v.tolist()):
-            samples += est.step(s, y, vi)
-        samples += est.finish()
-        return _arrays(est, samples)
+            add(step(s, y, vi))
+        add(est.finish())
+        return gathered.arrays()
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                        eager=bool(windows), imu=imu)
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
+
+
+#: The samples :func:`estimate_whole_vehicle` converts to arrays at a time online (no
+#: per-sample object held longer).
+CHUNK_ROWS = 1 << 14
+
+#: The per-sample fields of :class:`WholeVehicleArrays` (the sample the last axis).
+_PER_SAMPLE = ('stamps_ns', 'distance_m', 'converged', 'load_n', 'static_n', 'ltr',
+               'ltr_quasi_static', 'lateral_mps2', 'road_m', 'front_ltr', 'gaps',
+               'fault_flags')
+
+
+class _Gathered:
+    """Per-sample fields of :class:`WholeVehicleArrays` pieces written into arrays reserved
+    for ``capacity`` samples (doubling past it; trimmed at the end): the pieces' own bits,
+    without a list of pieces and their concatenation held at once."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = max(int(capacity), 1)
+        self.cols: dict | None = None
+        self.n = 0
+
+    def add(self, piece: WholeVehicleArrays) -> None:
+        m = len(piece.stamps_ns)
+        if self.cols is None:
+            self.cols = {f: None if getattr(piece, f) is None else
+                         np.empty(getattr(piece, f).shape[:-1] + (max(self.capacity, m),),
+                                  getattr(piece, f).dtype) for f in _PER_SAMPLE}
+        n = self.n
+        for f, col in self.cols.items():
+            if col is None:
+                continue
+            if n + m > col.shape[-1]:
+                grown = np.empty(col.shape[:-1] + (max(2 * col.shape[-1], n + m),), col.dtype)
+                grown[..., :n] = col[..., :n]
+                self.cols[f] = col = grown
+            col[..., n:n + m] = getattr(piece, f)
+        self.n = n + m
+
+    def fields(self) -> dict:
+        """Each per-sample field over the pieces added (C-contiguous; None: the pieces'
+        None)."""
+        cols, self.cols = self.cols or {}, None
+        return {f: None if c is None else
+                (c if c.shape[-1] == self.n else np.ascontiguousarray(c[..., :self.n]))
+                for f, c in cols.items()}
+
+
+class _OnlineArrays:
+    """The online samples (:meth:`WholeVehicleEstimator.step`'s) as a
+    :class:`WholeVehicleArrays`, converted ``chunk`` samples at a time into arrays reserved
+    for ``capacity`` samples (:class:`_Gathered`): no per-sample object held longer than a
+    chunk, the same arrays as converting them all at once."""
+
+    def __init__(self, est: WholeVehicleEstimator, capacity: int, chunk: int = CHUNK_ROWS):
+        self.est, self.chunk = est, max(int(chunk), 1)
+        self.pending: list = []
+        self.out = _Gathered(capacity)
+        self.fused: list = []
+        self.fits: list = []
+        self.gated: tuple = ()
+
+    def add(self, samples: list) -> None:
+        self.pending += samples
+        if len(self.pending) >= self.chunk:
+            self._convert()
+
+    def _convert(self) -> None:
+        if not self.pending:
+            return
+        a = _arrays(self.est, self.pending)
+        self.pending = []
+        self.gated = a.innovations_gated
+        self.fits += a.axle_fits
+        if a.fused.stamps_ns.size:
+            self.fused.append(a.fused)
+        self.out.add(a)
+
+    def arrays(self) -> WholeVehicleArrays:
+        """Every sample's fields (after :meth:`WholeVehicleEstimator.finish`'s were added)."""
+        self._convert()
+        if not self.out.n:
+            return _arrays(self.est, [])
+        fused = (FusedPoints(*(np.concatenate([getattr(p, f) for p in self.fused]) for f in
+                               ('stamps_ns', 'distance_m', 'left_m', 'right_m')))
+                 if self.fused else FusedPoints.from_points([]))
+        fits = tuple(self.fits)
+        est = self.est
+        return WholeVehicleArrays(
+            wheel_names=est.wheel_names, axle_names=est.axle_names,
+            axle_bodies=est.axle_bodies, innovations_gated=tuple(int(g) for g in self.gated),
+            channel_names=tuple(est.channel_names), fused=fused, axle_fits=fits,
+            axle_fit=fits[-1][1] if fits else None, faults=est.faults.counts(),
+            **self.out.fields())
 
 
 def concatenate_arrays(pieces: Sequence[WholeVehicleArrays]) -> WholeVehicleArrays:
