@@ -22,10 +22,12 @@ seed 1):
   tractor's roll and the trailer's roll, 20 s: when the flag came after the sensor stuck
   (target <= 1 s) and the sensor named;
 - drift: ``drift@<channel>:rate=1.667e-5,start=10`` (1 mm/min) on a trailer deflection at each
-  place of the tri-axle group (``trailer_1_left``, ``trailer_2_right``, ``trailer_3_left``),
-  60 s: when flagged after the drift began (target <= 30 s), named;
-- clean drives (class C and A 20 s, the family's ``C20-stop`` and ``C20-curve3`` at 40 s):
-  the flags raised (target none).
+  place of the tri-axle group (``trailer_1_left``, ``trailer_2_right``, ``trailer_3_left``), on
+  a tractor deflection of each axle (``front_left``, ``drive_right``), and (1 mrad/min) on each
+  roll sensor, 60 s: when flagged after the drift began (target <= 30 s), named;
+- clean drives (class C and A 20 s, the family's ``C20-stop``, ``C20-curve3``, and
+  ``C20-stick`` and ``A20-stick`` (1.5 kN of sticking friction per spring) at 40 s): the flags
+  raised (target none).
 
 Prints Markdown tables.
 
@@ -44,7 +46,9 @@ SPIKES = ('spikes@front_left_suspension:count=3,size=5e-4,start=3;'
 SPIKED = ('front_left_suspension', 'trailer_2_right_suspension')
 STUCK = ('drive_left_suspension', 'trailer_1_right_suspension', 'tractor_roll', 'trailer_roll')
 DRIFTING = ('trailer_1_left_suspension', 'trailer_2_right_suspension',
-            'trailer_3_left_suspension')
+            'trailer_3_left_suspension', 'front_left_suspension', 'drive_right_suspension',
+            'tractor_roll', 'trailer_roll')
+#: 1 mm/min on a deflection, 1 mrad/min on a roll sensor (m/s or rad/s)
 DRIFT_RATE = 1e-3 / 60.0
 STUCK_AT, DRIFT_AT = 8.0, 10.0
 SETTLE_S = 5.0
@@ -135,7 +139,8 @@ def latency_table(roads, modes, log) -> list[str]:
         cases = [(f'stuck {ch} 2 s at {STUCK_AT:g} s', base,
                   f'stuck@{ch}:start={STUCK_AT:g},duration=2', STUCK_AT) for ch in STUCK]
         long = drive_of(road, 60.0)
-        cases += [(f'drift {ch} 1 mm/min from {DRIFT_AT:g} s', long,
+        cases += [(f'drift {ch} 1 {"mrad" if ch.endswith("roll") else "mm"}/min from '
+                   f'{DRIFT_AT:g} s', long,
                    f'drift@{ch}:rate={DRIFT_RATE:.6g},start={DRIFT_AT:g}', DRIFT_AT)
                   for ch in DRIFTING]
         for label, drive, spec, at in cases:
@@ -158,7 +163,11 @@ def clean_table(roads, modes, log) -> list[str]:
     drives += [('C20-stop (braking, 5 s standing, pulling away), 40 s',
                 drive_of('C', 40.0, 'C20-stop')),
                ('C20-curve3 (a curve ramping to 3 m/s^2), 40 s',
-                drive_of('C', 40.0, 'C20-curve3'))]
+                drive_of('C', 40.0, 'C20-curve3')),
+               ('C20-stick (1.5 kN sticking friction per spring), 40 s',
+                drive_of('C', 40.0, 'C20-stick')),
+               ('A20-stick (1.5 kN sticking friction per spring), 40 s',
+                drive_of('A', 40.0, 'A20-stick'))]
     for label, drive in drives:
         for mode in modes:
             lines.append(f'| {label} | {mode} | {flags(estimate(drive, mode))} |')

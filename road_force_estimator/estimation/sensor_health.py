@@ -56,8 +56,9 @@ import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
-           'UNIT_MIN_AXLES',
-           'FaultSettings', 'FaultDetector', 'UnitDrift', 'detect_faults']
+           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'ROLL_DRIFT_LIMIT_RAD',
+           'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
+           'FaultDetector', 'UnitDrift', 'detect_faults']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -80,6 +81,16 @@ UNIT_MIN_SPEED_MPS = 8.0
 UNIT_CLEAR_FRACTION = 0.25
 #: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
 UNIT_MIN_AXLES = 3
+#: :class:`TractorDrift`'s statistics' scales: the kingpin pitch balance (m of the first
+#: axle's deflection), the two units' lateral accelerations' difference (m/s^2) and the road's
+#: cross-level seen by two axles (m, twice); the clean drives' largest over 12 s at 8 m/s or
+#: more were 0.09 mm, 0.007 m/s^2, 0.16 mm (``python -m bench.studies.articulated_sensor_faults``)
+TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
+#: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
+ROLL_DRIFT_LIMIT_RAD = 2e-4
+#: Time (s) a :class:`TractorDrift` candidate stays above its limit before it is flagged (a
+#: drift keeps growing; a sticking leaf spring's offset came and went within 4.2 s on A20-stick)
+TRACTOR_PERSIST_S = 6.0
 
 
 @dataclass(frozen=True)
@@ -99,6 +110,9 @@ class FaultSettings:
     #: deflection channels' indices and their rows ``(1, x, +-s)`` (m: position behind the
     #: front axle, half the spring track, + left); None: none (the front axle's ``body``)
     units: tuple | None = None
+    #: the tractor's and the roll sensors' drift check (:class:`TractorDrift`): (rows,
+    #: a_x coefficients, scales, candidates, limits, flaggable), or None
+    tractor: tuple | None = None
 
     @classmethod
     def of(cls, observer, vehicle, channels: Sequence[str]) -> 'FaultSettings':
@@ -133,7 +147,9 @@ class FaultSettings:
         return cls(tuple(model.channel_names), observer.fault_stuck_time_s,
                    observer.fault_stuck_tolerance, observer.fault_drift_window_s,
                    observer.fault_drift_offset_m, None, model.vehicle.zero_load,
-                   tuple(units) or None)
+                   tuple(units) or None,
+                   tractor_check(model, observer.fault_drift_offset_m, set(
+                       k for idx, _ in units for k in idx)))
 
 
 @dataclass
@@ -159,6 +175,10 @@ class FaultDetector:
         self.units = (UnitDrift(settings.units, UNIT_WINDOW_FACTOR * settings.drift_window_s,
                                 settings.drift_offset_m, settings.relative)
                       if settings.units and settings.drift_offset_m > 0.0 else None)
+        #: the tractor's deflections and the roll sensors (:class:`TractorDrift`), or None
+        self.tractor = (TractorDrift(*settings.tractor, UNIT_WINDOW_FACTOR
+                                     * settings.drift_window_s, settings.relative)
+                        if settings.tractor and settings.drift_offset_m > 0.0 else None)
         self.reset()
 
     def reset(self) -> None:
@@ -176,6 +196,8 @@ class FaultDetector:
         self._last = None
         if self.units is not None:
             self.units.forget()
+        if self.tractor is not None:
+            self.tractor.forget()
         self._restart(None)
 
     def _restart(self, t: float | None) -> None:
@@ -195,6 +217,8 @@ class FaultDetector:
         self._ref = None
         if self.units is not None:
             self.units.restart()
+        if self.tractor is not None:
+            self.tractor.restart()
 
     def step(self, stamp_ns: int, values: Sequence[float],
              rates: tuple[float, float] | None = None) -> None:
@@ -216,10 +240,15 @@ class FaultDetector:
             self._drift = [False] * self.n
             if self.units is not None:
                 self.units.restart()
+            if self.tractor is not None:
+                self.tractor.restart()
         elif rates is not None and self.settings.body is not None:
             self._drift_step(t, values, rates)
-        elif rates is not None and self.units is not None:
-            self.units.step(t, values, rates[0], self._drift)
+        elif rates is not None:
+            if self.units is not None:
+                self.units.step(t, values, rates[0], self._drift)
+            if self.tractor is not None:
+                self.tractor.step(t, values, rates[0], self._drift)
         self._last = values
         if self._flagged or True in stuck or True in self._drift:
             self._book(stamp_ns)
@@ -438,6 +467,223 @@ class UnitDrift:
             if a[i] > limit:
                 drift[idx[i]] = True
                 seen[u] = t
+
+
+class TractorDrift:
+    """A drift of the tractor's deflections or of a roll sensor, from balances of the whole
+    vehicle that hold over seconds whatever the road (MODEL.md "The whole vehicle", its
+    equations averaged, the accelerations' means taken as 0): statistics z = rows @ mean(y)
+    + ax * mean(a_x) (a_x from the speed), each 0 on a sound truck:
+
+    - P, the tractor's pitch about the kingpin: sum_j k_j (xi_j - xi_5) (q_j,1 + q_j,2)
+      + M_t H_t a_x (N m; the kingpin's force has no moment there);
+    - A, the tractor's and the trailer's lateral acceleration, each from its roll balance
+      with the fifth wheel's roll moment kphi_5 (phi_t - phi_r) between them
+      (a_y,b = [sum_j K_s,j rel_j +- kphi_5 (phi_t - phi_r)] / (M_b h_b) - g phi_b,
+      K_s,j = 2 k_j s_j^2 + kphi_j, rel_j = (q_j,1 - q_j,2) / (2 s_j); m/s^2);
+    - T and R, the road's cross-level (left minus right, m) that an axle's roll balance puts
+      under it, D_j = 2 w_j [phi_b - rel_j - (K_s,j rel_j + L_j a_y,r) / K_t,j]
+      (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j): every axle runs in the same
+      two wheel paths, so over a window D is the same under each: T the front axle's minus
+      the drive axle's, R the front axle's minus the trailer axles' mean.
+
+    Means are over a triangular window of ``window_s`` (two running means of half of it in
+    series: the bodies' momentum, whose change over a plain mean's window left 0.3 mm of
+    pitch on class C, enters only by its displacement). Judged as :class:`UnitDrift` is
+    (blocks, at :data:`UNIT_MIN_SPEED_MPS` or more): each candidate channel's offset fitted
+    to z / ``scales`` by least squares; the channel that explains most is flagged when it
+    is ``flaggable`` and its offset is above its limit (m or rad), and holds as
+    :class:`UnitDrift`'s flags do. ``relative``: z against its first judged window's.
+    """
+
+    def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
+                 names: Sequence, limits: Sequence, flaggable: Sequence, window_s: float,
+                 relative: bool = False) -> None:
+        rows = np.asarray(rows, float)
+        self.m = rows.shape[0]
+        self.window_s, self.relative = float(window_s), relative
+        #: per statistic: its nonzero (channel, coefficient) pairs
+        self.terms = [[(k, float(c)) for k, c in enumerate(r) if c != 0.0] for r in rows]
+        self.ax = np.asarray(ax, float)
+        self.scales = np.asarray(scales, float)
+        #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
+        #: the channels its flag names
+        self.candidates = tuple(tuple(c) for c in candidates)
+        self.names = tuple(tuple(c) for c in names)
+        self.limits = np.asarray(limits, float)
+        self.flaggable = tuple(bool(f) for f in flaggable)
+        cols = np.zeros((rows.shape[1], len(self.candidates)))
+        for j, cand in enumerate(self.candidates):
+            for k, weight in cand:
+                cols[k, j] = weight
+        g = rows @ cols / self.scales[:, None]      # (m, candidates): z / scales per offset
+        self._g = g
+        self._gg = np.einsum('ij,ij->j', g, g)
+        self._ref = None
+        self._seen = 0.0
+        self.restart()
+
+    def forget(self) -> None:
+        """The windows and the relative reference forgotten."""
+        self._ref = None
+        self.restart()
+
+    def restart(self) -> None:
+        """The windows start again (a gap, a stuck sensor, a stop)."""
+        m = self.m
+        self._win: deque = deque()          # blocks: (t0, sums (m + 1), n)
+        self._sum = [0.0] * (m + 1)
+        self._sn = 0
+        self._means: deque = deque()        # per block: (t, the half-window's means (m + 1))
+        self._msum = [0.0] * (m + 1)
+        self._blk = [0.0] * (m + 1)
+        self._bn = 0
+        self._b0 = 0.0
+        self._over = None                   # (candidate, since when) above its limit
+
+    def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
+        """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
+        judged block's end."""
+        if not abs(speed_mps) >= UNIT_MIN_SPEED_MPS:
+            if self._sn or self._bn:
+                self.restart()
+            return
+        blk = self._blk
+        for i, terms in enumerate(self.terms):
+            acc = 0.0
+            for k, c in terms:
+                acc += c * values[k]
+            blk[i] += acc
+        blk[-1] += speed_mps
+        self._bn += 1
+        if self._bn == 1:
+            self._b0 = t
+        if self._bn < DRIFT_BLOCK:
+            return
+        half = 0.5 * self.window_s
+        win, sums = self._win, self._sum
+        win.append((self._b0, blk, self._bn))
+        for i, b in enumerate(blk):
+            sums[i] += b
+        self._sn += self._bn
+        self._blk = [0.0] * len(blk)
+        self._bn = 0
+        while t - win[0][0] > half:
+            _, old, n = win.popleft()
+            for i, b in enumerate(old):
+                sums[i] -= b
+            self._sn -= n
+        if t - win[0][0] < 0.99 * half:
+            return
+        means, msum = self._means, self._msum
+        now = [x / self._sn for x in sums]
+        means.append((t, now))
+        for i, x in enumerate(now):
+            msum[i] += x
+        while t - means[0][0] > half:
+            _, old = means.popleft()
+            for i, x in enumerate(old):
+                msum[i] -= x
+        if t - means[0][0] < 0.99 * half:
+            return
+        nm = len(means)
+        span = t - means[0][0]
+        a_x = (now[-1] - means[0][1][-1]) / span if span > 0.0 else 0.0
+        z = np.asarray(msum[:-1]) / nm + self.ax * a_x
+        if self.relative:
+            if self._ref is None:
+                self._ref = z.copy()
+            z = z - self._ref
+        self._judge(t, z / self.scales, drift)
+
+    def _judge(self, t: float, u: np.ndarray, drift: list) -> None:
+        """The flags from the scaled statistics ``u``."""
+        fit = u @ self._g                       # per candidate: g . u
+        best = int(np.argmax(fit * fit / self._gg))
+        offset = fit / self._gg                 # per candidate: its least-squares offset
+        names = self.names
+        up = [j for j, ks in enumerate(names) if self.flaggable[j] and drift[ks[0]]]
+        if up and abs(offset[up[0]]) >= UNIT_CLEAR_FRACTION * self.limits[up[0]]:
+            self._seen = t
+        if up and t - self._seen <= self.window_s:
+            return
+        for j, ks in enumerate(names):
+            if self.flaggable[j]:
+                for k in ks:
+                    drift[k] = False
+        if not (self.flaggable[best] and abs(offset[best]) > self.limits[best]):
+            self._over = None
+            return
+        if self._over is None or self._over[0] != best:
+            self._over = (best, t)              # above since t
+        if t - self._over[1] >= TRACTOR_PERSIST_S:
+            for k in names[best]:
+                drift[k] = True
+            self._seen = t
+
+
+def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
+    """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
+    (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
+    not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
+    a tractor of two axles with the kingpin between them. Candidates: every deflection and
+    both roll sensors; flaggable: those not in ``judged`` (the channels :class:`UnitDrift`
+    judges), at ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`."""
+    veh = model.vehicle
+    axles = veh.axles
+    g = 9.81
+    chans = list(model.channels)
+    tractor = [j for j, a in enumerate(axles) if a.body == 'tractor']
+    trailer = [j for j, a in enumerate(axles) if a.body == 'trailer']
+    x5 = veh.fifth_wheel.position_m
+    if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
+            or veh.roll_sensor == 'pendulum' or len(tractor) != 2 or not trailer
+            or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
+        return None
+    n = len(chans)
+    at = {ch: k for k, ch in enumerate(chans)}
+    phi = np.zeros(n)
+    phi[at[('roll', 0)]] = 1.0
+    phir = np.zeros(n)
+    phir[at[('roll', 1)]] = 1.0
+    tr, rl = veh.body('tractor'), veh.body('trailer')
+    k5 = veh.fifth_wheel.roll_stiffness_nmprad
+    spring = model.core.statics().spring_load_n
+    pitch, ayt, ayr = np.zeros(n), np.zeros(n), np.zeros(n)
+    rel, ks = {}, {}
+    for j, a in enumerate(axles):
+        s = a.spring_half_track_m
+        left, right = at[('q', j, 0)], at[('q', j, 1)]
+        rel[j] = np.zeros(n)
+        rel[j][left], rel[j][right] = 0.5 / s, -0.5 / s
+        ks[j] = sum(a.suspension_stiffness_npm) * s * s + a.auxiliary_roll_stiffness_nmprad
+        if a.body == 'tractor':
+            pitch[left] += a.suspension_stiffness_npm[0] * (a.position_m - x5)
+            pitch[right] += a.suspension_stiffness_npm[1] * (a.position_m - x5)
+            ayt += ks[j] * rel[j]
+        else:
+            ayr += ks[j] * rel[j]
+    ayt = (ayt + k5 * (phi - phir)) / (tr.mass_kg * tr.cg_height_above_roll_axis_m) - g * phi
+    ayr = (ayr - k5 * (phi - phir)) / (rl.mass_kg * rl.cg_height_above_roll_axis_m) - g * phir
+
+    def cross(j: int) -> np.ndarray:
+        a = axles[j]
+        w = a.wheel_half_track_m
+        kt = sum(a.tire_stiffness_npm) * w * w
+        lat = a.roll_centre_height_m * float(spring[j].sum()) / g + a.wheel_radius_m * a.mass_kg
+        body = phi if a.body == 'tractor' else phir
+        return body - rel[j] - (ks[j] * rel[j] + lat * ayr) / kt
+
+    scale0 = abs(pitch[at[('q', tractor[0], 0)]])
+    rows = np.array([pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])])
+    ax = (tr.mass_kg * tr.cg_height_m / scale0, 0.0, 0.0)
+    deflections = [at[('q', j, side)] for j in tractor for side in (0, 1)]
+    roll = (at[('roll', 0)], at[('roll', 1)])
+    cands = tuple(((k, 1.0),) for k in deflections) + (((roll[0], 0.5), (roll[1], -0.5)),)
+    names = tuple((k,) for k in deflections) + (roll,)
+    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,)
+    flaggable = tuple(k not in judged for k in deflections) + (True,)
+    return (tuple(map(tuple, rows)), ax, TRACTOR_SCALES, cands, names, limits, flaggable)
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:
