@@ -29,7 +29,13 @@ seed 1):
   ``C20-stick`` and ``A20-stick`` (1.5 kN of sticking friction per spring) at 40 s): the flags
   raised (target none).
 
-Prints Markdown tables.
+Prints Markdown tables. ``--balances [--seconds 60]`` prints instead the tractor's drift
+balances (:class:`~road_force_estimator.estimation.sensor_health.TractorDrift`) on every drive
+of the family, clean (10 um, seed 1): per drive the largest judged kingpin pitch P (mm of the
+front deflection), the two units' a_y difference A (m/s^2) and the front-drive cross-level T
+(mrad), P and T also over a plain 12 s mean (the window the rigid fit used) at 8 m/s or more,
+the largest offset of the best candidate over its limit (a flag needs > 1 for 6 s), the drift
+flags raised.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -175,9 +181,66 @@ def clean_table(roads, modes, log) -> list[str]:
     return lines
 
 
+def plain_peaks(drive: dict, rows: np.ndarray, ax: np.ndarray, window_s: float) -> tuple:
+    """The largest |P| and |T| over a plain mean of ``window_s`` every 0.1 s, at
+    8 m/s or more over it (m, rad)."""
+    y, v, t = np.asarray(drive['y'], float), np.asarray(drive['speed'], float), drive['t']
+    n = int(round(window_s / (t[1] - t[0])))
+    z = y @ rows.T
+    c = np.vstack([np.zeros((1, z.shape[1])), np.cumsum(z, axis=0)])
+    ends = np.arange(n, len(t) + 1, max(1, n // 120))
+    ok = np.array([v[e - n:e].min() >= 8.0 for e in ends])
+    a_x = (v[ends - 1] - v[ends - n]) / (t[ends - 1] - t[ends - n])
+    mean = (c[ends] - c[ends - n]) / n + a_x[:, None] * ax
+    return float(np.abs(mean[ok, 0]).max()), float(np.abs(mean[ok, 2]).max())
+
+
+def balances_table(seconds: float, log) -> list[str]:
+    """The tractor's drift balances on the family's clean drives (module notes)."""
+    from bench.accuracy.articulated_observer import simulate
+    from bench.studies.articulated_drives import family
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.models.articulated import (
+        ArticulatedObserverModel)
+    from road_force_estimator.estimation.sensor_health import (
+        UNIT_WINDOW_FACTOR, FaultDetector, FaultSettings)
+
+    lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
+             'T (mrad) | A (m/s^2) | largest offset / limit | drift flags |',
+             '|---|---:|---:|---:|---:|---:|---:|---|']
+    obs = ObserverParameters()
+    for case in family():
+        drive = simulate(case, seconds, 1e-5)
+        settings = FaultSettings.of_whole_vehicle(obs, ArticulatedObserverModel(
+            drive['vehicle']))
+        det = FaultDetector(settings)
+        for stamp, y, v in zip(drive['stamps'].tolist(), np.asarray(drive['y']).tolist(),
+                               drive['speed'].tolist()):
+            det.step(stamp, y, (v,))
+        rows, ax = np.asarray(settings.tractor[0]), np.asarray(settings.tractor[1])
+        p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s)
+        peak = det.tractor.peak
+        raised = ', '.join(n for n, c in det.counts().drift_episodes.items() if c) or 'none'
+        lines.append(f'| {case.name} | {p * 1e3:.3f} | {peak[0] * 1e3:.3f} | {t * 1e3:.3f} | '
+                     f'{peak[2] * 1e3:.3f} | {peak[1]:.4f} | {peak[3]:.2f} | {raised} |')
+        log(lines[-1])
+    return lines
+
+
 def main(argv=None) -> int:
     from bench.studies import sensor_faults
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if '--balances' in argv:
+        import argparse
+
+        ap = argparse.ArgumentParser(description="the tractor's drift balances")
+        ap.add_argument('--balances', action='store_true')
+        ap.add_argument('--seconds', type=float, default=60.0)
+        args = ap.parse_args(argv)
+        print('\n'.join(balances_table(args.seconds, lambda text: print(
+            text, file=sys.stderr, flush=True))))
+        return 0
     return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
                               description=__doc__.splitlines()[0])
 

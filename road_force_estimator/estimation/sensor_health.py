@@ -26,8 +26,8 @@ about 0 (tens of microns of deflection on class C over 10 s), whatever the road,
 to H and s k_1 d to R, on the right k_2 d and -s k_2 d: |H| / k_i above the stated offset
 flags the sensor whose sign agrees (left when H and R have one sign). With
 ``vehicle.deflection_reference: zero_load`` H is taken against its first window's value.
-Not detected: a drift of the roll sensor (it enters R only, as a curve does), drifts of both
-deflection sensors that cancel in H.
+Not detected (the front axle): a drift of the roll sensor (it enters R only, as a curve
+does), drifts of both deflection sensors that cancel in H.
 
 A stuck deflection sensor is left out of the model observer while flagged (its gains
 designed without it, :meth:`.ModelCore.set_excluded`); a stuck roll sensor is flagged and
@@ -42,8 +42,13 @@ The whole vehicle (:meth:`FaultSettings.of_whole_vehicle`): the same detector ov
 channels (every deflection, the tractor's and the trailer's roll), stuck by the same rule;
 the drift of a deflection judged against its unit's other deflections (:class:`UnitDrift`:
 a rigid body's heave, pitch and roll, on units with :data:`UNIT_MIN_AXLES` instrumented
-axles or more; the kingpin's force is unknown, so no unit's momentum balances alone), from
+axles or more; the kingpin's force is unknown, so no unit's heave balances alone), from
 the readings and the speed (``rates`` is the speed there): the same flags in every mode.
+A tractor of two instrumented axles (one degree of freedom left over a rigid fit) and the roll
+sensors are judged by the whole vehicle's balances instead (:class:`TractorDrift`,
+:func:`tractor_check`): the tractor's pitch about the kingpin, the two units' lateral
+accelerations through the fifth wheel's roll stiffness, the road's cross-level under the
+front and the drive axle.
 """
 from __future__ import annotations
 
@@ -82,14 +87,15 @@ UNIT_CLEAR_FRACTION = 0.25
 #: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
 UNIT_MIN_AXLES = 3
 #: :class:`TractorDrift`'s statistics' scales: the kingpin pitch balance (m of the first
-#: axle's deflection), the two units' lateral accelerations' difference (m/s^2) and the road's
-#: cross-level seen by two axles (m, twice); the clean drives' largest over 12 s at 8 m/s or
-#: more were 0.09 mm, 0.007 m/s^2, 0.16 mm (``python -m bench.studies.articulated_sensor_faults``)
+#: axle's deflection), the two units' lateral accelerations' difference (m/s^2), the road's
+#: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
+#: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
 #: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
 ROLL_DRIFT_LIMIT_RAD = 2e-4
 #: Time (s) a :class:`TractorDrift` candidate stays above its limit before it is flagged (a
-#: drift keeps growing; a sticking leaf spring's offset came and went within 4.2 s on A20-stick)
+#: drift keeps growing; sticking leaf springs' offsets come and go: the ``*-stick`` drives of
+#: ``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_PERSIST_S = 6.0
 
 
@@ -473,27 +479,30 @@ class TractorDrift:
     """A drift of the tractor's deflections or of a roll sensor, from balances of the whole
     vehicle that hold over seconds whatever the road (MODEL.md "The whole vehicle", its
     equations averaged, the accelerations' means taken as 0): statistics z = rows @ mean(y)
-    + ax * mean(a_x) (a_x from the speed), each 0 on a sound truck:
+    + ax * mean(a_x) (a_x = dv/dt from the speed), each 0 on a sound truck:
 
-    - P, the tractor's pitch about the kingpin: sum_j k_j (xi_j - xi_5) (q_j,1 + q_j,2)
-      + M_t H_t a_x (N m; the kingpin's force has no moment there);
-    - A, the tractor's and the trailer's lateral acceleration, each from its roll balance
-      with the fifth wheel's roll moment kphi_5 (phi_t - phi_r) between them
-      (a_y,b = [sum_j K_s,j rel_j +- kphi_5 (phi_t - phi_r)] / (M_b h_b) - g phi_b,
-      K_s,j = 2 k_j s_j^2 + kphi_j, rel_j = (q_j,1 - q_j,2) / (2 s_j); m/s^2);
-    - T and R, the road's cross-level (left minus right, m) that an axle's roll balance puts
-      under it, D_j = 2 w_j [phi_b - rel_j - (K_s,j rel_j + L_j a_y,r) / K_t,j]
-      (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j): every axle runs in the same
-      two wheel paths, so over a window D is the same under each: T the front axle's minus
-      the drive axle's, R the front axle's minus the trailer axles' mean.
+    - P, the tractor's pitch about the kingpin (the kingpin's force has no moment there),
+      sum_j k_j (xi_j - xi_5) (q_j,1 + q_j,2) + M_t H_t a_x, divided by k_1 |xi_1 - xi_5|
+      (m of the front axle's deflection; > 0: the drive axle's springs extended);
+    - A, the tractor's minus the trailer's lateral acceleration (m/s^2), each from its roll
+      balance with the fifth wheel's roll moment between them,
+      a_y,b = [sum_j K_s,j rel_j +- kphi_5 (phi_t - phi_r)] / (M_b h_b) - g phi_b
+      (+ tractor, - trailer; K_s,j = 2 k_j s_j^2 + kphi_j, rel_j = (q_j,1 - q_j,2) / (2 s_j));
+    - T, the road's cross-level angle (rad, left up) that the front and the drive axle's
+      roll balances put under them, phi_t - rel_j - (K_s,j rel_j + L_j a_y,r) / K_t,j
+      (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j: the load transfer through the
+      links), the front's minus the drive's: both axles run in the same wheel paths.
 
     Means are over a triangular window of ``window_s`` (two running means of half of it in
-    series: the bodies' momentum, whose change over a plain mean's window left 0.3 mm of
-    pitch on class C, enters only by its displacement). Judged as :class:`UnitDrift` is
-    (blocks, at :data:`UNIT_MIN_SPEED_MPS` or more): each candidate channel's offset fitted
-    to z / ``scales`` by least squares; the channel that explains most is flagged when it
-    is ``flaggable`` and its offset is above its limit (m or rad), and holds as
-    :class:`UnitDrift`'s flags do. ``relative``: z against its first judged window's.
+    series: the bodies' momentum change, which left 0.3 mm of kingpin pitch in a plain 12 s
+    mean on class C, enters only by its displacement). Judged at :data:`UNIT_MIN_SPEED_MPS`
+    or more, a block at a time as :class:`UnitDrift`: each candidate's offset (``candidates``:
+    per candidate its weights on the channels) fitted to z / ``scales`` by least squares; the
+    one that explains most, above its limit (m or rad) for :data:`TRACTOR_PERSIST_S`, flags
+    its ``names`` (channel indices; a roll sensor's candidate is the pair's difference, both
+    named: the balances see phi_t - phi_r only, a drift common to both reads as a crossfall
+    or a curve), and holds as :class:`UnitDrift`'s flags do. ``relative``: z against its
+    first judged window's.
     """
 
     def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
@@ -519,13 +528,15 @@ class TractorDrift:
         g = rows @ cols / self.scales[:, None]      # (m, candidates): z / scales per offset
         self._g = g
         self._gg = np.einsum('ij,ij->j', g, g)
-        self._ref = None
         self._seen = 0.0
-        self.restart()
+        self.forget()
 
     def forget(self) -> None:
-        """The windows and the relative reference forgotten."""
+        """The windows, the relative reference and :attr:`peak` forgotten."""
         self._ref = None
+        #: the largest |z| of each statistic judged (P m, A m/s^2, T rad) and the largest
+        #: offset of the best candidate over its limit
+        self.peak = np.zeros(self.m + 1)
         self.restart()
 
     def restart(self) -> None:
@@ -601,6 +612,9 @@ class TractorDrift:
         fit = u @ self._g                       # per candidate: g . u
         best = int(np.argmax(fit * fit / self._gg))
         offset = fit / self._gg                 # per candidate: its least-squares offset
+        peak = self.peak
+        np.maximum(peak[:-1], np.abs(u) * self.scales, out=peak[:-1])
+        peak[-1] = max(peak[-1], abs(offset[best]) / self.limits[best])
         names = self.names
         up = [j for j, ks in enumerate(names) if self.flaggable[j] and drift[ks[0]]]
         if up and abs(offset[up[0]]) >= UNIT_CLEAR_FRACTION * self.limits[up[0]]:
