@@ -511,8 +511,8 @@ class TractorDrift:
         rows = np.asarray(rows, float)
         self.m = rows.shape[0]
         self.window_s, self.relative = float(window_s), relative
-        #: per statistic: its nonzero (channel, coefficient) pairs
-        self.terms = [[(k, float(c)) for k, c in enumerate(r) if c != 0.0] for r in rows]
+        self.rows = rows
+        self.n = rows.shape[1]
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
         #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
@@ -547,7 +547,8 @@ class TractorDrift:
         self._sn = 0
         self._means: deque = deque()        # per block: (t, the half-window's means (m + 1))
         self._msum = [0.0] * (m + 1)
-        self._blk = [0.0] * (m + 1)
+        self._vals: list = []               # the block's readings (the callers' sequences)
+        self._vs = 0.0                      # and its speeds' sum
         self._bn = 0
         self._b0 = 0.0
         self._over = None                   # (candidate, since when) above its limit
@@ -559,25 +560,23 @@ class TractorDrift:
             if self._sn or self._bn:
                 self.restart()
             return
-        blk = self._blk
-        for i, terms in enumerate(self.terms):
-            acc = 0.0
-            for k, c in terms:
-                acc += c * values[k]
-            blk[i] += acc
-        blk[-1] += speed_mps
-        self._bn += 1
-        if self._bn == 1:
+        if not self._bn:
             self._b0 = t
+        self._vals.append(values)
+        self._vs += speed_mps
+        self._bn += 1
         if self._bn < DRIFT_BLOCK:
             return
+        blk = (self.rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        blk.append(self._vs)
+        self._vals = []
+        self._vs = 0.0
         half = 0.5 * self.window_s
         win, sums = self._win, self._sum
         win.append((self._b0, blk, self._bn))
         for i, b in enumerate(blk):
             sums[i] += b
         self._sn += self._bn
-        self._blk = [0.0] * len(blk)
         self._bn = 0
         while t - win[0][0] > half:
             _, old, n = win.popleft()
