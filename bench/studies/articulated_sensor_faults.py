@@ -22,12 +22,20 @@ seed 1):
   tractor's roll and the trailer's roll, 20 s: when the flag came after the sensor stuck
   (target <= 1 s) and the sensor named;
 - drift: ``drift@<channel>:rate=1.667e-5,start=10`` (1 mm/min) on a trailer deflection at each
-  place of the tri-axle group (``trailer_1_left``, ``trailer_2_right``, ``trailer_3_left``),
-  60 s: when flagged after the drift began (target <= 30 s), named;
-- clean drives (class C and A 20 s, the family's ``C20-stop`` and ``C20-curve3`` at 40 s):
-  the flags raised (target none).
+  place of the tri-axle group (``trailer_1_left``, ``trailer_2_right``, ``trailer_3_left``), on
+  a tractor deflection of each axle (``front_left``, ``drive_right``), and (1 mrad/min) on each
+  roll sensor, 60 s: when flagged after the drift began (target <= 30 s), named;
+- clean drives (class C and A 20 s, the family's ``C20-stop``, ``C20-curve3``, and
+  ``C20-stick`` and ``A20-stick`` (1.5 kN of sticking friction per spring) at 40 s): the flags
+  raised (target none).
 
-Prints Markdown tables.
+Prints Markdown tables. ``--balances [--seconds 60]`` prints instead the tractor's drift
+balances (:class:`~road_force_estimator.estimation.sensor_health.TractorDrift`) on every drive
+of the family, clean (10 um, seed 1): per drive the largest judged kingpin pitch P (mm of the
+front deflection), the two units' a_y difference A (m/s^2) and the front-drive cross-level T
+(mrad), P and T also over a plain 12 s mean (the window the rigid fit used) at 8 m/s or more,
+the largest offset of the best candidate over its limit (a flag needs > 1 for 6 s), the drift
+flags raised.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -44,7 +52,9 @@ SPIKES = ('spikes@front_left_suspension:count=3,size=5e-4,start=3;'
 SPIKED = ('front_left_suspension', 'trailer_2_right_suspension')
 STUCK = ('drive_left_suspension', 'trailer_1_right_suspension', 'tractor_roll', 'trailer_roll')
 DRIFTING = ('trailer_1_left_suspension', 'trailer_2_right_suspension',
-            'trailer_3_left_suspension')
+            'trailer_3_left_suspension', 'front_left_suspension', 'drive_right_suspension',
+            'tractor_roll', 'trailer_roll')
+#: 1 mm/min on a deflection, 1 mrad/min on a roll sensor (m/s or rad/s)
 DRIFT_RATE = 1e-3 / 60.0
 STUCK_AT, DRIFT_AT = 8.0, 10.0
 SETTLE_S = 5.0
@@ -135,7 +145,8 @@ def latency_table(roads, modes, log) -> list[str]:
         cases = [(f'stuck {ch} 2 s at {STUCK_AT:g} s', base,
                   f'stuck@{ch}:start={STUCK_AT:g},duration=2', STUCK_AT) for ch in STUCK]
         long = drive_of(road, 60.0)
-        cases += [(f'drift {ch} 1 mm/min from {DRIFT_AT:g} s', long,
+        cases += [(f'drift {ch} 1 {"mrad" if ch.endswith("roll") else "mm"}/min from '
+                   f'{DRIFT_AT:g} s', long,
                    f'drift@{ch}:rate={DRIFT_RATE:.6g},start={DRIFT_AT:g}', DRIFT_AT)
                   for ch in DRIFTING]
         for label, drive, spec, at in cases:
@@ -158,7 +169,11 @@ def clean_table(roads, modes, log) -> list[str]:
     drives += [('C20-stop (braking, 5 s standing, pulling away), 40 s',
                 drive_of('C', 40.0, 'C20-stop')),
                ('C20-curve3 (a curve ramping to 3 m/s^2), 40 s',
-                drive_of('C', 40.0, 'C20-curve3'))]
+                drive_of('C', 40.0, 'C20-curve3')),
+               ('C20-stick (1.5 kN sticking friction per spring), 40 s',
+                drive_of('C', 40.0, 'C20-stick')),
+               ('A20-stick (1.5 kN sticking friction per spring), 40 s',
+                drive_of('A', 40.0, 'A20-stick'))]
     for label, drive in drives:
         for mode in modes:
             lines.append(f'| {label} | {mode} | {flags(estimate(drive, mode))} |')
@@ -166,9 +181,66 @@ def clean_table(roads, modes, log) -> list[str]:
     return lines
 
 
+def plain_peaks(drive: dict, rows: np.ndarray, ax: np.ndarray, window_s: float) -> tuple:
+    """The largest |P| and |T| over a plain mean of ``window_s`` every 0.1 s, at
+    8 m/s or more over it (m, rad)."""
+    y, v, t = np.asarray(drive['y'], float), np.asarray(drive['speed'], float), drive['t']
+    n = int(round(window_s / (t[1] - t[0])))
+    z = y @ rows.T
+    c = np.vstack([np.zeros((1, z.shape[1])), np.cumsum(z, axis=0)])
+    ends = np.arange(n, len(t) + 1, max(1, n // 120))
+    ok = np.array([v[e - n:e].min() >= 8.0 for e in ends])
+    a_x = (v[ends - 1] - v[ends - n]) / (t[ends - 1] - t[ends - n])
+    mean = (c[ends] - c[ends - n]) / n + a_x[:, None] * ax
+    return float(np.abs(mean[ok, 0]).max()), float(np.abs(mean[ok, 2]).max())
+
+
+def balances_table(seconds: float, log) -> list[str]:
+    """The tractor's drift balances on the family's clean drives (module notes)."""
+    from bench.accuracy.articulated_observer import simulate
+    from bench.studies.articulated_drives import family
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.models.articulated import (
+        ArticulatedObserverModel)
+    from road_force_estimator.estimation.sensor_health import (
+        UNIT_WINDOW_FACTOR, FaultDetector, FaultSettings)
+
+    lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
+             'T (mrad) | A (m/s^2) | largest offset / limit | drift flags |',
+             '|---|---:|---:|---:|---:|---:|---:|---|']
+    obs = ObserverParameters()
+    for case in family():
+        drive = simulate(case, seconds, 1e-5)
+        settings = FaultSettings.of_whole_vehicle(obs, ArticulatedObserverModel(
+            drive['vehicle']))
+        det = FaultDetector(settings)
+        for stamp, y, v in zip(drive['stamps'].tolist(), np.asarray(drive['y']).tolist(),
+                               drive['speed'].tolist()):
+            det.step(stamp, y, (v,))
+        rows, ax = np.asarray(settings.tractor[0]), np.asarray(settings.tractor[1])
+        p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s)
+        peak = det.tractor.peak
+        raised = ', '.join(n for n, c in det.counts().drift_episodes.items() if c) or 'none'
+        lines.append(f'| {case.name} | {p * 1e3:.3f} | {peak[0] * 1e3:.3f} | {t * 1e3:.3f} | '
+                     f'{peak[2] * 1e3:.3f} | {peak[1]:.4f} | {peak[3]:.2f} | {raised} |')
+        log(lines[-1])
+    return lines
+
+
 def main(argv=None) -> int:
     from bench.studies import sensor_faults
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if '--balances' in argv:
+        import argparse
+
+        ap = argparse.ArgumentParser(description="the tractor's drift balances")
+        ap.add_argument('--balances', action='store_true')
+        ap.add_argument('--seconds', type=float, default=60.0)
+        args = ap.parse_args(argv)
+        print('\n'.join(balances_table(args.seconds, lambda text: print(
+            text, file=sys.stderr, flush=True))))
+        return 0
     return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
                               description=__doc__.splitlines()[0])
 

@@ -26,8 +26,8 @@ about 0 (tens of microns of deflection on class C over 10 s), whatever the road,
 to H and s k_1 d to R, on the right k_2 d and -s k_2 d: |H| / k_i above the stated offset
 flags the sensor whose sign agrees (left when H and R have one sign). With
 ``vehicle.deflection_reference: zero_load`` H is taken against its first window's value.
-Not detected: a drift of the roll sensor (it enters R only, as a curve does), drifts of both
-deflection sensors that cancel in H.
+Not detected (the front axle): a drift of the roll sensor (it enters R only, as a curve
+does), drifts of both deflection sensors that cancel in H.
 
 A stuck sensor, deflection or roll, is left out of the model observer while flagged (its
 gains designed without it and its prediction taken for its reading,
@@ -43,8 +43,13 @@ The whole vehicle (:meth:`FaultSettings.of_whole_vehicle`): the same detector ov
 channels (every deflection, the tractor's and the trailer's roll), stuck by the same rule;
 the drift of a deflection judged against its unit's other deflections (:class:`UnitDrift`:
 a rigid body's heave, pitch and roll, on units with :data:`UNIT_MIN_AXLES` instrumented
-axles or more; the kingpin's force is unknown, so no unit's momentum balances alone), from
+axles or more; the kingpin's force is unknown, so no unit's heave balances alone), from
 the readings and the speed (``rates`` is the speed there): the same flags in every mode.
+A tractor of two instrumented axles (one degree of freedom left over a rigid fit) and the roll
+sensors are judged by the whole vehicle's balances instead (:class:`TractorDrift`,
+:func:`tractor_check`): the tractor's pitch about the kingpin, the two units' lateral
+accelerations through the fifth wheel's roll stiffness, the road's cross-level under the
+front and the drive axle.
 """
 from __future__ import annotations
 
@@ -57,8 +62,9 @@ import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
-           'UNIT_MIN_AXLES',
-           'FaultSettings', 'FaultDetector', 'UnitDrift', 'detect_faults']
+           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'ROLL_DRIFT_LIMIT_RAD',
+           'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
+           'FaultDetector', 'UnitDrift', 'detect_faults']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -81,6 +87,17 @@ UNIT_MIN_SPEED_MPS = 8.0
 UNIT_CLEAR_FRACTION = 0.25
 #: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
 UNIT_MIN_AXLES = 3
+#: :class:`TractorDrift`'s statistics' scales: the kingpin pitch balance (m of the first
+#: axle's deflection), the two units' lateral accelerations' difference (m/s^2), the road's
+#: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
+#: (``python -m bench.studies.articulated_sensor_faults --balances``)
+TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
+#: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
+ROLL_DRIFT_LIMIT_RAD = 2e-4
+#: Time (s) a :class:`TractorDrift` candidate stays above its limit before it is flagged (a
+#: drift keeps growing; sticking leaf springs' offsets come and go: the ``*-stick`` drives of
+#: ``python -m bench.studies.articulated_sensor_faults --balances``)
+TRACTOR_PERSIST_S = 6.0
 
 
 @dataclass(frozen=True)
@@ -100,6 +117,9 @@ class FaultSettings:
     #: deflection channels' indices and their rows ``(1, x, +-s)`` (m: position behind the
     #: front axle, half the spring track, + left); None: none (the front axle's ``body``)
     units: tuple | None = None
+    #: the tractor's and the roll sensors' drift check (:class:`TractorDrift`): (rows,
+    #: a_x coefficients, scales, candidates, limits, flaggable), or None
+    tractor: tuple | None = None
 
     @classmethod
     def of(cls, observer, vehicle, channels: Sequence[str]) -> 'FaultSettings':
@@ -134,7 +154,9 @@ class FaultSettings:
         return cls(tuple(model.channel_names), observer.fault_stuck_time_s,
                    observer.fault_stuck_tolerance, observer.fault_drift_window_s,
                    observer.fault_drift_offset_m, None, model.vehicle.zero_load,
-                   tuple(units) or None)
+                   tuple(units) or None,
+                   tractor_check(model, observer.fault_drift_offset_m, set(
+                       k for idx, _ in units for k in idx)))
 
 
 @dataclass
@@ -160,6 +182,10 @@ class FaultDetector:
         self.units = (UnitDrift(settings.units, UNIT_WINDOW_FACTOR * settings.drift_window_s,
                                 settings.drift_offset_m, settings.relative)
                       if settings.units and settings.drift_offset_m > 0.0 else None)
+        #: the tractor's deflections and the roll sensors (:class:`TractorDrift`), or None
+        self.tractor = (TractorDrift(*settings.tractor, UNIT_WINDOW_FACTOR
+                                     * settings.drift_window_s, settings.relative)
+                        if settings.tractor and settings.drift_offset_m > 0.0 else None)
         self.reset()
 
     def reset(self) -> None:
@@ -177,6 +203,8 @@ class FaultDetector:
         self._last = None
         if self.units is not None:
             self.units.forget()
+        if self.tractor is not None:
+            self.tractor.forget()
         self._restart(None)
 
     def _restart(self, t: float | None) -> None:
@@ -196,6 +224,8 @@ class FaultDetector:
         self._ref = None
         if self.units is not None:
             self.units.restart()
+        if self.tractor is not None:
+            self.tractor.restart()
 
     def step(self, stamp_ns: int, values: Sequence[float],
              rates: tuple[float, float] | None = None) -> None:
@@ -217,10 +247,15 @@ class FaultDetector:
             self._drift = [False] * self.n
             if self.units is not None:
                 self.units.restart()
+            if self.tractor is not None:
+                self.tractor.restart()
         elif rates is not None and self.settings.body is not None:
             self._drift_step(t, values, rates)
-        elif rates is not None and self.units is not None:
-            self.units.step(t, values, rates[0], self._drift)
+        elif rates is not None:
+            if self.units is not None:
+                self.units.step(t, values, rates[0], self._drift)
+            if self.tractor is not None:
+                self.tractor.step(t, values, rates[0], self._drift)
         self._last = values
         if self._flagged or True in stuck or True in self._drift:
             self._book(stamp_ns)
@@ -439,6 +474,230 @@ class UnitDrift:
             if a[i] > limit:
                 drift[idx[i]] = True
                 seen[u] = t
+
+
+class TractorDrift:
+    """A drift of the tractor's deflections or of a roll sensor, from balances of the whole
+    vehicle that hold over seconds whatever the road (MODEL.md "The whole vehicle", its
+    equations averaged, the accelerations' means taken as 0): statistics z = rows @ mean(y)
+    + ax * mean(a_x) (a_x = dv/dt from the speed), each 0 on a sound truck:
+
+    - P, the tractor's pitch about the kingpin (the kingpin's force has no moment there),
+      sum_j k_j (xi_j - xi_5) (q_j,1 + q_j,2) + M_t H_t a_x, divided by k_1 |xi_1 - xi_5|
+      (m of the front axle's deflection; > 0: the drive axle's springs extended);
+    - A, the tractor's minus the trailer's lateral acceleration (m/s^2), each from its roll
+      balance with the fifth wheel's roll moment between them,
+      a_y,b = [sum_j K_s,j rel_j +- kphi_5 (phi_t - phi_r)] / (M_b h_b) - g phi_b
+      (+ tractor, - trailer; K_s,j = 2 k_j s_j^2 + kphi_j, rel_j = (q_j,1 - q_j,2) / (2 s_j));
+    - T, the road's cross-level angle (rad, left up) that the front and the drive axle's
+      roll balances put under them, phi_t - rel_j - (K_s,j rel_j + L_j a_y,r) / K_t,j
+      (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j: the load transfer through the
+      links), the front's minus the drive's: both axles run in the same wheel paths.
+
+    Means are over a triangular window of ``window_s`` (two running means of half of it in
+    series: the bodies' momentum change, which left 0.3 mm of kingpin pitch in a plain 12 s
+    mean on class C, enters only by its displacement). Judged at :data:`UNIT_MIN_SPEED_MPS`
+    or more, a block at a time as :class:`UnitDrift`: each candidate's offset (``candidates``:
+    per candidate its weights on the channels) fitted to z / ``scales`` by least squares; the
+    one that explains most, above its limit (m or rad) for :data:`TRACTOR_PERSIST_S`, flags
+    its ``names`` (channel indices; a roll sensor's candidate is the pair's difference, both
+    named: the balances see phi_t - phi_r only, a drift common to both reads as a crossfall
+    or a curve), and holds as :class:`UnitDrift`'s flags do. ``relative``: z against its
+    first judged window's.
+    """
+
+    def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
+                 names: Sequence, limits: Sequence, flaggable: Sequence, window_s: float,
+                 relative: bool = False) -> None:
+        rows = np.asarray(rows, float)
+        self.m = rows.shape[0]
+        self.window_s, self.relative = float(window_s), relative
+        self.rows = rows
+        self.n = rows.shape[1]
+        self.ax = np.asarray(ax, float)
+        self.scales = np.asarray(scales, float)
+        #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
+        #: the channels its flag names
+        self.candidates = tuple(tuple(c) for c in candidates)
+        self.names = tuple(tuple(c) for c in names)
+        self.limits = np.asarray(limits, float)
+        self.flaggable = tuple(bool(f) for f in flaggable)
+        cols = np.zeros((rows.shape[1], len(self.candidates)))
+        for j, cand in enumerate(self.candidates):
+            for k, weight in cand:
+                cols[k, j] = weight
+        g = rows @ cols / self.scales[:, None]      # (m, candidates): z / scales per offset
+        self._g = g
+        self._gg = np.einsum('ij,ij->j', g, g)
+        self._seen = 0.0
+        self.forget()
+
+    def forget(self) -> None:
+        """The windows, the relative reference and :attr:`peak` forgotten."""
+        self._ref = None
+        #: the largest |z| of each statistic judged (P m, A m/s^2, T rad) and the largest
+        #: offset of the best candidate over its limit
+        self.peak = np.zeros(self.m + 1)
+        self.restart()
+
+    def restart(self) -> None:
+        """The windows start again (a gap, a stuck sensor, a stop)."""
+        m = self.m
+        self._win: deque = deque()          # blocks: (t0, sums (m + 1), n)
+        self._sum = [0.0] * (m + 1)
+        self._sn = 0
+        self._means: deque = deque()        # per block: (t, the half-window's means (m + 1))
+        self._msum = [0.0] * (m + 1)
+        self._vals: list = []               # the block's readings (the callers' sequences)
+        self._vs = 0.0                      # and its speeds' sum
+        self._bn = 0
+        self._b0 = 0.0
+        self._over = None                   # (candidate, since when) above its limit
+
+    def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
+        """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
+        judged block's end."""
+        if not abs(speed_mps) >= UNIT_MIN_SPEED_MPS:
+            if self._sn or self._bn:
+                self.restart()
+            return
+        if not self._bn:
+            self._b0 = t
+        self._vals.append(values)
+        self._vs += speed_mps
+        self._bn += 1
+        if self._bn < DRIFT_BLOCK:
+            return
+        blk = (self.rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        blk.append(self._vs)
+        self._vals = []
+        self._vs = 0.0
+        half = 0.5 * self.window_s
+        win, sums = self._win, self._sum
+        win.append((self._b0, blk, self._bn))
+        for i, b in enumerate(blk):
+            sums[i] += b
+        self._sn += self._bn
+        self._bn = 0
+        while t - win[0][0] > half:
+            _, old, n = win.popleft()
+            for i, b in enumerate(old):
+                sums[i] -= b
+            self._sn -= n
+        if t - win[0][0] < 0.99 * half:
+            return
+        means, msum = self._means, self._msum
+        now = [x / self._sn for x in sums]
+        means.append((t, now))
+        for i, x in enumerate(now):
+            msum[i] += x
+        while t - means[0][0] > half:
+            _, old = means.popleft()
+            for i, x in enumerate(old):
+                msum[i] -= x
+        if t - means[0][0] < 0.99 * half:
+            return
+        nm = len(means)
+        span = t - means[0][0]
+        a_x = (now[-1] - means[0][1][-1]) / span if span > 0.0 else 0.0
+        z = np.asarray(msum[:-1]) / nm + self.ax * a_x
+        if self.relative:
+            if self._ref is None:
+                self._ref = z.copy()
+            z = z - self._ref
+        self._judge(t, z / self.scales, drift)
+
+    def _judge(self, t: float, u: np.ndarray, drift: list) -> None:
+        """The flags from the scaled statistics ``u``."""
+        fit = u @ self._g                       # per candidate: g . u
+        best = int(np.argmax(fit * fit / self._gg))
+        offset = fit / self._gg                 # per candidate: its least-squares offset
+        peak = self.peak
+        np.maximum(peak[:-1], np.abs(u) * self.scales, out=peak[:-1])
+        peak[-1] = max(peak[-1], abs(offset[best]) / self.limits[best])
+        names = self.names
+        up = [j for j, ks in enumerate(names) if self.flaggable[j] and drift[ks[0]]]
+        if up and abs(offset[up[0]]) >= UNIT_CLEAR_FRACTION * self.limits[up[0]]:
+            self._seen = t
+        if up and t - self._seen <= self.window_s:
+            return
+        for j, ks in enumerate(names):
+            if self.flaggable[j]:
+                for k in ks:
+                    drift[k] = False
+        if not (self.flaggable[best] and abs(offset[best]) > self.limits[best]):
+            self._over = None
+            return
+        if self._over is None or self._over[0] != best:
+            self._over = (best, t)              # above since t
+        if t - self._over[1] >= TRACTOR_PERSIST_S:
+            for k in names[best]:
+                drift[k] = True
+            self._seen = t
+
+
+def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
+    """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
+    (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
+    not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
+    a tractor of two axles with the kingpin between them. Candidates: every deflection and
+    both roll sensors; flaggable: those not in ``judged`` (the channels :class:`UnitDrift`
+    judges), at ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`."""
+    veh = model.vehicle
+    axles = veh.axles
+    g = 9.81
+    chans = list(model.channels)
+    tractor = [j for j, a in enumerate(axles) if a.body == 'tractor']
+    trailer = [j for j, a in enumerate(axles) if a.body == 'trailer']
+    x5 = veh.fifth_wheel.position_m
+    if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
+            or veh.roll_sensor == 'pendulum' or len(tractor) != 2 or not trailer
+            or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
+        return None
+    n = len(chans)
+    at = {ch: k for k, ch in enumerate(chans)}
+    phi = np.zeros(n)
+    phi[at[('roll', 0)]] = 1.0
+    phir = np.zeros(n)
+    phir[at[('roll', 1)]] = 1.0
+    tr, rl = veh.body('tractor'), veh.body('trailer')
+    k5 = veh.fifth_wheel.roll_stiffness_nmprad
+    spring = model.core.statics().spring_load_n
+    pitch, ayt, ayr = np.zeros(n), np.zeros(n), np.zeros(n)
+    rel, ks = {}, {}
+    for j, a in enumerate(axles):
+        s = a.spring_half_track_m
+        left, right = at[('q', j, 0)], at[('q', j, 1)]
+        rel[j] = np.zeros(n)
+        rel[j][left], rel[j][right] = 0.5 / s, -0.5 / s
+        ks[j] = sum(a.suspension_stiffness_npm) * s * s + a.auxiliary_roll_stiffness_nmprad
+        if a.body == 'tractor':
+            pitch[left] += a.suspension_stiffness_npm[0] * (a.position_m - x5)
+            pitch[right] += a.suspension_stiffness_npm[1] * (a.position_m - x5)
+            ayt += ks[j] * rel[j]
+        else:
+            ayr += ks[j] * rel[j]
+    ayt = (ayt + k5 * (phi - phir)) / (tr.mass_kg * tr.cg_height_above_roll_axis_m) - g * phi
+    ayr = (ayr - k5 * (phi - phir)) / (rl.mass_kg * rl.cg_height_above_roll_axis_m) - g * phir
+
+    def cross(j: int) -> np.ndarray:
+        a = axles[j]
+        w = a.wheel_half_track_m
+        kt = sum(a.tire_stiffness_npm) * w * w
+        lat = a.roll_centre_height_m * float(spring[j].sum()) / g + a.wheel_radius_m * a.mass_kg
+        body = phi if a.body == 'tractor' else phir
+        return body - rel[j] - (ks[j] * rel[j] + lat * ayr) / kt
+
+    scale0 = abs(pitch[at[('q', tractor[0], 0)]])
+    rows = np.array([pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])])
+    ax = (tr.mass_kg * tr.cg_height_m / scale0, 0.0, 0.0)
+    deflections = [at[('q', j, side)] for j in tractor for side in (0, 1)]
+    roll = (at[('roll', 0)], at[('roll', 1)])
+    cands = tuple(((k, 1.0),) for k in deflections) + (((roll[0], 0.5), (roll[1], -0.5)),)
+    names = tuple((k,) for k in deflections) + (roll,)
+    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,)
+    flaggable = tuple(k not in judged for k in deflections) + (True,)
+    return (tuple(map(tuple, rows)), ax, TRACTOR_SCALES, cands, names, limits, flaggable)
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:

@@ -3,6 +3,8 @@ estimation.sensor_health's FaultDetector over the whole vehicle's channels, Unit
 faults put into the plant's readings by the plant's own fault module (core.sensor_faults),
 the flags judged against where it says they struck; the drift check against a rigid body's
 pattern computed here."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,7 +12,8 @@ from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.core.sensor_faults import FaultPlan, parse_faults
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.sensor_health import (
-    CODES, UNIT_MIN_SPEED_MPS, FaultSettings, detect_faults)
+    CODES, TRACTOR_PERSIST_S, UNIT_MIN_SPEED_MPS, FaultSettings, detect_faults,
+    tractor_check)
 from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, estimate_whole_vehicle)
 
@@ -60,10 +63,12 @@ def raised(counts) -> dict:
 def test_the_drift_check_takes_up_a_rigid_bodys_pattern_and_names_an_offset(articulated_c):
     """Readings that are a rigid unit's heave, pitch and roll (10 mm, 5 mrad, 8 mrad: a
     braking in a curve) raise nothing; 0.5 mm more on one trailer deflection names it; below
-    the speed at which the window runs, nothing is judged."""
+    the speed at which the window runs, nothing is judged. (The tractor's balances are set
+    aside: a rigid pattern at a steady speed is no state of the truck; they are tested
+    against the plant below.)"""
     vehicle = articulated_c[0].vehicle
     model = ArticulatedObserverModel(vehicle)
-    settings = settings_of(vehicle)
+    settings = dataclasses.replace(settings_of(vehicle), tractor=None)
     rigid = []
     for ch in model.channels:
         if ch[0] == 'q':
@@ -108,6 +113,77 @@ def test_a_clean_drive_raises_nothing_and_a_drift_is_named_within_30_s(long_driv
         assert raised(counts) == {ch: (0, 1)}, ch
         began = stamps[fault['first_sample']]
         assert 0 < counts.first_ns[ch]['drift'] - began <= 30e9, ch
+
+
+@pytest.mark.parametrize('channel, rate', [('front_left_suspension', 1.0),
+                                           ('front_right_suspension', -1.0),
+                                           ('drive_left_suspension', -1.0),
+                                           ('drive_right_suspension', 1.0)])
+def test_a_drifting_tractor_deflection_is_named_within_30_s(long_drive, channel, rate):
+    """36 s of class C, 1 mm/min (either sign) on a tractor deflection from 3 s (the plant's
+    drift): that sensor alone flagged drift, within 30 s of the drift's start."""
+    vehicle, stamps, y, names = long_drive
+    bad, truth = faulted(names, y, f'drift@{channel}:rate={rate * 1e-3 / 60:.6g},start=3',
+                         DRIFT_DURATION_S)
+    (fault,) = truth
+    counts, codes = detect_faults(settings_of(vehicle), stamps, bad,
+                                  np.full((stamps.size, 1), 20.0))
+    assert raised(counts) == {channel: (0, 1)}
+    began = stamps[fault['first_sample']]
+    assert TRACTOR_PERSIST_S * 1e9 < counts.first_ns[channel]['drift'] - began <= 30e9
+    assert codes[-1, names.index(channel)] == CODES['drift']
+
+
+@pytest.mark.parametrize('channel, rate', [('tractor_roll', 1.0), ('trailer_roll', -1.0)])
+def test_a_drifting_roll_sensor_flags_both_roll_sensors_within_30_s(long_drive, channel, rate):
+    """1 mrad/min on one roll sensor from 3 s: the balances see the two bodies' roll
+    difference only, so both roll sensors are flagged drift (no deflection), within 30 s."""
+    vehicle, stamps, y, names = long_drive
+    bad, truth = faulted(names, y, f'drift@{channel}:rate={rate * 1e-3 / 60:.6g},start=3',
+                         DRIFT_DURATION_S)
+    (fault,) = truth
+    counts, _ = detect_faults(settings_of(vehicle), stamps, bad,
+                              np.full((stamps.size, 1), 20.0))
+    assert raised(counts) == {'tractor_roll': (0, 1), 'trailer_roll': (0, 1)}
+    began = stamps[fault['first_sample']]
+    assert 0 < counts.first_ns[channel]['drift'] - began <= 30e9
+
+
+def test_a_curve_raises_no_drift_flag():
+    """30 s of class C through a curve ramping to 3 m/s^2 (the plant's lateral profile): the
+    tractor's balances carry the lateral load transfer; no flag."""
+    from road_force_estimator.core.articulated_plant import simulate_articulated
+    from road_force_estimator.core.articulated_setup import ArticulatedDrive
+    from road_force_estimator.core.parameters import load_params_file
+    from road_force_estimator.core.road import iso8608_profile
+    from road_force_estimator.estimation.models.articulated import channel_names
+
+    base = load_params_file(ARTICULATED_CONFIG)
+    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
+                 'simulator.duration': 30.0,
+                 'simulator.lateral_profile': 'curve:start=5,ramp=3,hold=6,ay=3'})
+    d = ArticulatedDrive.from_values(base)
+    tr = simulate_articulated(d.vehicle, iso8608_profile('C', d.road_length_m, seed=5),
+                              speed_mps=20.0, rate_hz=1000.0, duration_s=30.0,
+                              lateral_acceleration=d.lateral, tire_envelope_m=0.25,
+                              model=d.model)
+    assert np.max(np.abs(tr.lateral_accel_mps2)) > 2.9
+    y = d.sensors(channel_names(d.model)).measure(tr)
+    counts, _ = detect_faults(settings_of(d.vehicle), np.round(tr.t_s * 1e9).astype(np.int64),
+                              y, np.full((len(tr.t_s), 1), 20.0))
+    assert raised(counts) == {}
+
+
+def test_the_tractor_check_needs_its_balances_closed(articulated_c):
+    """Without the trailer's roll sensor, or with an axle not instrumented, no tractor check."""
+    vehicle = articulated_c[0].vehicle
+    assert tractor_check(ArticulatedObserverModel(vehicle), 2e-4, set()) is not None
+    for changed in (dataclasses.replace(vehicle, trailer_roll_sensor=False),
+                    dataclasses.replace(vehicle, axles=(dataclasses.replace(
+                        vehicle.axles[0], instrumented=False),) + vehicle.axles[1:])):
+        model = ArticulatedObserverModel(changed)
+        assert tractor_check(model, 2e-4, set()) is None
+        assert FaultSettings.of_whole_vehicle(ObserverParameters(), model).tractor is None
 
 
 #: The load error (every wheel, RMS) at 10 ms with the sensor stuck 2 s, at most this times the
