@@ -144,8 +144,8 @@ class ArticulatedOnline:
         if restart:
             brake.restart()
         brake.feed(t, float(speed_mps))
-        off = brake.offset
-        if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
+        off = brake.offset.tolist()
+        if not core.step(int(stamp_ns), tuple([float(v) - o for v, o in zip(y, off)]),
                          float(speed_mps), dt, restart, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
         if not first and self.clock.take(dt):

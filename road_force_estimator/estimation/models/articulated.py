@@ -547,6 +547,7 @@ class BrakingResponse:
         self.x = np.zeros(self._n2)
         self.offset = np.zeros(self._c.shape[0])
         self.dynamic_n = np.zeros(self._df.shape[0])
+        self._rest = True       # x is 0: a step under a_x = 0 leaves everything 0
 
     def _step_matrices(self, dt: float) -> tuple:
         """(Phi, Gamma) of a step dt (s), zero-order hold; cached."""
@@ -562,8 +563,9 @@ class BrakingResponse:
 
     def step(self, dt: float, ax_mps2: float) -> None:
         """Advance by dt (s) under ``a_x`` (m/s^2) held over the step."""
-        if dt <= 0.0:
+        if dt <= 0.0 or (self._rest and ax_mps2 == 0.0):   # (at rest: the products' +0)
             return
+        self._rest = False
         phi, gamma = self._step_matrices(dt)
         self.x = phi @ self.x + gamma * ax_mps2
         self.offset = self._c @ self.x
