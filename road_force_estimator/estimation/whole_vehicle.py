@@ -201,22 +201,21 @@ class WholeVehicleArrays:
 
 class _Transfer:
     """Each unit's LTR from finalized rows, stepped by their stamps, and the front axle's own
-    (the same recursion given the front axle alone: its wheels as both units, each needing
-    one): ``[LTR, quasi-static] per unit + front`` (8 numbers)."""
+    (the same recursion given the front axle alone, one unit of its two wheels): ``[LTR,
+    quasi-static] per unit + front`` (8 numbers)."""
 
     def __init__(self, vehicle: ArticulatedParameters, static_n) -> None:
         bodies = [a.body for a in vehicle.axles]
         static = np.reshape(static_n, (-1, 2))
         self.ltr = UnitLoadTransfer(bodies, static, 1e-3)
-        self.front = UnitLoadTransfer(('tractor', 'trailer'), static[[0, 0]], 1e-3)
+        self.front = UnitLoadTransfer(('tractor',), static[:1], 1e-3, units=[[0]])
         self.last: int | None = None
 
     def update(self, stamp_ns: int, loads: Sequence[float]) -> list:
         dt = 0.0 if self.last is None else (stamp_ns - self.last) * 1e-9
         self.last = stamp_ns
         left, right = loads[0], loads[1]
-        return self.ltr.update(loads, dt) + self.front.update((left, right, left, right),
-                                                              dt)[:2]
+        return self.ltr.update(loads, dt) + self.front.update((left, right), dt)
 
 
 class WheelStaticTracker:

@@ -549,6 +549,12 @@ class BrakingResponse:
         self.dynamic_n = np.zeros(self._df.shape[0])
         self._rest = True       # x is 0: a step under a_x = 0 leaves everything 0
 
+    @property
+    def at_rest(self) -> bool:
+        """Whether the state is 0 (:attr:`offset` and :attr:`dynamic_n` 0): from a restart
+        until the first step with ``a_x`` other than 0."""
+        return self._rest
+
     def _step_matrices(self, dt: float) -> tuple:
         """(Phi, Gamma) of a step dt (s), zero-order hold; cached."""
         key = round(dt, 9)
