@@ -22,6 +22,7 @@ acceleration; each axle's road on its own (their fusion by distance:
 from __future__ import annotations
 
 import math
+from operator import itemgetter
 
 import numpy as np
 
@@ -181,6 +182,9 @@ class ArticulatedOnlineRows:
         idx = _road_index(model)
         nw = len(self.static)
         self._w, self._acc = idx[:nw], idx[nw:]
+        # the outputs each part of a row takes, gathered at once
+        self._take_df, self._take_ay = itemgetter(*self._df), itemgetter(*self._ay)
+        self._take_w, self._take_acc = itemgetter(*self._w), itemgetter(*self._acc)
         cutoff = ROAD_CUTOFF_FACTOR * (100.0 if observer is None
                                        else observer.profile_cutoff_wavelength_m)
         self.roads = WheelRoads(nw, body_heave.cutoff_per_speed(cutoff))
@@ -203,11 +207,10 @@ class ArticulatedOnlineRows:
     def row(self, o: list, meta: tuple, op) -> tuple:
         """``(distance, converged, F_n..., dF..., a_y,t, a_y,r, u...)``."""
         x, dt, v, conv = meta
-        df = [o[i] for i in self._df]
+        df = self._take_df(o)
         r = o if op is None else op
-        u = self.roads.road([r[i] for i in self._w], [r[i] for i in self._acc], dt, v, x)
-        return (x, conv, *[s + d for s, d in zip(self.static, df)], *df,
-                *[o[i] for i in self._ay], *u)
+        u = self.roads.road(self._take_w(r), self._take_acc(r), dt, v, x)
+        return (x, conv, *[s + d for s, d in zip(self.static, df)], *df, *self._take_ay(o), *u)
 
 
 class ArticulatedOfflineRows:
