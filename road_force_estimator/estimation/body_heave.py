@@ -27,7 +27,8 @@ bench.accuracy.run_benchmark --scenarios C20-stop``.)
 The state is a plain tuple ``(dd z_s of the last step, its cutoff w (0 = none yet), y_1..y_8,
 z_s, dz_s)`` (``z_s`` and ``dz_s`` last) so that the per-sample estimators pay one function
 call. The per-sample path
-uses nothing but ``math``.
+uses nothing but ``math``; :func:`step_matrix` is the same step as one matrix (numpy), for
+many filters of one cutoff at once (the whole vehicle's wheels).
 
 Offline (non-causal) the same band-limiting is done without phase error by
 :func:`zero_phase`: the double integral times ``|H_B|^2``, ``H_B`` the Butterworth high-pass
