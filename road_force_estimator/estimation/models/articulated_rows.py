@@ -8,7 +8,8 @@ Columns of N axles (``nw = 2 N`` wheels, axle j front first, left then right)::
     [distance, converged, F_n (nw), dF (nw), a_y,t, a_y,r, road (nw), dd z_w (nw)]
 
 Online rows stop after the road: every wheel's road ``u = w + z_w`` with ``z_w`` the causal
-band-limited double integral (:func:`.body_heave.step`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
+band-limited double integral (:func:`.body_heave.step`'s filter, every wheel's in one product
+of :func:`.body_heave.step_matrix`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
 ``observer.profile_cutoff_wavelength``) of the wheel's acceleration from the finalized outputs
 (the load filter's: the causal one at zero latency, the fixed-lag one with
 ``observer.latency``), the run's start ramped in as offline, held at a stop
