@@ -42,44 +42,60 @@ class UnitLoadTransfer:
         The static wheel loads (N): the LTR floors.
     dt_s : float
         The sample step (s).
+    units : sequence of sequences of int, optional
+        The axles of each unit (default :func:`unit_masks` of ``bodies``: tractor, trailer,
+        combination); e.g. ``[[0]]``: the front axle alone.
     """
 
     def __init__(self, bodies: Sequence[str], static_load_n, dt_s: float,
-                 cutoff_hz: float = QUASI_STATIC_CUTOFF_HZ) -> None:
-        self.units = unit_masks(bodies)
+                 cutoff_hz: float = QUASI_STATIC_CUTOFF_HZ,
+                 units: Sequence[Sequence[int]] | None = None) -> None:
+        self.units = (unit_masks(bodies) if units is None
+                      else [[int(j) for j in u] for u in units])
         static = np.asarray(static_load_n, float)
         self.floor = [_FLOOR_FRACTION * float(static[u].sum()) for u in self.units]
         #: pole rate (1/s) of each lag of the low-pass
         self.rate = 2.0 * math.pi * cutoff_hz / _CASCADE_3DB
         self.e = math.exp(-dt_s * self.rate)
         self.state: list | None = None
+        # per unit (its left wheels' indices, its right wheels', its floor)
+        self._plan = [([2 * j for j in u], [2 * j + 1 for j in u], f)
+                      for u, f in zip(self.units, self.floor)]
+        self._dt: float | None = None       # the last step given, and its e
+        self._e_dt = self.e
 
     def update(self, loads: Sequence[float], dt_s: float | None = None) -> list[float]:
-        """``[LTR, quasi-static LTR]`` per unit (6 numbers) from one sample's wheel loads
-        [axle j left, right, ...] (N); ``dt_s``: the step from the previous sample (s; None:
-        the step given at construction)."""
-        e = self.e if dt_s is None else math.exp(-dt_s * self.rate)
+        """``[LTR, quasi-static LTR]`` per unit (2 numbers a unit) from one sample's wheel
+        loads [axle j left, right, ...] (N); ``dt_s``: the step from the previous sample (s;
+        None: the step given at construction)."""
+        if dt_s is None:
+            e = self.e
+        elif dt_s == self._dt:
+            e = self._e_dt
+        else:
+            e = self._e_dt = math.exp(-dt_s * self.rate)
+            self._dt = dt_s
         g = 1.0 - e
         out = []
-        first = self.state is None
-        if first:
-            self.state = [None] * len(self.units)
-        for i, unit in enumerate(self.units):
+        state = self.state
+        if state is None:
+            state = self.state = [None] * len(self.units)
+        for i, (lefts, rights, floor) in enumerate(self._plan):
             left = 0.0
-            right = 0.0
-            for j in unit:
-                a, b = loads[2 * j], loads[2 * j + 1]
+            for k in lefts:
+                a = loads[k]
                 left += a if a > 0.0 else 0.0
+            right = 0.0
+            for k in rights:
+                b = loads[k]
                 right += b if b > 0.0 else 0.0
-            st = self.state[i]
+            st = state[i]
             if st is None:
-                st = (left, left, right, right)
+                st = state[i] = (left, left, right, right)
             else:
                 l1 = e * st[0] + g * left
                 r1 = e * st[2] + g * right
-                st = (l1, e * st[1] + g * l1, r1, e * st[3] + g * r1)
-            self.state[i] = st
-            floor = self.floor[i]
+                st = state[i] = (l1, e * st[1] + g * l1, r1, e * st[3] + g * r1)
             den = left + right
             den_qs = st[1] + st[3]
             out.append((right - left) / (den if den > floor else floor))

@@ -121,7 +121,10 @@ class ArticulatedOnline:
         self.gaps = 0
         self._last: int | None = None
         self._x = 0.0
-        self._held: deque = deque()    # the braking response's dynamic loads of held samples
+        # the braking response's dynamic loads of held samples (None: at rest, all 0)
+        self._held: deque = deque()
+        cols = columns(len(self.wheel_names))
+        self._load, self._dyn = cols['load'].start, cols['dynamic'].start
 
     def starts_run(self, stamp_ns: int) -> bool:
         """Whether a sample at ``stamp_ns`` would start a run (the first, or after a gap)."""
@@ -144,14 +147,15 @@ class ArticulatedOnline:
         if restart:
             brake.restart()
         brake.feed(t, float(speed_mps))
-        off = brake.offset
-        if not core.step(int(stamp_ns), tuple(float(v) - o for v, o in zip(y, off)),
-                         float(speed_mps), dt, restart, self._x, t, dt):
+        rest = brake.at_rest           # its offset and loads 0: nothing to take or add
+        y = (tuple([float(v) for v in y]) if rest else
+             tuple([float(v) - o for v, o in zip(y, brake.offset.tolist())]))
+        if not core.step(int(stamp_ns), y, float(speed_mps), dt, restart, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')
         if not first and self.clock.take(dt):
             self.gaps += 1
         self._last = int(stamp_ns)
-        self._held.append(brake.dynamic_n.tolist())
+        self._held.append(None if rest else brake.dynamic_n.tolist())
         return self._ready()
 
     def finish(self) -> list:
@@ -162,14 +166,17 @@ class ArticulatedOnline:
     def _ready(self) -> list:
         """The finalized rows, the braking response's dynamic loads added."""
         out = []
-        cols = columns(len(self.wheel_names))
-        load, dyn = cols['load'], cols['dynamic']
+        load, dyn = self._load, self._dyn
+        held = self._held
         for stamp, row in self.core.ready:
-            d = self._held.popleft()
+            d = held.popleft()
+            if d is None:             # (the response at rest: + 0 changes no load)
+                out.append((stamp, row))
+                continue
             r = list(row)
             for k, f in enumerate(d):
-                r[load.start + k] += f
-                r[dyn.start + k] += f
+                r[load + k] += f
+                r[dyn + k] += f
             out.append((stamp, tuple(r)))
         self.core.ready.clear()
         return out

@@ -27,7 +27,8 @@ bench.accuracy.run_benchmark --scenarios C20-stop``.)
 The state is a plain tuple ``(dd z_s of the last step, its cutoff w (0 = none yet), y_1..y_8,
 z_s, dz_s)`` (``z_s`` and ``dz_s`` last) so that the per-sample estimators pay one function
 call. The per-sample path
-uses nothing but ``math``.
+uses nothing but ``math``; :func:`step_matrix` is the same step as one matrix (numpy), for
+many filters of one cutoff at once (the whole vehicle's wheels).
 
 Offline (non-causal) the same band-limiting is done without phase error by
 :func:`zero_phase`: the double integral times ``|H_B|^2``, ``H_B`` the Butterworth high-pass
@@ -35,12 +36,13 @@ of order :data:`ZERO_PHASE_ORDER` at ``w``.
 """
 from __future__ import annotations
 
+import functools
 import math
 
 from road_force_estimator.estimation.speed_check import STANDING_MPS
 
 __all__ = ['STANDING_MPS', 'SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed',
-           'start', 'step', 'zero_phase', 'in_distance', 'rest_stretches',
+           'start', 'step', 'step_matrix', 'zero_phase', 'in_distance', 'rest_stretches',
            'offline_profile', 'MIN_REST_SAMPLES', 'CHUNK', 'polynomial_fit',
            'polynomial_values', 'subtract_polynomial']
 
@@ -111,6 +113,51 @@ def step(state: tuple, accel: float, dt: float, v: float, wc_per_speed: float) -
                 5.0 * n6 + wc * (6.0 * n7 + wc * 7.0 * n8))))),
             n1 + wc * (n2 + wc * (n3 + wc * (n4 + wc * (n5 + wc * (
                 n6 + wc * (n7 - 7.0 * wc * n8)))))))
+
+
+def step_matrix(dt: float, wc: float):
+    """:func:`step`'s eight Tustin lags and its ``z_s`` over a step dt (s) at the cutoff wc
+    (rad/s) as one (9, 9) matrix M (numpy): ``[n_1..n_8, z_s] = M [y_1..y_8, a_old + accel]``
+    (a column per filter: many filters of one cutoff step in one product). The recursion
+    ``n_k = g y_k + hh (y_(k-1) + n_(k-1))`` (``y_0 + n_0 = a_old + accel``) multiplied out:
+    ``n = g y + (1 + g) sum_(m>=1) hh^m S^m y + (hh, hh^2, .., hh^8) (a_old + accel)``, S
+    the shift, g and hh as :func:`step` makes them; ``z_s`` the row ``(0, 1, 2 wc, ..,
+    7 wc^6) @ M``. The same filter, rounded otherwise than :func:`step` (within rounding:
+    test_body_heave.py); the speed's rescaling and standing are the caller's, as in
+    :func:`step`."""
+    import numpy as np
+
+    hh = 0.5 * dt
+    inv = 1.0 / (1.0 + wc * hh)
+    g = (1.0 - wc * hh) * inv
+    hh *= inv
+    one_g = 1.0 + g
+    h2 = hh * hh
+    h4 = h2 * h2
+    w2 = wc * wc
+    w4 = w2 * w2
+    pw = (hh, h2, h2 * hh, h4, h4 * hh, h4 * h2, h4 * h2 * hh, h4 * h4)   # hh^1 .. hh^8
+    # [0, g, (1 + g) hh^1..7, hh^1..8, then (k - 1) wc^(k - 2) of k = 1..8]
+    gen = np.array((0.0, g, one_g * hh, one_g * pw[1], one_g * pw[2], one_g * pw[3],
+                    one_g * pw[4], one_g * pw[5], one_g * pw[6], *pw,
+                    0.0, 1.0, 2.0 * wc, 3.0 * w2, 4.0 * w2 * wc, 5.0 * w4, 6.0 * w4 * wc,
+                    7.0 * w4 * w2))
+    m = np.empty((ORDER + 1, ORDER + 1))
+    m[:ORDER] = gen[_matrix_index()]               # Toeplitz, lower triangular; the input
+    np.dot(gen[2 * ORDER + 1:], m[:ORDER], out=m[ORDER])
+    return m
+
+
+@functools.lru_cache(maxsize=1)
+def _matrix_index():
+    """Where :func:`step_matrix`'s rows of the lags take their numbers from ``[0, g, (1 + g)
+    hh^1..7, hh^1..8]``: (8, 9) indices."""
+    import numpy as np
+
+    k = np.arange(ORDER)
+    lag = k[:, None] - k[None, :]
+    index = np.where(lag >= 0, 1 + lag, 0)
+    return np.hstack([index, (1 + ORDER + k)[:, None]])
 
 
 #: Samples per chunk of the whole-run steps done piecewise (a float64 chunk: 512 kB), so that

@@ -76,13 +76,15 @@ class LtrPredictor:
         if self._first is None:
             self._first = int(stamp_ns)
         ts = (int(stamp_ns) - self._first) * 1e-9     # (as the array form's float64)
-        qs = tuple(float(v) for v in ltr_quasi_static)
+        qs = tuple([float(v) for v in ltr_quasi_static])
         held = self._held
         held.append((ts, qs))
-        while held[0][0] < ts - self.rate_window_s:
+        early = ts - self.rate_window_s
+        while held[0][0] < early:
             held.popleft()
         t0, q0 = held[0]
         span = ts - t0
         if not span > 0.0:
             return qs
-        return tuple(q + self.lead_s * ((q - b) / span) for q, b in zip(qs, q0))
+        lead = self.lead_s
+        return tuple([q + lead * ((q - b) / span) for q, b in zip(qs, q0)])

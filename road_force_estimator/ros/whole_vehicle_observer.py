@@ -232,6 +232,8 @@ class WholeVehicleObserver:
                            ['point.x', 'point.y', 'point.z'])
         #: both wheel paths' points of one stamp (``/road_profile/*`` and the fused ones)
         self.road_group = CdrEncoderGroup([point, point])
+        #: an estimate's seven messages and its two road points in one pack
+        self.all_group = CdrEncoderGroup([*group, point, point])
         self.half_track_m = float(vehicle.axles[0].wheel_half_track_m)
         self.static_group = CdrEncoderGroup([group[0], *wrench])
         qos = reliable_qos(OUTPUT_DEPTH)
@@ -322,14 +324,15 @@ class WholeVehicleObserver:
             self.period['nonfinite_output'] += 1
             self.last_rejection = f'non-finite estimate at {t} ns'
             return
-        for send, data in zip(self.send, self.group.encode(t, values)):
-            send(data)
         x, s, road = sample.distance_m, self.half_track_m, sample.road_m
         u1, u2 = road[0], road[1]
+        data = self.all_group.encode(t, (*values, x, s, u1, x, -s, u2))
+        for send, one in zip(self.send, data):      # (the first seven)
+            send(one)
         if math.isfinite(x + u1 + u2):
-            for send, data in zip(self.send_road, self.road_group.encode(
-                    t, (x, s, u1, x, -s, u2))):
-                send(data)
+            send_left, send_right = self.send_road
+            send_left(data[-2])
+            send_right(data[-1])
         for stamp, px, left, right in sample.fused:
             if math.isfinite(px + left + right):
                 for send, data in zip(self.send_fused, self.road_group.encode(
@@ -344,15 +347,11 @@ class WholeVehicleObserver:
                         t, (*loads, st[0], st[1]))):
                     send(data)
         self.period['published'] += 1
-        m, mp, pred = self.max_abs_ltr, self.max_abs_ltr_predicted, sample.ltr_predicted
-        for u in range(3):
-            a = abs(pred[u])
-            if a > mp[u]:
-                mp[u] = a
-        for u in range(3):
-            a = abs(sample.ltr[u])
-            if a > m[u]:
-                m[u] = a
+        m, mp = self.max_abs_ltr, self.max_abs_ltr_predicted
+        a, b, c = sample.ltr_predicted
+        mp[:] = max(mp[0], abs(a)), max(mp[1], abs(b)), max(mp[2], abs(c))
+        a, b, c = sample.ltr
+        m[:] = max(m[0], abs(a)), max(m[1], abs(b)), max(m[2], abs(c))
         self.static_n = sample.static_n
         self.converged = sample.converged
         if sample.axle_fit is not None:

@@ -1,6 +1,7 @@
 """The whole vehicle's outputs (estimation/whole_vehicle.py, issue 32): the per-sample path and
 the drive's give the same bits, and each unit's LTR follows the plant's own (the truth's loads
 through the truth's recursion, core/unit_loads.py) on a drive of the articulated plant."""
+import dataclasses
 import pathlib
 
 import numpy as np
@@ -49,6 +50,10 @@ def test_per_sample_and_drive_give_the_same_bits(drive):
     np.testing.assert_array_equal(np.array([s.ltr_quasi_static for s in samples]).T,
                                   batch.ltr_quasi_static)
     assert batch.load_n.shape == (2 * len(vehicle.axles), m)
+    one = samples[-1]              # made without __init__ (whole_vehicle._sample): the same
+    assert dataclasses.replace(one) == one and one.gaps == 0 and len(one.load_n) == 10
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        one.gaps = 1
 
 
 def test_static_loads_sum_to_the_statics_and_ltr_follows_the_truth(drive):

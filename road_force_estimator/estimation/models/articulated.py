@@ -547,6 +547,13 @@ class BrakingResponse:
         self.x = np.zeros(self._n2)
         self.offset = np.zeros(self._c.shape[0])
         self.dynamic_n = np.zeros(self._df.shape[0])
+        self._rest = True       # x is 0: a step under a_x = 0 leaves everything 0
+
+    @property
+    def at_rest(self) -> bool:
+        """Whether the state is 0 (:attr:`offset` and :attr:`dynamic_n` 0): from a restart
+        until the first step with ``a_x`` other than 0."""
+        return self._rest
 
     def _step_matrices(self, dt: float) -> tuple:
         """(Phi, Gamma) of a step dt (s), zero-order hold; cached."""
@@ -562,8 +569,9 @@ class BrakingResponse:
 
     def step(self, dt: float, ax_mps2: float) -> None:
         """Advance by dt (s) under ``a_x`` (m/s^2) held over the step."""
-        if dt <= 0.0:
+        if dt <= 0.0 or (self._rest and ax_mps2 == 0.0):   # (at rest: the products' +0)
             return
+        self._rest = False
         phi, gamma = self._step_matrices(dt)
         self.x = phi @ self.x + gamma * ax_mps2
         self.offset = self._c @ self.x

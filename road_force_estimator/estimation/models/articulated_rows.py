@@ -8,7 +8,8 @@ Columns of N axles (``nw = 2 N`` wheels, axle j front first, left then right)::
     [distance, converged, F_n (nw), dF (nw), a_y,t, a_y,r, road (nw), dd z_w (nw)]
 
 Online rows stop after the road: every wheel's road ``u = w + z_w`` with ``z_w`` the causal
-band-limited double integral (:func:`.body_heave.step`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
+band-limited double integral (:func:`.body_heave.step`'s filter, every wheel's in one product
+of :func:`.body_heave.step_matrix`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
 ``observer.profile_cutoff_wavelength``) of the wheel's acceleration from the finalized outputs
 (the load filter's: the causal one at zero latency, the fixed-lag one with
 ``observer.latency``), the run's start ramped in as offline, held at a stop
@@ -22,6 +23,7 @@ acceleration; each axle's road on its own (their fusion by distance:
 from __future__ import annotations
 
 import math
+from operator import itemgetter
 
 import numpy as np
 
@@ -75,25 +77,64 @@ def _road_index(model) -> list:
 
 class WheelRoads:
     """Every wheel's road (m) one finalized sample at a time: ``u = w + z_w``, ``z_w`` the
-    causal band-limited double integral of the wheel's acceleration (:func:`.body_heave.step`,
-    ``wc_per_speed`` rad/m; the speed floored at :data:`.body_heave.SPEED_FLOOR_MPS`), the
-    acceleration left out for :data:`ROAD_START_S` of a run and ramped in over
+    causal band-limited double integral of the wheel's acceleration (:func:`.body_heave.step`'s
+    filter, ``wc_per_speed`` rad/m; the speed floored at :data:`.body_heave.SPEED_FLOOR_MPS`),
+    the acceleration left out for :data:`ROAD_START_S` of a run and ramped in over
     :data:`ROAD_RAMP_S` (the offline road's start); at a stop (the distance stands still and
     the speed below the floor) the road holds (what the integral does then is no road, as
-    the front axle's :class:`.front_axle_rows.OnlineRoad`)."""
+    the front axle's :class:`.front_axle_rows.OnlineRoad`). Every wheel's filter steps in one
+    product (:func:`.body_heave.step_matrix`, a column per wheel): the numbers of
+    :func:`.body_heave.step` per wheel within rounding (test_articulated_rows.py), the
+    speed's rescaling and the hold while standing as it does them."""
 
     def __init__(self, nw: int, wc_per_speed: float) -> None:
         self.nw = int(nw)
         self.wc = float(wc_per_speed)
+        self._key: tuple | None = None       # (dt, wc) of the step matrix
+        self._m = np.empty((0, 0))
         self.restart()
 
     def restart(self) -> None:
         """The next sample starts a run."""
         self._t = -1.0                  # time since the run's start (s); < 0: not started
-        self._state = [body_heave.start(0.0)] * self.nw
+        # the filters' states, a column per wheel: y_1..y_8, then a_old + accel (scratch);
+        # the product writes the other buffer (its last row z_s)
+        self._y = np.zeros((body_heave.ORDER + 1, self.nw))
+        self._n = np.zeros((body_heave.ORDER + 1, self.nw))
+        self._a_old: list = [0.0] * self.nw
+        self._w_old = 0.0               # the cutoff of the last step (rad/s; 0: none yet)
+        self._z: list = [0.0] * self.nw
         self._prev: list | None = None
         self._x = math.nan
         self._off = [0.0] * self.nw
+
+    def _integrate(self, accel: list, dt: float, v: float) -> list:
+        """Every wheel's ``z_w`` (m) after a step (:func:`.body_heave.step`'s rules)."""
+        av = v if v > 0.0 else -v
+        if av < body_heave.STANDING_MPS:       # standing: held, the newest accel kept
+            self._a_old = accel
+            return self._z
+        wc = self.wc * (av if av > SPEED_FLOOR_MPS else SPEED_FLOOR_MPS)
+        if (dt, wc) != self._key:
+            self._key = (dt, wc)
+            self._m = body_heave.step_matrix(dt, wc)
+        m = self._m
+        w_old = self._w_old
+        if wc > w_old > 0.0:     # the states in distance kept (body_heave.step): y_k scaled
+            r = w_old / wc
+            r2 = r * r
+            r4 = r2 * r2
+            m = m * np.array((1.0 / r, 1.0, r, r2, r2 * r, r4, r4 * r, r4 * r2, 1.0))
+        y = self._y
+        y[body_heave.ORDER] = self._a_old
+        y[body_heave.ORDER] += accel
+        n = self._n
+        np.dot(m, y, out=n)
+        self._y, self._n = n, y
+        self._w_old = wc
+        self._a_old = accel
+        z = self._z = n[body_heave.ORDER].tolist()
+        return z
 
     def road(self, w: list, accel: list, dt: float, v: float, x: float) -> list:
         """The roads (m) from the tires' deflections ``w`` (m) and the wheels' accelerations
@@ -102,9 +143,8 @@ class WheelRoads:
         t = self._t
         if t < 0.0:
             t = self._t = 0.0
-            self._state = [body_heave.start(0.0)] * self.nw
-            self._prev = None
-            self._off = [0.0] * self.nw
+            self.restart()
+            self._t = 0.0
         else:
             t = self._t = t + dt
         if t < ROAD_START_S:
@@ -113,14 +153,16 @@ class WheelRoads:
             ramp = 0.5 - 0.5 * math.cos(math.pi * (t - ROAD_START_S) / ROAD_RAMP_S)
         else:
             ramp = 1.0
-        states, wc, off = self._state, self.wc, self._off
-        u = [0.0] * self.nw
-        for k in range(self.nw):
-            h = states[k] = body_heave.step(states[k], ramp * accel[k], dt, v, wc) \
-                if self._prev is not None else body_heave.start(ramp * accel[k])
-            u[k] = w[k] + h[-2]
+        acc = list(accel) if ramp == 1.0 else [ramp * a for a in accel]
+        if self._prev is None:                 # the run's first sample: body_heave.start
+            self._a_old = acc
+            z = self._z
+        else:
+            z = self._integrate(acc, dt, v)
+        u = [a + b for a, b in zip(w, z)]
         prev, px = self._prev, self._x
         self._prev, self._x = u, x
+        off = self._off
         if prev is not None and x == px and -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
             for k in range(self.nw):
                 off[k] += u[k] - prev[k]
@@ -141,6 +183,9 @@ class ArticulatedOnlineRows:
         idx = _road_index(model)
         nw = len(self.static)
         self._w, self._acc = idx[:nw], idx[nw:]
+        # the outputs each part of a row takes, gathered at once
+        self._take_df, self._take_ay = itemgetter(*self._df), itemgetter(*self._ay)
+        self._take_w, self._take_acc = itemgetter(*self._w), itemgetter(*self._acc)
         cutoff = ROAD_CUTOFF_FACTOR * (100.0 if observer is None
                                        else observer.profile_cutoff_wavelength_m)
         self.roads = WheelRoads(nw, body_heave.cutoff_per_speed(cutoff))
@@ -163,11 +208,10 @@ class ArticulatedOnlineRows:
     def row(self, o: list, meta: tuple, op) -> tuple:
         """``(distance, converged, F_n..., dF..., a_y,t, a_y,r, u...)``."""
         x, dt, v, conv = meta
-        df = [o[i] for i in self._df]
+        df = self._take_df(o)
         r = o if op is None else op
-        u = self.roads.road([r[i] for i in self._w], [r[i] for i in self._acc], dt, v, x)
-        return (x, conv, *[s + d for s, d in zip(self.static, df)], *df,
-                *[o[i] for i in self._ay], *u)
+        u = self.roads.road(self._take_w(r), self._take_acc(r), dt, v, x)
+        return (x, conv, *[s + d for s, d in zip(self.static, df)], *df, *self._take_ay(o), *u)
 
 
 class ArticulatedOfflineRows:
