@@ -3,10 +3,11 @@ simulate_bag drive of the 5-axle combination with the tractor IMU, written again
 ``mcap`` library with messages made bad by the test (serialized by ``rosbags``, not by us):
 a twist with a non-finite speed, a twist stamped before the one before it, a deflection
 message without one trailer joint, an IMU message stamped back in time, and the IMU's first
-40 ms and a 0.3 s hole left out (the folder's ``metadata.yaml`` the simulation's). The report's ``rejected``, the last ``/diagnostics`` statuses
-(decoded by the ``mcap`` library) and estimate_fleet's ``summary.md`` carry the numbers the
-test put in; the IMU's samples without a fresh a_y are the test's own count (the rule of
-docs/articulated.md); every other deflection sample is estimated."""
+40 ms and a 0.3 s hole left out (the folder's ``metadata.yaml`` the simulation's). The
+report's ``rejected``, the last ``/diagnostics`` statuses (decoded by the ``mcap`` library)
+and estimate_fleet's ``summary.md`` carry the numbers the test put in; the IMU's samples
+without a fresh a_y are the test's own count (the rule of docs/articulated.md); every other
+deflection sample is estimated."""
 import json
 from pathlib import Path
 import subprocess
