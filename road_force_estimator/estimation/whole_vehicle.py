@@ -185,6 +185,9 @@ class WholeVehicleArrays:
     #: (m,) int8: each sample's tractor IMU pairing (:mod:`.imu_hold`: 0 fresh, 1 stale, 2
     #: missing) where the caller paired it, or None
     imu_codes: np.ndarray | None = None
+    #: the input messages its reader dropped, topic -> reason -> count (the caller's; e.g.
+    #: :class:`road_force_estimator.bagio.checks.Rejects`' counts), or None
+    rejected: dict | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:

@@ -8,7 +8,8 @@ report's segments, IRI and summary, the figures), closed once at the end. The pl
 picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
 block). With articulated parameters the whole vehicle's stage (:mod:`.whole_vehicle`, one
 block) runs beside the front axle's and its estimate, with the truth where the drive has it,
-joins the bag and the report; with front-axle parameters an articulated drive's
+joins the bag and the report (what its reader rejected counted as the drive's:
+:func:`.whole_vehicle.with_rejections`); with front-axle parameters an articulated drive's
 whole-vehicle truth joins the report (:mod:`~.report.whole_vehicle`).
 """
 from __future__ import annotations
@@ -63,6 +64,7 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
             fused = whole_vehicle.fused_profile(wv, whole)
             est = whole_vehicle.fused_road(est, wv, fused)
             est = whole_vehicle.sensor_report(est, wv)     # the report's "Sensors"
+            drive = whole_vehicle.with_rejections(drive, wv)   # and its rejections
         result = one_block.write(folder, output, input_path, drive, est, extra, vehicle,
                                  observer, options, stages, whole=wv, fused=fused,
                                  road_half_track_m=None if whole is None else

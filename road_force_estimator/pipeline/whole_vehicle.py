@@ -14,7 +14,8 @@ topics (:mod:`~.bagio.whole_vehicle_estimates`), the front axle's old topics fro
 wheels (:func:`front_wheels`), one ``/diagnostics`` status per second with the axle loads and
 the gross vehicle weight (:func:`add_diagnostics`; offline also the drive's model fit per
 axle, :func:`fit_values`: WARN naming the axle or sensor that does not fit; every channel's
-sensor flag, :func:`sensor_status_values`: WARN naming a stuck or drifting sensor), and the
+sensor flag, :func:`sensor_status_values`: WARN naming a stuck or drifting sensor; the last
+with what its reader rejected, :func:`rejection_values`: WARN with the counts), and the
 report's section and ``segments.csv`` columns (:mod:`~.report.whole_vehicle`); the report's
 "Sensors" are the whole vehicle's channels (:func:`sensor_report`).
 
@@ -40,7 +41,7 @@ __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'add_diagnostics', 'sensor_edges', 'sensor_status_values', 'sensor_report',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
-           'STATUS_NAME']
+           'STATUS_NAME', 'with_rejections', 'rejection_values']
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
 STATUS_NAME = f'{PROG}: whole vehicle'
@@ -98,7 +99,52 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
         readings = np.column_stack([readings, ay])
     wv = estimate_whole_vehicle(vehicle, r.stamps_ns, readings, speed, observer=observer,
                                 offline=mode == 'offline', windows=windows, imu=imu)
+    wv = replace(wv, rejected=_counts(r.rejected))
     return wv if codes is None else replace(wv, imu_codes=codes)
+
+
+def _counts(rejected: dict) -> dict[str, dict[str, int]]:
+    """topic -> reason -> count, sorted, zero counts left out."""
+    out = {t: {k: int(c) for k, c in sorted(reasons.items()) if c}
+           for t, reasons in sorted(rejected.items())}
+    return {t: reasons for t, reasons in out.items() if reasons}
+
+
+def with_rejections(drive, wv):
+    """The front axle's ``drive`` (:class:`~.bagio.drive.Drive`) with what the whole
+    vehicle's reader dropped: its counts replace the front-axle reader's for the topics it
+    read (``/suspension/deflections`` over every channel, ``/vehicle/twist`` and, with the
+    IMU, ``/imu/tractor``; the same checks, :mod:`~.bagio.checks`); the drive's other topics
+    as they are. Its estimate is the drive's (loads, load transfer, road), so the counts of
+    the report, the status' ``total.rejected_by_reader`` and the fleet's tables are its."""
+    from road_force_estimator.interfaces import DEFLECTIONS, IMU, TWIST
+
+    rejected = getattr(wv, 'rejected', None)
+    if rejected is None:
+        return drive
+    read = {DEFLECTIONS, TWIST} | ({IMU} if getattr(wv, 'imu_codes', None) is not None
+                                   else set())
+    merged = {t: dict(r) for t, r in drive.rejected.items() if t not in read}
+    merged.update({t: dict(r) for t, r in rejected.items()})
+    return replace(drive, rejected=dict(sorted(merged.items())))
+
+
+def rejection_values(wv) -> tuple[dict, str]:
+    """The whole vehicle's reader's rejections as the status' totals
+    (``total.rejected.<topic>.<reason>``, ``total.rejected_by_reader``) and a message ('' when
+    it dropped nothing): ``4 input messages rejected (/vehicle/twist: 1 nonfinite, ...)``."""
+    rejected = getattr(wv, 'rejected', None)
+    if rejected is None:
+        return {}, ''
+    values = {f'total.rejected.{t}.{k}': str(c) for t, reasons in rejected.items()
+              for k, c in reasons.items()}
+    total = sum(sum(r.values()) for r in rejected.values())
+    values['total.rejected_by_reader'] = str(total)
+    if not total:
+        return values, ''
+    parts = '; '.join(f'{t}: ' + ', '.join(f'{c} {k}' for k, c in reasons.items())
+                      for t, reasons in rejected.items())
+    return values, f'{total} input messages rejected ({parts})'
 
 
 def imu_values(wv, k: int, since: int = 0) -> tuple[dict, str]:
@@ -197,7 +243,7 @@ def sensor_status_values(wv, k: int, edges: list) -> tuple[dict, str]:
 
 
 def _status(wv, k: int, since: int = 0, edges: list | None = None,
-            ltr_predicted: np.ndarray | None = None) -> dict:
+            ltr_predicted: np.ndarray | None = None, last: bool = False) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
     weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
     ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period), and of its
@@ -205,7 +251,8 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None,
     WARN from :data:`~.estimation.rollover_warning.WARNING_THRESHOLD`; ``ltr_predicted`` the
     drive's, computed once by the caller); ``gaps``: those
     of the period (each restarted the estimate), ``total.gaps`` the drive's so far (the node's
-    keys)."""
+    keys); ``last``: the drive's last status, with the reader's rejections
+    (:func:`rejection_values`: WARN when it dropped any)."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
 
     axle = wv.static_n[:, k].reshape(-1, 2).sum(axis=1)
@@ -256,6 +303,12 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None,
         level = 1
         from road_force_estimator.estimation.axle_fit import ADVICE
         message += f'; model fit: {fit["model_fit_culprits"]} {ADVICE}'
+    if last:
+        rejected, why = rejection_values(wv)
+        values.update(rejected)
+        if why:
+            level = 1
+            message += f'; {why}'
     return {'name': STATUS_NAME, 'hardware_id': PROG, 'level': level, 'message': message,
             'values': values}
 
@@ -285,16 +338,17 @@ def fit_values(fit) -> dict:
 def add_diagnostics(diagnostics: list, wv) -> list:
     """``diagnostics`` ((stamp_ns, [status dicts]) per second) with the whole vehicle's
     status at the last sample at or before each stamp added (none before its first), its
-    period the samples since the previous status."""
+    period the samples since the previous status; the last with the reader's rejections."""
     if not wv.stamps_ns.size:
         return diagnostics
     out = []
     since = 0
     edges = sensor_edges(wv)
     predicted = wv.ltr_predicted
-    for stamp, statuses in diagnostics:
+    for j, (stamp, statuses) in enumerate(diagnostics):
         k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
-        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges, predicted)]
+        last = j == len(diagnostics) - 1
+        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges, predicted, last)]
                                              if k >= 0 else [])))
         since = max(since, k + 1)
     return out

@@ -35,6 +35,7 @@ __all__ = [
     'FLEET_COLUMNS', 'INT_COLUMNS', 'STAMP_NAME', 'TMP_NAME', 'LOCK_NAME', 'KEY_FORMAT',
     'FleetError', 'DriveInput', 'DriveTask', 'DriveOutcome', 'find_drives', 'input_sha256',
     'drive_key', 'read_segments_csv', 'process_drive', 'load_done', 'output_lock',
+    'report_counts',
 ]
 
 #: Columns of segments.csv / segments.parquet, in order (INTERFACES.md "Many drives").
@@ -106,6 +107,12 @@ class DriveOutcome:
     #: per sensor: the report's counts (``report.json`` ``sensors``: innovations gated,
     #: stuck and drift flags; :func:`road_force_estimator.report.summary.sensor_summary`)
     sensors: dict = field(default_factory=dict)
+    #: the messages rejected, topic -> reason -> count (``report.json`` ``rejected``: the
+    #: readers' and the estimator's; :func:`road_force_estimator.report.summary.rejections`)
+    rejected: dict = field(default_factory=dict)
+    #: an articulated drive's tractor IMU: its samples fed a ``fresh``, ``stale`` (held) or
+    #: ``missing`` a_y (``report.json`` ``whole_vehicle_estimate.tractor_imu``), else {}
+    tractor_imu: dict = field(default_factory=dict)
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -427,8 +434,7 @@ def process_drive(task: DriveTask) -> DriveOutcome:
                 shutil.rmtree(tmp, ignore_errors=True)
         return DriveOutcome(task.drive_id, 'processed', seconds=seconds, table=table,
                             lines=lines, warnings=list(result.warnings),
-                            input_path=task.input_path,
-                            sensors=dict(result.summary.get('sensors') or {}))
+                            input_path=task.input_path, **report_counts(result.summary))
     except Exception as err:  # noqa: BLE001 - one bad drive never stops the fleet
         from road_force_estimator.bagio import BagReadError, BagWriteError
         # estimate_bag's own reasons as they are; anything else with its type (a bug).
@@ -456,13 +462,25 @@ def load_done(output_dir: str | Path, drive: DriveInput, key: str) -> DriveOutco
         return None
     return DriveOutcome(drive.drive_id, 'skipped', seconds=float(stamp.get('seconds', 0.0)),
                         table=table, lines=lines, warnings=list(stamp.get('warnings', [])),
-                        input_path=str(drive.path), sensors=_report_sensors(folder))
+                        input_path=str(drive.path),
+                        **report_counts(_report_summary(folder)))
 
 
-def _report_sensors(folder: Path) -> dict:
-    """The ``sensors`` of a drive's ``report/report.json`` ({} without one)."""
+def report_counts(summary: dict) -> dict[str, dict]:
+    """The counts of a drive's report summary (``report.json``) that the fleet's tables
+    carry, as :class:`DriveOutcome`'s fields: ``sensors``, ``rejected``, ``tractor_imu``
+    ({} each where the summary has none)."""
+    def part(value) -> dict:
+        return dict(value) if isinstance(value, dict) else {}
+
+    return {'sensors': part(summary.get('sensors')), 'rejected': part(summary.get('rejected')),
+            'tractor_imu': part(part(summary.get('whole_vehicle_estimate')).get('tractor_imu'))}
+
+
+def _report_summary(folder: Path) -> dict:
+    """A drive's ``report/report.json`` ({} without one)."""
     try:
-        return dict(json.loads((folder / 'report' / 'report.json').read_text())
-                    .get('sensors') or {})
-    except (OSError, ValueError, AttributeError):
+        summary = json.loads((folder / 'report' / 'report.json').read_text())
+    except (OSError, ValueError):
         return {}
+    return summary if isinstance(summary, dict) else {}

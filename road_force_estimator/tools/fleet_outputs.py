@@ -143,6 +143,7 @@ def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_writ
     u = units(result.settings.get('units', 'si'))
     lines += _drives_section(result.outcomes, u)
     lines += _sensors_section(result.outcomes)
+    lines += _rejected_section(result.outcomes)
     lines += _roughest_section(table, u)
     failed = [o for o in result.outcomes if o.status == 'failed']
     if failed:
@@ -258,6 +259,27 @@ def _sensors_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
     lines += [f'| {_md(d)} | `{n}` | {int(v.get("innovations_gated", 0))} | '
               f'{int(v.get("stuck_flags", 0))} | {int(v.get("drift_flags", 0))} | '
               f'{v.get("flag", "ok")} |' for d, n, v in rows]
+    return lines + ['']
+
+
+def _rejected_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+    """Per drive, topic and reason: the messages rejected (each drive's ``report.json``
+    ``rejected``: the readers', an articulated drive's those of the whole vehicle's, and the
+    estimator's), then the tractor IMU's samples fed a held (stale) or no (missing) a_y
+    (``whole_vehicle_estimate.tractor_imu``); the drives with none left out."""
+    rows = [(o.drive_id, topic, reason, int(count)) for o in outcomes
+            for topic, reasons in sorted(o.rejected.items())
+            for reason, count in sorted(reasons.items()) if count]
+    from road_force_estimator.interfaces import IMU
+
+    rows += [(o.drive_id, IMU, f'samples {word} (a_y {what})', int(n))
+             for o in outcomes for word, what in (('stale', 'held'), ('missing', 'none'))
+             if (n := o.tractor_imu.get(word, 0))]
+    lines = ['## Rejected inputs', '']
+    if not rows:
+        return lines + ['No message was rejected; no sample lacked a fresh IMU a_y.', '']
+    lines += ['| drive | topic | reason | count |', '|---|---|---|---:|']
+    lines += [f'| {_md(d)} | `{t}` | {_md(r)} | {n} |' for d, t, r, n in sorted(rows)]
     return lines + ['']
 
 
