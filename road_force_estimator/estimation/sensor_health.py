@@ -120,6 +120,10 @@ class FaultSettings:
     #: the tractor's and the roll sensors' drift check (:class:`TractorDrift`): (rows,
     #: a_x coefficients, scales, candidates, limits, flaggable), or None
     tractor: tuple | None = None
+    #: the channels the stuck rule judges (indices), or None: every one. Not the tractor IMU's
+    #: a_y, which the pairing holds between its messages (its age is
+    #: :mod:`.imu_hold`'s stale / missing count)
+    stuck_channels: tuple | None = None
 
     @classmethod
     def of(cls, observer, vehicle, channels: Sequence[str]) -> 'FaultSettings':
@@ -156,7 +160,8 @@ class FaultSettings:
                    observer.fault_drift_offset_m, None, model.vehicle.zero_load,
                    tuple(units) or None,
                    tractor_check(model, observer.fault_drift_offset_m, set(
-                       k for idx, _ in units for k in idx)))
+                       k for idx, _ in units for k in idx)),
+                   tuple(k for k, ch in enumerate(model.channels) if ch[0] != 'ay'))
 
 
 @dataclass
@@ -178,6 +183,8 @@ class FaultDetector:
     def __init__(self, settings: FaultSettings) -> None:
         self.settings = settings
         self.n = len(settings.channels)
+        self._judged = (tuple(range(self.n)) if settings.stuck_channels is None
+                        else tuple(settings.stuck_channels))     # by the stuck rule
         #: the whole vehicle's drift check, or None (the front axle's momentum balance)
         self.units = (UnitDrift(settings.units, UNIT_WINDOW_FACTOR * settings.drift_window_s,
                                 settings.drift_offset_m, settings.relative)
@@ -295,7 +302,7 @@ class FaultDetector:
         tol, begun = settings.stuck_tolerance, t - settings.stuck_time_s
         run, stuck = self._run, self._stuck
         still, which = 0, 0
-        for ch in range(self.n):
+        for ch in self._judged:
             if abs(values[ch] - last[ch]) > tol:
                 run[ch] = t
                 stuck[ch] = False

@@ -232,3 +232,21 @@ def test_a_stuck_sensor_is_named_within_1_s_in_every_mode(articulated_c, channel
     stuck = flags['online'][k] == CODES['stuck']
     # excluded from the sample after the flag rose until the one after it fell
     np.testing.assert_array_equal(held[1:], stuck[:-1])
+
+
+def test_a_slow_imu_held_between_its_messages_is_not_a_stuck_sensor(articulated_c):
+    """The tractor IMU's a_y at 10 Hz, held for 100 ms between messages as the pairing holds it
+    (:mod:`.imu_hold`), beside deflections that move: no channel flagged stuck (the IMU's age
+    is its own count, stale / missing); a deflection stuck in the same drive still is."""
+    d, tr, stamps, y = articulated_c
+    model = ArticulatedObserverModel(d.vehicle, True)
+    settings = FaultSettings.of_whole_vehicle(ObserverParameters(), model)
+    ay = np.repeat(np.sin(np.arange(0, stamps.size, 100) * 1e-3), 100)[:stamps.size]
+    readings = np.column_stack([y, ay])
+    counts, _ = detect_faults(settings, stamps, readings, np.full((stamps.size, 1), 20.0))
+    assert raised(counts) == {}
+    names = model.channel_names
+    bad, _ = faulted(names[:-1], y, 'stuck@drive_left_suspension:start=3,duration=2', 8.0)
+    counts, _ = detect_faults(settings, stamps, np.column_stack([bad, ay]),
+                              np.full((stamps.size, 1), 20.0))
+    assert raised(counts) == {'drive_left_suspension': (1, 0)}
