@@ -377,6 +377,35 @@ class FaultDetector:
                            {n: dict(f) for n, f in zip(names, self.first_ns) if f})
 
 
+class MovingSums:
+    """The sums of the entries of the last ``span`` seconds: each entry its start time (s),
+    its values and its count of samples, added when pushed and taken off when it falls out
+    (:meth:`covers`), the window's and the whole vehicle's drift checks' running means."""
+
+    def __init__(self, m: int) -> None:
+        self.entries: deque = deque()       # (t0, values, count)
+        self.sums = [0.0] * m
+        self.count = 0
+
+    def push(self, t0: float, values: Sequence[float], count: int = 1) -> None:
+        self.entries.append((t0, values, count))
+        sums = self.sums
+        for i, x in enumerate(values):
+            sums[i] += x
+        self.count += count
+
+    def covers(self, t: float, span: float) -> bool:
+        """The entries older than ``span`` before ``t`` taken off; whether the rest span it
+        (to 1 %)."""
+        entries, sums = self.entries, self.sums
+        while t - entries[0][0] > span:
+            _, old, n = entries.popleft()
+            for i, x in enumerate(old):
+                sums[i] -= x
+            self.count -= n
+        return t - entries[0][0] >= 0.99 * span
+
+
 class UnitDrift:
     """The whole vehicle's slow offset drift, per rigid unit against its neighbours: each
     deflection's mean over the last window (``window_s``, s; summed per block of
@@ -422,9 +451,7 @@ class UnitDrift:
     def restart(self) -> None:
         """The window starts again (a gap, a stuck sensor, a stop)."""
         m = len(self.channels)
-        self._win: deque = deque()
-        self._sum = [0.0] * m
-        self._sn = 0
+        self._win = MovingSums(m)            # the blocks' sums
         self._blk = [0.0] * m
         self._bn = 0
         self._b0 = 0.0
@@ -433,7 +460,7 @@ class UnitDrift:
         """One sample (s, the readings, m/s) into the window; the flags into ``drift``
         (per channel of the detector) at a judged block's end."""
         if not abs(speed_mps) >= UNIT_MIN_SPEED_MPS:
-            if self._sn or self._bn:
+            if self._win.count or self._bn:
                 self.restart()
             return
         blk = self._blk
@@ -445,22 +472,13 @@ class UnitDrift:
         if self._bn < DRIFT_BLOCK:
             return
         win = self._win
-        win.append((self._b0, blk, self._bn))
-        sums = self._sum
-        for j, b in enumerate(blk):
-            sums[j] += b
-        self._sn += self._bn
+        win.push(self._b0, blk, self._bn)
         self._blk = [0.0] * len(blk)
         self._bn = 0
         w = self.window_s
-        while t - win[0][0] > w:
-            _, old, n = win.popleft()
-            for j, b in enumerate(old):
-                sums[j] -= b
-            self._sn -= n
-        if t - win[0][0] < 0.99 * w:
+        if not win.covers(t, w):
             return
-        mean = np.asarray(sums) / self._sn
+        mean = np.asarray(win.sums) / win.count
         z = [p @ mean[places] for _, places, p in self.units]
         if self.relative:
             if self._ref is None:
@@ -550,11 +568,8 @@ class TractorDrift:
     def restart(self) -> None:
         """The windows start again (a gap, a stuck sensor, a stop)."""
         m = self.m
-        self._win: deque = deque()          # blocks: (t0, sums (m + 1), n)
-        self._sum = [0.0] * (m + 1)
-        self._sn = 0
-        self._means: deque = deque()        # per block: (t, the half-window's means (m + 1))
-        self._msum = [0.0] * (m + 1)
+        self._win = MovingSums(m + 1)       # blocks: sums (m + 1)
+        self._means = MovingSums(m + 1)     # per block: the half-window's means (m + 1)
         self._vals: list = []               # the block's readings (the callers' sequences)
         self._vs = 0.0                      # and its speeds' sum
         self._bn = 0
@@ -565,7 +580,7 @@ class TractorDrift:
         """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
         judged block's end."""
         if not abs(speed_mps) >= UNIT_MIN_SPEED_MPS:
-            if self._sn or self._bn:
+            if self._win.count or self._bn:
                 self.restart()
             return
         if not self._bn:
@@ -580,34 +595,20 @@ class TractorDrift:
         self._vals = []
         self._vs = 0.0
         half = 0.5 * self.window_s
-        win, sums = self._win, self._sum
-        win.append((self._b0, blk, self._bn))
-        for i, b in enumerate(blk):
-            sums[i] += b
-        self._sn += self._bn
+        win = self._win
+        win.push(self._b0, blk, self._bn)
         self._bn = 0
-        while t - win[0][0] > half:
-            _, old, n = win.popleft()
-            for i, b in enumerate(old):
-                sums[i] -= b
-            self._sn -= n
-        if t - win[0][0] < 0.99 * half:
+        if not win.covers(t, half):
             return
-        means, msum = self._means, self._msum
-        now = [x / self._sn for x in sums]
-        means.append((t, now))
-        for i, x in enumerate(now):
-            msum[i] += x
-        while t - means[0][0] > half:
-            _, old = means.popleft()
-            for i, x in enumerate(old):
-                msum[i] -= x
-        if t - means[0][0] < 0.99 * half:
+        means = self._means
+        now = [x / win.count for x in win.sums]
+        means.push(t, now)
+        if not means.covers(t, half):
             return
-        nm = len(means)
-        span = t - means[0][0]
-        a_x = (now[-1] - means[0][1][-1]) / span if span > 0.0 else 0.0
-        z = np.asarray(msum[:-1]) / nm + self.ax * a_x
+        first_t, first, _ = means.entries[0]
+        span = t - first_t
+        a_x = (now[-1] - first[-1]) / span if span > 0.0 else 0.0
+        z = np.asarray(means.sums[:-1]) / len(means.entries) + self.ax * a_x
         if self.relative:
             if self._ref is None:
                 self._ref = z.copy()
