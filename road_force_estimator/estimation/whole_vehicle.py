@@ -41,8 +41,8 @@ channel flagged ``stuck`` when it alone stays still, each deflection of a unit w
 instrumented axles or more flagged ``drift`` against its neighbours (:class:`.UnitDrift`),
 from the readings as they come (before the static-load tracker) and the speed: the same flags
 online, at a latency and offline. Online (every latency) a stuck channel, deflection or
-roll, is left out of the filter while flagged (:meth:`.ModelCore.set_excluded`,
-:data:`EXCLUDE_STUCK_AT_LATENCY`); a drifting deflection stays fed; offline the smoother is
+roll, is left out of the filter while flagged (:meth:`.ModelCore.set_excluded`: below);
+a drifting deflection stays fed; offline the smoother is
 fed every channel. ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 """
@@ -71,7 +71,7 @@ from road_force_estimator.estimation.sensor_health import (
     CODES, FaultCounts, FaultDetector, FaultSettings)
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
 
-__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'EXCLUDE_STUCK_AT_LATENCY', 'PIECE_ROWS',
+__all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
@@ -87,13 +87,12 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'EXCLUDE_STUCK_AT_LATENCY', 'PIECE
 #: 1 s (the payload 4 t off the file's: the same to 0.4 point).
 OFFSET_TIME_CONSTANT_S = 1.0
 
-#: Whether a stuck channel is left out of the filter with ``observer.latency`` > 0 too. Yes,
-#: since each step takes a left-out channel's prediction for its reading (no fixed-lag output
-#: is given the held reading) and ``observer.fault_stuck_time`` is 0.05 s: on class C and A
-#: at 20 m/s (``python -m bench.studies.articulated_sensor_faults``'s drives), a channel stuck
-#: for 2 s cost the worst axle 17.8-25.4 % (deflections) and 3.2-9.4 % (rolls) at 10 ms against
-#: 3.2 / 6.4 % clean; fed, 43-79 % and 238-285 %.
-EXCLUDE_STUCK_AT_LATENCY = True
+# A stuck channel is left out of the filter at every latency: each step takes its prediction
+# for its reading (no fixed-lag output is given the held reading) and
+# ``observer.fault_stuck_time`` is 0.05 s. On class C and A at 20 m/s
+# (``python -m bench.studies.articulated_sensor_faults``'s drives), a channel stuck for 2 s cost
+# the worst axle 17.8-25.4 % (deflections) and 3.2-9.4 % (rolls) at 10 ms against 3.2 / 6.4 %
+# clean; fed, 43-79 % and 238-285 %.
 
 #: The units whose load transfer is estimated, in the order of the LTR fields.
 UNITS = ('tractor', 'trailer', 'combination')
@@ -326,9 +325,6 @@ class WholeVehicleEstimator:
         self._last: int | None = None
         #: stuck and drifting sensors (:mod:`.sensor_health`; module notes)
         self.faults = FaultDetector(FaultSettings.of_whole_vehicle(obs, self.model))
-        #: the channels left out of the filter while stuck (:data:`EXCLUDE_STUCK_AT_LATENCY`)
-        self._droppable = (tuple(range(len(self.model.channels)))
-                           if obs.latency_s == 0.0 or EXCLUDE_STUCK_AT_LATENCY else ())
         self._codes: deque = deque()               # each held sample's sensor flags
         self._flags = (0,) * len(self.channel_names)
         self._events = 0
@@ -348,8 +344,8 @@ class WholeVehicleEstimator:
         raw = y if self.tracker is None else list(y)
         faults = self.faults
         stuck = faults.stuck
-        if self._droppable and (True in stuck or self.online.core.schedule.excluded):
-            self.online.core.set_excluded(tuple(k for k in self._droppable if stuck[k]))
+        if True in stuck or self.online.core.schedule.excluded:   # left out (module notes)
+            self.online.core.set_excluded(tuple(k for k, s in enumerate(stuck) if s))
         if self.tracker is not None:
             if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
