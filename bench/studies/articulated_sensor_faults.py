@@ -207,8 +207,8 @@ def balances_table(seconds: float, log) -> list[str]:
         UNIT_WINDOW_FACTOR, FaultDetector, FaultSettings)
 
     lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
-             'T (mrad) | A (m/s^2) | largest offset / limit | drift flags |',
-             '|---|---:|---:|---:|---:|---:|---:|---|']
+             'T (mrad) | A (m/s^2) | largest offset / limit | units (mm) | drift flags |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---|']
     obs = ObserverParameters()
     for case in family():
         drive = simulate(case, seconds, 1e-5)
@@ -221,9 +221,11 @@ def balances_table(seconds: float, log) -> list[str]:
         rows, ax = np.asarray(settings.tractor[0]), np.asarray(settings.tractor[1])
         p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s)
         peak = det.tractor.peak
+        unit_mm, unit_ch = det.units.peak
+        unit = f'{unit_mm * 1e3:.3f} ({settings.channels[unit_ch]})' if unit_ch >= 0 else 'n/a'
         raised = ', '.join(n for n, c in det.counts().drift_episodes.items() if c) or 'none'
         lines.append(f'| {case.name} | {p * 1e3:.3f} | {peak[0] * 1e3:.3f} | {t * 1e3:.3f} | '
-                     f'{peak[2] * 1e3:.3f} | {peak[1]:.4f} | {peak[3]:.2f} | {raised} |')
+                     f'{peak[2] * 1e3:.3f} | {peak[1]:.4f} | {peak[3]:.2f} | {unit} | {raised} |')
         log(lines[-1])
     return lines
 

@@ -408,7 +408,8 @@ class MovingSums:
 
 class UnitDrift:
     """The whole vehicle's slow offset drift, per rigid unit against its neighbours: each
-    deflection's mean over the last window (``window_s``, s; summed per block of
+    deflection's mean over the last window (``window_s``, s; triangular, two running means
+    of half of it in series as :class:`TractorDrift`'s; summed per block of
     :data:`DRIFT_BLOCK` samples, judged at a block's end) against what the unit's other
     deflections make of a rigid body's heave, pitch and roll,
 
@@ -439,19 +440,21 @@ class UnitDrift:
         #: residuals' operator (n, n)
         self.units = [(tuple(idx), [where[k] for k in idx], _deleted(np.asarray(rows, float)))
                       for idx, rows in units]
-        self._ref = None
         self._seen = [0.0] * len(self.units)   # per unit: when its flag was last up (s)
-        self.restart()
+        self.forget()
 
     def forget(self) -> None:
-        """The window and the relative reference forgotten."""
+        """The window, the relative reference and :attr:`peak` forgotten."""
         self._ref = None
+        #: the largest scaled |r_i| judged (m) and its channel (-1: none judged yet)
+        self.peak = (0.0, -1)
         self.restart()
 
     def restart(self) -> None:
         """The window starts again (a gap, a stuck sensor, a stop)."""
         m = len(self.channels)
-        self._win = MovingSums(m)            # the blocks' sums
+        self._win = MovingSums(m)            # the blocks' sums over half the window
+        self._means = MovingSums(m)          # per block: the half-window's means
         self._blk = [0.0] * m
         self._bn = 0
         self._b0 = 0.0
@@ -476,9 +479,14 @@ class UnitDrift:
         self._blk = [0.0] * len(blk)
         self._bn = 0
         w = self.window_s
-        if not win.covers(t, w):
+        half = 0.5 * w
+        if not win.covers(t, half):
             return
-        mean = np.asarray(win.sums) / win.count
+        means = self._means
+        means.push(t, [x / win.count for x in win.sums])
+        if not means.covers(t, half):
+            return
+        mean = np.asarray(means.sums) / len(means.entries)
         z = [p @ mean[places] for _, places, p in self.units]
         if self.relative:
             if self._ref is None:
@@ -488,6 +496,9 @@ class UnitDrift:
         seen = self._seen
         for u, ((idx, _, _), r) in enumerate(zip(self.units, z)):
             a = np.abs(r)
+            i = int(np.argmax(a))
+            if a[i] > self.peak[0]:
+                self.peak = (float(a[i]), idx[i])
             up = [j for j, k in enumerate(idx) if drift[k]]
             if up and a[up[0]] >= UNIT_CLEAR_FRACTION * limit:
                 seen[u] = t                     # the flag's own r_i still up
@@ -495,7 +506,6 @@ class UnitDrift:
                 continue                        # a flag holds a window after it was last up
             for k in idx:
                 drift[k] = False
-            i = int(np.argmax(a))
             if a[i] > limit:
                 drift[idx[i]] = True
                 seen[u] = t
