@@ -17,7 +17,7 @@ from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.estimation import Estimator, estimate_batch, estimate_recording
 from road_force_estimator.estimation.offline_stream import OfflineStream
 from road_force_estimator.estimation.sensor_health import (
-    FaultDetector, FaultSettings, detect_faults)
+    FaultDetector, FaultSettings, detect_faults, flag_codes, left_out)
 
 VEHICLE = VehicleParameters()
 DRIFT = 1e-3 / 60.0          # 1 mm/min (m/s)
@@ -191,10 +191,16 @@ def _stuck_roll_drive():
 
 
 def _estimate(mode: str, stamps, q, phi, speed):
-    """The estimate in ``mode``: 0 ms, 10 ms, offline, or offline as the stream goes (in
-    windows of 4 s with 1 s of overlap)."""
+    """The estimate in ``mode``: 0 ms, 10 ms, offline, offline as the stream goes (in
+    windows of 4 s with 1 s of overlap), or offline with every 7th sample from 5 s to 12 s
+    lost (the smoother's grid completed between the samples left)."""
     if mode == 'offline':
         return estimate_recording(stamps, q, phi, speed, VEHICLE, ObserverParameters())
+    if mode == 'offline lost samples':
+        keep = np.ones(stamps.size, bool)
+        keep[5000:12000:7] = False
+        return estimate_recording(stamps[keep], q[keep], phi[keep], speed[keep], VEHICLE,
+                                  ObserverParameters())
     if mode == 'offline windows':
         stream = OfflineStream(VEHICLE, ObserverParameters(), window=(4000, 1000))
         stream.feed(stamps, q, phi, speed)
@@ -205,7 +211,8 @@ def _estimate(mode: str, stamps, q, phi, speed):
     return estimate_batch(stamps, q, phi, speed, VEHICLE, obs)
 
 
-@pytest.mark.parametrize('mode', ['0 ms', '10 ms', 'offline', 'offline windows'])
+@pytest.mark.parametrize('mode', ['0 ms', '10 ms', 'offline', 'offline windows',
+                                  'offline lost samples'])
 def test_the_estimate_carries_on_through_a_stuck_roll_sensor(mode):
     """A roll sensor stuck for 2 s is left out while flagged (its prediction taken for its
     reading; offline its stretch, held readings before the flag too, smoothed without it):
@@ -222,7 +229,8 @@ def test_the_estimate_carries_on_through_a_stuck_roll_sensor(mode):
     def error(roll) -> float:
         est = _estimate(mode, stamps, q, roll, speed)
         at = np.searchsorted(est.stamp_ns, stamps[judged])
-        return float(np.sqrt(np.mean((est.tire_force_dynamic_n[at] - true_dyn) ** 2)))
+        ok = est.stamp_ns[np.minimum(at, est.stamp_ns.size - 1)] == stamps[judged]
+        return float(np.sqrt(np.mean((est.tire_force_dynamic_n[at[ok]] - true_dyn[ok]) ** 2)))
 
     clean, faulty = error(phi), error(stuck)
     bound = {'0 ms': 1.1, '10 ms': 1.5}.get(mode, 1.1)
@@ -250,3 +258,21 @@ def test_offline_a_stuck_deflection_is_smoothed_without_it(channel):
 
     clean, faulty = error(q), error(stuck)
     assert faulty <= 3.5 * clean, (clean, faulty)
+
+
+def test_offline_the_held_readings_are_left_out_from_the_first_repeat():
+    """The stretch the offline smoother leaves out (:func:`.sensor_health.left_out`) is the
+    held readings put in here: from the sample after the last real reading to the last held
+    one, the 0.05 s before the flag included; every other reading is fed."""
+    tr, stamps, q, phi = _stuck_roll_drive()
+    stuck = phi.copy()
+    stuck[8000:10000] = stuck[8000]           # 8000: the last real reading, then held
+    det = FaultDetector(FaultSettings.of(ObserverParameters(), VEHICLE, NAMES))
+    values = np.column_stack([q, stuck])
+    for s, v in zip(stamps.tolist(), values.tolist()):
+        det.step(s, v)
+    out = left_out(flag_codes(det.events, stamps.size, 3), det.stuck_since, stamps)
+    expected = np.zeros((stamps.size, 3), bool)
+    expected[8001:10000, 2] = True
+    np.testing.assert_array_equal(out, expected)
+    assert left_out(flag_codes([], stamps.size, 3), [], stamps) is None
