@@ -766,6 +766,8 @@ def left_out(codes: np.ndarray, since: Sequence, stamps_ns) -> np.ndarray | None
     held) to the flag. Online those ``observer.fault_stuck_time`` seconds are fed (the flag
     comes after them); offline they are known to be held before the smoother runs.
     """
+    if not len(since):               # no stuck flag rose
+        return None
     stuck = np.asarray(codes) == CODES[STUCK]
     if not stuck.any():
         return None

@@ -618,10 +618,10 @@ class Smoother:
         Why: the steady-state smoother of the next stretch takes its first state as known to
         ``after``'s covariance, and the backward pass multiplies what the later readings
         tell by the stretch's own covariance; where a channel was left out the true
-        covariance is far larger (a roll sensor's 2 s out: the front axle's roll variance
-        ~10 x its scale squared against ~1e-3), and a channel's return moved the loads by kN
-        for 50 ms (``python -m bench.studies.sensor_faults --only latency --faults stuck
-        --modes offline``)."""
+        covariance is orders of magnitude larger (the roll's, after a roll sensor's 2 s
+        out), and without this a channel's return moved the loads for tens of ms
+        (``python -m bench.studies.sensor_faults --only latency --faults stuck --modes
+        offline``; docs/sensors.md)."""
         a_dt = after.transition(dt)
         c, r, q = after.model.c, after.r, after.q
         nx = a_dt.shape[0]
