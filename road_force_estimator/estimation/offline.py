@@ -31,7 +31,8 @@ from road_force_estimator.estimation.speed_check import check_arrays
 from road_force_estimator.estimation.static_load import track_recording
 
 __all__ = ['estimate_recording', 'fused_speed', 'attach_distance_source', 'smooth', 'prepare',
-           'smoothed_rows', 'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of']
+           'smoothed_rows', 'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of',
+           'left_out_rows']
 
 
 
@@ -98,6 +99,7 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
     the whole run (unless set in ``observer``), the steady-state Kalman filter runs forward
     and the Rauch-Tung-Striebel smoother (Rauch, Tung, Striebel 1965) backward; the body
     heave is the zero-phase band-limited double integral of the smoothed body acceleration.
+    A stuck sensor's stretch is smoothed without it (:func:`left_out_rows`).
 
     Parameters
     ----------
@@ -303,6 +305,7 @@ def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | Non
     written into them directly, and comes as ``(None, columns of its rows)``."""
     acc, starts, t_all = prep.acc, prep.starts, prep.t
     restat = Reconstruction(smoother.vehicle, prep.observer.rollover_cutoff_frequency_hz)
+    left = left_out_rows(prep)
     for r0, r1 in zip(starts[:-1], starts[1:]):
         idx = acc[r0:r1]
         whole = idx[-1] - idx[0] + 1 == idx.size               # no rejected sample inside
@@ -311,7 +314,8 @@ def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | Non
         t = t_all[r0:r1]
         y = (prep.y[src] if whole and prep.y is not None
              else np.column_stack([prep.q[src], prep.phi[src]]))
-        for a, b, part in smoother.pieces(t, y, prep.v_model[r0:r1], direct):
+        for a, b, part in smoother.pieces(t, y, prep.v_model[r0:r1], direct,
+                                          None if left is None else left[r0:r1]):
             part[Column.DISTANCE][:] = rows_of(prep.dist, r0 + a, r0 + b)
             if prep.static is not None:
                 restat.restatic(part, prep.static[r0 + a:r0 + b], t[a:b],
@@ -322,6 +326,51 @@ def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | Non
                 yield slice(idx[a], idx[b - 1] + 1), part
             else:
                 yield idx[a:b], part
+
+
+#: Accepted samples :func:`left_out_rows` looks at a time for a repeated reading.
+_REPEAT_CHUNK = 1 << 20
+
+
+def left_out_rows(prep: SimpleNamespace) -> np.ndarray | None:
+    """The readings of a recording's accepted samples (:func:`prepare`) that the smoother
+    leaves out: bool ``(accepted, 3)`` (``q_1``, ``q_2``, roll), or None when none.
+
+    A stuck sensor's stretch (:func:`.sensor_health.left_out`: flagged, and its held
+    readings before the flag), from the stuck rule of the detector that flags the estimate
+    (:class:`FaultRows`: the same samples, stamps and readings; the stuck flags do not
+    depend on the body's rates, so they are known before the smoother). A stuck flag needs a
+    reading repeated to within ``observer.fault_stuck_tolerance``: a recording without one
+    (noisy readings) is not stepped through the detector twice.
+    """
+    from road_force_estimator.estimation.models.front_axle import CHANNEL_NAMES
+    from road_force_estimator.estimation.sensor_health import (
+        FaultDetector, FaultSettings, flag_codes, left_out)
+
+    acc = prep.acc
+    tol = prep.observer.fault_stuck_tolerance
+    repeated = False
+    for a in range(0, max(acc.size - 1, 0), _REPEAT_CHUNK):
+        idx = acc[a:a + _REPEAT_CHUNK + 1]
+        vals = np.column_stack([prep.q[idx], prep.phi[idx]])
+        if np.any(np.abs(np.diff(vals, axis=0)) <= tol):
+            repeated = True
+            break
+    if not repeated:
+        return None
+    det = FaultDetector(FaultSettings.of(prep.observer, prep.vehicle, CHANNEL_NAMES))
+    stamps = np.empty(acc.size, np.int64)
+    k = 0
+    for a in range(0, prep.n, _REPEAT_CHUNK):
+        b = min(prep.n, a + _REPEAT_CHUNK)
+        ok = prep.valid[a:b]
+        part = rows_of(prep.stamps_out, a, b)[ok]
+        stamps[k:k + part.size] = part
+        k += part.size
+    step = det.step
+    for stamp, v in zip(stamps.tolist(), np.column_stack([prep.q[acc], prep.phi[acc]]).tolist()):
+        step(stamp, v)
+    return left_out(flag_codes(det.events, acc.size, det.n), det.stuck_since, stamps)
 
 
 def last_row(fields: dict, row: int) -> dict:

@@ -32,7 +32,9 @@ does), drifts of both deflection sensors that cancel in H.
 A stuck sensor, deflection or roll, is left out of the model observer while flagged (its
 gains designed without it and its prediction taken for its reading,
 :meth:`.ModelCore.set_excluded`; the sooner the better: the held readings fed before the flag
-leave an error the filter cannot see once the sensor is out, hence 0.05 s); a drifting sensor
+leave an error the filter cannot see once the sensor is out, hence 0.05 s; offline the
+smoother leaves out the flagged stretch and the held readings before the flag, known before it
+runs: :func:`left_out`); a drifting sensor
 is flagged and fed (an offset of d costs k d of static load, 0.1 kN at
 0.3 mm; left out, the sensor's wheel would lose its dynamic load). While a channel is stuck
 the drift window starts again (a held reading is no evidence of a drift).
@@ -64,7 +66,7 @@ __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIF
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
            'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'ROLL_DRIFT_LIMIT_RAD',
            'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
-           'FaultDetector', 'UnitDrift', 'detect_faults']
+           'FaultDetector', 'UnitDrift', 'detect_faults', 'left_out']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -207,6 +209,9 @@ class FaultDetector:
         #: :data:`CODES` (0 ok, 1 stuck, 2 drift)
         self.samples = 0
         self.events: list = []
+        #: each stuck flag's rise: (sample, channel, the time (s) its still run began, i.e.
+        #: the stamp of the first sample of the held reading): :func:`left_out`
+        self.stuck_since: list = []
         self._last = None
         if self.units is not None:
             self.units.forget()
@@ -285,6 +290,7 @@ class FaultDetector:
                     self.first_ns[ch].setdefault(word, int(stamp_ns))
                     if word == STUCK:
                         self.stuck_episodes[ch] += 1
+                        self.stuck_since.append((self.samples, ch, self._run[ch]))
                     else:
                         self.drift_episodes[ch] += 1
                 self.events.append((self.samples, ch, CODES[word]))
@@ -757,3 +763,32 @@ def detect_faults(settings: FaultSettings, stamps_ns, values, rates=None
     for j, (stamp, v) in enumerate(zip(np.asarray(stamps_ns, dtype=np.int64).tolist(), vals)):
         step(stamp, v, None if rts is None else rts[j])
     return det.counts(), flag_codes(det.events, len(vals), det.n)
+
+
+def left_out(codes: np.ndarray, since: Sequence, stamps_ns) -> np.ndarray | None:
+    """The samples an offline smoother leaves out, per channel: bool ``(n, channels)``, or
+    None when no channel is flagged stuck.
+
+    Each stretch flagged stuck (``codes``: :func:`flag_codes`' of the samples of
+    ``stamps_ns`` (ns), the detector's sample indices) and, before its flag, the held
+    readings of its still run (``since``: :attr:`FaultDetector.stuck_since`): from the
+    sample after the still run's first one (that one is fed: the reading the sensor then
+    held) to the flag. Online those ``observer.fault_stuck_time`` seconds are fed (the flag
+    comes after them); offline they are known to be held before the smoother runs.
+    """
+    if not len(since):               # no stuck flag rose
+        return None
+    stuck = np.asarray(codes) == CODES[STUCK]
+    if not stuck.any():
+        return None
+    out = stuck.copy()
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    for k, ch, t0 in since:
+        if t0 is None:
+            continue
+        # the first sample whose time (stamp * 1e-9, the detector's) is t0
+        j0 = int(np.searchsorted(stamps, int(round(t0 * 1e9)) - 2))
+        while j0 < k and int(stamps[j0]) * 1e-9 < t0:
+            j0 += 1
+        out[j0 + 1:k, ch] = True
+    return out

@@ -42,8 +42,9 @@ instrumented axles or more flagged ``drift`` against its neighbours (:class:`.Un
 from the readings as they come (before the static-load tracker) and the speed: the same flags
 online, at a latency and offline. Online (every latency) a stuck channel, deflection or
 roll, is left out of the filter while flagged (:meth:`.ModelCore.set_excluded`: below);
-a drifting deflection stays fed; offline the smoother is
-fed every channel. ``sensor_flags`` per sample
+a drifting deflection stays fed; offline the smoother leaves each stuck stretch out, the
+held readings before the flag too (:func:`.sensor_health.left_out`, :meth:`.Smoother.pieces`
+``left_out``). ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 """
 from __future__ import annotations
@@ -68,7 +69,7 @@ from road_force_estimator.estimation.rollover_warning import LtrPredictor, predi
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
 from road_force_estimator.estimation.models.articulated_rows import CONV, DIST, columns
 from road_force_estimator.estimation.sensor_health import (
-    CODES, FaultCounts, FaultDetector, FaultSettings)
+    CODES, FaultCounts, FaultDetector, FaultSettings, left_out)
 from road_force_estimator.estimation.static_load import TIME_CONSTANT_S
 
 __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
@@ -92,7 +93,9 @@ OFFSET_TIME_CONSTANT_S = 1.0
 # ``observer.fault_stuck_time`` is 0.05 s. On class C and A at 20 m/s
 # (``python -m bench.studies.articulated_sensor_faults``'s drives), a channel stuck for 2 s cost
 # the worst axle 17.8-25.4 % (deflections) and 3.2-9.4 % (rolls) at 10 ms against 3.2 / 6.4 %
-# clean; fed, 43-79 % and 238-285 %.
+# clean; fed, 43-79 % and 238-285 %. Offline the smoother leaves the stretch out
+# (``python -m bench.studies.articulated_sensor_faults --only latency --faults stuck
+# --modes offline``).
 
 #: The units whose load transfer is estimated, in the order of the LTR fields.
 UNITS = ('tractor', 'trailer', 'combination')
@@ -761,6 +764,8 @@ class WholeVehicleOfflineStream:
         nw = len(est.wheel_names)
         starts = run_starts(stamps, self.gap_threshold_s)
         bounds = list(zip(starts.tolist(), starts[1:].tolist() + [stamps.size]))
+        # a stuck channel's stretch not fed to the smoother (module notes)
+        left = left_out(codes, est.faults.stuck_since, stamps) if codes.size else None
         dist = 0.0
         prev: int | None = None
         for run, (a0, b0) in enumerate(bounds):
@@ -771,7 +776,8 @@ class WholeVehicleOfflineStream:
                 y[a0 + a:a0 + b] -= off                       # the known a_x's share
             response = online.braking.responses(tdts, ax, self.piece_rows)
             held = None                                      # (a, dynamic) not used yet
-            for a, b, pc in smoother.pieces(t, y[a0:b0], v[a0:b0]):
+            for a, b, pc in smoother.pieces(t, y[a0:b0], v[a0:b0],
+                                            left_out=None if left is None else left[a0:b0]):
                 rows = np.column_stack(pc)
                 dyn = np.empty((nw, b - a))
                 k = a

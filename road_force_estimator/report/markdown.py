@@ -332,7 +332,9 @@ def _sensors_section(s: dict[str, Any]) -> list[str]:
     lines = ['', '### Sensors', '',
              'Innovations gated: samples kept from the filter, beyond `observer.innovation_gate` '
              'standard deviations (spikes). Stuck / drift: flags raised '
-             '(`observer.fault_*`), with the time of the first (s from the first sample).', '',
+             '(`observer.fault_*`), with the time of the first (s from the first sample). A '
+             'stuck sensor is left out of the estimate while flagged (offline its whole held '
+             'stretch, from before the flag); a drifting one stays fed.', '',
              '| sensor | innovations gated | stuck flags (samples) | first stuck (s) | '
              'drift flags (samples) | first drift (s) | at the end |',
              '|---|---:|---:|---:|---:|---:|---|']

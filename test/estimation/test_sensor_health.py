@@ -6,6 +6,7 @@ Truth: where the faults were put into the plant's readings here (core/plant.py, 
 solve_ivp in test/core/test_plant.py); the detector is never told.
 """
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,9 +14,10 @@ import pytest
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.core.plant import simulate
 from road_force_estimator.core.road import iso8608_profile
-from road_force_estimator.estimation import Estimator, estimate_batch
+from road_force_estimator.estimation import Estimator, estimate_batch, estimate_recording
+from road_force_estimator.estimation.offline_stream import OfflineStream
 from road_force_estimator.estimation.sensor_health import (
-    FaultDetector, FaultSettings, detect_faults)
+    FaultDetector, FaultSettings, detect_faults, flag_codes, left_out)
 
 VEHICLE = VehicleParameters()
 DRIFT = 1e-3 / 60.0          # 1 mm/min (m/s)
@@ -177,11 +179,7 @@ def test_the_bag_diagnostics_name_the_flagged_sensor_each_second():
     assert vals[2]['total.drift.right_suspension'] == '1'
 
 
-@pytest.mark.parametrize('latency_s', [0.0, 0.01])
-def test_the_estimate_carries_on_through_a_stuck_roll_sensor(latency_s):
-    """A roll sensor stuck for 2 s is left out while flagged (its prediction taken for its
-    reading): the load error against the plant's stays near the clean drive's. Fed, the
-    same fault cost 4-30 x (``python -m bench.studies.sensor_faults --only latency``)."""
+def _stuck_roll_drive():
     duration = 14.0
     road = iso8608_profile('C', 20.0 * duration + 60.0, seed=3)
     tr = simulate(VEHICLE, road, speed_mps=20.0, rate_hz=1000.0, duration_s=duration,
@@ -189,18 +187,92 @@ def test_the_estimate_carries_on_through_a_stuck_roll_sensor(latency_s):
     rng = np.random.default_rng(11)
     q = tr.q_m + rng.normal(0.0, 1e-5, tr.q_m.shape)
     phi = tr.roll_rad + rng.normal(0.0, 1e-4, tr.roll_rad.shape)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    return tr, np.round(tr.t_s * 1e9).astype(np.int64), q, phi
+
+
+def _estimate(mode: str, stamps, q, phi, speed):
+    """The estimate in ``mode``: 0 ms, 10 ms, offline, offline as the stream goes (in
+    windows of 4 s with 1 s of overlap), or offline with every 7th sample from 5 s to 12 s
+    lost (the smoother's grid completed between the samples left)."""
+    if mode == 'offline':
+        return estimate_recording(stamps, q, phi, speed, VEHICLE, ObserverParameters())
+    if mode == 'offline lost samples':
+        keep = np.ones(stamps.size, bool)
+        keep[5000:12000:7] = False
+        return estimate_recording(stamps[keep], q[keep], phi[keep], speed[keep], VEHICLE,
+                                  ObserverParameters())
+    if mode == 'offline windows':
+        stream = OfflineStream(VEHICLE, ObserverParameters(), window=(4000, 1000))
+        stream.feed(stamps, q, phi, speed)
+        pieces = list(stream.finish())
+        return SimpleNamespace(**{f: np.concatenate([getattr(p, f) for p in pieces])
+                                  for f in ('stamp_ns', 'tire_force_dynamic_n')})
+    obs = replace(ObserverParameters(), latency_s=0.01 if mode == '10 ms' else 0.0)
+    return estimate_batch(stamps, q, phi, speed, VEHICLE, obs)
+
+
+@pytest.mark.parametrize('mode', ['0 ms', '10 ms', 'offline', 'offline windows',
+                                  'offline lost samples'])
+def test_the_estimate_carries_on_through_a_stuck_roll_sensor(mode):
+    """A roll sensor stuck for 2 s is left out while flagged (its prediction taken for its
+    reading; offline its stretch, held readings before the flag too, smoothed without it):
+    the load error against the plant's stays near the clean drive's (offline measured
+    1.02 x). Fed, the same fault cost 4-30 x online, 3.10 x offline (before the smoother
+    left it out)."""
+    tr, stamps, q, phi = _stuck_roll_drive()
     speed = np.full(stamps.size, 20.0)
     stuck = phi.copy()
     stuck[8000:10000] = stuck[8000]
     judged = tr.t_s >= 3.0
     true_dyn = tr.tire_force_dynamic_n[judged]
-    obs = replace(ObserverParameters(), latency_s=latency_s)
 
     def error(roll) -> float:
-        est = estimate_batch(stamps, q, roll, speed, VEHICLE, obs)
+        est = _estimate(mode, stamps, q, roll, speed)
+        at = np.searchsorted(est.stamp_ns, stamps[judged])
+        ok = est.stamp_ns[np.minimum(at, est.stamp_ns.size - 1)] == stamps[judged]
+        return float(np.sqrt(np.mean((est.tire_force_dynamic_n[at[ok]] - true_dyn[ok]) ** 2)))
+
+    clean, faulty = error(phi), error(stuck)
+    bound = {'0 ms': 1.1, '10 ms': 1.5}.get(mode, 1.1)
+    assert faulty <= bound * clean, (clean, faulty)
+
+
+@pytest.mark.parametrize('channel', [0, 1])
+def test_offline_a_stuck_deflection_is_smoothed_without_it(channel):
+    """Offline, a deflection sensor stuck for 2 s is left out of the smoother: the other
+    deflection and the roll carry the estimate. That wheel's road is not seen for those 2 s
+    (40 m), so the error grows: measured 3.09 / 3.12 x here (left / right), fed (before
+    this was built) 21.1 / 19.9 x."""
+    tr, stamps, q, phi = _stuck_roll_drive()
+    speed = np.full(stamps.size, 20.0)
+    stuck = q.copy()
+    stuck[8000:10000, channel] = stuck[8000, channel]
+    judged = tr.t_s >= 3.0
+    true_dyn = tr.tire_force_dynamic_n[judged]
+
+    def error(deflections) -> float:
+        est = estimate_recording(stamps, deflections, phi, speed, VEHICLE,
+                                 ObserverParameters())
         at = np.searchsorted(est.stamp_ns, stamps[judged])
         return float(np.sqrt(np.mean((est.tire_force_dynamic_n[at] - true_dyn) ** 2)))
 
-    clean, faulty = error(phi), error(stuck)
-    assert faulty <= (1.1 if latency_s == 0.0 else 1.5) * clean, (clean, faulty)
+    clean, faulty = error(q), error(stuck)
+    assert faulty <= 3.5 * clean, (clean, faulty)
+
+
+def test_offline_the_held_readings_are_left_out_from_the_first_repeat():
+    """The stretch the offline smoother leaves out (:func:`.sensor_health.left_out`) is the
+    held readings put in here: from the sample after the last real reading to the last held
+    one, the 0.05 s before the flag included; every other reading is fed."""
+    tr, stamps, q, phi = _stuck_roll_drive()
+    stuck = phi.copy()
+    stuck[8000:10000] = stuck[8000]           # 8000: the last real reading, then held
+    det = FaultDetector(FaultSettings.of(ObserverParameters(), VEHICLE, NAMES))
+    values = np.column_stack([q, stuck])
+    for s, v in zip(stamps.tolist(), values.tolist()):
+        det.step(s, v)
+    out = left_out(flag_codes(det.events, stamps.size, 3), det.stuck_since, stamps)
+    expected = np.zeros((stamps.size, 3), bool)
+    expected[8001:10000, 2] = True
+    np.testing.assert_array_equal(out, expected)
+    assert left_out(flag_codes([], stamps.size, 3), [], stamps) is None

@@ -76,6 +76,8 @@ class Gains:
     step_cache: dict = field(default_factory=dict)
     a_cache: dict = field(default_factory=dict)
     friction_cache: dict = field(default_factory=dict)
+    #: the channels the design leaves out (``excluded`` of :func:`design`)
+    excluded: tuple = ()
 
     @property
     def nx(self) -> int:
@@ -224,7 +226,8 @@ def design(model: VehicleModel, *, dt_s: float, speed_mps: float,
     f_closed = ikc @ a
     settle = _settling_time(f_closed, cm.h[list(model.load_outputs)], dt_s, pf, scale)
     return Gains(key, dt_s, abs(speed_mps), sq, sp, road_gd_m3, lag, cm, a, q, r, p, pf, s, k,
-                 lag_gains, out, np.sqrt(np.maximum(np.diag(post), 0.0)), settle, t_sm)
+                 lag_gains, out, np.sqrt(np.maximum(np.diag(post), 0.0)), settle, t_sm,
+                 excluded=tuple(int(j) for j in excluded))
 
 
 def _stable_gain(model: VehicleModel, a, c, q, sq: float, sp: float, noise_deflection_m: float,

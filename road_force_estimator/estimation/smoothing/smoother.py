@@ -198,11 +198,18 @@ class Smoother:
         status.gain_designs = sched.design_count
         status.innovations_gated = dict(zip(self.model.channel_names, self.gated.tolist()))
 
-    def pieces(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, out: list | None = None
-               ) -> Iterator[tuple[int, int, list]]:
+    def pieces(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, out: list | None = None,
+               left_out: np.ndarray | None = None) -> Iterator[tuple[int, int, list]]:
         """The estimates of one run (see :func:`smooth`) as ``(a, b, columns of rows a:b)``
         (the model's columns; the distance is the caller's), in order: ``t`` its times (s),
         ``y`` (m, ny) its measurements, ``v`` its model speeds (m/s).
+
+        ``left_out`` (bool (m, ny), or None): the readings not fed (a stuck sensor,
+        :func:`.sensor_health.left_out`): each stretch of samples with the same channels left
+        out is smoothed with the gains designed without them (:func:`.gains.design`
+        ``excluded``, as the online :meth:`.ModelCore.set_excluded`) and their innovations 0
+        (:meth:`_pass_matrices`), in the load pass and the profile pass, so that the other
+        channels carry the estimate. Not on a run of uneven steps off any grid (fed there).
 
         A long evenly sampled run (:func:`window_samples`) comes window by window
         (:meth:`_windowed`: its rows are never held whole); any other run in one piece, in
@@ -221,24 +228,27 @@ class Smoother:
             yield 0, 1, out
             return
         run = self._design_run(t, y, v)
+        run.left_out = (left_out if left_out is not None and np.any(left_out) else None)
         if run.windowed:
             yield from self._windowed(run, t, y, v, x0)
             return
         out = rows.field_columns(m)[1] if out is None else out
         g, dt, speed, dts, steps = run.gains, run.dt, run.speed, run.dts, run.steps
         if run.uniform:
-            self._uniform(g, dt, y, x0, out,
-                          segments=speed_segments(self.schedule, dt, v, speed),
+            segs = speed_segments(self.schedule, dt, v, speed)
+            if run.left_out is not None:
+                segs = self._left_out(segs or [(0, m, g)], run.left_out, dt)
+            self._uniform(g, dt, y, x0, out, segments=segs,
                           gate_from=self._gate_start(dt), count=True)
         elif steps is not None:
-            self._bridged(g, dt, speed, t, steps, y, x0, out)
+            self._bridged(g, dt, speed, t, steps, y, x0, out, run.left_out)
         else:
             self._uneven(g, dts, y, x0, out, count=True)
         if steps is None:
             self._finish(out, t, dt, speed)
         if rows.road_columns:
             road = self._profile(dt, speed, dts, run.uniform, steps, y, v, x0,
-                                 rows.roll_moment_psd(out, dt))
+                                 rows.roll_moment_psd(out, dt), run.left_out)
             for j, u in zip(rows.road_columns, road):
                 out[j][:] = u
         yield 0, m, out
@@ -294,7 +304,7 @@ class Smoother:
         run.dts = None                             # an even run's profile does not need them
         psd = recon.roll_moment_psd(kept, run.dt)
         del kept
-        road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd)
+        road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd, run.left_out)
         for a, b, rows in self._windows(run, t, y, v):
             for j, u in zip(recon.road_columns, road):
                 rows[j][:] = u[a:b]
@@ -302,14 +312,14 @@ class Smoother:
 
     def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
                  steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
-                 roll_moment_psd: float) -> tuple:
+                 roll_moment_psd: float, left_out: np.ndarray | None = None) -> tuple:
         """The road columns of a run from the profile smoother (issue 21): the same model and
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
         profile_design`, ``'offline'``), the road of its states by the model's
         reconstruction (:meth:`.OfflineRows.road`). Returns the road of each wheel path (m)
         of the run's samples; ``roll_moment_psd`` ((N m)^2 / s) is what the load pass's roll
-        residual shows (:meth:`.OfflineRows.roll_moment_psd`), the other arguments as
-        :meth:`pieces` made them."""
+        residual shows (:meth:`.OfflineRows.roll_moment_psd`), ``left_out`` the readings not
+        fed (:meth:`pieces`), the other arguments as :meth:`pieces` made them."""
         # the roll moment as slow as the load pass's roll residual says it is
         g = self.schedule.profile_design(dt, 'offline', roll_moment_psd)
         recon = self.rows
@@ -318,10 +328,13 @@ class Smoother:
             pos = np.concatenate([[0], np.cumsum(steps)])
             grid = np.arange(int(pos[-1]) + 1)
             y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
+            left_out = _on_grid(left_out, pos)
         if uniform or steps is not None:        # only the road's columns held whole
             cols = KeptColumns(y.shape[0], recon.profile_columns,
                                field_columns=recon.field_columns)
-            self._uniform(g, dt, y, x0, cols, gate_from=self._gate_start(dt))
+            segs = (None if left_out is None else self._left_out(
+                [(0, y.shape[0], g)], left_out, dt, roll_moment_psd))
+            self._uniform(g, dt, y, x0, cols, segments=segs, gate_from=self._gate_start(dt))
         else:
             cols = recon.field_columns(y.shape[0])[1]
             self._uneven(g, dts, y, x0, cols)
@@ -353,6 +366,8 @@ class Smoother:
             cols = (recon.field_columns(hi - lo)[1] if keep is None else
                     KeptColumns(hi - lo, keep, field_columns=recon.field_columns))
             segs = level_segments(self.schedule, dt, v[lo:hi]) if run.unsteady else None
+            if run.left_out is not None:
+                segs = self._left_out(segs or [(0, hi - lo, g)], run.left_out[lo:hi], dt)
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
                                     keep=None if nxt is None else max(0, nxt) - lo,
                                     segments=segs, gate_from=max(0, gate_from - lo),
@@ -365,18 +380,23 @@ class Smoother:
             x0 = carried
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
-                 y: np.ndarray, x0: np.ndarray, out: list) -> None:
+                 y: np.ndarray, x0: np.ndarray, out: list,
+                 left_out: np.ndarray | None = None) -> None:
         """A run on a grid of dt (s) with samples missing (rejected, or lost): the run is
         completed on the grid (the measurements of the missing points interpolated linearly
         between their neighbours), smoothed as an evenly sampled run (:meth:`_uniform`, the
         body heave over the whole grid), and the rows of the samples present written to
-        ``out``. ``steps``: grid steps between the samples (>= 1)."""
+        ``out``. ``steps``: grid steps between the samples (>= 1); ``left_out`` the readings
+        not fed (:meth:`pieces`; a point between two samples left out with either)."""
         pos = np.concatenate([[0], np.cumsum(steps)])
         m = int(pos[-1]) + 1
         grid = np.arange(m)
         yg = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
         cols = self.rows.field_columns(m)[1]
-        self._uniform(g, dt, yg, x0, cols, gate_from=self._gate_start(dt), count=True)
+        segs = (None if left_out is None else
+                self._left_out([(0, m, g)], _on_grid(left_out, pos), dt))
+        self._uniform(g, dt, yg, x0, cols, segments=segs, gate_from=self._gate_start(dt),
+                      count=True)
         self._finish(cols, t[0] + dt * grid, dt, speed)
         for j, col in enumerate(cols):
             if j != self.rows.distance_column:
@@ -489,7 +509,7 @@ class Smoother:
         with ``keep``, the forward state ``x+_keep`` (where the next window starts).
         """
         m = y.shape[0]
-        mats = [self._pass_matrices(g, dt, forces) for _, _, g in segs]
+        mats = [self._pass_matrices(g, dt, forces, (a, b)) for a, b, g in segs]
         dq = None if out is not None else np.empty((len(self._dq_states), m))
         fwd = None
         for k0, k1, xs in smoothed_chunks(segs, mats, y, x0, _SMOOTH_CHUNK, gate_from):
@@ -508,27 +528,120 @@ class Smoother:
             return dq
         return None if keep is None else fwd.states(keep, keep + 1)[0][0]
 
-    def _pass_matrices(self, g: Gains, dt: float, forces: np.ndarray | None) -> tuple:
+    def _pass_matrices(self, g: Gains, dt: float, forces: np.ndarray | None,
+                       rows: tuple[int, int] = (0, 0)) -> tuple:
         """What :meth:`_uniform_pass` needs of the gains g at the step dt (s): the forward
         ``(I - K C) A`` (its powers), ``K^T``, ``(C A)^T``, the backward ``Phi^T`` (powers),
-        ``(C^T S^-1)^T``, ``(P+ A^T)^T`` and the friction forces' parts (or None)."""
+        ``(C^T S^-1)^T``, ``(P+ A^T)^T`` and the friction forces' parts (or None). A
+        :class:`_Step` (one sample's gains, ``rows`` its sample): the matrices themselves,
+        the friction's parts of that sample only."""
         c = g.model.c
         nx = self.nx
         row_x = row_layout(nx, self.ny)[1]
-        a_run = Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, row_x:row_x + nx]))
         a_dt = g.transition(dt)
-        kt = np.ascontiguousarray(g.k.T)
+        gain = g.k
+        ex = list(g.excluded)
+        step = isinstance(g, _Step)
+        if ex:      # left out: the gain's and the backward pass's columns 0 (innovation 0)
+            gain = gain.copy()
+            gain[:, ex] = 0.0
+        if ex or step:
+            a_run = np.ascontiguousarray((np.eye(nx) - gain @ c) @ a_dt)
+            a_run = a_run if step else Powers(a_run)
+        else:
+            a_run = Powers(np.ascontiguousarray(g.step_matrix(dt)[:nx, row_x:row_x + nx]))
+        kt = np.ascontiguousarray(gain.T)
         ca_t = np.ascontiguousarray((c @ a_dt).T)
-        phi_t = Powers(np.ascontiguousarray((a_dt @ (np.eye(nx) - g.k @ c)).T))
-        u_t = np.ascontiguousarray((c.T @ np.linalg.inv(g.s)).T)
+        phi_t = np.ascontiguousarray((a_dt @ (np.eye(nx) - gain @ c)).T)
+        phi_t = phi_t if step else Powers(phi_t)
+        u_t = (c.T @ np.linalg.inv(g.s)).T
+        if ex:
+            u_t[ex] = 0.0
+        u_t = np.ascontiguousarray(u_t)
         pa_t = np.ascontiguousarray((g.p_post @ a_dt.T).T)
         fin = None
         if forces is not None:
             bd = g.friction_input(dt)
-            fin = (forces.T @ (bd - g.k @ (c @ bd)).T, forces.T @ (c @ bd).T)
+            if step:        # the rows rows[0] - 1 .. rows[1] - 2 (the forward's indices)
+                part = forces[:, max(rows[0] - 1, 0):max(rows[1] - 1, 0)].T
+                fin = (_Offset(part @ (bd - gain @ (c @ bd)).T, rows[0] - 1),
+                       _Offset(part @ (c @ bd).T, rows[0] - 1))
+            else:
+                fin = (forces.T @ (bd - gain @ (c @ bd)).T, forces.T @ (c @ bd).T)
         k = self.observer.innovation_gate
         gate = k * np.sqrt(np.diag(g.s)) if k > 0.0 else None
+        if gate is not None and ex:
+            gate[ex] = np.inf                # (its innovation is not used)
         return a_run, kt, ca_t, phi_t, u_t, pa_t, fin, gate
+
+    def _left_out(self, segs: list, left_out: np.ndarray, dt: float,
+                  profile_psd: float | None = None) -> list:
+        """``segs`` (``(start, end, gains)``) cut where the channels left out (``left_out``,
+        bool (m, ny)) change; a stretch with channels left out takes the gains of its
+        stretch's levels designed without them (:func:`.gains.design` ``excluded``: the
+        load pass's at the step dt (s), or with ``profile_psd`` the profile pass's,
+        :meth:`.GainSchedule.profile_design`). The schedule's gains in use stay."""
+        rows = np.asarray(left_out, dtype=bool)
+        cuts = np.flatnonzero(np.any(rows[1:] != rows[:-1], axis=1)) + 1
+        sched = self.schedule
+        saved = sched.levels['v'], sched.excluded, sched.gains, sched.stale
+        out = []
+        try:
+            for s0, s1, g in segs:
+                inner = cuts[(cuts > s0) & (cuts < s1)].tolist()
+                for a, b in zip([s0, *inner], [*inner, s1]):
+                    channels = tuple(np.flatnonzero(rows[a]).tolist())
+                    gains = g
+                    if channels:
+                        sched.levels['v'] = g.key[1]
+                        sched.excluded = channels
+                        gains = (sched.design(dt, 0) if profile_psd is None else
+                                 sched.profile_design(dt, 'offline', profile_psd))
+                    if out and set(out[-1][2].excluded) - set(channels):
+                        steps = self._reentry(out[-1][2], gains, dt, b - a)
+                        out += [(a + i, a + i + 1, st) for i, st in enumerate(steps)]
+                        a += len(steps)
+                    if a < b:
+                        out.append((a, b, gains))
+        finally:
+            sched.levels['v'], sched.excluded, sched.gains, sched.stale = saved
+        return out
+
+    def _reentry(self, before: Gains, after: Gains, dt: float, most: int) -> list:
+        """The gains of the samples where a channel left out comes back (``before`` the
+        design of the stretch without it, ``after`` the next stretch's), one :class:`_Step`
+        per sample: the Kalman filter's own covariance from ``before``'s to ``after``'s
+        (the Riccati recursion with ``after``'s model and noises), until it is ``after``'s to
+        :data:`REENTRY_TOLERANCE` (of the largest entry, in the model's state scales), at
+        most ``most`` samples and :data:`REENTRY_MAX_SAMPLES`.
+
+        Why: the steady-state smoother of the next stretch takes its first state as known to
+        ``after``'s covariance, and the backward pass multiplies what the later readings
+        tell by the stretch's own covariance; where a channel was left out the true
+        covariance is orders of magnitude larger (the roll's, after a roll sensor's 2 s
+        out), and without this a channel's return moved the loads for tens of ms
+        (``python -m bench.studies.sensor_faults --only latency --faults stuck --modes
+        offline``; docs/sensors.md)."""
+        a_dt = after.transition(dt)
+        c, r, q = after.model.c, after.r, after.q
+        nx = a_dt.shape[0]
+        scale = np.asarray(self.model.state_scale(nx), dtype=float)
+        norm = np.outer(scale, scale)
+        target = after.p_post / norm
+        tol = REENTRY_TOLERANCE * float(np.max(np.abs(target)))
+        p = before.p_post
+        out = []
+        for _ in range(min(most, REENTRY_MAX_SAMPLES)):
+            pm = a_dt @ p @ a_dt.T + q
+            s = c @ pm @ c.T + r
+            s = 0.5 * (s + s.T)
+            k = np.linalg.solve(s, c @ pm).T
+            p = (np.eye(nx) - k @ c) @ pm
+            p = 0.5 * (p + p.T)
+            out.append(_Step(after, k, s, p))
+            if float(np.max(np.abs(p / norm - target))) <= tol:
+                break
+        return out
 
     def _gate_start(self, dt: float) -> int:
         """The first sample of a run (steps of dt, s) the innovation gate sees: as the online
@@ -541,3 +654,51 @@ class Smoother:
         body's motion, the quasi-static LTR, the converged flags counted from ``t_start``,
         default ``t[0]``). ``dt`` and ``speed``: the run's median step (s) and |speed| (m/s)."""
         self.rows.finish_run(out, t, dt, speed, self.schedule.settling_time_s(dt), t_start)
+
+
+#: Where a left-out channel comes back, the smoother's covariance is followed sample by
+#: sample (:meth:`Smoother._reentry`) until it is the steady state's to this fraction...
+REENTRY_TOLERANCE = 1e-9
+#: ... or for at most this many samples.
+REENTRY_MAX_SAMPLES = 4096
+
+
+class _Step:
+    """One sample's gains where a left-out channel comes back (:meth:`Smoother._reentry`):
+    the stretch's design (its model, transition and friction input) with the Kalman gain
+    ``k``, innovation covariance ``s`` and a-posteriori covariance ``p_post`` of that
+    sample."""
+
+    def __init__(self, design: Gains, k: np.ndarray, s: np.ndarray, p_post: np.ndarray
+                 ) -> None:
+        self.design, self.k, self.s, self.p_post = design, k, s, p_post
+        self.model = design.model
+        self.excluded = design.excluded
+        self.key = design.key
+
+    def transition(self, dt_s: float) -> np.ndarray:
+        return self.design.transition(dt_s)
+
+    def friction_input(self, dt_s: float) -> np.ndarray:
+        return self.design.friction_input(dt_s)
+
+
+class _Offset:
+    """Rows of an array as rows ``offset ..`` of a longer one (slices only)."""
+
+    def __init__(self, rows: np.ndarray, offset: int) -> None:
+        self.rows, self.offset = rows, offset
+
+    def __getitem__(self, sl: slice) -> np.ndarray:
+        return self.rows[sl.start - self.offset:sl.stop - self.offset]
+
+
+def _on_grid(left_out: np.ndarray | None, pos: np.ndarray) -> np.ndarray | None:
+    """``left_out`` (bool (m, ny)) of samples at the grid points ``pos`` on the whole grid:
+    a point between two samples left out with either."""
+    if left_out is None:
+        return None
+    grid = np.arange(int(pos[-1]) + 1)
+    before = np.searchsorted(pos, grid, side='right') - 1
+    after = np.searchsorted(pos, grid, side='left')
+    return left_out[before] | left_out[after]
