@@ -56,6 +56,36 @@ def test_per_sample_and_drive_give_the_same_bits(drive):
         one.gaps = 1
 
 
+@pytest.mark.parametrize('latency_s', [0.0, 0.01])
+def test_products_without_the_rows_zero_columns_give_the_same_bits(drive, monkeypatch,
+                                                                    latency_s):
+    """The core's per-sample products leave out the buffer row's leading zero columns
+    (``online.SKIP_QUANTUM``, issue 32's CPU): every output the same bits as with the full
+    products (the quantum past the row's length: no column left out), through the first
+    designs, the first block's replay and the innovation gate's start (3 s)."""
+    from road_force_estimator.estimation.observer import online
+
+    vehicle, _, stamps, y, _, _ = drive
+    m = 3000
+    obs = ObserverParameters(latency_s=latency_s)
+    est, fast = step_by_step(vehicle, obs, stamps[:m], y[:m])
+    core = est.online.core
+    assert core._mk_skip == 32 and core._pm_skip == (32 if latency_s == 0.0 else 0)
+    monkeypatch.setattr(online, 'SKIP_QUANTUM', 10**6)
+    est_full, full = step_by_step(vehicle, obs, stamps[:m], y[:m])
+    assert est_full.online.core._mk_skip == 0 and len(full) == len(fast) == m
+
+    def bits(samples, name):
+        return np.array([getattr(s, name) for s in samples], float).view(np.int64)
+
+    for name in ('load_n', 'static_n', 'ltr', 'ltr_quasi_static', 'lateral_mps2', 'road_m',
+                 'front_ltr', 'ltr_predicted', 'distance_m'):
+        np.testing.assert_array_equal(bits(fast, name), bits(full, name), err_msg=name)
+    assert [s.fused for s in fast] == [s.fused for s in full]
+    assert [(s.converged, s.innovations_gated) for s in fast] == [
+        (s.converged, s.innovations_gated) for s in full]
+
+
 def test_static_loads_sum_to_the_statics_and_ltr_follows_the_truth(drive):
     """Axle loads and gross weight are the plant's statics (the equilibrium's readings); each
     unit's quasi-static LTR within 0.005 of the truth's after 3 s (measured online 0.0008-0.0014
