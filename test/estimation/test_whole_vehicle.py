@@ -11,7 +11,7 @@ from road_force_estimator.core.articulated_plant import simulate_articulated
 from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.parameters import ObserverParameters, load_params_file
 from road_force_estimator.core.road import iso8608_profile
-from road_force_estimator.core.unit_loads import unit_load_transfer
+from road_force_estimator.core.unit_loads import UnitLoadTransfer, unit_load_transfer
 from road_force_estimator.estimation.models.articulated import channel_names
 from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, estimate_whole_vehicle)
@@ -56,34 +56,24 @@ def test_per_sample_and_drive_give_the_same_bits(drive):
         one.gaps = 1
 
 
-@pytest.mark.parametrize('latency_s', [0.0, 0.01])
-def test_products_without_the_rows_zero_columns_give_the_same_bits(drive, monkeypatch,
-                                                                    latency_s):
-    """The core's per-sample products leave out the buffer row's leading zero columns
-    (``online.SKIP_QUANTUM``, issue 32's CPU): every output the same bits as with the full
-    products (the quantum past the row's length: no column left out), through the first
-    designs, the first block's replay and the innovation gate's start (3 s)."""
-    from road_force_estimator.estimation.observer import online
-
-    vehicle, _, stamps, y, _, _ = drive
-    m = 3000
-    obs = ObserverParameters(latency_s=latency_s)
-    est, fast = step_by_step(vehicle, obs, stamps[:m], y[:m])
-    core = est.online.core
-    assert core._mk_skip == 32 and core._pm_skip == (32 if latency_s == 0.0 else 0)
-    monkeypatch.setattr(online, 'SKIP_QUANTUM', 10**6)
-    est_full, full = step_by_step(vehicle, obs, stamps[:m], y[:m])
-    assert est_full.online.core._mk_skip == 0 and len(full) == len(fast) == m
-
-    def bits(samples, name):
-        return np.array([getattr(s, name) for s in samples], float).view(np.int64)
-
-    for name in ('load_n', 'static_n', 'ltr', 'ltr_quasi_static', 'lateral_mps2', 'road_m',
-                 'front_ltr', 'ltr_predicted', 'distance_m'):
-        np.testing.assert_array_equal(bits(fast, name), bits(full, name), err_msg=name)
-    assert [s.fused for s in fast] == [s.fused for s in full]
-    assert [(s.converged, s.innovations_gated) for s in fast] == [
-        (s.converged, s.innovations_gated) for s in full]
+def test_units_summed_on_from_another_give_each_units_own_bits():
+    """A recursion of several units sums a unit on from an earlier one that starts it (the
+    front axle, the tractor, the combination: issue 32's CPU): the same bits as each unit's
+    own recursion given its axles alone; loads of both signs (the negative ones count 0),
+    steps varying."""
+    bodies = ['tractor', 'tractor', 'trailer', 'trailer', 'trailer']
+    static = np.full((5, 2), 40e3)
+    units = [[0], [0, 1], [2, 3, 4], [0, 1, 2, 3, 4]]
+    together = UnitLoadTransfer(bodies, static, 1e-3, units=units)
+    alone = [UnitLoadTransfer(bodies, static, 1e-3, units=[u]) for u in units]
+    rng = np.random.default_rng(7)
+    loads = (40e3 + 30e3 * rng.standard_normal((500, 10))).tolist()
+    dts = rng.choice([1e-3, 2e-3, 0.9e-3], 500).tolist()
+    got = np.array([together.update(f, dt) for f, dt in zip(loads, dts)])
+    want = np.hstack([np.array([a.update(f, dt) for f, dt in zip(loads, dts)])
+                      for a in alone])
+    assert (np.array(loads) < 0.0).any()
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
 
 
 def test_static_loads_sum_to_the_statics_and_ltr_follows_the_truth(drive):

@@ -81,14 +81,6 @@ SM_NOISE_SCALE = 1e-7
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
 _R0 = 0           # the row's rho part starts the row (:func:`.protocol.row_layout`)
-#: The per-sample products leave out the leading columns of the buffer row that the step
-#: matrix holds zero and the row holds zero (the rho part, 3 ny columns, with no sliding mode;
-#: always in the profile filter's row), in whole multiples of this many: each dot product then
-#: sums the same nonzero terms in the same SIMD lanes and order (OpenBLAS's gemv kernels: 4
-#: or 8 lanes, the tail by the length's residue), so the same bits, from fewer bytes (the
-#: articulated model: 32 of the 111 columns of its two (131, 111) products; the front axle's
-#: 9 leading zeros: none left out). ``python -m bench.probes.node_cost --articulated``.
-SKIP_QUANTUM = 32
 
 
 class ModelCore:
@@ -202,10 +194,6 @@ class ModelCore:
         self._slow = 0                    # samples of the block below the speed floor
         self._prow = np.zeros(self._row)        # the profile filter's row: [0, x+, 0, y]
         self._pm = None                    # its step matrix (zero latency only)
-        # the products' matrices less their leading zero columns (SKIP_QUANTUM), and how many
-        self._mk, self._mk_skip = None, 0
-        self._pmk, self._pm_skip = None, 0
-        self._reduced_cache: dict = {}
         # the step products' buffers (:meth:`_select`) and views of their state and outputs
         self._sv = self._sv_x = np.empty(0)
         self._sp = self._sp_x = self._sp_o = np.empty(0)
@@ -313,9 +301,6 @@ class ModelCore:
         if sched.stale or g is None or g.key[0] != lv['dt']:
             g = self._design(dt)
         self._m = g.step_matrix(dt)
-        # (with the sliding mode, the row's rho part is not 0: every column taken)
-        self._mk_skip, self._mk = (self._reduced(self._m) if self.sm_gain == 0.0
-                                   else (0, self._m))
         if self._sv.shape[0] != self._m.shape[0]:    # the product's buffer (and its state)
             self._sv = np.empty(self._m.shape[0])
             self._buffer_views()
@@ -324,24 +309,9 @@ class ModelCore:
         self._m_dt = dt
         if self._profile_on:
             self._pm = sched.profile_design(dt, 'online').step_matrix(dt)
-            self._pm_skip, self._pmk = self._reduced(self._pm)
             if self._sp.shape[0] != self._pm.shape[0]:
                 self._sp = np.empty(self._pm.shape[0])
                 self._buffer_views()
-
-    def _reduced(self, m: np.ndarray) -> tuple[int, np.ndarray]:
-        """``(k, m[:, k:])`` (contiguous, kept per step matrix): k the leading columns of
-        ``m`` that are zero, rounded down to a multiple of :data:`SKIP_QUANTUM`."""
-        hit = self._reduced_cache.get(id(m))
-        if hit is not None and hit[0] is m:
-            return hit[1], hit[2]
-        used = np.flatnonzero(np.any(m != 0.0, axis=0))
-        k = (int(used[0]) if used.size else m.shape[1]) // SKIP_QUANTUM * SKIP_QUANTUM
-        mk = np.ascontiguousarray(m[:, k:]) if k else m
-        if len(self._reduced_cache) >= 64:
-            self._reduced_cache.clear()
-        self._reduced_cache[id(m)] = (m, k, mk)      # (m held: its id stays its own)
-        return k, mk
 
     def _buffer_views(self) -> None:
         """The views of the step products' buffers: their state and outputs parts."""
@@ -353,13 +323,12 @@ class ModelCore:
         """Pickled (a streamed run's snapshot) without the buffers' views: a pickled view
         is a copy of its own, no longer the buffer the products write into."""
         state = self.__dict__.copy()
-        for name in ('_sv_x', '_sp_x', '_sp_o', '_reduced_cache'):
+        for name in ('_sv_x', '_sp_x', '_sp_o'):
             state.pop(name, None)
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self._reduced_cache = {}
         self._buffer_views()
 
     # -- the run --------------------------------------------------------------------------
@@ -472,8 +441,7 @@ class ModelCore:
         x0, y0 = self._x0i, self._y0i
         ny = self._ny
         row[y0:y0 + ny] = y
-        mk, rowk = self._mk, row[self._mk_skip:]    # (its leading zeros left out: SKIP_QUANTUM)
-        sv = _dot(mk, rowk, out=self._sv)       # (into a buffer: the same numbers)
+        sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
         fr = self._fr
         if fr is not None:        # the friction over the step (of x+_k)
             sv = fr.update(sv, row[x0:y0 - ny])
@@ -486,7 +454,7 @@ class ModelCore:
             for ch in excluded:
                 y[ch] -= s[self._nx + ch]
             row[y0:y0 + ny] = y
-            sv = _dot(mk, rowk, out=self._sv)
+            sv = _dot(self._m, row, out=self._sv)
             if fr is not None:
                 sv = fr.update(sv, row[x0:y0 - ny])
             s = sv.tolist()
@@ -496,7 +464,7 @@ class ModelCore:
             # transient, whose innovations the steady-state spread does not describe)
             undo, self._undo = self._undo, None
             if undo is not None and self._undo_gate(undo, s, row):   # it was real: again
-                sv = _dot(mk, rowk, out=self._sv)
+                sv = _dot(self._m, row, out=self._sv)
                 if fr is not None:
                     sv = fr.update(sv, row[x0:y0 - ny])
                 s = sv.tolist()
@@ -505,7 +473,7 @@ class ModelCore:
             if clean is not None:
                 y = clean
                 row[y0:y0 + ny] = y
-                sv = _dot(mk, rowk, out=self._sv)
+                sv = _dot(self._m, row, out=self._sv)
                 if fr is not None:
                     sv = fr.update(sv, row[x0:y0 - ny])
                 s = sv.tolist()
@@ -653,7 +621,7 @@ class ModelCore:
         x0, y0 = self._x0i, self._y0i
         prow = self._prow
         prow[y0:y0 + self._ny] = y
-        _dot(self._pmk, prow[self._pm_skip:], out=self._sp)
+        _dot(self._pm, prow, out=self._sp)
         prow[x0:y0] = self._sp_x
         return self._sp_o.tolist()
 
