@@ -27,7 +27,10 @@ the second.
 ``--articulated``: the observer with ``config/tractor_semitrailer.yaml`` (5 axles), fed the
 readings of a simulated class C drive at 20 m/s (:func:`.node_latency.articulated_drive`);
 the parts as above with ``WholeVehicleEstimator.step`` for the numeric core (the plant's
-sample is left out), the child subscribing to every output of the articulated node.
+sample is left out), the child subscribing to every output of the articulated node. With
+``--flush MB`` also ``WholeVehicleEstimator.step, cold``: the step alone timed, an array of
+that many MB summed before each (the node's thread sleeps between samples while others run:
+its caches are theirs when it wakes).
 """
 from __future__ import annotations
 
@@ -96,6 +99,8 @@ def main(argv=None) -> int:
     parser.add_argument('--repeats', type=int, default=7)
     parser.add_argument('--articulated', action='store_true',
                         help='vehicle.model: articulated (config/tractor_semitrailer.yaml)')
+    parser.add_argument('--flush', type=float, default=0.0, metavar='MB',
+                        help='--articulated: also the step with MB of memory read before each')
     parser.add_argument('--serve', type=float, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve:
@@ -225,12 +230,36 @@ def report_articulated(observer, drive: list, args) -> None:
     rows.append(('WholeVehicleEstimator.step', per_sample_us(
         lambda k: estimator.step(T0_NS + k * 10**6, drive[k], 20.0),
         lambda r: range(n * (r + 1), n * (r + 2)), args.repeats)))
+    if args.flush > 0.0:
+        rows.append(('WholeVehicleEstimator.step, cold', cold_step_us(
+            estimator, drive, n, args.repeats, args.flush)))
     observer.destroy_node()
     for name, (low, mid) in rows:
         print(f'{name:32s} min {low:7.2f} us   median {mid:7.2f} us per sample')
     (cb, _), (py, _), (core, _) = rows[0][1], rows[1][1], rows[2][1]
     print(f"node's own Python (min) {py - core:.1f} us, rclpy publish (min) {cb - py:.1f} us "
           f'per sample')
+
+
+def cold_step_us(estimator, drive: list, n: int, repeats: int, flush_mb: float
+                 ) -> tuple[float, float]:
+    """(min, median) thread CPU time (us) of ``estimator.step`` alone on the drive's samples
+    after the first ``(repeats + 1) n`` (where the warm blocks left it), ``flush_mb`` MB of
+    memory summed before each step (outside its time)."""
+    import numpy as np
+
+    junk = np.ones(max(int(flush_mb * 2**20 / 8), 1))
+    clock, step = time.thread_time_ns, estimator.step
+    times = []
+    for r in range(repeats):
+        total = 0
+        for k in range(n * (r + repeats + 1), n * (r + repeats + 2)):
+            junk.sum()
+            start = clock()
+            step(T0_NS + k * 10**6, drive[k], 20.0)
+            total += clock() - start
+        times.append(total / n / 1e3)
+    return min(times), statistics.median(times)
 
 
 if __name__ == '__main__':

@@ -58,9 +58,15 @@ class UnitLoadTransfer:
         self.rate = 2.0 * math.pi * cutoff_hz / _CASCADE_3DB
         self.e = math.exp(-dt_s * self.rate)
         self.state: list | None = None
-        # per unit (its left wheels' indices, its right wheels', its floor)
-        self._plan = [([2 * j for j in u], [2 * j + 1 for j in u], f)
-                      for u, f in zip(self.units, self.floor)]
+        # per unit (an earlier unit whose axles start its own, or -1; its other left wheels'
+        # indices, its right wheels', its floor): the combination's sums go on from the
+        # tractor's (the same additions in the same order: the same bits)
+        self._plan = []
+        for i, (u, f) in enumerate(zip(self.units, self.floor)):
+            base = max((p for p in range(i) if self.units[p] == u[:len(self.units[p])]),
+                       key=lambda p: len(self.units[p]), default=-1)
+            rest = u[len(self.units[base]):] if base >= 0 else u
+            self._plan.append((base, [2 * j for j in rest], [2 * j + 1 for j in rest], f))
         self._dt: float | None = None       # the last step given, and its e
         self._e_dt = self.e
 
@@ -80,15 +86,16 @@ class UnitLoadTransfer:
         state = self.state
         if state is None:
             state = self.state = [None] * len(self.units)
-        for i, (lefts, rights, floor) in enumerate(self._plan):
-            left = 0.0
+        sums = []
+        for i, (base, lefts, rights, floor) in enumerate(self._plan):
+            left, right = sums[base] if base >= 0 else (0.0, 0.0)
             for k in lefts:
                 a = loads[k]
                 left += a if a > 0.0 else 0.0
-            right = 0.0
             for k in rights:
                 b = loads[k]
                 right += b if b > 0.0 else 0.0
+            sums.append((left, right))
             st = state[i]
             if st is None:
                 st = state[i] = (left, left, right, right)

@@ -148,7 +148,7 @@ class ArticulatedOnline:
             brake.restart()
         brake.feed(t, float(speed_mps))
         rest = brake.at_rest           # its offset and loads 0: nothing to take or add
-        y = (tuple([float(v) for v in y]) if rest else
+        y = (tuple(map(float, y)) if rest else
              tuple([float(v) - o for v, o in zip(y, brake.offset.tolist())]))
         if not core.step(int(stamp_ns), y, float(speed_mps), dt, restart, self._x, t, dt):
             raise ValueError(f'sample at {stamp_ns} ns: not finite')

@@ -21,6 +21,7 @@ distance reaches ``x_k + max(xi)`` comes in: of :func:`.fuse_roads`'s points ove
 """
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass
 import math
@@ -127,8 +128,8 @@ class FusedStream:
             m = self._ptr[j] - self._base
             if m < i:
                 m = i
-            while m < last and xs[m] < target:
-                m += 1
+            if m < last and xs[m] < target:    # the first at or past it (xs in order)
+                m = bisect_left(xs, target, m, last)
             self._ptr[j] = m + self._base
             x1 = xs[m]
             kl, kr = 2 * j, 2 * j + 1

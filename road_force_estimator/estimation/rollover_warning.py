@@ -76,7 +76,7 @@ class LtrPredictor:
         if self._first is None:
             self._first = int(stamp_ns)
         ts = (int(stamp_ns) - self._first) * 1e-9     # (as the array form's float64)
-        qs = tuple([float(v) for v in ltr_quasi_static])
+        qs = tuple(map(float, ltr_quasi_static))
         held = self._held
         held.append((ts, qs))
         early = ts - self.rate_window_s

@@ -58,7 +58,7 @@ import numpy as np
 
 from road_force_estimator.core.articulated_parameters import ArticulatedParameters
 from road_force_estimator.core.parameters import GRAVITY_MPS2, ObserverParameters
-from road_force_estimator.core.unit_loads import UnitLoadTransfer
+from road_force_estimator.core.unit_loads import UnitLoadTransfer, unit_masks
 from road_force_estimator.estimation.acceptance import GAP_THRESHOLD_S, StepGaps
 from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, run_starts)
@@ -211,20 +211,23 @@ class WholeVehicleArrays:
 class _Transfer:
     """Each unit's LTR from finalized rows, stepped by their stamps, and the front axle's own
     (the same recursion given the front axle alone, one unit of its two wheels): ``[LTR,
-    quasi-static] per unit + front`` (8 numbers)."""
+    quasi-static] per unit + front`` (8 numbers). One recursion of four units, the front
+    axle's first: the tractor's sums go on from it and the combination's from the tractor's
+    (:class:`.UnitLoadTransfer`: the same additions, the same bits as each unit summed
+    alone)."""
 
     def __init__(self, vehicle: ArticulatedParameters, static_n) -> None:
         bodies = [a.body for a in vehicle.axles]
         static = np.reshape(static_n, (-1, 2))
-        self.ltr = UnitLoadTransfer(bodies, static, 1e-3)
-        self.front = UnitLoadTransfer(('tractor',), static[:1], 1e-3, units=[[0]])
+        self.ltr = UnitLoadTransfer(bodies, static, 1e-3,
+                                    units=[[0], *unit_masks(bodies)])
         self.last: int | None = None
 
     def update(self, stamp_ns: int, loads: Sequence[float]) -> list:
         dt = 0.0 if self.last is None else (stamp_ns - self.last) * 1e-9
         self.last = stamp_ns
-        left, right = loads[0], loads[1]
-        return self.ltr.update(loads, dt) + self.front.update((left, right), dt)
+        out = self.ltr.update(loads, dt)
+        return out[2:] + out[:2]
 
 
 class WheelStaticTracker:
@@ -343,7 +346,7 @@ class WholeVehicleEstimator:
             A reading or the speed not finite.
         """
         stamp = int(stamp_ns)
-        y = [float(r) for r in readings]      # from the equilibrium unless zero_load
+        y = list(map(float, readings))      # from the equilibrium unless zero_load
         raw = y if self.tracker is None else list(y)
         faults = self.faults
         stuck = faults.stuck

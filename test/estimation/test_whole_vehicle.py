@@ -11,7 +11,7 @@ from road_force_estimator.core.articulated_plant import simulate_articulated
 from road_force_estimator.core.articulated_setup import ArticulatedDrive
 from road_force_estimator.core.parameters import ObserverParameters, load_params_file
 from road_force_estimator.core.road import iso8608_profile
-from road_force_estimator.core.unit_loads import unit_load_transfer
+from road_force_estimator.core.unit_loads import UnitLoadTransfer, unit_load_transfer
 from road_force_estimator.estimation.models.articulated import channel_names
 from road_force_estimator.estimation.whole_vehicle import (
     WholeVehicleEstimator, estimate_whole_vehicle)
@@ -54,6 +54,26 @@ def test_per_sample_and_drive_give_the_same_bits(drive):
     assert dataclasses.replace(one) == one and one.gaps == 0 and len(one.load_n) == 10
     with pytest.raises(dataclasses.FrozenInstanceError):
         one.gaps = 1
+
+
+def test_units_summed_on_from_another_give_each_units_own_bits():
+    """A recursion of several units sums a unit on from an earlier one that starts it (the
+    front axle, the tractor, the combination: issue 32's CPU): the same bits as each unit's
+    own recursion given its axles alone; loads of both signs (the negative ones count 0),
+    steps varying."""
+    bodies = ['tractor', 'tractor', 'trailer', 'trailer', 'trailer']
+    static = np.full((5, 2), 40e3)
+    units = [[0], [0, 1], [2, 3, 4], [0, 1, 2, 3, 4]]
+    together = UnitLoadTransfer(bodies, static, 1e-3, units=units)
+    alone = [UnitLoadTransfer(bodies, static, 1e-3, units=[u]) for u in units]
+    rng = np.random.default_rng(7)
+    loads = (40e3 + 30e3 * rng.standard_normal((500, 10))).tolist()
+    dts = rng.choice([1e-3, 2e-3, 0.9e-3], 500).tolist()
+    got = np.array([together.update(f, dt) for f, dt in zip(loads, dts)])
+    want = np.hstack([np.array([a.update(f, dt) for f, dt in zip(loads, dts)])
+                      for a in alone])
+    assert (np.array(loads) < 0.0).any()
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
 
 
 def test_static_loads_sum_to_the_statics_and_ltr_follows_the_truth(drive):

@@ -107,6 +107,7 @@ class WheelRoads:
         self._prev: list | None = None
         self._x = math.nan
         self._off = [0.0] * self.nw
+        self._offset = False            # whether an offset was ever taken (a stop)
 
     def _integrate(self, accel: list, dt: float, v: float) -> list:
         """Every wheel's ``z_w`` (m) after a step (:func:`.body_heave.step`'s rules)."""
@@ -153,7 +154,7 @@ class WheelRoads:
             ramp = 0.5 - 0.5 * math.cos(math.pi * (t - ROAD_START_S) / ROAD_RAMP_S)
         else:
             ramp = 1.0
-        acc = list(accel) if ramp == 1.0 else [ramp * a for a in accel]
+        acc = accel if ramp == 1.0 else [ramp * a for a in accel]
         if self._prev is None:                 # the run's first sample: body_heave.start
             self._a_old = acc
             z = self._z
@@ -166,7 +167,9 @@ class WheelRoads:
         if prev is not None and x == px and -SPEED_FLOOR_MPS < v < SPEED_FLOOR_MPS:
             for k in range(self.nw):
                 off[k] += u[k] - prev[k]
-        return [a - b for a, b in zip(u, off)]
+            self._offset = True
+        # (u - 0.0 is u, bit for bit: no offset yet, none taken)
+        return [a - b for a, b in zip(u, off)] if self._offset else u
 
 
 class ArticulatedOnlineRows:

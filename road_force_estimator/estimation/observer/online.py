@@ -505,7 +505,9 @@ class ModelCore:
             o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
-            self._emit(stamp, meta, o, self._profile_step(y) if self._profile else None)
+            # (the row holds y as fed: the profile filter copies it from there)
+            self._emit(stamp, meta, o, self._profile_step(row[y0:y0 + ny]) if self._profile
+                       else None)
         else:
             pending = self._pending
             pending.append((stamp, meta))
@@ -612,9 +614,10 @@ class ModelCore:
         if w is not None:
             buf[i - lag:i + 1, self._x0i:self._y0i] += w
 
-    def _profile_step(self, y: tuple) -> list:
+    def _profile_step(self, y) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
-        profile's gains): its outputs (the model's)."""
+        profile's gains) on the channels ``y`` (a sequence or an array): its outputs (the
+        model's)."""
         x0, y0 = self._x0i, self._y0i
         prow = self._prow
         prow[y0:y0 + self._ny] = y
