@@ -51,7 +51,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -75,7 +75,7 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
-           'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream']
+           'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -470,21 +470,37 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
-        online = WholeVehicleOnlineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
-                                          imu=imu, chunk_rows=chunk_rows)
-        gathered = _OnlineArrays(online.estimator, stamps.size)
-        y, c = np.asarray(readings, float), online.chunk_rows
-        for a in range(0, stamps.size, c):          # fed a chunk at a time: no list held
-            for piece in online.feed(stamps[a:a + c], y[a:a + c], v[a:a + c]):
-                gathered.add(piece)
-        for piece in online.finish():
-            gathered.add(piece)
-        return gathered.arrays()
+        y, c = np.asarray(readings, float), max(int(chunk_rows or CHUNK_ROWS), 1)
+        return estimate_online_blocks(        # fed a chunk at a time: no list held
+            vehicle, ((stamps[a:a + c], y[a:a + c], v[a:a + c])
+                      for a in range(0, stamps.size, c)),
+            observer=observer, gap_threshold_s=gap_threshold_s, imu=imu,
+            capacity=stamps.size, chunk_rows=c)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                        eager=bool(windows), imu=imu)
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
+
+
+def estimate_online_blocks(vehicle: ArticulatedParameters, blocks: Iterable[tuple], *,
+                           observer: ObserverParameters | None = None,
+                           gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False,
+                           capacity: int = 0,
+                           chunk_rows: int | None = None) -> WholeVehicleArrays:
+    """:func:`estimate_whole_vehicle` online over a drive's ``blocks`` (each ``(stamps_ns,
+    readings, speed_mps)`` as :meth:`WholeVehicleOnlineStream.feed` takes them, consumed as
+    they come): the same arrays, the blocks' inputs never held together; ``capacity``: the
+    samples the arrays are reserved for at once (a bag's metadata; grown past it)."""
+    online = WholeVehicleOnlineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
+                                      imu=imu, chunk_rows=chunk_rows)
+    gathered = _OnlineArrays(online.estimator, capacity)
+    for stamps, readings, speed in blocks:
+        for piece in online.feed(stamps, readings, speed):
+            gathered.add(piece)
+    for piece in online.finish():
+        gathered.add(piece)
+    return gathered.arrays()
 
 
 #: The samples :func:`estimate_whole_vehicle` converts to arrays at a time online (no

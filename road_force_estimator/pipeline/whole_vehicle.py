@@ -79,6 +79,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
 
     imu = bool(getattr(vehicle, 'tractor_imu', False))
     names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
+    if mode == 'online':
+        return _online(input_path, vehicle, observer, names, imu)
     try:
         r = read_articulated_readings(input_path, names, imu=imu)
     except BagReadError as err:
@@ -101,6 +103,39 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
                                 offline=mode == 'offline', windows=windows, imu=imu)
     wv = replace(wv, rejected=_counts(r.rejected))
     return wv if codes is None else replace(wv, imu_codes=codes)
+
+
+def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
+    """The stage online: the drive read in blocks (:class:`~.bagio.drive_blocks.DriveBlocks`
+    with the whole vehicle's channels), :func:`~.estimation.whole_vehicle.
+    estimate_online_blocks` stepped across them (the same bits as the drive read whole)."""
+    from road_force_estimator.bagio import BagReadError
+    from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
+    from road_force_estimator.estimation.whole_vehicle import estimate_online_blocks
+
+    reader = DriveBlocks(input_path, joints=names, imu=imu)
+    codes: list = []
+
+    def blocks():
+        for b in reader:
+            if not np.isfinite(b.speed_mps).all():      # only before the first twist
+                raise InputError('no usable /vehicle/twist message: the speed is unknown')
+            if imu:                                    # the IMU's a_y by the node's rule
+                codes.append(b.imu_codes)
+                yield b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]), b.speed_mps
+            else:
+                yield b.stamps_ns, b.readings, b.speed_mps
+
+    try:
+        wv = estimate_online_blocks(vehicle, blocks(), observer=observer, imu=imu,
+                                    capacity=streamable(input_path))
+    except BagReadError as err:
+        raise InputError(str(err)) from None
+    if not wv.stamps_ns.size:
+        raise InputError(f'{input_path}: no /suspension/deflections message carries every '
+                         f'channel of the whole vehicle ({", ".join(names)})')
+    wv = replace(wv, rejected=_counts(reader.rejected))
+    return wv if not imu else replace(wv, imu_codes=np.concatenate(codes))
 
 
 def _counts(rejected: dict) -> dict[str, dict[str, int]]:
