@@ -62,10 +62,12 @@ def front_axle_vehicle():
     return VehicleParameters()
 
 
-def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False):
+def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False,
+             blocks: bool = False):
     """The stage in one call: the drive's
     :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline';
-    ``windows``: offline, the smoother in windows, as :mod:`.plan` decides).
+    ``windows``: offline, the smoother in windows; ``blocks``: online, the drive read in
+    blocks and the estimator carried across them, the same bits; as :mod:`.plan` decides).
 
     Raises
     ------
@@ -79,7 +81,7 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
 
     imu = bool(getattr(vehicle, 'tractor_imu', False))
     names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
-    if mode == 'online':
+    if mode == 'online' and blocks:
         return _online(input_path, vehicle, observer, names, imu)
     try:
         r = read_articulated_readings(input_path, names, imu=imu)
@@ -398,10 +400,9 @@ def bag_streams(wv) -> list:
 
     ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
           & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
-    return whole_vehicle_streams(wv.stamps_ns[ok], wheel_joints(wv.axle_names),
-                                 wv.load_n[:, ok],
-                                 wv.static_n[:, ok], wv.ltr[:, ok],
-                                 wv.ltr_quasi_static[:, ok])
+    return whole_vehicle_streams(wv.stamps_ns, wheel_joints(wv.axle_names), wv.load_n,
+                                 wv.static_n, wv.ltr, wv.ltr_quasi_static,
+                                 rows=None if ok.all() else np.flatnonzero(ok))
 
 
 @dataclass(frozen=True)
