@@ -19,12 +19,23 @@ the same samples, speeds and counts (test_drive_blocks):
   (:attr:`InputBlock.truth`: :meth:`.GroundTruth.at` of the whole drive's truth, NaN where
   a topic has no sample at that stamp); while a truth topic the bag lists has not reached a
   sample's stamp, the sample waits.
+
+The whole vehicle's inputs (``joints``: the articulated observer's channels, as
+:func:`.articulated_readings.read_articulated_readings` reads them; ``imu``: with
+``/imu/tractor``) come the same way: :attr:`InputBlock.readings` every channel, the samples
+before the first twist the speed of the first sample that holds one (that reader's caller's
+rule, :func:`road_force_estimator.pipeline.whole_vehicle.estimate`: they wait for it), with
+the IMU each sample's a_y and code by :func:`~road_force_estimator.estimation.imu_hold.
+pair_imu` (a sample waits until an IMU message at or after it while the bag's metadata
+lists more of them, always without usable metadata: such a bag is read as one block);
+only those topics are read and counted (no fixes, no truth).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -37,8 +48,8 @@ from road_force_estimator.bagio.mcap_scan import Block
 from road_force_estimator.bagio.reader import (
     USE_MESSAGE_INDEX, raw_batches, TopicReader, bag_custom_data, bag_files)
 from road_force_estimator.interfaces import (
-    DEFLECTIONS, FIX, JOINT_STATE, NAVSATFIX, POINT, TRUE_LOAD, TRUE_ROAD, TWIST,
-    TWIST_STAMPED, WRENCH)
+    DEFLECTIONS, FIX, IMU, IMU_MSG, JOINT_STATE, NAVSATFIX, POINT, TRUE_LOAD, TRUE_ROAD,
+    TWIST, TWIST_STAMPED, WRENCH)
 
 __all__ = ['BLOCK_SAMPLES', 'InputBlock', 'DriveRecord', 'DriveBlocks', 'listed_messages',
            'streamable']
@@ -53,7 +64,8 @@ _FIELDS = {DEFLECTIONS: _STAMP + ('position', 'velocity', 'effort'),
            TWIST: _STAMP + ('twist.linear.x',),
            FIX: _STAMP + ('latitude', 'longitude', 'altitude', 'status.status'),
            **{t: _STAMP + ('wrench.force.z',) for t in TRUE_LOAD},
-           **{t: _STAMP + ('point.x', 'point.y', 'point.z') for t in TRUE_ROAD}}
+           **{t: _STAMP + ('point.x', 'point.y', 'point.z') for t in TRUE_ROAD},
+           IMU: _STAMP + ('linear_acceleration.y',)}
 #: The truth's columns by topic: (key, value column) as :func:`.drive.read_drive_bag` keys them.
 _TRUTH_KEYS = {TRUE_LOAD[0]: ('load_l',), TRUE_LOAD[1]: ('load_r',),
                TRUE_ROAD[0]: ('road_l', 'x_l'), TRUE_ROAD[1]: ('road_r', 'x_r')}
@@ -72,6 +84,12 @@ class InputBlock:
     early: np.ndarray | None = None
     #: the ground truth at the samples' stamps (None: the bag has none)
     truth: GroundTruth | None = None
+    #: the whole vehicle's readings (k, channels; m, rad) of :class:`DriveBlocks` ``joints``
+    #: (then ``q_m`` and ``roll_rad`` are empty), else None
+    readings: np.ndarray | None = None
+    #: with ``imu``: each sample's a_y (m/s^2) and pairing code (:mod:`.estimation.imu_hold`)
+    imu_ay_mps2: np.ndarray | None = None
+    imu_codes: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -122,12 +140,20 @@ class DriveBlocks:
 
     After the iteration: :attr:`messages`, :attr:`rejected` (as :class:`.Drive`),
     :attr:`issues`, :attr:`custom_data`, :attr:`fixes`, :attr:`noted`, :attr:`twists`
-    (accepted twists), :attr:`first_speed` and :attr:`early`.
+    (accepted twists), :attr:`first_speed` and :attr:`early`. ``joints``, ``imu``: the whole
+    vehicle's inputs (module notes).
     """
 
-    def __init__(self, path: str | Path, block_samples: int = BLOCK_SAMPLES) -> None:
+    def __init__(self, path: str | Path, block_samples: int = BLOCK_SAMPLES, *,
+                 joints: Sequence[str] | None = None, imu: bool = False) -> None:
         self.path = Path(path)
         self.block_samples = int(block_samples)
+        self.whole = joints is not None
+        self.imu = bool(imu)
+        self._wanted = ({DEFLECTIONS: JOINT_STATE, TWIST: TWIST_STAMPED,
+                         **({IMU: IMU_MSG} if imu else {})} if self.whole else _WANTED)
+        self._imu_ns = np.zeros(0, np.int64)          # the IMU messages a sample may need
+        self._imu_ay = np.zeros(0)
         self.rejects = Rejects()
         self.issues: list[str] = []
         self.messages: dict[str, int] = {}
@@ -135,7 +161,7 @@ class DriveBlocks:
         self.noted: dict = {}
         self.custom_data = bag_custom_data(self.path)
         #: the deflection joints read and what the reader says of them (.vehicle_layout)
-        self.joints: tuple | None = None
+        self.joints: tuple | None = None if joints is None else tuple(joints)
         self.notes: tuple[str, ...] = ()
         self.twists = 0
         self.first_speed: float | None = None
@@ -148,8 +174,14 @@ class DriveBlocks:
         #: the truth topics the bag lists with messages (a sample waits until each has
         #: reached its stamp or has given every message listed)
         self._listed = listed_messages(self.path)
-        self._truth_topics = {t for t, c in self._listed.items() if c} & set(_TRUTH)
+        self._truth_topics = (set() if self.whole else
+                              {t for t, c in self._listed.items() if c} & set(_TRUTH))
         self._truth_last: dict[str, int | None] = {t: None for t in _TRUTH}
+        if self.imu:
+            self._truth_last[IMU] = None
+        #: the samples wait for the IMU (notes): while the bag lists more of its messages,
+        #: always without a usable metadata.yaml (then a bag without it is one block)
+        self._imu_wait = self.imu and (bool(self._listed.get(IMU)) or not self._listed)
         self._truth: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
@@ -171,7 +203,7 @@ class DriveBlocks:
         seen: dict = {}
         readers: dict[str, TopicReader] = {}
         fix_reader = None
-        for batch in raw_batches(self.path, _WANTED, self.issues, seen,
+        for batch in raw_batches(self.path, self._wanted, self.issues, seen,
                                   indexed=USE_MESSAGE_INDEX):
             for topic, add in self._parts(batch):
                 if topic == FIX:
@@ -180,7 +212,7 @@ class DriveBlocks:
                     add(fix_reader)
                     continue
                 if topic not in readers:
-                    readers[topic] = TopicReader(_WANTED[topic], seen[topic].msgtype,
+                    readers[topic] = TopicReader(self._wanted[topic], seen[topic].msgtype,
                                                   _FIELDS[topic])
                 add(readers[topic])
             deflections = readers.get(DEFLECTIONS)
@@ -235,6 +267,13 @@ class DriveBlocks:
         for topic in set(readers) & set(_TRUTH):
             self._truth_topics.add(topic)
             self._add_truth(topic, readers[topic].columns(topic))
+        if IMU in readers:
+            s, a = read_scalar(readers[IMU].columns(IMU), 'linear_acceleration.y',
+                               self.rejects, self._truth_last[IMU])
+            if s.size:
+                self._truth_last[IMU] = int(s[-1])
+                self._imu_ns = np.concatenate([self._imu_ns, s])
+                self._imu_ay = np.concatenate([self._imu_ay, a])
         if DEFLECTIONS in readers:
             self.seen_deflections = True
             columns = readers[DEFLECTIONS].columns(DEFLECTIONS)
@@ -245,7 +284,11 @@ class DriveBlocks:
                 self.notes = (note,) if note else ()
             s, pos = read_joint_state(columns, self.joints, self.rejects,
                                       floor=self._last[DEFLECTIONS])
-            if s.size:
+            if s.size and self.whole:
+                self._last[DEFLECTIONS] = int(s[-1])
+                self._pending.append(InputBlock(s, pos[:, :0], pos[:, 0][:0], np.zeros(0),
+                                                readings=np.asarray(pos, float)))
+            elif s.size:
                 self._last[DEFLECTIONS] = int(s[-1])
                 self._pending.append(InputBlock(s, pos[:, :2].copy(), pos[:, 2].copy(),
                                                 np.zeros(0)))
@@ -259,17 +302,24 @@ class DriveBlocks:
         stamps = np.concatenate([b.stamps_ns for b in self._pending])
         lasts = [self._last[TWIST]] + [self._truth_last[t] for t in self._truth_topics
                                        if self.messages.get(t, 0) < self._listed.get(t, 1)]
+        if self._imu_wait and self.messages.get(IMU, 0) < self._listed.get(IMU, math.inf):
+            lasts.append(self._truth_last[IMU])
         if final:
             k = stamps.size
         elif any(last is None for last in lasts):
             k = 0
         else:
             k = int(np.searchsorted(stamps, min(lasts), side='right'))
+        if k and self.whole and not final and not self._twist_ns.size or (
+                k and self.whole and not final and stamps[k - 1] < self._twist_ns[0]):
+            k = 0                         # only early samples: they wait for a held speed
         if k == 0:
             return None
         q = np.concatenate([b.q_m for b in self._pending])
         roll = np.concatenate([b.roll_rad for b in self._pending])
-        self._pending = ([InputBlock(stamps[k:], q[k:], roll[k:], np.zeros(0))]
+        y = (np.concatenate([b.readings for b in self._pending]) if self.whole else None)
+        self._pending = ([InputBlock(stamps[k:], q[k:], roll[k:], np.zeros(0),
+                                     readings=None if y is None else y[k:])]
                          if k < stamps.size else [])
         s = stamps[:k]
         held = np.searchsorted(self._twist_ns, s, side='right') - 1
@@ -278,14 +328,32 @@ class DriveBlocks:
         else:
             speed = np.full(k, np.nan)
         early = ~np.isfinite(speed)
-        if self.first_speed is not None and early.any():
+        if self.whole and early.any() and not early.all():
+            speed[early] = speed[np.argmax(~early)]     # the first held speed (notes)
+            self.early += int(np.count_nonzero(early))
+        elif not self.whole and self.first_speed is not None and early.any():
             speed[early] = self.first_speed
             self.early += int(np.count_nonzero(early))
         # keep only the twists a later sample may still need (the last one at or before it)
         nxt = stamps[k] if k < stamps.size else s[-1]
         keep = max(0, int(np.searchsorted(self._twist_ns, nxt, side='right')) - 1)
         self._twist_ns, self._twist_v = self._twist_ns[keep:], self._twist_v[keep:]
+        if self.whole:
+            return InputBlock(s, q[:k], roll[:k], speed, early, None, y[:k],
+                              *self._imu_at(s, nxt))
         return InputBlock(s, q[:k], roll[:k], speed, early, self._truth_at(s))
+
+    def _imu_at(self, s: np.ndarray, nxt: int) -> tuple:
+        """With the IMU: the samples' a_y and codes (:func:`.imu_hold.pair_imu` over the
+        messages kept), the messages no later sample needs dropped; else (None, None)."""
+        if not self.imu:
+            return None, None
+        from road_force_estimator.estimation.imu_hold import pair_imu
+
+        ay, codes = pair_imu(s, self._imu_ns, self._imu_ay)
+        keep = max(0, int(np.searchsorted(self._imu_ns, nxt, side='right')) - 1)
+        self._imu_ns, self._imu_ay = self._imu_ns[keep:], self._imu_ay[keep:]
+        return ay, codes
 
     def _add_truth(self, topic: str, columns) -> None:
         """One batch of a truth topic, checked (its own floor) into the waiting columns."""

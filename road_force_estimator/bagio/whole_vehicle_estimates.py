@@ -22,7 +22,7 @@ import numpy as np
 from road_force_estimator.interfaces import (
     BASE_FRAME, JOINT_STATE, ROAD_FRAME, ROAD_FUSED, STATIC_LOAD_PERIOD_NS, STATIC_WHEEL_LOADS,
     UNIT_LOAD_TRANSFER, VECTOR3_STAMPED, WHEEL_LOADS)
-from road_force_estimator.serde.cdr import ColumnRows
+from road_force_estimator.serde.cdr import ColumnRows, LazyColumns
 from road_force_estimator.serde.messages import message_template, points_rows, stamp_columns
 
 __all__ = ['static_rows', 'whole_vehicle_streams', 'fused_profile_streams']
@@ -38,10 +38,12 @@ def static_rows(stamps_ns: np.ndarray) -> np.ndarray:
 
 
 def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_n, ltr,
-                          ltr_quasi_static) -> list:
+                          ltr_quasi_static, rows: np.ndarray | None = None) -> list:
     """The streams (topic, stamps, rows) of the samples ``stamps_ns`` (m,), strictly
     increasing: ``load_n`` and ``static_n`` (wheels, m; N), ``ltr`` and ``ltr_quasi_static``
-    (3, m; tractor, trailer, combination).
+    (3, m; tractor, trailer, combination); ``rows``: only these samples (indices, increasing;
+    None: all), the messages read from the arrays a block at a time as the bag is written
+    (:class:`~.serde.cdr.LazyColumns`: no copy of the columns).
 
     Raises
     ------
@@ -49,32 +51,49 @@ def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_
         Shapes that disagree, stamps not increasing or a value not finite (nothing
         non-finite is published: the caller drops such samples first).
     """
-    s = np.asarray(stamps_ns, np.int64).reshape(-1)
-    m, k = s.size, len(wheel_names)
-    loads = np.asarray(load_n, float).reshape(k, m).T
-    static = np.asarray(static_n, float).reshape(k, m).T
+    every = np.asarray(stamps_ns, np.int64).reshape(-1)
+    m, k = every.size, len(wheel_names)
+    s = every if rows is None else every[rows]
+    loads = np.asarray(load_n, float).reshape(k, m)
+    static = np.asarray(static_n, float).reshape(k, m)
     x = np.asarray(ltr, float).reshape(len(UNIT_LOAD_TRANSFER), m)
     y = np.asarray(ltr_quasi_static, float).reshape(len(UNIT_LOAD_TRANSFER), m)
-    if m and np.any(np.diff(s) <= 0):
+    if s.size and np.any(np.diff(s) <= 0):
         raise ValueError('whole-vehicle stamps must be strictly increasing')
     for name, a in (('load', loads), ('static load', static), ('LTR', x),
                     ('quasi-static LTR', y)):
-        if not np.isfinite(a).all():
+        if not _finite(a, rows):
             raise ValueError(f'whole-vehicle {name}: not finite')
+    n = s.size
     cols = stamp_columns(s)
     streams = [(WHEEL_LOADS, s, ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
-        m, dict(cols, effort=np.ascontiguousarray(loads))))]
+        n, dict(cols, effort=LazyColumns(list(loads), rows))))]
     first = static_rows(s)
     streams.append((STATIC_WHEEL_LOADS, s[first], ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
-        first.size, dict(stamp_columns(s[first]),
-                         effort=np.ascontiguousarray(static[first])))))
+        first.size, dict(stamp_columns(s[first]), effort=LazyColumns(
+            list(static), first if rows is None else rows[first])))))
     for u, topic in enumerate(UNIT_LOAD_TRANSFER):
         streams.append((topic, s, ColumnRows(
-            VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), m,
-            dict(cols, **{'vector.x': x[u], 'vector.y': y[u]}))))
+            VECTOR3_STAMPED, message_template(VECTOR3_STAMPED, BASE_FRAME), n,
+            dict(cols, **{'vector.x': LazyColumns([x[u]], rows),
+                          'vector.y': LazyColumns([y[u]], rows)}))))
     return streams
+
+
+#: The samples checked at a time by :func:`_finite` (bounded temporaries).
+_CHECK_ROWS = 1 << 16
+
+
+def _finite(a: np.ndarray, rows: np.ndarray | None) -> bool:
+    """Every value of ``a`` (k, m) finite at the samples ``rows`` (None: all)."""
+    for r0 in range(0, a.shape[1] if rows is None else rows.size, _CHECK_ROWS):
+        part = (a[:, r0:r0 + _CHECK_ROWS] if rows is None
+                else a[:, rows[r0:r0 + _CHECK_ROWS]])
+        if not np.isfinite(part).all():
+            return False
+    return True
 
 
 def fused_profile_streams(stamps_ns, distance_m, left_m, right_m,

@@ -52,7 +52,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -76,7 +76,7 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
-           'fit_axles', 'CHUNK_ROWS']
+           'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -473,22 +473,40 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     chunk_rows : online, the samples turned into arrays at a time (no per-sample object
         held longer; :data:`CHUNK_ROWS`; the same numbers whatever it is)
     """
-    est = WholeVehicleEstimator(vehicle, observer, gap_threshold_s=gap_threshold_s, imu=imu)
-    chunk_rows = max(int(chunk_rows or CHUNK_ROWS), 1)
     stamps = np.asarray(stamps_ns, np.int64)
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
-        gathered = _OnlineArrays(est, stamps.size, chunk_rows)
-        step, add = est.step, gathered.add
-        for s, y, vi in zip(stamps.tolist(), np.asarray(readings, float), v.tolist()):
-            add(step(s, y, vi))
-        add(est.finish())
-        return gathered.arrays()
+        y, c = np.asarray(readings, float), max(int(chunk_rows or CHUNK_ROWS), 1)
+        return estimate_online_blocks(        # fed a chunk at a time: no list held
+            vehicle, ((stamps[a:a + c], y[a:a + c], v[a:a + c])
+                      for a in range(0, stamps.size, c)),
+            observer=observer, gap_threshold_s=gap_threshold_s, imu=imu,
+            capacity=stamps.size, chunk_rows=c)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                        eager=bool(windows), imu=imu)
     stream.feed(stamps, readings, v)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
+
+
+def estimate_online_blocks(vehicle: ArticulatedParameters, blocks: Iterable[tuple], *,
+                           observer: ObserverParameters | None = None,
+                           gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False,
+                           capacity: int = 0,
+                           chunk_rows: int | None = None) -> WholeVehicleArrays:
+    """:func:`estimate_whole_vehicle` online over a drive's ``blocks`` (each ``(stamps_ns,
+    readings, speed_mps)`` as :meth:`WholeVehicleOnlineStream.feed` takes them, consumed as
+    they come): the same arrays, the blocks' inputs never held together; ``capacity``: the
+    samples the arrays are reserved for at once (a bag's metadata; grown past it)."""
+    online = WholeVehicleOnlineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
+                                      imu=imu, chunk_rows=chunk_rows)
+    gathered = _OnlineArrays(online.estimator, capacity)
+    for stamps, readings, speed in blocks:
+        for piece in online.feed(stamps, readings, speed):
+            gathered.add(piece)
+    for piece in online.finish():
+        gathered.add(piece)
+    return gathered.arrays()
 
 
 #: The samples :func:`estimate_whole_vehicle` converts to arrays at a time online (no
@@ -538,29 +556,18 @@ class _Gathered:
 
 
 class _OnlineArrays:
-    """The online samples (:meth:`WholeVehicleEstimator.step`'s) as a
-    :class:`WholeVehicleArrays`, converted ``chunk`` samples at a time into arrays reserved
-    for ``capacity`` samples (:class:`_Gathered`): no per-sample object held longer than a
-    chunk, the same arrays as converting them all at once."""
+    """The online pieces (:class:`WholeVehicleOnlineStream`'s) as one
+    :class:`WholeVehicleArrays`, written into arrays reserved for ``capacity`` samples
+    (:class:`_Gathered`): the same arrays as converting every sample at once."""
 
-    def __init__(self, est: WholeVehicleEstimator, capacity: int, chunk: int = CHUNK_ROWS):
-        self.est, self.chunk = est, max(int(chunk), 1)
-        self.pending: list = []
+    def __init__(self, est: WholeVehicleEstimator, capacity: int):
+        self.est = est
         self.out = _Gathered(capacity)
         self.fused: list = []
         self.fits: list = []
         self.gated: tuple = ()
 
-    def add(self, samples: list) -> None:
-        self.pending += samples
-        if len(self.pending) >= self.chunk:
-            self._convert()
-
-    def _convert(self) -> None:
-        if not self.pending:
-            return
-        a = _arrays(self.est, self.pending)
-        self.pending = []
+    def add(self, a: WholeVehicleArrays) -> None:
         self.gated = a.innovations_gated
         self.fits += a.axle_fits
         if a.fused.stamps_ns.size:
@@ -569,7 +576,6 @@ class _OnlineArrays:
 
     def arrays(self) -> WholeVehicleArrays:
         """Every sample's fields (after :meth:`WholeVehicleEstimator.finish`'s were added)."""
-        self._convert()
         if not self.out.n:
             return _arrays(self.est, [])
         fused = (FusedPoints(*(np.concatenate([getattr(p, f) for p in self.fused]) for f in
@@ -583,6 +589,59 @@ class _OnlineArrays:
             channel_names=tuple(est.channel_names), fused=fused, axle_fits=fits,
             axle_fit=fits[-1][1] if fits else None, faults=est.faults.counts(),
             **self.out.fields())
+
+
+class WholeVehicleOnlineStream:
+    """:class:`WholeVehicleEstimator` carried from block to block of a drive (the node's
+    numbers: the same bits however the drive is cut): :meth:`feed` steps a block's samples
+    and returns the pieces completed (:class:`WholeVehicleArrays` of ``chunk_rows`` samples,
+    :data:`CHUNK_ROWS` by default; each piece's ``fused`` the points its samples completed,
+    ``axle_fits`` its verdicts, ``innovations_gated`` and ``faults`` the counts so far),
+    :meth:`finish` the rest (what a latency held). What it keeps between blocks does not grow
+    with the drive: the estimator's state and at most one piece's samples."""
+
+    def __init__(self, vehicle: ArticulatedParameters,
+                 observer: ObserverParameters | None = None, *,
+                 gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False,
+                 chunk_rows: int | None = None) -> None:
+        self.estimator = WholeVehicleEstimator(vehicle, observer,
+                                               gap_threshold_s=gap_threshold_s, imu=imu)
+        self.chunk_rows = max(int(chunk_rows or CHUNK_ROWS), 1)
+        #: the samples fed so far
+        self.fed = 0
+        self._pending: list = []
+
+    def feed(self, stamps_ns, readings, speed_mps) -> list[WholeVehicleArrays]:
+        """One block: ``stamps_ns`` (m,) increasing across blocks, ``readings`` (m, channels)
+        as :meth:`WholeVehicleEstimator.step` takes them, ``speed_mps`` (m,) or a float
+        (m/s); the pieces completed.
+
+        Raises
+        ------
+        ValueError
+            A reading or the speed not finite (:meth:`WholeVehicleEstimator.step`).
+        """
+        stamps = np.asarray(stamps_ns, np.int64)
+        v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
+        out = []
+        step, chunk, pending = self.estimator.step, self.chunk_rows, self._pending
+        for s, y, vi in zip(stamps.tolist(), np.asarray(readings, float), v.tolist()):
+            pending += step(s, y, vi)
+            if len(pending) >= chunk:
+                out.append(self._piece())
+                pending = self._pending
+        self.fed += stamps.size
+        return out
+
+    def finish(self) -> list[WholeVehicleArrays]:
+        """The last piece (the samples a latency held with those not yet handed out)."""
+        self._pending += self.estimator.finish()
+        return [self._piece()] if self._pending else []
+
+    def _piece(self) -> WholeVehicleArrays:
+        piece = _arrays(self.estimator, self._pending)
+        self._pending = []
+        return piece
 
 
 def concatenate_arrays(pieces: Sequence[WholeVehicleArrays]) -> WholeVehicleArrays:

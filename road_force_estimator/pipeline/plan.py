@@ -18,9 +18,13 @@ online and offline: the estimation layer streams it offline
 pieces; ``estimate_whole_vehicle`` offline runs it in one feed), but the stages around it do
 not yet: the front axle's stage beside it, the whole vehicle's sinks (its topics, its
 ``/diagnostics`` status, the report's per-axle segment columns) and the fused profile take
-whole arrays; online the whole vehicle's estimator and load-transfer filters would have to be
-carried from block to block (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
-:data:`STREAM_MIN_SAMPLES`). Offline its smoother goes in windows
+whole arrays (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
+:data:`STREAM_MIN_SAMPLES`). Online (with a metadata.yaml listing its deflections) the whole
+vehicle's stage reads the drive in blocks (``BlockPlan.whole_vehicle_blocks``:
+:class:`~.bagio.drive_blocks.DriveBlocks` with its channels, the estimator carried from block
+to block, :class:`~.estimation.whole_vehicle.WholeVehicleOnlineStream`: the same bits as the
+drive read whole); its estimate is still gathered whole for the sinks. Offline its smoother
+goes in windows
 (``BlockPlan.whole_vehicle_windows``: ``estimate_whole_vehicle(..., windows=True)``, a run
 longer than :data:`~.estimation.whole_vehicle.STREAM_WINDOW_SAMPLES` and its overlap smoothed
 a window at a time), so the load pass's rows are held a window at a time, not the drive's.
@@ -45,11 +49,13 @@ class BlockPlan:
     """A drive's way through the pipeline: ``blocks`` False (one block) or True (many);
     ``samples``: the deflection messages metadata.yaml lists (0: unknown);
     ``whole_vehicle_windows``: an articulated drive offline, the whole vehicle's smoother in
-    windows (module notes)."""
+    windows; ``whole_vehicle_blocks``: an articulated drive online, its stage's input read
+    in blocks (module notes)."""
 
     blocks: bool
     samples: int
     whole_vehicle_windows: bool = False
+    whole_vehicle_blocks: bool = False
 
 
 def stream_threshold(memory_limit_bytes: float | None = None) -> int:
@@ -80,7 +86,7 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
         return BlockPlan(False, samples)
     if is_whole_vehicle(vehicle):                   # the whole vehicle: one block (notes)
-        return BlockPlan(False, samples, mode == 'offline')
+        return BlockPlan(False, samples, mode == 'offline', mode == 'online')
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain
     return BlockPlan(samples >= limit, samples)

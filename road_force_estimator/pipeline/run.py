@@ -59,7 +59,8 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
         if whole is not None:
             stages.next(f'estimating the whole vehicle ({options["mode"]})')
             wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'],
-                                        windows=plan.whole_vehicle_windows)
+                                        windows=plan.whole_vehicle_windows,
+                                        blocks=plan.whole_vehicle_blocks)
             est = whole_vehicle.front_wheels(est, wv)
             fused = whole_vehicle.fused_profile(wv, whole)
             est = whole_vehicle.fused_road(est, wv, fused)

@@ -62,10 +62,12 @@ def front_axle_vehicle():
     return VehicleParameters()
 
 
-def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False):
+def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False,
+             blocks: bool = False):
     """The stage in one call: the drive's
     :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline';
-    ``windows``: offline, the smoother in windows, as :mod:`.plan` decides).
+    ``windows``: offline, the smoother in windows; ``blocks``: online, the drive read in
+    blocks and the estimator carried across them, the same bits; as :mod:`.plan` decides).
 
     Raises
     ------
@@ -79,6 +81,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
 
     imu = bool(getattr(vehicle, 'tractor_imu', False))
     names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
+    if mode == 'online' and blocks:
+        return _online(input_path, vehicle, observer, names, imu)
     try:
         r = read_articulated_readings(input_path, names, imu=imu)
     except BagReadError as err:
@@ -101,6 +105,39 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
                                 offline=mode == 'offline', windows=windows, imu=imu)
     wv = replace(wv, rejected=_counts(r.rejected))
     return wv if codes is None else replace(wv, imu_codes=codes)
+
+
+def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
+    """The stage online: the drive read in blocks (:class:`~.bagio.drive_blocks.DriveBlocks`
+    with the whole vehicle's channels), :func:`~.estimation.whole_vehicle.
+    estimate_online_blocks` stepped across them (the same bits as the drive read whole)."""
+    from road_force_estimator.bagio import BagReadError
+    from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
+    from road_force_estimator.estimation.whole_vehicle import estimate_online_blocks
+
+    reader = DriveBlocks(input_path, joints=names, imu=imu)
+    codes: list = []
+
+    def blocks():
+        for b in reader:
+            if not np.isfinite(b.speed_mps).all():      # only before the first twist
+                raise InputError('no usable /vehicle/twist message: the speed is unknown')
+            if imu:                                    # the IMU's a_y by the node's rule
+                codes.append(b.imu_codes)
+                yield b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]), b.speed_mps
+            else:
+                yield b.stamps_ns, b.readings, b.speed_mps
+
+    try:
+        wv = estimate_online_blocks(vehicle, blocks(), observer=observer, imu=imu,
+                                    capacity=streamable(input_path))
+    except BagReadError as err:
+        raise InputError(str(err)) from None
+    if not wv.stamps_ns.size:
+        raise InputError(f'{input_path}: no /suspension/deflections message carries every '
+                         f'channel of the whole vehicle ({", ".join(names)})')
+    wv = replace(wv, rejected=_counts(reader.rejected))
+    return wv if not imu else replace(wv, imu_codes=np.concatenate(codes))
 
 
 def _counts(rejected: dict) -> dict[str, dict[str, int]]:
@@ -363,10 +400,9 @@ def bag_streams(wv) -> list:
 
     ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
           & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
-    return whole_vehicle_streams(wv.stamps_ns[ok], wheel_joints(wv.axle_names),
-                                 wv.load_n[:, ok],
-                                 wv.static_n[:, ok], wv.ltr[:, ok],
-                                 wv.ltr_quasi_static[:, ok])
+    return whole_vehicle_streams(wv.stamps_ns, wheel_joints(wv.axle_names), wv.load_n,
+                                 wv.static_n, wv.ltr, wv.ltr_quasi_static,
+                                 rows=None if ok.all() else np.flatnonzero(ok))
 
 
 @dataclass(frozen=True)

@@ -175,9 +175,10 @@ def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
     inside = (seg >= 0) & np.where(seg == k - 1, x <= end[-1],
                                    x < end[np.clip(seg, 0, k - 1)])
     seg = seg[inside]
-    loads = np.asarray(wv.load_n, float)[:, use][:, inside]
-    static = np.asarray(wv.static_n, float)[:, use][:, inside]
-    qs = np.asarray(wv.ltr_quasi_static, float)[1, use][inside]
+    rows = np.flatnonzero(use)[inside]        # one wheel's row at a time (no (wheels, m) copy)
+    loads = np.asarray(wv.load_n, float)
+    static = np.asarray(wv.static_n, float)
+    qs = np.asarray(wv.ltr_quasi_static, float)[1, rows]
     counts = np.bincount(seg, minlength=k)
     table: dict[str, np.ndarray] = {}
 
@@ -187,7 +188,7 @@ def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
 
     for j, a in enumerate(wv.axle_names):
         for side, word in enumerate(('left', 'right')):
-            f = loads[2 * j + side]
+            f = loads[2 * j + side, rows]
             peak = np.full(k, np.nan)
             np.fmax.at(peak, seg, f)
             m = mean(f)
@@ -195,12 +196,21 @@ def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
                 std = np.sqrt(np.maximum(mean(f * f) - m * m, 0.0))
                 table[f'dlc_{a}_{word}'] = np.where(counts > 1, std / m, np.nan)
             table[f'peak_load_{a}_{word}_n'] = peak
-        table[f'static_load_{a}_n'] = mean(static[2 * j] + static[2 * j + 1])
-    table['gross_weight_n'] = mean(static.sum(axis=0))
+        table[f'static_load_{a}_n'] = mean(static[2 * j, rows] + static[2 * j + 1, rows])
+    table['gross_weight_n'] = mean(_wheel_sum(static, rows))
     peak_qs = np.full(k, np.nan)
     np.fmax.at(peak_qs, seg, np.abs(qs))
     table['max_abs_ltr_trailer_quasi_static'] = peak_qs
     return {c: table[c] for c in segment_columns(wv.axle_names)}
+
+
+def _wheel_sum(static: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``static[:, rows].sum(axis=0)`` (the same bits: the same additions in the same order)
+    a block of samples at a time (no (wheels, m) copy)."""
+    out = np.empty(rows.size)
+    for r0 in range(0, rows.size, 1 << 16):
+        out[r0:r0 + (1 << 16)] = static[:, rows[r0:r0 + (1 << 16)]].sum(axis=0)
+    return out
 
 
 def _append_segments_csv(path: Path, wv) -> dict[str, np.ndarray]:
@@ -231,17 +241,18 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
 
     names = wheel_joints(wv.axle_names)
     use = np.asarray(wv.converged, bool)
-    loads = np.asarray(wv.load_n, float)[:, use]
-    static = np.asarray(wv.static_n, float)[:, use]
+    loads = np.asarray(wv.load_n, float)       # one wheel's row at a time (no copy of all)
+    static = np.asarray(wv.static_n, float)
     axles = list(wv.axle_names)
-    axle_static = [float(np.mean(static[2 * j] + static[2 * j + 1])) if use.any()
+    axle_static = [float(np.mean(static[2 * j, use] + static[2 * j + 1, use])) if use.any()
                    else float('nan') for j in range(len(axles))]
     wheels = []
     for i, name in enumerate(names):
-        f = loads[i]
+        f = loads[i, use]
         mean = float(np.mean(f)) if f.size else float('nan')
         wheels.append({'wheel': name, 'axle': axles[i // 2],
-                       'static_load_n': float(np.mean(static[i])) if f.size else float('nan'),
+                       'static_load_n': float(np.mean(static[i, use])) if f.size
+                       else float('nan'),
                        'mean_load_n': mean,
                        'max_load_n': float(np.max(f)) if f.size else float('nan'),
                        'dlc': float(np.std(f)) / mean if f.size and mean > 0.0

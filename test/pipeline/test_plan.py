@@ -38,7 +38,8 @@ def test_a_drive_with_truth_goes_in_blocks_from_the_threshold(tmp_path):
 
 def test_the_whole_vehicle_stays_one_block(tmp_path):
     """With an articulated vehicle (the whole vehicle's stage) a drive past the threshold is
-    one block, online and offline, its smoother in windows offline; the same drive with a
+    one block, online and offline, its smoother in windows offline, its input read in blocks
+    online (the whole vehicle's stage only); the same drive with a
     front-axle vehicle goes in blocks."""
     from pathlib import Path
 
@@ -53,6 +54,7 @@ def test_the_whole_vehicle_stays_one_block(tmp_path):
     for mode in ('online', 'offline'):
         assert plan.plan_drive(tmp_path / 'd', mode, obs, min_samples=1,
                                vehicle=whole) == plan.BlockPlan(False, 300,
-                                                                mode == 'offline')
+                                                                mode == 'offline',
+                                                                mode == 'online')
         assert plan.plan_drive(tmp_path / 'd', mode, obs, min_samples=1,
                                vehicle=VehicleParameters()).blocks
