@@ -62,7 +62,7 @@ import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
-           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'ROLL_DRIFT_LIMIT_RAD',
+           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'IMU_SCALE_MPS2', 'ROLL_DRIFT_LIMIT_RAD',
            'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
            'FaultDetector', 'UnitDrift', 'detect_faults']
 
@@ -92,6 +92,9 @@ UNIT_MIN_AXLES = 3
 #: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
 #: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
+#: :class:`TractorDrift`'s fourth statistic's scale (m/s^2), the tractor's a_y from its roll
+#: balance minus the tractor IMU's (``--balances --imu`` of the same study)
+IMU_SCALE_MPS2 = 1e-3
 #: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
 ROLL_DRIFT_LIMIT_RAD = 2e-4
 #: Time (s) a :class:`TractorDrift` candidate stays above its limit before it is flagged (a
@@ -190,8 +193,9 @@ class FaultDetector:
                                 settings.drift_offset_m, settings.relative)
                       if settings.units and settings.drift_offset_m > 0.0 else None)
         #: the tractor's deflections and the roll sensors (:class:`TractorDrift`), or None
-        self.tractor = (TractorDrift(*settings.tractor, UNIT_WINDOW_FACTOR
-                                     * settings.drift_window_s, settings.relative)
+        self.tractor = (TractorDrift(*settings.tractor[:7], UNIT_WINDOW_FACTOR
+                                     * settings.drift_window_s, settings.relative,
+                                     *settings.tractor[7:])
                         if settings.tractor and settings.drift_offset_m > 0.0 else None)
         self.reset()
 
@@ -533,12 +537,23 @@ class TractorDrift:
 
     def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
                  names: Sequence, limits: Sequence, flaggable: Sequence, window_s: float,
-                 relative: bool = False) -> None:
+                 relative: bool = False, imu: tuple | None = None) -> None:
         rows = np.asarray(rows, float)
         self.m = rows.shape[0]
         self.window_s, self.relative = float(window_s), relative
         self.rows = rows
         self.n = rows.shape[1]
+        #: the rows summed per block: ``rows``, then the rates' rows (``imu``)
+        self._rows = rows
+        #: the IMU's channel and per unit balance (its row, its roll's weights (n,),
+        #: I_x,b / (M_b h_b)), or None
+        self._imu = None
+        if imu is not None:
+            rates, ay, units = imu
+            self._rows = np.vstack([rows, np.asarray(rates, float)])
+            self._imu = (int(ay), tuple((int(r), np.asarray(w, float), float(c))
+                                        for r, w, c in units))
+        self._me = self._rows.shape[0]
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
         #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
@@ -567,14 +582,15 @@ class TractorDrift:
 
     def restart(self) -> None:
         """The windows start again (a gap, a stuck sensor, a stop)."""
-        m = self.m
-        self._win = MovingSums(m + 1)       # blocks: sums (m + 1)
-        self._means = MovingSums(m + 1)     # per block: the half-window's means (m + 1)
+        m = self._me
+        self._win = MovingSums(m + 1)       # blocks: sums (rows, rates, speed)
+        self._means = MovingSums(m + 1)     # per block: the half-window's means
         self._vals: list = []               # the block's readings (the callers' sequences)
         self._vs = 0.0                      # and its speeds' sum
         self._bn = 0
         self._b0 = 0.0
         self._over = None                   # (candidate, since when) above its limit
+        self._pts: deque = deque()          # (t, phi_t's block mean) over a window (imu)
 
     def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
         """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
@@ -590,7 +606,19 @@ class TractorDrift:
         self._bn += 1
         if self._bn < DRIFT_BLOCK:
             return
-        blk = (self.rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        if self._imu is None:
+            blk = (self._rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        else:                   # I against a_y cos(phi_t); phi_t's block mean kept
+            arr = np.asarray(self._vals, float)[:, :self.n]
+            blk = (self._rows @ arr.sum(axis=0)).tolist()
+            ay, units = self._imu
+            phis = arr @ np.array([w for _, w, _ in units]).T     # (samples, units)
+            for (row, _, _), phi in zip(units, phis.T):
+                blk[row] += float(arr[:, ay] @ (1.0 - np.cos(phi)))
+            pts = self._pts
+            pts.append((t, phis.mean(axis=0)))
+            while t - pts[0][0] > self.window_s:
+                pts.popleft()
         blk.append(self._vs)
         self._vals = []
         self._vs = 0.0
@@ -608,7 +636,18 @@ class TractorDrift:
         first_t, first, _ = means.entries[0]
         span = t - first_t
         a_x = (now[-1] - first[-1]) / span if span > 0.0 else 0.0
-        z = np.asarray(means.sums[:-1]) / len(means.entries) + self.ax * a_x
+        m = self.m
+        z = np.asarray(means.sums[:m]) / len(means.entries) + self.ax * a_x
+        if self._imu is not None:
+            # the rates' triangular means: the half-window means' change; phi_t's second
+            # difference over the window: the triangular mean of its acceleration
+            z = z + (np.asarray(now[m:-1]) - np.asarray(first[m:-1])) / span
+            pts = self._pts
+            (t2, p2), (t1, p1), p0 = pts[0], pts[len(pts) // 2], pts[-1][1]
+            if t1 > t2 and t > t1:
+                acc = ((p0 - p1) / (t - t1) - (p1 - p2) / (t1 - t2)) / (0.5 * (t - t2))
+                for (row, _, inertia), a in zip(self._imu[1], acc):
+                    z[row] += inertia * a
         if self.relative:
             if self._ref is None:
                 self._ref = z.copy()
@@ -624,7 +663,9 @@ class TractorDrift:
         np.maximum(peak[:-1], np.abs(u) * self.scales, out=peak[:-1])
         peak[-1] = max(peak[-1], abs(offset[best]) / self.limits[best])
         names = self.names
-        up = [j for j, ks in enumerate(names) if self.flaggable[j] and drift[ks[0]]]
+        up = sorted((j for j, ks in enumerate(names)    # the flagged candidate: all its
+                     if self.flaggable[j] and all(drift[k] for k in ks)),  # names, the most
+                    key=lambda j: -len(names[j]))
         if up and abs(offset[up[0]]) >= UNIT_CLEAR_FRACTION * self.limits[up[0]]:
             self._seen = t
         if up and t - self._seen <= self.window_s:
@@ -658,20 +699,25 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     tractor = [j for j, a in enumerate(axles) if a.body == 'tractor']
     trailer = [j for j, a in enumerate(axles) if a.body == 'trailer']
     x5 = veh.fifth_wheel.position_m
+    at = {ch: k for k, ch in enumerate(chans)}
+    imu = at.get(('ay', 0))                       # the tractor IMU's a_y, or None
     if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
-            or veh.roll_sensor == 'pendulum' or len(tractor) != 2 or not trailer
+            or (veh.roll_sensor == 'pendulum' and imu is None) or len(tractor) != 2
+            or not trailer
             or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
         return None
     n = len(chans)
-    at = {ch: k for k, ch in enumerate(chans)}
     phi = np.zeros(n)
     phi[at[('roll', 0)]] = 1.0
     phir = np.zeros(n)
     phir[at[('roll', 1)]] = 1.0
+    if veh.roll_sensor == 'pendulum':             # a pendulum reads phi + a_y / g
+        phi[imu] = phir[imu] = -1.0 / g
     tr, rl = veh.body('tractor'), veh.body('trailer')
     k5 = veh.fifth_wheel.roll_stiffness_nmprad
     spring = model.core.statics().spring_load_n
     pitch, ayt, ayr = np.zeros(n), np.zeros(n), np.zeros(n)
+    damp = {'tractor': np.zeros(n), 'trailer': np.zeros(n)}   # the springs' damping moments
     rel, ks = {}, {}
     for j, a in enumerate(axles):
         s = a.spring_half_track_m
@@ -679,14 +725,18 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         rel[j] = np.zeros(n)
         rel[j][left], rel[j][right] = 0.5 / s, -0.5 / s
         ks[j] = sum(a.suspension_stiffness_npm) * s * s + a.auxiliary_roll_stiffness_nmprad
+        damp[a.body][left] += a.suspension_damping_nspm[0] * s
+        damp[a.body][right] -= a.suspension_damping_nspm[1] * s
         if a.body == 'tractor':
             pitch[left] += a.suspension_stiffness_npm[0] * (a.position_m - x5)
             pitch[right] += a.suspension_stiffness_npm[1] * (a.position_m - x5)
             ayt += ks[j] * rel[j]
         else:
             ayr += ks[j] * rel[j]
-    ayt = (ayt + k5 * (phi - phir)) / (tr.mass_kg * tr.cg_height_above_roll_axis_m) - g * phi
-    ayr = (ayr - k5 * (phi - phir)) / (rl.mass_kg * rl.cg_height_above_roll_axis_m) - g * phir
+    mh_t = tr.mass_kg * tr.cg_height_above_roll_axis_m
+    mh_r = rl.mass_kg * rl.cg_height_above_roll_axis_m
+    ayt = (ayt + k5 * (phi - phir)) / mh_t - g * phi
+    ayr = (ayr - k5 * (phi - phir)) / mh_r - g * phir
 
     def cross(j: int) -> np.ndarray:
         a = axles[j]
@@ -697,15 +747,38 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         return body - rel[j] - (ks[j] * rel[j] + lat * ayr) / kt
 
     scale0 = abs(pitch[at[('q', tractor[0], 0)]])
-    rows = np.array([pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])])
-    ax = (tr.mass_kg * tr.cg_height_m / scale0, 0.0, 0.0)
+    rows = [pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])]
+    scales = TRACTOR_SCALES
     deflections = [at[('q', j, side)] for j in tractor for side in (0, 1)]
     roll = (at[('roll', 0)], at[('roll', 1)])
-    cands = tuple(((k, 1.0),) for k in deflections) + (((roll[0], 0.5), (roll[1], -0.5)),)
-    names = tuple((k,) for k in deflections) + (roll,)
-    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,)
-    flaggable = tuple(k not in judged for k in deflections) + (True,)
-    return (tuple(map(tuple, rows)), ax, TRACTOR_SCALES, cands, names, limits, flaggable)
+    cands = tuple(((k, 1.0),) for k in deflections)
+    names = tuple((k,) for k in deflections)
+    if imu is None:             # the roll difference only: both named
+        cands += (((roll[0], 0.5), (roll[1], -0.5)),)
+        names += (roll,)
+        rolls = 1
+    else:                       # each unit's a_y from its roll balance minus the IMU's
+        measured = np.zeros(n)
+        measured[imu] = 1.0
+        rows[1:2] = []          # A is their difference
+        rows += [ayt - measured, ayr - measured]
+        scales = (scales[0], scales[2], IMU_SCALE_MPS2, IMU_SCALE_MPS2)
+        cands += (((roll[0], 1.0),), ((roll[1], 1.0),), ((roll[0], 1.0), (roll[1], 1.0)))
+        names += ((roll[0],), (roll[1],), roll)
+        rolls = 3
+    ax = (tr.mass_kg * tr.cg_height_m / scale0,) + (0.0,) * (len(rows) - 1)
+    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,) * rolls
+    flaggable = tuple(k not in judged for k in deflections) + (True,) * rolls
+    out = (tuple(map(tuple, np.array(rows))), ax, scales, cands, names, limits, flaggable)
+    if imu is None:
+        return out
+    c5 = veh.fifth_wheel.roll_damping_nmsprad * (phi - phir)
+    rates = np.zeros((len(rows), n))   # the damping moments, on the channels' rates
+    rates[2] = (damp['tractor'] + c5) / mh_t
+    rates[3] = (damp['trailer'] - c5) / mh_r
+    units = ((2, tuple(phi), tr.roll_inertia_kgm2 / mh_t),
+             (3, tuple(phir), rl.roll_inertia_kgm2 / mh_r))
+    return out + ((tuple(map(tuple, rates)), imu, units),)
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:
