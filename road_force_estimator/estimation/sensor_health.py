@@ -92,6 +92,7 @@ UNIT_MIN_AXLES = 3
 #: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
 #: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
+_G = 9.81                  # m/s^2, as tractor_check's g
 #: :class:`TractorDrift`'s fourth statistic's scale (m/s^2), the tractor's a_y from its roll
 #: balance minus the tractor IMU's (``--balances --imu`` of the same study)
 IMU_SCALE_MPS2 = 1e-3
@@ -545,14 +546,14 @@ class TractorDrift:
         self.n = rows.shape[1]
         #: the rows summed per block: ``rows``, then the rates' rows (``imu``)
         self._rows = rows
-        #: the IMU's channel and per unit balance (its row, its roll's weights (n,),
-        #: I_x,b / (M_b h_b)), or None
+        #: the IMU's channel; per unit balance its row and I_x,b / (M_b h_b); the units'
+        #: rolls' weights (n, units); or None
         self._imu = None
         if imu is not None:
             rates, ay, units = imu
             self._rows = np.vstack([rows, np.asarray(rates, float)])
-            self._imu = (int(ay), tuple((int(r), np.asarray(w, float), float(c))
-                                        for r, w, c in units))
+            self._imu = (int(ay), tuple((int(r), float(c)) for r, c, _ in units),
+                         np.array([w for *_, w in units], float).T)
         self._me = self._rows.shape[0]
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
@@ -611,10 +612,14 @@ class TractorDrift:
         else:                   # I against a_y cos(phi_t); phi_t's block mean kept
             arr = np.asarray(self._vals, float)[:, :self.n]
             blk = (self._rows @ arr.sum(axis=0)).tolist()
-            ay, units = self._imu
-            phis = arr @ np.array([w for _, w, _ in units]).T     # (samples, units)
-            for (row, _, _), phi in zip(units, phis.T):
-                blk[row] += float(arr[:, ay] @ (1.0 - np.cos(phi)))
+            ay, units, weights = self._imu
+            phis = arr @ weights                # (samples, units): the bodies' roll
+            # MODEL.md's M_b h_b (a_y cos(phi_b) + g sin(phi_b)) beyond the rows' linear
+            # terms (the rows divide by M_b h_b)
+            extra = (arr[:, ay, None] * (1.0 - np.cos(phis))
+                     + _G * (phis - np.sin(phis))).sum(axis=0)
+            for (row, _), e in zip(units, extra.tolist()):
+                blk[row] += e
             pts = self._pts
             pts.append((t, phis.mean(axis=0)))
             while t - pts[0][0] > self.window_s:
@@ -646,7 +651,7 @@ class TractorDrift:
             (t2, p2), (t1, p1), p0 = pts[0], pts[len(pts) // 2], pts[-1][1]
             if t1 > t2 and t > t1:
                 acc = ((p0 - p1) / (t - t1) - (p1 - p2) / (t1 - t2)) / (0.5 * (t - t2))
-                for (row, _, inertia), a in zip(self._imu[1], acc):
+                for (row, inertia), a in zip(self._imu[1], acc):
                     z[row] += inertia * a
         if self.relative:
             if self._ref is None:
@@ -776,8 +781,8 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     rates = np.zeros((len(rows), n))   # the damping moments, on the channels' rates
     rates[2] = (damp['tractor'] + c5) / mh_t
     rates[3] = (damp['trailer'] - c5) / mh_r
-    units = ((2, tuple(phi), tr.roll_inertia_kgm2 / mh_t),
-             (3, tuple(phir), rl.roll_inertia_kgm2 / mh_r))
+    units = ((2, tr.roll_inertia_kgm2 / mh_t, tuple(phi)),
+             (3, rl.roll_inertia_kgm2 / mh_r, tuple(phir)))
     return out + ((tuple(map(tuple, rates)), imu, units),)
 
 
