@@ -35,7 +35,12 @@ of the family, clean (10 um, seed 1): per drive the largest judged kingpin pitch
 front deflection), the two units' a_y difference A (m/s^2) and the front-drive cross-level T
 (mrad), P and T also over a plain 12 s mean (the window the rigid fit used) at 8 m/s or more,
 the largest offset of the best candidate over its limit (a flag needs > 1 for 6 s), the drift
-flags raised.
+flags raised. ``--balances --imu``: the same with the tractor IMU's a_y (the plant's IMU, its
+default noise; A replaced by each unit's roll balance against it, I_t and I_r, m/s^2) on the
+family and :data:`IMU_DRIVES` (a 3 % crossfall straight and in the curve, pendulum roll
+sensors in the curve), then the roll sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each,
+on both with either sign, the plant's gyro drift on both) on C20, A20 and the curve on the
+crossfall: the drift flags and when, with and without the IMU.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """

@@ -49,7 +49,9 @@ A tractor of two instrumented axles (one degree of freedom left over a rigid fit
 sensors are judged by the whole vehicle's balances instead (:class:`TractorDrift`,
 :func:`tractor_check`): the tractor's pitch about the kingpin, the two units' lateral
 accelerations through the fifth wheel's roll stiffness, the road's cross-level under the
-front and the drive axle.
+front and the drive axle; with the tractor IMU each unit's roll balance against its a_y
+instead of the two units' difference, which names the roll sensor that drifts, or both for a
+drift common to them.
 """
 from __future__ import annotations
 
@@ -93,8 +95,9 @@ UNIT_MIN_AXLES = 3
 #: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
 _G = 9.81                  # m/s^2, as tractor_check's g
-#: :class:`TractorDrift`'s fourth statistic's scale (m/s^2), the tractor's a_y from its roll
-#: balance minus the tractor IMU's (``--balances --imu`` of the same study)
+#: :class:`TractorDrift`'s scale (m/s^2) of each unit's a_y from its roll balance minus the
+#: tractor IMU's (the IMU's noise over the window leaves 0.0007-0.0013 on the clean drives:
+#: ``python -m bench.studies.articulated_sensor_faults --balances --imu``)
 IMU_SCALE_MPS2 = 1e-3
 #: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
 ROLL_DRIFT_LIMIT_RAD = 2e-4
@@ -524,16 +527,36 @@ class TractorDrift:
       (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j: the load transfer through the
       links), the front's minus the drive's: both axles run in the same wheel paths.
 
+    With the tractor IMU (``imu``; :meth:`FaultSettings.of_whole_vehicle` with the IMU's a_y
+    among the channels, ``vehicle.tractor_imu``) A gives way to each unit's a_y from its roll
+    balance minus the IMU's a_y (m/s^2; the path's lateral acceleration, gravity-free, as
+    INTERFACES.md's ``/imu/tractor`` states it), MODEL.md's body roll equation whole:
+
+      I_b = [sum_j (K_s,j rel_j + s_j (c_j,1 dq_j,1 - c_j,2 dq_j,2)) +- (kphi_5 (phi_t - phi_r)
+            + cphi_5 (dphi_t - dphi_r)) + I_x,b dd phi_b] / (M_b h_b)
+            - g sin(phi_b) - a_y cos(phi_b)
+
+    (I_t the tractor's, + ; I_r the trailer's, -; the rates' means over the window from its
+    half-window means' change, dd phi_b's from the roll's second difference over it; a
+    pendulum's phi_b is its reading minus a_y / g). An offset d_t on the tractor's roll
+    sensor gives I_t (kphi_5 / (M_t h_t) - g) d_t and I_r -kphi_5 / (M_r h_r) d_t: the
+    difference's large terms, and -g d_t, the absolute roll the gravity term sees (9.81
+    m/s^2 per rad); a drift common to both, -g d on each. So each sensor's drift and a
+    common one are three candidates apart (a specific-force a_y, a_y + g phi, would cancel
+    the gravity term and leave the difference only).
+
     Means are over a triangular window of ``window_s`` (two running means of half of it in
     series: the bodies' momentum change, which left 0.3 mm of kingpin pitch in a plain 12 s
     mean on class C, enters only by its displacement). Judged at :data:`UNIT_MIN_SPEED_MPS`
     or more, a block at a time as :class:`UnitDrift`: each candidate's offset (``candidates``:
     per candidate its weights on the channels) fitted to z / ``scales`` by least squares; the
     one that explains most, above its limit (m or rad) for :data:`TRACTOR_PERSIST_S`, flags
-    its ``names`` (channel indices; a roll sensor's candidate is the pair's difference, both
-    named: the balances see phi_t - phi_r only, a drift common to both reads as a crossfall
-    or a curve), and holds as :class:`UnitDrift`'s flags do. ``relative``: z against its
-    first judged window's.
+    its ``names`` (channel indices; without the IMU a roll sensor's candidate is the pair's
+    difference, both named: the balances see phi_t - phi_r only, a drift common to both
+    reads as a crossfall or a curve; with it each sensor alone and both together), and holds
+    as :class:`UnitDrift`'s flags do. ``relative``: z against its first judged window's.
+    ``imu``: (the rates' rows (m, n), the IMU's channel, per unit (its row, I_x,b / (M_b
+    h_b), its roll's weights (n,))), :func:`tractor_check`'s.
     """
 
     def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
@@ -693,10 +716,12 @@ class TractorDrift:
 def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
     (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
-    not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
-    a tractor of two axles with the kingpin between them. Candidates: every deflection and
-    both roll sensors; flaggable: those not in ``judged`` (the channels :class:`UnitDrift`
-    judges), at ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`."""
+    not close: every axle instrumented, both roll sensors reading the roll (a pendulum only
+    with the IMU's a_y), a tractor of two axles with the kingpin between them. Candidates:
+    every deflection and the roll sensors (their difference; with the IMU each and both);
+    flaggable: those not in ``judged`` (the channels :class:`UnitDrift` judges), at
+    ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`. With the IMU (its a_y among
+    ``model``'s channels) the statistics are P, T, I_t, I_r and an eighth item, ``imu``."""
     veh = model.vehicle
     axles = veh.axles
     g = 9.81
