@@ -567,17 +567,21 @@ class TractorDrift:
         self.window_s, self.relative = float(window_s), relative
         self.rows = rows
         self.n = rows.shape[1]
-        #: the rows summed per block: ``rows``, then the rates' rows (``imu``)
+        #: the rows summed per block: ``rows``, then (``imu``) the rates' rows, the units'
+        #: rolls and the IMU's a_y
         self._rows = rows
-        #: the IMU's channel; per unit balance its row and I_x,b / (M_b h_b); the units'
-        #: rolls' weights (n, units); or None
+        #: per unit balance its row and I_x,b / (M_b h_b), or None
         self._imu = None
+        self._me = self.m               # the rows the windows keep (rows, rates)
         if imu is not None:
             rates, ay, units = imu
-            self._rows = np.vstack([rows, np.asarray(rates, float)])
-            self._imu = (int(ay), tuple((int(r), float(c)) for r, c, _ in units),
-                         np.array([w for *_, w in units], float).T)
-        self._me = self._rows.shape[0]
+            rates = np.asarray(rates, float)
+            measured = np.zeros(self.n)
+            measured[int(ay)] = 1.0
+            self._rows = np.vstack([rows, rates] + [np.asarray(w, float) for *_, w in units]
+                                   + [measured])
+            self._imu = tuple((int(r), float(c)) for r, c, _ in units)
+            self._me = self.m + rates.shape[0]
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
         #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
@@ -630,21 +634,19 @@ class TractorDrift:
         self._bn += 1
         if self._bn < DRIFT_BLOCK:
             return
-        if self._imu is None:
-            blk = (self._rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
-        else:                   # I against a_y cos(phi_t); phi_t's block mean kept
-            arr = np.asarray(self._vals, float)[:, :self.n]
-            blk = (self._rows @ arr.sum(axis=0)).tolist()
-            ay, units, weights = self._imu
-            phis = arr @ weights                # (samples, units): the bodies' roll
+        blk = (self._rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        if self._imu is not None:
             # MODEL.md's M_b h_b (a_y cos(phi_b) + g sin(phi_b)) beyond the rows' linear
-            # terms (the rows divide by M_b h_b)
-            extra = (arr[:, ay, None] * (1.0 - np.cos(phis))
-                     + _G * (phis - np.sin(phis))).sum(axis=0)
-            for (row, _), e in zip(units, extra.tolist()):
-                blk[row] += e
+            # terms (the rows divide by M_b h_b), at the block's means (10 ms); the bodies'
+            # rolls' block means kept for their acceleration
+            bn, me = self._bn, self._me
+            ay = blk[-1] / bn
+            phis = [x / bn for x in blk[me:-1]]
+            for (row, _), phi in zip(self._imu, phis):
+                blk[row] += bn * (ay * (1.0 - math.cos(phi)) + _G * (phi - math.sin(phi)))
+            del blk[me:]
             pts = self._pts
-            pts.append((t, phis.mean(axis=0)))
+            pts.append((t, phis))
             while t - pts[0][0] > self.window_s:
                 pts.popleft()
         blk.append(self._vs)
@@ -673,9 +675,9 @@ class TractorDrift:
             pts = self._pts
             (t2, p2), (t1, p1), p0 = pts[0], pts[len(pts) // 2], pts[-1][1]
             if t1 > t2 and t > t1:
-                acc = ((p0 - p1) / (t - t1) - (p1 - p2) / (t1 - t2)) / (0.5 * (t - t2))
-                for (row, inertia), a in zip(self._imu[1], acc):
-                    z[row] += inertia * a
+                for (row, inertia), a, b, c in zip(self._imu, p0, p1, p2):
+                    z[row] += inertia * ((a - b) / (t - t1) - (b - c) / (t1 - t2)) / (
+                        0.5 * (t - t2))
         if self.relative:
             if self._ref is None:
                 self._ref = z.copy()
