@@ -536,7 +536,8 @@ class TractorDrift:
             + cphi_5 (dphi_t - dphi_r)) + I_x,b dd phi_b] / (M_b h_b)
             - g sin(phi_b) - a_y cos(phi_b)
 
-    (I_t the tractor's, + ; I_r the trailer's, -; the rates' means over the window from its
+    (I_t the tractor's, + ; I_r the trailer's, -; a_y the IMU's, MODEL.md's one lateral
+    acceleration of the combination; the rates' means over the window from its
     half-window means' change, dd phi_b's from the roll's second difference over it; a
     pendulum's phi_b is its reading minus a_y / g). An offset d_t on the tractor's roll
     sensor gives I_t (kphi_5 / (M_t h_t) - g) d_t and I_r -kphi_5 / (M_r h_r) d_t: the
@@ -618,7 +619,7 @@ class TractorDrift:
         self._bn = 0
         self._b0 = 0.0
         self._over = None                   # (candidate, since when) above its limit
-        self._pts: deque = deque()          # (t, phi_t's block mean) over a window (imu)
+        self._pts: deque = deque()          # (t, the rolls' block means), a window (imu)
 
     def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
         """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
