@@ -37,10 +37,10 @@ front deflection), the two units' a_y difference A (m/s^2) and the front-drive c
 the largest offset of the best candidate over its limit (a flag needs > 1 for 6 s), the drift
 flags raised. ``--balances --imu``: the same with the tractor IMU's a_y (the plant's IMU, its
 default noise; A replaced by each unit's roll balance against it, I_t and I_r, m/s^2) on the
-family and :data:`IMU_DRIVES` (a 3 % crossfall straight and in the curve, pendulum roll
-sensors in the curve), then the roll sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each,
-on both with either sign, the plant's gyro drift on both) on C20, A20 and the curve on the
-crossfall: the drift flags and when, with and without the IMU.
+family and :data:`IMU_DRIVES` (a 3 % crossfall straight and in the curve), then the roll
+sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each, on both with either sign, the
+plant's gyro drift on both) on C20, A20 and the curve on the crossfall: the drift flags and
+when, with and without the IMU.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -205,11 +205,9 @@ def plain_peaks(drive: dict, rows: np.ndarray, ax: np.ndarray, window_s: float,
 
 
 #: ``--imu``: drives beside the family's (name, the family's drive, parameter overrides): a
-#: road crossfall (``simulator.road_crossfall``, rad) and pendulum roll sensors
+#: road crossfall (``simulator.road_crossfall``, rad)
 IMU_DRIVES = (('C20-crossfall', 'C20', {'simulator.road_crossfall': 0.03}),
-              ('C20-curve3-crossfall', 'C20-curve3', {'simulator.road_crossfall': 0.03}),
-              ('C20-curve3-pendulum', 'C20-curve3', {'simulator.roll_sensor': 'pendulum',
-                                                     'vehicle.roll_sensor': 'pendulum'}))
+              ('C20-curve3-crossfall', 'C20-curve3', {'simulator.road_crossfall': 0.03}))
 
 
 def imu_cases() -> list:

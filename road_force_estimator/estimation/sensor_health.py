@@ -538,8 +538,8 @@ class TractorDrift:
 
     (I_t the tractor's, + ; I_r the trailer's, -; a_y the IMU's, MODEL.md's one lateral
     acceleration of the combination; the rates' means over the window from its
-    half-window means' change, dd phi_b's from the roll's second difference over it; a
-    pendulum's phi_b is its reading minus a_y / g). An offset d_t on the tractor's roll
+    half-window means' change, dd phi_b's from the roll's second difference over it). An
+    offset d_t on the tractor's roll
     sensor gives I_t (kphi_5 / (M_t h_t) - g) d_t and I_r -kphi_5 / (M_r h_r) d_t: the
     difference's large terms, and -g d_t, the absolute roll the gravity term sees (9.81
     m/s^2 per rad); a drift common to both, -g d on each. So each sensor's drift and a
@@ -719,8 +719,8 @@ class TractorDrift:
 def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
     (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
-    not close: every axle instrumented, both roll sensors reading the roll (a pendulum only
-    with the IMU's a_y), a tractor of two axles with the kingpin between them. Candidates:
+    not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
+    a tractor of two axles with the kingpin between them. Candidates:
     every deflection and the roll sensors (their difference; with the IMU each and both);
     flaggable: those not in ``judged`` (the channels :class:`UnitDrift` judges), at
     ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`. With the IMU (its a_y among
@@ -735,7 +735,7 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     at = {ch: k for k, ch in enumerate(chans)}
     imu = at.get(('ay', 0))                       # the tractor IMU's a_y, or None
     if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
-            or (veh.roll_sensor == 'pendulum' and imu is None) or len(tractor) != 2
+            or veh.roll_sensor == 'pendulum' or len(tractor) != 2
             or not trailer
             or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
         return None
@@ -744,8 +744,6 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     phi[at[('roll', 0)]] = 1.0
     phir = np.zeros(n)
     phir[at[('roll', 1)]] = 1.0
-    if veh.roll_sensor == 'pendulum':             # a pendulum reads phi + a_y / g
-        phi[imu] = phir[imu] = -1.0 / g
     tr, rl = veh.body('tractor'), veh.body('trailer')
     k5 = veh.fifth_wheel.roll_stiffness_nmprad
     spring = model.core.statics().spring_load_n
