@@ -46,8 +46,9 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 MODES = (('0 ms', 0.0, False), ('10 ms', 0.01, False), ('offline', 0.0, True))
 
 
-def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
-    """One drive of the family: the plant's truth and the sensors' readings."""
+def simulate(case, duration_s: float, noise_m: float, seed: int = 1, imu: bool = False) -> dict:
+    """One drive of the family: the plant's truth and the sensors' readings; ``imu``: also
+    the tractor IMU's a_y (``'ay'``, m/s^2, the plant's IMU with its default noise)."""
     from bench.studies.articulated_drives import CONFIG
     from road_force_estimator.bagio import road_from_source
     from road_force_estimator.core.articulated_plant import simulate_articulated
@@ -73,13 +74,17 @@ def simulate(case, duration_s: float, noise_m: float, seed: int = 1) -> dict:
     tr = simulate_articulated(drive.vehicle, road, speed_mps=sim.speed_mps, rate_hz=sim.rate_hz,
                               duration_s=duration_s, speed_profile=drive.speed_profile,
                               lateral_acceleration=drive.lateral,
-                              tire_envelope_m=sim.tire_envelope_length_m, model=drive.model)
-    readings = drive.sensors(channel_names(drive.model)).measure(tr)
+                              tire_envelope_m=sim.tire_envelope_length_m, model=drive.model,
+                              crossfall_rad=sim.road_crossfall_rad)
+    sensors = drive.sensors(channel_names(drive.model))
+    readings = sensors.measure(tr)
     static = drive.model.statics().output_wheel_load_n.reshape(-1)
-    return {'vehicle': drive.vehicle, 't': tr.t_s, 'stamps': np.round(tr.t_s * 1e9).astype(
-        np.int64), 'y': readings, 'speed': np.asarray(tr.speed_mps, float) * np.ones(len(tr)),
-        'load': tr.wheel_load_n.T, 'dynamic': tr.wheel_load_n.T - static[:, None],
-        'axles': drive.vehicle.axle_names, 'road': tr.road_m, 'distance': tr.distance_m}
+    extra = {'ay': sensors.imu(tr)[:, 1]} if imu else {}
+    return {**extra, 'vehicle': drive.vehicle, 't': tr.t_s,
+            'stamps': np.round(tr.t_s * 1e9).astype(np.int64), 'y': readings,
+            'speed': np.asarray(tr.speed_mps, float) * np.ones(len(tr)),
+            'load': tr.wheel_load_n.T, 'dynamic': tr.wheel_load_n.T - static[:, None],
+            'axles': drive.vehicle.axle_names, 'road': tr.road_m, 'distance': tr.distance_m}
 
 
 def error_pct(t, est_dyn: np.ndarray, true_dyn: np.ndarray, settle_s: float) -> np.ndarray:

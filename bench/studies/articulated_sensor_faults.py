@@ -35,7 +35,12 @@ of the family, clean (10 um, seed 1): per drive the largest judged kingpin pitch
 front deflection), the two units' a_y difference A (m/s^2) and the front-drive cross-level T
 (mrad), P and T also over a plain 12 s mean (the window the rigid fit used) at 8 m/s or more,
 the largest offset of the best candidate over its limit (a flag needs > 1 for 6 s), the drift
-flags raised.
+flags raised. ``--balances --imu``: the same with the tractor IMU's a_y (the plant's IMU, its
+default noise; A replaced by each unit's roll balance against it, I_t and I_r, m/s^2) on the
+family and :data:`IMU_DRIVES` (a 3 % crossfall straight and in the curve), then the roll
+sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each, on both with either sign, the
+plant's gyro drift on both) on C20, A20 and the curve on the crossfall: the drift flags and
+when, with and without the IMU.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -182,51 +187,135 @@ def clean_table(roads, modes, log) -> list[str]:
     return lines
 
 
-def plain_peaks(drive: dict, rows: np.ndarray, ax: np.ndarray, window_s: float) -> tuple:
-    """The largest |P| and |T| over a plain mean of ``window_s`` every 0.1 s, at
-    8 m/s or more over it (m, rad)."""
+def plain_peaks(drive: dict, rows: np.ndarray, ax: np.ndarray, window_s: float,
+                cross: int = 2) -> tuple:
+    """The largest |P| and |T| (row ``cross``) over a plain mean of ``window_s`` every 0.1 s,
+    at 8 m/s or more over it (m, rad)."""
     y, v, t = np.asarray(drive['y'], float), np.asarray(drive['speed'], float), drive['t']
     n = int(round(window_s / (t[1] - t[0])))
+    if rows.shape[1] > y.shape[1]:               # the IMU's a_y, the last channel
+        y = np.column_stack([y, drive['ay']])
     z = y @ rows.T
     c = np.vstack([np.zeros((1, z.shape[1])), np.cumsum(z, axis=0)])
     ends = np.arange(n, len(t) + 1, max(1, n // 120))
     ok = np.array([v[e - n:e].min() >= 8.0 for e in ends])
     a_x = (v[ends - 1] - v[ends - n]) / (t[ends - 1] - t[ends - n])
     mean = (c[ends] - c[ends - n]) / n + a_x[:, None] * ax
-    return float(np.abs(mean[ok, 0]).max()), float(np.abs(mean[ok, 2]).max())
+    return float(np.abs(mean[ok, 0]).max()), float(np.abs(mean[ok, cross]).max())
 
 
-def balances_table(seconds: float, log) -> list[str]:
-    """The tractor's drift balances on the family's clean drives (module notes)."""
-    from bench.accuracy.articulated_observer import simulate
-    from bench.studies.articulated_drives import family
+#: ``--imu``: drives beside the family's (name, the family's drive, parameter overrides): a
+#: road crossfall (``simulator.road_crossfall``, rad)
+IMU_DRIVES = (('C20-crossfall', 'C20', {'simulator.road_crossfall': 0.03}),
+              ('C20-curve3-crossfall', 'C20-curve3', {'simulator.road_crossfall': 0.03}))
+
+
+def imu_cases() -> list:
+    """The family's drives and :data:`IMU_DRIVES`."""
+    from bench.studies.articulated_drives import Case, family
+
+    cases = family()
+    by = {c.name: c for c in cases}
+    for name, base, values in IMU_DRIVES:
+        c = by[base]
+        cases.append(Case(name, c.road, c.speed_mps, speed_profile=c.speed_profile,
+                          values={**c.values, **values}))
+    return cases
+
+
+def detector_run(drive: dict, imu: bool):
+    """The whole vehicle's fault detector over a drive (the readings, with the IMU's a_y as the
+    last channel when ``imu``): the detector after its last sample."""
     from road_force_estimator.core.parameters import ObserverParameters
     from road_force_estimator.estimation.models.articulated import (
         ArticulatedObserverModel)
-    from road_force_estimator.estimation.sensor_health import (
-        UNIT_WINDOW_FACTOR, FaultDetector, FaultSettings)
+    from road_force_estimator.estimation.sensor_health import FaultDetector, FaultSettings
 
+    y = np.column_stack([drive['y'], drive['ay']]) if imu else np.asarray(drive['y'])
+    det = FaultDetector(FaultSettings.of_whole_vehicle(ObserverParameters(), (
+        ArticulatedObserverModel(drive['vehicle'], imu=imu))))
+    for stamp, row, v in zip(drive['stamps'].tolist(), y.tolist(), drive['speed'].tolist()):
+        det.step(stamp, row, (v,))
+    return det
+
+
+def balances_table(seconds: float, log, imu: bool = False) -> list[str]:
+    """The tractor's drift balances on the family's clean drives (module notes); ``imu``:
+    with the tractor IMU (A replaced by each unit's balance against the IMU's a_y), on
+    :func:`imu_cases`."""
+    from bench.accuracy.articulated_observer import simulate
+    from bench.studies.articulated_drives import family
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.sensor_health import UNIT_WINDOW_FACTOR
+
+    middle = 'I_t (m/s^2) | I_r (m/s^2)' if imu else 'A (m/s^2)'
     lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
-             'T (mrad) | A (m/s^2) | largest offset / limit | units (mm) | drift flags |',
-             '|---|---:|---:|---:|---:|---:|---:|---:|---|']
+             f'T (mrad) | {middle} | largest offset / limit | units (mm) | drift flags |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---|' + ('---:|' if imu else '')]
     obs = ObserverParameters()
-    for case in family():
-        drive = simulate(case, seconds, 1e-5)
-        settings = FaultSettings.of_whole_vehicle(obs, ArticulatedObserverModel(
-            drive['vehicle']))
-        det = FaultDetector(settings)
-        for stamp, y, v in zip(drive['stamps'].tolist(), np.asarray(drive['y']).tolist(),
-                               drive['speed'].tolist()):
-            det.step(stamp, y, (v,))
+    for case in (imu_cases() if imu else family()):
+        drive = simulate(case, seconds, 1e-5, imu=imu)
+        det = detector_run(drive, imu)
+        settings = det.settings
         rows, ax = np.asarray(settings.tractor[0]), np.asarray(settings.tractor[1])
-        p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s)
+        cross = 1 if imu else 2
+        p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s,
+                           cross)
         peak = det.tractor.peak
         unit_mm, unit_ch = det.units.peak
         unit = f'{unit_mm * 1e3:.3f} ({settings.channels[unit_ch]})' if unit_ch >= 0 else 'n/a'
         raised = ', '.join(n for n, c in det.counts().drift_episodes.items() if c) or 'none'
+        cells = (f'{peak[2]:.4f} | {peak[3]:.4f}' if imu else f'{peak[1]:.4f}')
         lines.append(f'| {case.name} | {p * 1e3:.3f} | {peak[0] * 1e3:.3f} | {t * 1e3:.3f} | '
-                     f'{peak[2] * 1e3:.3f} | {peak[1]:.4f} | {peak[3]:.2f} | {unit} | {raised} |')
+                     f'{peak[cross] * 1e3:.3f} | {cells} | {peak[-1]:.2f} | {unit} | '
+                     f'{raised} |')
         log(lines[-1])
+    return lines
+
+
+#: ``--imu``: the roll sensors' drifts (1 mrad/min from :data:`DRIFT_AT`, or the plant's gyro
+#: drift on both from 0 s), named with and without the IMU
+ROLL_DRIFTS = (('tractor_roll +1 mrad/min', f'drift@tractor_roll:rate={DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g}', {}),
+               ('trailer_roll -1 mrad/min', f'drift@trailer_roll:rate={-DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g}', {}),
+               ('both +1 mrad/min', f'drift@tractor_roll:rate={DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g};drift@trailer_roll:rate={DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g}', {}),
+               ('both -1 mrad/min', f'drift@tractor_roll:rate={-DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g};drift@trailer_roll:rate={-DRIFT_RATE:.6g},'
+                f'start={DRIFT_AT:g}', {}),
+               ('gyro drift 1 mrad/min on both (plant)', '',
+                {'simulator.roll_sensor': 'gyro', 'simulator.roll_gyro_drift': DRIFT_RATE}))
+
+
+def roll_table(seconds: float, log) -> list[str]:
+    """The roll sensors' drifts (:data:`ROLL_DRIFTS`) on C20, A20 and C20-curve3-crossfall:
+    the drift flags raised and the first, s after the drift began, with and without the
+    IMU."""
+    from bench.accuracy.articulated_observer import simulate
+    from bench.studies.articulated_drives import Case
+
+    lines = ['| drive | drift | with the IMU: flags (first, s after the drift began) | '
+             'without: flags (first) |', '|---|---|---|---|']
+    by = {c.name: c for c in imu_cases()}
+    for name in ('C20', 'A20', 'C20-curve3-crossfall'):
+        for label, spec, values in ROLL_DRIFTS:
+            c = by[name]
+            drive = simulate(Case(c.name, c.road, c.speed_mps, speed_profile=c.speed_profile,
+                                  values={**c.values, **values}), seconds, 1e-5, imu=True)
+            if spec:
+                drive = with_faults(drive, spec)
+            at = DRIFT_AT if spec else 0.0
+            cells = []
+            for imu in (True, False):
+                counts = detector_run(drive, imu).counts()
+                t0 = int(drive['stamps'][0])
+                cells.append(', '.join(
+                    f'{n} +{(f["drift"] - t0) * 1e-9 - at:.2f}' for n, f in
+                    counts.first_ns.items() if 'drift' in f) or 'none')
+            lines.append(f'| {name} | {label} | {cells[0]} | {cells[1]} |')
+            log(lines[-1])
     return lines
 
 
@@ -240,9 +329,17 @@ def main(argv=None) -> int:
         ap = argparse.ArgumentParser(description="the tractor's drift balances")
         ap.add_argument('--balances', action='store_true')
         ap.add_argument('--seconds', type=float, default=60.0)
+        ap.add_argument('--imu', action='store_true',
+                        help="with the tractor IMU's a_y; then also the roll drifts' table")
         args = ap.parse_args(argv)
-        print('\n'.join(balances_table(args.seconds, lambda text: print(
-            text, file=sys.stderr, flush=True))))
+
+        def log(text: str) -> None:
+            print(text, file=sys.stderr, flush=True)
+
+        print('\n'.join(balances_table(args.seconds, log, args.imu)))
+        if args.imu:
+            print()
+            print('\n'.join(roll_table(args.seconds, log)))
         return 0
     return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
                               description=__doc__.splitlines()[0])

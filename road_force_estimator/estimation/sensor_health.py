@@ -51,7 +51,9 @@ A tractor of two instrumented axles (one degree of freedom left over a rigid fit
 sensors are judged by the whole vehicle's balances instead (:class:`TractorDrift`,
 :func:`tractor_check`): the tractor's pitch about the kingpin, the two units' lateral
 accelerations through the fifth wheel's roll stiffness, the road's cross-level under the
-front and the drive axle.
+front and the drive axle; with the tractor IMU each unit's roll balance against its a_y
+instead of the two units' difference, which names the roll sensor that drifts, or both for a
+drift common to them.
 """
 from __future__ import annotations
 
@@ -64,7 +66,7 @@ import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
-           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'ROLL_DRIFT_LIMIT_RAD',
+           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'IMU_SCALE_MPS2', 'ROLL_DRIFT_LIMIT_RAD',
            'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
            'FaultDetector', 'UnitDrift', 'detect_faults', 'left_out']
 
@@ -94,6 +96,11 @@ UNIT_MIN_AXLES = 3
 #: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
 #: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
+_G = 9.81                  # m/s^2, as tractor_check's g
+#: :class:`TractorDrift`'s scale (m/s^2) of each unit's a_y from its roll balance minus the
+#: tractor IMU's (the IMU's noise over the window leaves 0.0007-0.0013 on the clean drives:
+#: ``python -m bench.studies.articulated_sensor_faults --balances --imu``)
+IMU_SCALE_MPS2 = 1e-3
 #: A roll sensor's offset (rad) above which :class:`TractorDrift` flags it.
 ROLL_DRIFT_LIMIT_RAD = 2e-4
 #: Time (s) a :class:`TractorDrift` candidate stays above its limit before it is flagged (a
@@ -192,8 +199,9 @@ class FaultDetector:
                                 settings.drift_offset_m, settings.relative)
                       if settings.units and settings.drift_offset_m > 0.0 else None)
         #: the tractor's deflections and the roll sensors (:class:`TractorDrift`), or None
-        self.tractor = (TractorDrift(*settings.tractor, UNIT_WINDOW_FACTOR
-                                     * settings.drift_window_s, settings.relative)
+        self.tractor = (TractorDrift(*settings.tractor[:7], UNIT_WINDOW_FACTOR
+                                     * settings.drift_window_s, settings.relative,
+                                     *settings.tractor[7:])
                         if settings.tractor and settings.drift_offset_m > 0.0 else None)
         self.reset()
 
@@ -535,26 +543,62 @@ class TractorDrift:
       (K_t,j = 2 kt_j w_j^2, L_j = h_rc,j S_j / g + rho_j m_j: the load transfer through the
       links), the front's minus the drive's: both axles run in the same wheel paths.
 
+    With the tractor IMU (``imu``; :meth:`FaultSettings.of_whole_vehicle` with the IMU's a_y
+    among the channels, ``vehicle.tractor_imu``) A gives way to each unit's a_y from its roll
+    balance minus the IMU's a_y (m/s^2; the path's lateral acceleration, gravity-free, as
+    INTERFACES.md's ``/imu/tractor`` states it), MODEL.md's body roll equation whole:
+
+      I_b = [sum_j (K_s,j rel_j + s_j (c_j,1 dq_j,1 - c_j,2 dq_j,2)) +- (kphi_5 (phi_t - phi_r)
+            + cphi_5 (dphi_t - dphi_r)) + I_x,b dd phi_b] / (M_b h_b)
+            - g sin(phi_b) - a_y cos(phi_b)
+
+    (I_t the tractor's, + ; I_r the trailer's, -; a_y the IMU's, MODEL.md's one lateral
+    acceleration of the combination; the rates' means over the window from its
+    half-window means' change, dd phi_b's from the roll's second difference over it). An
+    offset d_t on the tractor's roll
+    sensor gives I_t (kphi_5 / (M_t h_t) - g) d_t and I_r -kphi_5 / (M_r h_r) d_t: the
+    difference's large terms, and -g d_t, the absolute roll the gravity term sees (9.81
+    m/s^2 per rad); a drift common to both, -g d on each. So each sensor's drift and a
+    common one are three candidates apart (a specific-force a_y, a_y + g phi, would cancel
+    the gravity term and leave the difference only).
+
     Means are over a triangular window of ``window_s`` (two running means of half of it in
     series: the bodies' momentum change, which left 0.3 mm of kingpin pitch in a plain 12 s
     mean on class C, enters only by its displacement). Judged at :data:`UNIT_MIN_SPEED_MPS`
     or more, a block at a time as :class:`UnitDrift`: each candidate's offset (``candidates``:
     per candidate its weights on the channels) fitted to z / ``scales`` by least squares; the
     one that explains most, above its limit (m or rad) for :data:`TRACTOR_PERSIST_S`, flags
-    its ``names`` (channel indices; a roll sensor's candidate is the pair's difference, both
-    named: the balances see phi_t - phi_r only, a drift common to both reads as a crossfall
-    or a curve), and holds as :class:`UnitDrift`'s flags do. ``relative``: z against its
-    first judged window's.
+    its ``names`` (channel indices; without the IMU a roll sensor's candidate is the pair's
+    difference, both named: the balances see phi_t - phi_r only, a drift common to both
+    reads as a crossfall or a curve; with it each sensor alone and both together), and holds
+    as :class:`UnitDrift`'s flags do. ``relative``: z against its first judged window's.
+    ``imu``: (the rates' rows (m, n), the IMU's channel, per unit (its row, I_x,b / (M_b
+    h_b), its roll's weights (n,))), :func:`tractor_check`'s.
     """
 
     def __init__(self, rows: Sequence, ax: Sequence, scales: Sequence, candidates: Sequence,
                  names: Sequence, limits: Sequence, flaggable: Sequence, window_s: float,
-                 relative: bool = False) -> None:
+                 relative: bool = False, imu: tuple | None = None) -> None:
         rows = np.asarray(rows, float)
         self.m = rows.shape[0]
         self.window_s, self.relative = float(window_s), relative
         self.rows = rows
         self.n = rows.shape[1]
+        #: the rows summed per block: ``rows``, then (``imu``) the rates' rows, the units'
+        #: rolls and the IMU's a_y
+        self._rows = rows
+        #: per unit balance its row and I_x,b / (M_b h_b), or None
+        self._imu = None
+        self._me = self.m               # the rows the windows keep (rows, rates)
+        if imu is not None:
+            rates, ay, units = imu
+            rates = np.asarray(rates, float)
+            measured = np.zeros(self.n)
+            measured[int(ay)] = 1.0
+            self._rows = np.vstack([rows, rates] + [np.asarray(w, float) for *_, w in units]
+                                   + [measured])
+            self._imu = tuple((int(r), float(c)) for r, c, _ in units)
+            self._me = self.m + rates.shape[0]
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
         #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
@@ -583,14 +627,15 @@ class TractorDrift:
 
     def restart(self) -> None:
         """The windows start again (a gap, a stuck sensor, a stop)."""
-        m = self.m
-        self._win = MovingSums(m + 1)       # blocks: sums (m + 1)
-        self._means = MovingSums(m + 1)     # per block: the half-window's means (m + 1)
+        m = self._me
+        self._win = MovingSums(m + 1)       # blocks: sums (rows, rates, speed)
+        self._means = MovingSums(m + 1)     # per block: the half-window's means
         self._vals: list = []               # the block's readings (the callers' sequences)
         self._vs = 0.0                      # and its speeds' sum
         self._bn = 0
         self._b0 = 0.0
         self._over = None                   # (candidate, since when) above its limit
+        self._pts: deque = deque()          # (t, the rolls' block means), a window (imu)
 
     def step(self, t: float, values: Sequence[float], speed_mps: float, drift: list) -> None:
         """One sample (s, the readings, m/s) into the windows; the flags into ``drift`` at a
@@ -606,7 +651,21 @@ class TractorDrift:
         self._bn += 1
         if self._bn < DRIFT_BLOCK:
             return
-        blk = (self.rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        blk = (self._rows @ np.sum(self._vals, axis=0)[:self.n]).tolist()
+        if self._imu is not None:
+            # MODEL.md's M_b h_b (a_y cos(phi_b) + g sin(phi_b)) beyond the rows' linear
+            # terms (the rows divide by M_b h_b), at the block's means (10 ms); the bodies'
+            # rolls' block means kept for their acceleration
+            bn, me = self._bn, self._me
+            ay = blk[-1] / bn
+            phis = [x / bn for x in blk[me:-1]]
+            for (row, _), phi in zip(self._imu, phis):
+                blk[row] += bn * (ay * (1.0 - math.cos(phi)) + _G * (phi - math.sin(phi)))
+            del blk[me:]
+            pts = self._pts
+            pts.append((t, phis))
+            while t - pts[0][0] > self.window_s:
+                pts.popleft()
         blk.append(self._vs)
         self._vals = []
         self._vs = 0.0
@@ -624,7 +683,18 @@ class TractorDrift:
         first_t, first, _ = means.entries[0]
         span = t - first_t
         a_x = (now[-1] - first[-1]) / span if span > 0.0 else 0.0
-        z = np.asarray(means.sums[:-1]) / len(means.entries) + self.ax * a_x
+        m = self.m
+        z = np.asarray(means.sums[:m]) / len(means.entries) + self.ax * a_x
+        if self._imu is not None:
+            # the rates' triangular means: the half-window means' change; phi_t's second
+            # difference over the window: the triangular mean of its acceleration
+            z = z + (np.asarray(now[m:-1]) - np.asarray(first[m:-1])) / span
+            pts = self._pts
+            (t2, p2), (t1, p1), p0 = pts[0], pts[len(pts) // 2], pts[-1][1]
+            if t1 > t2 and t > t1:
+                for (row, inertia), a, b, c in zip(self._imu, p0, p1, p2):
+                    z[row] += inertia * ((a - b) / (t - t1) - (b - c) / (t1 - t2)) / (
+                        0.5 * (t - t2))
         if self.relative:
             if self._ref is None:
                 self._ref = z.copy()
@@ -640,7 +710,9 @@ class TractorDrift:
         np.maximum(peak[:-1], np.abs(u) * self.scales, out=peak[:-1])
         peak[-1] = max(peak[-1], abs(offset[best]) / self.limits[best])
         names = self.names
-        up = [j for j, ks in enumerate(names) if self.flaggable[j] and drift[ks[0]]]
+        up = sorted((j for j, ks in enumerate(names)    # the flagged candidate: all its
+                     if self.flaggable[j] and all(drift[k] for k in ks)),  # names, the most
+                    key=lambda j: -len(names[j]))
         if up and abs(offset[up[0]]) >= UNIT_CLEAR_FRACTION * self.limits[up[0]]:
             self._seen = t
         if up and t - self._seen <= self.window_s:
@@ -664,9 +736,11 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
     (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
     not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
-    a tractor of two axles with the kingpin between them. Candidates: every deflection and
-    both roll sensors; flaggable: those not in ``judged`` (the channels :class:`UnitDrift`
-    judges), at ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`."""
+    a tractor of two axles with the kingpin between them. Candidates:
+    every deflection and the roll sensors (their difference; with the IMU each and both);
+    flaggable: those not in ``judged`` (the channels :class:`UnitDrift` judges), at
+    ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`. With the IMU (its a_y among
+    ``model``'s channels) the statistics are P, T, I_t, I_r and an eighth item, ``imu``."""
     veh = model.vehicle
     axles = veh.axles
     g = 9.81
@@ -674,12 +748,14 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     tractor = [j for j, a in enumerate(axles) if a.body == 'tractor']
     trailer = [j for j, a in enumerate(axles) if a.body == 'trailer']
     x5 = veh.fifth_wheel.position_m
+    at = {ch: k for k, ch in enumerate(chans)}
+    imu = at.get(('ay', 0))                       # the tractor IMU's a_y, or None
     if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
-            or veh.roll_sensor == 'pendulum' or len(tractor) != 2 or not trailer
+            or veh.roll_sensor == 'pendulum' or len(tractor) != 2
+            or not trailer
             or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
         return None
     n = len(chans)
-    at = {ch: k for k, ch in enumerate(chans)}
     phi = np.zeros(n)
     phi[at[('roll', 0)]] = 1.0
     phir = np.zeros(n)
@@ -688,6 +764,7 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     k5 = veh.fifth_wheel.roll_stiffness_nmprad
     spring = model.core.statics().spring_load_n
     pitch, ayt, ayr = np.zeros(n), np.zeros(n), np.zeros(n)
+    damp = {'tractor': np.zeros(n), 'trailer': np.zeros(n)}   # the springs' damping moments
     rel, ks = {}, {}
     for j, a in enumerate(axles):
         s = a.spring_half_track_m
@@ -695,14 +772,18 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         rel[j] = np.zeros(n)
         rel[j][left], rel[j][right] = 0.5 / s, -0.5 / s
         ks[j] = sum(a.suspension_stiffness_npm) * s * s + a.auxiliary_roll_stiffness_nmprad
+        damp[a.body][left] += a.suspension_damping_nspm[0] * s
+        damp[a.body][right] -= a.suspension_damping_nspm[1] * s
         if a.body == 'tractor':
             pitch[left] += a.suspension_stiffness_npm[0] * (a.position_m - x5)
             pitch[right] += a.suspension_stiffness_npm[1] * (a.position_m - x5)
             ayt += ks[j] * rel[j]
         else:
             ayr += ks[j] * rel[j]
-    ayt = (ayt + k5 * (phi - phir)) / (tr.mass_kg * tr.cg_height_above_roll_axis_m) - g * phi
-    ayr = (ayr - k5 * (phi - phir)) / (rl.mass_kg * rl.cg_height_above_roll_axis_m) - g * phir
+    mh_t = tr.mass_kg * tr.cg_height_above_roll_axis_m
+    mh_r = rl.mass_kg * rl.cg_height_above_roll_axis_m
+    ayt = (ayt + k5 * (phi - phir)) / mh_t - g * phi
+    ayr = (ayr - k5 * (phi - phir)) / mh_r - g * phir
 
     def cross(j: int) -> np.ndarray:
         a = axles[j]
@@ -713,15 +794,38 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         return body - rel[j] - (ks[j] * rel[j] + lat * ayr) / kt
 
     scale0 = abs(pitch[at[('q', tractor[0], 0)]])
-    rows = np.array([pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])])
-    ax = (tr.mass_kg * tr.cg_height_m / scale0, 0.0, 0.0)
+    rows = [pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])]
+    scales = TRACTOR_SCALES
     deflections = [at[('q', j, side)] for j in tractor for side in (0, 1)]
     roll = (at[('roll', 0)], at[('roll', 1)])
-    cands = tuple(((k, 1.0),) for k in deflections) + (((roll[0], 0.5), (roll[1], -0.5)),)
-    names = tuple((k,) for k in deflections) + (roll,)
-    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,)
-    flaggable = tuple(k not in judged for k in deflections) + (True,)
-    return (tuple(map(tuple, rows)), ax, TRACTOR_SCALES, cands, names, limits, flaggable)
+    cands = tuple(((k, 1.0),) for k in deflections)
+    names = tuple((k,) for k in deflections)
+    if imu is None:             # the roll difference only: both named
+        cands += (((roll[0], 0.5), (roll[1], -0.5)),)
+        names += (roll,)
+        rolls = 1
+    else:                       # each unit's a_y from its roll balance minus the IMU's
+        measured = np.zeros(n)
+        measured[imu] = 1.0
+        rows[1:2] = []          # A is their difference
+        rows += [ayt - measured, ayr - measured]
+        scales = (scales[0], scales[2], IMU_SCALE_MPS2, IMU_SCALE_MPS2)
+        cands += (((roll[0], 1.0),), ((roll[1], 1.0),), ((roll[0], 1.0), (roll[1], 1.0)))
+        names += ((roll[0],), (roll[1],), roll)
+        rolls = 3
+    ax = (tr.mass_kg * tr.cg_height_m / scale0,) + (0.0,) * (len(rows) - 1)
+    limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,) * rolls
+    flaggable = tuple(k not in judged for k in deflections) + (True,) * rolls
+    out = (tuple(map(tuple, np.array(rows))), ax, scales, cands, names, limits, flaggable)
+    if imu is None:
+        return out
+    c5 = veh.fifth_wheel.roll_damping_nmsprad * (phi - phir)
+    rates = np.zeros((len(rows), n))   # the damping moments, on the channels' rates
+    rates[2] = (damp['tractor'] + c5) / mh_t
+    rates[3] = (damp['trailer'] - c5) / mh_r
+    units = ((2, tr.roll_inertia_kgm2 / mh_t, tuple(phi)),
+             (3, rl.roll_inertia_kgm2 / mh_r, tuple(phir)))
+    return out + ((tuple(map(tuple, rates)), imu, units),)
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:
