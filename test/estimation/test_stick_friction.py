@@ -1,0 +1,81 @@
+"""The stick friction carried from the measured deflections (issue 30: MODEL.md's
+elastic-plastic element, ``vehicle.leaf_spring_friction_model: stick``): the stop operator on
+the readings against the plant's own slider force, and the loads against the plant's truth
+beside the same drive without friction, on the front axle and the whole vehicle, online,
+with 10 ms and offline.
+
+Truth: the plants (core/plant.py, core/articulated_plant.py); the slider force is the
+plant's suspension force less its linear spring and damper, ``F_b + k q + c dq``.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
+from road_force_estimator.core.plant import simulate
+from road_force_estimator.core.road import iso8608_profile
+from road_force_estimator.core.sensors import SensorModel
+from road_force_estimator.estimation import estimate_batch
+from road_force_estimator.estimation.models.front_axle import FrontAxleModel
+from road_force_estimator.estimation.observer.friction import MeasuredSliders
+from road_force_estimator.estimation.offline import estimate_recording
+
+STICK = replace(VehicleParameters(), leaf_spring_friction_n=(1500.0, 1500.0),
+                leaf_spring_friction_model='stick')
+SKIP = 2000          # samples (2 s) of convergence
+MODES = (('online', 0.0), ('10 ms', 0.01), ('offline', 0.0))
+
+
+def _drive(vehicle, road_class: str, parked: float = 0.0):
+    tr = simulate(vehicle, iso8608_profile(road_class, 250.0, seed=3), speed_mps=20.0,
+                  rate_hz=1000.0, duration_s=10.0, tire_envelope_m=0.25, friction_start=parked)
+    q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5).measure(
+        tr.q_m, tr.roll_rad)
+    return tr, np.round(np.asarray(tr.t_s) * 1e9).astype(np.int64), q, phi
+
+
+def _load_error(vehicle, drive, mode: str, latency: float) -> float:
+    tr, stamps, q, phi = drive
+    if mode == 'offline':
+        est = estimate_recording(stamps, q, phi, 20.0, vehicle, ObserverParameters())
+    else:
+        est = estimate_batch(stamps, q, phi, 20.0, vehicle,
+                             ObserverParameters(latency_s=latency))
+    load = np.asarray(tr.wheel_load_n)[SKIP:]
+    return float(np.sqrt(np.mean((np.asarray(est.wheel_load_n)[SKIP:] - load) ** 2)))
+
+
+@pytest.mark.parametrize('road_class', ['A', 'C'])
+def test_the_operator_on_the_readings_is_the_plants_slider_force(road_class):
+    """The stop operator on the noisy readings (10 um) from a free start against the plant's
+    slider force: within 5 % of its RMS (measured: 38 N of 1160 N on class A, 23 N of 1390 N
+    on class C: the noise, k_f 10 um = 32 N while the slider holds)."""
+    tr, _, q, phi = _drive(STICK, road_class)
+    v = STICK
+    slider = (np.asarray(tr.suspension_force_n) + np.asarray(v.suspension_stiffness_npm)
+              * np.asarray(tr.q_m) + np.asarray(v.suspension_damping_nspm)
+              * np.asarray(tr.dq_mps))
+    got = MeasuredSliders(FrontAxleModel(STICK)).run(np.column_stack([q, phi])).T
+    err = np.sqrt(np.mean((got - slider) ** 2, axis=0))
+    ref = np.sqrt(np.mean(slider ** 2, axis=0))
+    assert np.all(err < 0.05 * ref), (err, ref)
+
+
+@pytest.fixture(scope='module', params=['A', 'C'])
+def drives(request):
+    return (request.param, _drive(STICK, request.param),
+            _drive(replace(STICK, leaf_spring_friction_n=(0.0, 0.0)), request.param))
+
+
+def test_front_axle_loads_with_sticking_springs_as_without_friction(drives):
+    """The file stating the stick friction: the wheel-load error against the plant's truth
+    within 1.1 x the same drive's without friction (plant and file) in every mode (measured,
+    10 s: class A 1.00 / 1.03 / 1.05, class C 1.00 / 0.99 / 1.00 online / 10 ms / offline;
+    with the roughness matched on the raw readings, 1.15 / 1.36 / 1.51 on class A)."""
+    road_class, stick, clean = drives
+    none = replace(STICK, leaf_spring_friction_n=(0.0, 0.0))
+    for mode, latency in MODES:
+        got = _load_error(STICK, stick, mode, latency)
+        ref = _load_error(none, clean, mode, latency)
+        assert got < 1.1 * ref, (road_class, mode, got, ref)
