@@ -51,7 +51,8 @@ from road_force_estimator.core.friction import Sliders
 from road_force_estimator.estimation.models.protocol import ContinuousModel, VehicleModel
 from road_force_estimator.estimation.observer.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 
-__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'dq_rows', 'friction_response']
+__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'dq_rows', 'friction_response',
+           'friction_step']
 
 #: With a latency, each step's friction is corrected twice: at this lag (s), where the rates
 #: have taken most of what the later samples tell (the sensor lag and the wheel's sticking
@@ -69,20 +70,27 @@ def dq_rows(g: Gains, dt: float, rates: tuple) -> tuple[np.ndarray, np.ndarray]:
     return g.transition(dt)[rows], g.friction_input(dt)[rows]
 
 
-def friction_response(model: ContinuousModel, dt: float, forces, x0=None
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    """The linear model's readings (m, ny) driven by the friction forces alone: ``forces``
-    (m, nf) (N) held over the step into each sample (row 0: the first sample, whose state is
-    ``x0``, default 0), steps of dt (s, zero-order hold); and the last sample's state."""
-    forces = np.asarray(forces, dtype=float)
+def friction_step(model: ContinuousModel, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_d, B_d)``: the transition of a step of dt (s) and the state change per newton of
+    friction force held over it (zero-order hold)."""
     nx, nf = model.friction_b.shape
     big = np.zeros((nx + nf, nx + nf))
     big[:nx, :nx] = model.a
     big[:nx, nx:] = model.friction_b
     step = linalg.expm(big * dt)
-    a, bd = step[:nx, :nx], step[:nx, nx:]
-    x = np.zeros(nx) if x0 is None else np.asarray(x0, dtype=float)
-    states = np.empty((forces.shape[0], nx))
+    return step[:nx, :nx], step[:nx, nx:]
+
+
+def friction_response(model: ContinuousModel, dt: float, forces, x0=None, step=None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The linear model's readings (m, ny) driven by the friction forces alone: ``forces``
+    (m, nf) (N) held over the step into each sample (row 0: the first sample, whose state is
+    ``x0``, default 0), steps of dt (s, zero-order hold; ``step``: its :func:`friction_step`
+    when known); and the last sample's state."""
+    forces = np.asarray(forces, dtype=float)
+    a, bd = friction_step(model, dt) if step is None else step
+    x = np.zeros(a.shape[0]) if x0 is None else np.asarray(x0, dtype=float)
+    states = np.empty((forces.shape[0], a.shape[0]))
     for k, f in enumerate(forces):
         if k or x0 is not None:
             x = a @ x + bd @ f
@@ -165,6 +173,10 @@ class KnownFriction:
         #: the stick element from the readings (module notes), or None: the law on the rates
         self.stick = MeasuredSliders(vehicle_model) if vehicle_model.friction_sticks else None
         self._y_start = None
+        self._stat_step = None       # (model, dt, its friction_step) of :meth:`response`
+        # stick: the outputs' direct part per newton (no, nf) and the rows that have one
+        self._fd_rows = [j for j, *_ in self.fd]
+        self._fd_mat = np.array([d for _, *d in self.fd]).reshape(len(self.fd), -1)
         self.restart()
 
     @property
@@ -240,13 +252,14 @@ class KnownFriction:
         the forces at the elements' rates among them (stick: the forces of the sample
         stamped ``stamp``, kept since :meth:`record`)."""
         if self.stick is not None:
-            f = self._direct_force(stamp)
-        else:
-            f = self.force([o[j] for j in self.rate_outputs]).tolist()
+            add = _dot(self._fd_mat, self._direct_force(stamp)).tolist()
+            for j, a in zip(self._fd_rows, add):
+                o[j] += a
+            return
+        f = self.force([o[j] for j in self.rate_outputs]).tolist()
         for j, *d in self.fd:
             o[j] += sum(dk * fk for dk, fk in zip(d, f))
 
-    # -- the delayed correction (module notes) ---------------------------------------------
     def response(self, model: ContinuousModel, dt: float) -> np.ndarray:
         """Stick: the linear model's readings (m, ny) driven by the forces of the samples
         recorded since the last call (:func:`friction_response`, steps of dt, s; its state
@@ -254,7 +267,10 @@ class KnownFriction:
         f, self._stat_f = self._stat_f, []
         if not f:
             return np.zeros((0, model.c.shape[0]))
-        out, self._stat_x = friction_response(model, dt, f, self._stat_x)
+        key = self._stat_step
+        if key is None or key[0] is not model or key[1] != dt:
+            key = self._stat_step = (model, dt, friction_step(model, dt))
+        out, self._stat_x = friction_response(model, dt, f, self._stat_x, key[2])
         return out
 
     def _direct_force(self, stamp: int | None) -> tuple:
@@ -307,6 +323,7 @@ class KnownFriction:
         if self._steps:
             self._steps[-1][1] = self.last_force
 
+    # -- the delayed correction (module notes) ---------------------------------------------
     @staticmethod
     def stage_lag(dt: float, lag: int) -> int:
         """The intermediate lag (samples) of the first correction (:data:`STAGE_S` at the step
