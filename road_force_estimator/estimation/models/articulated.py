@@ -57,15 +57,16 @@ a pendulum without the IMU is read as phi.
 
 Friction and sensor lag, as the front axle's (:mod:`.front_axle`, "Friction and sensor lag";
 the law shared, :mod:`.leaf_friction`; the equivalent damping's factors this model's own,
-:data:`FRICTION_DAMPING_FACTORS`): every spring's
-``-F_f,j,i tanh(dq_j,i / v_f)`` (``vehicle.axle.<name>.leaf_spring_friction``) is a known
-input acting where its spring and damper act (generalised force ``S^T f``, S the springs'
+:data:`FRICTION_DAMPING_FACTORS`): every spring's ``-F_f,j,i tanh(dq_j,i / v_f)``
+(``vehicle.axle.<name>.leaf_spring_friction``; the ``stick`` element: its force from the
+measured ``q_j,i`` where every such spring's axle is instrumented, :mod:`.leaf_friction`) is a
+known input acting where its spring and damper act (generalised force ``S^T f``, S the springs'
 kinematic rows), evaluated on the estimated ``dq_j,i``; the gains' linear model carries its
 equivalent damping. Every lagged channel (an axle's ``sensor_time_constant``, the rolls'
-``vehicle.sensor_time_constant[1]``) has a first-order state ``tau dl = y - l`` appended
-after ``a_y``, which the sensor measures; the braking response is read through the same lag.
-The friction is evaluated on the rates the filter estimates, without the braking response's
-(whose rates are slow).
+``vehicle.sensor_time_constant[1]``) has a first-order state ``tau dl = y - l`` appended after
+``a_y``, which the sensor measures; the braking response is read through the same lag. The
+friction is evaluated on the rates the filter estimates, without the braking response's (whose
+rates are slow).
 
 Tuning: the front axle's schedule on the deflection noise (:func:`.front_axle.scheduled`),
 force noise on every equation of motion (per wheel on the axles, heave, pitch and roll on the
@@ -221,6 +222,14 @@ class ArticulatedObserverModel(LeafSpringFriction):
         self.friction_rate_states = tuple(range(self.layout.dx.start,
                                                 self.layout.dx.start + nw))
         self.friction_rate_outputs = tuple(range(nw, 2 * nw))
+        #: the stick element's law and k_f (N/m) per spring, and each spring's deflection
+        #: channel (sign +1: the channel reads q_j,i; None: its axle is not instrumented)
+        self.friction_model = vehicle.leaf_spring_friction_model
+        self.stick_stiffness_npm = tuple(self.core.stick_stiffness_npm())
+        measured = {(ch[1], ch[2]): k for k, ch in enumerate(self.channels) if ch[0] == 'q'}
+        self.friction_channels = tuple(
+            (measured[(j, side)], 1.0) if (j, side) in measured else None
+            for j in range(self.core.n_axles) for side in (0, 1))
         #: each channel's sensor time constant (s; 0: none) and the lagged channels
         self.sensor_time_constant_s = tuple(
             vehicle.axles[ch[1]].sensor_time_constant_s if ch[0] == 'q'

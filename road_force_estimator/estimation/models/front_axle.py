@@ -47,7 +47,8 @@ heave published stays the load filter's at ``observer.profile_cutoff_wavelength`
 Friction and sensor lag (``vehicle.leaf_spring_friction``, ``vehicle.sensor_time_constant``)
 -------------------------------------------------------------------------------------------
 The leaf-spring friction ``f_i = -F_f,i tanh(dq_i / v_f)`` (``v_f`` =
-``vehicle.leaf_spring_friction_velocity``; :mod:`.observer.friction`) is added to ``F_bi``
+``vehicle.leaf_spring_friction_velocity``; :mod:`.observer.friction`; the ``stick`` element:
+its force from the measured ``q_i``, :mod:`.leaf_friction`) is added to ``F_bi``
 as a known nonlinear input, evaluated on the estimated ``dq_i`` (in the filter's prediction
 held over the step, the trapezoid of the previous sample's estimate and the step's end,
 whose rate the updated state gives: one iterated update, :mod:`.observer.online`; the
@@ -482,14 +483,20 @@ class FrontAxleModel(LeafSpringFriction):
     load_outputs = LOAD_OUTPUTS
     friction_rate_states = FRICTION_RATE_STATES
     friction_rate_outputs = FRICTION_RATE_OUTPUTS
+    #: each spring's deflection channel and sign (the channels read q_1, q_2)
+    friction_channels = ((0, 1.0), (1, 1.0))
 
     def __init__(self, vehicle: VehicleParameters | None = None) -> None:
         self.vehicle = VehicleParameters() if vehicle is None else vehicle
         #: the friction elements' F_f (N), left and right spring, and the tanh law's v_f (m/s,
-        #: ``vehicle.leaf_spring_friction_velocity``; the observer models the ``stick`` element
-        #: by the same law: its slider state is not carried)
-        self.friction_n = tuple(float(f) for f in self.vehicle.leaf_spring_friction_n)
-        self.friction_velocity_mps = float(self.vehicle.leaf_spring_friction_velocity_mps)
+        #: ``vehicle.leaf_spring_friction_velocity``); the ``stick`` element's k_f (N/m)
+        #: (:class:`.leaf_friction.LeafSpringFriction`)
+        v = self.vehicle
+        self.friction_n = tuple(float(f) for f in v.leaf_spring_friction_n)
+        self.friction_velocity_mps = float(v.leaf_spring_friction_velocity_mps)
+        self.friction_model = v.leaf_spring_friction_model
+        self.stick_stiffness_npm = tuple(v.leaf_spring_friction_stiffness_ratio * float(k)
+                                         for k in v.suspension_stiffness_npm)
 
     def with_vehicle(self, vehicle: VehicleParameters) -> FrontAxleModel:
         """The model of other parameters (an estimated sprung mass)."""

@@ -3,12 +3,18 @@ equivalent damping and the tuning of both, shared by every model whose springs c
 ``vehicle.leaf_spring_friction`` (:class:`LeafSpringFriction`: the front axle's two springs,
 :mod:`.front_axle`; every spring of the whole vehicle, :mod:`.articulated`).
 
-The plants' laws are :mod:`..core.friction`'s; the observer models both (``tanh`` and
-``stick``) by the tanh law ``-F_f tanh(dq / v_f)`` (N on the body, dq the spring's extension
-rate, m/s, v_f = ``vehicle.leaf_spring_friction_velocity``): the stick element's slider state
-is not carried. The gains' linear model carries the friction's equivalent damping ``c_eq``
-(:func:`friction_damping`); the known input is the rest, ``-F_f tanh(dq / v_f) + c_eq dq``
-(:mod:`..observer.friction`).
+The plants' laws are :mod:`..core.friction`'s. ``tanh``: the observer's known input is the
+law ``-F_f tanh(dq / v_f)`` (N on the body, dq the spring's extension rate, m/s, v_f =
+``vehicle.leaf_spring_friction_velocity``) at the estimated rates; the gains' linear model
+carries the friction's equivalent damping ``c_eq`` (:func:`friction_damping`), and the known
+input is the rest, ``-F_f tanh(dq / v_f) + c_eq dq`` (:mod:`..observer.friction`).
+
+``stick`` (:attr:`LeafSpringFriction.friction_sticks`): the element's force depends only on
+its spring's extension history, which the deflection sensors measure, so the force is a known
+input computed from the readings by the stop operator (:class:`..core.friction.Sliders`, the
+plants' own) on each element's deflection channel (:attr:`LeafSpringFriction.
+friction_channels`), its slider force 0 at a run's first sample; no equivalent damping (c_eq
+0). A vehicle with a stick element on a spring no channel measures keeps the tanh law.
 """
 from __future__ import annotations
 
@@ -61,6 +67,22 @@ class LeafSpringFriction:
     friction_n: tuple = ()
     friction_velocity_mps: float = 0.01
     friction_damping_factors: tuple[float, float] | None = None
+    #: per element, its deflection channel (index into y) and the sign of the reading per
+    #: metre of the spring's extension (+1.0), or None: no channel measures it
+    friction_channels: tuple = ()
+    #: the law of ``vehicle.leaf_spring_friction_model`` ('tanh' or 'stick')
+    friction_model: str = 'tanh'
+    #: k_f of each element's stick spring (N/m: ``vehicle.leaf_spring_friction_stiffness``
+    #: times its suspension stiffness)
+    stick_stiffness_npm: tuple = ()
+
+    @property
+    def friction_sticks(self) -> bool:
+        """The friction is the stick element, carried from the measured deflections: the law
+        says stick and every element with friction has a deflection channel."""
+        return (self.friction_model == 'stick' and any(self.friction_n)
+                and all(ch is not None for ch, f in zip(self.friction_channels,
+                                                         self.friction_n) if f > 0.0))
 
     def friction_forces(self, dq, ceq) -> np.ndarray:
         """The friction's known input (N) per spring at its rates dq (m/s): ``-F_f,i
@@ -81,6 +103,8 @@ class LeafSpringFriction:
         """:func:`friction_damping` of this vehicle's friction at an RMS rate (m/s);
         ``delayed``: with a latency, whose friction is corrected at the smoothed rates
         (:data:`FRICTION_DAMPING_FACTOR_LATENCY`, or the model's factors)."""
+        if self.friction_sticks:        # the stick element's force is known: none
+            return (0.0,) * len(self.friction_n)
         own = self.friction_damping_factors
         if own is not None:
             factor = own[1] if delayed else own[0]

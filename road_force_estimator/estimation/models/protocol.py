@@ -191,6 +191,14 @@ class VehicleModel(Protocol):
     friction_n: tuple
     friction_rate_states: tuple[int, ...]
     friction_rate_outputs: tuple[int, ...]
+    #: per element, its deflection channel (index into y) and the reading's sign per metre of
+    #: the spring's extension, or None (no channel); the law (``'tanh'``, ``'stick'``), the
+    #: stick springs' k_f (N/m), and whether the stick element is carried from the readings
+    #: (:class:`.leaf_friction.LeafSpringFriction`)
+    friction_channels: tuple
+    friction_model: str
+    stick_stiffness_npm: tuple
+    friction_sticks: bool
 
     def friction_forces(self, dq, ceq) -> np.ndarray:
         """The friction's known input (N) per element at its rates dq (m/s), less the share

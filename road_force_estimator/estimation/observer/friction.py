@@ -8,6 +8,22 @@ The vehicle model says which states and outputs are the friction elements' rates
 equivalent damping ``c_eq,i`` (:meth:`.VehicleModel.friction_damping`), and the known input
 is the rest, e.g. ``-F_f,i tanh(dq_i / v_f) + c_eq,i dq_i``.
 
+The stick element (``vehicle.leaf_spring_friction_model: stick``, the model's
+``friction_sticks``)
+-----------------------------------------------------------------------------------
+Its force depends only on the spring's extension history, which the deflection channels read:
+the known input is the stop operator (:class:`..core.friction.Sliders`) on each element's
+reading (:class:`MeasuredSliders`; the model's ``friction_channels``), its slider force 0 at
+a run's first sample. The force over a step is the trapezoid of the operator's outputs at its
+two samples, both known from the readings; no equivalent damping, no iterated update, no
+delayed correction (the forces are final); the outputs' direct part is the force at the
+emitted sample (kept by its stamp for a latency). The operator reads what the filter is fed:
+a gated or left-out channel's prediction in place of its reading (a spike would otherwise
+move the slider for good), the reading again when the gate is undone. The noise and
+roughness statistics (:meth:`.GainSchedule.statistics`) see the readings less the linear
+model's response to these forces (:func:`friction_response`): stuck springs move less, and
+the roughness matched on the readings themselves came out a third of the road's (class A).
+
 Delayed correction (``observer.latency`` > 0)
 ---------------------------------------------
 The forward filter can only evaluate the friction at its filtered rate, whose error a steep
@@ -29,11 +45,14 @@ from collections import deque
 import math
 
 import numpy as np
+from scipy import linalg
 
-from road_force_estimator.estimation.models.protocol import VehicleModel
+from road_force_estimator.core.friction import Sliders
+from road_force_estimator.estimation.models.protocol import ContinuousModel, VehicleModel
 from road_force_estimator.estimation.observer.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 
-__all__ = ['STAGE_S', 'KnownFriction', 'dq_rows']
+__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'dq_rows', 'friction_response',
+           'friction_step']
 
 #: With a latency, each step's friction is corrected twice: at this lag (s), where the rates
 #: have taken most of what the later samples tell (the sensor lag and the wheel's sticking
@@ -49,6 +68,82 @@ def dq_rows(g: Gains, dt: float, rates: tuple) -> tuple[np.ndarray, np.ndarray]:
     (nf, nx) and of the friction input B_d(dt) (nf, nf)."""
     rows = list(rates)
     return g.transition(dt)[rows], g.friction_input(dt)[rows]
+
+
+def friction_step(model: ContinuousModel, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_d, B_d)``: the transition of a step of dt (s) and the state change per newton of
+    friction force held over it (zero-order hold)."""
+    nx, nf = model.friction_b.shape
+    big = np.zeros((nx + nf, nx + nf))
+    big[:nx, :nx] = model.a
+    big[:nx, nx:] = model.friction_b
+    step = linalg.expm(big * dt)
+    return step[:nx, :nx], step[:nx, nx:]
+
+
+def friction_response(model: ContinuousModel, dt: float, forces, x0=None, step=None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The linear model's readings (m, ny) driven by the friction forces alone: ``forces``
+    (m, nf) (N) held over the step into each sample (row 0: the first sample, whose state is
+    ``x0``, default 0), steps of dt (s, zero-order hold; ``step``: its :func:`friction_step`
+    when known); and the last sample's state."""
+    forces = np.asarray(forces, dtype=float)
+    a, bd = friction_step(model, dt) if step is None else step
+    x = np.zeros(a.shape[0]) if x0 is None else np.asarray(x0, dtype=float)
+    states = np.empty((forces.shape[0], a.shape[0]))
+    for k, f in enumerate(forces):
+        if k or x0 is not None:
+            x = a @ x + bd @ f
+        states[k] = x
+    return states @ model.c.T, x
+
+
+class MeasuredSliders:
+    """The stick elements' forces on the body (N) from the deflection readings: the stop
+    operator (:class:`..core.friction.Sliders`) on each element's extension as its channel
+    reads it (the model's ``friction_channels``: channel and sign; a constant offset of the
+    reading does not matter, the operator sees increments), its force 0 at the first sample."""
+
+    def __init__(self, vehicle_model: VehicleModel) -> None:
+        chans = vehicle_model.friction_channels
+        self.channels = [c for c, _ in chans]
+        self.signs = [float(sign) for _, sign in chans]
+        self.sliders = Sliders(vehicle_model.stick_stiffness_npm, vehicle_model.friction_n)
+
+    def extensions(self, y) -> list[float]:
+        """The elements' extensions (m, up to a constant) in one sample y."""
+        return [sign * float(y[c]) for c, sign in zip(self.channels, self.signs)]
+
+    def start(self, y) -> tuple:
+        """A run's first sample y: every slider force 0; the forces (N, zeros)."""
+        q = self.extensions(y)
+        self.sliders.start(q, [0.0] * len(q))
+        return (0.0,) * len(q)
+
+    def peek(self, y) -> tuple[list, tuple]:
+        """``(bases, forces)`` after the next sample y, the operator left as it was."""
+        sl = self.sliders
+        keep = sl.base
+        q = self.extensions(y)
+        sl.advance(q)
+        out = (sl.base, tuple(sl.forces(q)))
+        sl.base = keep
+        return out
+
+    def run(self, y: np.ndarray) -> np.ndarray:
+        """The forces (nf, m) (N) of a run's samples y (m, ny), from its first sample."""
+        y = np.asarray(y, dtype=float)
+        m = y.shape[0]
+        q = y[:, self.channels] * np.asarray(self.signs)
+        out = np.zeros((len(self.channels), m))
+        if m == 0:
+            return out
+        sl = self.sliders
+        sl.start(q[0].tolist(), [0.0] * q.shape[1])
+        for k, qk in enumerate(q.tolist()):
+            sl.advance(qk)
+            out[:, k] = sl.forces(qk)
+        return out
 
 
 class KnownFriction:
@@ -75,27 +170,61 @@ class KnownFriction:
         self.last_force = self._zero
         self._w_cache: dict = {}     # rows per newton by step (:meth:`_rows_per_newton`)
         self._w_gains = None         # ... of these gains
+        #: the stick element from the readings (module notes), or None: the law on the rates
+        self.stick = MeasuredSliders(vehicle_model) if vehicle_model.friction_sticks else None
+        self._y_start = None
+        self._stat_step = None       # (model, dt, its friction_step) of :meth:`response`
+        # stick: the outputs' direct part per newton (no, nf) and the rows that have one
+        self._fd_rows = [j for j, *_ in self.fd]
+        self._fd_mat = np.array([d for _, *d in self.fd]).reshape(len(self.fd), -1)
         self.restart()
 
-    def restart(self) -> None:
-        """A run's start: no step awaits its delayed correction."""
+    @property
+    def sticks(self) -> bool:
+        """The friction is the stick element from the readings (no delayed correction)."""
+        return self.stick is not None
+
+    def restart(self, y=None, stamp: int | None = None) -> None:
+        """A run's start: no step awaits its delayed correction. Stick: the operator starts
+        at the run's first sample y (stamped ``stamp``), or again at the last run's first
+        sample (y None: the run filtered again, its forces the same)."""
         # [sample index at the step's start, its friction (N) in effect] of the recent steps
         self._steps: deque = deque()
         self._rate: dict = {}   # per lag: (sample index, rates) of its last estimate
+        if self.stick is not None:
+            if y is not None:
+                self._y_start = tuple(y)
+                self._direct: deque = deque()   # (stamp, force at that sample (N))
+            if self._y_start is not None:
+                self._f = self.stick.start(self._y_start)
+                self._before = self._pend = (self.stick.sliders.base, self._f)
+                if y is not None and stamp is not None:
+                    self._direct.append((stamp, self._f))
+                    # the forces into each sample since the last :meth:`response` (the run's
+                    # first: none) and the response's state
+                    self._stat_f: list = [self._f]
+                    self._stat_x = None
 
     def select(self, g: Gains, dt: float) -> None:
         """The step of dt (s) with the gains ``g``: :meth:`.Gains.friction_step`, the dq rows
         (:func:`dq_rows`) and the equivalent damping of g's model."""
         self.fm = g.friction_step(dt)
-        self.a_dq, self.b_dq = dq_rows(g, dt, self.rates)
         self.ceq = g.model.friction_damping_nspm
+        if self.stick is None:
+            self.a_dq, self.b_dq = dq_rows(g, dt, self.rates)
 
-    def update(self, sv: np.ndarray, x: np.ndarray) -> np.ndarray:
+    def update(self, sv: np.ndarray, x: np.ndarray, y=None) -> np.ndarray:
         """``sv`` (the step without friction) with the friction held over the step from
         x+_k = ``x``: that of :meth:`held` (end rate predicted), then once more with the end
         rate of that update's x+_(k+1) (one iterated update; README, "Friction"); a new
-        array."""
+        array. Stick: the trapezoid of the operator's forces at the step's two samples, the
+        second from the reading ``y`` the step is fed (committed by :meth:`record`)."""
         fm = self.fm
+        if self.stick is not None:
+            self._pend = self.stick.peek(y)
+            f1 = self._pend[1]
+            self.last_force = tuple(0.5 * (a + b) for a, b in zip(self._f, f1))
+            return sv + _dot(fm, self.last_force)
         first = sv + _dot(fm, self.held(x))
         rates = list(self.rates)
         r0, r1 = x[rates], first[rates]
@@ -118,27 +247,83 @@ class KnownFriction:
         less the equivalent damping's share that the gains' linear model carries."""
         return self.law(dq, self.ceq)
 
-    def add_direct(self, o: list) -> None:
+    def add_direct(self, o: list, stamp: int | None = None) -> None:
         """Add the friction's direct part to the outputs ``o`` (the model's outputs, in place),
-        the forces at the elements' rates among them."""
+        the forces at the elements' rates among them (stick: the forces of the sample
+        stamped ``stamp``, kept since :meth:`record`)."""
+        if self.stick is not None:
+            add = _dot(self._fd_mat, self._direct_force(stamp)).tolist()
+            for j, a in zip(self._fd_rows, add):
+                o[j] += a
+            return
         f = self.force([o[j] for j in self.rate_outputs]).tolist()
         for j, *d in self.fd:
             o[j] += sum(dk * fk for dk, fk in zip(d, f))
 
-    # -- the delayed correction (module notes) ---------------------------------------------
-    def record(self, index: int, keep: int) -> None:
+    def response(self, model: ContinuousModel, dt: float) -> np.ndarray:
+        """Stick: the linear model's readings (m, ny) driven by the forces of the samples
+        recorded since the last call (:func:`friction_response`, steps of dt, s; its state
+        carried on), for the noise and roughness statistics."""
+        f, self._stat_f = self._stat_f, []
+        if not f:
+            return np.zeros((0, model.c.shape[0]))
+        key = self._stat_step
+        if key is None or key[0] is not model or key[1] != dt:
+            key = self._stat_step = (model, dt, friction_step(model, dt))
+        out, self._stat_x = friction_response(model, dt, f, self._stat_x, key[2])
+        return out
+
+    def _direct_force(self, stamp: int | None) -> tuple:
+        """Stick: the forces (N) of the sample stamped ``stamp`` (dropped with the older
+        ones: the samples are emitted in order), or the newest sample's."""
+        kept = self._direct
+        for n, (s, f) in enumerate(kept):
+            if s == stamp:
+                for _ in range(n + 1):
+                    kept.popleft()
+                return f
+        return self._f
+
+    def redo(self) -> None:
+        """The last recorded step is made again (a gate undone): stick, the operator back to
+        before it (then :meth:`update` and :meth:`rerecord`)."""
+        if self.stick is not None:
+            self.stick.sliders.base, self._f = self._before
+
+    def record(self, index: int, keep: int, stamp: int | None = None) -> None:
         """The step from sample ``index`` used :attr:`last_force`: keep it (and the ``keep``
-        steps before it) for the delayed correction."""
+        steps before it) for the delayed correction. Stick: the operator moves to the step's
+        end, its forces kept for the direct part of the sample ``stamp`` (None: a run
+        filtered again, whose forces are kept already)."""
+        if self.stick is not None:
+            self._before = (self.stick.sliders.base, self._f)
+            self.stick.sliders.base, self._f = self._pend
+            if stamp is not None:
+                kept = self._direct
+                kept.append((stamp, self._f))
+                while len(kept) > keep + 2:
+                    kept.popleft()
+                self._stat_f.append(self.last_force)
+            return
         steps = self._steps
         steps.append([index, self.last_force])
         while len(steps) > keep + 1:
             steps.popleft()
 
     def rerecord(self) -> None:
-        """The last recorded step was made again (a gate undone): its :attr:`last_force`."""
+        """The last recorded step was made again (a gate undone): its :attr:`last_force`
+        (stick: the operator at its end, its sample's direct forces)."""
+        if self.stick is not None:
+            self.stick.sliders.base, self._f = self._pend
+            if self._direct:
+                self._direct[-1] = (self._direct[-1][0], self._f)
+            if self._stat_f:
+                self._stat_f[-1] = self.last_force
+            return
         if self._steps:
             self._steps[-1][1] = self.last_force
 
+    # -- the delayed correction (module notes) ---------------------------------------------
     @staticmethod
     def stage_lag(dt: float, lag: int) -> int:
         """The intermediate lag (samples) of the first correction (:data:`STAGE_S` at the step
@@ -153,6 +338,8 @@ class KnownFriction:
         samples later, or None when the step into it is not known (a run's first sample, a
         re-filtered block). Added to those rows, the buffer is the filter driven by the
         friction at the latest rates (the module notes)."""
+        if self.stick is not None:      # the forces are final
+            return None
         rates = self._rate
         prev = rates.get(lag)
         rates[lag] = (index, dq)

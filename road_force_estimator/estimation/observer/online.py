@@ -373,7 +373,7 @@ class ModelCore:
         self._undo = None
         self._n = 0                      # the newest sample's index in the run
         if self._fr is not None:
-            self._fr.restart()
+            self._fr.restart(y, stamp)
         self._pending.clear()
         self._run_y = [y]
         self._dts = []
@@ -444,7 +444,7 @@ class ModelCore:
         sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
         fr = self._fr
         if fr is not None:        # the friction over the step (of x+_k)
-            sv = fr.update(sv, row[x0:y0 - ny])
+            sv = fr.update(sv, row[x0:y0 - ny], row[y0:y0 + ny])
         s = sv.tolist()
         if not math.isfinite(sum(s)):
             return False
@@ -456,7 +456,7 @@ class ModelCore:
             row[y0:y0 + ny] = y
             sv = _dot(self._m, row, out=self._sv)
             if fr is not None:
-                sv = fr.update(sv, row[x0:y0 - ny])
+                sv = fr.update(sv, row[x0:y0 - ny], row[y0:y0 + ny])
             s = sv.tolist()
             y = tuple(y)
         if self._gate is not None and self._t >= GATE_START_S and meta[3]:
@@ -466,7 +466,7 @@ class ModelCore:
             if undo is not None and self._undo_gate(undo, s, row):   # it was real: again
                 sv = _dot(self._m, row, out=self._sv)
                 if fr is not None:
-                    sv = fr.update(sv, row[x0:y0 - ny])
+                    sv = fr.update(sv, row[x0:y0 - ny], row[y0:y0 + ny])
                 s = sv.tolist()
             raw = y
             clean = self._innovation_gate(y, s)
@@ -475,7 +475,7 @@ class ModelCore:
                 row[y0:y0 + ny] = y
                 sv = _dot(self._m, row, out=self._sv)
                 if fr is not None:
-                    sv = fr.update(sv, row[x0:y0 - ny])
+                    sv = fr.update(sv, row[x0:y0 - ny], row[y0:y0 + ny])
                 s = sv.tolist()
                 self._undo = (i, self._compactions, row.copy(), raw, self._m,
                               None if fr is None else fr.fm,
@@ -483,7 +483,7 @@ class ModelCore:
         if self.nll is not None and meta[3]:      # the innovations' likelihood (a fit)
             self._add_nll(s)
         if fr is not None:
-            fr.record(self._n, self.lag + 1)
+            fr.record(self._n, self.lag + 1, stamp)
         self._n += 1
         i += 1
         nxt = buf[i]
@@ -514,12 +514,13 @@ class ModelCore:
             if len(pending) == lag + 1:     # the steady state: the sample N back is due
                 item = pending.popleft()
                 gains = sched.gains
-                if fr is not None:   # the friction at its smoothed rates (.model_friction)
+                delayed = fr is not None and not fr.sticks
+                if delayed:   # the friction at its smoothed rates (.model_friction)
                     stage = fr.stage_lag(dt, lag)
                     if stage:
                         self._friction_correction(gains, dt, i, stage, None)
                 o = _dot(gains.out, buf[i - lag:i + 1].reshape(-1)).tolist()
-                if fr is not None:
+                if delayed:
                     self._friction_correction(gains, dt, i, lag, o)
                 self._emit(item[0], item[1], o)
             while len(pending) > lag:
@@ -589,7 +590,8 @@ class ModelCore:
             self._buf[j, y0:y0 + self._ny] = prev[y0:y0 + self._ny]
         sv = _dot(m, prev)
         if fr is not None:
-            sv = fr.update(sv, prev[x0:y0 - self._ny])
+            fr.redo()
+            sv = fr.update(sv, prev[x0:y0 - self._ny], prev[y0:y0 + self._ny])
             fr.rerecord()
         row[x0:y0] = sv[:y0 - x0]
         if prow is not None:       # the profile filter's step again, with the same data
@@ -662,6 +664,11 @@ class ModelCore:
             dts = self._dts[1:]    # the first step led to the block's first sample
         sched = self.schedule
         first_ever = sched.blocks == 0
+        fr = self._fr
+        if fr is not None and fr.sticks:     # the readings less the stick forces' response
+            r = fr.response(sched.gains.model, float(np.median(dts)) if dts else self._m_dt)
+            if r.shape[0] >= y.shape[0]:
+                y = y - r[r.shape[0] - y.shape[0]:]
         if sched.statistics(y, dts, self._slow == 0):
             self._t_retuned = self._t
         self._clock = clock_step(self._raw_dts)
@@ -696,7 +703,7 @@ class ModelCore:
             sv = g.step_matrix(dt) @ buf[j]
             if fr is not None:
                 fr.select(g, dt)
-                sv = fr.update(sv, buf[j, x0:y0 - self._ny])
+                sv = fr.update(sv, buf[j, x0:y0 - self._ny], buf[j, y0:y0 + self._ny])
                 fr.record(j, self.lag + 1)
             nxt[x0:y0] = sv[:y0 - x0]
             nxt[_R0:_R0 + 3 * self._ny] = 0.0
@@ -742,7 +749,7 @@ class ModelCore:
         zero-latency profile filter's outputs, or None."""
         fr = self._fr
         if fr is not None:
-            fr.add_direct(o)
+            fr.add_direct(o, stamp)
         row = self._recon.row(o, meta, op)
         self.last_row = row
         self.ready.append((stamp, row))

@@ -21,7 +21,10 @@ import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
+from road_force_estimator.estimation.chain.zero_phase import zero_phase_derivatives
 from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
+from road_force_estimator.estimation.observer.friction import (MeasuredSliders,
+                                                                friction_response)
 from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER
 from road_force_estimator.estimation.observer.online import GATE_START_S
@@ -56,6 +59,12 @@ WINDOWED_RUNS = 4
 #: Chunk of the offline smoother (samples): its temporaries (~12 x 8 bytes per sample each)
 #: stay in the cache.
 _SMOOTH_CHUNK = 16384
+#: Offline, the stick friction's stop operator reads each deflection through a zero-phase
+#: low-pass at this cut-off (Hz) with its sensor's first-order lag undone, ``l + tau dl/dt``
+#: (:meth:`Smoother._stick_readings`). 10 s at 10 um, the file stating 1.5 kN stick: class C
+#: with a 3 ms lag 2.09 x the frictionless drive's load error on the raw readings, 1.08 x at
+#: 30 Hz, 0.99 x at 60 and 100 Hz; class A without lag 1.05 x raw, 0.99 x at 60 Hz.
+STICK_CUTOFF_HZ = 60.0
 #: Passes of the offline smoother with leaf-spring friction: the friction input of each pass
 #: is evaluated on the previous pass's smoothed dq (the first pass: none).
 FRICTION_PASSES = 3
@@ -172,6 +181,49 @@ class Smoother:
         #: passes whose rows are the estimate)
         self.gated = np.zeros(self.ny, dtype=np.int64)
         self._dq_states = list(model.friction_rate_states)
+        #: the stick element from the readings (:class:`..observer.friction.MeasuredSliders`),
+        #: or None; its forces of the last run given (``(y, forces)``)
+        self.stick = (MeasuredSliders(model) if self.friction is not None
+                      and model.friction_sticks else None)
+        self._stick_run: tuple | None = None
+        self._stick_dt = 1e-3        # the run's median step (s), set by :meth:`_design_run`
+        #: per deflection channel its sensor's time constant (s), 0: none (from cm's lags)
+        tau = [0.0] * cm.ny
+        first = cm.nx - len(cm.lagged)
+        for n, ch in enumerate(cm.lagged):
+            tau[ch] = -1.0 / float(cm.a[first + n, first + n])
+        self._tau = tau
+
+    def _stick_forces(self, y: np.ndarray) -> np.ndarray:
+        """Stick: the forces (nf, m) (N) of the samples y (m, ny), from y's first sample (the
+        last array's kept: a run's passes take the same)."""
+        kept = self._stick_run
+        if kept is not None and kept[0] is y:
+            return kept[1]
+        f = self.stick.run(self._stick_readings(y))
+        self._stick_run = (y, f)
+        return f
+
+    def _stick_readings(self, y: np.ndarray) -> np.ndarray:
+        """The readings the offline stop operator takes: each deflection channel of an element
+        through the zero-phase low-pass at :data:`STICK_CUTOFF_HZ` (:func:`..chain.zero_phase.
+        zero_phase_derivatives`, steps of the run's median dt), its sensor lag undone."""
+        out = np.array(y, dtype=float)
+        chans = sorted(set(self.stick.channels))
+        low, rate, _ = zero_phase_derivatives(out[:, chans], self._stick_dt, STICK_CUTOFF_HZ)
+        tau = np.array([self._tau[c] for c in chans])
+        out[:, chans] = low + tau * rate
+        return out
+
+    def _less_stick(self, y: np.ndarray, dt: float) -> np.ndarray:
+        """Stick: the readings y (m, ny) less the linear model's response to the operator's
+        forces (:func:`..observer.friction.friction_response`, steps of dt, s): what the noise
+        and roughness statistics see (as the online observer's)."""
+        f = self._stick_forces(y).T
+        steps = f.copy()
+        steps[1:] = 0.5 * (f[:-1] + f[1:])
+        r, _ = friction_response(self.model.continuous(1.0, DEFAULT_ROAD_GD_M3), dt, steps)
+        return y - r
 
     @property
     def vehicle(self):
@@ -265,10 +317,12 @@ class Smoother:
         speed = float(np.median(np.abs(v)))
         sched = self.schedule
         sched.set_run(dt, speed)
+        self._stick_dt = dt
         if m > 8 * NOISE_DIFF_ORDER:
             for hist in (*sched.history, sched.dq_history):
                 hist.clear()
-            run_statistics(sched, y, dts, v, speed)
+            run_statistics(sched, y if self.stick is None else self._less_stick(y, dt), dts,
+                           v, speed)
         uniform = float(np.max(np.abs(dts - dt))) <= 1e-6 * dt
         steps = None if uniform else grid_steps(dts, dt)
         if not uniform and steps is None:
@@ -359,6 +413,7 @@ class Smoother:
         gate_from = self._gate_start(dt)
         x0 = self.model.rest_state(y[0])
         recon = self.rows
+        stick = None if self.stick is None else self._stick_forces(y)  # (the whole run's)
         for a in range(0, m, window):
             b = min(m, a + window)
             lo, hi = max(0, a - overlap), min(m, b + overlap)
@@ -371,7 +426,8 @@ class Smoother:
             carried = self._uniform(g, dt, y[lo:hi], x0, cols,
                                     keep=None if nxt is None else max(0, nxt) - lo,
                                     segments=segs, gate_from=max(0, gate_from - lo),
-                                    count=keep is None)
+                                    count=keep is None,
+                                    stick=None if stick is None else stick[:, lo:hi])
             if keep is None:
                 self._finish(cols, t[lo:hi], dt, run.speed, t[0])
                 yield a, b, [col[a - lo:b - lo] for col in cols]
@@ -406,8 +462,10 @@ class Smoother:
                 out: list, count: bool = False) -> None:
         """Uneven steps: the transition of each step (cached), the run's gains; the
         innovation gate as :class:`.rts_pass.ForwardPass`'s (from the time of
-        :meth:`_gate_start`; counted with ``count``)."""
+        :meth:`_gate_start`; counted with ``count``). Stick: the operator on the readings
+        (not on what the gate feeds: offline the gate's verdicts come later)."""
         m = y.shape[0]
+        stick = None if self.stick is None else self._stick_forces(y)
         c = g.model.c
         nx = self.nx
         a_steps = [g.transition(float(d)) for d in dts]     # A_k: sample k-1 -> k
@@ -421,7 +479,7 @@ class Smoother:
         flags = np.zeros(self.ny, dtype=np.int8)
         undo = None             # (the last sample's prediction and innovations before the gate)
         for k in range(1, m):
-            xp = self._predict(g, a_steps, dts, xf, k)
+            xp = self._predict(g, a_steps, dts, xf, k, stick)
             nus[k] = y[k] - c @ xp
             if gate is not None and elapsed[k] >= t_gate:
                 outside = np.abs(nus[k]) > gate
@@ -431,7 +489,7 @@ class Smoother:
                     xf[k - 1] = undo[0] + g.k @ nus[k - 1]
                     if count:
                         self.gated -= back
-                    xp = self._predict(g, a_steps, dts, xf, k)
+                    xp = self._predict(g, a_steps, dts, xf, k, stick)
                     nus[k] = y[k] - c @ xp
                     outside = np.abs(nus[k]) > gate
                     flags[back] = 2
@@ -454,33 +512,46 @@ class Smoother:
             xs[k - 1] = xf[k - 1] + g.p_post @ (a_steps[k - 1].T @ lam)
         o = self.h @ xs.T
         if self.friction is not None:
-            o = o + self.fd @ self._forces(o)
+            o = o + self.fd @ (self._forces(o) if stick is None else stick)
         self.rows.columns(o, out)
 
     def _predict(self, g: Gains, a_steps: list, dts: np.ndarray, xf: np.ndarray,
-                 k: int) -> np.ndarray:
+                 k: int, stick: np.ndarray | None = None) -> np.ndarray:
         """The prediction of sample k from ``x+_(k-1)`` over the uneven step (the friction on
-        the filtered dq: one pass, the steps uneven)."""
+        the filtered dq: one pass, the steps uneven; stick: the trapezoid of the forces
+        ``stick`` (nf, m) at the step's ends)."""
         xp = a_steps[k - 1] @ xf[k - 1]
-        if self.friction is not None:
+        if stick is not None:
+            xp = xp + g.friction_input(float(dts[k - 1])) @ (
+                0.5 * (stick[:, k - 1] + stick[:, k]))
+        elif self.friction is not None:
             dq = xf[k - 1, self._dq_states]
             xp = xp + g.friction_input(float(dts[k - 1])) @ self._forces_at(dq)
         return xp
 
     def _uniform(self, g: Gains, dt: float, y: np.ndarray, x0: np.ndarray,
                  out: list, keep: int | None = None, segments: list | None = None, *,
-                 gate_from: int = 0, count: bool = False) -> np.ndarray | None:
+                 gate_from: int = 0, count: bool = False,
+                 stick: np.ndarray | None = None) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run
         (:meth:`_uniform_pass`); with friction, :data:`FRICTION_PASSES` passes, each with the
         friction evaluated on the previous pass's smoothed dq (the first without). With
         ``keep`` the forward state ``x+_keep`` is returned (where the next window starts);
         ``segments`` (:func:`.run_speed.speed_segments`): the gains per stretch of speed;
         the innovation gate on from sample ``gate_from``, its samples counted (:attr:`gated`)
-        with ``count`` (the load pass whose rows are the estimate)."""
+        with ``count`` (the load pass whose rows are the estimate). Stick: one pass with the
+        operator's forces ``stick`` (nf, m) (N; None: from y), the trapezoid over each step and
+        the sample's own in the direct part."""
         segs = segments or [(0, y.shape[0], g)]
         gating = dict(gate_from=gate_from)
         if self.friction is None:
             return self._uniform_pass(segs, dt, y, x0, out, keep=keep, count=count, **gating)
+        if self.stick is not None:
+            f = self._stick_forces(y) if stick is None else stick
+            forces = f.copy()
+            forces[:, :-1] = 0.5 * (f[:, :-1] + f[:, 1:])
+            return self._uniform_pass(segs, dt, y, x0, out, forces, keep, count=count,
+                                      direct=f, **gating)
         forces = None
         for _ in range(FRICTION_PASSES - 1):
             # (no gate: without the friction input the first pass's innovations exceed it)
@@ -495,7 +566,8 @@ class Smoother:
     def _uniform_pass(self, segs: list, dt: float, y: np.ndarray, x0: np.ndarray,
                       out: list | None, forces: np.ndarray | None = None,
                       keep: int | None = None, *, gate_from: int = 0,
-                      count: bool = False) -> np.ndarray | None:
+                      count: bool = False, direct: np.ndarray | None = None
+                      ) -> np.ndarray | None:
         """The steady-state filter and RTS smoother of an evenly sampled run, chunk by chunk.
 
         Forward: ``x+_k = (I - K C) A x+_(k-1) + K y_k``, innovations ``nu_k = y_k - C A
@@ -504,7 +576,9 @@ class Smoother:
         P+ A^T lam_(k+1)``. ``segs``: ``(start, end, gains)`` stretches of the run (one: the
         run's gains), each step with the matrices of its sample's stretch. ``x0`` is ``x+_0``.
         With friction forces f (nf, m) (N), the known input ``B_d f_(k-1)`` joins the
-        prediction ``A x+_(k-1)``. ``out`` None: only the smoothed rates (nf, m) are returned;
+        prediction ``A x+_(k-1)``; ``direct`` (nf, m): the forces of the outputs' direct part
+        (None: the law at the smoothed rates). ``out`` None: only the smoothed rates (nf, m)
+        are returned;
         else,
         with ``keep``, the forward state ``x+_keep`` (where the next window starts).
         """
@@ -521,7 +595,9 @@ class Smoother:
                 dq[:, k0:k1] = xs[:, self._dq_states].T
             else:
                 o = self.h @ xs.T
-                if self.friction is not None:
+                if direct is not None:
+                    o = o + self.fd @ direct[:, k0:k1]
+                elif self.friction is not None:
                     o = o + self.fd @ self._forces(o)
                 self.rows.columns(o, _rows(out, k0, k1))
         if out is None:
