@@ -472,8 +472,15 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     imu : the readings' last column is the tractor IMU's a_y (m/s^2)
     chunk_rows : online, the samples turned into arrays at a time (no per-sample object
         held longer; :data:`CHUNK_ROWS`; the same numbers whatever it is)
+
+    Raises
+    ------
+    ValueError
+        No sample (a drive's estimate has at least one).
     """
     stamps = np.asarray(stamps_ns, np.int64)
+    if stamps.size == 0:
+        raise ValueError('estimate_whole_vehicle: no samples (stamps_ns is empty)')
     v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
     if not offline:
         y, c = np.asarray(readings, float), max(int(chunk_rows or CHUNK_ROWS), 1)

@@ -325,3 +325,12 @@ def test_a_file_stating_the_lag_too_finds_the_loads_better(lag_drive):
         got = [_worst_dynamic_pct(tr, static, estimate_whole_vehicle(
             v, stamps, y, 20.0, observer=obs, offline=offline)) for v in (both, none)]
         assert got[0] < 6.0 and got[0] < 0.5 * got[1], (obs.latency_s, offline, got)
+
+
+@pytest.mark.parametrize('offline', [False, True])
+def test_a_drive_without_samples_is_refused_by_name(offline):
+    """No sample: a ValueError that says so (it was numpy's reshape error)."""
+    vehicle = ArticulatedDrive.from_values(load_params_file(CONFIG)).vehicle
+    with pytest.raises(ValueError, match='no samples'):
+        estimate_whole_vehicle(vehicle, np.zeros(0, np.int64), np.zeros((0, 12)), 20.0,
+                               offline=offline)
