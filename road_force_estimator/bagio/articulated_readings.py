@@ -36,6 +36,8 @@ class ArticulatedReadings:
     rejected: dict
     imu_stamps_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     imu_ay_mps2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: topic -> messages read (the topics above that the bag has)
+    messages: dict = field(default_factory=dict)
 
 
 def read_articulated_readings(path: str | Path, names: Sequence[str], imu: bool = False
@@ -71,4 +73,5 @@ def read_articulated_readings(path: str | Path, names: Sequence[str], imu: bool 
         imu_ns, imu_ay = read_scalar(cols[IMU], 'linear_acceleration.y', rejects)
     return ArticulatedReadings(stamps, np.asarray(pos, float), tuple(names), speed,
                                rejects.counts, np.asarray(imu_ns, np.int64),
-                               np.asarray(imu_ay, float))
+                               np.asarray(imu_ay, float),
+                               {t: c.count for t, c in cols.items()})

@@ -190,6 +190,8 @@ class WholeVehicleArrays:
     #: the input messages its reader dropped, topic -> reason -> count (the caller's; e.g.
     #: :class:`road_force_estimator.bagio.checks.Rejects`' counts), or None
     rejected: dict | None = None
+    #: the input messages its reader read, topic -> count (the caller's), or None
+    messages: dict | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:

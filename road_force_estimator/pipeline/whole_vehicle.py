@@ -103,7 +103,7 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
         readings = np.column_stack([readings, ay])
     wv = estimate_whole_vehicle(vehicle, r.stamps_ns, readings, speed, observer=observer,
                                 offline=mode == 'offline', windows=windows, imu=imu)
-    wv = replace(wv, rejected=_counts(r.rejected))
+    wv = replace(wv, rejected=_counts(r.rejected), messages=dict(r.messages))
     return wv if codes is None else replace(wv, imu_codes=codes)
 
 
@@ -136,7 +136,7 @@ def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
     if not wv.stamps_ns.size:
         raise InputError(f'{input_path}: no /suspension/deflections message carries every '
                          f'channel of the whole vehicle ({", ".join(names)})')
-    wv = replace(wv, rejected=_counts(reader.rejected))
+    wv = replace(wv, rejected=_counts(reader.rejected), messages=dict(reader.messages))
     return wv if not imu else replace(wv, imu_codes=np.concatenate(codes))
 
 
@@ -152,8 +152,10 @@ def with_rejections(drive, wv):
     vehicle's reader dropped: its counts replace the front-axle reader's for the topics it
     read (``/suspension/deflections`` over every channel, ``/vehicle/twist`` and, with the
     IMU, ``/imu/tractor``; the same checks, :mod:`~.bagio.checks`); the drive's other topics
-    as they are. Its estimate is the drive's (loads, load transfer, road), so the counts of
-    the report, the status' ``total.rejected_by_reader`` and the fleet's tables are its."""
+    as they are; a topic only it read (``/imu/tractor``) joins the drive's message counts
+    (the report's "Messages and rejections"). Its estimate is the drive's (loads, load
+    transfer, road), so the counts of the report, the status' ``total.rejected_by_reader``
+    and the fleet's tables are its."""
     from road_force_estimator.interfaces import DEFLECTIONS, IMU, TWIST
 
     rejected = getattr(wv, 'rejected', None)
@@ -163,7 +165,12 @@ def with_rejections(drive, wv):
                                    else set())
     merged = {t: dict(r) for t, r in drive.rejected.items() if t not in read}
     merged.update({t: dict(r) for t, r in rejected.items()})
-    return replace(drive, rejected=dict(sorted(merged.items())))
+    # the messages the front axle's reader did not read (the IMU's) counted beside its own
+    messages = dict(drive.messages)
+    for t, n in (getattr(wv, 'messages', None) or {}).items():
+        messages.setdefault(t, int(n))
+    return replace(drive, rejected=dict(sorted(merged.items())),
+                   messages=dict(sorted(messages.items())))
 
 
 def rejection_values(wv) -> tuple[dict, str]:

@@ -167,6 +167,12 @@ def test_the_report_counts_what_the_test_put_in(drive):
     assert missing == 20 and stale > 50
     imu = report['whole_vehicle_estimate']['tractor_imu']
     assert (imu['stale'], imu['missing']) == (stale, missing)
+    # every topic read is counted, the IMU's too (which the front axle's reader never reads):
+    # the messages in the spoilt bag, as the mcap library decodes them
+    inputs = decoded(drive['bag'])
+    for topic in ('/imu/tractor', '/suspension/deflections', '/vehicle/twist'):
+        assert report['messages'][topic] == len(inputs[topic]), topic
+        assert f'| `{topic}` | {len(inputs[topic])} |' in markdown
 
 
 def test_the_last_statuses_count_them_and_every_good_sample_is_estimated(drive):
