@@ -66,9 +66,9 @@ import numpy as np
 
 __all__ = ['STUCK', 'DRIFT', 'OK', 'CODES', 'flag_codes', 'DRIFT_START_S', 'DRIFT_BLOCK',
            'GAP_S', 'UNIT_WINDOW_FACTOR', 'UNIT_MIN_SPEED_MPS', 'UNIT_CLEAR_FRACTION',
-           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'IMU_SCALE_MPS2', 'ROLL_DRIFT_LIMIT_RAD',
-           'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift', 'tractor_check',
-           'FaultDetector', 'UnitDrift', 'detect_faults', 'left_out']
+           'UNIT_MIN_AXLES', 'TRACTOR_SCALES', 'IMU_SCALE_MPS2', 'IMU_HELD_S',
+           'ROLL_DRIFT_LIMIT_RAD', 'TRACTOR_PERSIST_S', 'FaultSettings', 'TractorDrift',
+           'tractor_check', 'FaultDetector', 'UnitDrift', 'detect_faults', 'left_out']
 
 STUCK, DRIFT, OK = 'stuck', 'drift', 'ok'
 #: The flags as numbers (:attr:`FaultDetector.events`, :func:`flag_codes`).
@@ -89,6 +89,12 @@ UNIT_MIN_SPEED_MPS = 8.0
 #: offset (:class:`UnitDrift`; at once below half, the front axle's rule, let a 1 mm/min
 #: drift's flag drop for 0.4 s on class C).
 UNIT_CLEAR_FRACTION = 0.25
+#: With the tractor IMU, an a_y repeated exactly for longer than this (s) is a held value (the
+#: pairing's, :mod:`.imu_hold`: stale after :data:`.imu_hold.IMU_MAX_AGE_S`, 0 before the
+#: first message), not a measurement: :class:`TractorDrift`'s windows start again (a held a_y
+#: through a curve read as a common roll drift). Twice the stale age: an IMU at 10 Hz repeats
+#: each a_y for 0.1 s while fresh.
+IMU_HELD_S = 0.2
 #: Fewest instrumented axles of a unit whose deflections :class:`UnitDrift` judges.
 UNIT_MIN_AXLES = 3
 #: :class:`TractorDrift`'s statistics' scales: the kingpin pitch balance (m of the first
@@ -599,6 +605,9 @@ class TractorDrift:
                                    + [measured])
             self._imu = tuple((int(r), float(c)) for r, c, _ in units)
             self._me = self.m + rates.shape[0]
+            self._ay_ch = int(ay)
+        self._ay_last = math.nan        # the IMU's a_y and since when it has held it (s)
+        self._ay_since = 0.0
         self.ax = np.asarray(ax, float)
         self.scales = np.asarray(scales, float)
         #: per candidate: its offset's weights on the channels ((channel, weight), ...) and
@@ -644,6 +653,16 @@ class TractorDrift:
             if self._win.count or self._bn:
                 self.restart()
             return
+        if self._imu is not None:
+            # a_y repeated for longer than IMU_HELD_S: the pairing's held value (stale, or 0
+            # before the first message), not the road's: the windows start again
+            a = values[self._ay_ch]
+            if a != self._ay_last:
+                self._ay_last, self._ay_since = a, t
+            elif t - self._ay_since > IMU_HELD_S:
+                if self._win.count or self._bn:
+                    self.restart()
+                return
         if not self._bn:
             self._b0 = t
         self._vals.append(values)

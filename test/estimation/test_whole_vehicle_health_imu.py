@@ -146,6 +146,33 @@ def test_with_the_imu_a_curve_on_a_crossfall_raises_nothing():
     assert tractor_check(ArticulatedObserverModel(vp, True), 2e-4, set()) is None
 
 
+@pytest.fixture(scope='module')
+def curve():
+    """30 s of class C through a curve ramping to 3 m/s^2 (from 5 s, 3 s of ramp, 6 s held),
+    with the IMU: the drive, its readings, a_y."""
+    dr = drive({'vehicle.tractor_imu': True,
+                'simulator.lateral_profile': 'curve:start=5,ramp=3,hold=6,ay=3'}, 30.0, 5,
+               lateral=True)
+    y, ay, vehicle = readings(dr)
+    return dr, y, ay, vehicle
+
+
+def test_an_imu_that_falls_silent_through_a_curve_raises_no_drift_flag(curve):
+    """The IMU silent from 3 s to 20 s (its last a_y held, as the pairing feeds it: stale) while
+    the curve's a_y rises to 3 m/s^2: held, it would read as a roll offset of a_y / g common
+    to both roll sensors (the check before IMU_HELD_S flagged both); the windows wait for a
+    fresh a_y instead: no flag. The same for an IMU that never speaks (0 fed: missing)."""
+    dr, y, ay, vehicle = curve
+    assert np.max(np.abs(ay)) > 2.5
+    assert raised(flags(vehicle, dr, y, ay)) == {}
+    t = (dr['stamps'] - dr['stamps'][0]) * 1e-9
+    held = ay.copy()
+    silent = (t >= 3.0) & (t < 20.0)
+    held[silent] = ay[np.flatnonzero(t < 3.0)[-1]]
+    assert raised(flags(vehicle, dr, y, held)) == {}
+    assert raised(flags(vehicle, dr, y, np.zeros_like(ay))) == {}
+
+
 def test_the_estimator_flags_what_the_detector_flags_with_the_imu(straight):
     """estimate_whole_vehicle(imu=True) online: the trailer roll sensor's drift named alone, the
     per-sample flags those of the detector over the same readings."""
