@@ -251,7 +251,7 @@ def balances_table(seconds: float, log, imu: bool = False) -> list[str]:
     middle = 'I_t (m/s^2) | I_r (m/s^2)' if imu else 'A (m/s^2)'
     lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
              f'T (mrad) | {middle} | largest offset / limit | units (mm) | drift flags |',
-             '|---|---:|---:|---:|---:|---:|---:|---:|---|' + ('---:|' if imu else '')]
+             '|---|' + '---:|' * (8 if imu else 7) + '---|']
     obs = ObserverParameters()
     for case in (imu_cases() if imu else family()):
         drive = simulate(case, seconds, 1e-5, imu=imu)
