@@ -34,10 +34,9 @@ def settings_of(vehicle) -> FaultSettings:
                                           ArticulatedObserverModel(vehicle))
 
 
-@pytest.fixture(scope='module')
-def long_drive():
-    """36 s of class C at 20 m/s, 1 kHz, 10 um of deflection noise (the whole vehicle):
-    ``(vehicle, stamps ns, readings, channel names)``."""
+def simulated(road: str, speed_mps: float, seed: int, duration_s: float) -> tuple:
+    """The whole vehicle on an ISO 8608 road at a constant speed, 1 kHz, 10 um of deflection
+    noise: ``(vehicle, stamps ns, readings, channel names)``."""
     from road_force_estimator.core.articulated_plant import simulate_articulated
     from road_force_estimator.core.articulated_setup import ArticulatedDrive
     from road_force_estimator.core.parameters import load_params_file
@@ -46,14 +45,20 @@ def long_drive():
 
     base = load_params_file(ARTICULATED_CONFIG)
     base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
-                 'simulator.duration': DRIFT_DURATION_S})
+                 'simulator.duration': duration_s})
     d = ArticulatedDrive.from_values(base)
-    road = iso8608_profile('C', d.road_length_m, seed=11)
-    tr = simulate_articulated(d.vehicle, road, speed_mps=20.0, rate_hz=1000.0,
-                              duration_s=DRIFT_DURATION_S, tire_envelope_m=0.25, model=d.model)
+    tr = simulate_articulated(d.vehicle, iso8608_profile(road, d.road_length_m, seed=seed),
+                              speed_mps=speed_mps, rate_hz=1000.0, duration_s=duration_s,
+                              tire_envelope_m=0.25, model=d.model)
     names = channel_names(d.model)
     return (d.vehicle, np.round(tr.t_s * 1e9).astype(np.int64),
             d.sensors(names).measure(tr), tuple(names))
+
+
+@pytest.fixture(scope='module')
+def long_drive():
+    """36 s of class C at 20 m/s (seed 11)."""
+    return simulated('C', 20.0, 11, DRIFT_DURATION_S)
 
 
 def raised(counts) -> dict:
@@ -122,25 +127,12 @@ def test_a_rough_or_slow_clean_drive_raises_no_drift_flag(road, speed_mps, seed)
     of noise: no flag. Over a plain 12 s mean the tri-axle group's statistic kept the bodies'
     momentum and flagged a trailer deflection on both (docs/articulated.md); over the
     triangular window it stays below half the limit (measured 0.34 x on both)."""
-    from road_force_estimator.core.articulated_plant import simulate_articulated
-    from road_force_estimator.core.articulated_setup import ArticulatedDrive
-    from road_force_estimator.core.parameters import load_params_file
-    from road_force_estimator.core.road import iso8608_profile
-    from road_force_estimator.estimation.models.articulated import channel_names
     from road_force_estimator.estimation.sensor_health import FaultDetector
 
-    duration = 60.0
-    base = load_params_file(ARTICULATED_CONFIG)
-    base.update({'simulator.noise.deflection': 1e-5, 'simulator.noise.roll': 1e-5 / 0.45,
-                 'simulator.duration': duration})
-    d = ArticulatedDrive.from_values(base)
-    rough = iso8608_profile(road, d.road_length_m, seed=seed)
-    tr = simulate_articulated(d.vehicle, rough, speed_mps=speed_mps, rate_hz=1000.0,
-                              duration_s=duration, tire_envelope_m=0.25, model=d.model)
-    y = d.sensors(channel_names(d.model)).measure(tr)
-    settings = settings_of(d.vehicle)
+    vehicle, stamps, y, _ = simulated(road, speed_mps, seed, 60.0)
+    settings = settings_of(vehicle)
     det = FaultDetector(settings)
-    for stamp, row in zip(np.round(tr.t_s * 1e9).astype(np.int64).tolist(), y.tolist()):
+    for stamp, row in zip(stamps.tolist(), y.tolist()):
         det.step(stamp, row, (speed_mps,))
     assert raised(det.counts()) == {}
     assert 0.0 < det.units.peak[0] < settings.drift_offset_m / 2.0
