@@ -9,10 +9,11 @@ IMU message stamped at or before it, as the twist's speed is held. The plant sta
 with the sample's stamp (the pair is exact); a truck's IMU at its own rate gives the sample
 the a_y up to one IMU period old. Its limit: an a_y older than :data:`IMU_MAX_AGE_S` is
 ``stale``, and a sample with no IMU message at or before it is ``missing``. Neither stops
-the estimate (the model cannot leave the IMU's row out sample by sample offline, so no mode
-does): a stale sample is fed the held a_y, a missing one 0 (a truck sets off straight), and
-both are counted by name (:data:`STATES`: ``/diagnostics``, estimate_bag's status and
-report). A held a_y that is off by ``e`` reads a pendulum's roll off by ``e / g`` rad.
+the estimate: the sample carries the held a_y (0 when missing), every mode leaves the IMU's
+row out of it (with pendulum roll sensors their rows too: :func:`.whole_vehicle.
+imu_left_out`), and both are counted by name (:data:`STATES`: ``/diagnostics``,
+estimate_bag's status and report). Fed instead, a held a_y that is off by ``e`` reads a
+pendulum's roll off by ``e / g`` rad (``python -m bench.studies.imu_dropout``).
 """
 from __future__ import annotations
 

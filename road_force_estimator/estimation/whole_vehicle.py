@@ -46,6 +46,14 @@ a drifting deflection stays fed; offline the smoother leaves each stuck stretch 
 held readings before the flag too (:func:`.sensor_health.left_out`, :meth:`.Smoother.pieces`
 ``left_out``). ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
+
+The tractor IMU without a fresh a_y (``imu``; a sample whose pairing, :mod:`.imu_hold`, is
+stale or missing: ``imu_fresh`` False, ``imu_codes`` not 0) is left out the same way, online
+and offline, for that sample: its row (:func:`imu_left_out`), and with pendulum roll sensors
+the roll rows too (they read ``phi + a_y / g`` and a_y is not known; the rolls without the
+IMU would be the tilt / lateral-acceleration ambiguity, whose gain design fails). The held
+a_y fed instead cost 2.4-3.3 x the fresh IMU's load error on the tractor through a curve
+(``python -m bench.studies.imu_dropout``).
 """
 from __future__ import annotations
 
@@ -76,7 +84,8 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'STREAM_WINDOW_SAMPLES', 'STREAM_OVERLAP_S', 'WholeVehicleSample',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
-           'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks']
+           'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks',
+           'imu_left_out']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -290,6 +299,16 @@ class WheelStaticTracker:
         return y
 
 
+def imu_left_out(model: ArticulatedObserverModel) -> tuple[int, ...]:
+    """The channels (indices of ``model``'s) left out of a sample without a fresh a_y (module
+    notes): the IMU's, and the roll sensors' where they are pendulums read with the IMU
+    (``model.pendulum``); () without the IMU."""
+    if not model.imu:
+        return ()
+    rolls = tuple(model.roll_channels) if model.pendulum else ()
+    return tuple(sorted(rolls + (len(model.channels) - 1,)))
+
+
 class WholeVehicleEstimator:
     """Every output of the whole vehicle one sample at a time: :meth:`step` returns the samples
     finalized by that input (an ``observer.latency``'s samples late), :meth:`finish` the
@@ -336,11 +355,15 @@ class WholeVehicleEstimator:
         self._codes: deque = deque()               # each held sample's sensor flags
         self._flags = (0,) * len(self.channel_names)
         self._events = 0
+        #: left out of a sample without a fresh a_y (module notes)
+        self.imu_out = frozenset(imu_left_out(self.model))
 
-    def step(self, stamp_ns: int, readings: Sequence[float], speed_mps: float
-             ) -> list[WholeVehicleSample]:
+    def step(self, stamp_ns: int, readings: Sequence[float], speed_mps: float,
+             imu_fresh: bool = True) -> list[WholeVehicleSample]:
         """One input: ``readings`` the model's channels (:attr:`channel_names`; m, rad, from
-        the vehicle's deflection reference), ``speed_mps`` (m/s).
+        the vehicle's deflection reference), ``speed_mps`` (m/s); ``imu_fresh`` False: the
+        IMU's a_y (the last reading) is not fresh, the sample's :attr:`imu_out` channels are
+        left out (module notes).
 
         Raises
         ------
@@ -352,8 +375,11 @@ class WholeVehicleEstimator:
         raw = y if self.tracker is None else list(y)
         faults = self.faults
         stuck = faults.stuck
-        if True in stuck or self.online.core.schedule.excluded:   # left out (module notes)
-            self.online.core.set_excluded(tuple(k for k, s in enumerate(stuck) if s))
+        if True in stuck or not imu_fresh or self.online.core.schedule.excluded:
+            out = {k for k, s in enumerate(stuck) if s}       # left out (module notes)
+            if not imu_fresh:
+                out |= self.imu_out
+            self.online.core.set_excluded(tuple(sorted(out)))
         if self.tracker is not None:
             if not math.isfinite(sum(y)):
                 raise ValueError(f'sample at {stamp} ns: not finite')
@@ -456,7 +482,8 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
                            gap_threshold_s: float = GAP_THRESHOLD_S,
                            windows: bool = False,
                            imu: bool = False,
-                           chunk_rows: int | None = None) -> WholeVehicleArrays:
+                           chunk_rows: int | None = None,
+                           imu_codes=None) -> WholeVehicleArrays:
     """Every output over a drive: online :class:`WholeVehicleEstimator` sample by sample (its
     numbers exactly), offline the smoother (:func:`.articulated.estimate_articulated`) and the
     same load transfer over its loads.
@@ -474,6 +501,9 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     imu : the readings' last column is the tractor IMU's a_y (m/s^2)
     chunk_rows : online, the samples turned into arrays at a time (no per-sample object
         held longer; :data:`CHUNK_ROWS`; the same numbers whatever it is)
+    imu_codes : (m,) each sample's IMU pairing (:mod:`.imu_hold` codes; not 0: the a_y is
+        not fresh, :func:`imu_left_out`'s channels are left out of that sample); None:
+        every a_y fresh
 
     Raises
     ------
@@ -487,13 +517,14 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
     if not offline:
         y, c = np.asarray(readings, float), max(int(chunk_rows or CHUNK_ROWS), 1)
         return estimate_online_blocks(        # fed a chunk at a time: no list held
-            vehicle, ((stamps[a:a + c], y[a:a + c], v[a:a + c])
+            vehicle, ((stamps[a:a + c], y[a:a + c], v[a:a + c],
+                       None if imu_codes is None else imu_codes[a:a + c])
                       for a in range(0, stamps.size, c)),
             observer=observer, gap_threshold_s=gap_threshold_s, imu=imu,
             capacity=stamps.size, chunk_rows=c)
     stream = WholeVehicleOfflineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                        eager=bool(windows), imu=imu)
-    stream.feed(stamps, readings, v)
+    stream.feed(stamps, readings, v, imu_codes)
     out = concatenate_arrays(list(stream.finish()))
     return replace(out, axle_fit=fit_axles(vehicle, out))
 
@@ -504,14 +535,15 @@ def estimate_online_blocks(vehicle: ArticulatedParameters, blocks: Iterable[tupl
                            capacity: int = 0,
                            chunk_rows: int | None = None) -> WholeVehicleArrays:
     """:func:`estimate_whole_vehicle` online over a drive's ``blocks`` (each ``(stamps_ns,
-    readings, speed_mps)`` as :meth:`WholeVehicleOnlineStream.feed` takes them, consumed as
-    they come): the same arrays, the blocks' inputs never held together; ``capacity``: the
-    samples the arrays are reserved for at once (a bag's metadata; grown past it)."""
+    readings, speed_mps[, imu_codes])`` as :meth:`WholeVehicleOnlineStream.feed` takes
+    them, consumed as they come): the same arrays, the blocks' inputs never held together;
+    ``capacity``: the samples the arrays are reserved for at once (a bag's metadata; grown
+    past it)."""
     online = WholeVehicleOnlineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                       imu=imu, chunk_rows=chunk_rows)
     gathered = _OnlineArrays(online.estimator, capacity)
-    for stamps, readings, speed in blocks:
-        for piece in online.feed(stamps, readings, speed):
+    for block in blocks:
+        for piece in online.feed(*block):
             gathered.add(piece)
     for piece in online.finish():
         gathered.add(piece)
@@ -620,10 +652,12 @@ class WholeVehicleOnlineStream:
         self.fed = 0
         self._pending: list = []
 
-    def feed(self, stamps_ns, readings, speed_mps) -> list[WholeVehicleArrays]:
+    def feed(self, stamps_ns, readings, speed_mps, imu_codes=None
+             ) -> list[WholeVehicleArrays]:
         """One block: ``stamps_ns`` (m,) increasing across blocks, ``readings`` (m, channels)
         as :meth:`WholeVehicleEstimator.step` takes them, ``speed_mps`` (m,) or a float
-        (m/s); the pieces completed.
+        (m/s), ``imu_codes`` (m,) the IMU's pairing (:func:`estimate_whole_vehicle`'s; None:
+        every a_y fresh); the pieces completed.
 
         Raises
         ------
@@ -634,8 +668,10 @@ class WholeVehicleOnlineStream:
         v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)
         out = []
         step, chunk, pending = self.estimator.step, self.chunk_rows, self._pending
-        for s, y, vi in zip(stamps.tolist(), np.asarray(readings, float), v.tolist()):
-            pending += step(s, y, vi)
+        fresh = (np.ones(stamps.size, bool) if imu_codes is None else
+                 np.asarray(imu_codes).reshape(-1) == 0).tolist()
+        for s, y, vi, f in zip(stamps.tolist(), np.asarray(readings, float), v.tolist(), fresh):
+            pending += step(s, y, vi, f)
             if len(pending) >= chunk:
                 out.append(self._piece())
                 pending = self._pending
@@ -762,6 +798,7 @@ class WholeVehicleOfflineStream:
         self._last: int | None = None
         self._last_row = None
         self._codes = _Columns([(np.int8, (ny,))], capacity)    # each sample's sensor flags
+        self._stale = _Columns([(bool, ())], capacity)       # each sample's a_y not fresh
         self._flags_before = list(self.est.faults.flags)
         #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
         self.innovations_gated: tuple = ()
@@ -771,12 +808,15 @@ class WholeVehicleOfflineStream:
         """Samples fed so far."""
         return self._in.n
 
-    def feed(self, stamps_ns, readings, speed_mps) -> list:
+    def feed(self, stamps_ns, readings, speed_mps, imu_codes=None) -> list:
         """One block: stamps (k,) ns increasing (over the blocks too), readings (k, channels)
-        as :meth:`WholeVehicleEstimator.step` takes them, speed (k,) or float (m/s); no
-        piece (see the class notes)."""
+        as :meth:`WholeVehicleEstimator.step` takes them, speed (k,) or float (m/s), the
+        IMU's pairing codes (k,) (:func:`estimate_whole_vehicle`'s; None: every a_y fresh);
+        no piece (see the class notes)."""
         stamps = np.asarray(stamps_ns, np.int64).reshape(-1)
         k = stamps.size
+        self._stale.append(np.zeros(k, bool) if imu_codes is None else
+                           np.asarray(imu_codes).reshape(-1) != 0)
         y = np.array(readings, float, copy=True).reshape(k, -1)
         v = np.broadcast_to(np.asarray(speed_mps, float), (k,))
         if k:
@@ -837,6 +877,11 @@ class WholeVehicleOfflineStream:
         bounds = list(zip(starts.tolist(), starts[1:].tolist() + [stamps.size]))
         # a stuck channel's stretch not fed to the smoother (module notes)
         left = left_out(codes, est.faults.stuck_since, stamps) if codes.size else None
+        stale = self._stale.arrays()[0]
+        if est.imu_out and stale.any():        # no fresh a_y: its rows left out too
+            if left is None:
+                left = np.zeros(codes.shape, bool)
+            left[np.ix_(stale, sorted(est.imu_out))] = True
         dist = 0.0
         prev: int | None = None
         for run, (a0, b0) in enumerate(bounds):

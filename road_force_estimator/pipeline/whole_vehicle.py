@@ -102,7 +102,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
         ay, codes = pair_imu(r.stamps_ns, r.imu_stamps_ns, r.imu_ay_mps2)
         readings = np.column_stack([readings, ay])
     wv = estimate_whole_vehicle(vehicle, r.stamps_ns, readings, speed, observer=observer,
-                                offline=mode == 'offline', windows=windows, imu=imu)
+                                offline=mode == 'offline', windows=windows, imu=imu,
+                                imu_codes=codes)
     wv = replace(wv, rejected=_counts(r.rejected), messages=dict(r.messages))
     return wv if codes is None else replace(wv, imu_codes=codes)
 
@@ -124,7 +125,8 @@ def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
                 raise InputError('no usable /vehicle/twist message: the speed is unknown')
             if imu:                                    # the IMU's a_y by the node's rule
                 codes.append(b.imu_codes)
-                yield b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]), b.speed_mps
+                yield (b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]), b.speed_mps,
+                       b.imu_codes)
             else:
                 yield b.stamps_ns, b.readings, b.speed_mps
 
@@ -193,7 +195,7 @@ def rejection_values(wv) -> tuple[dict, str]:
 
 def imu_values(wv, k: int, since: int = 0) -> tuple[dict, str]:
     """The tractor IMU's counts at sample ``k`` (the node's keys, :mod:`~.estimation.imu_hold`:
-    ``imu.stale``, ``imu.missing`` the samples of the period ``since`` .. ``k`` fed a held or
+    ``imu.stale``, ``imu.missing`` the samples of the period ``since`` .. ``k`` with a held or
     no a_y, ``total.imu.*`` the drive's so far) and a message ('' when the period had none);
     none without the IMU."""
     from road_force_estimator.estimation.imu_hold import MISSING, STALE

@@ -40,9 +40,11 @@ The tractor IMU (``vehicle.tractor_imu: true`` in the observer's file, the param
 reads): ``/imu/tractor`` is subscribed (sensor-data QoS) and read from its bytes
 (:class:`ImuReader`, ``linear_acceleration.y`` = a_y, m/s^2); each sample takes the latest a_y
 at or before its stamp (:mod:`~.estimation.imu_hold`) as the estimator's last channel
-(``imu=True``). ``observer: estimator`` counts ``imu.stale`` and ``imu.missing`` (samples fed
-a held a_y older than :data:`~.estimation.imu_hold.IMU_MAX_AGE_S`, or 0 before any IMU
-message) of the period and ``total.imu.*``, WARN when the period had any.
+(``imu=True``); a sample without a fresh a_y leaves the IMU's row out (and a pendulum's roll
+rows: :mod:`~.estimation.whole_vehicle`). ``observer: estimator`` counts ``imu.stale`` and
+``imu.missing`` (samples with a held a_y older than
+:data:`~.estimation.imu_hold.IMU_MAX_AGE_S`, or no IMU message yet) of the period and
+``total.imu.*``, WARN when the period had any.
 """
 from __future__ import annotations
 
@@ -62,7 +64,7 @@ from road_force_estimator.core.articulated_parameters import ArticulatedParamete
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation import diagnostics
 from road_force_estimator.estimation.axle_fit import ADVICE
-from road_force_estimator.estimation.imu_hold import MISSING, STALE, STATES
+from road_force_estimator.estimation.imu_hold import FRESH, MISSING, STALE, STATES
 from road_force_estimator.estimation.models.articulated import IMU_CHANNEL
 from road_force_estimator.estimation.rollover_warning import WARNING_THRESHOLD
 from road_force_estimator.estimation.whole_vehicle import UNITS, WholeVehicleEstimator
@@ -305,7 +307,8 @@ class WholeVehicleObserver:
                 self.last_rejection = f'stamp {stamp_ns} ns at or before the last ({last} ns)'
                 return
             try:
-                samples = self.estimator.step(stamp_ns, readings, speed_mps)
+                samples = self.estimator.step(stamp_ns, readings, speed_mps,
+                                              imu is None or imu[1] == FRESH)
             except ValueError as exc:
                 self.period['nonfinite'] += 1
                 self.last_rejection = bounded(str(exc))

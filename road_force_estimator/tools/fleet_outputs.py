@@ -265,8 +265,8 @@ def _sensors_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
 def _rejected_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
     """Per drive, topic and reason: the messages rejected (each drive's ``report.json``
     ``rejected``: the readers', an articulated drive's those of the whole vehicle's, and the
-    estimator's), then the tractor IMU's samples fed a held (stale) or no (missing) a_y
-    (``whole_vehicle_estimate.tractor_imu``); the drives with none left out."""
+    estimator's), then the tractor IMU's samples with a held (stale) or no (missing) a_y,
+    left out (``whole_vehicle_estimate.tractor_imu``); the drives with none left out."""
     rows = [(o.drive_id, topic, reason, int(count)) for o in outcomes
             for topic, reasons in sorted(o.rejected.items())
             for reason, count in sorted(reasons.items()) if count]
