@@ -78,7 +78,7 @@ def drives(request):
 def test_front_axle_loads_with_sticking_springs_as_without_friction(drives):
     """The file stating the stick friction: the wheel-load error against the plant's truth
     within 1.1 x the same drive's without friction (plant and file) in every mode (measured,
-    10 s: class A 1.00 / 1.03 / 1.05, class C 1.00 / 0.99 / 1.00 online / 10 ms / offline;
+    10 s: class A 1.00 / 0.98 / 1.05, class C 1.00 / 0.99 / 1.00 online / 10 ms / offline;
     with the roughness matched on the raw readings, 1.15 / 1.36 / 1.51 on class A)."""
     road_class, stick, clean = drives
     none = replace(STICK, leaf_spring_friction_n=(0.0, 0.0))
@@ -107,8 +107,7 @@ def test_offline_a_lagging_sensor_costs_the_operator_nothing():
     """A 3 ms first-order lag on the deflection sensors, stated in the file (class C, 10 s):
     offline the operator reads the readings low-passed without phase and the lag undone, and
     the load error is within 1.1 x the same drive's without friction (measured 0.99 x; on the
-    raw lagged readings 2.09 x). Online with 10 ms it stays on the lagged readings: 1.73 x
-    (zero latency 1.04 x)."""
+    raw lagged readings 2.09 x). At 10 ms: the test below (zero latency 1.04 x)."""
     lagged = replace(STICK, sensor_time_constant_s=(0.003, 0.003))
     none = replace(lagged, leaf_spring_friction_n=(0.0, 0.0))
     got, ref = [], []
@@ -173,6 +172,19 @@ def test_whole_vehicle_loads_with_sticking_springs_as_without_friction():
     for (obs, offline), bound in zip(WV_MODES, (1.25, 1.15, 1.15)):
         got, ref = _worst_wheel_pct(stick, obs, offline), _worst_wheel_pct(clean, obs, offline)
         assert got < bound * ref, (obs.latency_s, offline, got, ref)
+
+
+@pytest.mark.parametrize('road_class', ['A', 'C'])
+def test_whole_vehicle_with_a_lagging_sensor_at_a_latency(road_class):
+    """8 s, 1.5 kN of stick friction on every spring and a 3 ms lag on every sensor, both
+    stated in the file, 10 ms latency: the worst wheel's load error against the plant's truth
+    within 1.2 x the same drive's without friction (the same lag; measured A 0.95, C 1.09;
+    with the forces final on the lagged readings, before: 1.68, 1.60)."""
+    lag = {'vehicle.sensor_time_constant': [0.003, 0.003]}
+    stick, clean = _wv_drive({**WV_STICK, **lag}, road_class), _wv_drive(lag, road_class)
+    obs = ObserverParameters(latency_s=0.01)
+    got, ref = _worst_wheel_pct(stick, obs, False), _worst_wheel_pct(clean, obs, False)
+    assert got < 1.2 * ref, (got, ref)
 
 
 @pytest.mark.parametrize('lag', [False, True])

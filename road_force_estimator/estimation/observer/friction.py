@@ -15,14 +15,34 @@ Its force depends only on the spring's extension history, which the deflection c
 the known input is the stop operator (:class:`..core.friction.Sliders`) on each element's
 reading (:class:`MeasuredSliders`; the model's ``friction_channels``), its slider force 0 at
 a run's first sample. The force over a step is the trapezoid of the operator's outputs at its
-two samples, both known from the readings; no equivalent damping, no iterated update, no
-delayed correction (the forces are final); the outputs' direct part is the force at the
-emitted sample (kept by its stamp for a latency). The operator reads what the filter is fed:
-a gated or left-out channel's prediction in place of its reading (a spike would otherwise
-move the slider for good), the reading again when the gate is undone. The noise and
-roughness statistics (:meth:`.GainSchedule.statistics`) see the readings less the linear
-model's response to these forces (:func:`friction_response`): stuck springs move less, and
-the roughness matched on the readings themselves came out a third of the road's (class A).
+two samples, both known from the readings; no equivalent damping, no iterated update; the
+outputs' direct part is the force at the emitted sample (kept by its stamp for a latency).
+The operator reads what the filter is fed: a gated or left-out channel's prediction in place
+of its reading (a spike would otherwise move the slider for good), the reading again when the
+gate is undone. The noise and roughness statistics (:meth:`.GainSchedule.statistics`) see the
+readings less the linear model's response to these forces (:func:`friction_response`): stuck
+springs move less, and the roughness matched on the readings themselves came out a third of
+the road's (class A).
+
+With a latency the forward operator's forces are corrected later, as the tanh law's below
+(:meth:`KnownFriction.stick_correction`): a sensor lag delays the operator's force by the lag,
+which costs far more at 10 ms than at zero latency while those forces are final. Once
+the samples after e are in, each element's reading at e is read again de-lagged: ``y + tau
+dy/dt`` (tau its sensor's time constant, :func:`channel_lags`; 0: none) from the centred
+quadratic fit over at most ``lag`` samples each side (:func:`delagged`, a light low-pass that
+is causal within the fixed lag). A second operator per correction lag runs on those readings
+(force 0 at the run's first sample, as the forward one). The trapezoid of its forces at e - 1
+and e replaces the forward filter's force of that step. The difference corrects the rows e ..
+e + lag as below, first at :data:`STAGE_S` (the full lag alone leaves much of the cost) and
+then at the full lag. At the full lag this happens before sample e is emitted, and its
+direct part takes that operator's force at e. The forward operator goes on from its own
+state on the fed readings (re-basing it on the delayed operator's force each step changed
+nothing that mattered). A gated or left-out channel's prediction is in the fed readings that
+both operators take. The correction runs with no lag stated too: the low-pass alone helps a
+little on class A (``python -m bench.studies.stick_friction [--whole-vehicle]``; the figures:
+docs/notes/stick_friction.md). A gap or a run's start starts
+every operator again; a run filtered again (the first block's replay) keeps them and its
+rows lose the corrections made so far, as the tanh law's.
 
 Delayed correction (``observer.latency`` > 0)
 ---------------------------------------------
@@ -52,8 +72,9 @@ from road_force_estimator.core.friction import Sliders
 from road_force_estimator.estimation.models.protocol import ContinuousModel, VehicleModel
 from road_force_estimator.estimation.observer.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 
-__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'delagged', 'delag_weights', 'dq_rows',
-           'friction_response', 'friction_step']
+__all__ = ['STAGE_S', 'STICK_DELAG_UNLAGGED', 'STICK_STAGED', 'KnownFriction', 'MeasuredSliders',
+           'channel_lags', 'delagged', 'delag_weights', 'dq_rows', 'friction_response',
+           'friction_step']
 
 #: With a latency, each step's friction is corrected twice: at this lag (s), where the rates
 #: have taken most of what the later samples tell (the sensor lag and the wheel's sticking
@@ -62,9 +83,10 @@ __all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'delagged', 'delag_wei
 STAGE_S = 0.004
 
 #: Stick: whether the delayed correction runs when no friction channel has a sensor lag (the
-#: readings then only low-passed) -- measured: docs/notes/stick_friction.md
+#: readings then only low-passed; module notes)
 STICK_DELAG_UNLAGGED = True
-#: Stick: the delayed correction at :data:`STAGE_S` too (not only at the full lag)
+#: Stick: the delayed correction at :data:`STAGE_S` too, not only at the full lag (module
+#: notes)
 STICK_STAGED = True
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
@@ -410,7 +432,7 @@ class KnownFriction:
         samples later, or None when the step into it is not known (a run's first sample, a
         re-filtered block). Added to those rows, the buffer is the filter driven by the
         friction at the latest rates (the module notes)."""
-        if self.stick is not None:      # the forces are final
+        if self.stick is not None:      # (its own: :meth:`stick_correction`)
             return None
         rates = self._rate
         prev = rates.get(lag)
