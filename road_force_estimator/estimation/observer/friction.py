@@ -90,6 +90,7 @@ STICK_DELAG_UNLAGGED = True
 STICK_STAGED = True
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
+_FITS: dict = {}  # :func:`delag_weights` by h
 
 
 def channel_lags(model: ContinuousModel) -> list[float]:
@@ -140,12 +141,17 @@ def delag_weights(h: int) -> tuple[np.ndarray, np.ndarray]:
     """The centred local quadratic fit (Savitzky-Golay) over the 2 h + 1 samples k = -h..h:
     the weights of its value at k = 0 and of its slope there per step (multiply by 1 / dt,
     s); h = 0: the sample itself, slope 0."""
-    if h <= 0:
-        return np.ones(1), np.zeros(1)
-    k = np.arange(-h, h + 1, dtype=float)
-    value = (3.0 * (3 * h * h + 3 * h - 1) - 15.0 * k * k) / ((2 * h - 1) * (2 * h + 1)
-                                                              * (2 * h + 3))
-    return value, k / float(np.sum(k * k))
+    w = _FITS.get(h)
+    if w is None:
+        if h <= 0:
+            w = np.ones(1), np.zeros(1)
+        else:
+            k = np.arange(-h, h + 1, dtype=float)
+            w = ((3.0 * (3 * h * h + 3 * h - 1) - 15.0 * k * k)
+                 / ((2 * h - 1) * (2 * h + 1) * (2 * h + 3)), k / float(np.sum(k * k)))
+        if len(_FITS) < 64:
+            _FITS[h] = w
+    return w
 
 
 def delagged(window, dt: float, tau) -> np.ndarray:
@@ -155,7 +161,7 @@ def delagged(window, dt: float, tau) -> np.ndarray:
     (:func:`delag_weights`) over the window, samples dt (s) apart (units of the readings)."""
     w = np.asarray(window, dtype=float)
     value, slope = delag_weights(w.shape[0] // 2)
-    return value @ w + np.asarray(tau, dtype=float) * (slope @ w) / dt
+    return _dot(value, w) + np.asarray(tau, dtype=float) * (_dot(slope, w) / dt)
 
 
 class MeasuredSliders:
@@ -238,6 +244,7 @@ class KnownFriction:
                     if self.stick is not None else ())
         self.late = self.stick is not None and (STICK_DELAG_UNLAGGED
                                                 or any(t > 0.0 for t in self.tau))
+        self._tau_a = np.array(self.tau)
         self._pend_q: list = []
         self._y_start = None
         self._stat_step = None       # (model, dt, its friction_step) of :meth:`response`
@@ -462,21 +469,26 @@ class KnownFriction:
         them), or None (a run's first sample, the step not kept). ``final`` (the output's
         lag): the sample's direct part takes that operator's forces too (module notes)."""
         late = self._late.get(lag)
-        if late is None:     # [operator, next sample, forces at the one before, at the last]
+        if late is None:     # [operator, next sample, forces at the one before, at the last,
+            # (h, dt, weights) of its last de-lagging fit]
             late = self._late[lag] = [Sliders(self.stick.sliders.stiffness,
-                                              self.stick.sliders.friction), 0, None, None]
+                                              self.stick.sliders.friction), 0, None, None,
+                                      (-1, 0.0, None)]
         fed = self._fed
         newest = self._fed_last
         oldest = newest - len(fed) + 1
         if late[1] < oldest:
             late[1] = oldest
-        tau = self.tau
         sl = late[0]
         while late[1] <= index:
             j = late[1]
             h = min(lag, j - oldest, newest - j)
             a = j - oldest
-            q = delagged(list(islice(fed, a - h, a + h + 1)), dt, tau).tolist()
+            fit = late[4]
+            if fit[0] != h or fit[1] != dt:     # the fit's weights per reading (2 h + 1, nf)
+                value, slope = delag_weights(h)
+                fit = late[4] = (h, dt, value[:, None] + slope[:, None] * (self._tau_a / dt))
+            q = (fit[2] * list(islice(fed, a - h, a + h + 1))).sum(axis=0).tolist()
             if late[3] is None:       # the operator's first sample: its forces 0
                 sl.start(q, [0.0] * len(q))
                 f = (0.0,) * len(q)
@@ -500,6 +512,8 @@ class KnownFriction:
             kept = self._direct
             if back < len(kept):
                 kept[-1 - back] = (kept[-1 - back][0], late[3])
+        if not any(delta):      # (both sliding at the same +-F_f)
+            return None
         return _dot(self._rows_per_newton(g, dt)[:lag + 1], delta)
 
     def _rows_per_newton(self, g: Gains, dt: float) -> np.ndarray:
