@@ -30,9 +30,9 @@ which costs far more at 10 ms than at zero latency while those forces are final.
 the samples after e are in, each element's reading at e is read again de-lagged: ``y + tau
 dy/dt`` (tau its sensor's time constant, :func:`channel_lags`; 0: none) from the centred
 quadratic fit over at most ``lag`` samples each side (:func:`delagged`, a light low-pass that
-is causal within the fixed lag). A second operator per correction lag runs on those readings
-(force 0 at the run's first sample, as the forward one). The trapezoid of its forces at e - 1
-and e replaces the forward filter's force of that step. The difference corrects the rows e ..
+is causal within the fixed lag). An operator per correction (the stage's, the final) runs
+on them (force 0 at the run's first sample, as the forward one). The trapezoid of its forces
+at e - 1 and e replaces the forward filter's force of that step. The difference corrects the rows e ..
 e + lag as below, first at :data:`STAGE_S` (the full lag alone leaves much of the cost) and
 then at the full lag. At the full lag this happens before sample e is emitted, and its
 direct part takes that operator's force at e. The forward operator goes on from its own
@@ -271,7 +271,8 @@ class KnownFriction:
                 self._y_start = tuple(y)
                 self._direct: deque = deque()   # (stamp, force at that sample (N))
                 # the fed extensions of the run's latest samples (newest last, its index
-                # _fed_last) and per correction lag its operator on their de-lagged reading
+                # _fed_last) and per correction (stage, final) its operator on their
+                # de-lagged readings
                 self._fed: deque = deque([self.stick.extensions(y)])
                 self._fed_last = 0
                 self._late: dict = {}
@@ -465,13 +466,14 @@ class KnownFriction:
         """Stick, at a latency: the change (lag + 1, nx + ny) of the row of sample ``index``
         and the ``lag`` rows after it (x+ and nu) for the forces over the step into it read
         again ``lag`` samples later from the de-lagged readings (:func:`delagged`, the
-        centred fit over at most ``lag`` samples each side; the operator of this lag run on
-        them), or None (a run's first sample, the step not kept). ``final`` (the output's
-        lag): the sample's direct part takes that operator's forces too (module notes)."""
-        late = self._late.get(lag)
+        centred fit over at most ``lag`` samples each side; one operator runs on them per
+        role: the stage's correction, the final one), or None (a run's first sample, the
+        step not kept, no change). ``final`` (the output's lag): the sample's direct part
+        takes that operator's forces too (module notes)."""
+        late = self._late.get(final)    # (by its role: the stage's lag follows the step)
         if late is None:     # [operator, next sample, forces at the one before, at the last,
             # (h, dt, weights) of its last de-lagging fit]
-            late = self._late[lag] = [Sliders(self.stick.sliders.stiffness,
+            late = self._late[final] = [Sliders(self.stick.sliders.stiffness,
                                               self.stick.sliders.friction), 0, None, None,
                                       (-1, 0.0, None)]
         fed = self._fed
