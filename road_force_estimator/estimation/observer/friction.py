@@ -25,24 +25,24 @@ springs move less, and the roughness matched on the readings themselves came out
 the road's (class A).
 
 With a latency the forward operator's forces are corrected later, as the tanh law's below
-(:meth:`KnownFriction.stick_correction`): a sensor lag delays the operator's force by the lag,
-which costs far more at 10 ms than at zero latency while those forces are final. Once
+(:meth:`KnownFriction.stick_correction`): a sensor lag delays the operator's force by the
+lag, which costs far more at 10 ms than at zero latency while those forces are final. Once
 the samples after e are in, each element's reading at e is read again de-lagged: ``y + tau
 dy/dt`` (tau its sensor's time constant, :func:`channel_lags`; 0: none) from the centred
-quadratic fit over at most ``lag`` samples each side (:func:`delagged`, a light low-pass that
-is causal within the fixed lag). An operator per correction (the stage's, the final) runs
-on them (force 0 at the run's first sample, as the forward one). The trapezoid of its forces
-at e - 1 and e replaces the forward filter's force of that step. The difference corrects the rows e ..
-e + lag as below, first at :data:`STAGE_S` (the full lag alone leaves much of the cost) and
-then at the full lag. At the full lag this happens before sample e is emitted, and its
-direct part takes that operator's force at e. The forward operator goes on from its own
-state on the fed readings (re-basing it on the delayed operator's force each step changed
-nothing that mattered). A gated or left-out channel's prediction is in the fed readings that
-both operators take. The correction runs with no lag stated too: the low-pass alone helps a
-little on class A (``python -m bench.studies.stick_friction [--whole-vehicle]``; the figures:
-docs/notes/stick_friction.md). A gap or a run's start starts
-every operator again; a run filtered again (the first block's replay) keeps them and its
-rows lose the corrections made so far, as the tanh law's.
+quadratic fit over at most ``lag`` samples each side (:func:`delagged`, a light low-pass
+that is causal within the fixed lag). An operator per correction (the stage's, the final)
+runs on them (force 0 at the run's first sample, as the forward one). The trapezoid of its
+forces at e - 1 and e replaces the forward filter's force of that step. The difference
+corrects the rows e .. e + lag as below, first at :data:`STAGE_S` (the full lag alone leaves
+much of the cost) and then at the full lag. At the full lag this happens before sample e is
+emitted, and its direct part takes that operator's force at e. The forward operator goes on
+from its own state on the fed readings (re-basing it on the delayed operator's force each
+step changed nothing that mattered). A gated or left-out channel's prediction is in the fed
+readings that both operators take. The correction runs with no lag stated too: the low-pass
+alone helps a little on class A (``python -m bench.studies.stick_friction
+[--whole-vehicle]``; the figures: docs/notes/stick_friction.md). A gap or a run's start
+starts every operator again; a run filtered again (the first block's replay) keeps them and
+its rows lose the corrections made so far, as the tanh law's.
 
 Delayed correction (``observer.latency`` > 0)
 ---------------------------------------------
