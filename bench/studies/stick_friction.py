@@ -6,7 +6,7 @@ offline.
 Run from the repository root::
 
     .venv/bin/python -m bench.studies.stick_friction [--duration 20] [--classes A C]
-        [--cases free lag noise2 parked]
+        [--cases free lag noise2 parked] [--whole-vehicle]
 
 Drives: the file's front axle at 20 m/s, 1 kHz, ISO 8608 road (seed 3), tire envelope
 0.25 m, 1.5 kN of ``stick`` friction per spring (``k_f`` = 8 k), 10 um / 0.1 mrad of noise
@@ -15,6 +15,13 @@ every sensor, stated in the file), ``noise2`` (2 um of deflection noise), ``park
 slider holding +F_f at the start, ``simulator.leaf_spring_friction_start: 1``; the observer's
 operator starts at 0). Printed per case and mode: the wheel-load RMS error after 2 s (N)
 with stick friction and without, and their ratio.
+
+``--whole-vehicle``: the same on MODEL.md's tractor and semi-trailer
+(``config/tractor_semitrailer.yaml``, :mod:`bench.accuracy.articulated_wim`'s drives: 20 m/s,
+1 kHz, ISO 8608 seed 1, 10 um, 1.5 kN of ``stick`` friction on every spring, the sliders free
+at the start), cases ``free`` and ``lag`` only: per axle (front, drive, trailer_1..3) the
+dynamic-load error after 5 s (% of the true dynamic RMS) with stick friction, and its ratio
+to the same drive without friction (the same lag).
 
 What it found: docs/notes/stick_friction.md.
 """
@@ -67,12 +74,45 @@ def load_error_n(vehicle: VehicleParameters, d: tuple, mode: str, latency_s: flo
     return float(np.sqrt(np.mean(err ** 2)))
 
 
+def whole_vehicle(duration_s: float, classes, cases) -> list[str]:
+    """The ``--whole-vehicle`` table (Markdown rows)."""
+    from bench.accuracy import articulated_wim as wim
+
+    stick = {'vehicle.leaf_spring_friction_model': 'stick',
+             'vehicle.leaf_spring_friction': [1500.0, 1500.0]}
+    lines = [f'Whole vehicle, 1.5 kN stick friction per spring stated in the file, '
+             f'{duration_s:g} s at 20 m/s: dynamic-load error after 5 s per axle (front, drive, '
+             'trailer_1..3; % of the true dynamic RMS) with stick friction, and / without\n',
+             '| class | case | ' + ' | '.join(m for m, _, _ in wim.MODES) + ' |',
+             '|---|---|' + '---|' * len(wim.MODES)]
+    for road in classes:
+        for case in cases:
+            lag = {'vehicle.sensor_time_constant': [0.003, 0.003]} if case == 'lag' else {}
+            ds = wim.simulate(road, duration_s, 1e-5, {**stick, **lag})
+            dn = wim.simulate(road, duration_s, 1e-5, lag)
+            cells = []
+            for _, latency, offline in wim.MODES:
+                a = wim.dynamic_pct(ds, wim.estimate(ds['vehicle'], ds, latency, offline))
+                b = wim.dynamic_pct(dn, wim.estimate(dn['vehicle'], dn, latency, offline))
+                cells.append(', '.join(f'{v:.1f}' for v in a) + ' / '
+                             + ', '.join(f'{v:.2f}' for v in a / b))
+            lines.append(f'| {road} | {case} | ' + ' | '.join(cells) + ' |')
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--duration', type=float, default=20.0, help='each drive (s)')
     p.add_argument('--classes', nargs='+', default=['A', 'C'])
     p.add_argument('--cases', nargs='+', default=list(CASES), choices=list(CASES))
+    p.add_argument('--whole-vehicle', action='store_true',
+                   help="the tractor and semi-trailer's per-axle table (cases free, lag)")
     args = p.parse_args(argv)
+    if args.whole_vehicle:
+        cases = [c for c in args.cases if c in ('free', 'lag')] or ['free', 'lag']
+        print('\n'.join(whole_vehicle(args.duration, args.classes, cases)))
+        return 0
     print(f'Front axle, 1.5 kN stick friction per spring stated in the file, {args.duration:g} s '
           'at 20 m/s: wheel-load RMS error after 2 s (N), stick / without friction (ratio)\n')
     print('| class | case | ' + ' | '.join(m for m, _ in MODES) + ' |')

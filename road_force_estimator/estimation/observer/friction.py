@@ -15,14 +15,34 @@ Its force depends only on the spring's extension history, which the deflection c
 the known input is the stop operator (:class:`..core.friction.Sliders`) on each element's
 reading (:class:`MeasuredSliders`; the model's ``friction_channels``), its slider force 0 at
 a run's first sample. The force over a step is the trapezoid of the operator's outputs at its
-two samples, both known from the readings; no equivalent damping, no iterated update, no
-delayed correction (the forces are final); the outputs' direct part is the force at the
-emitted sample (kept by its stamp for a latency). The operator reads what the filter is fed:
-a gated or left-out channel's prediction in place of its reading (a spike would otherwise
-move the slider for good), the reading again when the gate is undone. The noise and
-roughness statistics (:meth:`.GainSchedule.statistics`) see the readings less the linear
-model's response to these forces (:func:`friction_response`): stuck springs move less, and
-the roughness matched on the readings themselves came out a third of the road's (class A).
+two samples, both known from the readings; no equivalent damping, no iterated update; the
+outputs' direct part is the force at the emitted sample (kept by its stamp for a latency).
+The operator reads what the filter is fed: a gated or left-out channel's prediction in place
+of its reading (a spike would otherwise move the slider for good), the reading again when the
+gate is undone. The noise and roughness statistics (:meth:`.GainSchedule.statistics`) see the
+readings less the linear model's response to these forces (:func:`friction_response`): stuck
+springs move less, and the roughness matched on the readings themselves came out a third of
+the road's (class A).
+
+With a latency the forward operator's forces are corrected later, as the tanh law's below
+(:meth:`KnownFriction.stick_correction`): a sensor lag delays the operator's force by the
+lag, which costs far more at 10 ms than at zero latency while those forces are final. Once
+the samples after e are in, each element's reading at e is read again de-lagged: ``y + tau
+dy/dt`` (tau its sensor's time constant, :func:`channel_lags`; 0: none) from the centred
+quadratic fit over at most ``lag`` samples each side (:func:`delagged`, a light low-pass
+that is causal within the fixed lag). An operator per correction (the stage's, the final)
+runs on them (force 0 at the run's first sample, as the forward one). The trapezoid of its
+forces at e - 1 and e replaces the forward filter's force of that step. The difference
+corrects the rows e .. e + lag as below, first at :data:`STAGE_S` (the full lag alone leaves
+much of the cost) and then at the full lag. At the full lag this happens before sample e is
+emitted, and its direct part takes that operator's force at e. The forward operator goes on
+from its own state on the fed readings (re-basing it on the delayed operator's force each
+step changed nothing that mattered). A gated or left-out channel's prediction is in the fed
+readings that both operators take. The correction runs with no lag stated too: the low-pass
+alone helps a little on class A (``python -m bench.studies.stick_friction
+[--whole-vehicle]``; the figures: docs/notes/stick_friction.md). A gap or a run's start
+starts every operator again; a run filtered again (the first block's replay) keeps them and
+its rows lose the corrections made so far, as the tanh law's.
 
 Delayed correction (``observer.latency`` > 0)
 ---------------------------------------------
@@ -42,6 +62,7 @@ together cost far more than either alone (``python -m bench.studies.friction_lag
 from __future__ import annotations
 
 from collections import deque
+from itertools import islice
 import math
 
 import numpy as np
@@ -51,7 +72,8 @@ from road_force_estimator.core.friction import Sliders
 from road_force_estimator.estimation.models.protocol import ContinuousModel, VehicleModel
 from road_force_estimator.estimation.observer.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 
-__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'dq_rows', 'friction_response',
+__all__ = ['STAGE_S', 'STICK_DELAG_UNLAGGED', 'STICK_STAGED', 'KnownFriction', 'MeasuredSliders',
+           'channel_lags', 'delagged', 'delag_weights', 'dq_rows', 'friction_response',
            'friction_step']
 
 #: With a latency, each step's friction is corrected twice: at this lag (s), where the rates
@@ -60,7 +82,24 @@ __all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders', 'dq_rows', 'friction_r
 #: bench.studies.friction_lag``).
 STAGE_S = 0.004
 
+#: Stick: whether the delayed correction runs when no friction channel has a sensor lag (the
+#: readings then only low-passed; module notes)
+STICK_DELAG_UNLAGGED = True
+#: Stick: the delayed correction at :data:`STAGE_S` too, not only at the full lag (module
+#: notes)
+STICK_STAGED = True
+
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
+_FITS: dict = {}  # :func:`delag_weights` by h
+
+
+def channel_lags(model: ContinuousModel) -> list[float]:
+    """Each channel's sensor time constant (s, 0: none) from the model's lag states."""
+    tau = [0.0] * model.ny
+    first = model.nx - len(model.lagged)
+    for n, ch in enumerate(model.lagged):
+        tau[ch] = -1.0 / float(model.a[first + n, first + n])
+    return tau
 
 
 def dq_rows(g: Gains, dt: float, rates: tuple) -> tuple[np.ndarray, np.ndarray]:
@@ -96,6 +135,33 @@ def friction_response(model: ContinuousModel, dt: float, forces, x0=None, step=N
             x = a @ x + bd @ f
         states[k] = x
     return states @ model.c.T, x
+
+
+def delag_weights(h: int) -> tuple[np.ndarray, np.ndarray]:
+    """The centred local quadratic fit (Savitzky-Golay) over the 2 h + 1 samples k = -h..h:
+    the weights of its value at k = 0 and of its slope there per step (multiply by 1 / dt,
+    s); h = 0: the sample itself, slope 0."""
+    w = _FITS.get(h)
+    if w is None:
+        if h <= 0:
+            w = np.ones(1), np.zeros(1)
+        else:
+            k = np.arange(-h, h + 1, dtype=float)
+            w = ((3.0 * (3 * h * h + 3 * h - 1) - 15.0 * k * k)
+                 / ((2 * h - 1) * (2 * h + 1) * (2 * h + 3)), k / float(np.sum(k * k)))
+        if len(_FITS) < 64:
+            _FITS[h] = w
+    return w
+
+
+def delagged(window, dt: float, tau) -> np.ndarray:
+    """The quantity a first-order sensor lag of time constant tau (s, per column; 0: none)
+    read as ``window`` (2 h + 1, n): the centre sample's ``y + tau dy/dt`` (the lag's
+    ``tau dy/dt + y = q`` undone), y and its rate from the centred quadratic fit
+    (:func:`delag_weights`) over the window, samples dt (s) apart (units of the readings)."""
+    w = np.asarray(window, dtype=float)
+    value, slope = delag_weights(w.shape[0] // 2)
+    return _dot(value, w) + np.asarray(tau, dtype=float) * (_dot(slope, w) / dt)
 
 
 class MeasuredSliders:
@@ -172,6 +238,14 @@ class KnownFriction:
         self._w_gains = None         # ... of these gains
         #: the stick element from the readings (module notes), or None: the law on the rates
         self.stick = MeasuredSliders(vehicle_model) if vehicle_model.friction_sticks else None
+        #: stick, each element's channel's sensor time constant (s, 0: none), and whether the
+        #: forces get a delayed correction at a latency (:meth:`stick_correction`)
+        self.tau = (tuple(channel_lags(model)[c] for c in self.stick.channels)
+                    if self.stick is not None else ())
+        self.late = self.stick is not None and (STICK_DELAG_UNLAGGED
+                                                or any(t > 0.0 for t in self.tau))
+        self._tau_a = np.array(self.tau)
+        self._pend_q: list = []
         self._y_start = None
         self._stat_step = None       # (model, dt, its friction_step) of :meth:`response`
         # stick: the outputs' direct part per newton (no, nf) and the rows that have one
@@ -181,7 +255,8 @@ class KnownFriction:
 
     @property
     def sticks(self) -> bool:
-        """The friction is the stick element from the readings (no delayed correction)."""
+        """The friction is the stick element from the readings (its delayed correction, if
+        any: :attr:`late`)."""
         return self.stick is not None
 
     def restart(self, y=None, stamp: int | None = None) -> None:
@@ -195,6 +270,12 @@ class KnownFriction:
             if y is not None:
                 self._y_start = tuple(y)
                 self._direct: deque = deque()   # (stamp, force at that sample (N))
+                # the fed extensions of the run's latest samples (newest last, its index
+                # _fed_last) and per correction (stage, final) its operator on their
+                # de-lagged readings
+                self._fed: deque = deque([self.stick.extensions(y)])
+                self._fed_last = 0
+                self._late: dict = {}
             if self._y_start is not None:
                 self._f = self.stick.start(self._y_start)
                 self._before = self._pend = (self.stick.sliders.base, self._f)
@@ -221,6 +302,8 @@ class KnownFriction:
         second from the reading ``y`` the step is fed (committed by :meth:`record`)."""
         fm = self.fm
         if self.stick is not None:
+            if self.late:
+                self._pend_q = self.stick.extensions(y)
             self._pend = self.stick.peek(y)
             f1 = self._pend[1]
             self.last_force = tuple(0.5 * (a + b) for a, b in zip(self._f, f1))
@@ -298,6 +381,15 @@ class KnownFriction:
         if self.stick is not None:
             self._before = (self.stick.sliders.base, self._f)
             self.stick.sliders.base, self._f = self._pend
+            if self.late:       # the force used, and the reading fed (a run filtered again:
+                # the same forces, the readings kept)
+                self._keep_step(index, keep)
+                if stamp is not None:
+                    fed = self._fed
+                    fed.append(self._pend_q)
+                    self._fed_last += 1
+                    while len(fed) > 2 * keep + 1:
+                        fed.popleft()
             if stamp is not None:
                 kept = self._direct
                 kept.append((stamp, self._f))
@@ -305,6 +397,11 @@ class KnownFriction:
                     kept.popleft()
                 self._stat_f.append(self.last_force)
             return
+        self._keep_step(index, keep)
+
+    def _keep_step(self, index: int, keep: int) -> None:
+        """Keep the step from sample ``index`` and its :attr:`last_force` (and the ``keep``
+        steps before it) for the delayed correction."""
         steps = self._steps
         steps.append([index, self.last_force])
         while len(steps) > keep + 1:
@@ -319,6 +416,11 @@ class KnownFriction:
                 self._direct[-1] = (self._direct[-1][0], self._f)
             if self._stat_f:
                 self._stat_f[-1] = self.last_force
+            if self.late:
+                if self._fed:
+                    self._fed[-1] = self._pend_q
+                if self._steps:
+                    self._steps[-1][1] = self.last_force
             return
         if self._steps:
             self._steps[-1][1] = self.last_force
@@ -338,7 +440,7 @@ class KnownFriction:
         samples later, or None when the step into it is not known (a run's first sample, a
         re-filtered block). Added to those rows, the buffer is the filter driven by the
         friction at the latest rates (the module notes)."""
-        if self.stick is not None:      # the forces are final
+        if self.stick is not None:      # (its own: :meth:`stick_correction`)
             return None
         rates = self._rate
         prev = rates.get(lag)
@@ -358,6 +460,63 @@ class KnownFriction:
         step[1] = new
         return _dot(self._rows_per_newton(g, dt)[:lag + 1],
                     [a - b for a, b in zip(new, used)])
+
+    def stick_correction(self, g: Gains, dt: float, lag: int, index: int, final: bool
+                         ) -> np.ndarray | None:
+        """Stick, at a latency: the change (lag + 1, nx + ny) of the row of sample ``index``
+        and the ``lag`` rows after it (x+ and nu) for the forces over the step into it read
+        again ``lag`` samples later from the de-lagged readings (:func:`delagged`, the
+        centred fit over at most ``lag`` samples each side; one operator runs on them per
+        role: the stage's correction, the final one), or None (a run's first sample, the
+        step not kept, no change). ``final`` (the output's lag): the sample's direct part
+        takes that operator's forces too (module notes)."""
+        late = self._late.get(final)    # (by its role: the stage's lag follows the step)
+        if late is None:     # [operator, next sample, forces at the one before, at the last,
+            # (h, dt, weights) of its last de-lagging fit]
+            late = self._late[final] = [Sliders(self.stick.sliders.stiffness,
+                                              self.stick.sliders.friction), 0, None, None,
+                                      (-1, 0.0, None)]
+        fed = self._fed
+        newest = self._fed_last
+        oldest = newest - len(fed) + 1
+        if late[1] < oldest:
+            late[1] = oldest
+        sl = late[0]
+        while late[1] <= index:
+            j = late[1]
+            h = min(lag, j - oldest, newest - j)
+            a = j - oldest
+            fit = late[4]
+            if fit[0] != h or fit[1] != dt:     # the fit's weights per reading (2 h + 1, nf)
+                value, slope = delag_weights(h)
+                fit = late[4] = (h, dt, value[:, None] + slope[:, None] * (self._tau_a / dt))
+            q = (fit[2] * list(islice(fed, a - h, a + h + 1))).sum(axis=0).tolist()
+            if late[3] is None:       # the operator's first sample: its forces 0
+                sl.start(q, [0.0] * len(q))
+                f = (0.0,) * len(q)
+            else:
+                sl.advance(q)
+                f = tuple(sl.forces(q))
+            late[2], late[3] = late[3], f
+            late[1] = j + 1
+        steps = self._steps
+        if late[1] != index + 1 or late[2] is None or not steps:
+            return None
+        pos = index - 1 - steps[0][0]
+        if not 0 <= pos < len(steps):
+            return None
+        step = steps[pos]
+        new = tuple(0.5 * (a + b) for a, b in zip(late[2], late[3]))
+        delta = [a - b for a, b in zip(new, step[1])]
+        step[1] = new
+        if final:
+            back = newest - index
+            kept = self._direct
+            if back < len(kept):
+                kept[-1 - back] = (kept[-1 - back][0], late[3])
+        if not any(delta):      # (both sliding at the same +-F_f)
+            return None
+        return _dot(self._rows_per_newton(g, dt)[:lag + 1], delta)
 
     def _rows_per_newton(self, g: Gains, dt: float) -> np.ndarray:
         """(N + 1, nx + ny, nf): the change of the rows e .. e + N (x+ and nu) per newton of

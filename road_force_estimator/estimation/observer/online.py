@@ -55,7 +55,7 @@ import numpy as np
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
-from road_force_estimator.estimation.observer.friction import KnownFriction
+from road_force_estimator.estimation.observer.friction import STICK_STAGED, KnownFriction
 from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.observer.schedule import (
@@ -515,6 +515,8 @@ class ModelCore:
                 item = pending.popleft()
                 gains = sched.gains
                 delayed = fr is not None and not fr.sticks
+                if fr is not None and fr.late:    # stick: from de-lagged readings (.friction)
+                    self._stick_correction(gains, dt, i, lag)
                 if delayed:   # the friction at its smoothed rates (.model_friction)
                     stage = fr.stage_lag(dt, lag)
                     if stage:
@@ -615,6 +617,17 @@ class ModelCore:
         w = self._fr.correction(gains, dt, lag, self._n - lag, dq)
         if w is not None:
             buf[i - lag:i + 1, self._x0i:self._y0i] += w
+
+    def _stick_correction(self, gains: Gains, dt: float, i: int, lag: int) -> None:
+        """Stick: the delayed correction (:meth:`.KnownFriction.stick_correction`) of the
+        rows from the sample :meth:`.KnownFriction.stage_lag` rows back on, then of those from
+        the sample ``lag`` rows back (the one due now, before its output) on."""
+        fr = self._fr
+        stage = fr.stage_lag(dt, lag) if STICK_STAGED else 0
+        for n in (stage, lag) if stage else (lag,):
+            w = fr.stick_correction(gains, dt, n, self._n - n, n == lag)
+            if w is not None:
+                self._buf[i - n:i + 1, self._x0i:self._y0i] += w
 
     def _profile_step(self, y) -> list:
         """One step of the zero-latency profile filter (issue 21: the same data, the
