@@ -110,8 +110,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('vehicle.leaf_spring_friction_model', 'string', 'tanh', '',
        'law of the leaf-spring friction: "tanh" = -F_f tanh(dq / v_f) (no stick); "stick" = '
        'the elastic-plastic (Jenkins) element, a spring k_f in series with a Coulomb slider '
-       'F_f (MODEL.md "Friction that sticks"; the plant simulates it, the observer models '
-       'the tanh law)', choices=('tanh', 'stick')),
+       'F_f (MODEL.md "Friction that sticks"; the plant simulates it, the observer carries '
+       "each slider from its spring's measured deflection)", choices=('tanh', 'stick')),
     _p('vehicle.leaf_spring_friction_velocity', 'double', 0.01, 'm/s',
        'smoothing velocity v_f of the tanh friction law -F_f tanh(dq / v_f)', 1e-4, 1.0),
     _p('vehicle.leaf_spring_friction_stiffness', 'double', 8.0, '',
