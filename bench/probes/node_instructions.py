@@ -22,8 +22,9 @@ min and median of ``--repeats``. With ``--callgrind``: this script run under ``v
 --tool=callgrind`` twice side by side, after the same ``--warm`` samples, for each of the two
 sample counts of ``--samples``; instructions per sample = the difference of the runs' totals
 over the difference of the counts (start-up, imports and warm-up cancel), the main thread's
-alone (DDS's threads run by the wall clock), Python's hash seed fixed (a random one moves the
-start-up's count by more than a few hundred samples take). Make the difference a multiple of
+alone (DDS's threads run by the wall clock), Python's hash seed fixed and one BLAS thread
+(a random seed, or OpenBLAS's pool sharing out the gain designs' products by the clock, moves
+the start-up's count by more than thousands of samples take). Make the difference a multiple of
 256 samples (the observer's noise statistics run once a block of 256). Instruction counts do
 not move with the machine's load, unlike times.
 """
@@ -40,6 +41,8 @@ import tempfile
 import time
 
 import numpy as np
+
+from road_force_estimator.ros.launcher import BLAS_THREAD_VARIABLES
 
 T0_NS = 1_700_000_000 * 10**9
 CACHE = pathlib.Path(tempfile.gettempdir()) / 'node_instructions_drive.npy'
@@ -116,8 +119,9 @@ def measure_once(part: str, warm: int, samples: int, cache: pathlib.Path) -> Non
 def callgrind_totals(part: str, warm: int, counts: list, cache: pathlib.Path) -> list:
     """The instructions callgrind counts in the main thread of a run of ``warm + n`` samples,
     for each ``n`` of ``counts`` (the runs side by side; Python's hash seed fixed, 0, so that
-    the start-up's dictionaries take the same instructions in every run)."""
-    env = {**os.environ, 'PYTHONHASHSEED': '0'}
+    the start-up's dictionaries take the same instructions in every run; one BLAS thread, as
+    the nodes run, so that no gain design's products are shared out by the clock)."""
+    env = {**os.environ, 'PYTHONHASHSEED': '0', **dict.fromkeys(BLAS_THREAD_VARIABLES, '1')}
     with tempfile.TemporaryDirectory() as tmp:
         outs = [pathlib.Path(tmp) / f'callgrind.out.{n}' for n in counts]
         runs = [subprocess.Popen(
