@@ -59,7 +59,9 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from itertools import repeat
 import math
+from operator import lt, sub
 from typing import Sequence
 
 import numpy as np
@@ -321,6 +323,13 @@ class FaultDetector:
         settings = self.settings
         tol, begun = settings.stuck_tolerance, t - settings.stuck_time_s
         run, stuck = self._run, self._stuck
+        n = self.n
+        if len(self._judged) == n and all(map(lt, repeat(tol, n), map(abs, map(
+                sub, values, last)))):   # every channel moved (the loop's outcome, in C)
+            run[:] = repeat(t, n)
+            if True in stuck:
+                stuck[:] = repeat(False, n)
+            return False
         still, which = 0, 0
         for ch in self._judged:
             if abs(values[ch] - last[ch]) > tol:

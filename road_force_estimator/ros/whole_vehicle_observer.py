@@ -50,6 +50,7 @@ from __future__ import annotations
 
 from collections import Counter
 import math
+from operator import itemgetter
 import threading
 import time
 from typing import Any, Iterable, Mapping, Sequence
@@ -182,6 +183,12 @@ class ImuReader:
         return stamp_ns, ay
 
 
+def _getter(indices: Sequence[int]):
+    """A callable giving the tuple of ``indices``' items of a sequence (one or more)."""
+    get = itemgetter(*indices)
+    return get if len(indices) > 1 else lambda seq: (get(seq),)
+
+
 def output_values(sample, wheels: Sequence[int]) -> tuple:
     """The numbers of one estimate's messages in :data:`OUTPUTS`' order: the loads of
     ``wheels`` (indices into the sample's), per unit (LTR, quasi-static LTR, 0), the front
@@ -209,9 +216,11 @@ class WholeVehicleObserver:
         instrumented = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
         #: indices of the published wheels (every instrumented axle's) in the estimator's
         self.wheels = tuple(2 * j + s for j in instrumented for s in (0, 1))
+        self.take_wheels = _getter(self.wheels)
         self.wheel_names = tuple(api.wheel_joints([axles[j] for j in instrumented]))
         self.axles = axles
         self.period, self.total = Counter(), Counter()
+        self.published = 0             # estimates published this period (statuses())
         self.gated_before = [0] * len(self.names)
         self.gated_base: Counter = Counter()
         self.gaps_base = self.gaps_before = 0      # gaps of estimators rebuilt, and reported
@@ -322,7 +331,9 @@ class WholeVehicleObserver:
     def publish(self, sample) -> None:
         """One estimate's messages, and the static loads when due."""
         t = sample.stamp_ns
-        values = output_values(sample, self.wheels)
+        ld, ltr, qs, front = sample.load_n, sample.ltr, sample.ltr_quasi_static, sample.front_ltr
+        values = (*self.take_wheels(ld), ltr[0], qs[0], 0.0, ltr[1], qs[1], 0.0, ltr[2], qs[2],
+                  0.0, ld[0], ld[1], front[0], front[1], 0.0)      # (output_values')
         if not math.isfinite(sum(values)):
             self.period['nonfinite_output'] += 1
             self.last_rejection = f'non-finite estimate at {t} ns'
@@ -349,12 +360,10 @@ class WholeVehicleObserver:
                 for send, data in zip(self.send_static, self.static_group.encode(
                         t, (*loads, st[0], st[1]))):
                     send(data)
-        self.period['published'] += 1
-        m, mp = self.max_abs_ltr, self.max_abs_ltr_predicted
-        a, b, c = sample.ltr_predicted
-        mp[:] = max(mp[0], abs(a)), max(mp[1], abs(b)), max(mp[2], abs(c))
-        a, b, c = sample.ltr
-        m[:] = max(m[0], abs(a)), max(m[1], abs(b)), max(m[2], abs(c))
+        self.published += 1
+        m, mp = self.max_abs_ltr, self.max_abs_ltr_predicted     # (per unit, in C loops)
+        mp[:] = map(max, mp, map(abs, sample.ltr_predicted))
+        m[:] = map(max, m, map(abs, sample.ltr))
         self.static_n = sample.static_n
         self.converged = sample.converged
         if sample.axle_fit is not None:
@@ -386,6 +395,9 @@ class WholeVehicleObserver:
         now = time.monotonic()
         elapsed, self.last_report = now - self.last_report, now
         period, self.period = self.period, Counter()
+        if self.published:
+            period['published'] += self.published
+            self.published = 0
         period['received'] = self.input.received - self.total['received']
         missed = self.input.missed - self.total['missed']
         period['missed'] = missed

@@ -276,3 +276,43 @@ def test_offline_the_held_readings_are_left_out_from_the_first_repeat():
     expected[8001:10000, 2] = True
     np.testing.assert_array_equal(out, expected)
     assert left_out(flag_codes([], stamps.size, 3), [], stamps) is None
+
+
+def test_the_stuck_rule_sample_by_sample_against_its_statement():
+    """The stuck flags of every sample against the rule written out here (module notes: a
+    channel still, within the tolerance, for the stuck time while every other judged channel
+    moves is flagged; a move clears it): noisy readings with one channel held, two held
+    together, moves of exactly the tolerance (still) and just above it (moving), so that both
+    the common case (every channel moved) and the per-channel rule are taken."""
+    names = ('a', 'b', 'c', 'd')
+    tol, still_s = 2.0 ** -20, 0.05                  # (moves of tol and 1.5 tol exact)
+    rng = np.random.default_rng(3)
+    v = np.cumsum(rng.normal(0.0, 1e-4, (3000, 4)), axis=0)
+    v[1000:1200, 1] = v[1000, 1]                        # b held 0.2 s: flagged
+    v[2000:2100, 2:] = v[2000, 2:]                      # c and d held together: not flagged
+    v[2500:2700, 0] = 0.25 + tol * (np.arange(200) % 2)        # a moves by tol: still
+    v[2800:2900, 3] = 0.25 + 1.5 * tol * (np.arange(100) % 2)  # d moves beyond it
+    rows = [[float(x) for x in r] for r in v]
+    det = FaultDetector(FaultSettings(names, stuck_time_s=still_s, stuck_tolerance=tol))
+    run, flags, got, want = [0.0] * 4, [False] * 4, [], []
+    for k, r in enumerate(rows):
+        det.step(k * 1_000_000, r)
+        got.append(list(det.stuck))
+        t = k * 1e-3
+        if k == 0:
+            run = [t] * 4
+        else:
+            still = []
+            for ch in range(4):
+                if abs(r[ch] - rows[k - 1][ch]) > tol:
+                    run[ch], flags[ch] = t, False
+                elif run[ch] <= t - still_s:
+                    still.append(ch)
+            if len(still) == 1:
+                flags[still[0]] = True
+        want.append(list(flags))
+    assert got == want
+    held = [k for k, f in enumerate(got) if f[1]]
+    assert held[0] == 1050 and held[-1] == 1199          # b: after 0.05 s still, until it moves
+    assert not any(f[2] or f[3] for f in got)
+    assert any(f[0] for f in got[2500:2700])

@@ -23,7 +23,7 @@ acceleration; each axle's road on its own (their fusion by distance:
 from __future__ import annotations
 
 import math
-from operator import itemgetter
+from operator import add, itemgetter
 
 import numpy as np
 
@@ -127,10 +127,9 @@ class WheelRoads:
             r4 = r2 * r2
             m = m * np.array((1.0 / r, 1.0, r, r2, r2 * r, r4, r4 * r, r4 * r2, 1.0))
         y = self._y
-        y[body_heave.ORDER] = self._a_old
-        y[body_heave.ORDER] += accel
+        y[body_heave.ORDER] = list(map(add, self._a_old, accel))   # (the same sums as numpy's)
         n = self._n
-        np.dot(m, y, out=n)
+        m.dot(y, n)           # (np.dot's product, without its dispatch in Python)
         self._y, self._n = n, y
         self._w_old = wc
         self._a_old = accel
@@ -160,7 +159,7 @@ class WheelRoads:
             z = self._z
         else:
             z = self._integrate(acc, dt, v)
-        u = [a + b for a, b in zip(w, z)]
+        u = list(map(add, w, z))
         prev, px = self._prev, self._x
         self._prev, self._x = u, x
         off = self._off
@@ -214,7 +213,7 @@ class ArticulatedOnlineRows:
         df = self._take_df(o)
         r = o if op is None else op
         u = self.roads.road(self._take_w(r), self._take_acc(r), dt, v, x)
-        return (x, conv, *[s + d for s, d in zip(self.static, df)], *df, *self._take_ay(o), *u)
+        return (x, conv, *map(add, self.static, df), *df, *self._take_ay(o), *u)
 
 
 class ArticulatedOfflineRows:

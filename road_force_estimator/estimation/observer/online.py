@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from collections import deque
 import math
+from operator import le
 
 import numpy as np
 
@@ -441,7 +442,8 @@ class ModelCore:
         x0, y0 = self._x0i, self._y0i
         ny = self._ny
         row[y0:y0 + ny] = y
-        sv = _dot(self._m, row, out=self._sv)       # (into a buffer: the same numbers)
+        # (into a buffer: the same numbers; the method skips np.dot's dispatch in Python)
+        sv = self._m.dot(row, self._sv)
         fr = self._fr
         if fr is not None:        # the friction over the step (of x+_k)
             sv = fr.update(sv, row[x0:y0 - ny], row[y0:y0 + ny])
@@ -553,6 +555,8 @@ class ModelCore:
         it comes back inside. Counted per channel (:attr:`gated`)."""
         nu0 = self._nx
         flags = self._gate_flags
+        if not any(flags) and all(map(le, map(abs, s[nu0:nu0 + self._ny]), self._gate)):
+            return None       # every channel inside, as it was (the loop's outcome, in C)
         clean = None
         for ch, g in enumerate(self._gate):
             e = s[nu0 + ch]
@@ -636,7 +640,7 @@ class ModelCore:
         x0, y0 = self._x0i, self._y0i
         prow = self._prow
         prow[y0:y0 + self._ny] = y
-        _dot(self._pm, prow, out=self._sp)
+        self._pm.dot(prow, self._sp)
         prow[x0:y0] = self._sp_x
         return self._sp_o.tolist()
 
