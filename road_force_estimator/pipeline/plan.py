@@ -23,7 +23,11 @@ whole arrays (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
 vehicle's stage reads the drive in blocks (``BlockPlan.whole_vehicle_blocks``:
 :class:`~.bagio.drive_blocks.DriveBlocks` with its channels, the estimator carried from block
 to block, :class:`~.estimation.whole_vehicle.WholeVehicleOnlineStream`: the same bits as the
-drive read whole); its estimate is still gathered whole for the sinks. Offline its smoother
+drive read whole); its estimate is still gathered whole for the sinks. From the front
+axle's threshold on (:func:`stream_threshold`), online, the front axle's stage and its sinks
+go in blocks beside it (``BlockPlan.blocks``: :func:`.blocks.run_blocks` with the whole
+vehicle's estimate, its front wheels' loads and road put into each piece, as one block does
+them). Offline its smoother
 goes in windows
 (``BlockPlan.whole_vehicle_windows``: ``estimate_whole_vehicle(..., windows=True)``, a run
 longer than :data:`~.estimation.whole_vehicle.STREAM_WINDOW_SAMPLES` and its overlap smoothed
@@ -75,7 +79,8 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
                min_samples: int | None = None, vehicle=None) -> BlockPlan:
     """The :class:`BlockPlan` of a drive bag (see the module notes); ``reference``: the
     ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
-    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block."""
+    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block
+    offline, online in blocks from the threshold on (module notes)."""
     from road_force_estimator.bagio.drive_blocks import listed_messages
     from road_force_estimator.interfaces import DEFLECTIONS
     from road_force_estimator.pipeline.whole_vehicle import is_whole_vehicle
@@ -85,8 +90,9 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
         return BlockPlan(False, samples)
-    if is_whole_vehicle(vehicle):                   # the whole vehicle: one block (notes)
-        return BlockPlan(False, samples, mode == 'offline', mode == 'online')
+    if is_whole_vehicle(vehicle):     # offline one block; online the front axle's in blocks
+        return BlockPlan(mode == 'online' and samples >= limit, samples, mode == 'offline',
+                         mode == 'online')
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain
     return BlockPlan(samples >= limit, samples)

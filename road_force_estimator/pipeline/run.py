@@ -7,7 +7,8 @@ report's segments, IRI and summary, the figures), closed once at the end. The pl
 (:func:`.plan.plan_drive`: one block or many, from the drive's length and the memory limit)
 picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
 block). With articulated parameters the whole vehicle's stage (:mod:`.whole_vehicle`, one
-block) runs beside the front axle's and its estimate, with the truth where the drive has it,
+block; online from the plan's threshold the front axle's goes in blocks beside it) runs
+beside the front axle's and its estimate, with the truth where the drive has it,
 joins the bag and the report (what its reader rejected counted as the drive's:
 :func:`.whole_vehicle.with_rejections`); with front-axle parameters an articulated drive's
 whole-vehicle truth joins the report (:mod:`~.report.whole_vehicle`).
@@ -47,8 +48,16 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
                       memory_limit_bytes=memory_limit_bytes, vehicle=whole)
     wv = fused = None
     if plan.blocks:
+        joined = None
+        if whole is not None:                # online: the whole vehicle's stage first
+            stages.next(f'estimating the whole vehicle ({options["mode"]})')
+            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'],
+                                        blocks=plan.whole_vehicle_blocks)
+            fused = whole_vehicle.fused_profile(wv, whole)
+            joined = whole_vehicle.BlockJoin(wv, fused,
+                                             float(whole.axles[0].wheel_half_track_m))
         result = blocks.run_blocks(folder, output, input_path, vehicle, observer, options,
-                                   stages, progress, samples=plan.samples)
+                                   stages, progress, samples=plan.samples, whole=joined)
     else:
         stages.next('reading the bag')
         drive, speed, early = one_block.read(input_path, options['segment_length_m'])

@@ -41,7 +41,8 @@ __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'add_diagnostics', 'sensor_edges', 'sensor_status_values', 'sensor_report',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
-           'STATUS_NAME', 'with_rejections', 'rejection_values']
+           'STATUS_NAME', 'with_rejections', 'rejection_values', 'sensor_status',
+           'BlockJoin']
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
 STATUS_NAME = f'{PROG}: whole vehicle'
@@ -217,16 +218,23 @@ def sensor_report(est, wv):
     "Sensors", ``report.json`` ``sensors``, the fleet's tables) those of the whole vehicle's
     channels: the flags and counts of ``wv.faults`` (:mod:`~.estimation.sensor_health`), the
     innovations gated per channel."""
+    if getattr(wv, 'faults', None) is None:
+        return est
+    return replace(est, status=sensor_status(est.status, wv))
+
+
+def sensor_status(status, wv):
+    """The front axle's estimator ``status`` with the sensor fields of the whole vehicle's
+    channels (:func:`sensor_report`'s; ``status`` itself without ``wv.faults``)."""
     fc = getattr(wv, 'faults', None)
     if fc is None:
-        return est
-    st = replace(est.status, sensor_faults=dict(fc.flags),
-                 stuck_episodes=dict(fc.stuck_episodes), stuck_samples=dict(fc.stuck_samples),
-                 drift_episodes=dict(fc.drift_episodes), drift_samples=dict(fc.drift_samples),
-                 fault_first_ns={n: dict(f) for n, f in fc.first_ns.items()},
-                 innovations_gated=dict(zip(wv.channel_names,
-                                            (int(g) for g in wv.innovations_gated))))
-    return replace(est, status=st)
+        return status
+    return replace(status, sensor_faults=dict(fc.flags),
+                   stuck_episodes=dict(fc.stuck_episodes), stuck_samples=dict(fc.stuck_samples),
+                   drift_episodes=dict(fc.drift_episodes), drift_samples=dict(fc.drift_samples),
+                   fault_first_ns={n: dict(f) for n, f in fc.first_ns.items()},
+                   innovations_gated=dict(zip(wv.channel_names,
+                                              (int(g) for g in wv.innovations_gated))))
 
 
 def front_wheels(est, wv):
@@ -487,3 +495,40 @@ def fused_road(est, wv, fused: FusedRoad | None):
         road[on, 0] = fused.left_m[k[on]]
         road[on, 1] = fused.right_m[k[on]]
     return replace(est, road_m=road)
+
+
+@dataclass(frozen=True)
+class BlockJoin:
+    """The whole vehicle's estimate ``wv`` and fused profile ``fused`` joined to the front
+    axle's stage in blocks (:func:`~.blocks.run_blocks`, online from the plan's threshold),
+    each step as the one-block path does it on the whole arrays (:func:`~.run.run_drive`):
+    every piece of the front axle's estimate with the front wheels' loads, load transfer and
+    road (:meth:`piece`), the whole vehicle's topics (:meth:`streams`) and its ``/diagnostics``
+    status (:meth:`diagnostics`) in the bag, the sensors' fields of its status
+    (:meth:`status`) and its reader's rejections (:meth:`drive`) in the report;
+    ``half_track_m``: the front wheels' (m), the y of ``/road_profile/*``."""
+
+    wv: object
+    fused: FusedRoad | None
+    half_track_m: float
+
+    def piece(self, est):
+        """A piece of the front axle's estimate with the whole vehicle's front wheels."""
+        return fused_road(front_wheels(est, self.wv), self.wv, self.fused)
+
+    def streams(self) -> list:
+        """The whole vehicle's topics and the fused profile's (:func:`bag_streams`,
+        :func:`fused_streams`)."""
+        return bag_streams(self.wv) + fused_streams(self.fused)
+
+    def diagnostics(self, diagnostics: list) -> list:
+        """The per-second statuses with the whole vehicle's (:func:`add_diagnostics`)."""
+        return add_diagnostics(diagnostics, self.wv)
+
+    def status(self, status):
+        """:func:`sensor_status`."""
+        return sensor_status(status, self.wv)
+
+    def drive(self, drive):
+        """:func:`with_rejections`."""
+        return with_rejections(drive, self.wv)
