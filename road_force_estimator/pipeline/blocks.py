@@ -227,7 +227,7 @@ class BlockRun:
         diagnostics = self.diag.statuses(
             counts, f'{PROG}: estimator ({self.options["mode"]})', PROG, verdict)
         if self.whole is not None:            # its topics, its status beside the estimator's
-            self.bag.write_streams(self.whole.streams())
+            self.whole.write_streams(self.bag)
             diagnostics = self.whole.diagnostics(diagnostics)
         written = self.bag.close(diagnostics)
         if written.get('nonfinite'):

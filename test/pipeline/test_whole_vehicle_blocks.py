@@ -3,7 +3,8 @@ whole vehicle's (pipeline.plan's threshold lowered to 1: pipeline.blocks with
 pipeline.whole_vehicle.BlockJoin) against the same drive in one block: every message of the
 estimate bag the same (topic, log time, bytes; read by the mcap library), segments.csv,
 report.md and report.json the same, at 0 and 10 ms, on a drive with 0.3 s of deflections and
-twists lost (a gap), with the tractor IMU, in blocks of 1, 300 and 65536 samples."""
+twists lost (a gap), with the tractor IMU, in blocks of 1, 300 and 65536 samples, the whole
+vehicle's samples spilled to files and read back 97 to 65536 at a time."""
 import json
 from pathlib import Path
 import subprocess
@@ -101,10 +102,18 @@ def run(bag: Path, params: Path, folder: Path, latency_s: float, monkeypatch) ->
                          '--no-progress']) == 0
 
 
-@pytest.mark.parametrize('drive, latency_s, block', [
-    ('gap', 0.0, 300), ('gap', 0.01, 1), ('gap', 0.0, 1 << 16), ('imu', 0.01, 300)])
+@pytest.mark.parametrize('drive, latency_s, block, sink', [
+    ('gap', 0.0, 300, 257), ('gap', 0.01, 1, 1000), ('gap', 0.0, 1 << 16, 1 << 16),
+    ('imu', 0.01, 300, 97)])
 def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, drive,
-                                              latency_s, block):
+                                              latency_s, block, sink):
+    """``block``: the samples the drive is read in; ``sink``: the whole vehicle's spilled
+    samples its sinks read at a time (its bag topics, statuses, report sums and the front
+    wheels joined to the front axle's pieces)."""
+    from road_force_estimator.pipeline import whole_vehicle
+    from road_force_estimator.report import whole_vehicle as report
+
+
     bag, params = drives[drive]
     run(bag, params, tmp_path / 'one', latency_s, monkeypatch)
     calls = []
@@ -118,8 +127,10 @@ def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, dri
     monkeypatch.setattr(blocks, 'run_blocks', counted)
     monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
+    monkeypatch.setattr(whole_vehicle, 'SINK_ROWS', sink)
+    monkeypatch.setattr(report, 'SUM_ROWS', sink)
     run(bag, params, tmp_path / 'str', latency_s, monkeypatch)
-    assert len(calls) == 1 and calls[0] is not None       # went in blocks, joined
+    assert len(calls) == 1 and calls[0].source.n > 2500    # in blocks, the samples spilled
     one, streamed = tmp_path / 'one' / 'est', tmp_path / 'str' / 'est'
     a, b = messages(one / 'bag'), messages(streamed / 'bag')
     assert sorted(a) == sorted(b)
