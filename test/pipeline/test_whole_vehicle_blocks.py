@@ -65,7 +65,8 @@ def imu_params(folder: Path) -> Path:
     text = CONFIG.read_text()
     for old, new in (('tractor_imu: false', 'tractor_imu: true'),
                      ('roll_sensor: "ideal"', 'roll_sensor: "pendulum"'),
-                     ('lateral_profile: ""', 'lateral_profile: "curve:start=1,ramp=1,hold=2,ay=2"')):
+                     ('lateral_profile: ""',
+                      'lateral_profile: "curve:start=1,ramp=1,hold=2,ay=2"')):
         assert old in text
         text = text.replace(old, new)
     path = folder / 'imu.yaml'
