@@ -57,6 +57,13 @@ def test_the_whole_vehicle_offline_stays_one_block(tmp_path):
                            vehicle=whole) == plan.BlockPlan(True, 300, False, True)
     assert plan.plan_drive(tmp_path / 'd', 'online', obs, min_samples=301,
                            vehicle=whole) == plan.BlockPlan(False, 300, False, True)
+    # without a threshold given: the whole vehicle's (lower than the front axle's)
+    assert plan.WHOLE_VEHICLE_STREAM_MIN_SAMPLES < plan.STREAM_MIN_SAMPLES
+    assert not plan.plan_drive(tmp_path / 'd', 'online', obs, vehicle=whole).blocks
+    assert not plan.plan_drive(tmp_path / 'd', 'online', obs, vehicle=whole,
+                               memory_limit_bytes=0.7e6).blocks       # 350 samples
+    assert plan.plan_drive(tmp_path / 'd', 'online', obs, vehicle=whole,
+                           memory_limit_bytes=0.6e6).blocks
     for mode in ('online', 'offline'):
         assert plan.plan_drive(tmp_path / 'd', mode, obs, min_samples=1,
                                vehicle=VehicleParameters()).blocks

@@ -148,3 +148,24 @@ def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, dri
     assert wv['gaps'] == (1 if drive == 'gap' else 0)
     if drive == 'imu':
         assert wv['tractor_imu']['fresh'] > 2500
+
+
+def test_a_full_disk_while_spilling_leaves_nothing(drives, tmp_path, monkeypatch, capsys):
+    """The whole vehicle's samples go to temporary files in the output folder (core.spill):
+    a full disk there is one line, exit 1, and nothing left behind."""
+    import errno
+
+    from road_force_estimator.core import spill
+
+    def full(self, rows):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+
+    bag, params = drives['gap']
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(spill.SpillColumn, 'append', full)
+    out = tmp_path / 'o'
+    code = estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
+                         '--mode', 'online', '--no-progress', '--no-figures'])
+    err = capsys.readouterr().err
+    assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
+    assert not out.exists() or not any(out.iterdir())
