@@ -19,6 +19,7 @@ wait in unnamed temporary files in the output folder (:mod:`.core.spill`).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
@@ -250,7 +251,8 @@ class BlockRun:
         return draw(self.folder / 'report', self.input_path, self.reader.block_samples,
                     keeper, self.summary, segments,
                     f'{name} ({mode})' if name else mode, self.options['units'],
-                    static_line(doc, self.vehicle), self._rerun)
+                    static_line(doc, self.vehicle), self._rerun,
+                    join=None if self.whole is None else replace(self.whole).piece)
 
     def _rerun(self):
         """A new estimator stage over this drive's blocks (the offline detail window's

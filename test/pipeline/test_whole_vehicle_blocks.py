@@ -169,3 +169,25 @@ def test_a_full_disk_while_spilling_leaves_nothing(drives, tmp_path, monkeypatch
     err = capsys.readouterr().err
     assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_in_blocks_the_detail_figures_are_one_blocks(drives, tmp_path, monkeypatch):
+    """Figures on: the detail window's figures (the estimator resumed over the window's
+    blocks, each piece given the whole vehicle's front wheels again) are one block's bytes;
+    the profile and overview show that window only (the report's note says so)."""
+    from road_force_estimator.pipeline import blocks
+    from road_force_estimator.tools.estimate_bag import load_parameters, run as estimate
+
+    bag, params = drives['gap']
+    vehicle, observer = load_parameters(str(params))
+    kw = dict(vehicle=vehicle, observer=observer, mode='online', segment_length_m=10.0)
+    one = estimate(bag, tmp_path / 'one', **kw)
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 700)
+    streamed = estimate(bag, tmp_path / 'str', **kw)
+    assert blocks.FIGURES_NOTE in streamed.summary['notes']
+    names = ('states.png', 'body.png', 'wheels.png', 'loads.png')
+    assert set(names) <= set(one.summary['figures']) & set(streamed.summary['figures'])
+    for name in names:
+        assert (tmp_path / 'one' / 'report' / name).read_bytes() == \
+            (tmp_path / 'str' / 'report' / name).read_bytes(), name
