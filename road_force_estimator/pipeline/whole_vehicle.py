@@ -729,15 +729,16 @@ class BlockJoin:
         src = self.source
         if self._buf is None:
             self._buf = src.rows(0, min(self.rows, src.n))
-        while (not len(self._buf.stamps_ns) or int(self._buf.stamps_ns[-1]) < last) \
-                and self._lo + len(self._buf.stamps_ns) < src.n:
+        while True:
+            cut = int(np.searchsorted(self._buf.stamps_ns, first))
+            if cut:                          # before ``first``: never needed again
+                self._buf = take_rows(self._buf, cut, len(self._buf.stamps_ns))
+                self._lo += cut
             hi = self._lo + len(self._buf.stamps_ns)
+            if (len(self._buf.stamps_ns) and int(self._buf.stamps_ns[-1]) >= last) \
+                    or hi >= src.n:
+                return self._buf
             self._buf = join_rows(self._buf, src.rows(hi, min(hi + self.rows, src.n)))
-        cut = int(np.searchsorted(self._buf.stamps_ns, first))
-        if cut:
-            self._buf = take_rows(self._buf, cut, len(self._buf.stamps_ns))
-            self._lo += cut
-        return self._buf
 
     def piece(self, est):
         """A piece of the front axle's estimate with the whole vehicle's front wheels
