@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.probes.estimate_bag_process [--duration 600] [--repeats 3]
                                                    [--modes offline online] [--json FILE]
-                                                   [--articulated]
+                                                   [--articulated] [--memory-limit MB]
 
 1. ``simulate_bag`` records two drives as a truck would (ISO 8608 class C, seed 1, 20 m/s,
    1 kHz, 10 um / 0.1 mrad sensor noise, GNSS at 10 Hz, no ground truth): 1 s and
@@ -14,6 +14,11 @@
 3. Start-up = the median wall time on the 1 s drive; throughput = (samples of the long drive
    - samples of the 1 s drive) / (median wall time on the long drive - that on the 1 s one),
    and the same with CPU times (on a shared machine the wall time waits for the others).
+
+``--memory-limit MB``: ``estimate_bag.run`` with that memory limit in a child python (what
+``estimate_fleet`` gives a worker): a drive past :func:`road_force_estimator.pipeline.plan.
+stream_threshold` goes in blocks (on an articulated drive online: the front axle's stage in
+blocks beside the whole vehicle's).
 
 ``--articulated``: the drives are the 5-axle tractor and semi-trailer's
 (``config/tractor_semitrailer.yaml``, its own sensor noise, no GNSS), and ``estimate_bag``
@@ -48,6 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--modes', nargs='+', choices=('offline', 'online'),
                    default=['offline', 'online'])
     p.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
+    p.add_argument('--memory-limit', type=float, metavar='MB',
+                   help='run estimate_bag.run with this memory limit (an estimate_fleet '
+                        "worker's: pipeline.plan's threshold, so a drive of more than "
+                        'MB / 2 kB samples goes in blocks) in a child python')
     p.add_argument('--articulated', action='store_true',
                    help='a 5-axle articulated drive estimated whole (config/'
                         'tractor_semitrailer.yaml)')
@@ -115,12 +124,25 @@ def run_child(argv: list[str]) -> dict:
             'peak_rss_mb': usage.ru_maxrss / 1024.0}
 
 
-def estimate(bag: Path, out: Path, mode: str, articulated: bool = False) -> dict:
-    """One ``estimate_bag`` run (figures on) into ``out`` (removed after)."""
+def estimate(bag: Path, out: Path, mode: str, articulated: bool = False,
+             memory_limit_mb: float | None = None) -> dict:
+    """One ``estimate_bag`` run (figures on) into ``out`` (removed after); with
+    ``memory_limit_mb``, :func:`~road_force_estimator.tools.estimate_bag.run` with that limit
+    in a child python (the command line has no such option: ``estimate_fleet`` sets it)."""
     own = ['--params-file', str(ARTICULATED)] if articulated else []
+    if memory_limit_mb is not None:
+        code = ('import sys\n'
+                'from road_force_estimator.tools.estimate_bag import load_parameters, run\n'
+                'v, o = load_parameters(sys.argv[4]) if len(sys.argv) > 4 else (None, None)\n'
+                'run(sys.argv[1], sys.argv[2], vehicle=v, observer=o, mode=sys.argv[3], '
+                f'memory_limit_bytes={memory_limit_mb * 2.0 ** 20!r})\n')
+        argv = [sys.executable, '-c', code, str(bag), str(out), mode,
+                *([str(ARTICULATED)] if articulated else [])]
+    else:
+        argv = [command('estimate_bag'), str(bag), '--output', str(out), '--mode', mode,
+                '--no-progress', *own]
     try:
-        return run_child([command('estimate_bag'), str(bag), '--output', str(out), '--mode',
-                          mode, '--no-progress', *own])
+        return run_child(argv)
     finally:
         shutil.rmtree(out, ignore_errors=True)
 
@@ -129,7 +151,8 @@ def _median(runs: list[dict]) -> dict:
     return {k: statistics.median(r[k] for r in runs) for k in runs[0]}
 
 
-def measure(duration_s: float, repeats: int, modes, articulated: bool = False) -> dict:
+def measure(duration_s: float, repeats: int, modes, articulated: bool = False,
+            memory_limit_mb: float | None = None) -> dict:
     """Simulate the two drives and time the command on them (see the module notes)."""
     from road_force_estimator import bagio
 
@@ -143,7 +166,8 @@ def measure(duration_s: float, repeats: int, modes, articulated: bool = False) -
         n = {k: len(bagio.read_drive_bag(b).stamps_ns) for k, b in bags.items()}
         doc['samples'] = n
         for mode in modes:
-            runs = {k: [estimate(b, tmp / 'out', mode, articulated) for _ in range(repeats)]
+            runs = {k: [estimate(b, tmp / 'out', mode, articulated, memory_limit_mb)
+                        for _ in range(repeats)]
                     for k, b in bags.items()}
             med = {k: _median(v) for k, v in runs.items()}
             added = n['long'] - n['short']
@@ -180,7 +204,8 @@ def markdown(doc: dict) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    doc = measure(args.duration, args.repeats, args.modes, args.articulated)
+    doc = measure(args.duration, args.repeats, args.modes, args.articulated,
+                  args.memory_limit)
     doc['command'] = ('python -m bench.probes.estimate_bag_process '
                       + ' '.join(argv if argv is not None else sys.argv[1:])).strip()
     print('\n'.join(markdown(doc)))

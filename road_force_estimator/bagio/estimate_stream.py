@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -96,6 +96,20 @@ class EstimateBagStream:
             streams.append((STATIC_LOAD[side], stamps, ColumnRows(
                 WRENCH, message_template(WRENCH, WHEEL_FRAMES[side]), stamps.size, cols)))
         return streams
+
+    def write_streams(self, streams: Sequence[tuple[str, np.ndarray, Any]]) -> None:
+        """Write more topics of :data:`~road_force_estimator.interfaces.TOPIC_TYPES`
+        (``(topic, stamps, rows)`` streams, as :func:`.write_estimate_bag`'s
+        ``extra_streams``: the whole vehicle's) beside the estimates."""
+        if not self._declared:
+            for topic in _TOPICS:
+                self.bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
+            self._declared = True
+        for topic, _, _ in streams:
+            if topic not in self.bag.topics:
+                self.bag.add_topic(topic, TOPIC_TYPES[topic], qos_kind(topic))
+        if streams:
+            self.bag.write_rows(streams)
 
     def close(self, diagnostics: Iterable[tuple[int, Any]] = ()) -> dict[str, int]:
         """Write the ``/diagnostics`` messages and close the bag; the counts of

@@ -28,22 +28,28 @@ from road_force_estimator.serde.messages import message_template, points_rows, s
 __all__ = ['static_rows', 'whole_vehicle_streams', 'fused_profile_streams']
 
 
-def static_rows(stamps_ns: np.ndarray) -> np.ndarray:
-    """The rows opening a period of STATIC_LOAD_PERIOD_NS (the ~10 Hz topics' samples)."""
+def static_rows(stamps_ns: np.ndarray, after_ns: int | None = None) -> np.ndarray:
+    """The rows opening a period of STATIC_LOAD_PERIOD_NS (the ~10 Hz topics' samples);
+    ``after_ns``: the last stamp written before these (its period not opened again; None:
+    none)."""
     s = np.asarray(stamps_ns, np.int64)
     if not s.size:
         return np.zeros(0, np.int64)
     period = s // STATIC_LOAD_PERIOD_NS
-    return np.flatnonzero(np.concatenate([[True], period[1:] != period[:-1]]))
+    opens = after_ns is None or int(period[0]) != int(after_ns) // STATIC_LOAD_PERIOD_NS
+    return np.flatnonzero(np.concatenate([[opens], period[1:] != period[:-1]]))
 
 
 def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_n, ltr,
-                          ltr_quasi_static, rows: np.ndarray | None = None) -> list:
+                          ltr_quasi_static, rows: np.ndarray | None = None,
+                          after_ns: int | None = None) -> list:
     """The streams (topic, stamps, rows) of the samples ``stamps_ns`` (m,), strictly
     increasing: ``load_n`` and ``static_n`` (wheels, m; N), ``ltr`` and ``ltr_quasi_static``
     (3, m; tractor, trailer, combination); ``rows``: only these samples (indices, increasing;
     None: all), the messages read from the arrays a block at a time as the bag is written
-    (:class:`~.serde.cdr.LazyColumns`: no copy of the columns).
+    (:class:`~.serde.cdr.LazyColumns`: no copy of the columns); ``after_ns``: the last
+    stamp written before these samples (a drive written piece by piece: the static loads'
+    period it opened not opened again).
 
     Raises
     ------
@@ -69,7 +75,7 @@ def whole_vehicle_streams(stamps_ns, wheel_names: Sequence[str], load_n, static_
     streams = [(WHEEL_LOADS, s, ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
         n, dict(cols, effort=LazyColumns(list(loads), rows))))]
-    first = static_rows(s)
+    first = static_rows(s, after_ns)
     streams.append((STATIC_WHEEL_LOADS, s[first], ColumnRows(
         JOINT_STATE, message_template(JOINT_STATE, BASE_FRAME, tuple(wheel_names), effort=True),
         first.size, dict(stamp_columns(s[first]), effort=LazyColumns(

@@ -34,10 +34,13 @@ WARNING_THRESHOLD = 0.6
 
 
 def predicted_ltr(stamps_ns, ltr_quasi_static, lead_s: float = LEAD_S,
-                  rate_window_s: float = RATE_WINDOW_S) -> np.ndarray:
+                  rate_window_s: float = RATE_WINDOW_S, t0_ns: int | None = None) -> np.ndarray:
     """The predictor (module notes) over a drive: ``stamps_ns`` (m,) increasing,
     ``ltr_quasi_static`` (..., m) one row per unit; the same shape. The first
-    ``rate_window_s`` of samples take the rate since the first sample (0 at it)."""
+    ``rate_window_s`` of samples take the rate since the first sample (0 at it).
+    ``t0_ns``: the drive's first stamp when these samples are a later part of it (None:
+    ``stamps_ns[0]``); the same bits as the whole drive's at the samples whose window the
+    part holds."""
     t = np.asarray(stamps_ns, np.int64)
     qs = np.asarray(ltr_quasi_static, float)
     if lead_s < 0.0 or rate_window_s <= 0.0:
@@ -45,7 +48,7 @@ def predicted_ltr(stamps_ns, ltr_quasi_static, lead_s: float = LEAD_S,
                          'and > 0')
     if t.size == 0:
         return qs.copy()
-    ts = (t - t[0]) * 1e-9
+    ts = (t - (t[0] if t0_ns is None else np.int64(t0_ns))) * 1e-9
     back = np.searchsorted(ts, ts - rate_window_s, side='left')
     span = ts - ts[back]
     rise = qs - qs[..., back]

@@ -60,7 +60,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Iterable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -85,7 +85,7 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
            'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks',
-           'imu_left_out']
+           'imu_left_out', 'ROW_FIELDS', 'take_rows', 'join_rows', 'ArraysRows']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -533,20 +533,29 @@ def estimate_online_blocks(vehicle: ArticulatedParameters, blocks: Iterable[tupl
                            observer: ObserverParameters | None = None,
                            gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False,
                            capacity: int = 0,
-                           chunk_rows: int | None = None) -> WholeVehicleArrays:
+                           chunk_rows: int | None = None,
+                           sink: Callable[[WholeVehicleArrays], None] | None = None
+                           ) -> WholeVehicleArrays:
     """:func:`estimate_whole_vehicle` online over a drive's ``blocks`` (each ``(stamps_ns,
     readings, speed_mps[, imu_codes])`` as :meth:`WholeVehicleOnlineStream.feed` takes
     them, consumed as they come): the same arrays, the blocks' inputs never held together;
     ``capacity``: the samples the arrays are reserved for at once (a bag's metadata; grown
-    past it)."""
+    past it). ``sink``: each piece handed to it instead (none gathered); the arrays returned
+    then hold no sample, only what is the drive's (the fused points, the model-fit verdicts,
+    the gated innovations and the sensor counts; the pieces' own are those so far)."""
     online = WholeVehicleOnlineStream(vehicle, observer, gap_threshold_s=gap_threshold_s,
                                       imu=imu, chunk_rows=chunk_rows)
-    gathered = _OnlineArrays(online.estimator, capacity)
+    gathered = _OnlineArrays(online.estimator, 0 if sink is not None else capacity,
+                             keep=sink is None)
     for block in blocks:
         for piece in online.feed(*block):
             gathered.add(piece)
+            if sink is not None:
+                sink(piece)
     for piece in online.finish():
         gathered.add(piece)
+        if sink is not None:
+            sink(piece)
     return gathered.arrays()
 
 
@@ -601,9 +610,10 @@ class _OnlineArrays:
     :class:`WholeVehicleArrays`, written into arrays reserved for ``capacity`` samples
     (:class:`_Gathered`): the same arrays as converting every sample at once."""
 
-    def __init__(self, est: WholeVehicleEstimator, capacity: int):
+    def __init__(self, est: WholeVehicleEstimator, capacity: int, keep: bool = True):
         self.est = est
         self.out = _Gathered(capacity)
+        self.keep = keep
         self.fused: list = []
         self.fits: list = []
         self.gated: tuple = ()
@@ -613,11 +623,33 @@ class _OnlineArrays:
         self.fits += a.axle_fits
         if a.fused.stamps_ns.size:
             self.fused.append(a.fused)
-        self.out.add(a)
+        if self.keep:
+            self.out.add(a)
 
     def arrays(self) -> WholeVehicleArrays:
-        """Every sample's fields (after :meth:`WholeVehicleEstimator.finish`'s were added)."""
+        """Every sample's fields (after :meth:`WholeVehicleEstimator.finish`'s were added);
+        not kept: none, with the drive's fused points, verdicts and counts."""
         if not self.out.n:
+            if not self.keep:
+                fits = tuple(self.fits)
+                est, w = self.est, len(self.est.wheel_names)
+
+                def empty(rows: int | None, dtype=float) -> np.ndarray:
+                    return np.zeros((0,) if rows is None else (rows, 0), dtype)
+
+                none = WholeVehicleArrays(
+                    empty(None, np.int64), empty(None), empty(None, bool), est.wheel_names,
+                    est.axle_names, est.axle_bodies, empty(w), empty(w), empty(len(UNITS)),
+                    empty(len(UNITS)), empty(None), empty(w), (), tuple(est.channel_names),
+                    empty(2), empty(None, np.int64),
+                    fault_flags=empty(len(est.channel_names), np.int8),
+                    faults=est.faults.counts())
+                return replace(none, fused=FusedPoints(*(
+                    np.concatenate([getattr(p, f) for p in self.fused]) for f in
+                    ('stamps_ns', 'distance_m', 'left_m', 'right_m')))
+                    if self.fused else FusedPoints.from_points([]),
+                    innovations_gated=tuple(int(g) for g in self.gated), axle_fits=fits,
+                    axle_fit=fits[-1][1] if fits else None)
             return _arrays(self.est, [])
         fused = (FusedPoints(*(np.concatenate([getattr(p, f) for p in self.fused]) for f in
                                ('stamps_ns', 'distance_m', 'left_m', 'right_m')))
@@ -687,6 +719,39 @@ class WholeVehicleOnlineStream:
         piece = _arrays(self.estimator, self._pending)
         self._pending = []
         return piece
+
+
+#: The per-sample fields :func:`take_rows` and :func:`join_rows` cut and join (with the
+#: tractor IMU's pairing codes).
+ROW_FIELDS = _PER_SAMPLE + ('imu_codes',)
+
+
+def take_rows(wv: WholeVehicleArrays, lo: int, hi: int) -> WholeVehicleArrays:
+    """The samples ``lo:hi`` of ``wv`` (views), what is the drive's (names, counts, fused
+    points, verdicts, rejections) as it is."""
+    return replace(wv, **{f: getattr(wv, f)[..., lo:hi] for f in ROW_FIELDS
+                          if getattr(wv, f) is not None})
+
+
+def join_rows(a: WholeVehicleArrays, b: WholeVehicleArrays) -> WholeVehicleArrays:
+    """The samples of ``a`` then ``b`` (consecutive rows of one drive), the drive's fields
+    ``a``'s."""
+    return replace(a, **{f: np.concatenate([getattr(a, f), getattr(b, f)], axis=-1)
+                         for f in ROW_FIELDS if getattr(a, f) is not None})
+
+
+class ArraysRows:
+    """A drive's :class:`WholeVehicleArrays` as a source of rows (``n`` samples, ``meta``
+    the drive's fields, :meth:`rows` the samples ``lo:hi``), as the sinks of a drive in
+    blocks read a spilled estimate (:class:`road_force_estimator.pipeline.whole_vehicle.
+    SpilledEstimate`)."""
+
+    def __init__(self, wv: WholeVehicleArrays) -> None:
+        self.meta = wv
+        self.n = int(len(wv.stamps_ns))
+
+    def rows(self, lo: int, hi: int) -> WholeVehicleArrays:
+        return take_rows(self.meta, lo, hi)
 
 
 def concatenate_arrays(pieces: Sequence[WholeVehicleArrays]) -> WholeVehicleArrays:

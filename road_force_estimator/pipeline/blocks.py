@@ -19,6 +19,7 @@ wait in unnamed temporary files in the output folder (:mod:`.core.spill`).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
@@ -41,10 +42,13 @@ FIGURES_NOTE = ('figures: the profile and overview show the detail window (a dri
 
 def run_blocks(folder: Path, output: Path, input_path: Path, vehicle, observer,
                options: dict, stages, progress: bool = False,
-               block_samples: int | None = None, samples: int = 0) -> EstimateResult:
+               block_samples: int | None = None, samples: int = 0,
+               whole=None) -> EstimateResult:
     """Estimate the drive block by block and write ``folder/bag`` and ``folder/report``.
 
-    ``samples``: the deflection messages metadata.yaml lists (the columns reserved at once).
+    ``samples``: the deflection messages metadata.yaml lists (the columns reserved at once);
+    ``whole``: an articulated drive's whole-vehicle estimate joined to every piece and sink
+    (:class:`.whole_vehicle.BlockJoin`, online), or None.
     The result's ``estimates`` are never held whole: only the stamps and distances of the
     accepted samples for ``estimate_fleet``'s polylines when the drive has ``/fix``
     (:meth:`.StreamedSummary.track`).
@@ -58,12 +62,15 @@ def run_blocks(folder: Path, output: Path, input_path: Path, vehicle, observer,
         if p.exists():
             raise InputError(f'{p} exists (use --force to replace it)')
     folder.mkdir(parents=True, exist_ok=True)
-    run = BlockRun(folder, input_path, vehicle, observer, options, block_samples, samples)
+    run = BlockRun(folder, input_path, vehicle, observer, options, block_samples, samples,
+                   whole)
     stages.next(f'estimating ({options["mode"]}) and writing the bag, block by block')
     run.estimate(progress)
-    extra, written = run.close_bag()
-    stages.next('writing the report' + (' and figures' if options['figures'] else ''))
     drive = run.reader.record()
+    if whole is not None:                     # the whole vehicle's reader's rejections
+        drive = whole.drive(drive)
+    extra, written = run.close_bag(drive.rejected_total)
+    stages.next('writing the report' + (' and figures' if options['figures'] else ''))
     doc = _write_report(folder / 'report', run, drive, extra, input_path.name, options)
     warnings = [f'{input_path}: {issue}' for issue in drive.issues]
     return EstimateResult(doc, output / 'bag', output / 'report', run.summary.track(),
@@ -75,7 +82,7 @@ class BlockRun:
     sinks (the bag, the accumulators, the diagnostics, the model fit, the figures' window)."""
 
     def __init__(self, folder: Path, input_path: Path, vehicle, observer, options: dict,
-                 block_samples: int | None, samples: int) -> None:
+                 block_samples: int | None, samples: int, whole=None) -> None:
         from road_force_estimator.bagio.drive_blocks import BLOCK_SAMPLES, DriveBlocks
         from road_force_estimator.bagio.estimate_stream import EstimateBagStream
         from road_force_estimator.bagio.drive_blocks import listed_messages
@@ -86,14 +93,15 @@ class BlockRun:
 
         self.folder, self.input_path, self.samples = folder, input_path, samples
         self.vehicle, self.observer, self.options = vehicle, observer, options
+        self.whole = whole
         self.reader = DriveBlocks(input_path, block_samples or BLOCK_SAMPLES)
         self.offline = options['mode'] == 'offline'
         self.stream = self._estimator_stage(folder)
         custom = {'road_force_estimator.mode': options['mode'],
                   'road_force_estimator.input': input_path.name,
                   'road_force_estimator.writer_command': PROG}
-        self.bag = EstimateBagStream(folder / 'bag', track_width_m=vehicle.track_width_m,
-                                     custom_data=custom)
+        track = vehicle.track_width_m if whole is None else 2.0 * whole.half_track_m
+        self.bag = EstimateBagStream(folder / 'bag', track_width_m=track, custom_data=custom)
         self.summary = StreamedSummary(options['segment_length_m'],
                                        with_stamps=_has_fixes(input_path),
                                        capacity=samples, spill=folder)
@@ -172,6 +180,8 @@ class BlockRun:
     def _consume(self, piece) -> None:
         """One piece of estimates to the sinks: the bag, the report's accumulators, the
         diagnostics, the model fit (with the recorded speeds of its samples), the window."""
+        if self.whole is not None:            # the whole vehicle's front wheels
+            piece = self.whole.piece(piece)
         m = len(piece.stamp_ns)
         v = self.speeds.take(m)
         self.bag.write(piece)
@@ -195,19 +205,32 @@ class BlockRun:
             return nothing_estimated(self.input_path, n, status)
         return None
 
-    def close_bag(self) -> tuple[dict[str, Any], dict[str, int]]:
-        """The notes for the report and the bag's counts, once its diagnostics are written."""
-        status, reader = self.stream.status, self.reader
+    @property
+    def status(self):
+        """The estimator's status (with the whole vehicle's sensor fields when joined)."""
+        st = self.stream.status
+        return st if self.whole is None else self.whole.status(st)
+
+    def close_bag(self, rejected_total: int | None = None
+                  ) -> tuple[dict[str, Any], dict[str, int]]:
+        """The notes for the report and the bag's counts, once its diagnostics are written;
+        ``rejected_total``: the drive's rejections (None: the reader's)."""
+        status, reader = self.status, self.reader
         extra: dict[str, Any] = {}
         if reader.early:
             extra['samples before the first twist (given its speed)'] = reader.early
         odometer = self.stream.odometer if self.offline else None
-        counts = estimate_counts(self.summary.inputs, status, reader.rejected_total, odometer)
+        counts = estimate_counts(self.summary.inputs, status, reader.rejected_total
+                                 if rejected_total is None else rejected_total, odometer)
         verdict = self.fit.result(self.summary, status, self.vehicle, self.observer)
         if verdict is not None:
             extra['model fit'] = fit_note(verdict)
-        written = self.bag.close(self.diag.statuses(
-            counts, f'{PROG}: estimator ({self.options["mode"]})', PROG, verdict))
+        diagnostics = self.diag.statuses(
+            counts, f'{PROG}: estimator ({self.options["mode"]})', PROG, verdict)
+        if self.whole is not None:            # its topics, its status beside the estimator's
+            self.whole.write_streams(self.bag)
+            diagnostics = self.whole.diagnostics(diagnostics)
+        written = self.bag.close(diagnostics)
         if written.get('nonfinite'):
             extra['estimates not written (non-finite)'] = written['nonfinite']
         if self.options['figures']:
@@ -228,7 +251,8 @@ class BlockRun:
         return draw(self.folder / 'report', self.input_path, self.reader.block_samples,
                     keeper, self.summary, segments,
                     f'{name} ({mode})' if name else mode, self.options['units'],
-                    static_line(doc, self.vehicle), self._rerun)
+                    static_line(doc, self.vehicle), self._rerun,
+                    join=None if self.whole is None else replace(self.whole).piece)
 
     def _rerun(self):
         """A new estimator stage over this drive's blocks (the offline detail window's
@@ -259,7 +283,7 @@ def _write_report(folder: Path, run: BlockRun, drive, extra: dict, input_name: s
 
     folder.mkdir(parents=True, exist_ok=True)
     summary, segments = _summary(run.summary, run.stream, drive, run.vehicle, run.observer,
-                                 extra, input_name, options)
+                                 extra, input_name, options, run.status)
     if run.accuracy.seen:
         summary['has_ground_truth'] = True
         summary['accuracy'] = run.accuracy.result(run.static_n)
@@ -272,14 +296,15 @@ def _write_report(folder: Path, run: BlockRun, drive, extra: dict, input_name: s
 
 
 def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str,
-             options: dict) -> tuple[dict[str, Any], dict]:
+             options: dict, status=None) -> tuple[dict[str, Any], dict]:
     """:func:`.summary.summarize`'s ``(summary, segments)`` of a streamed drive (``stream``:
-    its :class:`.OnlineStream` or :class:`.OfflineStream`)."""
+    its :class:`.OnlineStream` or :class:`.OfflineStream`; ``status``: its status as
+    reported, None: ``stream.status``)."""
     from road_force_estimator import __version__
     from road_force_estimator.report.summary import (
         convergence_summary, notes, rejections, segment_counts, sensor_summary)
 
-    st = stream.status
+    st = stream.status if status is None else status
     rejected = rejections(drive, st)
     t_s = (0.0 if acc.t0_ns is None else (acc.last_ns - acc.t0_ns) * 1e-9)
     judged = 'converged' if acc.converged or acc.t0_ns is None else 'settling time'

@@ -12,33 +12,41 @@ alignment is found over the whole drive) and the offline differentiator chain
 (``observer.discretization`` other than ``model``: a zero-phase filter over the whole
 recording).
 
-An articulated drive (``vehicle.model: articulated``, :mod:`.whole_vehicle`) is one block,
-online and offline: the estimation layer streams it offline
+An articulated drive (``vehicle.model: articulated``, :mod:`.whole_vehicle`) is one block
+offline: the estimation layer streams it
 (:class:`~.estimation.whole_vehicle.WholeVehicleOfflineStream`: fed in blocks, handed out in
-pieces; ``estimate_whole_vehicle`` offline runs it in one feed), but the stages around it do
-not yet: the front axle's stage beside it, the whole vehicle's sinks (its topics, its
-``/diagnostics`` status, the report's per-axle segment columns) and the fused profile take
-whole arrays (a 10-minute 5-axle drive at 1 kHz is 0.6 M samples, far below
-:data:`STREAM_MIN_SAMPLES`). Online (with a metadata.yaml listing its deflections) the whole
-vehicle's stage reads the drive in blocks (``BlockPlan.whole_vehicle_blocks``:
-:class:`~.bagio.drive_blocks.DriveBlocks` with its channels, the estimator carried from block
-to block, :class:`~.estimation.whole_vehicle.WholeVehicleOnlineStream`: the same bits as the
-drive read whole); its estimate is still gathered whole for the sinks. Offline its smoother
-goes in windows
-(``BlockPlan.whole_vehicle_windows``: ``estimate_whole_vehicle(..., windows=True)``, a run
-longer than :data:`~.estimation.whole_vehicle.STREAM_WINDOW_SAMPLES` and its overlap smoothed
-a window at a time), so the load pass's rows are held a window at a time, not the drive's.
+pieces; ``estimate_whole_vehicle`` offline runs it in one feed, its smoother in windows:
+``BlockPlan.whole_vehicle_windows``, a run longer than
+:data:`~.estimation.whole_vehicle.STREAM_WINDOW_SAMPLES` and its overlap smoothed a window at
+a time), but the stages around it take whole arrays (the front axle's stage beside it, the
+whole vehicle's sinks, the fused profile). Online (with a metadata.yaml listing its
+deflections) the whole vehicle's stage reads the drive in blocks
+(``BlockPlan.whole_vehicle_blocks``: :class:`~.bagio.drive_blocks.DriveBlocks` with its
+channels, the estimator carried from block to block,
+:class:`~.estimation.whole_vehicle.WholeVehicleOnlineStream`: the same bits as the drive read
+whole). Below :func:`stream_threshold` (and :data:`WHOLE_VEHICLE_STREAM_MIN_SAMPLES`) its
+estimate is gathered whole for the one-block sinks; from it on the front axle's stage and
+its sinks go in blocks beside it (``BlockPlan.blocks``: :func:`.blocks.run_blocks` with the
+whole vehicle's estimate spilled to temporary files and read back in pieces,
+:class:`.whole_vehicle.BlockJoin`: its front wheels' loads and road put into each piece, its
+topics, statuses and report sums from pieces, as one block gives them).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ['STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'BlockPlan', 'stream_threshold',
-           'plan_drive']
+__all__ = ['STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'WHOLE_VEHICLE_STREAM_MIN_SAMPLES',
+           'BlockPlan', 'stream_threshold', 'plan_drive']
 
 #: Drives of at least this many deflection messages (metadata.yaml) go in blocks.
 STREAM_MIN_SAMPLES = 1 << 21
+#: An articulated drive goes in blocks online from this many deflection messages (17.5 min
+#: at 1 kHz): one block grows by ~915 bytes a sample there (its front axle's stage and the
+#: whole vehicle's estimate held whole, ``python -m bench.probes.estimate_bag_process
+#: --articulated``), ~1 GB at this count; in blocks the outputs are one block's but for the
+#: front axle's (the figures' window, the truth's profile figures: :mod:`.blocks`).
+WHOLE_VEHICLE_STREAM_MIN_SAMPLES = 1 << 20
 #: What a sample costs one block at its peak, figures on (bytes; measured 545 offline and
 #: ~720 online without truth, ``bench/probes/long_drive_memory.py``), rounded up.
 ONE_BLOCK_BYTES_PER_SAMPLE = 1000
@@ -75,7 +83,8 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
                min_samples: int | None = None, vehicle=None) -> BlockPlan:
     """The :class:`BlockPlan` of a drive bag (see the module notes); ``reference``: the
     ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
-    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block."""
+    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block
+    offline, online in blocks from the threshold on (module notes)."""
     from road_force_estimator.bagio.drive_blocks import listed_messages
     from road_force_estimator.interfaces import DEFLECTIONS
     from road_force_estimator.pipeline.whole_vehicle import is_whole_vehicle
@@ -85,8 +94,11 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
         return BlockPlan(False, samples)
-    if is_whole_vehicle(vehicle):                   # the whole vehicle: one block (notes)
-        return BlockPlan(False, samples, mode == 'offline', mode == 'online')
+    if is_whole_vehicle(vehicle):     # offline one block; online the front axle's in blocks
+        if min_samples is None:
+            limit = min(limit, WHOLE_VEHICLE_STREAM_MIN_SAMPLES)
+        return BlockPlan(mode == 'online' and samples >= limit, samples, mode == 'offline',
+                         mode == 'online')
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain
     return BlockPlan(samples >= limit, samples)

@@ -7,7 +7,8 @@ report's segments, IRI and summary, the figures), closed once at the end. The pl
 (:func:`.plan.plan_drive`: one block or many, from the drive's length and the memory limit)
 picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
 block). With articulated parameters the whole vehicle's stage (:mod:`.whole_vehicle`, one
-block) runs beside the front axle's and its estimate, with the truth where the drive has it,
+block; online from the plan's threshold the front axle's goes in blocks beside it) runs
+beside the front axle's and its estimate, with the truth where the drive has it,
 joins the bag and the report (what its reader rejected counted as the drive's:
 :func:`.whole_vehicle.with_rejections`); with front-axle parameters an articulated drive's
 whole-vehicle truth joins the report (:mod:`~.report.whole_vehicle`).
@@ -47,8 +48,23 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
                       memory_limit_bytes=memory_limit_bytes, vehicle=whole)
     wv = fused = None
     if plan.blocks:
-        result = blocks.run_blocks(folder, output, input_path, vehicle, observer, options,
-                                   stages, progress, samples=plan.samples)
+        joined = None
+        if whole is not None:                # online: the whole vehicle's stage first
+            stages.next(f'estimating the whole vehicle ({options["mode"]})')
+            folder.mkdir(parents=True, exist_ok=True)    # its samples spilled there
+            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'],
+                                        spill=whole_vehicle.SpilledEstimate(folder))
+            fused = whole_vehicle.fused_profile(wv, whole)
+            joined = whole_vehicle.BlockJoin(wv, fused,
+                                             float(whole.axles[0].wheel_half_track_m))
+        try:
+            result = blocks.run_blocks(folder, output, input_path, vehicle, observer,
+                                       options, stages, progress, samples=plan.samples,
+                                       whole=joined)
+            return _whole_vehicle(result, input_path, folder, wv, fused)
+        finally:
+            if wv is not None:                 # its temporary files
+                wv.close()
     else:
         stages.next('reading the bag')
         drive, speed, early = one_block.read(input_path, options['segment_length_m'])
@@ -76,8 +92,8 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
 def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path,
                    wv=None, fused=None) -> EstimateResult:
     """An articulated drive: the note of what was estimated, the whole vehicle's estimate
-    ``wv`` (None: not estimated) and the truth of every axle in the report
-    (:mod:`~.report.whole_vehicle`)."""
+    ``wv`` (its arrays or a :class:`.whole_vehicle.SpilledEstimate`; None: not estimated)
+    and the truth of every axle in the report (:mod:`~.report.whole_vehicle`)."""
     from road_force_estimator import bagio
     from road_force_estimator.bagio.articulated_drive import read_articulated_truth
     from road_force_estimator.bagio.vehicle_layout import front_axle_joints, is_articulated
@@ -89,8 +105,10 @@ def _whole_vehicle(result: EstimateResult, input_path: Path, folder: Path,
         append_estimate(folder / 'report', wv, truth, result.summary, fused=fused)
         road = (f'the road fused over the {fused.axles} axles' if fused is not None
                 else 'its road by the front-axle estimator')
-        result.notes.append(f'the whole vehicle estimated ({len(wv.axle_names)} axles, '
-                            f"{len(wv.stamps_ns)} samples); the front axle's loads and load "
+        n = wv.n if hasattr(wv, 'rows') else len(wv.stamps_ns)
+        names = (wv.meta if hasattr(wv, 'rows') else wv).axle_names
+        result.notes.append(f'the whole vehicle estimated ({len(names)} axles, '
+                            f"{n} samples); the front axle's loads and load "
                             f'transfer from its wheels, {road}')
         return result
     if result.drive.notes:

@@ -41,7 +41,11 @@ __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'add_diagnostics', 'sensor_edges', 'sensor_status_values', 'sensor_report',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
-           'STATUS_NAME', 'with_rejections', 'rejection_values']
+           'STATUS_NAME', 'with_rejections', 'rejection_values', 'sensor_status',
+           'BlockJoin', 'SpilledEstimate', 'bag_stream_pieces', 'SINK_ROWS']
+
+#: The samples of a spilled estimate the sinks read at a time (:class:`BlockJoin`).
+SINK_ROWS = 1 << 16
 
 #: The name of the whole vehicle's status in ``/diagnostics``.
 STATUS_NAME = f'{PROG}: whole vehicle'
@@ -63,11 +67,13 @@ def front_axle_vehicle():
 
 
 def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = False,
-             blocks: bool = False):
+             blocks: bool = False, spill: SpilledEstimate | None = None):
     """The stage in one call: the drive's
     :class:`~.estimation.whole_vehicle.WholeVehicleArrays` (``mode`` 'online' or 'offline';
     ``windows``: offline, the smoother in windows; ``blocks``: online, the drive read in
-    blocks and the estimator carried across them, the same bits; as :mod:`.plan` decides).
+    blocks and the estimator carried across them, the same bits; as :mod:`.plan` decides;
+    ``spill``: online in blocks, the samples into it instead (:class:`SpilledEstimate`: it
+    is returned, its ``meta`` set).
 
     Raises
     ------
@@ -81,8 +87,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
 
     imu = bool(getattr(vehicle, 'tractor_imu', False))
     names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
-    if mode == 'online' and blocks:
-        return _online(input_path, vehicle, observer, names, imu)
+    if mode == 'online' and (blocks or spill is not None):
+        return _online(input_path, vehicle, observer, names, imu, spill)
     try:
         r = read_articulated_readings(input_path, names, imu=imu)
     except BagReadError as err:
@@ -108,7 +114,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
     return wv if codes is None else replace(wv, imu_codes=codes)
 
 
-def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
+def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool,
+            spill: SpilledEstimate | None = None):
     """The stage online: the drive read in blocks (:class:`~.bagio.drive_blocks.DriveBlocks`
     with the whole vehicle's channels), :func:`~.estimation.whole_vehicle.
     estimate_online_blocks` stepped across them (the same bits as the drive read whole)."""
@@ -124,7 +131,10 @@ def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
             if not np.isfinite(b.speed_mps).all():      # only before the first twist
                 raise InputError('no usable /vehicle/twist message: the speed is unknown')
             if imu:                                    # the IMU's a_y by the node's rule
-                codes.append(b.imu_codes)
+                if spill is not None:
+                    spill.add_codes(b.imu_codes)
+                else:
+                    codes.append(b.imu_codes)
                 yield (b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]), b.speed_mps,
                        b.imu_codes)
             else:
@@ -132,13 +142,17 @@ def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool):
 
     try:
         wv = estimate_online_blocks(vehicle, blocks(), observer=observer, imu=imu,
-                                    capacity=streamable(input_path))
+                                    capacity=streamable(input_path),
+                                    sink=None if spill is None else spill.add)
     except BagReadError as err:
         raise InputError(str(err)) from None
-    if not wv.stamps_ns.size:
+    if not (wv.stamps_ns.size if spill is None else spill.n):
         raise InputError(f'{input_path}: no /suspension/deflections message carries every '
                          f'channel of the whole vehicle ({", ".join(names)})')
     wv = replace(wv, rejected=_counts(reader.rejected), messages=dict(reader.messages))
+    if spill is not None:                      # the samples' IMU codes spilled with them
+        spill.meta = wv if not imu else replace(wv, imu_codes=np.zeros(0, np.int8))
+        return spill
     return wv if not imu else replace(wv, imu_codes=np.concatenate(codes))
 
 
@@ -193,11 +207,11 @@ def rejection_values(wv) -> tuple[dict, str]:
     return values, f'{total} input messages rejected ({parts})'
 
 
-def imu_values(wv, k: int, since: int = 0) -> tuple[dict, str]:
+def imu_values(wv, k: int, since: int = 0, before: dict | None = None) -> tuple[dict, str]:
     """The tractor IMU's counts at sample ``k`` (the node's keys, :mod:`~.estimation.imu_hold`:
     ``imu.stale``, ``imu.missing`` the samples of the period ``since`` .. ``k`` with a held or
-    no a_y, ``total.imu.*`` the drive's so far) and a message ('' when the period had none);
-    none without the IMU."""
+    no a_y (left out), ``total.imu.*`` the drive's so far, with ``before``'s: code -> samples
+    before ``wv``'s first) and a message ('' when the period had none); none without the IMU."""
     from road_force_estimator.estimation.imu_hold import MISSING, STALE
 
     codes = getattr(wv, 'imu_codes', None)
@@ -208,7 +222,8 @@ def imu_values(wv, k: int, since: int = 0) -> tuple[dict, str]:
     for code, word in ((STALE, 'stale'), (MISSING, 'missing')):
         n = int(np.count_nonzero(codes[since:k + 1] == code))
         values[f'imu.{word}'] = str(n)
-        values[f'total.imu.{word}'] = str(int(np.count_nonzero(codes[:k + 1] == code)))
+        values[f'total.imu.{word}'] = str(int(np.count_nonzero(codes[:k + 1] == code))
+                                          + (before or {}).get(code, 0))
         if n:
             words.append(f'{n} {word}')
     return values, (f'tractor IMU: {", ".join(words)} samples' if words else '')
@@ -219,16 +234,23 @@ def sensor_report(est, wv):
     "Sensors", ``report.json`` ``sensors``, the fleet's tables) those of the whole vehicle's
     channels: the flags and counts of ``wv.faults`` (:mod:`~.estimation.sensor_health`), the
     innovations gated per channel."""
+    if getattr(wv, 'faults', None) is None:
+        return est
+    return replace(est, status=sensor_status(est.status, wv))
+
+
+def sensor_status(status, wv):
+    """The front axle's estimator ``status`` with the sensor fields of the whole vehicle's
+    channels (:func:`sensor_report`'s; ``status`` itself without ``wv.faults``)."""
     fc = getattr(wv, 'faults', None)
     if fc is None:
-        return est
-    st = replace(est.status, sensor_faults=dict(fc.flags),
-                 stuck_episodes=dict(fc.stuck_episodes), stuck_samples=dict(fc.stuck_samples),
-                 drift_episodes=dict(fc.drift_episodes), drift_samples=dict(fc.drift_samples),
-                 fault_first_ns={n: dict(f) for n, f in fc.first_ns.items()},
-                 innovations_gated=dict(zip(wv.channel_names,
-                                            (int(g) for g in wv.innovations_gated))))
-    return replace(est, status=st)
+        return status
+    return replace(status, sensor_faults=dict(fc.flags),
+                   stuck_episodes=dict(fc.stuck_episodes), stuck_samples=dict(fc.stuck_samples),
+                   drift_episodes=dict(fc.drift_episodes), drift_samples=dict(fc.drift_samples),
+                   fault_first_ns={n: dict(f) for n, f in fc.first_ns.items()},
+                   innovations_gated=dict(zip(wv.channel_names,
+                                              (int(g) for g in wv.innovations_gated))))
 
 
 def front_wheels(est, wv):
@@ -255,25 +277,28 @@ def front_wheels(est, wv):
                    ltr=take(ltr[:, 0]), ltr_quasi_static=take(ltr[:, 1]), lift_off=lift)
 
 
-def sensor_edges(wv) -> list | None:
+def sensor_edges(wv, first: np.ndarray | None = None) -> list | None:
     """Per channel of ``wv`` (its ``fault_flags``): the samples where a stuck and where a
-    drift flag rose (sorted index arrays), or None without flags."""
+    drift flag rose (sorted index arrays), or None without flags; ``first``: each channel's
+    flag before ``wv``'s first sample (None: ok)."""
     from road_force_estimator.estimation.sensor_health import CODES
 
     flags = getattr(wv, 'fault_flags', None)
     if flags is None:
         return None
     out = []
-    for row in np.asarray(flags):
-        prev = np.concatenate([[0], row[:-1]])
+    for c, row in enumerate(np.asarray(flags)):
+        prev = np.concatenate([[0 if first is None else first[c]], row[:-1]])
         rose = row != prev
         out.append(tuple(np.flatnonzero(rose & (row == CODES[w])) for w in ('stuck', 'drift')))
     return out
 
 
-def sensor_status_values(wv, k: int, edges: list) -> tuple[dict, str]:
+def sensor_status_values(wv, k: int, edges: list,
+                         before: list | None = None) -> tuple[dict, str]:
     """The sensors' status values at sample ``k`` (the node's keys: ``sensor.<channel>``,
-    ``total.stuck.<channel>``, ``total.drift.<channel>``: flags raised so far) and the
+    ``total.stuck.<channel>``, ``total.drift.<channel>``: flags raised so far, with
+    ``before``'s: per channel (stuck, drift) raised before ``wv``'s first sample) and the
     fault message ('' when every sensor is ok; :func:`~.estimation.diagnostics.
     fault_message`)."""
     from road_force_estimator.estimation.diagnostics import fault_message, sensor_values
@@ -282,14 +307,16 @@ def sensor_status_values(wv, k: int, edges: list) -> tuple[dict, str]:
     words = {c: w for w, c in CODES.items()}
     flags = {n: words[int(c)] for n, c in zip(wv.channel_names, wv.fault_flags[:, k])}
     values = sensor_values(flags)
-    for n, (stuck, drift) in zip(wv.channel_names, edges):
-        values[f'total.stuck.{n}'] = str(int(np.searchsorted(stuck, k, side='right')))
-        values[f'total.drift.{n}'] = str(int(np.searchsorted(drift, k, side='right')))
+    for c, (n, (stuck, drift)) in enumerate(zip(wv.channel_names, edges)):
+        b = (0, 0) if before is None else before[c]
+        values[f'total.stuck.{n}'] = str(int(np.searchsorted(stuck, k, side='right')) + b[0])
+        values[f'total.drift.{n}'] = str(int(np.searchsorted(drift, k, side='right')) + b[1])
     return values, fault_message(flags)
 
 
 def _status(wv, k: int, since: int = 0, edges: list | None = None,
-            ltr_predicted: np.ndarray | None = None, last: bool = False) -> dict:
+            ltr_predicted: np.ndarray | None = None, last: bool = False,
+            before: dict | None = None) -> dict:
     """The whole vehicle's status at sample ``k``: the axle static loads, the gross vehicle
     weight (N), each unit's quasi-static LTR, and each unit's largest |LTR| over the samples
     ``since`` .. ``k`` (``max_abs_ltr_<unit>``, as the observer node's period), and of its
@@ -298,7 +325,9 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None,
     drive's, computed once by the caller); ``gaps``: those
     of the period (each restarted the estimate), ``total.gaps`` the drive's so far (the node's
     keys); ``last``: the drive's last status, with the reader's rejections
-    (:func:`rejection_values`: WARN when it dropped any)."""
+    (:func:`rejection_values`: WARN when it dropped any); ``before``: the counts of the
+    samples before ``wv``'s first (``imu``, ``edges``: :func:`imu_values`',
+    :func:`sensor_status_values`'), ``wv`` a part of the drive."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
 
     axle = wv.static_n[:, k].reshape(-1, 2).sum(axis=1)
@@ -332,13 +361,14 @@ def _status(wv, k: int, since: int = 0, edges: list | None = None,
         level = 1
         message += (f'; rollover warning: {", ".join(warned)} predicted |LTR| >= '
                     f'{WARNING_THRESHOLD:g}')
-    imu, late = imu_values(wv, k, since)
+    before = before or {}
+    imu, late = imu_values(wv, k, since, before.get('imu'))
     values.update(imu)
     if late:
         level = 1
         message += f'; {late}'
     if edges is not None:
-        sensors, fault = sensor_status_values(wv, k, edges)
+        sensors, fault = sensor_status_values(wv, k, edges, before.get('edges'))
         values.update(sensors)
         if fault:
             level = 1
@@ -381,23 +411,138 @@ def fit_values(fit) -> dict:
     return {} if fit is None else fit.status_values()
 
 
-def add_diagnostics(diagnostics: list, wv) -> list:
+def add_diagnostics(diagnostics: list, wv, rows: int = 1 << 16) -> list:
     """``diagnostics`` ((stamp_ns, [status dicts]) per second) with the whole vehicle's
     status at the last sample at or before each stamp added (none before its first), its
-    period the samples since the previous status; the last with the reader's rejections."""
-    if not wv.stamps_ns.size:
+    period the samples since the previous status; the last with the reader's rejections.
+    ``wv``: the drive's arrays, or a source of their rows (``n``, ``meta``, ``rows(lo,
+    hi)``: :class:`SpilledEstimate`), read ``rows`` samples at a time: only a period's
+    samples and the predictor's window held (:class:`_Periods`), the same statuses."""
+    from road_force_estimator.estimation.whole_vehicle import ArraysRows
+
+    source = wv if hasattr(wv, 'rows') else ArraysRows(wv)
+    if not source.n:
         return diagnostics
+    periods = _Periods(source, rows)
     out = []
     since = 0
-    edges = sensor_edges(wv)
-    predicted = wv.ltr_predicted
     for j, (stamp, statuses) in enumerate(diagnostics):
-        k = int(np.searchsorted(wv.stamps_ns, stamp, side='right')) - 1
+        k = periods.last_at(stamp)
         last = j == len(diagnostics) - 1
-        out.append((stamp, list(statuses) + ([_status(wv, k, since, edges, predicted, last)]
+        out.append((stamp, list(statuses) + ([periods.status(k, since, last)]
                                              if k >= 0 else [])))
         since = max(since, k + 1)
     return out
+
+
+class _Periods:
+    """The rows of a drive's whole-vehicle estimate from ``source`` for its statuses in
+    order (:func:`add_diagnostics`): the samples of the current period, the predictor's
+    window before it (:func:`~.estimation.rollover_warning.predicted_ltr` with the drive's
+    first stamp) and the IMU and sensor-flag counts of the samples before them."""
+
+    def __init__(self, source, rows: int) -> None:
+        self.source, self.step = source, max(int(rows), 1)
+        self.buf = source.rows(0, min(self.step, source.n))
+        self.lo = 0                          # the buffer's first sample
+        self.t0 = int(self.buf.stamps_ns[0])
+        self.counted = 0                     # the samples counted in the totals below
+        self.imu: dict = {}
+        flags = getattr(self.buf, 'fault_flags', None)
+        self.edges = None if flags is None else [(0, 0)] * flags.shape[0]
+
+    @property
+    def hi(self) -> int:
+        return self.lo + len(self.buf.stamps_ns)
+
+    def _more(self) -> bool:
+        from road_force_estimator.estimation.whole_vehicle import join_rows
+
+        if self.hi >= self.source.n:
+            return False
+        self.buf = join_rows(self.buf, self.source.rows(self.hi, min(self.hi + self.step,
+                                                                     self.source.n)))
+        return True
+
+    def last_at(self, stamp: int) -> int:
+        """The last sample at or before ``stamp`` (-1: none)."""
+        while int(self.buf.stamps_ns[-1]) <= stamp and self._more():
+            pass
+        return self.lo + int(np.searchsorted(self.buf.stamps_ns, stamp, side='right')) - 1
+
+    def _flags_before(self, a: int):
+        """Each channel's flag at sample ``a - 1`` (None at the drive's start)."""
+        return self.buf.fault_flags[:, a - 1 - self.lo] if a > 0 else None
+
+    def status(self, k: int, since: int, last: bool) -> dict:
+        """:func:`_status` at sample ``k`` over ``since`` .. ``k``."""
+        from road_force_estimator.estimation.rollover_warning import predicted_ltr
+        from road_force_estimator.estimation.whole_vehicle import take_rows
+
+        a = max(since - 1, 0)                # the period with the sample before it
+        self._count(a)
+        part = take_rows(self.buf, a - self.lo, k + 1 - self.lo)
+        window = take_rows(self.buf, 0, k + 1 - self.lo)
+        predicted = predicted_ltr(window.stamps_ns, window.ltr_quasi_static,
+                                  t0_ns=self.t0)[:, a - self.lo:]
+        edges = None if self.edges is None else sensor_edges(part, self._flags_before(a))
+        st = _status(part, k - a, since - a, edges, predicted, last,
+                     {'imu': self.imu, 'edges': self.edges})
+        self._drop(k)
+        return st
+
+    def _count(self, a: int) -> None:
+        """The IMU codes and the flags raised before sample ``a`` counted."""
+        from road_force_estimator.estimation.whole_vehicle import take_rows
+
+        if a <= self.counted:
+            return
+        part = take_rows(self.buf, self.counted - self.lo, a - self.lo)
+        codes = getattr(part, 'imu_codes', None)
+        if codes is not None:
+            for c in np.unique(codes).tolist():
+                self.imu[c] = self.imu.get(c, 0) + int(np.count_nonzero(codes == c))
+        if self.edges is not None:
+            rose = sensor_edges(part, self._flags_before(self.counted))
+            self.edges = [(s0 + st.size, d0 + dr.size)
+                          for (s0, d0), (st, dr) in zip(self.edges, rose)]
+        self.counted = a
+
+    def _drop(self, k: int) -> None:
+        """The samples no later status needs let go: those more than the predictor's
+        window and 1 s before sample ``k``, and none from the sample before the next
+        period's first (the flags before it)."""
+        from road_force_estimator.estimation.rollover_warning import RATE_WINDOW_S
+        from road_force_estimator.estimation.whole_vehicle import take_rows
+
+        keep = int(self.buf.stamps_ns[k - self.lo]) - int((RATE_WINDOW_S + 1.0) * 1e9)
+        j = self.lo + int(np.searchsorted(self.buf.stamps_ns, keep, side='right')) - 1
+        cut = min(j, self.counted - 1)
+        if cut > self.lo:
+            self.buf = take_rows(self.buf, cut - self.lo, len(self.buf.stamps_ns))
+            self.lo = cut
+
+
+def bag_stream_pieces(source, rows: int = 1 << 16):
+    """:func:`bag_streams` of a drive a piece of ``rows`` samples at a time from ``source``
+    (``n``, ``meta``, ``rows(lo, hi)``: :class:`SpilledEstimate`): each piece's streams, the
+    same messages."""
+    from road_force_estimator.bagio.whole_vehicle_estimates import whole_vehicle_streams
+    from road_force_estimator.interfaces import wheel_joints
+
+    after = None
+    joints = wheel_joints(source.meta.axle_names)
+    for lo in range(0, source.n, max(int(rows), 1)):
+        wv = source.rows(lo, min(lo + rows, source.n))
+        ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
+              & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
+        if not ok.any():
+            continue
+        yield whole_vehicle_streams(wv.stamps_ns, joints, wv.load_n, wv.static_n, wv.ltr,
+                                    wv.ltr_quasi_static,
+                                    rows=None if ok.all() else np.flatnonzero(ok),
+                                    after_ns=after)
+        after = int(wv.stamps_ns[np.flatnonzero(ok)[-1]])
 
 
 def bag_streams(wv) -> list:
@@ -435,7 +580,13 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
     every axle."""
     from road_force_estimator.estimation.articulated import ArticulatedEstimate, fuse_roads
 
-    if wv.road_m is None or not len(wv.stamps_ns):
+    if hasattr(wv, 'rows'):                    # a source of rows: its drive's fields
+        if not wv.n:
+            return None
+        wv = wv.meta
+    elif not len(wv.stamps_ns):
+        return None
+    if wv.road_m is None:
         return None
     half_track = float(vehicle.axles[0].wheel_half_track_m)
     if wv.fused is not None:
@@ -489,3 +640,134 @@ def fused_road(est, wv, fused: FusedRoad | None):
         road[on, 0] = fused.left_m[k[on]]
         road[on, 1] = fused.right_m[k[on]]
     return replace(est, road_m=road)
+
+
+class SpilledEstimate:
+    """The whole vehicle's estimate of a drive in blocks, online: its per-sample fields
+    (:data:`~.estimation.whole_vehicle.ROW_FIELDS`) in temporary files in ``folder``
+    (:class:`~.core.spill.SpillColumn`) as the pieces come (:meth:`add`), what is the
+    drive's (names, counts, fused points, verdicts, rejections: ``meta``, a
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays` without samples) in memory; the
+    sinks read it back ``rows(lo, hi)`` at a time."""
+
+    def __init__(self, folder: Path | None) -> None:
+        self.folder = folder
+        self.cols: dict | None = None
+        self.n = 0
+        self.meta = None
+        self.codes = None
+
+    def add_codes(self, codes) -> None:
+        """The tractor IMU's pairing codes of consecutive input samples (one per sample)."""
+        from road_force_estimator.core.spill import SpillColumn
+
+        if self.codes is None:
+            self.codes = SpillColumn(np.int8, None, self.folder)
+        self.codes.append(np.asarray(codes, np.int8))
+
+    def add(self, piece) -> None:
+        """One piece of consecutive samples (:class:`~.estimation.whole_vehicle.
+        WholeVehicleOnlineStream`'s)."""
+        from road_force_estimator.core.spill import SpillColumn
+        from road_force_estimator.estimation.whole_vehicle import ROW_FIELDS
+
+        if self.cols is None:
+            self.cols = {}
+            for f in ROW_FIELDS:
+                a = getattr(piece, f)
+                if a is not None:
+                    self.cols[f] = SpillColumn(a.dtype, a.shape[0] if a.ndim == 2 else None,
+                                               self.folder)
+        for f, col in self.cols.items():
+            a = getattr(piece, f)
+            col.append(a.T if a.ndim == 2 else a)
+        self.n += len(piece.stamps_ns)
+
+    def rows(self, lo: int, hi: int):
+        """The samples ``lo:hi`` with the drive's fields."""
+        out = {}
+        for f, col in (self.cols or {}).items():
+            a = col.read(lo, hi)
+            out[f] = np.ascontiguousarray(a.T) if a.ndim == 2 else a
+        if self.codes is not None:
+            out['imu_codes'] = self.codes.read(lo, hi)
+        return replace(self.meta, **out)
+
+    def close(self) -> None:
+        for col in (self.cols or {}).values():
+            col.close()
+        if self.codes is not None:
+            self.codes.close()
+
+
+@dataclass
+class BlockJoin:
+    """The whole vehicle's estimate ``source`` (:class:`SpilledEstimate`, or the arrays as
+    :class:`~.estimation.whole_vehicle.ArraysRows`) and fused profile ``fused`` joined to
+    the front axle's stage in blocks (:func:`~.blocks.run_blocks`, online from the plan's
+    threshold), each step as the one-block path does it on the whole arrays
+    (:func:`~.run.run_drive`): every piece of the front axle's estimate with the front
+    wheels' loads, load transfer and road (:meth:`piece`: the rows of its stamps read as it
+    comes), the whole vehicle's topics (:meth:`write_streams`, a piece at a time) and its
+    ``/diagnostics`` status (:meth:`diagnostics`) in the bag, the sensors' fields of its
+    status (:meth:`status`) and its reader's rejections (:meth:`drive`) in the report;
+    ``half_track_m``: the front wheels' (m), the y of ``/road_profile/*``."""
+
+    source: object
+    fused: FusedRoad | None
+    half_track_m: float
+    rows: int = 0                            # samples read at a time (0: SINK_ROWS)
+
+    def __post_init__(self) -> None:
+        self.rows = self.rows or SINK_ROWS
+        self._buf = None
+        self._lo = 0
+
+    def _cover(self, first: int, last: int):
+        """The whole vehicle's samples of stamps ``first`` .. ``last`` and more (those
+        before ``first`` let go)."""
+        from road_force_estimator.estimation.whole_vehicle import join_rows, take_rows
+
+        src = self.source
+        if self._buf is None:
+            self._buf = src.rows(0, min(self.rows, src.n))
+        while True:
+            cut = int(np.searchsorted(self._buf.stamps_ns, first))
+            if cut:                          # before ``first``: never needed again
+                self._buf = take_rows(self._buf, cut, len(self._buf.stamps_ns))
+                self._lo += cut
+            hi = self._lo + len(self._buf.stamps_ns)
+            if (len(self._buf.stamps_ns) and int(self._buf.stamps_ns[-1]) >= last) \
+                    or hi >= src.n:
+                return self._buf
+            self._buf = join_rows(self._buf, src.rows(hi, min(hi + self.rows, src.n)))
+
+    def piece(self, est):
+        """A piece of the front axle's estimate with the whole vehicle's front wheels
+        (:func:`front_wheels`, :func:`fused_road`)."""
+        stamps = np.asarray(est.stamp_ns, np.int64)
+        if not stamps.size or not self.source.n:
+            return est
+        part = self._cover(int(stamps[0]), int(stamps[-1]))
+        est = front_wheels(est, part)
+        return fused_road(est, part, self.fused) if len(part.stamps_ns) else est
+
+    def write_streams(self, bag) -> None:
+        """The whole vehicle's topics and the fused profile's into ``bag`` (an
+        :class:`~.bagio.estimate_stream.EstimateBagStream`), a piece at a time
+        (:func:`bag_stream_pieces`, :func:`fused_streams`)."""
+        for streams in bag_stream_pieces(self.source, self.rows):
+            bag.write_streams(streams)
+        bag.write_streams(fused_streams(self.fused))
+
+    def diagnostics(self, diagnostics: list) -> list:
+        """The per-second statuses with the whole vehicle's (:func:`add_diagnostics`)."""
+        return add_diagnostics(diagnostics, self.source, self.rows)
+
+    def status(self, status):
+        """:func:`sensor_status`."""
+        return sensor_status(status, self.source.meta)
+
+    def drive(self, drive):
+        """:func:`with_rejections`."""
+        return with_rejections(drive, self.source.meta)

@@ -186,10 +186,12 @@ def _select(pieces: list, bounds: Window):
 
 
 def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
-         title: str, units: str, static_load_n, rerun=None) -> list[str]:
+         title: str, units: str, static_load_n, rerun=None, join=None) -> list[str]:
     """The figures' file names written into ``folder`` (none without a window). ``keeper``:
     the :class:`Snapshots` of an online drive or the :class:`OfflineWindow` of an offline
-    one (``rerun()``: the drive's pieces again, when its guess missed)."""
+    one (``rerun()``: the drive's pieces again, when its guess missed); ``join(piece)``:
+    online, each estimated piece as the sinks took it (an articulated drive's front wheels,
+    :meth:`.whole_vehicle.BlockJoin.piece`; None: as estimated)."""
     from road_force_estimator.bagio.drive_blocks import DriveBlocks
     from road_force_estimator.report.alignment import align
     from road_force_estimator.report.figures import DEFAULT_WINDOW_S, FigureDrive, write_figures
@@ -205,6 +207,8 @@ def draw(folder, input_path, block_samples: int, keeper, acc, segments: dict,
         index, stream = keeper.resume(bounds.ns[0])
         pieces, inputs = _window_pieces(DriveBlocks(input_path, block_samples), index,
                                         stream, bounds)
+        if join is not None:
+            pieces = [join(p) for p in pieces]
     else:
         return []
     est = _select(pieces, bounds)

@@ -22,6 +22,7 @@ fit).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -157,51 +158,93 @@ def column_decimals(name: str) -> int:
     return 4 if name.startswith(('dlc_', 'max_abs_ltr')) else 0
 
 
-def segment_table(wv, start_m, end_m) -> dict[str, np.ndarray]:
+def _source(wv):
+    """``wv`` as a source of rows (``n``, ``meta``, ``rows(lo, hi)``): itself, or its arrays'
+    (:class:`~.estimation.whole_vehicle.ArraysRows`)."""
+    from road_force_estimator.estimation.whole_vehicle import ArraysRows
+
+    return wv if hasattr(wv, 'rows') else ArraysRows(wv)
+
+
+#: The samples the report's sums take at a time (the same bits however many: they add in
+#: sample order).
+SUM_ROWS = 1 << 16
+
+
+def segment_table(wv, start_m, end_m, rows: int | None = None) -> dict[str, np.ndarray]:
     """The columns of :func:`segment_columns` for the segments ``[start_m, end_m)`` (the last
     one's end inclusive) from the converged samples of ``wv`` (a
-    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`) by their distance (the front
-    axle's, m): peak load and DLC (std / mean) per wheel, mean static axle load and gross
-    weight, largest |quasi-static LTR| of the trailer; NaN in a segment without a sample.
-    Every sample counts, converged or not, as in the front axle's columns."""
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`, or a source of its rows read
+    ``rows`` samples at a time, :data:`SUM_ROWS` by default) by their distance (the front
+    axle's, m): peak load and DLC
+    (std / mean) per wheel, mean static axle load and gross weight, largest |quasi-static
+    LTR| of the trailer; NaN in a segment without a sample. Every sample counts, converged
+    or not, as in the front axle's columns. The sums add in sample order (``np.bincount``
+    continued from piece to piece: the same bits in one piece or many)."""
+    source = _source(wv)
+    rows = max(int(rows or SUM_ROWS), 1)
     start = np.asarray(start_m, float)
     end = np.asarray(end_m, float)
     k = start.size
-    use = np.isfinite(np.asarray(wv.distance_m, float))
-    x = np.asarray(wv.distance_m, float)[use]
+    names = source.meta.axle_names
     if k == 0:
-        return {c: np.zeros(0) for c in segment_columns(wv.axle_names)}
-    seg = np.searchsorted(start, x, side='right') - 1
-    inside = (seg >= 0) & np.where(seg == k - 1, x <= end[-1],
-                                   x < end[np.clip(seg, 0, k - 1)])
-    seg = seg[inside]
-    rows = np.flatnonzero(use)[inside]        # one wheel's row at a time (no (wheels, m) copy)
-    loads = np.asarray(wv.load_n, float)
-    static = np.asarray(wv.static_n, float)
-    qs = np.asarray(wv.ltr_quasi_static, float)[1, rows]
-    counts = np.bincount(seg, minlength=k)
+        return {c: np.zeros(0) for c in segment_columns(names)}
+    wheels = 2 * len(names)
+    counts = np.zeros(k, np.int64)
+    total = np.zeros((wheels, k))
+    square = np.zeros((wheels, k))
+    static = np.zeros((len(names), k))
+    gross = np.zeros(k)
+    peak = np.full((wheels, k), np.nan)
+    peak_qs = np.full(k, np.nan)
+    bins = np.arange(k)
+
+    def add(acc: np.ndarray, seg: np.ndarray, values: np.ndarray) -> None:
+        acc[:] = np.bincount(np.concatenate([bins, seg]), np.concatenate([acc, values]),
+                             minlength=k)
+
+    for lo in range(0, source.n, rows):
+        part = source.rows(lo, min(lo + rows, source.n))
+        x = np.asarray(part.distance_m, float)
+        use = np.isfinite(x)
+        x = x[use]
+        seg = np.searchsorted(start, x, side='right') - 1
+        inside = (seg >= 0) & np.where(seg == k - 1, x <= end[-1],
+                                       x < end[np.clip(seg, 0, k - 1)])
+        seg = seg[inside]
+        if not seg.size:
+            continue
+        at = np.flatnonzero(use)[inside]     # one wheel's row at a time (no (wheels, m) copy)
+        loads = np.asarray(part.load_n, float)
+        st = np.asarray(part.static_n, float)
+        counts += np.bincount(seg, minlength=k)
+        for i in range(wheels):
+            f = loads[i, at]
+            np.fmax.at(peak[i], seg, f)
+            add(total[i], seg, f)
+            add(square[i], seg, f * f)
+        for j in range(len(names)):
+            add(static[j], seg, st[2 * j, at] + st[2 * j + 1, at])
+        add(gross, seg, _wheel_sum(st, at))
+        np.fmax.at(peak_qs, seg, np.abs(np.asarray(part.ltr_quasi_static, float)[1, at]))
     table: dict[str, np.ndarray] = {}
 
-    def mean(values: np.ndarray) -> np.ndarray:
+    def mean(sums: np.ndarray) -> np.ndarray:
         with np.errstate(invalid='ignore', divide='ignore'):
-            return np.where(counts > 0, np.bincount(seg, values, minlength=k) / counts, np.nan)
+            return np.where(counts > 0, sums / counts, np.nan)
 
-    for j, a in enumerate(wv.axle_names):
+    for j, a in enumerate(names):
         for side, word in enumerate(('left', 'right')):
-            f = loads[2 * j + side, rows]
-            peak = np.full(k, np.nan)
-            np.fmax.at(peak, seg, f)
-            m = mean(f)
+            i = 2 * j + side
+            m = mean(total[i])
             with np.errstate(invalid='ignore', divide='ignore'):
-                std = np.sqrt(np.maximum(mean(f * f) - m * m, 0.0))
+                std = np.sqrt(np.maximum(mean(square[i]) - m * m, 0.0))
                 table[f'dlc_{a}_{word}'] = np.where(counts > 1, std / m, np.nan)
-            table[f'peak_load_{a}_{word}_n'] = peak
-        table[f'static_load_{a}_n'] = mean(static[2 * j, rows] + static[2 * j + 1, rows])
-    table['gross_weight_n'] = mean(_wheel_sum(static, rows))
-    peak_qs = np.full(k, np.nan)
-    np.fmax.at(peak_qs, seg, np.abs(qs))
+            table[f'peak_load_{a}_{word}_n'] = peak[i]
+        table[f'static_load_{a}_n'] = mean(static[j])
+    table['gross_weight_n'] = mean(gross)
     table['max_abs_ltr_trailer_quasi_static'] = peak_qs
-    return {c: table[c] for c in segment_columns(wv.axle_names)}
+    return {c: table[c] for c in segment_columns(names)}
 
 
 def _wheel_sum(static: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -232,50 +275,99 @@ def _append_segments_csv(path: Path, wv) -> dict[str, np.ndarray]:
     return table
 
 
-def summarize_estimate(wv, truth=None) -> dict[str, Any]:
+def _ordered_sum(total: float, values: np.ndarray) -> float:
+    """``total`` plus ``values`` added one by one in order (``np.cumsum``: the same bits
+    however the values are cut into pieces)."""
+    if not values.size:
+        return total
+    return float(np.cumsum(np.concatenate([[total], values]))[-1])
+
+
+def summarize_estimate(wv, truth=None, rows: int | None = None) -> dict[str, Any]:
     """The numbers of the estimate's section from ``wv`` (a
-    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`) and, when given, the drive's
-    :class:`~.bagio.articulated_drive.ArticulatedTruth` (its accuracy at the shared stamps)."""
+    :class:`~.estimation.whole_vehicle.WholeVehicleArrays`, or a source of its rows read
+    ``rows`` samples at a time, :data:`SUM_ROWS` by default) and, when given, the drive's
+    :class:`~.bagio.articulated_drive.ArticulatedTruth` (its accuracy at the shared stamps).
+    Means and spreads from sums in sample order (:func:`_ordered_sum`; the spread
+    ``sqrt(mean(f^2) - mean(f)^2)``): the same bits in one piece or many."""
     from road_force_estimator.estimation.whole_vehicle import UNITS
     from road_force_estimator.interfaces import wheel_joints
 
-    names = wheel_joints(wv.axle_names)
-    use = np.asarray(wv.converged, bool)
-    loads = np.asarray(wv.load_n, float)       # one wheel's row at a time (no copy of all)
-    static = np.asarray(wv.static_n, float)
-    axles = list(wv.axle_names)
-    axle_static = [float(np.mean(static[2 * j, use] + static[2 * j + 1, use])) if use.any()
-                   else float('nan') for j in range(len(axles))]
+    source = _source(wv)
+    rows = max(int(rows or SUM_ROWS), 1)
+    meta = source.meta
+    names = wheel_joints(meta.axle_names)
+    axles = list(meta.axle_names)
+    nw = len(names)
+    n_use = 0
+    total = [0.0] * nw
+    square = [0.0] * nw
+    static = [0.0] * nw
+    axle_total = [0.0] * len(axles)
+    peak = [-np.inf] * nw
+    ltr_max = {u: [np.nan, np.nan] for u in UNITS}
+    codes_seen: dict[int, int] = {}
+    has_codes = False
+    gaps = 0
+    check = (truth is not None and len(truth.stamps_ns)
+             and tuple(truth.wheel_names) == names)
+    acc = _AccuracySums(truth, nw) if check else None
+    for lo in range(0, source.n, rows):
+        part = source.rows(lo, min(lo + rows, source.n))
+        use = np.asarray(part.converged, bool)
+        n_use += int(np.count_nonzero(use))
+        loads = np.asarray(part.load_n, float)     # one wheel's row at a time
+        st = np.asarray(part.static_n, float)
+        for i in range(nw):
+            f = loads[i, use]
+            total[i] = _ordered_sum(total[i], f)
+            square[i] = _ordered_sum(square[i], f * f)
+            static[i] = _ordered_sum(static[i], st[i, use])
+            if f.size:                        # a NaN load stays NaN (as np.max's)
+                peak[i] = float(np.maximum(peak[i], np.max(f)))
+        for j in range(len(axles)):
+            axle_total[j] = _ordered_sum(axle_total[j], st[2 * j, use] + st[2 * j + 1, use])
+        for k, u in enumerate(UNITS):
+            for c, field in enumerate((part.ltr, part.ltr_quasi_static)):
+                ltr_max[u][c] = float(np.fmax(ltr_max[u][c], _nanmax_abs(
+                    np.asarray(field, float)[k, use])))
+        codes = getattr(part, 'imu_codes', None)
+        if codes is not None:
+            has_codes = True
+            for c in np.unique(codes).tolist():
+                codes_seen[c] = codes_seen.get(c, 0) + int(np.count_nonzero(codes == c))
+        if getattr(part, 'gaps', None) is not None and part.gaps.size:
+            gaps = int(part.gaps[-1])
+        if acc is not None:
+            acc.add(part, use)
+    nan = float('nan')
+    axle_static = [t / n_use if n_use else nan for t in axle_total]
     wheels = []
     for i, name in enumerate(names):
-        f = loads[i, use]
-        mean = float(np.mean(f)) if f.size else float('nan')
+        mean = total[i] / n_use if n_use else nan
+        spread = math.sqrt(max(square[i] / n_use - mean * mean, 0.0)) if n_use else nan
         wheels.append({'wheel': name, 'axle': axles[i // 2],
-                       'static_load_n': float(np.mean(static[i, use])) if f.size
-                       else float('nan'),
+                       'static_load_n': static[i] / n_use if n_use else nan,
                        'mean_load_n': mean,
-                       'max_load_n': float(np.max(f)) if f.size else float('nan'),
-                       'dlc': float(np.std(f)) / mean if f.size and mean > 0.0
-                       else float('nan')})
-    units = {u: {'max_abs_ltr': _nanmax_abs(np.asarray(wv.ltr, float)[k, use]),
-                 'max_abs_ltr_quasi_static': _nanmax_abs(
-                     np.asarray(wv.ltr_quasi_static, float)[k, use])}
-             for k, u in enumerate(UNITS)}
+                       'max_load_n': peak[i] if n_use else nan,
+                       'dlc': spread / mean if n_use and mean > 0.0 else nan})
+    units = {u: {'max_abs_ltr': ltr_max[u][0], 'max_abs_ltr_quasi_static': ltr_max[u][1]}
+             for u in UNITS}
     out: dict[str, Any] = {
-        'samples': int(len(wv.stamps_ns)), 'converged': int(np.count_nonzero(use)),
-        'axles': axles, 'axle_bodies': list(wv.axle_bodies),
+        'samples': int(source.n), 'converged': n_use,
+        'axles': axles, 'axle_bodies': list(meta.axle_bodies),
         'axle_static_load_n': axle_static,
         'gross_weight_n': float(np.sum(axle_static)), 'wheels': wheels, 'units': units,
-        'gaps': int(wv.gap_count) if hasattr(wv, 'gap_count') else 0}
-    codes = getattr(wv, 'imu_codes', None)
-    if codes is not None:       # the tractor IMU's pairing (:mod:`~.estimation.imu_hold`)
+        'gaps': gaps}
+    if has_codes or getattr(meta, 'imu_codes', None) is not None:
+        # the tractor IMU's pairing (:mod:`~.estimation.imu_hold`)
         from road_force_estimator.estimation.imu_hold import IMU_MAX_AGE_S, STATES
         out['tractor_imu'] = {'max_age_s': IMU_MAX_AGE_S, **{
-            w: int(np.count_nonzero(np.asarray(codes) == c)) for c, w in enumerate(STATES)}}
-    fit = getattr(wv, 'axle_fit', None)
+            w: codes_seen.get(c, 0) for c, w in enumerate(STATES)}}
+    fit = getattr(meta, 'axle_fit', None)
     if fit is not None and fit.measured:
         from road_force_estimator.estimation.axle_fit import ONLINE_THRESHOLD, THRESHOLD
-        fits = [f for _, f in getattr(wv, 'axle_fits', ())]    # online: every verdict
+        fits = [f for _, f in getattr(meta, 'axle_fits', ())]    # online: every verdict
         out['model_fit'] = {'verdict': 'mismatch' if fit.culprits else 'ok',
                             'culprits': list(fit.culprits),
                             'threshold': ONLINE_THRESHOLD if fits else THRESHOLD,
@@ -284,35 +376,68 @@ def summarize_estimate(wv, truth=None) -> dict[str, Any]:
                                                (float(m) for m in fit.axle_misfit))),
                             'online_verdicts': len(fits),
                             'online_mismatches': sum(bool(f.culprits) for f in fits)}
-    if truth is not None and len(truth.stamps_ns) and tuple(truth.wheel_names) == names:
-        out['accuracy'] = _accuracy(wv, truth, use, names)
+    if acc is not None:
+        out['accuracy'] = acc.result(names)
     return out
 
 
-def _accuracy(wv, truth, use: np.ndarray, names: tuple) -> dict[str, Any]:
-    """Per wheel the RMS load error (% of the true dynamic load's RMS) and the trailer's
-    quasi-static LTR error, over the converged samples whose stamps the truth has."""
-    stamps = np.asarray(wv.stamps_ns, np.int64)
-    at = np.clip(np.searchsorted(truth.stamps_ns, stamps), 0, len(truth.stamps_ns) - 1)
-    hit = use & (np.asarray(truth.stamps_ns)[at] == stamps)
-    est = np.asarray(wv.load_n, float)[:, hit]
-    true = np.asarray(truth.wheel_load_n, float)[at[hit]].T
-    static = np.asarray(truth.static_load_n, float)
-    pct = []
-    for i in range(est.shape[0]):
-        ref = static[i] if np.isfinite(static[i]) else np.mean(true[i])
-        dyn = float(np.sqrt(np.mean((true[i] - ref) ** 2))) if true.shape[1] else float('nan')
-        err = float(np.sqrt(np.mean((est[i] - true[i]) ** 2))) if true.shape[1] \
-            else float('nan')
-        pct.append(100.0 * err / dyn if dyn > 0.0 else float('nan'))
-    ltr_true = np.asarray(truth.unit_ltr, float)[at[hit], 3]
-    ltr_est = np.asarray(wv.ltr_quasi_static, float)[1, hit]
-    d = (ltr_est - ltr_true)[np.isfinite(ltr_true)]
-    return {'samples': int(np.count_nonzero(hit)),
-            'load_rms_pct_dynamic': dict(zip(names, pct)),
-            'ltr_trailer_quasi_static_rms_error': float(np.sqrt(np.mean(d ** 2))) if d.size
-            else float('nan'),
-            'ltr_trailer_quasi_static_max_error': _nanmax_abs(d)}
+class _AccuracySums:
+    """Per wheel the RMS load error (% of the true dynamic load's RMS: about the truth's
+    static load, else its mean) and the trailer's quasi-static LTR error, over the converged
+    samples whose stamps the truth has, from sums in sample order piece by piece."""
+
+    def __init__(self, truth, wheels: int) -> None:
+        self.truth = truth
+        self.static = np.asarray(truth.static_load_n, float)
+        self.samples = 0
+        self.err = [0.0] * wheels
+        self.dyn = [0.0] * wheels            # about the static load, where it is finite
+        self.true_total = [0.0] * wheels
+        self.true_square = [0.0] * wheels
+        self.d2 = 0.0
+        self.d_n = 0
+        self.d_max = float('nan')
+
+    def add(self, wv, use: np.ndarray) -> None:
+        truth = self.truth
+        stamps = np.asarray(wv.stamps_ns, np.int64)
+        at = np.clip(np.searchsorted(truth.stamps_ns, stamps), 0, len(truth.stamps_ns) - 1)
+        hit = use & (np.asarray(truth.stamps_ns)[at] == stamps)
+        est = np.asarray(wv.load_n, float)[:, hit]
+        true = np.asarray(truth.wheel_load_n, float)[at[hit]].T
+        self.samples += int(np.count_nonzero(hit))
+        for i in range(est.shape[0]):
+            self.err[i] = _ordered_sum(self.err[i], (est[i] - true[i]) ** 2)
+            self.true_total[i] = _ordered_sum(self.true_total[i], true[i])
+            self.true_square[i] = _ordered_sum(self.true_square[i], true[i] ** 2)
+            if np.isfinite(self.static[i]):
+                self.dyn[i] = _ordered_sum(self.dyn[i], (true[i] - self.static[i]) ** 2)
+        ltr_true = np.asarray(truth.unit_ltr, float)[at[hit], 3]
+        ltr_est = np.asarray(wv.ltr_quasi_static, float)[1, hit]
+        d = (ltr_est - ltr_true)[np.isfinite(ltr_true)]
+        self.d2 = _ordered_sum(self.d2, d ** 2)
+        self.d_n += d.size
+        self.d_max = float(np.fmax(self.d_max, _nanmax_abs(d)))
+
+    def result(self, names: tuple) -> dict[str, Any]:
+        nan = float('nan')
+        n = self.samples
+        pct = []
+        for i in range(len(names)):
+            if not n:
+                pct.append(nan)
+                continue
+            if np.isfinite(self.static[i]):
+                dyn = math.sqrt(self.dyn[i] / n)
+            else:
+                mean = self.true_total[i] / n
+                dyn = math.sqrt(max(self.true_square[i] / n - mean * mean, 0.0))
+            err = math.sqrt(self.err[i] / n)
+            pct.append(100.0 * err / dyn if dyn > 0.0 else nan)
+        return {'samples': n, 'load_rms_pct_dynamic': dict(zip(names, pct)),
+                'ltr_trailer_quasi_static_rms_error': math.sqrt(self.d2 / self.d_n)
+                if self.d_n else nan,
+                'ltr_trailer_quasi_static_max_error': self.d_max}
 
 
 def _fused_iri(fused) -> dict[str, Any]:
@@ -403,7 +528,8 @@ def append_estimate(folder: str | Path, wv, truth=None,
     """Add the whole vehicle's estimate to the report folder (``report.md``,
     ``report.json``'s ``whole_vehicle_estimate``, ``segments.csv``'s columns) and, with
     ``truth``, the truth's section; the estimate's numbers (also in
-    ``summary['whole_vehicle_estimate']`` when given). ``fused``: the fused profile
+    ``summary['whole_vehicle_estimate']`` when given; ``wv`` the arrays or a source of
+    their rows, :func:`summarize_estimate`'s). ``fused``: the fused profile
     (``distance_m``, ``left_m``, ``right_m``, ``axles``; m): its IRI in the section (offline
     the report's road, profile figures and segment IRI are already the fused profile's,
     online the front wheels' own road: :func:`~.pipeline.whole_vehicle.fused_road`)."""
@@ -411,7 +537,8 @@ def append_estimate(folder: str | Path, wv, truth=None,
     s = summarize_estimate(wv, truth)
     if fused is not None:
         s['fused_profile'] = _fused_iri(fused)
-        s['fused_profile']['streamed'] = getattr(wv, 'fused', None) is not None
+        meta = wv.meta if hasattr(wv, 'rows') else wv
+        s['fused_profile']['streamed'] = getattr(meta, 'fused', None) is not None
     if (folder / 'segments.csv').exists():
         _append_segments_csv(folder / 'segments.csv', wv)
     _append_section(folder, 'whole_vehicle_estimate', s, estimate_markdown(s), summary)
