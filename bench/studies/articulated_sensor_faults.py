@@ -40,7 +40,8 @@ default noise; A replaced by each unit's roll balance against it, I_t and I_r, m
 family and :data:`IMU_DRIVES` (a 3 % crossfall straight and in the curve), then the roll
 sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each, on both with either sign, the
 plant's gyro drift on both) on C20, A20 and the curve on the crossfall: the drift flags and
-when, with and without the IMU.
+when, with and without the IMU. ``--balances --imu --pendulum``: the same with pendulum roll
+sensors in the plant and the file (:data:`PENDULUM`; the gyro's row left out).
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -210,8 +211,12 @@ IMU_DRIVES = (('C20-crossfall', 'C20', {'simulator.road_crossfall': 0.03}),
               ('C20-curve3-crossfall', 'C20-curve3', {'simulator.road_crossfall': 0.03}))
 
 
-def imu_cases() -> list:
-    """The family's drives and :data:`IMU_DRIVES`."""
+#: ``--pendulum``: pendulum roll sensors, the plant's and the file's
+PENDULUM = {'simulator.roll_sensor': 'pendulum', 'vehicle.roll_sensor': 'pendulum'}
+
+
+def imu_cases(extra: dict | None = None) -> list:
+    """The family's drives and :data:`IMU_DRIVES` (each with ``extra``'s values)."""
     from bench.studies.articulated_drives import Case, family
 
     cases = family()
@@ -220,7 +225,8 @@ def imu_cases() -> list:
         c = by[base]
         cases.append(Case(name, c.road, c.speed_mps, speed_profile=c.speed_profile,
                           values={**c.values, **values}))
-    return cases
+    return [Case(c.name, c.road, c.speed_mps, speed_profile=c.speed_profile,
+                 values={**c.values, **(extra or {})}) for c in cases]
 
 
 def detector_run(drive: dict, imu: bool):
@@ -239,10 +245,11 @@ def detector_run(drive: dict, imu: bool):
     return det
 
 
-def balances_table(seconds: float, log, imu: bool = False) -> list[str]:
+def balances_table(seconds: float, log, imu: bool = False,
+                   extra: dict | None = None) -> list[str]:
     """The tractor's drift balances on the family's clean drives (module notes); ``imu``:
     with the tractor IMU (A replaced by each unit's balance against the IMU's a_y), on
-    :func:`imu_cases`."""
+    :func:`imu_cases` (with ``extra``'s values)."""
     from bench.accuracy.articulated_observer import simulate
     from bench.studies.articulated_drives import family
     from road_force_estimator.core.parameters import ObserverParameters
@@ -253,7 +260,7 @@ def balances_table(seconds: float, log, imu: bool = False) -> list[str]:
              f'T (mrad) | {middle} | largest offset / limit | units (mm) | drift flags |',
              '|---|' + '---:|' * (8 if imu else 7) + '---|']
     obs = ObserverParameters()
-    for case in (imu_cases() if imu else family()):
+    for case in (imu_cases(extra) if imu else family()):
         drive = simulate(case, seconds, 1e-5, imu=imu)
         det = detector_run(drive, imu)
         settings = det.settings
@@ -289,7 +296,7 @@ ROLL_DRIFTS = (('tractor_roll +1 mrad/min', f'drift@tractor_roll:rate={DRIFT_RAT
                 {'simulator.roll_sensor': 'gyro', 'simulator.roll_gyro_drift': DRIFT_RATE}))
 
 
-def roll_table(seconds: float, log) -> list[str]:
+def roll_table(seconds: float, log, extra: dict | None = None) -> list[str]:
     """The roll sensors' drifts (:data:`ROLL_DRIFTS`) on C20, A20 and C20-curve3-crossfall:
     the drift flags raised and the first, s after the drift began, with and without the
     IMU."""
@@ -298,9 +305,11 @@ def roll_table(seconds: float, log) -> list[str]:
 
     lines = ['| drive | drift | with the IMU: flags (first, s after the drift began) | '
              'without: flags (first) |', '|---|---|---|---|']
-    by = {c.name: c for c in imu_cases()}
+    by = {c.name: c for c in imu_cases(extra)}
     for name in ('C20', 'A20', 'C20-curve3-crossfall'):
         for label, spec, values in ROLL_DRIFTS:
+            if extra and not spec:          # (the plant's gyro is another roll sensor)
+                continue
             c = by[name]
             drive = simulate(Case(c.name, c.road, c.speed_mps, speed_profile=c.speed_profile,
                                   values={**c.values, **values}), seconds, 1e-5, imu=True)
@@ -331,15 +340,18 @@ def main(argv=None) -> int:
         ap.add_argument('--seconds', type=float, default=60.0)
         ap.add_argument('--imu', action='store_true',
                         help="with the tractor IMU's a_y; then also the roll drifts' table")
+        ap.add_argument('--pendulum', action='store_true',
+                        help='with --imu: pendulum roll sensors (plant and file)')
         args = ap.parse_args(argv)
+        extra = PENDULUM if args.pendulum else None
 
         def log(text: str) -> None:
             print(text, file=sys.stderr, flush=True)
 
-        print('\n'.join(balances_table(args.seconds, log, args.imu)))
+        print('\n'.join(balances_table(args.seconds, log, args.imu, extra)))
         if args.imu:
             print()
-            print('\n'.join(roll_table(args.seconds, log)))
+            print('\n'.join(roll_table(args.seconds, log, extra)))
         return 0
     return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
                               description=__doc__.splitlines()[0])

@@ -763,8 +763,10 @@ class TractorDrift:
 def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
     (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
-    not close: every axle instrumented, both roll sensors reading the roll (not a pendulum),
-    a tractor of two axles with the kingpin between them. Candidates:
+    not close: every axle instrumented, both roll sensors fitted (pendulums only with the
+    IMU: each unit's balance then holds g phi_b + a_y,b whole as g times the reading, the
+    bodies' rolls are the readings less the IMU's a_y / g, and the cross-level's a_y is the
+    IMU's), a tractor of two axles with the kingpin between them. Candidates:
     every deflection and the roll sensors (their difference; with the IMU each and both);
     flaggable: those not in ``judged`` (the channels :class:`UnitDrift` judges), at
     ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`. With the IMU (its a_y among
@@ -778,8 +780,9 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     x5 = veh.fifth_wheel.position_m
     at = {ch: k for k, ch in enumerate(chans)}
     imu = at.get(('ay', 0))                       # the tractor IMU's a_y, or None
+    pendulum = veh.roll_sensor == 'pendulum'
     if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
-            or veh.roll_sensor == 'pendulum' or len(tractor) != 2
+            or (pendulum and imu is None) or len(tractor) != 2
             or not trailer
             or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
         return None
@@ -812,6 +815,9 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     mh_r = rl.mass_kg * rl.cg_height_above_roll_axis_m
     ayt = (ayt + k5 * (phi - phir)) / mh_t - g * phi
     ayr = (ayr - k5 * (phi - phir)) / mh_r - g * phir
+    measured = np.zeros(n)
+    if imu is not None:
+        measured[imu] = 1.0
 
     def cross(j: int) -> np.ndarray:
         a = axles[j]
@@ -819,7 +825,8 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         kt = sum(a.tire_stiffness_npm) * w * w
         lat = a.roll_centre_height_m * float(spring[j].sum()) / g + a.wheel_radius_m * a.mass_kg
         body = phi if a.body == 'tractor' else phir
-        return body - rel[j] - (ks[j] * rel[j] + lat * ayr) / kt
+        # (a pendulum's balance holds g phi + a_y, its reading: the a_y is the IMU's)
+        return body - rel[j] - (ks[j] * rel[j] + lat * (measured if pendulum else ayr)) / kt
 
     scale0 = abs(pitch[at[('q', tractor[0], 0)]])
     rows = [pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])]
@@ -833,10 +840,9 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         names += (roll,)
         rolls = 1
     else:                       # each unit's a_y from its roll balance minus the IMU's
-        measured = np.zeros(n)
-        measured[imu] = 1.0
         rows[1:2] = []          # A is their difference
-        rows += [ayt - measured, ayr - measured]
+        # a pendulum reads phi_b + a_y,b / g: g times it is the balance's g phi_b + a_y whole
+        rows += [ayt, ayr] if pendulum else [ayt - measured, ayr - measured]
         scales = (scales[0], scales[2], IMU_SCALE_MPS2, IMU_SCALE_MPS2)
         cands += (((roll[0], 1.0),), ((roll[1], 1.0),), ((roll[0], 1.0), (roll[1], 1.0)))
         names += ((roll[0],), (roll[1],), roll)
@@ -851,6 +857,8 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     rates = np.zeros((len(rows), n))   # the damping moments, on the channels' rates
     rates[2] = (damp['tractor'] + c5) / mh_t
     rates[3] = (damp['trailer'] - c5) / mh_r
+    if pendulum:                # the bodies' rolls: the readings less the IMU's a_y / g
+        phi, phir = phi - measured / g, phir - measured / g
     units = ((2, tr.roll_inertia_kgm2 / mh_t, tuple(phi)),
              (3, rl.roll_inertia_kgm2 / mh_r, tuple(phir)))
     return out + ((tuple(map(tuple, rates)), imu, units),)

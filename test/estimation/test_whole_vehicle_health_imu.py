@@ -130,8 +130,9 @@ def test_the_plants_gyro_drift_is_flagged_with_the_imu(straight):
 
 def test_with_the_imu_a_curve_on_a_crossfall_raises_nothing():
     """30 s of class C through a curve ramping to 3 m/s^2 on a 3 % crossfall (the plant's
-    lateral profile and road plane), with the IMU: no flag. Pendulum roll sensors get no
-    tractor check, with the IMU or without."""
+    lateral profile and road plane), with the IMU: no flag, with ideal roll sensors and with
+    pendulums (read with the IMU: each unit's balance holds g phi + a_y, the reading). Without
+    the IMU pendulums get no tractor check."""
     dr = drive({'vehicle.tractor_imu': True, 'simulator.road_crossfall': 0.03,
                 'simulator.lateral_profile': 'curve:start=5,ramp=3,hold=6,ay=3'}, 30.0, 5,
                lateral=True)
@@ -143,7 +144,30 @@ def test_with_the_imu_a_curve_on_a_crossfall_raises_nothing():
     roll = dr['names'].index('tractor_roll')
     assert np.max(np.abs(yp[:, roll] - y[:, roll])) > 0.25   # the pendulums read a_y / g
     assert tractor_check(ArticulatedObserverModel(vp), 2e-4, set()) is None
-    assert tractor_check(ArticulatedObserverModel(vp, True), 2e-4, set()) is None
+    assert tractor_check(ArticulatedObserverModel(vp, True), 2e-4, set()) is not None
+    assert raised(flags(vp, dr, yp, ayp)) == {}
+
+
+@pytest.mark.parametrize('channel, sign', [('tractor_roll', 1.0), ('trailer_roll', -1.0)])
+def test_with_the_imu_a_drifting_pendulum_is_named_alone(channel, sign):
+    """Pendulum roll sensors (the plant's and the file's) with the IMU, 36 s of class C:
+    1 mrad/min on one from 3 s named alone, after the 6 s persistence and within 30 s; a
+    drift common to both flags both; the clean drive nothing."""
+    pend = {'vehicle.tractor_imu': True, 'simulator.roll_sensor': 'pendulum',
+            'vehicle.roll_sensor': 'pendulum'}
+    dr = drive(pend, DURATION_S, 11)
+    y, ay, vehicle = readings(dr)
+    assert vehicle.roll_sensor == 'pendulum'
+    assert raised(flags(vehicle, dr, y, ay)) == {}
+    bad, (fault,) = faulted(dr['names'], y, f'drift@{channel}:rate={sign * RATE:.6g},start=3')
+    counts = flags(vehicle, dr, bad, ay)
+    assert raised(counts) == {channel: (0, 1)}
+    began = dr['stamps'][fault['first_sample']]
+    assert TRACTOR_PERSIST_S * 1e9 < counts.first_ns[channel]['drift'] - began <= 30e9
+    spec = ';'.join(f'drift@{ch}:rate={sign * RATE:.6g},start=3'
+                    for ch in ('tractor_roll', 'trailer_roll'))
+    assert raised(flags(vehicle, dr, faulted(dr['names'], y, spec)[0], ay)) == {
+        'tractor_roll': (0, 1), 'trailer_roll': (0, 1)}
 
 
 @pytest.fixture(scope='module')
