@@ -72,7 +72,7 @@ from road_force_estimator.core.friction import Sliders
 from road_force_estimator.estimation.models.protocol import ContinuousModel, VehicleModel
 from road_force_estimator.estimation.observer.gains import DT_QUANTUM, MAX_STEP_MATRICES, Gains
 
-__all__ = ['STAGE_S', 'STICK_DELAG_UNLAGGED', 'STICK_STAGED', 'KnownFriction', 'MeasuredSliders',
+__all__ = ['STAGE_S', 'KnownFriction', 'MeasuredSliders',
            'channel_lags', 'delagged', 'delag_weights', 'dq_rows', 'friction_response',
            'friction_step']
 
@@ -81,13 +81,6 @@ __all__ = ['STAGE_S', 'STICK_DELAG_UNLAGGED', 'STICK_STAGED', 'KnownFriction', '
 #: time ``m_i v_f / F_f`` are ~3 ms), and at the full lag (``python -m
 #: bench.studies.friction_lag``).
 STAGE_S = 0.004
-
-#: Stick: whether the delayed correction runs when no friction channel has a sensor lag (the
-#: readings then only low-passed; module notes)
-STICK_DELAG_UNLAGGED = True
-#: Stick: the delayed correction at :data:`STAGE_S` too, not only at the full lag (module
-#: notes)
-STICK_STAGED = True
 
 _dot = np.dot     # (a little faster than the @ operator on small arrays)
 _FITS: dict = {}  # :func:`delag_weights` by h
@@ -238,12 +231,10 @@ class KnownFriction:
         self._w_gains = None         # ... of these gains
         #: the stick element from the readings (module notes), or None: the law on the rates
         self.stick = MeasuredSliders(vehicle_model) if vehicle_model.friction_sticks else None
-        #: stick, each element's channel's sensor time constant (s, 0: none), and whether the
-        #: forces get a delayed correction at a latency (:meth:`stick_correction`)
+        #: stick, each element's channel's sensor time constant (s, 0: none) for the forces'
+        #: delayed correction at a latency (:meth:`stick_correction`; with no lag too)
         self.tau = (tuple(channel_lags(model)[c] for c in self.stick.channels)
                     if self.stick is not None else ())
-        self.late = self.stick is not None and (STICK_DELAG_UNLAGGED
-                                                or any(t > 0.0 for t in self.tau))
         self._tau_a = np.array(self.tau)
         self._pend_q: list = []
         self._y_start = None
@@ -255,8 +246,8 @@ class KnownFriction:
 
     @property
     def sticks(self) -> bool:
-        """The friction is the stick element from the readings (its delayed correction, if
-        any: :attr:`late`)."""
+        """The friction is the stick element from the readings (at a latency its delayed
+        correction: :meth:`stick_correction`)."""
         return self.stick is not None
 
     def restart(self, y=None, stamp: int | None = None) -> None:
@@ -302,8 +293,7 @@ class KnownFriction:
         second from the reading ``y`` the step is fed (committed by :meth:`record`)."""
         fm = self.fm
         if self.stick is not None:
-            if self.late:
-                self._pend_q = self.stick.extensions(y)
+            self._pend_q = self.stick.extensions(y)
             self._pend = self.stick.peek(y)
             f1 = self._pend[1]
             self.last_force = tuple(0.5 * (a + b) for a, b in zip(self._f, f1))
@@ -381,16 +371,15 @@ class KnownFriction:
         if self.stick is not None:
             self._before = (self.stick.sliders.base, self._f)
             self.stick.sliders.base, self._f = self._pend
-            if self.late:       # the force used, and the reading fed (a run filtered again:
-                # the same forces, the readings kept)
-                self._keep_step(index, keep)
-                if stamp is not None:
-                    fed = self._fed
-                    fed.append(self._pend_q)
-                    self._fed_last += 1
-                    while len(fed) > 2 * keep + 1:
-                        fed.popleft()
+            # the force used, and the reading fed (a run filtered again: the same forces, the
+            # readings kept)
+            self._keep_step(index, keep)
             if stamp is not None:
+                fed = self._fed
+                fed.append(self._pend_q)
+                self._fed_last += 1
+                while len(fed) > 2 * keep + 1:
+                    fed.popleft()
                 kept = self._direct
                 kept.append((stamp, self._f))
                 while len(kept) > keep + 2:
@@ -416,12 +405,8 @@ class KnownFriction:
                 self._direct[-1] = (self._direct[-1][0], self._f)
             if self._stat_f:
                 self._stat_f[-1] = self.last_force
-            if self.late:
-                if self._fed:
-                    self._fed[-1] = self._pend_q
-                if self._steps:
-                    self._steps[-1][1] = self.last_force
-            return
+            if self._fed:
+                self._fed[-1] = self._pend_q
         if self._steps:
             self._steps[-1][1] = self.last_force
 

@@ -56,7 +56,7 @@ import numpy as np
 from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.protocol import VehicleModel, row_layout
-from road_force_estimator.estimation.observer.friction import STICK_STAGED, KnownFriction
+from road_force_estimator.estimation.observer.friction import KnownFriction
 from road_force_estimator.estimation.observer.gains import Gains
 from road_force_estimator.estimation.observer.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.observer.schedule import (
@@ -517,7 +517,7 @@ class ModelCore:
                 item = pending.popleft()
                 gains = sched.gains
                 delayed = fr is not None and not fr.sticks
-                if fr is not None and fr.late:    # stick: from de-lagged readings (.friction)
+                if fr is not None and fr.sticks:   # stick: from de-lagged readings (.friction)
                     self._stick_correction(gains, dt, i, lag)
                 if delayed:   # the friction at its smoothed rates (.model_friction)
                     stage = fr.stage_lag(dt, lag)
@@ -627,7 +627,7 @@ class ModelCore:
         rows from the sample :meth:`.KnownFriction.stage_lag` rows back on, then of those from
         the sample ``lag`` rows back (the one due now, before its output) on."""
         fr = self._fr
-        stage = fr.stage_lag(dt, lag) if STICK_STAGED else 0
+        stage = fr.stage_lag(dt, lag)
         for n in (stage, lag) if stage else (lag,):
             w = fr.stick_correction(gains, dt, n, self._n - n, n == lag)
             if w is not None:
