@@ -104,7 +104,7 @@ UNIT_MIN_AXLES = 3
 #: cross-level angle under the tractor's two axles (rad); about what the clean drives leave
 #: (``python -m bench.studies.articulated_sensor_faults --balances``)
 TRACTOR_SCALES = (5e-5, 1e-2, 7.5e-5)
-_G = 9.81                  # m/s^2, as tractor_check's g
+_G = 9.81                  # m/s^2, the balances' gravity (tractor_check, TractorDrift)
 #: :class:`TractorDrift`'s scale (m/s^2) of each unit's a_y from its roll balance minus the
 #: tractor IMU's (the IMU's noise over the window leaves 0.0007-0.0013 on the clean drives:
 #: ``python -m bench.studies.articulated_sensor_faults --balances --imu``)
@@ -773,7 +773,7 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     ``model``'s channels) the statistics are P, T, I_t, I_r and an eighth item, ``imu``."""
     veh = model.vehicle
     axles = veh.axles
-    g = 9.81
+    g = _G
     chans = list(model.channels)
     tractor = [j for j, a in enumerate(axles) if a.body == 'tractor']
     trailer = [j for j, a in enumerate(axles) if a.body == 'trailer']

@@ -534,8 +534,7 @@ def bag_stream_pieces(source, rows: int = 1 << 16):
     joints = wheel_joints(source.meta.axle_names)
     for lo in range(0, source.n, max(int(rows), 1)):
         wv = source.rows(lo, min(lo + rows, source.n))
-        ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
-              & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
+        ok = _published(wv)
         if not ok.any():
             continue
         yield whole_vehicle_streams(wv.stamps_ns, joints, wv.load_n, wv.static_n, wv.ltr,
@@ -545,6 +544,13 @@ def bag_stream_pieces(source, rows: int = 1 << 16):
         after = int(wv.stamps_ns[np.flatnonzero(ok)[-1]])
 
 
+def _published(wv) -> np.ndarray:
+    """The samples of ``wv`` whose loads, static loads and load transfer are all finite (the
+    bag's topics carry those only)."""
+    return (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
+            & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
+
+
 def bag_streams(wv) -> list:
     """The whole vehicle's topics, the wheels named ``<axle>_left_wheel``,
     ``<axle>_right_wheel`` (INTERFACES.md) (:func:`~.bagio.whole_vehicle_estimates.
@@ -552,8 +558,7 @@ def bag_streams(wv) -> list:
     from road_force_estimator.bagio.whole_vehicle_estimates import whole_vehicle_streams
     from road_force_estimator.interfaces import wheel_joints
 
-    ok = (np.isfinite(wv.load_n).all(axis=0) & np.isfinite(wv.static_n).all(axis=0)
-          & np.isfinite(wv.ltr).all(axis=0) & np.isfinite(wv.ltr_quasi_static).all(axis=0))
+    ok = _published(wv)
     return whole_vehicle_streams(wv.stamps_ns, wheel_joints(wv.axle_names), wv.load_n,
                                  wv.static_n, wv.ltr, wv.ltr_quasi_static,
                                  rows=None if ok.all() else np.flatnonzero(ok))
