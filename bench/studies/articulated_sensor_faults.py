@@ -42,6 +42,9 @@ sensors' drifts (:data:`ROLL_DRIFTS`: 1 mrad/min on each, on both with either si
 plant's gyro drift on both) on C20, A20 and the curve on the crossfall: the drift flags and
 when, with and without the IMU. ``--balances --imu --pendulum``: the same with pendulum roll
 sensors in the plant and the file (:data:`PENDULUM`; the gyro's row left out).
+``--balances --pendulum``: pendulums without the IMU, each unit's balance on its pendulum (I_t,
+I_r) on the same drives, then the same drifts and a tractor deflection's
+(:data:`DEFLECTION_DRIFTS`), with the IMU and without. ``--drives NAME ...``: only those.
 
 What it found: docs/notes/articulated_sensor_faults.md.
 """
@@ -246,33 +249,37 @@ def detector_run(drive: dict, imu: bool):
 
 
 def balances_table(seconds: float, log, imu: bool = False,
-                   extra: dict | None = None) -> list[str]:
+                   extra: dict | None = None, drives: tuple = ()) -> list[str]:
     """The tractor's drift balances on the family's clean drives (module notes); ``imu``:
     with the tractor IMU (A replaced by each unit's balance against the IMU's a_y), on
-    :func:`imu_cases` (with ``extra``'s values)."""
+    :func:`imu_cases` (with ``extra``'s values); pendulums (``extra``) without it: each
+    unit's balance on its pendulum, on :func:`imu_cases` too. ``drives``: only those named."""
     from bench.accuracy.articulated_observer import simulate
     from bench.studies.articulated_drives import family
     from road_force_estimator.core.parameters import ObserverParameters
     from road_force_estimator.estimation.sensor_health import UNIT_WINDOW_FACTOR
 
-    middle = 'I_t (m/s^2) | I_r (m/s^2)' if imu else 'A (m/s^2)'
+    units = imu or bool(extra)          # each unit's balance: I_t, I_r
+    middle = 'I_t (m/s^2) | I_r (m/s^2)' if units else 'A (m/s^2)'
     lines = [f'| drive ({seconds:g} s) | P plain 12 s (mm) | P (mm) | T plain 12 s (mrad) | '
              f'T (mrad) | {middle} | largest offset / limit | units (mm) | drift flags |',
-             '|---|' + '---:|' * (8 if imu else 7) + '---|']
+             '|---|' + '---:|' * (8 if units else 7) + '---|']
     obs = ObserverParameters()
-    for case in (imu_cases(extra) if imu else family()):
+    for case in (imu_cases(extra) if units else family()):
+        if drives and case.name not in drives:
+            continue
         drive = simulate(case, seconds, 1e-5, imu=imu)
         det = detector_run(drive, imu)
         settings = det.settings
         rows, ax = np.asarray(settings.tractor[0]), np.asarray(settings.tractor[1])
-        cross = 1 if imu else 2
+        cross = 1 if units else 2
         p, t = plain_peaks(drive, rows, ax, UNIT_WINDOW_FACTOR * obs.fault_drift_window_s,
                            cross)
         peak = det.tractor.peak
         unit_mm, unit_ch = det.units.peak
         unit = f'{unit_mm * 1e3:.3f} ({settings.channels[unit_ch]})' if unit_ch >= 0 else 'n/a'
         raised = ', '.join(n for n, c in det.counts().drift_episodes.items() if c) or 'none'
-        cells = (f'{peak[2]:.4f} | {peak[3]:.4f}' if imu else f'{peak[1]:.4f}')
+        cells = (f'{peak[2]:.4f} | {peak[3]:.4f}' if units else f'{peak[1]:.4f}')
         lines.append(f'| {case.name} | {p * 1e3:.3f} | {peak[0] * 1e3:.3f} | {t * 1e3:.3f} | '
                      f'{peak[cross] * 1e3:.3f} | {cells} | {peak[-1]:.2f} | {unit} | '
                      f'{raised} |')
@@ -296,18 +303,27 @@ ROLL_DRIFTS = (('tractor_roll +1 mrad/min', f'drift@tractor_roll:rate={DRIFT_RAT
                 {'simulator.roll_sensor': 'gyro', 'simulator.roll_gyro_drift': DRIFT_RATE}))
 
 
-def roll_table(seconds: float, log, extra: dict | None = None) -> list[str]:
-    """The roll sensors' drifts (:data:`ROLL_DRIFTS`) on C20, A20 and C20-curve3-crossfall:
-    the drift flags raised and the first, s after the drift began, with and without the
-    IMU."""
+#: ``--pendulum``: also a tractor deflection's drift (1 mm/min from :data:`DRIFT_AT`), named
+#: beside the pendulums' candidates
+DEFLECTION_DRIFTS = (('front_left_suspension +1 mm/min', f'drift@front_left_suspension:rate='
+                      f'{DRIFT_RATE:.6g},start={DRIFT_AT:g}', {}),
+                     ('drive_right_suspension -1 mm/min', f'drift@drive_right_suspension:rate='
+                      f'{-DRIFT_RATE:.6g},start={DRIFT_AT:g}', {}))
+
+
+def roll_table(seconds: float, log, extra: dict | None = None,
+               drives: tuple = ('C20', 'A20', 'C20-curve3-crossfall')) -> list[str]:
+    """The roll sensors' drifts (:data:`ROLL_DRIFTS`) on ``drives`` (C20, A20 and
+    C20-curve3-crossfall): the drift flags raised and the first, s after the drift began,
+    with and without the IMU (pendulums, ``extra``: also :data:`DEFLECTION_DRIFTS`)."""
     from bench.accuracy.articulated_observer import simulate
     from bench.studies.articulated_drives import Case
 
     lines = ['| drive | drift | with the IMU: flags (first, s after the drift began) | '
              'without: flags (first) |', '|---|---|---|---|']
     by = {c.name: c for c in imu_cases(extra)}
-    for name in ('C20', 'A20', 'C20-curve3-crossfall'):
-        for label, spec, values in ROLL_DRIFTS:
+    for name in drives:
+        for label, spec, values in ROLL_DRIFTS + (DEFLECTION_DRIFTS if extra else ()):
             if extra and not spec:          # (the plant's gyro is another roll sensor)
                 continue
             c = by[name]
@@ -341,17 +357,23 @@ def main(argv=None) -> int:
         ap.add_argument('--imu', action='store_true',
                         help="with the tractor IMU's a_y; then also the roll drifts' table")
         ap.add_argument('--pendulum', action='store_true',
-                        help='with --imu: pendulum roll sensors (plant and file)')
+                        help='pendulum roll sensors (plant and file), with or without --imu; '
+                             "then also the roll drifts' table")
+        ap.add_argument('--drives', nargs='+', default=(),
+                        help='only these drives (e.g. C20 C20-curve3-crossfall)')
         args = ap.parse_args(argv)
         extra = PENDULUM if args.pendulum else None
 
         def log(text: str) -> None:
             print(text, file=sys.stderr, flush=True)
 
-        print('\n'.join(balances_table(args.seconds, log, args.imu, extra)))
-        if args.imu:
+        print('\n'.join(balances_table(args.seconds, log, args.imu, extra,
+                                        tuple(args.drives))))
+        if args.imu or args.pendulum:
             print()
-            print('\n'.join(roll_table(args.seconds, log, extra)))
+            rolled = tuple(d for d in ('C20', 'A20', 'C20-curve3-crossfall')
+                           if not args.drives or d in args.drives)
+            print('\n'.join(roll_table(args.seconds, log, extra, rolled)))
         return 0
     return sensor_faults.main(argv, tables=(spikes_table, latency_table, clean_table),
                               description=__doc__.splitlines()[0])

@@ -53,7 +53,9 @@ sensors are judged by the whole vehicle's balances instead (:class:`TractorDrift
 accelerations through the fifth wheel's roll stiffness, the road's cross-level under the
 front and the drive axle; with the tractor IMU each unit's roll balance against its a_y
 instead of the two units' difference, which names the roll sensor that drifts, or both for a
-drift common to them.
+drift common to them. Pendulum roll sensors without the IMU: each unit's roll balance on g
+times its pendulum's reading (the balance's g phi + a_y whole), which names the pendulum that
+drifts alone; a drift common to both is not judged.
 """
 from __future__ import annotations
 
@@ -577,6 +579,18 @@ class TractorDrift:
     common one are three candidates apart (a specific-force a_y, a_y + g phi, would cancel
     the gravity term and leave the difference only).
 
+    Pendulum roll sensors (reading r_b = phi_b + a_y / g) without the IMU: g r_b is the
+    balance's g phi_b + a_y whole, so I_t and I_r hold no a_y in their linear rows; an
+    offset d_t on the tractor's gives I_t (kphi_5 / (M_t h_t) - g) d_t, I_r -kphi_5 / (M_r
+    h_r) d_t, so each is named alone; a common d only -g d on each, less than what a rough
+    road, a curve on a crossfall (a_y phi times the crossfall, which no reading tells from
+    a_y) or sticking friction leave there (``python -m
+    bench.studies.articulated_sensor_faults --balances --pendulum``): no common candidate.
+    T eliminates a_y with the tractor's pendulum, and the bodies' rolls (the inertia and
+    non-linear terms) are the readings less an a_y of g times the tractor's reading less its
+    roll over a level road (the axles' relative and tire rolls): ``imu``'s a_y is then its
+    weights on the channels (no held-value check).
+
     Means are over a triangular window of ``window_s`` (two running means of half of it in
     series: the bodies' momentum change, which left 0.3 mm of kingpin pitch in a plain 12 s
     mean on class C, enters only by its displacement). Judged at :data:`UNIT_MIN_SPEED_MPS`
@@ -604,17 +618,21 @@ class TractorDrift:
         self._rows = rows
         #: per unit balance its row and I_x,b / (M_b h_b), or None
         self._imu = None
+        self._ay_ch = None              # the IMU's a_y channel (its held value), or None
         self._me = self.m               # the rows the windows keep (rows, rates)
         if imu is not None:
             rates, ay, units = imu
             rates = np.asarray(rates, float)
-            measured = np.zeros(self.n)
-            measured[int(ay)] = 1.0
+            if isinstance(ay, (int, np.integer)):   # the IMU's channel
+                measured = np.zeros(self.n)
+                measured[int(ay)] = 1.0
+            else:                       # a_y's weights on the channels (pendulums alone)
+                measured, ay = np.asarray(ay, float), None
             self._rows = np.vstack([rows, rates] + [np.asarray(w, float) for *_, w in units]
                                    + [measured])
             self._imu = tuple((int(r), float(c)) for r, c, _ in units)
             self._me = self.m + rates.shape[0]
-            self._ay_ch = int(ay)
+            self._ay_ch = None if ay is None else int(ay)
         self._ay_last = math.nan        # the IMU's a_y and since when it has held it (s)
         self._ay_since = 0.0
         self.ax = np.asarray(ax, float)
@@ -662,7 +680,7 @@ class TractorDrift:
             if self._win.count or self._bn:
                 self.restart()
             return
-        if self._imu is not None:
+        if self._ay_ch is not None:
             # a_y repeated for longer than IMU_HELD_S: the pairing's held value (stale, or 0
             # before the first message), not the road's: the windows start again
             a = values[self._ay_ch]
@@ -763,14 +781,16 @@ class TractorDrift:
 def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     """:class:`TractorDrift`'s arguments (but the window) for the whole vehicle's ``model``
     (:class:`.models.articulated.ArticulatedObserverModel`), or None where its balances do
-    not close: every axle instrumented, both roll sensors fitted (pendulums only with the
-    IMU: each unit's balance then holds g phi_b + a_y,b whole as g times the reading, the
-    bodies' rolls are the readings less the IMU's a_y / g, and the cross-level's a_y is the
-    IMU's), a tractor of two axles with the kingpin between them. Candidates:
-    every deflection and the roll sensors (their difference; with the IMU each and both);
+    not close: every axle instrumented, both roll sensors fitted (pendulums: each unit's
+    balance then holds g phi_b + a_y,b whole as g times the reading; the bodies' rolls are
+    the readings less a_y / g, and the cross-level's a_y is the IMU's, or without it the
+    tractor's pendulum's, eliminated), a tractor of two axles with the kingpin between them.
+    Candidates: every deflection and the roll sensors (their difference; with the IMU each
+    and both; pendulums without it each);
     flaggable: those not in ``judged`` (the channels :class:`UnitDrift` judges), at
     ``limit_m`` (deflections) and :data:`ROLL_DRIFT_LIMIT_RAD`. With the IMU (its a_y among
-    ``model``'s channels) the statistics are P, T, I_t, I_r and an eighth item, ``imu``."""
+    ``model``'s channels) the statistics are P, T, I_t, I_r and an eighth item, ``imu``;
+    the same for pendulums without it (``imu``'s a_y its weights on the channels)."""
     veh = model.vehicle
     axles = veh.axles
     g = _G
@@ -782,7 +802,7 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     imu = at.get(('ay', 0))                       # the tractor IMU's a_y, or None
     pendulum = veh.roll_sensor == 'pendulum'
     if (not all(a.instrumented for a in axles) or not veh.trailer_roll_sensor
-            or (pendulum and imu is None) or len(tractor) != 2
+            or len(tractor) != 2
             or not trailer
             or not axles[tractor[0]].position_m < x5 < axles[tractor[1]].position_m):
         return None
@@ -818,6 +838,21 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
     measured = np.zeros(n)
     if imu is not None:
         measured[imu] = 1.0
+    own = pendulum and imu is None      # the a_y the pendulums and the tractor's axles tell
+    if own:
+        # cross(j) = phi_t - rel_j - (K_s,j rel_j + lat_j a_y) / K_t,j with a_y = g (r_t -
+        # phi_t): phi_t (1 + e_j) - X_j, e_j = g lat_j / K_t,j; the road level under the axle
+        # (0 on the window's mean, a crossfall not) gives phi_t = X_j / (1 + e_j)
+        lev = {}
+        for j in tractor:
+            a = axles[j]
+            kt = sum(a.tire_stiffness_npm) * a.wheel_half_track_m ** 2
+            lat = (a.roll_centre_height_m * float(spring[j].sum()) / g
+                   + a.wheel_radius_m * a.mass_kg)
+            e = g * lat / kt
+            lev[j] = (rel[j] + (ks[j] * rel[j] + g * lat * phi) / kt) / (1.0 + e)
+        level = sum(lev.values()) / len(lev)    # the tractor's roll, the road level
+        measured = g * (phi - level)            # a_y: g times the reading less the roll
 
     def cross(j: int) -> np.ndarray:
         a = axles[j]
@@ -830,12 +865,14 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
 
     scale0 = abs(pitch[at[('q', tractor[0], 0)]])
     rows = [pitch / scale0, ayt - ayr, cross(tractor[0]) - cross(tractor[1])]
+    if own:                     # T with a_y eliminated: the two axles' road levels' difference
+        rows[2] = lev[tractor[1]] - lev[tractor[0]]
     scales = TRACTOR_SCALES
     deflections = [at[('q', j, side)] for j in tractor for side in (0, 1)]
     roll = (at[('roll', 0)], at[('roll', 1)])
     cands = tuple(((k, 1.0),) for k in deflections)
     names = tuple((k,) for k in deflections)
-    if imu is None:             # the roll difference only: both named
+    if imu is None and not pendulum:    # the roll difference only: both named
         cands += (((roll[0], 0.5), (roll[1], -0.5)),)
         names += (roll,)
         rolls = 1
@@ -844,24 +881,28 @@ def tractor_check(model, limit_m: float, judged: set) -> tuple | None:
         # a pendulum reads phi_b + a_y,b / g: g times it is the balance's g phi_b + a_y whole
         rows += [ayt, ayr] if pendulum else [ayt - measured, ayr - measured]
         scales = (scales[0], scales[2], IMU_SCALE_MPS2, IMU_SCALE_MPS2)
-        cands += (((roll[0], 1.0),), ((roll[1], 1.0),), ((roll[0], 1.0), (roll[1], 1.0)))
-        names += ((roll[0],), (roll[1],), roll)
-        rolls = 3
+        cands += (((roll[0], 1.0),), ((roll[1], 1.0),))
+        names += ((roll[0],), (roll[1],))
+        rolls = 2
+        if not own:             # (pendulums alone: no common candidate, module notes)
+            cands += (((roll[0], 1.0), (roll[1], 1.0)),)
+            names += (roll,)
+            rolls = 3
     ax = (tr.mass_kg * tr.cg_height_m / scale0,) + (0.0,) * (len(rows) - 1)
     limits = (limit_m,) * len(deflections) + (ROLL_DRIFT_LIMIT_RAD,) * rolls
     flaggable = tuple(k not in judged for k in deflections) + (True,) * rolls
     out = (tuple(map(tuple, np.array(rows))), ax, scales, cands, names, limits, flaggable)
-    if imu is None:
+    if imu is None and not pendulum:
         return out
     c5 = veh.fifth_wheel.roll_damping_nmsprad * (phi - phir)
     rates = np.zeros((len(rows), n))   # the damping moments, on the channels' rates
     rates[2] = (damp['tractor'] + c5) / mh_t
     rates[3] = (damp['trailer'] - c5) / mh_r
-    if pendulum:                # the bodies' rolls: the readings less the IMU's a_y / g
+    if pendulum:                # the bodies' rolls: the readings less a_y / g
         phi, phir = phi - measured / g, phir - measured / g
     units = ((2, tr.roll_inertia_kgm2 / mh_t, tuple(phi)),
              (3, rl.roll_inertia_kgm2 / mh_r, tuple(phir)))
-    return out + ((tuple(map(tuple, rates)), imu, units),)
+    return out + ((tuple(map(tuple, rates)), tuple(measured) if own else imu, units),)
 
 
 def _deleted(rows: np.ndarray) -> np.ndarray:
