@@ -3,7 +3,8 @@ the tractor and semi-trailer, one clean and one whose plant has trailer_2's spri
 stiffer than the parameter file the estimate is given (``-p`` on simulate_bag alone: the truth
 is the plant's configuration); offline, the estimate bag's ``/diagnostics`` (read by the mcap
 library) and the report name trailer_2 on the faulty drive and nothing on the clean one;
-online there is no verdict (no road)."""
+online there is no verdict (15 s: shorter than the online window of 800 m); estimate_fleet
+carries each drive's verdict."""
 import csv
 import json
 from pathlib import Path
