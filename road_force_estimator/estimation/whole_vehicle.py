@@ -22,8 +22,8 @@ dynamic tire force. The model's gains stay the file's (the
 payload moves no design here, unlike the front axle's ``MASS_REDESIGN_FRACTION``); an axle
 without sensors keeps the file's static load. ``innovations_gated`` counts, per channel, the
 samples the observer's innovation gate (``observer.innovation_gate``) replaced. Offline,
-``axle_fit`` says which axle or sensor does not fit (:mod:`.axle_fit`: each axle's road
-against the other axles' at the same distance).
+and online at every latency, ``axle_fit`` says which axle or sensor does not fit
+(:mod:`.axle_fit`: each axle's road against the other axles' at the same distance).
 
 Gaps (:mod:`.articulated`'s rule, the front axle's): a step longer than ``max(0.1 s, 10
 typical steps)`` restarts the observer (online and offline, each run smoothed on its own);
@@ -180,8 +180,8 @@ class WholeVehicleArrays:
         return int(self.gaps[-1]) if self.gaps is not None and self.gaps.size else 0
 
     #: the model fit per axle (:class:`.axle_fit.AxleFit`: which axle or sensor does not
-    #: fit) over the instrumented axles: offline the drive's, online the last verdict (with
-    #: a latency); None with fewer than 3 of them, or online before the first verdict
+    #: fit) over the instrumented axles: offline the drive's, online the last verdict (at
+    #: every latency); None with fewer than 3 of them, or online before the first verdict
     axle_fit: AxleFit | None = None
     #: online, the fused profile's points streamed (:class:`.fused_stream.FusedPoints`)
     fused: FusedPoints | None = None
@@ -340,13 +340,15 @@ class WholeVehicleEstimator:
         #: the fused profile streamed (every axle of the vehicle, front first)
         self.fused = FusedStream([a.position_m for a in vehicle.axles])
         self.tracker = WheelStaticTracker(self.model) if vehicle.zero_load else None
-        #: the model fit per instrumented axle online (with a latency and 3 such axles)
+        #: the model fit per instrumented axle online (3 such axles; below
+        #: ``ONLINE_MIN_LATENCY_S`` on the causal road, :mod:`.axle_fit`'s ``causal``)
         inst = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
         self._fit_rows = [2 * j + side for j in inst for side in (0, 1)]
         self.axle_fit_online = (
             OnlineAxleFit([vehicle.axles[j].position_m for j in inst],
-                          [vehicle.axles[j].name for j in inst])
-            if len(inst) >= 3 and obs.latency_s >= ONLINE_MIN_LATENCY_S else None)
+                          [vehicle.axles[j].name for j in inst],
+                          causal=obs.latency_s < ONLINE_MIN_LATENCY_S)
+            if len(inst) >= 3 else None)
         self._pending: dict[int, tuple] = {}      # each held sample's static loads
         self._gaps: deque = deque()                # each held sample's gaps so far
         self._last: int | None = None

@@ -13,7 +13,7 @@ load and the gross vehicle weight (the mean of the static loads' sums), per whee
 peak load and the DLC, per unit the largest |LTR| and |quasi-static LTR|; with the truth per
 wheel the RMS of the load error in % of the true dynamic load's RMS (about the drive's static
 load) and the trailer's quasi-static LTR error (RMS and largest), at the stamps both have;
-offline the model fit per axle (:mod:`~.estimation.axle_fit`: which axle or sensor does not
+the model fit per axle (:mod:`~.estimation.axle_fit`: which axle or sensor does not
 fit).
 ``report.md`` gains "The whole vehicle (estimate)", ``report.json`` the key
 ``whole_vehicle_estimate``, ``segments.csv`` the columns :func:`segment_columns` names
@@ -370,7 +370,8 @@ def summarize_estimate(wv, truth=None, rows: int | None = None) -> dict[str, Any
         fits = [f for _, f in getattr(meta, 'axle_fits', ())]    # online: every verdict
         out['model_fit'] = {'verdict': 'mismatch' if fit.culprits else 'ok',
                             'culprits': list(fit.culprits),
-                            'threshold': ONLINE_THRESHOLD if fits else THRESHOLD,
+                            'threshold': (fit.threshold if math.isfinite(fit.threshold)
+                                          else ONLINE_THRESHOLD if fits else THRESHOLD),
                             'length_m': float(fit.length_m),
                             'misfit': dict(zip(fit.axle_names,
                                                (float(m) for m in fit.axle_misfit))),

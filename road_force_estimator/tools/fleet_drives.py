@@ -113,6 +113,10 @@ class DriveOutcome:
     #: an articulated drive's tractor IMU: its samples fed a ``fresh``, ``stale`` (held) or
     #: ``missing`` a_y (``report.json`` ``whole_vehicle_estimate.tractor_imu``), else {}
     tractor_imu: dict = field(default_factory=dict)
+    #: an articulated drive's model fit per axle (``report.json``
+    #: ``whole_vehicle_estimate.model_fit``: ``verdict``, ``culprits``, ``misfit`` per axle,
+    #: online the verdicts), else {} (no verdict: a front-axle drive, too short)
+    model_fit: dict = field(default_factory=dict)
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -468,13 +472,15 @@ def load_done(output_dir: str | Path, drive: DriveInput, key: str) -> DriveOutco
 
 def report_counts(summary: dict) -> dict[str, dict]:
     """The counts of a drive's report summary (``report.json``) that the fleet's tables
-    carry, as :class:`DriveOutcome`'s fields: ``sensors``, ``rejected``, ``tractor_imu``
-    ({} each where the summary has none)."""
+    carry, as :class:`DriveOutcome`'s fields: ``sensors``, ``rejected``, ``tractor_imu``,
+    ``model_fit`` ({} each where the summary has none)."""
     def part(value) -> dict:
         return dict(value) if isinstance(value, dict) else {}
 
+    whole = part(summary.get('whole_vehicle_estimate'))
     return {'sensors': part(summary.get('sensors')), 'rejected': part(summary.get('rejected')),
-            'tractor_imu': part(part(summary.get('whole_vehicle_estimate')).get('tractor_imu'))}
+            'tractor_imu': part(whole.get('tractor_imu')),
+            'model_fit': part(whole.get('model_fit'))}
 
 
 def _report_summary(folder: Path) -> dict:

@@ -2,7 +2,9 @@
 failures and ``summary.md``.
 
 ``segments.parquet`` and ``segments.csv`` hold :data:`~.fleet_drives.FLEET_COLUMNS`, one row
-per segment of every drive done, drives in id order (coordinates NaN without ``/fix``);
+per segment of every drive done, drives in id order (coordinates NaN without ``/fix``), then
+an articulated drive's columns and its model fit per axle (:data:`FIT_COLUMN`, repeated on
+its rows: :func:`fleet_table`);
 ``segments.geojson`` one LineString per segment (:mod:`road_force_estimator.report.fleet_map`);
 ``segments_map.png`` the segments coloured by IRI, when any has coordinates; ``failures.csv``
 ``drive,reason``. Every file is written to a temporary name and renamed into place.
@@ -23,10 +25,17 @@ import numpy as np
 
 from road_force_estimator.tools.fleet_drives import FLEET_COLUMNS, INT_COLUMNS, DriveOutcome
 
-__all__ = ['ROUGHEST', 'FleetResult', 'fleet_table', 'summary_markdown', 'write_outputs']
+__all__ = ['ROUGHEST', 'FIT_COLUMN', 'FleetResult', 'fleet_table', 'summary_markdown',
+           'write_outputs']
 
 #: Number of roughest segments listed in summary.md.
 ROUGHEST = 10
+#: The fleet table's columns of a drive's model fit per axle (``report.json``
+#: ``whole_vehicle_estimate.model_fit``: the drive's verdict, online the last), on every row
+#: of the drive, NaN in a drive without a verdict: ``model_fit_mismatch`` (1 when it names
+#: an axle or sensor, else 0), then ``model_fit_misfit_<axle>`` (the misfit's bound, a
+#: fraction) per axle; the culprits by name in ``summary.md``.
+FIT_COLUMN = 'model_fit_'
 
 
 @dataclass
@@ -54,18 +63,34 @@ class FleetResult:
 
 def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
     """The fleet table (:data:`~.fleet_drives.FLEET_COLUMNS`, then the whole vehicle's
-    columns of the articulated drives in the order first met, NaN in a drive without them):
-    the segments of every drive done, in the order of ``outcomes``."""
+    columns of the articulated drives in the order first met, then their model fit's
+    (:data:`FIT_COLUMN`), NaN in a drive without them): the segments of every drive done, in
+    the order of ``outcomes``."""
     done = [o for o in outcomes if o.status != 'failed' and o.table is not None]
     table: dict[str, np.ndarray] = {'drive': np.array(
         [o.drive_id for o in done for _ in range(len(o.table['start_m']))], dtype=object)}
-    names = list(dict.fromkeys([*FLEET_COLUMNS[1:], *(c for o in done for c in o.table)]))
+    fits = [_fit_columns(o) for o in done]
+    names = list(dict.fromkeys([*FLEET_COLUMNS[1:], *(c for o in done for c in o.table),
+                                *(c for f in fits for c in f)]))
     for name in names:
         dtype = np.int64 if name in INT_COLUMNS else float
         parts = [np.asarray(o.table[name], dtype=dtype) if name in o.table
-                 else np.full(len(o.table['start_m']), np.nan) for o in done]
+                 else np.full(len(o.table['start_m']), f.get(name, np.nan))
+                 for o, f in zip(done, fits)]
         table[name] = np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
     return table
+
+
+def _fit_columns(o: DriveOutcome) -> dict[str, float]:
+    """A drive's model fit as the fleet table's values (:data:`FIT_COLUMN`; {} without a
+    verdict)."""
+    fit = o.model_fit
+    if not fit or fit.get('verdict') not in ('ok', 'mismatch'):
+        return {}
+    out = {f'{FIT_COLUMN}mismatch': float(fit['verdict'] == 'mismatch')}
+    for axle, m in dict(fit.get('misfit') or {}).items():
+        out[f'{FIT_COLUMN}misfit_{axle}'] = math.nan if m is None else float(m)
+    return out
 
 
 def _atomic_write(path: Path, data: bytes | str) -> None:
@@ -79,12 +104,12 @@ def _atomic_write(path: Path, data: bytes | str) -> None:
 
 def _csv_text(header: Sequence[str], rows) -> str:
     """CSV text; the segment columns rounded as in a drive's ``segments.csv``
-    (:data:`road_force_estimator.report.SEGMENT_DECIMALS`)."""
+    (:data:`road_force_estimator.report.SEGMENT_DECIMALS`), the model fit's as they are."""
     from road_force_estimator.report import SEGMENT_DECIMALS, csv_cell
     from road_force_estimator.report.whole_vehicle import column_decimals
 
-    decimals = [SEGMENT_DECIMALS.get(name) if name in FLEET_COLUMNS else column_decimals(name)
-                for name in header]
+    decimals = [SEGMENT_DECIMALS.get(name) if name in FLEET_COLUMNS else None
+                if name.startswith(FIT_COLUMN) else column_decimals(name) for name in header]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator='\n')
     w.writerow(header)
@@ -144,6 +169,7 @@ def summary_markdown(result: FleetResult, table: dict[str, np.ndarray], map_writ
     lines += _drives_section(result.outcomes, u)
     lines += _sensors_section(result.outcomes)
     lines += _rejected_section(result.outcomes)
+    lines += _model_fit_section(result.outcomes)
     lines += _roughest_section(table, u)
     failed = [o for o in result.outcomes if o.status == 'failed']
     if failed:
@@ -281,6 +307,30 @@ def _rejected_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
     lines += ['| drive | topic | reason | count |', '|---|---|---|---:|']
     lines += [f'| {_md(d)} | `{t}` | {_md(r)} | {n} |' for d, t, r, n in sorted(rows)]
     return lines + ['']
+
+
+def _model_fit_section(outcomes: Sequence[DriveOutcome]) -> list[str]:
+    """Per articulated drive with a verdict: the model fit per axle (``report.json``
+    ``whole_vehicle_estimate.model_fit``: the verdict, the culprits, each axle's misfit bound
+    in %, online how many verdicts and how many named something); none without one."""
+    rows = [(o.drive_id, o.model_fit) for o in outcomes
+            if o.status != 'failed' and o.model_fit.get('verdict') in ('ok', 'mismatch')]
+    if not rows:
+        return []
+    lines = ['## Model fit per axle (the whole vehicle)', '',
+             '| drive | model fit | culprits | misfit bound per axle (%) | threshold (%) | '
+             'online verdicts (named) |', '|---|---|---|---|---:|---|']
+    for drive, fit in rows:
+        cells = ', '.join(f'{a} {_f(100 * m if m is not None else math.nan, ".1f")}'
+                          for a, m in dict(fit.get('misfit') or {}).items())
+        n = int(fit.get('online_verdicts') or 0)
+        online = f'{n} ({int(fit.get("online_mismatches") or 0)})' if n else 'offline'
+        lines.append(f'| {_md(drive)} | {fit["verdict"]} | '
+                     f'{_md(", ".join(fit.get("culprits") or ())) or "none"} | {cells} | '
+                     f'{_f(100 * float(fit.get("threshold", math.nan)), "g")} | {online} |')
+    return lines + ['', "The drive's verdict (online the last): each axle's road against the "
+                    "other axles' at the same distance; `mismatch` names the axle, or its "
+                    'sensor, that does not fit the parameter file.', '']
 
 
 def _roughest_section(table: dict[str, np.ndarray], u=None) -> list[str]:

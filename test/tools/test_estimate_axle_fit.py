@@ -3,7 +3,9 @@ the tractor and semi-trailer, one clean and one whose plant has trailer_2's spri
 stiffer than the parameter file the estimate is given (``-p`` on simulate_bag alone: the truth
 is the plant's configuration); offline, the estimate bag's ``/diagnostics`` (read by the mcap
 library) and the report name trailer_2 on the faulty drive and nothing on the clean one;
-online there is no verdict (no road)."""
+online there is no verdict (15 s: shorter than the online window of 800 m); estimate_fleet
+carries each drive's verdict."""
+import csv
 import json
 from pathlib import Path
 import subprocess
@@ -81,3 +83,52 @@ def test_online_has_no_verdict(runs):
         assert 'model_fit' not in {kv.key for kv in status.values}
     report = json.loads((runs['stiff', 'online'] / 'report' / 'report.json').read_text())
     assert 'model_fit' not in report['whole_vehicle_estimate']
+
+
+@pytest.mark.slow   # a Dask cluster: `pytest -m 'not slow'` skips it; scripts/test runs it
+def test_estimate_fleet_carries_each_drives_model_fit(runs, tmp_path):
+    """estimate_fleet over the clean and the stiff drive (offline, one worker): the fleet
+    table's ``model_fit_mismatch`` and ``model_fit_misfit_<axle>`` on every row of each drive
+    (CSV and Parquet) are the verdict of that drive's report (``drives/<id>/report``, bit for
+    bit), which is estimate_bag's run on its own (to 1e-9: the BLAS threads of a Dask worker
+    and of this process sum in another order), the stiff drive's naming trailer_2 (the
+    plant's fault), and ``summary.md`` names the culprits."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    inputs = tmp_path / 'in'
+    for drive in ('clean', 'stiff'):
+        shutil.copytree(runs[drive, 'offline'].parent / drive, inputs / drive)
+    out = tmp_path / 'fleet'
+    fleet = subprocess.run([str(BIN / 'estimate_fleet'), str(inputs), '--params-file',
+                            str(CONFIG), '--output', str(out), '--workers', '1', '--mode',
+                            'offline', '--no-figures', '--no-progress'],
+                           capture_output=True, text=True, timeout=900)
+    assert fleet.returncode == 0, fleet.stderr
+    with (out / 'segments.csv').open(newline='') as f:
+        rows = list(csv.DictReader(f))
+    parquet = pq.read_table(out / 'segments.parquet').to_pydict()
+    for drive, named in (('clean', ''), ('stiff', 'trailer_2')):
+        own = json.loads((runs[drive, 'offline'] / 'report' / 'report.json').read_text())
+        alone = own['whole_vehicle_estimate']['model_fit']
+        kept = json.loads((out / 'drives' / drive / 'report' / 'report.json').read_text())
+        fit = kept['whole_vehicle_estimate']['model_fit']
+        assert fit['culprits'] == alone['culprits'] == ([named] if named else [])
+        for a in AXLES:
+            assert fit['misfit'][a] == pytest.approx(alone['misfit'][a], abs=1e-9), a
+        mine = [r for r in rows if r['drive'] == drive]
+        at = [j for j, d in enumerate(parquet['drive']) if d == drive]
+        assert mine and len(at) == len(mine)
+        for r in mine:
+            assert float(r['model_fit_mismatch']) == (1.0 if named else 0.0)
+            for a in AXLES:
+                assert float(r[f'model_fit_misfit_{a}']) == fit['misfit'][a], a
+        for a in AXLES:
+            assert [parquet[f'model_fit_misfit_{a}'][j] for j in at] == \
+                [fit['misfit'][a]] * len(at)
+        assert (max(fit['misfit'], key=fit['misfit'].get) == named) if named else \
+            max(fit['misfit'].values()) < 0.015
+    summary = (out / 'summary.md').read_text()
+    assert '## Model fit per axle (the whole vehicle)' in summary
+    assert '| clean | ok | none |' in summary and '| stiff | mismatch | trailer_2 |' in summary
