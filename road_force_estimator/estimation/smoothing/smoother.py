@@ -165,6 +165,9 @@ class Smoother:
         self.observer = observer
         self.window = window
         self.eager = eager
+        #: where a windowed run's road waits for its windows (a folder for a temporary file,
+        #: :class:`~.core.spill.SpillColumn`: the same bits, not held in memory), or None
+        self.spill = None
         self.schedule = GainSchedule(model, observer)
         self.rows = model.offline_rows(observer)
         cm = model.continuous(1.0, DEFAULT_ROAD_GD_M3)
@@ -345,7 +348,8 @@ class Smoother:
         """A long evenly sampled run window by window (:meth:`_windows`): the load pass once
         for its roll residual (the profile pass's roll moment), the road from the profile
         pass over the whole run (:meth:`_profile`), then the load pass again (the same
-        windows, the same bits), each window's rows with the road put in."""
+        windows, the same bits), each window's rows with the road put in (with
+        :attr:`spill`, read back from the file it waited in)."""
         recon = self.rows
         if not recon.road_columns:
             yield from self._windows(run, t, y, v)
@@ -359,10 +363,24 @@ class Smoother:
         psd = recon.roll_moment_psd(kept, run.dt)
         del kept
         road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd, run.left_out)
-        for a, b, rows in self._windows(run, t, y, v):
-            for j, u in zip(recon.road_columns, road):
-                rows[j][:] = u[a:b]
-            yield a, b, rows
+        spilled = None
+        if self.spill is not None:           # the road in a file until its window comes
+            from road_force_estimator.core.spill import SpillColumn
+
+            spilled = SpillColumn(float, len(road), self.spill)
+            for c0 in range(0, t.size, _SMOOTH_CHUNK):
+                spilled.append(np.column_stack([u[c0:c0 + _SMOOTH_CHUNK] for u in road]))
+            road = None
+        try:
+            for a, b, rows in self._windows(run, t, y, v):
+                part = road if spilled is None else spilled.read(a, b).T
+                lo = 0 if spilled is None else a
+                for j, u in zip(recon.road_columns, part):
+                    rows[j][:] = u[a - lo:b - lo]
+                yield a, b, rows
+        finally:
+            if spilled is not None:
+                spilled.close()
 
     def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
                  steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
