@@ -169,7 +169,7 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
     from road_force_estimator.bagio import BagReadError
     from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
     from road_force_estimator.estimation.whole_vehicle import (
-        WholeVehicleOfflineStream, take_rows)
+        ROW_FIELDS, WholeVehicleOfflineStream, take_rows)
 
     reader = DriveBlocks(input_path, joints=names, imu=imu)
     stream = WholeVehicleOfflineStream(vehicle, observer, eager=bool(windows), imu=imu,
@@ -193,7 +193,10 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
             last = piece
     except BagReadError as err:
         raise InputError(str(err)) from None
-    meta = replace(take_rows(last, 0, 0), innovations_gated=stream.innovations_gated,
+    none = take_rows(last, 0, 0)               # no sample (copies: the piece let go)
+    none = replace(none, **{f: np.array(getattr(none, f)) for f in ROW_FIELDS
+                            if getattr(none, f) is not None})
+    meta = replace(none, innovations_gated=stream.innovations_gated,
                    rejected=_counts(reader.rejected), messages=dict(reader.messages))
     del stream, last
     spill.meta = meta if not imu else replace(meta, imu_codes=np.zeros(0, np.int8))
