@@ -991,6 +991,7 @@ class WholeVehicleOfflineStream:
                                          else statics.read(g0, g1)))
                     yield self._piece(st, rows[c0:c1], d_run, static, run, g0 == a0,
                                       smoother, codes[g0:g1])
+                del rows, dyn, pc         # (let go before the next window is computed)
         self.innovations_gated = tuple(int(g) for g in smoother.gated.tolist())
         if self._statics is not None and not isinstance(self._statics, _Columns):
             self._statics.close()                           # the spilled file

@@ -378,6 +378,7 @@ class Smoother:
                 for j, u in zip(recon.road_columns, part):
                     rows[j][:] = u[a - lo:b - lo]
                 yield a, b, rows
+                del rows, part        # (let go before the next window is computed)
         finally:
             if spilled is not None:
                 spilled.close()
@@ -451,6 +452,7 @@ class Smoother:
                 yield a, b, [col[a - lo:b - lo] for col in cols]
             else:
                 yield a, b, {j: cols[j][a - lo:b - lo] for j in keep}
+            del cols                  # (let go before the next window's are made)
             x0 = carried
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
