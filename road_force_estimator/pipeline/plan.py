@@ -46,11 +46,12 @@ __all__ = ['STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'WHOLE_VEHICLE_ST
 
 #: Drives of at least this many deflection messages (metadata.yaml) go in blocks.
 STREAM_MIN_SAMPLES = 1 << 21
-#: An articulated drive goes in blocks online from this many deflection messages (17.5 min
-#: at 1 kHz): one block grows by ~915 bytes a sample there (its front axle's stage and the
-#: whole vehicle's estimate held whole, ``python -m bench.probes.estimate_bag_process
-#: --articulated``), ~1 GB at this count; in blocks the outputs are one block's but for the
-#: front axle's (the figures' window, the truth's profile figures: :mod:`.blocks`).
+#: An articulated drive goes in blocks from this many deflection messages (17.5 min at
+#: 1 kHz), online and offline: one block grows by ~915 bytes a sample online there, ~1300
+#: offline (its front axle's stage and the whole vehicle's estimate held whole, ``python -m
+#: bench.probes.estimate_bag_process --articulated``), ~1 GB at this count; in blocks the
+#: outputs are one block's but for the front axle's (the figures' window, the truth's
+#: profile figures: :mod:`.blocks`).
 WHOLE_VEHICLE_STREAM_MIN_SAMPLES = 1 << 20
 #: What a sample costs one block at its peak, figures on (bytes; measured 545 offline and
 #: ~720 online without truth, ``bench/probes/long_drive_memory.py``), rounded up.
