@@ -37,6 +37,16 @@ class SpillColumn:
         self._file.write(a.tobytes())
         self.size += a.shape[0]
 
+    def write(self, start: int, rows) -> None:
+        """Rows from row ``start`` on (written over, or past the end: rows not written
+        between read as zeros)."""
+        a = np.ascontiguousarray(rows, dtype=self.dtype)
+        if a.shape[1:] != self.shape:
+            raise ValueError(f'rows of shape {a.shape[1:]}, expected {self.shape}')
+        self._file.seek(int(start) * self.row_bytes)
+        self._file.write(a.tobytes())
+        self.size = max(self.size, int(start) + a.shape[0])
+
     def read(self, start: int, stop: int) -> np.ndarray:
         """Rows ``start:stop`` (a new array)."""
         start, stop = max(0, int(start)), min(self.size, int(stop))

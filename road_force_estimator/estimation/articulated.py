@@ -41,7 +41,7 @@ from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['ArticulatedEstimate', 'ArticulatedOnline', 'estimate_articulated', 'run_starts',
            'equilibrium_readings', 'LIFT_OFF_FRACTION', 'FUSION_SPLIT_WAVELENGTH_M',
-           'FusedProfile', 'fuse_roads']
+           'FusedProfile', 'fuse_roads', 'fuse_path']
 
 
 @dataclass(frozen=True)
@@ -285,24 +285,36 @@ def fuse_roads(estimate: ArticulatedEstimate, positions_m) -> FusedProfile:
         raise ValueError('no road in the estimate: the road comes offline')
     x = estimate.distance_m
     xi = np.asarray(positions_m, float)
-    keep = x + xi.max() <= x[-1]
-    p = x[keep]
     static = estimate.load_n - estimate.dynamic_n
     grounded = (estimate.load_n >= LIFT_OFF_FRACTION * static).astype(float)
-    steps = np.diff(x)
-    dx = float(np.median(steps[steps > 0.0])) if np.any(steps > 0.0) else 0.0
+    p = x[x + xi.max() <= x[-1]]
     paths = np.zeros((2, p.size))
     for side in (0, 1):
-        reads = np.array([np.interp(p + lag, x, estimate.road_m[2 * j + side])
-                          for j, lag in enumerate(xi)])
-        ok = np.array([np.interp(p + lag, x, grounded[2 * j + side]) > 0.999
-                       for j, lag in enumerate(xi)]).astype(float)
-        long = _low_pass(p, reads, dx)
-        short = reads - long
-        n_ok = ok.sum(axis=0)
-        paths[side] = long.mean(axis=0) + np.where(
-            n_ok > 0, (ok * short).sum(axis=0) / np.maximum(n_ok, 1.0), short.mean(axis=0))
+        paths[side] = fuse_path(x, estimate.road_m[side::2], grounded[side::2], xi)
     return FusedProfile(p, paths[0], paths[1], int(xi.size))
+
+
+def fuse_path(distance_m: np.ndarray, road_m: np.ndarray, grounded: np.ndarray,
+              positions_m) -> np.ndarray:
+    """One wheel path of :func:`fuse_roads` (its numbers, bit for bit): ``road_m`` (N, m) each
+    axle's road on that side (m), ``grounded`` (N, m) whether its wheel carried at least
+    :data:`LIFT_OFF_FRACTION` of its static load (bool or 0/1), ``distance_m`` (m,) the front
+    axle's distance (m), ``positions_m`` (N,) each axle behind the front axle (m); the fused
+    road (m) at the distances the last axle has passed (``distance_m + max(positions_m) <=
+    distance_m[-1]``)."""
+    x = distance_m
+    xi = np.asarray(positions_m, float)
+    p = x[x + xi.max() <= x[-1]]
+    steps = np.diff(x)
+    dx = float(np.median(steps[steps > 0.0])) if np.any(steps > 0.0) else 0.0
+    reads = np.array([np.interp(p + lag, x, road_m[j]) for j, lag in enumerate(xi)])
+    ok = np.array([np.interp(p + lag, x, np.asarray(grounded[j], float)) > 0.999
+                   for j, lag in enumerate(xi)]).astype(float)
+    long = _low_pass(p, reads, dx)
+    short = reads - long
+    n_ok = ok.sum(axis=0)
+    return long.mean(axis=0) + np.where(
+        n_ok > 0, (ok * short).sum(axis=0) / np.maximum(n_ok, 1.0), short.mean(axis=0))
 
 
 def _low_pass(p: np.ndarray, reads: np.ndarray, dx: float) -> np.ndarray:

@@ -167,8 +167,10 @@ class AxleFit:
 
 
 def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, axle_names,
-                 *, threshold: float = THRESHOLD, skip_s: float = SKIP_S) -> AxleFit:
-    """The axles' misfits and verdict (module notes): :func:`assess_steps` run through.
+                 *, threshold: float = THRESHOLD, skip_s: float = SKIP_S,
+                 grounded: np.ndarray | None = None) -> AxleFit:
+    """The axles' misfits and verdict (module notes): :func:`assess_steps` run through
+    (``grounded``: as it takes it, then ``load_n`` and ``static_n`` are not read).
 
     Parameters
     ----------
@@ -182,7 +184,7 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     skip_s : the start left out (s)
     """
     steps = assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m,
-                         axle_names, threshold=threshold, skip_s=skip_s)
+                         axle_names, threshold=threshold, skip_s=skip_s, grounded=grounded)
     while True:
         try:
             next(steps)

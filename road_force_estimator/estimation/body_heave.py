@@ -44,7 +44,7 @@ from road_force_estimator.estimation.speed_check import STANDING_MPS
 __all__ = ['STANDING_MPS', 'SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed',
            'start', 'step', 'step_matrix', 'zero_phase', 'in_distance', 'rest_stretches',
            'offline_profile', 'MIN_REST_SAMPLES', 'CHUNK', 'polynomial_fit',
-           'polynomial_values', 'subtract_polynomial']
+           'polynomial_values', 'subtract_polynomial', 'zero_phase_sections']
 
 #: Speed floor of the cutoff (m/s): w >= 2 pi v_floor / lambda_c.
 SPEED_FLOOR_MPS = 1.0
@@ -242,16 +242,30 @@ def zero_phase(accel, dt_s: float, w: float, order: int = ZERO_PHASE_ORDER):
         return np.zeros_like(a)
     if order < 2 or order % 2:
         raise ValueError(f'order = {order!r}: must be an even integer >= 2')
-    fs = 1.0 / dt_s
-    _, poles, _ = signal.butter(order, w, btype='high', analog=True, output='zpk')
     out = np.empty(a.shape)
-    for n_zeros, backward in ((order - 2, False), (order, True)):
-        z, p, k = signal.bilinear_zpk(np.zeros(n_zeros), poles, 1.0, fs)
-        sos = signal.zpk2sos(z, p, k)
+    for sos, backward in zip(zero_phase_sections(dt_s, w, order), (False, True)):
         src = out if backward else a
         zi = signal.sosfilt_zi(sos) * src[-1 if backward else 0]
         _sosfilt_chunks(sos, src, out, zi, backward)
     return out
+
+
+def zero_phase_sections(dt_s: float, w: float, order: int = ZERO_PHASE_ORDER) -> tuple:
+    """The second-order sections of :func:`zero_phase`'s forward pass (``s^(n-2) / D(s)``)
+    and backward pass (``s^n / D(s)``), bilinear at the step ``dt_s`` (s), cutoff ``w``
+    (rad/s), even order ``n``: for a caller that runs them over pieces (the same bits)."""
+    import numpy as np
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    signal = _signal()
+
+    if order < 2 or order % 2:
+        raise ValueError(f'order = {order!r}: must be an even integer >= 2')
+    _, poles, _ = signal.butter(order, w, btype='high', analog=True, output='zpk')
+    out = []
+    for n_zeros in (order - 2, order):
+        z, p, k = signal.bilinear_zpk(np.zeros(n_zeros), poles, 1.0, 1.0 / dt_s)
+        out.append(signal.zpk2sos(z, p, k))
+    return tuple(out)
 
 
 def _linspace_part(start: float, stop: float, num: int, i: int, j: int):

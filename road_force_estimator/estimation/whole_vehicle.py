@@ -825,7 +825,8 @@ class WholeVehicleOfflineStream:
     :meth:`feed` gathers a block (the smoother needs the whole run first: its noise and
     roughness statistics, the road's profile pass), running the static-load tracker as it
     comes (zero-load readings: the readings kept less its offsets, its static loads kept or,
-    with ``spill``, in a temporary file there); :meth:`finish` smooths run after run
+    with ``spill``, in a temporary file there, as is then a windowed run's road between its
+    profile pass and its windows, :attr:`.Smoother.spill`); :meth:`finish` smooths run after run
     (:class:`.smoothing.smoother.Smoother`: with ``eager`` a run longer than one window and
     its overlap goes in windows of :data:`STREAM_WINDOW_SAMPLES` and
     :data:`STREAM_OVERLAP_S`; ``window`` = ``(window, overlap)`` samples instead; without
@@ -938,6 +939,7 @@ class WholeVehicleOfflineStream:
             dt = float(np.median(np.diff(stamps))) * 1e-9
             window = (STREAM_WINDOW_SAMPLES, int(math.ceil(STREAM_OVERLAP_S / dt)))
         smoother = Smoother(online.model, self.observer, window, eager=self.eager)
+        smoother.spill = self.spill or None      # a windowed run's road in a file
         cols = cols_of(len(est.wheel_names))
         nw = len(est.wheel_names)
         starts = run_starts(stamps, self.gap_threshold_s)
@@ -991,6 +993,7 @@ class WholeVehicleOfflineStream:
                                          else statics.read(g0, g1)))
                     yield self._piece(st, rows[c0:c1], d_run, static, run, g0 == a0,
                                       smoother, codes[g0:g1])
+                del rows, dyn, pc         # (let go before the next window is computed)
         self.innovations_gated = tuple(int(g) for g in smoother.gated.tolist())
         if self._statics is not None and not isinstance(self._statics, _Columns):
             self._statics.close()                           # the spilled file

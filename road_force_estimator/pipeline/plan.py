@@ -13,7 +13,7 @@ alignment is found over the whole drive) and the offline differentiator chain
 recording).
 
 An articulated drive (``vehicle.model: articulated``, :mod:`.whole_vehicle`) is one block
-offline: the estimation layer streams it
+offline below the threshold: the estimation layer streams it
 (:class:`~.estimation.whole_vehicle.WholeVehicleOfflineStream`: fed in blocks, handed out in
 pieces; ``estimate_whole_vehicle`` offline runs it in one feed, its smoother in windows:
 ``BlockPlan.whole_vehicle_windows``, a run longer than
@@ -29,7 +29,12 @@ estimate is gathered whole for the one-block sinks; from it on the front axle's 
 its sinks go in blocks beside it (``BlockPlan.blocks``: :func:`.blocks.run_blocks` with the
 whole vehicle's estimate spilled to temporary files and read back in pieces,
 :class:`.whole_vehicle.BlockJoin`: its front wheels' loads and road put into each piece, its
-topics, statuses and report sums from pieces, as one block gives them).
+topics, statuses and report sums from pieces, as one block gives them). Offline from the
+same threshold (with the model's smoother) the same: the whole vehicle's stage reads the
+drive in blocks into :class:`~.estimation.whole_vehicle.WholeVehicleOfflineStream` (its
+smoother in windows), its pieces spilled; its fused profile and model fit per axle from the
+spilled columns they need (:func:`.whole_vehicle.fused_profile`); the front axle's stage in
+blocks beside it (:func:`.blocks.run_blocks` offline, ``BlockJoin``).
 """
 from __future__ import annotations
 
@@ -41,11 +46,12 @@ __all__ = ['STREAM_MIN_SAMPLES', 'ONE_BLOCK_BYTES_PER_SAMPLE', 'WHOLE_VEHICLE_ST
 
 #: Drives of at least this many deflection messages (metadata.yaml) go in blocks.
 STREAM_MIN_SAMPLES = 1 << 21
-#: An articulated drive goes in blocks online from this many deflection messages (17.5 min
-#: at 1 kHz): one block grows by ~915 bytes a sample there (its front axle's stage and the
-#: whole vehicle's estimate held whole, ``python -m bench.probes.estimate_bag_process
-#: --articulated``), ~1 GB at this count; in blocks the outputs are one block's but for the
-#: front axle's (the figures' window, the truth's profile figures: :mod:`.blocks`).
+#: An articulated drive goes in blocks from this many deflection messages (17.5 min at
+#: 1 kHz), online and offline: one block grows by ~915 bytes a sample online there, ~1300
+#: offline (its front axle's stage and the whole vehicle's estimate held whole, ``python -m
+#: bench.probes.estimate_bag_process --articulated``), ~1 GB at this count; in blocks the
+#: outputs are one block's but for the front axle's (the figures' window, the truth's
+#: profile figures: :mod:`.blocks`).
 WHOLE_VEHICLE_STREAM_MIN_SAMPLES = 1 << 20
 #: What a sample costs one block at its peak, figures on (bytes; measured 545 offline and
 #: ~720 online without truth, ``bench/probes/long_drive_memory.py``), rounded up.
@@ -57,7 +63,8 @@ class BlockPlan:
     """A drive's way through the pipeline: ``blocks`` False (one block) or True (many);
     ``samples``: the deflection messages metadata.yaml lists (0: unknown);
     ``whole_vehicle_windows``: an articulated drive offline, the whole vehicle's smoother in
-    windows; ``whole_vehicle_blocks``: an articulated drive online, its stage's input read
+    windows (with ``blocks``: its stage read in blocks and spilled too);
+    ``whole_vehicle_blocks``: an articulated drive online, its stage's input read
     in blocks (module notes)."""
 
     blocks: bool
@@ -83,8 +90,8 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
                min_samples: int | None = None, vehicle=None) -> BlockPlan:
     """The :class:`BlockPlan` of a drive bag (see the module notes); ``reference``: the
     ``--reference-profile`` (one block); ``min_samples``: the threshold instead of
-    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in one block
-    offline, online in blocks from the threshold on (module notes)."""
+    :func:`stream_threshold` (tests); ``vehicle``: an articulated one goes in blocks from the
+    threshold on, offline and online (module notes)."""
     from road_force_estimator.bagio.drive_blocks import listed_messages
     from road_force_estimator.interfaces import DEFLECTIONS
     from road_force_estimator.pipeline.whole_vehicle import is_whole_vehicle
@@ -94,11 +101,11 @@ def plan_drive(input_path: str | Path, mode: str, observer, reference=None, *,
     limit = stream_threshold(memory_limit_bytes) if min_samples is None else min_samples
     if mode not in ('online', 'offline') or samples == 0 or reference is not None:
         return BlockPlan(False, samples)
-    if is_whole_vehicle(vehicle):     # offline one block; online the front axle's in blocks
+    if is_whole_vehicle(vehicle):     # both stages in pieces from the threshold on
         if min_samples is None:
             limit = min(limit, WHOLE_VEHICLE_STREAM_MIN_SAMPLES)
-        return BlockPlan(mode == 'online' and samples >= limit, samples, mode == 'offline',
-                         mode == 'online')
+        pieces = samples >= limit and (mode == 'online' or observer.discretization == 'model')
+        return BlockPlan(pieces, samples, mode == 'offline', mode == 'online')
     if mode == 'offline' and observer.discretization != 'model':
         return BlockPlan(False, samples)        # the differentiators' zero-phase chain
     return BlockPlan(samples >= limit, samples)

@@ -7,7 +7,7 @@ report's segments, IRI and summary, the figures), closed once at the end. The pl
 (:func:`.plan.plan_drive`: one block or many, from the drive's length and the memory limit)
 picks the stages' form: :mod:`.one_block` (one call each) or :mod:`.blocks` (fed block by
 block). With articulated parameters the whole vehicle's stage (:mod:`.whole_vehicle`, one
-block; online from the plan's threshold the front axle's goes in blocks beside it) runs
+block; from the plan's threshold, online and offline, both stages in pieces) runs
 beside the front axle's and its estimate, with the truth where the drive has it,
 joins the bag and the report (what its reader rejected counted as the drive's:
 :func:`.whole_vehicle.with_rejections`); with front-axle parameters an articulated drive's
@@ -49,15 +49,16 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
     wv = fused = None
     if plan.blocks:
         joined = None
-        if whole is not None:                # online: the whole vehicle's stage first
-            stages.next(f'estimating the whole vehicle ({options["mode"]})')
-            folder.mkdir(parents=True, exist_ok=True)    # its samples spilled there
-            wv = whole_vehicle.estimate(input_path, whole, observer, options['mode'],
-                                        spill=whole_vehicle.SpilledEstimate(folder))
-            fused = whole_vehicle.fused_profile(wv, whole)
-            joined = whole_vehicle.BlockJoin(wv, fused,
-                                             float(whole.axles[0].wheel_half_track_m))
         try:
+            if whole is not None:            # the whole vehicle's stage first
+                stages.next(f'estimating the whole vehicle ({options["mode"]})')
+                folder.mkdir(parents=True, exist_ok=True)    # its samples spilled there
+                wv = whole_vehicle.SpilledEstimate(folder)
+                whole_vehicle.estimate(input_path, whole, observer, options['mode'],
+                                       windows=plan.whole_vehicle_windows, spill=wv)
+                fused = whole_vehicle.fused_profile(wv, whole)
+                joined = whole_vehicle.BlockJoin(wv, fused,
+                                                 float(whole.axles[0].wheel_half_track_m))
             result = blocks.run_blocks(folder, output, input_path, vehicle, observer,
                                        options, stages, progress, samples=plan.samples,
                                        whole=joined)

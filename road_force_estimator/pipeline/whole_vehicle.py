@@ -42,7 +42,7 @@ __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
            'STATUS_NAME', 'with_rejections', 'rejection_values', 'sensor_status',
-           'BlockJoin', 'SpilledEstimate', 'bag_stream_pieces', 'SINK_ROWS']
+           'BlockJoin', 'SpilledEstimate', 'bag_stream_pieces', 'SINK_ROWS', 'spilled_fit']
 
 #: The samples of a spilled estimate the sinks read at a time (:class:`BlockJoin`).
 SINK_ROWS = 1 << 16
@@ -89,6 +89,8 @@ def estimate(input_path: Path, vehicle, observer, mode: str, windows: bool = Fal
     names = WholeVehicleEstimator(vehicle, observer).channel_names   # without the IMU's
     if mode == 'online' and (blocks or spill is not None):
         return _online(input_path, vehicle, observer, names, imu, spill)
+    if spill is not None:
+        return _offline(input_path, vehicle, observer, names, imu, spill, windows)
     try:
         r = read_articulated_readings(input_path, names, imu=imu)
     except BagReadError as err:
@@ -154,6 +156,72 @@ def _online(input_path: Path, vehicle, observer, names: tuple, imu: bool,
         spill.meta = wv if not imu else replace(wv, imu_codes=np.zeros(0, np.int8))
         return spill
     return wv if not imu else replace(wv, imu_codes=np.concatenate(codes))
+
+
+def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
+             spill: SpilledEstimate, windows: bool):
+    """The stage offline in pieces: the drive read in blocks
+    (:class:`~.bagio.drive_blocks.DriveBlocks`, the inputs of the drive read whole) into
+    :class:`~.estimation.whole_vehicle.WholeVehicleOfflineStream` (``windows``: its smoother
+    in windows; its static loads in a file), its pieces into ``spill``; the drive's model fit
+    per axle from the spilled columns (:func:`spilled_fit`). Returns ``spill``, its ``meta``
+    set."""
+    from road_force_estimator.bagio import BagReadError
+    from road_force_estimator.bagio.drive_blocks import DriveBlocks, streamable
+    from road_force_estimator.estimation.whole_vehicle import (
+        ROW_FIELDS, WholeVehicleOfflineStream, take_rows)
+
+    reader = DriveBlocks(input_path, joints=names, imu=imu)
+    stream = WholeVehicleOfflineStream(vehicle, observer, eager=bool(windows), imu=imu,
+                                       capacity=streamable(input_path), spill=spill.folder)
+    last = None
+    try:
+        for b in reader:
+            if not np.isfinite(b.speed_mps).all():      # only before the first twist
+                raise InputError('no usable /vehicle/twist message: the speed is unknown')
+            if imu:                                    # the IMU's a_y by the node's rule
+                spill.add_codes(b.imu_codes)
+                stream.feed(b.stamps_ns, np.column_stack([b.readings, b.imu_ay_mps2]),
+                            b.speed_mps, b.imu_codes)
+            else:
+                stream.feed(b.stamps_ns, b.readings, b.speed_mps)
+        if not stream.fed:
+            raise InputError(f'{input_path}: no /suspension/deflections message carries '
+                             f'every channel of the whole vehicle ({", ".join(names)})')
+        for piece in stream.finish():
+            spill.add(piece)
+            last = piece
+    except BagReadError as err:
+        raise InputError(str(err)) from None
+    none = take_rows(last, 0, 0)               # no sample (copies: the piece let go)
+    none = replace(none, **{f: np.array(getattr(none, f)) for f in ROW_FIELDS
+                            if getattr(none, f) is not None})
+    meta = replace(none, innovations_gated=stream.innovations_gated,
+                   rejected=_counts(reader.rejected), messages=dict(reader.messages))
+    del stream, last
+    spill.meta = meta if not imu else replace(meta, imu_codes=np.zeros(0, np.int8))
+    spill.meta = replace(spill.meta, axle_fit=spilled_fit(spill, vehicle))
+    return spill
+
+
+def spilled_fit(spill: SpilledEstimate, vehicle):
+    """:func:`~.estimation.whole_vehicle.fit_axles` of an offline estimate spilled in
+    ``spill`` (its numbers, bit for bit): the stamps, distances, instrumented wheels' roads
+    and whether each carried its share, read back a piece at a time into arrays of the
+    drive (~100 bytes a sample instead of the estimate's ~350)."""
+    from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
+    from road_force_estimator.estimation.axle_fit import assess_axles
+
+    axles = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
+    if 'road_m' not in (spill.cols or {}) or len(axles) < 3 or spill.n < 2:
+        return None
+    rows = [2 * j + s for j in axles for s in (0, 1)]
+    grounded = spill.column_of(lambda wv: wv.load_n[rows]
+                               >= LIFT_OFF_FRACTION * wv.static_n[rows], len(rows), bool)
+    return assess_axles(spill.column('stamps_ns'), spill.column('distance_m'),
+                        spill.column('road_m', rows), None, None,
+                        [vehicle.axles[j].position_m for j in axles],
+                        [vehicle.axles[j].name for j in axles], grounded=grounded)
 
 
 def _counts(rejected: dict) -> dict[str, dict[str, int]]:
@@ -588,6 +656,8 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
     if hasattr(wv, 'rows'):                    # a source of rows: its drive's fields
         if not wv.n:
             return None
+        if wv.meta.fused is None and wv.meta.road_m is not None:
+            return _spilled_fused(wv, vehicle)  # offline: from the columns it needs
         wv = wv.meta
     elif not len(wv.stamps_ns):
         return None
@@ -615,6 +685,34 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
     return FusedRoad(np.asarray(wv.stamps_ns, np.int64)[keep][ok], fused.distance_m[ok],
                      fused.left[ok], fused.right[ok], fused.axles,
                      float(vehicle.axles[0].wheel_half_track_m))
+
+
+def _spilled_fused(source, vehicle) -> FusedRoad | None:
+    """:func:`fused_profile` offline from a spilled estimate ``source``
+    (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path` per wheel path on
+    the distances, that side's roads and whether each wheel carried its share (as
+    :func:`~.estimation.articulated.fuse_roads` computes it), read back a piece at a time: the
+    one-block numbers bit for bit, one side's columns held at a time."""
+    from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION, fuse_path
+
+    xi = [a.position_m for a in vehicle.axles]
+    x = source.column('distance_m')
+    keep = np.flatnonzero(x + max(xi) <= x[-1])
+    if not keep.size:
+        return None
+    paths = []
+    for side in (0, 1):
+        rows = list(range(side, 2 * len(xi), 2))
+
+        def grounded(wv, rows=rows):         # fuse_roads' static: load - (load - static)
+            load = wv.load_n[rows]
+            return load >= LIFT_OFF_FRACTION * (load - (load - wv.static_n[rows]))
+
+        paths.append(fuse_path(x, source.column('road_m', rows),
+                               source.column_of(grounded, len(rows), bool), xi))
+    ok = np.isfinite(paths[0]) & np.isfinite(paths[1])
+    return FusedRoad(source.column('stamps_ns')[keep][ok], x[keep][ok], paths[0][ok],
+                     paths[1][ok], len(xi), float(vehicle.axles[0].wheel_half_track_m))
 
 
 def fused_streams(fused: FusedRoad | None) -> list:
@@ -697,6 +795,28 @@ class SpilledEstimate:
         if self.codes is not None:
             out['imu_codes'] = self.codes.read(lo, hi)
         return replace(self.meta, **out)
+
+    def column(self, name: str, rows: list | None = None) -> np.ndarray:
+        """One per-sample field of every sample (``(len(rows), n)`` of a per-wheel field's
+        ``rows``, or ``(n,)``), read back :data:`SINK_ROWS` samples at a time into one array."""
+        col = self.cols[name]
+        if not col.shape:
+            return col.array()
+        out = np.empty((len(rows) if rows is not None else col.shape[0], self.n), col.dtype)
+        for lo in range(0, self.n, SINK_ROWS):
+            a = col.read(lo, lo + SINK_ROWS)
+            out[:, lo:lo + a.shape[0]] = (a if rows is None else a[:, rows]).T
+        return out
+
+    def column_of(self, f, width: int, dtype) -> np.ndarray:
+        """``f`` (samples' :class:`~.estimation.whole_vehicle.WholeVehicleArrays` -> (width,
+        k)) of every sample, computed :data:`SINK_ROWS` samples at a time into one
+        ``(width, n)`` array."""
+        out = np.empty((width, self.n), dtype)
+        for lo in range(0, self.n, SINK_ROWS):
+            hi = min(lo + SINK_ROWS, self.n)
+            out[:, lo:hi] = f(self.rows(lo, hi))
+        return out
 
     def close(self) -> None:
         for col in (self.cols or {}).values():

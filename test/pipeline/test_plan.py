@@ -36,11 +36,12 @@ def test_a_drive_with_truth_goes_in_blocks_from_the_threshold(tmp_path):
     assert not plan.plan_drive(tmp_path / 'missing', 'online', obs, min_samples=1).blocks
 
 
-def test_the_whole_vehicle_offline_stays_one_block(tmp_path):
-    """With an articulated vehicle (the whole vehicle's stage) a drive past the threshold is
-    one block offline (its smoother in windows); online its input is read in blocks and,
-    from the threshold on (not below it), the front axle's stage goes in blocks beside it;
-    the same drive with a front-axle vehicle goes in blocks."""
+def test_the_whole_vehicle_goes_in_pieces_from_the_threshold(tmp_path):
+    """With an articulated vehicle (the whole vehicle's stage) a drive below the threshold is
+    one block offline (its smoother in windows), from it on in pieces (not with the
+    differentiators' chain); online its input is read in blocks and, from the threshold on
+    (not below it), the front axle's stage goes in blocks beside it; the same drive with a
+    front-axle vehicle goes in blocks."""
     from pathlib import Path
 
     from road_force_estimator.core.articulated_parameters import ArticulatedParameters
@@ -51,8 +52,17 @@ def test_the_whole_vehicle_offline_stays_one_block(tmp_path):
     obs = ObserverParameters()
     config = Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
     whole = ArticulatedParameters.from_parameters(load_params_file(config))
-    assert plan.plan_drive(tmp_path / 'd', 'offline', obs, min_samples=1,
+    assert plan.plan_drive(tmp_path / 'd', 'offline', obs, min_samples=301,
                            vehicle=whole) == plan.BlockPlan(False, 300, True, False)
+    assert plan.plan_drive(tmp_path / 'd', 'offline', obs, min_samples=300,
+                           vehicle=whole) == plan.BlockPlan(True, 300, True, False)
+    chain = dataclasses.replace(obs, discretization='implicit')
+    assert not plan.plan_drive(tmp_path / 'd', 'offline', chain, min_samples=1,
+                               vehicle=whole).blocks
+    assert not plan.plan_drive(tmp_path / 'd', 'offline', obs, vehicle=whole,
+                               memory_limit_bytes=0.7e6).blocks       # 350 samples
+    assert plan.plan_drive(tmp_path / 'd', 'offline', obs, vehicle=whole,
+                           memory_limit_bytes=0.6e6).blocks
     assert plan.plan_drive(tmp_path / 'd', 'online', obs, min_samples=300,
                            vehicle=whole) == plan.BlockPlan(True, 300, False, True)
     assert plan.plan_drive(tmp_path / 'd', 'online', obs, min_samples=301,

@@ -33,7 +33,7 @@ from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.front_axle import PROFILE_OFFLINE_ROLL_MOMENT_PSD
 
 __all__ = ['DIST', 'CONV', 'ROAD_START_S', 'ROAD_RAMP_S', 'ROAD_CUTOFF_FACTOR', 'columns',
-           'WheelRoads', 'ArticulatedOnlineRows', 'ArticulatedOfflineRows']
+           'WheelRoads', 'ArticulatedOnlineRows', 'ArticulatedOfflineRows', 'ROAD_PIECE_ROWS']
 
 #: The distance (m) and converged columns; the rest: :func:`columns`.
 DIST, CONV = 0, 1
@@ -216,6 +216,10 @@ class ArticulatedOnlineRows:
         return (x, conv, *map(add, self.static, df), *df, *self._take_ay(o), *u)
 
 
+#: The rows :meth:`ArticulatedOfflineRows.road_pieces` reads at a time (20 columns: ~10 MB).
+ROAD_PIECE_ROWS = 1 << 16
+
+
 class ArticulatedOfflineRows:
     """Columns of smoothed runs (:class:`.protocol.OfflineRows`): loads, a_y and, from the
     profile pass, the road under every wheel."""
@@ -263,6 +267,67 @@ class ArticulatedOfflineRows:
         """The profile pass's roll-moment density: the front axle's offline constant (the
         a_y states' density follows from it, :mod:`.articulated`)."""
         return PROFILE_OFFLINE_ROLL_MOMENT_PSD
+
+    def road_pieces(self, kept, m: int, dt: float, speed: float, folder,
+                    piece: int | None = None):
+        """:meth:`road` of an evenly sampled run (``pos`` None) from the profile pass's
+        columns in a file, ``kept`` (:class:`~.core.spill.SpillColumn` (m, 2 wheels): every
+        wheel's tire deflection then its acceleration, :attr:`profile_columns`' order),
+        ``piece`` rows at a time (:data:`ROAD_PIECE_ROWS`): the double integral's forward
+        pass over them in order, its state carried and its output in a file in ``folder``,
+        the backward pass over them in reverse; the roads (m, wheels) in a file there
+        (returned). The same bits as :meth:`road` on the columns in memory."""
+        from road_force_estimator.core.scipy_signal import signal as _signal
+        from road_force_estimator.core.spill import SpillColumn
+
+        sosfilt, sosfilt_zi = _signal().sosfilt, _signal().sosfilt_zi
+        nw = self.static.size
+        w_c = 2.0 * math.pi * max(speed, SPEED_FLOOR_MPS) / self.cutoff_m
+        n0 = min(int(round(ROAD_START_S / dt)), m)
+        n1 = min(int(round(ROAD_RAMP_S / dt)), m - n0)
+
+        def ramp(i: int, j: int) -> np.ndarray:  # :meth:`road`'s ramp, rows i:j
+            r = np.ones(j - i)
+            r[:max(0, min(j, n0) - i)] = 0.0
+            a, b = max(i, n0), min(j, n0 + n1)
+            if b > a:
+                r[a - i:b - i] = 0.5 - 0.5 * np.cos(np.pi * np.arange(a - n0, b - n0)
+                                                    / max(n1, 1))
+            return r
+
+        piece = max(int(piece or ROAD_PIECE_ROWS), 1)
+        bounds = [(i, min(m, i + piece)) for i in range(0, m, piece)]
+        roads = SpillColumn(float, nw, folder)
+        if m < 8:                             # zero_phase: no integral
+            for i, j in bounds:
+                roads.append(kept.read(i, j)[:, :nw] + 0.0)
+            return roads
+        fwd_sos, back_sos = body_heave.zero_phase_sections(dt, w_c)
+        fwd = SpillColumn(float, nw, folder)
+        try:
+            zi = None
+            for i, j in bounds:
+                a = kept.read(i, j)[:, nw:] * ramp(i, j)[:, None]
+                if zi is None:
+                    zi = [sosfilt_zi(fwd_sos) * a[0, k] for k in range(nw)]
+                out = np.empty_like(a)
+                for k in range(nw):
+                    out[:, k], zi[k] = sosfilt(fwd_sos, a[:, k], zi=zi[k])
+                fwd.append(out)
+            last = fwd.read(m - 1, m)[0]
+            zi = [sosfilt_zi(back_sos) * last[k] for k in range(nw)]
+            for i, j in reversed(bounds):
+                f = fwd.read(i, j)
+                z = np.empty_like(f)
+                for k in range(nw):
+                    z[::-1, k], zi[k] = sosfilt(back_sos, f[::-1, k], zi=zi[k])
+                roads.write(i, kept.read(i, j)[:, :nw] + z)
+        except BaseException:
+            roads.close()
+            raise
+        finally:
+            fwd.close()
+        return roads
 
     def road(self, cols, dt: float, speed: float, dts, uniform: bool, pos, v) -> tuple:
         """The road under every wheel (m): ``w + z_w`` (module notes), on the grid ``pos``

@@ -37,8 +37,8 @@ from road_force_estimator.estimation.smoothing.rts_pass import smoothed_chunks
 from road_force_estimator.estimation.observer.sample_clock import JITTER_MAX_FRACTION, clock_step
 from road_force_estimator.estimation.observer.schedule import GainSchedule
 
-__all__ = ['Smoother', 'KeptColumns', 'grid_steps', 'window_samples', 'slowest_tau_s',
-           'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
+__all__ = ['Smoother', 'KeptColumns', 'SpilledColumns', 'grid_steps', 'window_samples',
+           'slowest_tau_s', 'WINDOW_SAMPLES', 'WINDOW_OVERLAP_TAUS', 'WINDOWED_RUNS']
 
 #: Long evenly sampled runs (:data:`WINDOWED_RUNS`) are smoothed in windows of this length
 #: (samples; at least four overlaps: :func:`window_samples`), so that the smoother's
@@ -87,6 +87,38 @@ class KeptColumns:
 
     def __getitem__(self, j: int) -> np.ndarray:
         return self.kept[int(j)]
+
+
+class SpilledColumns(KeptColumns):
+    """:class:`KeptColumns` whose ``keep`` columns go to a file in ``folder`` (``file``, a
+    :class:`~.core.spill.SpillColumn` (m, len(keep)) in ``keep``'s order) chunk by chunk as
+    they are written (in any order: the profile pass's come from the end), none held whole;
+    :meth:`flush` after the last chunk."""
+
+    def __init__(self, m: int, keep, field_columns, folder,
+                 chunk: int = _SMOOTH_CHUNK) -> None:
+        from road_force_estimator.core.spill import SpillColumn
+
+        self.keep = [int(j) for j in keep]
+        self.kept = {}
+        self.scratch = field_columns(chunk)[1]
+        self.file = SpillColumn(float, len(self.keep), folder)
+        self._pending: tuple | None = None
+
+    def rows(self, k0: int, k1: int) -> list:
+        self.flush()
+        self._pending = (k0, k1)
+        return [col[:k1 - k0] for col in self.scratch]
+
+    def flush(self) -> None:
+        """The last chunk's kept columns into the file."""
+        if self._pending is not None:
+            k0, k1 = self._pending
+            self.file.write(k0, np.column_stack([self.scratch[j][:k1 - k0] for j in self.keep]))
+            self._pending = None
+
+    def __getitem__(self, j: int) -> np.ndarray:
+        raise TypeError('spilled columns: read them from the file')
 
 
 def _rows(out, k0: int, k1: int) -> list:
@@ -165,6 +197,9 @@ class Smoother:
         self.observer = observer
         self.window = window
         self.eager = eager
+        #: where a windowed run's road waits for its windows (a folder for a temporary file,
+        #: :class:`~.core.spill.SpillColumn`: the same bits, not held in memory), or None
+        self.spill = None
         self.schedule = GainSchedule(model, observer)
         self.rows = model.offline_rows(observer)
         cm = model.continuous(1.0, DEFAULT_ROAD_GD_M3)
@@ -345,7 +380,8 @@ class Smoother:
         """A long evenly sampled run window by window (:meth:`_windows`): the load pass once
         for its roll residual (the profile pass's roll moment), the road from the profile
         pass over the whole run (:meth:`_profile`), then the load pass again (the same
-        windows, the same bits), each window's rows with the road put in."""
+        windows, the same bits), each window's rows with the road put in (with
+        :attr:`spill`, read back from the file it waited in)."""
         recon = self.rows
         if not recon.road_columns:
             yield from self._windows(run, t, y, v)
@@ -358,22 +394,45 @@ class Smoother:
         run.dts = None                             # an even run's profile does not need them
         psd = recon.roll_moment_psd(kept, run.dt)
         del kept
-        road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd, run.left_out)
-        for a, b, rows in self._windows(run, t, y, v):
-            for j, u in zip(recon.road_columns, road):
-                rows[j][:] = u[a:b]
-            yield a, b, rows
+        road = self._profile(run.dt, run.speed, None, True, None, y, v, x0, psd, run.left_out,
+                             spilled=self.spill is not None)
+        spilled = None
+        if not isinstance(road, tuple):      # the profile pass's own file of roads
+            spilled, road = road, None
+        elif self.spill is not None:         # the road in a file until its window comes
+            from road_force_estimator.core.spill import SpillColumn
+
+            spilled = SpillColumn(float, len(road), self.spill)
+            for c0 in range(0, t.size, _SMOOTH_CHUNK):
+                spilled.append(np.column_stack([u[c0:c0 + _SMOOTH_CHUNK] for u in road]))
+            road = None
+        try:
+            for a, b, rows in self._windows(run, t, y, v):
+                part = road if spilled is None else spilled.read(a, b).T
+                lo = 0 if spilled is None else a
+                for j, u in zip(recon.road_columns, part):
+                    rows[j][:] = u[a - lo:b - lo]
+                yield a, b, rows
+                del rows, part        # (let go before the next window is computed)
+        finally:
+            if spilled is not None:
+                spilled.close()
 
     def _profile(self, dt: float, speed: float, dts: np.ndarray, uniform: bool,
                  steps: np.ndarray | None, y: np.ndarray, v: np.ndarray, x0: np.ndarray,
-                 roll_moment_psd: float, left_out: np.ndarray | None = None) -> tuple:
+                 roll_moment_psd: float, left_out: np.ndarray | None = None,
+                 spilled: bool = False):
         """The road columns of a run from the profile smoother (issue 21): the same model and
         data through the smoother with the profile's tuning (:meth:`.GainSchedule.
         profile_design`, ``'offline'``), the road of its states by the model's
         reconstruction (:meth:`.OfflineRows.road`). Returns the road of each wheel path (m)
         of the run's samples; ``roll_moment_psd`` ((N m)^2 / s) is what the load pass's roll
         residual shows (:meth:`.OfflineRows.roll_moment_psd`), ``left_out`` the readings not
-        fed (:meth:`pieces`), the other arguments as :meth:`pieces` made them."""
+        fed (:meth:`pieces`), the other arguments as :meth:`pieces` made them. ``spilled`` (with
+        :attr:`spill`, an evenly sampled run, rows that build the road in pieces:
+        ``road_pieces``): the pass's road columns in a file (:class:`SpilledColumns`), the
+        road built over them in pieces and returned in a file (a
+        :class:`~.core.spill.SpillColumn` (m, wheels)): the same bits, none held whole."""
         # the roll moment as slow as the load pass's roll residual says it is
         g = self.schedule.profile_design(dt, 'offline', roll_moment_psd)
         recon = self.rows
@@ -383,6 +442,19 @@ class Smoother:
             grid = np.arange(int(pos[-1]) + 1)
             y = np.column_stack([np.interp(grid, pos, y[:, i]) for i in range(self.ny)])
             left_out = _on_grid(left_out, pos)
+        if (spilled and self.spill is not None and uniform and steps is None
+                and hasattr(recon, 'road_pieces')):    # the road's columns in a file
+            cols = SpilledColumns(y.shape[0], recon.profile_columns, recon.field_columns,
+                                  self.spill)
+            try:
+                segs = (None if left_out is None else self._left_out(
+                    [(0, y.shape[0], g)], left_out, dt, roll_moment_psd))
+                self._uniform(g, dt, y, x0, cols, segments=segs,
+                              gate_from=self._gate_start(dt))
+                cols.flush()
+                return recon.road_pieces(cols.file, y.shape[0], dt, speed, self.spill)
+            finally:
+                cols.file.close()
         if uniform or steps is not None:        # only the road's columns held whole
             cols = KeptColumns(y.shape[0], recon.profile_columns,
                                field_columns=recon.field_columns)
@@ -433,6 +505,7 @@ class Smoother:
                 yield a, b, [col[a - lo:b - lo] for col in cols]
             else:
                 yield a, b, {j: cols[j][a - lo:b - lo] for j in keep}
+            del cols                  # (let go before the next window's are made)
             x0 = carried
 
     def _bridged(self, g: Gains, dt: float, speed: float, t: np.ndarray, steps: np.ndarray,
