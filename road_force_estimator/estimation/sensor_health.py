@@ -936,7 +936,9 @@ def detect_faults(settings: FaultSettings, stamps_ns, values, rates=None
     """:class:`FaultDetector` over whole arrays (accepted samples, in order): the counts and
     the flags per sample, ``(n, channels)`` int8 (:data:`CODES`: 0 ok, 1 stuck, 2 drift).
 
-    ``values`` (n, channels); ``rates`` (n, 2) the body's heave and roll rates, or None."""
+    ``values`` (n, channels); ``rates`` per sample what :meth:`FaultDetector.step` takes
+    (the front axle's body heave and roll rates, (n, 2); the whole vehicle's speed, (n, 1)),
+    or None."""
     det = FaultDetector(settings)
     vals = np.asarray(values, dtype=float).tolist()
     rts = None if rates is None else np.asarray(rates, dtype=float).tolist()
