@@ -12,7 +12,9 @@ online (:func:`road_force_estimator.estimation.whole_vehicle.estimate_whole_vehi
 every wheel's road from the wheels (:class:`~road_force_estimator.estimation.models.
 articulated_rows.WheelRoads`) and from the bodies (:class:`~road_force_estimator.estimation.
 models.articulated_rows.BodyRoads`), after 5 s and away from the last 60 m. Printed: per axle
-the band errors (% of the true band's RMS, both paths); for the front axle the cross
+the band errors (% of the true band's RMS, both paths) and the road's wander (the largest
+mean over a second of the road less the truth, m, both paths, the whole drive); for the front
+axle the cross
 correlation (the lower path) of the road and of the truth plus the error band-passed to one
 band (zero phase); ``--blend L``: the bodies' road plus the difference high-passed at L m
 (causal second-order Butterworth at the drive's 20 m/s, the front axle only).
@@ -59,8 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     keep = articulated_rows.ROAD_FROM_BODIES
     print('| drive | mode | road | axle | ' + ' | '.join(f'{lo:g}-{hi:g} m' for lo, hi in BANDS)
-          + ' |')
-    print('|---|---|---|---|' + '---:|' * len(BANDS))
+          + ' | wander (m) |')
+    print('|---|---|---|---|' + '---:|' * (len(BANDS) + 1))
     xc_lines = []
     try:
         for case in [c for c in family() if c.name in args.only]:
@@ -78,8 +80,12 @@ def main(argv: list[str] | None = None) -> int:
                         got = [_band_pct(x, wv.road_m[2 * j:2 * j + 2].T,
                                          drive['road'][:, 2 * j:2 * j + 2], mask, lo, hi)
                                for lo, hi in BANDS]
+                        e = wv.road_m[2 * j:2 * j + 2].T - drive['road'][:, 2 * j:2 * j + 2]
+                        k = int(RATE_HZ)
+                        n = e.shape[0] // k * k
+                        wander = float(np.max(np.abs(e[:n].reshape(-1, k, 2).mean(axis=1))))
                         print(f'| {case.name} | {latency * 1e3:g} ms | {source} | {name} | '
-                              + ' | '.join(f'{g:.2f}' for g in got) + ' |')
+                              + ' | '.join(f'{g:.2f}' for g in got) + f' | {wander:.3f} |')
                     roads[source] = wv.road_m[:2].T.copy()
                 truth = drive['road'][:, :2]
                 for source, p in roads.items():
