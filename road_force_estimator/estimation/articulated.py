@@ -19,7 +19,8 @@ Gaps: a step longer than ``max(gap_threshold_s, 10 typical steps)`` (the front a
 run; the next sample restarts the observer at rest on its readings (the braking response
 too), offline each run is smoothed on its own (the noise and roughness schedule carried over
 runs), the distance continues over the gap (``|v|`` times the step); ``gaps`` counts them.
-Online, every wheel's road comes with each row (:class:`.models.articulated_rows.WheelRoads`;
+Online, every wheel's road comes with each row (:class:`.models.articulated_rows.BodyRoads`
+at zero latency, :class:`.models.articulated_rows.WheelRoads` with a latency;
 the streamed fusion: :mod:`.fused_stream`). Not yet: rejected samples (every sample finite,
 stamps increasing), a fusion that tells the bodies' heave and pitch from the road by the
 axles' differences.
@@ -49,7 +50,8 @@ class ArticulatedEstimate:
     """A drive's estimate: per sample (m) the distance (m), converged flag, every wheel's
     load and dynamic load (N; (nw, m), wheels ``<axle>_<side>`` of :attr:`wheel_names`),
     each unit's a_y (m/s^2; (2, m), tractor, trailer) and the road under every wheel (m;
-    (nw, m), band-limited: offline the smoother's, online the causal or fixed-lag one of
+    (nw, m), band-limited: offline the smoother's, online the causal one of
+    :class:`.models.articulated_rows.BodyRoads` or the fixed-lag one of
     :class:`.models.articulated_rows.WheelRoads`)."""
 
     stamps_ns: np.ndarray

@@ -31,8 +31,9 @@ the static-load tracker keeps its mean and offset over it (a step of 0: the load
 changed, as :mod:`.static_load`'s), the load transfer's filters step over it; ``gaps``
 counts them (per sample: the gaps so far).
 
-The road online: every wheel's road per finalized sample (the causal one at zero latency, the
-fixed-lag one with ``observer.latency``: :class:`.models.articulated_rows.WheelRoads`) and
+The road online: every wheel's road per finalized sample (at zero latency from the bodies,
+:class:`.models.articulated_rows.BodyRoads`; the fixed-lag one with ``observer.latency`` from
+the wheels, :class:`.models.articulated_rows.WheelRoads`) and
 the fused profile streamed (:class:`.fused_stream.FusedStream`: each point once the last axle
 has passed it, the rule of :func:`.articulated.fuse_roads` made causal).
 

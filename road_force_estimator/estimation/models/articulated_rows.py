@@ -7,12 +7,16 @@ Columns of N axles (``nw = 2 N`` wheels, axle j front first, left then right)::
 
     [distance, converged, F_n (nw), dF (nw), a_y,t, a_y,r, road (nw), dd z_w (nw)]
 
-Online rows stop after the road: every wheel's road ``u = w + z_w`` with ``z_w`` the causal
-band-limited double integral (:func:`.body_heave.step`'s filter, every wheel's in one product
-of :func:`.body_heave.step_matrix`, cutoff :data:`ROAD_CUTOFF_FACTOR` x
-``observer.profile_cutoff_wavelength``) of the wheel's acceleration from the finalized outputs
-(the load filter's: the causal one at zero latency, the fixed-lag one with
-``observer.latency``), the run's start ramped in as offline, held at a stop
+Online rows stop after the road, every wheel's. At zero latency (:data:`ROAD_FROM_BODIES`)
+from the bodies, as the front axle's (:class:`BodyRoads`): its axle's heave and roll from the
+bodies' heave, pitch and roll and its springs' extensions, plus the tire's deflection, the
+bodies' heave and pitch the causal band-limited double integrals of their accelerations from
+the model's force balance (the zero-latency profile filter's outputs). With
+``observer.latency`` from the wheels: ``u = w + z_w`` with ``z_w`` the causal band-limited
+double integral (:func:`.body_heave.step`'s filter, every wheel's in one product of
+:func:`.body_heave.step_matrix`) of the wheel's acceleration from the fixed-lag outputs
+(:class:`WheelRoads`). Both: cutoff :data:`ROAD_CUTOFF_FACTOR` x
+``observer.profile_cutoff_wavelength``, the run's start ramped in as offline, held at a stop
 (:class:`WheelRoads`). Offline, the road under every wheel comes from the smoother's
 profile pass (:meth:`ArticulatedOfflineRows.road`): ``u = w + z_w``, ``z_w`` the zero-phase
 band-limited double integral (:func:`.body_heave.zero_phase`, cutoff
@@ -33,7 +37,8 @@ from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.front_axle import PROFILE_OFFLINE_ROLL_MOMENT_PSD
 
 __all__ = ['DIST', 'CONV', 'ROAD_START_S', 'ROAD_RAMP_S', 'ROAD_CUTOFF_FACTOR', 'columns',
-           'WheelRoads', 'ArticulatedOnlineRows', 'ArticulatedOfflineRows', 'ROAD_PIECE_ROWS']
+           'WheelRoads', 'BodyRoads', 'body_road_gains', 'ROAD_FROM_BODIES',
+           'ArticulatedOnlineRows', 'ArticulatedOfflineRows', 'ROAD_PIECE_ROWS']
 
 #: The distance (m) and converged columns; the rest: :func:`columns`.
 DIST, CONV = 0, 1
@@ -51,6 +56,13 @@ ROAD_RAMP_S = 0.5
 #: error 11.8 % of the band's RMS with 1 (the 100 m high-pass itself), 3.3 % with 2, 3.1 % with
 #: 3, 3.1 % with 10; its 0.5-30 m band 0.60 % with 1, 0.51 % with 2 and more.
 ROAD_CUTOFF_FACTOR = 3.0
+#: Online, every wheel's road from the bodies (:class:`BodyRoads`) rather than from the
+#: wheels' own accelerations (:class:`WheelRoads`): at zero latency and with
+#: ``observer.latency``. The bodies' at zero latency; the wheels' with 10 ms, where the bodies'
+#: halve the 0.5-30 m band's error but lower the IRI-filtered cross correlation (their 1-3 m
+#: band's error larger): ``python -m bench.accuracy.articulated_fusion --duration 25 --online
+#: 0 0.01``, docs/articulated.md "The road online".
+ROAD_FROM_BODIES = (True, False)
 
 
 def columns(nw: int) -> dict[str, slice | int]:
@@ -66,6 +78,17 @@ def _output_index(model) -> tuple[list, list]:
     """The outputs of the dynamic tire forces and of the two a_y."""
     names = model.outputs
     return list(model.load_outputs), [names.index('ay_tractor'), names.index('ay_trailer')]
+
+
+def _body_road_index(model) -> tuple[list, list]:
+    """The outputs of the bodies' heave and pitch accelerations (:class:`BodyRoads`' order),
+    then of the bodies' roll, every spring's extension and every tire's deflection."""
+    names = model.outputs
+    wheels = [n[len('df_'):] for n in (names[i] for i in model.load_outputs)]
+    acc = [names.index(f'{a}_{b}') for b in ('tractor', 'trailer') for a in ('ddz', 'ddtheta')]
+    lin = [names.index(f'phi_{b}') for b in ('tractor', 'trailer')]
+    lin += [names.index(f'q_{w}') for w in wheels] + [names.index(f'w_{w}') for w in wheels]
+    return acc, lin
 
 
 def _road_index(model) -> list:
@@ -87,8 +110,10 @@ class WheelRoads:
     :func:`.body_heave.step` per wheel within rounding (test_articulated_rows.py), the
     speed's rescaling and the hold while standing as it does them."""
 
-    def __init__(self, nw: int, wc_per_speed: float) -> None:
+    def __init__(self, nw: int, wc_per_speed: float, n_integrals: int | None = None) -> None:
         self.nw = int(nw)
+        #: the double integrals stepped (one per wheel here; :class:`BodyRoads`: four)
+        self.ni = self.nw if n_integrals is None else int(n_integrals)
         self.wc = float(wc_per_speed)
         self._key: tuple | None = None       # (dt, wc) of the step matrix
         self._m = np.empty((0, 0))
@@ -97,13 +122,13 @@ class WheelRoads:
     def restart(self) -> None:
         """The next sample starts a run."""
         self._t = -1.0                  # time since the run's start (s); < 0: not started
-        # the filters' states, a column per wheel: y_1..y_8, then a_old + accel (scratch);
+        # the filters' states, a column per integral: y_1..y_8, then a_old + accel (scratch);
         # the product writes the other buffer (its last row z_s)
-        self._y = np.zeros((body_heave.ORDER + 1, self.nw))
-        self._n = np.zeros((body_heave.ORDER + 1, self.nw))
-        self._a_old: list = [0.0] * self.nw
+        self._y = np.zeros((body_heave.ORDER + 1, self.ni))
+        self._n = np.zeros((body_heave.ORDER + 1, self.ni))
+        self._a_old: list = [0.0] * self.ni
         self._w_old = 0.0               # the cutoff of the last step (rad/s; 0: none yet)
-        self._z: list = [0.0] * self.nw
+        self._z: list = [0.0] * self.ni
         self._prev: list | None = None
         self._x = math.nan
         self._off = [0.0] * self.nw
@@ -140,6 +165,11 @@ class WheelRoads:
         """The roads (m) from the tires' deflections ``w`` (m) and the wheels' accelerations
         ``accel`` (m/s^2, up) after a step ``dt`` (s) at speed ``v`` (m/s), distance ``x``
         (m)."""
+        return self._hold(list(map(add, w, self._heave(accel, dt, v))), v, x)
+
+    def _heave(self, accel: list, dt: float, v: float) -> list:
+        """The double integrals (the accelerations' units times s^2) after a step: the run's
+        start left out and ramped in."""
         t = self._t
         if t < 0.0:
             t = self._t = 0.0
@@ -156,10 +186,12 @@ class WheelRoads:
         acc = accel if ramp == 1.0 else [ramp * a for a in accel]
         if self._prev is None:                 # the run's first sample: body_heave.start
             self._a_old = acc
-            z = self._z
-        else:
-            z = self._integrate(acc, dt, v)
-        u = list(map(add, w, z))
+            return self._z
+        return self._integrate(acc, dt, v)
+
+    def _hold(self, u: list, v: float, x: float) -> list:
+        """The roads ``u`` (m) held at a stop (the distance ``x`` (m) stands still and the
+        speed ``v`` (m/s) below the floor)."""
         prev, px = self._prev, self._x
         self._prev, self._x = u, x
         off = self._off
@@ -169,6 +201,50 @@ class WheelRoads:
             self._offset = True
         # (u - 0.0 is u, bit for bit: no offset yet, none taken)
         return [a - b for a, b in zip(u, off)] if self._offset else u
+
+
+def body_road_gains(model: ArticulatedModel) -> np.ndarray:
+    """``C`` (nw, 6 + 2 nw) of every wheel's road ``u = C [Z_t, Theta_t, Z_r, Theta_r, phi_t,
+    phi_r, q (nw), w (nw)]`` from the linearised kinematics (MODEL.md, the core's
+    :meth:`~.core.articulated_model.ArticulatedModel.kinematics`): the axle's heave and roll
+    from its springs' extensions ``q_j,i = z_b + d_j theta_b +- s_j phi_b - (z_a,j +- s_j
+    phi_a,j)`` (m, rad; theta nose down, phi left side up), the wheel's heave ``z_a,j +- w_j
+    phi_a,j`` plus the tire's deflection ``w = u - z_w``; ``Z``, ``Theta`` the bodies' heave
+    (m, up) and pitch (rad)."""
+    springs, wheels, _, _ = model.kinematics()
+    n_axles = springs.shape[0]
+    nw = 2 * n_axles
+    body_cols = [0, 1, 3, 4, 2, 5]         # z_t, theta_t, z_r, theta_r, phi_t, phi_r
+    c = np.zeros((nw, 6 + 2 * nw))
+    for j in range(n_axles):
+        ia = 6 + 2 * j
+        k = wheels[j][:, ia:ia + 2] @ np.linalg.inv(springs[j][:, ia:ia + 2])
+        rows = slice(2 * j, 2 * j + 2)
+        c[rows, :6] = -k @ springs[j][:, body_cols]
+        c[rows, 6 + 2 * j:8 + 2 * j] = k
+        c[rows, 6 + nw + 2 * j:8 + nw + 2 * j] = np.eye(2)
+    return c
+
+
+class BodyRoads(WheelRoads):
+    """Every wheel's road (m) one finalized sample at a time from the bodies (as the front
+    axle's :class:`.front_axle_rows.OnlineRoad`): ``u = C [Z, Theta, phi, q, w]``
+    (:func:`body_road_gains`), ``Z``, ``Theta`` the causal band-limited double integrals of
+    the tractor's and the trailer's heave and pitch accelerations (the model's force balance:
+    smooth, where the wheels' are the least known at zero latency); the start, the stop and
+    the speed floor as :class:`WheelRoads`' (four integrals instead of one per wheel)."""
+
+    def __init__(self, gains: np.ndarray, wc_per_speed: float) -> None:
+        self.gains = np.asarray(gains, float)
+        super().__init__(self.gains.shape[0], wc_per_speed, n_integrals=4)
+
+    def road(self, lin: tuple, accel: tuple, dt: float, v: float, x: float) -> list:
+        """The roads (m) from ``lin`` = ``[phi_t, phi_r, q (nw), w (nw)]`` (rad, m) and the
+        bodies' accelerations ``accel`` = ``[dd z_t, dd theta_t, dd z_r, dd theta_r]`` (m/s^2
+        up, rad/s^2 nose down) after a step ``dt`` (s) at speed ``v`` (m/s), distance ``x``
+        (m)."""
+        z = self._heave(accel, dt, v)
+        return self._hold(self.gains.dot([*z, *lin]).tolist(), v, x)
 
 
 class ArticulatedOnlineRows:
@@ -184,22 +260,32 @@ class ArticulatedOnlineRows:
         self._df, self._ay = _output_index(model)
         idx = _road_index(model)
         nw = len(self.static)
-        self._w, self._acc = idx[:nw], idx[nw:]
         # the outputs each part of a row takes, gathered at once
         self._take_df, self._take_ay = itemgetter(*self._df), itemgetter(*self._ay)
-        self._take_w, self._take_acc = itemgetter(*self._w), itemgetter(*self._acc)
         cutoff = ROAD_CUTOFF_FACTOR * (100.0 if observer is None
                                        else observer.profile_cutoff_wavelength_m)
-        self.roads = WheelRoads(nw, body_heave.cutoff_per_speed(cutoff))
+        lag = observer is not None and observer.latency_s > 0.0
+        #: whether the roads come from the bodies (:data:`ROAD_FROM_BODIES`)
+        self.from_bodies = ROAD_FROM_BODIES[1 if lag else 0]
+        if self.from_bodies:
+            acc, lin = _body_road_index(model)
+            self._take_w, self._take_acc = itemgetter(*lin), itemgetter(*acc)
+            self.roads = BodyRoads(body_road_gains(model.core),
+                                   body_heave.cutoff_per_speed(cutoff))
+        else:
+            self._take_w, self._take_acc = itemgetter(*idx[:nw]), itemgetter(*idx[nw:])
+            self.roads = WheelRoads(nw, body_heave.cutoff_per_speed(cutoff))
 
     def restart(self) -> None:
         """The next row starts a run (the roads' integrals restart)."""
         self.roads.restart()
 
     def set_vehicle(self, vehicle) -> None:
-        """The static loads of other parameters."""
-        self.static = [float(f) for f in
-                       ArticulatedModel(vehicle).statics().output_wheel_load_n.reshape(-1)]
+        """The static loads (and the bodies' road gains) of other parameters."""
+        core = ArticulatedModel(vehicle)
+        self.static = [float(f) for f in core.statics().output_wheel_load_n.reshape(-1)]
+        if self.from_bodies:
+            self.roads.gains = body_road_gains(core)
 
     def set_static(self, *static_n: float) -> None:
         """The static wheel loads (N), one per wheel."""

@@ -86,3 +86,29 @@ def test_step_matrix_is_the_tustin_cascade_of_lfilter():
             got[i] = state[n]
             prev = ak
         assert np.max(np.abs(got - ref)) < 1e-11 * np.max(np.abs(ref))
+
+
+def test_body_road_gains_give_every_wheels_heave_from_the_plants_bodies(articulated_c):
+    # MODEL.md: the wheel's heave z_a,j +- w_j sin(phi_a,j) from the plant's own coordinates
+    # (z_b, theta_b, phi_b of each body, then each axle's heave and roll), against the gains'
+    # from the bodies' coordinates and the plant's springs' extensions q_j,i; the tire's
+    # deflection passes through
+    from road_force_estimator.estimation.models.articulated_rows import body_road_gains
+
+    d, tr, _, _ = articulated_c
+    model = d.model
+    n, nw = model.n_dof, 2 * model.n_axles
+    x = tr.state[:, :n]                                   # the coordinates
+    assert np.max(np.abs(x[:, [0, 3]])) > 1e-3            # the bodies move
+    true = np.zeros((len(tr), nw))
+    for j, a in enumerate(model.axles):
+        za, phia = x[:, 6 + 2 * j], x[:, 7 + 2 * j]
+        true[:, 2 * j] = za + a.wheel_half_track_m * np.sin(phia)
+        true[:, 2 * j + 1] = za - a.wheel_half_track_m * np.sin(phia)
+    c = body_road_gains(model)
+    w = np.random.default_rng(1).normal(0.0, 1e-3, (len(tr), nw))
+    lin = np.column_stack([x[:, [0, 1, 3, 4, 2, 5]], tr.q_m, w])
+    got = lin @ c.T
+    # within the small angles' linearisation (the plant's q_j,i are MODEL.md's sines)
+    assert np.max(np.abs(got - w - true)) < 2e-4 * np.max(np.abs(true))
+    assert np.sqrt(np.mean((got - w - true) ** 2)) < 5e-5 * np.sqrt(np.mean(true ** 2))
