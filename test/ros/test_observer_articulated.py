@@ -202,8 +202,11 @@ def test_the_articulated_observer_beside_the_plant(ros_context, imu):
     # the batch on the same inputs: the same numbers, in rclpy's bytes
     vehicle = ArticulatedParameters.from_parameters(values)
     assert vehicle.tractor_imu == imu
+    # (with the IMU, the codes the node paired: on a loaded machine an a_y can come stale, and
+    # such a sample leaves the IMU's row out in the node and in the batch alike)
     ref = estimate_whole_vehicle(vehicle, stamps, readings, speed,
-                                 observer=ObserverParameters.from_parameters(values), imu=imu)
+                                 observer=ObserverParameters.from_parameters(values), imu=imu,
+                                 imu_codes=codes if imu else None)
     front = ref.load_n[:2]
     for k, t in enumerate(stamps.tolist()):
         assert_same_bytes(api.JOINT_STATE, raw.data[api.WHEEL_LOADS][k],
