@@ -103,22 +103,14 @@ def run(bag: Path, params: Path, folder: Path, latency_s: float, monkeypatch) ->
                          '--no-progress']) == 0
 
 
-@pytest.mark.parametrize('drive, latency_s, block, sink', [
-    ('gap', 0.0, 300, 257), ('gap', 0.01, 1, 1000), ('gap', 0.0, 1 << 16, 1 << 16),
-    ('imu', 0.01, 300, 97)])
-def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, drive,
-                                              latency_s, block, sink):
-    """``block``: the samples the drive is read in; ``sink``: the whole vehicle's spilled
-    samples its sinks read at a time (its bag topics, statuses, report sums and the front
-    wheels joined to the front axle's pieces)."""
-    from road_force_estimator.pipeline import whole_vehicle
+def in_pieces(monkeypatch, block: int, sink: int) -> list:
+    """pipeline.plan's threshold lowered to 1, the drive read ``block`` samples at a time and
+    the whole vehicle's sinks reading ``sink`` spilled samples at a time: the list that
+    collects each ``run_blocks`` call's ``whole`` argument."""
+    from road_force_estimator.pipeline import blocks, whole_vehicle
     from road_force_estimator.report import whole_vehicle as report
 
-
-    bag, params = drives[drive]
-    run(bag, params, tmp_path / 'one', latency_s, monkeypatch)
     calls = []
-    from road_force_estimator.pipeline import blocks
     original = blocks.run_blocks
 
     def counted(*args, **kw):
@@ -130,13 +122,43 @@ def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, dri
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
     monkeypatch.setattr(whole_vehicle, 'SINK_ROWS', sink)
     monkeypatch.setattr(report, 'SUM_ROWS', sink)
-    run(bag, params, tmp_path / 'str', latency_s, monkeypatch)
-    assert len(calls) == 1 and calls[0].source.n > 2500    # in blocks, the samples spilled
-    one, streamed = tmp_path / 'one' / 'est', tmp_path / 'str' / 'est'
-    a, b = messages(one / 'bag'), messages(streamed / 'bag')
+    return calls
+
+
+def same_messages(one: Path, other: Path) -> dict:
+    """The two bags' messages by topic (read by the mcap library), asserted the same."""
+    a, b = messages(one), messages(other)
     assert sorted(a) == sorted(b)
     for topic in a:
         assert a[topic] == b[topic], topic
+    return a
+
+
+def assert_fails_out_of_space(bag: Path, params: Path, out: Path, mode: str, capsys) -> None:
+    """estimate_bag on a disk that fills: exit 1, one line saying so, the output folder
+    empty or absent."""
+    code = estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
+                         '--mode', mode, '--no-progress', '--no-figures'])
+    err = capsys.readouterr().err
+    assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize('drive, latency_s, block, sink', [
+    ('gap', 0.0, 300, 257), ('gap', 0.01, 1, 1000), ('gap', 0.0, 1 << 16, 1 << 16),
+    ('imu', 0.01, 300, 97)])
+def test_in_blocks_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, drive,
+                                              latency_s, block, sink):
+    """``block``: the samples the drive is read in; ``sink``: the whole vehicle's spilled
+    samples its sinks read at a time (its bag topics, statuses, report sums and the front
+    wheels joined to the front axle's pieces)."""
+    bag, params = drives[drive]
+    run(bag, params, tmp_path / 'one', latency_s, monkeypatch)
+    calls = in_pieces(monkeypatch, block, sink)
+    run(bag, params, tmp_path / 'str', latency_s, monkeypatch)
+    assert len(calls) == 1 and calls[0].source.n > 2500    # in blocks, the samples spilled
+    one, streamed = tmp_path / 'one' / 'est', tmp_path / 'str' / 'est'
+    a = same_messages(one / 'bag', streamed / 'bag')
     assert len(a['/wheel_loads']) > 2500
     assert len(a['/road_profile/fused/left']) > 0
     for name in ('segments.csv', 'report.md'):
@@ -163,12 +185,7 @@ def test_a_full_disk_while_spilling_leaves_nothing(drives, tmp_path, monkeypatch
     bag, params = drives['gap']
     monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(spill.SpillColumn, 'append', full)
-    out = tmp_path / 'o'
-    code = estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
-                         '--mode', 'online', '--no-progress', '--no-figures'])
-    err = capsys.readouterr().err
-    assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
-    assert not out.exists() or not any(out.iterdir())
+    assert_fails_out_of_space(bag, params, tmp_path / 'o', 'online', capsys)
 
 
 def test_in_blocks_the_detail_figures_are_one_blocks(drives, tmp_path, monkeypatch):

@@ -20,7 +20,8 @@ from road_force_estimator.tools.estimate_bag import main as estimate_bag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_whole_vehicle_blocks import (  # noqa: E402  (the same drives, the same reader)
-    CONFIG, imu_params, messages, simulate, with_gap)
+    CONFIG, assert_fails_out_of_space, imu_params, in_pieces, same_messages, simulate,
+    with_gap)
 
 
 @pytest.fixture(scope='module')
@@ -63,25 +64,12 @@ def test_offline_in_pieces_the_outputs_are_one_blocks(drives, tmp_path, monkeypa
     a time. The smoother's windows 1000 samples with 0.3 s of overlap in both runs (a 3 s
     drive goes in windows)."""
     from road_force_estimator.estimation import whole_vehicle as estimation
-    from road_force_estimator.pipeline import blocks, whole_vehicle
-    from road_force_estimator.report import whole_vehicle as report
 
     monkeypatch.setattr(estimation, 'STREAM_WINDOW_SAMPLES', 1000)
     monkeypatch.setattr(estimation, 'STREAM_OVERLAP_S', 0.3)
     bag, params = drives[drive]
     run(bag, params, tmp_path / 'one')
-    calls = []
-    original = blocks.run_blocks
-
-    def counted(*args, **kw):
-        calls.append(kw.get('whole'))
-        return original(*args, **kw)
-
-    monkeypatch.setattr(blocks, 'run_blocks', counted)
-    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
-    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', block)
-    monkeypatch.setattr(whole_vehicle, 'SINK_ROWS', sink)
-    monkeypatch.setattr(report, 'SUM_ROWS', sink)
+    calls = in_pieces(monkeypatch, block, sink)
     spills.clear()
     run(bag, params, tmp_path / 'str')
     assert len(calls) == 1 and calls[0].source.n > 2500    # in pieces, the samples spilled
@@ -89,10 +77,7 @@ def test_offline_in_pieces_the_outputs_are_one_blocks(drives, tmp_path, monkeypa
     assert len(spills) > 10 and all(c._file.closed for c in spills)
     one, streamed = tmp_path / 'one', tmp_path / 'str'
     assert sorted(p.name for p in streamed.iterdir()) == sorted(p.name for p in one.iterdir())
-    a, b = messages(one / 'bag'), messages(streamed / 'bag')
-    assert sorted(a) == sorted(b)
-    for topic in a:
-        assert a[topic] == b[topic], topic
+    a = same_messages(one / 'bag', streamed / 'bag')
     assert len(a['/wheel_loads']) > 2500 and len(a['/road_profile/fused/left']) > 1000
     assert (one / 'report' / 'segments.csv').read_text() == \
         (streamed / 'report' / 'segments.csv').read_text()
@@ -128,12 +113,7 @@ def test_a_failure_in_pieces_closes_every_spill(drives, tmp_path, monkeypatch, s
     monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
     monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 300)
     monkeypatch.setattr(spill.SpillColumn, 'append', full)
-    out = tmp_path / 'o'
-    code = estimate_bag([str(bag), '--params-file', str(params), '--output', str(out),
-                         '--mode', 'offline', '--no-progress', '--no-figures'])
-    err = capsys.readouterr().err
-    assert code == 1 and 'out of space' in err and err.count('\n') == 1, err
-    assert not out.exists() or not any(out.iterdir())
+    assert_fails_out_of_space(bag, params, tmp_path / 'o', 'offline', capsys)
     assert len(spills) > 10 and all(c._file.closed for c in spills)
 
 
