@@ -53,7 +53,7 @@ def child(repeats: int, causal: bool = False) -> dict:
         stamps = np.round(t * 1e9).astype(np.int64)
         for k in range(t.size):
             fit.push(int(stamps[k]), float(x[k]), road[:, k], load, load)
-        job = fit._start()
+        job = fit.verdict_job()
         slices = []
         wall = time.perf_counter()
         while True:

@@ -381,11 +381,14 @@ class OnlineAxleFit:
                 return self.fit
         elif distance_m >= self._next_x:
             self._next_x = float(distance_m) + self.every_m
-            self._job = self._start()
+            self._job = self.verdict_job()
             self._wait = ONLINE_SLICE_SAMPLES
         return None
 
-    def _start(self):
+    def verdict_job(self):
+        """The verdict on the window pushed so far as a job of slices: a generator, each
+        ``next`` one slice of :func:`assess_steps`' work, its return value (``StopIteration.
+        value``) the :class:`AxleFit` (what :meth:`push` runs one slice at a time)."""
         size = self._x.size
         m = min(self._n, size)
         order = (np.arange(self._n - m, self._n) % size)

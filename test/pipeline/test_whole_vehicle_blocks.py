@@ -74,15 +74,6 @@ def imu_params(folder: Path) -> Path:
     return path
 
 
-@pytest.fixture(scope='module')
-def drives(tmp_path_factory):
-    root = tmp_path_factory.mktemp('drives')
-    plain = simulate(root / 'plain', CONFIG, 3.0)
-    params = imu_params(root)
-    return {'gap': (with_gap(plain, root / 'gap'), CONFIG),
-            'imu': (simulate(root / 'imu', params, 3.0), params)}
-
-
 def messages(bag: Path) -> dict:
     out: dict = {}
     for f in sorted(bag.glob('*.mcap')):

@@ -20,17 +20,7 @@ from road_force_estimator.tools.estimate_bag import main as estimate_bag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_whole_vehicle_blocks import (  # noqa: E402  (the same drives, the same reader)
-    CONFIG, assert_fails_out_of_space, imu_params, in_pieces, same_messages, simulate,
-    with_gap)
-
-
-@pytest.fixture(scope='module')
-def drives(tmp_path_factory):
-    root = tmp_path_factory.mktemp('drives')
-    plain = simulate(root / 'plain', CONFIG, 3.0)
-    params = imu_params(root)
-    return {'gap': (with_gap(plain, root / 'gap'), CONFIG),
-            'imu': (simulate(root / 'imu', params, 3.0), params)}
+    CONFIG, assert_fails_out_of_space, in_pieces, same_messages, simulate)
 
 
 def run(bag: Path, params: Path, out: Path) -> None:
