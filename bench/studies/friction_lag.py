@@ -36,7 +36,7 @@ with s the forward filter's posterior std (``expect-forward``) or the fixed-lag 
 (``expect-correction``, at each delayed correction's lag), and the equivalent damping's
 factor at 10 ms (``damping F``; the package's 0.5), against the package's law; and how
 fast a causal v_f fit could decide: the innovations' log-likelihood lead (nats) of each v_f of
-:data:`road_force_estimator.estimation.offline.FIT_GRID` over the file's, zero-latency
+:data:`road_force_estimator.estimation.friction_fit.FIT_GRID` over the file's, zero-latency
 filters over the drive's first seconds (as ``observer.friction_velocity_fit`` offline),
 and what switching once at that moment could give at most: the 10 ms loads of the file's v_f
 before it and of the truth's after it, spliced (the switch's transient ignored).
@@ -352,7 +352,7 @@ def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
     and road seed."""
     from road_force_estimator.core.parameters import ObserverParameters
     from road_force_estimator.estimation.estimator import BatchRun
-    from road_force_estimator.estimation.offline import FIT_GRID
+    from road_force_estimator.estimation.friction_fit import FIT_GRID
 
     lines = []
     for name, truck, v_true in (('friction+lag, truth v_f 0.005', BOTH, 0.005),
