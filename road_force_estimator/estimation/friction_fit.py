@@ -6,8 +6,8 @@
 The model's online observer at zero latency runs over the first run's first :data:`FIT_S`
 seconds once per ``v_f`` of :data:`FIT_GRID` x the file's; the ``v_f`` whose converged
 innovations have the least negative log-likelihood (the steady-state Gaussian
-``(nu^T S^-1 nu + log det S) / 2`` summed, :attr:`.observer.online.ModelCore.nll`) is the
-smoother's. The innovations depend on ``v_f``: the friction is a known input evaluated on the
+``(nu^T S^-1 nu + log det S) / 2`` summed over the samples converged under every ``v_f``,
+:attr:`.observer.online.ModelCore.nll_terms`) is the smoother's. The innovations depend on ``v_f``: the friction is a known input evaluated on the
 estimated rates, steep near zero rate (docs/method.md "Offline, v_f fitted from the drive").
 """
 from __future__ import annotations
@@ -43,14 +43,22 @@ def fit_end(stamps_ns, run_end: int) -> int:
     return min(int(run_end), int(np.searchsorted(stamps, stamps[0] + round(FIT_S * 1e9))))
 
 
-def likeliest_velocity(v_file_mps: float, nll: Callable[[float], float]) -> float:
-    """The ``v_f`` (m/s) of :data:`FIT_GRID` x ``v_file_mps`` whose ``nll(v_f)`` (the
-    innovations' negative log-likelihood over the fit's samples) is least; the first of equals,
-    the file's when none is finite."""
+def likeliest_velocity(v_file_mps: float, nll_terms: Callable[[float], list]) -> float:
+    """The ``v_f`` (m/s) of :data:`FIT_GRID` x ``v_file_mps`` whose innovations are likeliest:
+    ``nll_terms(v_f)`` each converged sample's ``(index, negative log-likelihood)``
+    (:attr:`.observer.online.ModelCore.nll_terms`), summed over the samples converged under
+    every ``v_f`` (the settling time depends on ``v_f``, and each sample adds ``log det S /
+    2``, tens of nats: unequal sets would favour the ``v_f`` that settles first); the first of
+    equals; the file's without a sample converged under every ``v_f``."""
+    terms = [dict(nll_terms(factor * v_file_mps)) for factor in FIT_GRID]
+    common = set(terms[0]).intersection(*terms[1:])
+    if not common:                 # (no sample converged under every v_f: nothing to tell)
+        return v_file_mps
     best = (math.inf, v_file_mps)
-    for factor in FIT_GRID:
-        v_f = factor * v_file_mps
-        value = nll(v_f)
+    for factor, t in zip(FIT_GRID, terms):
+        value = 0.0
+        for k in sorted(common):
+            value += t[k]
         if value < best[0]:
-            best = (value, v_f)
+            best = (value, factor * v_file_mps)
     return best[1]

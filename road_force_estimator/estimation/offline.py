@@ -258,14 +258,14 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
     end = fit_end(stamps, int(later[0]) if later.size else stamps.size)
     obs = replace(observer, latency_s=0.0)
 
-    def nll(v_f: float) -> float:
+    def nll_terms(v_f: float) -> list:
         run = BatchRun(replace(vehicle, leaf_spring_friction_velocity_mps=v_f), obs)
-        run.estimator.core.nll = 0.0
+        terms = run.estimator.core.nll_terms = []
         run.feed(stamps[:end], q[:end], phi[:end], speed[:end])
-        return run.estimator.core.nll
+        return terms
 
     return replace(vehicle, leaf_spring_friction_velocity_mps=likeliest_velocity(
-        vehicle.leaf_spring_friction_velocity_mps, nll))
+        vehicle.leaf_spring_friction_velocity_mps, nll_terms))
 
 
 def rows_of(column, a: int, b: int) -> np.ndarray:

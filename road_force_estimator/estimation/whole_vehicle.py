@@ -1069,17 +1069,17 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
                                            for r in np.asarray(left, bool)[:end]]
     obs = replace(observer, latency_s=0.0)
 
-    def nll(v_f: float) -> float:
+    def nll_terms(v_f: float) -> list:
         online = ArticulatedOnline(replace(vehicle, leaf_spring_friction_velocity_mps=v_f),
                                    0.0, obs, imu=imu)
         core, step = online.core, online.step
-        core.nll = 0.0
+        terms = core.nll_terms = []
         for s, yi, vi, o in zip(stamps[:end].tolist(), y, v, out):
             core.set_excluded(o)
             step(s, yi, vi)
-        return core.nll
+        return terms
 
-    v_f = likeliest_velocity(vehicle.leaf_spring_friction_velocity_mps, nll)
+    v_f = likeliest_velocity(vehicle.leaf_spring_friction_velocity_mps, nll_terms)
     if v_f == vehicle.leaf_spring_friction_velocity_mps:
         return vehicle
     return replace(vehicle, leaf_spring_friction_velocity_mps=v_f)
