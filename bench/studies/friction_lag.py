@@ -496,7 +496,7 @@ def zero_load_fit(sims: dict, both: dict) -> list[str]:
         WholeVehicleEstimator, fit_friction_velocity)
 
     vehicle = wim.file_vehicle({**wim.ZERO_LOAD, **both})
-    lines = ['| zero-load drive (whole vehicle, C) | the truth\'s v_f | the fit on the '
+    lines = ["| zero-load drive (whole vehicle, C) | the truth's v_f | the fit on the "
              "tracker's readings (m/s) |", '|---|---:|---:|']
     for name, v_true in (('friction+lag', 0.01), ('friction+lag, truth v_f 0.005', 0.005)):
         drive = sims[name]

@@ -7,8 +7,9 @@ The model's online observer at zero latency runs over the first run's first :dat
 seconds once per ``v_f`` of :data:`FIT_GRID` x the file's; the ``v_f`` whose converged
 innovations have the least negative log-likelihood (the steady-state Gaussian
 ``(nu^T S^-1 nu + log det S) / 2`` summed over the samples converged under every ``v_f``,
-:attr:`.observer.online.ModelCore.nll_terms`) is the smoother's. The innovations depend on ``v_f``: the friction is a known input evaluated on the
-estimated rates, steep near zero rate (docs/method.md "Offline, v_f fitted from the drive").
+:attr:`.observer.online.ModelCore.nll_terms`) is the smoother's. The innovations depend on
+``v_f``: the friction is a known input evaluated on the estimated rates, steep near zero
+rate (docs/method.md "Offline, v_f fitted from the drive").
 """
 from __future__ import annotations
 

@@ -48,6 +48,11 @@ held readings before the flag too (:func:`.sensor_health.left_out`, :meth:`.Smoo
 ``left_out``). ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 
+The tanh friction's ``v_f`` offline (``observer.friction_velocity_fit``, the front axle's rule,
+:mod:`.friction_fit`): :meth:`WholeVehicleOfflineStream.finish` fits one ``v_f`` for every
+spring (:func:`fit_friction_velocity`) on the first run's readings before its smoother, so a
+drive in one block and in pieces take the same; not under ``zero_load``.
+
 The tractor IMU without a fresh a_y (``imu``; a sample whose pairing, :mod:`.imu_hold`, is
 stale or missing: ``imu_fresh`` False, ``imu_codes`` not 0) is left out the same way, online
 and offline, for that sample: its row (:func:`imu_left_out`), and with pendulum roll sensors
