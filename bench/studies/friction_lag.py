@@ -46,12 +46,18 @@ before it and of the truth's after it, spliced (the switch's transient ignored).
 zero-load readings, the payload unknown, ``--duration`` s), at 10 ms: per axle the
 dynamic-load error with neither, with the 3 ms lag, with both (v_f 0.01), and with the
 truth's v_f 0.005 against the file's 0.01 and told it, each against the drive with neither.
-Then whether the lag's cost is the information's (``--whole-vehicle``'s second table): the
+Then offline (the file's truck read from the equilibrium: the fit does not run under
+``zero_load``): neither, friction + lag and the truth's v_f 0.005 with the offline v_f fit
+(``observer.friction_velocity_fit`` 1, the default) and without it (0), and told it, with
+the v_f the smoother took and each estimate's wall time. Then whether the lag's cost is the
+information's (``--whole-vehicle``'s second table): the
 same class C drives with the file's vehicle and readings from the equilibrium (no payload
 change, no zero-load readings, so that the peer's model is the truth's), neither and the lag,
 ours at 10 ms beside :class:`bench.accuracy.articulated_peer.ArticulatedKalmanPeer` at its
 exact 10-sample fixed lag, tuned on the truth, with a lag state per channel on the lag drive
-(the plant's discrete lag exactly): per axle each one's lag / neither ratio.
+(the plant's discrete lag exactly): per axle each one's lag / neither ratio. Last, why not
+under ``zero_load``: the v_f the fit would take on the first table's zero-load drives, on
+the static-load tracker's readings.
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
