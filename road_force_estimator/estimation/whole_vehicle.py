@@ -1061,9 +1061,9 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
 
     Not under ``zero_load`` (as the front axle's): on the tracker's readings (less its
     offsets) the fit took one grid step more than the truth's v_f on 20 s of class C (the
-    truth's 0.01 m/s: 0.014; 0.005: 0.01), where the readings from the equilibrium gave 0.01
-    and 0.007 (``python -m bench.studies.friction_lag --whole-vehicle``, its last table): a
-    file stating the right v_f would be moved off it.
+    truth's 0.01 m/s: 0.014; 0.005: 0.01; ``python -m bench.studies.friction_lag
+    --whole-vehicle``, its last table; from the equilibrium its offline table's 0.01 and
+    0.007): a file stating the right v_f would be moved off it.
     """
     if (vehicle.zero_load or not fits(
             observer, vehicle.leaf_spring_friction_model,
