@@ -36,7 +36,7 @@ with s the forward filter's posterior std (``expect-forward``) or the fixed-lag 
 (``expect-correction``, at each delayed correction's lag), and the equivalent damping's
 factor at 10 ms (``damping F``; the package's 0.5), against the package's law; and how
 fast a causal v_f fit could decide: the innovations' log-likelihood lead (nats) of each v_f of
-:data:`road_force_estimator.estimation.offline.FIT_GRID` over the file's, zero-latency
+:data:`road_force_estimator.estimation.friction_fit.FIT_GRID` over the file's, zero-latency
 filters over the drive's first seconds (as ``observer.friction_velocity_fit`` offline),
 and what switching once at that moment could give at most: the 10 ms loads of the file's v_f
 before it and of the truth's after it, spliced (the switch's transient ignored).
@@ -46,12 +46,18 @@ before it and of the truth's after it, spliced (the switch's transient ignored).
 zero-load readings, the payload unknown, ``--duration`` s), at 10 ms: per axle the
 dynamic-load error with neither, with the 3 ms lag, with both (v_f 0.01), and with the
 truth's v_f 0.005 against the file's 0.01 and told it, each against the drive with neither.
-Then whether the lag's cost is the information's (``--whole-vehicle``'s second table): the
+Then offline (the file's truck read from the equilibrium: the fit does not run under
+``zero_load``): neither, friction + lag and the truth's v_f 0.005 with the offline v_f fit
+(``observer.friction_velocity_fit`` 1, the default) and without it (0), and told it, with
+the v_f the smoother took and each estimate's wall time. Then whether the lag's cost is the
+information's (``--whole-vehicle``'s second table): the
 same class C drives with the file's vehicle and readings from the equilibrium (no payload
 change, no zero-load readings, so that the peer's model is the truth's), neither and the lag,
 ours at 10 ms beside :class:`bench.accuracy.articulated_peer.ArticulatedKalmanPeer` at its
 exact 10-sample fixed lag, tuned on the truth, with a lag state per channel on the lag drive
-(the plant's discrete lag exactly): per axle each one's lag / neither ratio.
+(the plant's discrete lag exactly): per axle each one's lag / neither ratio. Last, why not
+under ``zero_load``: the v_f the fit would take on the first table's zero-load drives, on
+the static-load tracker's readings.
 
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
@@ -352,7 +358,7 @@ def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
     and road seed."""
     from road_force_estimator.core.parameters import ObserverParameters
     from road_force_estimator.estimation.estimator import BatchRun
-    from road_force_estimator.estimation.offline import FIT_GRID
+    from road_force_estimator.estimation.friction_fit import FIT_GRID
 
     lines = []
     for name, truck, v_true in (('friction+lag, truth v_f 0.005', BOTH, 0.005),
@@ -426,14 +432,89 @@ def whole_vehicle(duration_s: float) -> list[str]:
     lines = ['| drive (whole vehicle, C, 10 ms) | front, drive, trailer_1..3 (% dyn) | '
              'x neither, per axle |', '|---|---|---|']
     ref = None
+    sims = {}
     for name, plant, file_ in drives:
-        drive = wim.simulate('C', duration_s, 1e-5, {**base, **plant})
+        drive = sims[name] = wim.simulate('C', duration_s, 1e-5, {**base, **plant})
         est = wim.estimate(wim.file_vehicle({**wim.ZERO_LOAD, **file_}), drive, 0.01, False)
         pct = wim.dynamic_pct(drive, est)
         ref = pct if ref is None else ref
         lines.append(f'| {name} | ' + ', '.join(f'{v:.2f}' for v in pct) + ' | '
                      + ', '.join(f'{v:.2f}' for v in pct / ref) + ' |')
-    return lines + [''] + lag_limit(duration_s)
+    return (lines + [''] + whole_vehicle_offline(duration_s, both, sharp) + ['']
+            + lag_limit(duration_s) + [''] + zero_load_fit(sims, both))
+
+
+def _offline(vehicle, drive: dict, fit: int) -> tuple:
+    """The whole vehicle offline (:class:`.WholeVehicleOfflineStream` in one block, as
+    ``estimate_whole_vehicle``) with ``observer.friction_velocity_fit`` = ``fit``: the
+    estimate, the v_f its smoother took (m/s) and the wall time (s)."""
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.whole_vehicle import (
+        WholeVehicleOfflineStream, concatenate_arrays)
+
+    t0 = time.perf_counter()
+    stream = WholeVehicleOfflineStream(vehicle, ObserverParameters(friction_velocity_fit=fit),
+                                       eager=False)
+    stream.feed(drive['stamps'], drive['y'], drive['speed'])
+    est = concatenate_arrays(list(stream.finish()))
+    return est, stream.friction_velocity_mps, time.perf_counter() - t0
+
+
+def whole_vehicle_offline(duration_s: float, both: dict, sharp: dict) -> list[str]:
+    """The ``--whole-vehicle`` offline table (Markdown rows): the file's truck read from the
+    equilibrium (the fit does not run under ``zero_load``), neither, friction + lag (v_f
+    0.01), the truth's v_f 0.005 against the file's 0.01 and told it, offline with the v_f
+    fit (``observer.friction_velocity_fit`` 1, the default) and without it (0): the v_f the
+    smoother took, per axle the error and its ratio to neither's, the estimate's wall time."""
+    from bench.accuracy import articulated_wim as wim
+
+    sims = {name: wim.simulate('C', duration_s, 1e-5, plant) for name, plant in (
+        ('neither', {}), ('friction+lag', both), ('sharp', {**both, **sharp}))}
+    rows = (('neither', 'neither', {}, 1),
+            ("friction+lag (v_f 0.01, the file's)", 'friction+lag', both, 1),
+            ("friction+lag (v_f 0.01, the file's)", 'friction+lag', both, 0),
+            ("the truth's v_f 0.005, the file's 0.01", 'sharp', both, 1),
+            ("the truth's v_f 0.005, the file's 0.01", 'sharp', both, 0),
+            ('the same, the file told 0.005', 'sharp', {**both, **sharp}, 0))
+    lines = ["| drive (whole vehicle, the file's truck, C, offline) | v_f fit | v_f taken (m/s) "
+             '| front, drive, trailer_1..3 (% dyn) | x neither, per axle | s |',
+             '|---|---:|---:|---|---|---:|']
+    ref = None
+    for label, name, file_, fit in rows:
+        drive = sims[name]
+        est, v_f, seconds = _offline(wim.file_vehicle(file_), drive, fit)
+        pct = wim.dynamic_pct(drive, est)
+        ref = pct if ref is None else ref
+        lines.append(f'| {label} | {fit} | {v_f:g} | ' + ', '.join(f'{v:.2f}' for v in pct)
+                     + ' | ' + ', '.join(f'{v:.2f}' for v in pct / ref)
+                     + f' | {seconds:.0f} |')
+    return lines
+
+
+def zero_load_fit(sims: dict, both: dict) -> list[str]:
+    """Why the whole vehicle's fit does not run under ``zero_load``: the v_f it would take
+    on the first table's zero-load drives (``sims``, by name), on the static-load tracker's
+    readings (less its offsets, as the smoother takes them) as if they were from the
+    equilibrium."""
+    from bench.accuracy import articulated_wim as wim
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.whole_vehicle import (
+        WholeVehicleEstimator, fit_friction_velocity)
+
+    vehicle = wim.file_vehicle({**wim.ZERO_LOAD, **both})
+    lines = ["| zero-load drive (whole vehicle, C) | the truth's v_f | the fit on the "
+             "tracker's readings (m/s) |", '|---|---:|---:|']
+    for name, v_true in (('friction+lag', 0.01), ('friction+lag, truth v_f 0.005', 0.005)):
+        drive = sims[name]
+        tracker = WholeVehicleEstimator(vehicle).tracker      # no gap in these drives
+        steps = np.concatenate([[0.0], np.diff(drive['stamps']) * 1e-9])
+        y = np.array([tracker.update(row, dt)
+                      for row, dt in zip(drive['y'].tolist(), steps.tolist())])
+        fitted = fit_friction_velocity(replace(vehicle, deflection_reference='equilibrium'),
+                                       ObserverParameters(), drive['stamps'], y,
+                                       drive['speed'])
+        lines.append(f'| {name} | {v_true:g} | {fitted.leaf_spring_friction_velocity_mps:g} |')
+    return lines
 
 
 def lag_limit(duration_s: float) -> list[str]:

@@ -160,7 +160,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     _p('observer.friction_velocity_fit', 'integer', 1, '',
        'offline: 1 = fit v_f of the tanh leaf-spring friction (vehicle.leaf_spring_friction_'
        'velocity x 0.5-2) by the likelihood of the innovations of the online observer over the '
-       'first 20 s (estimation.offline.fit_friction_velocity); 0 = the v_f of the file', 0, 1),
+       'first 20 s (estimation.friction_fit; the front axle not under zero_load, the whole '
+       'vehicle one v_f for every spring); 0 = the v_f of the file', 0, 1),
     _p('observer.fault_stuck_time', 'double', 0.05, 's',
        'a sensor whose reading has not changed (by more than observer.fault_stuck_tolerance) '
        'for this long while every other sensor moved is flagged stuck (estimation.sensor_health)',

@@ -14,14 +14,14 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Iterator
 
-import math
-
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters, VehicleParameters
 from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.chain.zero_phase import estimate_offline
+from road_force_estimator.estimation.friction_fit import (
+    fit_end, fits, likeliest_velocity)
 from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -232,48 +232,40 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
         starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
 
 
-#: The friction-velocity fit (:func:`fit_friction_velocity`): the seconds of the first run it
-#: takes, and the v_f tried, relative to the file's.
-FIT_S = 20.0
-FIT_GRID = (0.5, 0.7, 1.0, 1.4, 2.0)
-
-
 def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParameters, stamps_ns,
                           q, phi, speed, restart) -> VehicleParameters:
     """``vehicle`` with the tanh friction's ``v_f`` (``vehicle.leaf_spring_friction_velocity``)
-    that makes the drive likeliest, with ``observer.friction_velocity_fit`` (else, and without
-    tanh friction, or under ``zero_load``, ``vehicle`` as it is).
+    that makes the drive likeliest (:mod:`.friction_fit`'s rule), with
+    ``observer.friction_velocity_fit`` (else, and without tanh friction, or under
+    ``zero_load``, ``vehicle`` as it is).
 
-    The online observer (no latency) runs over the first run's first :data:`FIT_S` seconds
-    of the accepted samples (``stamps_ns``, ``q``, ``phi``, ``speed``, ``restart``: per
-    accepted sample) once per v_f of :data:`FIT_GRID` x the file's; the one whose converged
-    innovations have the least negative log-likelihood (steady-state Gaussian, ``nu^T S^-1 nu
-    + log det S``) is taken. The innovations depend on v_f: the friction is a known input
-    evaluated on the estimated rate, steep near zero rate (docs/method.md).
+    The front axle's online observer (no latency, :class:`.estimator.BatchRun`) over the first
+    run's first :data:`.friction_fit.FIT_S` seconds of the accepted samples (``stamps_ns``,
+    ``q``, ``phi``, ``speed``, ``restart``: per accepted sample). Not under ``zero_load``
+    (the whole vehicle fits there): the readings here are the tracker's, less its offset,
+    which a ``zero_load`` vehicle's :class:`.BatchRun` would track again, and the tracker's
+    offset lag (:data:`.static_load.TIME_CONSTANT_S`, 10 s) is half the fit's seconds.
     """
     from dataclasses import replace
 
     from road_force_estimator.estimation.estimator import BatchRun
 
-    if (not observer.friction_velocity_fit or not any(vehicle.leaf_spring_friction_n)
-            or vehicle.leaf_spring_friction_model != 'tanh' or vehicle.zero_load
-            or len(stamps_ns) == 0):
+    if (not fits(observer, vehicle.leaf_spring_friction_model, vehicle.leaf_spring_friction_n)
+            or vehicle.zero_load or len(stamps_ns) == 0):
         return vehicle
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     later = np.flatnonzero(np.asarray(restart, bool)[1:]) + 1      # the first run only
-    end = int(later[0]) if later.size else stamps.size
-    end = min(end, int(np.searchsorted(stamps, stamps[0] + round(FIT_S * 1e9))))
-    best = (math.inf, vehicle.leaf_spring_friction_velocity_mps)
+    end = fit_end(stamps, int(later[0]) if later.size else stamps.size)
     obs = replace(observer, latency_s=0.0)
-    for factor in FIT_GRID:
-        v_f = factor * vehicle.leaf_spring_friction_velocity_mps
+
+    def nll_terms(v_f: float) -> list:
         run = BatchRun(replace(vehicle, leaf_spring_friction_velocity_mps=v_f), obs)
-        run.estimator.core.nll = 0.0
+        terms = run.estimator.core.nll_terms = []
         run.feed(stamps[:end], q[:end], phi[:end], speed[:end])
-        nll = run.estimator.core.nll
-        if nll < best[0]:
-            best = (nll, v_f)
-    return replace(vehicle, leaf_spring_friction_velocity_mps=best[1])
+        return terms
+
+    return replace(vehicle, leaf_spring_friction_velocity_mps=likeliest_velocity(
+        vehicle.leaf_spring_friction_velocity_mps, nll_terms))
 
 
 def rows_of(column, a: int, b: int) -> np.ndarray:

@@ -48,6 +48,11 @@ held readings before the flag too (:func:`.sensor_health.left_out`, :meth:`.Smoo
 ``left_out``). ``sensor_flags`` per sample
 (:data:`.sensor_health.CODES`), ``faults`` the drive's counts.
 
+The tanh friction's ``v_f`` offline (``observer.friction_velocity_fit``, the front axle's rule,
+:mod:`.friction_fit`): :meth:`WholeVehicleOfflineStream.finish` fits one ``v_f`` for every
+spring (:func:`fit_friction_velocity`) on the first run's readings before its smoother, so a
+drive in one block and in pieces take the same; not under ``zero_load``.
+
 The tractor IMU without a fresh a_y (``imu``; a sample whose pairing, :mod:`.imu_hold`, is
 stale or missing: ``imu_fresh`` False, ``imu_codes`` not 0) is left out the same way, online
 and offline, for that sample: its row (:func:`imu_left_out`), and with pendulum roll sensors
@@ -73,6 +78,7 @@ from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, run_starts)
 from road_force_estimator.estimation.axle_fit import (
     ONLINE_MIN_LATENCY_S, AxleFit, OnlineAxleFit, assess_axles)
+from road_force_estimator.estimation.friction_fit import fit_end, fits, likeliest_velocity
 from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.rollover_warning import LtrPredictor, predicted_ltr
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
@@ -86,7 +92,8 @@ __all__ = ['UNITS', 'OFFSET_TIME_CONSTANT_S', 'PIECE_ROWS',
            'WholeVehicleArrays', 'WholeVehicleEstimator', 'WheelStaticTracker',
            'WholeVehicleOfflineStream', 'estimate_whole_vehicle', 'concatenate_arrays',
            'fit_axles', 'CHUNK_ROWS', 'WholeVehicleOnlineStream', 'estimate_online_blocks',
-           'imu_left_out', 'ROW_FIELDS', 'take_rows', 'join_rows', 'ArraysRows']
+           'imu_left_out', 'ROW_FIELDS', 'take_rows', 'join_rows', 'ArraysRows',
+           'fit_friction_velocity']
 
 #: The lag (s) between each deflection's running mean and the offset the core's reading is
 #: taken less: shorter than the front axle's 10 s (:mod:`.static_load`), because a truck that
@@ -871,6 +878,9 @@ class WholeVehicleOfflineStream:
         self._flags_before = list(self.est.faults.flags)
         #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
         self.innovations_gated: tuple = ()
+        #: the tanh friction's v_f (m/s) the smoother takes: the file's, once :meth:`finish`
+        #: has begun the fitted one (:func:`fit_friction_velocity`)
+        self.friction_velocity_mps = vehicle.leaf_spring_friction_velocity_mps
 
     @property
     def fed(self) -> int:
@@ -934,13 +944,10 @@ class WholeVehicleOfflineStream:
         if isinstance(statics, _Columns):
             statics = statics.arrays()[0]
         est = self.est
-        online = est.online
         window = self.window
         if window is None and self.eager and stamps.size > 1:
             dt = float(np.median(np.diff(stamps))) * 1e-9
             window = (STREAM_WINDOW_SAMPLES, int(math.ceil(STREAM_OVERLAP_S / dt)))
-        smoother = Smoother(online.model, self.observer, window, eager=self.eager)
-        smoother.spill = self.spill or None      # a windowed run's road in a file
         cols = cols_of(len(est.wheel_names))
         nw = len(est.wheel_names)
         starts = run_starts(stamps, self.gap_threshold_s)
@@ -952,15 +959,25 @@ class WholeVehicleOfflineStream:
             if left is None:
                 left = np.zeros(codes.shape, bool)
             left[np.ix_(stale, sorted(est.imu_out))] = True
+        # the friction's v_f fitted (module notes), on the readings the smoother takes
+        end = bounds[0][1] if bounds else 0
+        vehicle = fit_friction_velocity(est.vehicle, self.observer, stamps[:end], y[:end],
+                                        v[:end], None if left is None else left[:end],
+                                        imu=est.model.imu)
+        self.friction_velocity_mps = vehicle.leaf_spring_friction_velocity_mps
+        model = (est.model if vehicle is est.vehicle else est.model.with_vehicle(vehicle))
+        braking = est.online.braking if model is est.model else model.braking_response()
+        smoother = Smoother(model, self.observer, window, eager=self.eager)
+        smoother.spill = self.spill or None      # a windowed run's road in a file
         dist = 0.0
         prev: int | None = None
         for run, (a0, b0) in enumerate(bounds):
             t = (stamps[a0:b0] - stamps[a0]) * 1e-9
             tdts = np.diff(t)
-            ax = online.braking.offline_ax(t, v[a0:b0])
-            for a, b, off, _ in online.braking.responses(tdts, ax, self.piece_rows):
+            ax = braking.offline_ax(t, v[a0:b0])
+            for a, b, off, _ in braking.responses(tdts, ax, self.piece_rows):
                 y[a0 + a:a0 + b] -= off                       # the known a_x's share
-            response = online.braking.responses(tdts, ax, self.piece_rows)
+            response = braking.responses(tdts, ax, self.piece_rows)
             held = None                                      # (a, dynamic) not used yet
             for a, b, pc in smoother.pieces(t, y[a0:b0], v[a0:b0],
                                             left_out=None if left is None else left[a0:b0]):
@@ -1026,6 +1043,56 @@ class WholeVehicleOfflineStream:
             tuple(int(x) for x in smoother.gated.tolist()), tuple(est.channel_names),
             ltr[6:].copy(), g, fault_flags=None if codes is None else codes.T.copy(),
             faults=est.faults.counts())
+
+
+def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverParameters,
+                          stamps_ns, readings, speed_mps, left=None, *, imu: bool = False
+                          ) -> ArticulatedParameters:
+    """``vehicle`` with the tanh friction's ``v_f`` (``vehicle.leaf_spring_friction_velocity``,
+    one for every spring) that makes the drive likeliest (:mod:`.friction_fit`'s rule), with
+    ``observer.friction_velocity_fit`` and some spring's tanh friction stated, not under
+    ``zero_load``; else, or with the file's ``v_f`` the likeliest, ``vehicle`` itself.
+
+    The whole vehicle's online observer (:class:`.articulated.ArticulatedOnline`, no latency)
+    over the first :data:`.friction_fit.FIT_S` s of ``stamps_ns`` (ns; the first run's:
+    the caller gives no other), ``readings`` ((m, channels) from the equilibrium, as the
+    smoother takes them), ``speed_mps`` ((m,), m/s); ``left`` ((m, channels) bool or None):
+    the channels the smoother leaves out of each sample, left out here too.
+
+    Not under ``zero_load`` (as the front axle's): on the tracker's readings (less its
+    offsets) the fit took one grid step more than the truth's v_f on 20 s of class C (the
+    truth's 0.01 m/s: 0.014; 0.005: 0.01; ``python -m bench.studies.friction_lag
+    --whole-vehicle``, its last table; from the equilibrium its offline table's 0.01 and
+    0.007): a file stating the right v_f would be moved off it.
+    """
+    if (vehicle.zero_load or not fits(
+            observer, vehicle.leaf_spring_friction_model,
+            [f for a in vehicle.axles for f in a.leaf_spring_friction_n])):
+        return vehicle
+    stamps = np.asarray(stamps_ns, np.int64)
+    end = fit_end(stamps, stamps.size)
+    if end == 0:
+        return vehicle
+    y = np.asarray(readings, float)[:end].tolist()
+    v = np.broadcast_to(np.asarray(speed_mps, float), stamps.shape)[:end].tolist()
+    out = [()] * end if left is None else [tuple(np.flatnonzero(r).tolist())
+                                           for r in np.asarray(left, bool)[:end]]
+    obs = replace(observer, latency_s=0.0)
+
+    def nll_terms(v_f: float) -> list:
+        online = ArticulatedOnline(replace(vehicle, leaf_spring_friction_velocity_mps=v_f),
+                                   0.0, obs, imu=imu)
+        core, step = online.core, online.step
+        terms = core.nll_terms = []
+        for s, yi, vi, o in zip(stamps[:end].tolist(), y, v, out):
+            core.set_excluded(o)
+            step(s, yi, vi)
+        return terms
+
+    v_f = likeliest_velocity(vehicle.leaf_spring_friction_velocity_mps, nll_terms)
+    if v_f == vehicle.leaf_spring_friction_velocity_mps:
+        return vehicle
+    return replace(vehicle, leaf_spring_friction_velocity_mps=v_f)
 
 
 def fit_axles(vehicle: ArticulatedParameters, wv: WholeVehicleArrays) -> AxleFit | None:

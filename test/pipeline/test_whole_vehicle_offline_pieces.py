@@ -4,7 +4,8 @@ spilled to files, its model fit per axle and fused profile from the spilled colu
 axle's stage in blocks beside it (pipeline.blocks with BlockJoin), against the same drive in
 one block: every message of the estimate bag the same (topic, log time, bytes; read by the
 mcap library), segments.csv, report.md (but its command line) and report.json the same, with
-a gap and with the tractor IMU, the smoother's windows made small (the same in both runs);
+a gap, with the tractor IMU and with tanh friction whose v_f is fitted (the plant's 0.02, the
+file's 0.01), the smoother's windows made small (the same in both runs);
 every spilled file closed at the end and on a failure. And the spilled fit and fused profile
 alone against fit_axles and fuse_roads on the whole arrays: the same bits."""
 import json
@@ -21,6 +22,29 @@ from road_force_estimator.tools.estimate_bag import main as estimate_bag
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_whole_vehicle_blocks import (  # noqa: E402  (the same drives, the same reader)
     CONFIG, assert_fails_out_of_space, in_pieces, same_messages, simulate)
+
+
+def friction_params(folder: Path, v_f: float) -> Path:
+    """The file's combination with 1.5 kN of tanh friction per spring of v_f ``v_f`` (m/s)."""
+    text = CONFIG.read_text()
+    for old, new in (('leaf_spring_friction: [0.0, 0.0]',
+                      'leaf_spring_friction: [1500.0, 1500.0]'),
+                     ('leaf_spring_friction_velocity: 0.01',
+                      f'leaf_spring_friction_velocity: {v_f!r}')):
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    path = folder / f'friction_{v_f:g}.yaml'
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope='module')
+def drives(drives, tmp_path_factory):
+    """The shared drives (conftest.py) and a friction drive: the plant's v_f 0.02, the
+    file's 0.01 (v_f fitted offline, in both runs)."""
+    root = tmp_path_factory.mktemp('friction')
+    return {**drives, 'friction': (simulate(root / 'friction', friction_params(root, 0.02), 3.0),
+                                   friction_params(root, 0.01))}
 
 
 def run(bag: Path, params: Path, out: Path) -> None:
@@ -47,7 +71,8 @@ def spills(monkeypatch):
     return opened
 
 
-@pytest.mark.parametrize('drive, block, sink', [('gap', 300, 257), ('imu', 1 << 16, 97)])
+@pytest.mark.parametrize('drive, block, sink', [('gap', 300, 257), ('imu', 1 << 16, 97),
+                                                ('friction', 300, 257)])
 def test_offline_in_pieces_the_outputs_are_one_blocks(drives, tmp_path, monkeypatch, spills,
                                                       drive, block, sink):
     """``block``: the samples the drive is read in; ``sink``: the spilled samples read back at

@@ -1,0 +1,65 @@
+"""The tanh leaf-spring friction's ``v_f`` fitted from the drive offline
+(``observer.friction_velocity_fit``, issue 30): one rule for the front axle
+(:func:`.offline.fit_friction_velocity`) and the whole vehicle
+(:func:`.whole_vehicle.fit_friction_velocity`).
+
+The model's online observer at zero latency runs over the first run's first :data:`FIT_S`
+seconds once per ``v_f`` of :data:`FIT_GRID` x the file's; the ``v_f`` whose converged
+innovations have the least negative log-likelihood (the steady-state Gaussian
+``(nu^T S^-1 nu + log det S) / 2`` summed over the samples converged under every ``v_f``,
+:attr:`.observer.online.ModelCore.nll_terms`) is the smoother's. The innovations depend on
+``v_f``: the friction is a known input evaluated on the estimated rates, steep near zero
+rate (docs/method.md "Offline, v_f fitted from the drive").
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Iterable
+
+import numpy as np
+
+from road_force_estimator.core.parameters import ObserverParameters
+
+__all__ = ['FIT_S', 'FIT_GRID', 'fits', 'fit_end', 'likeliest_velocity']
+
+#: The seconds of the first run the fit takes, and the v_f tried, relative to the file's.
+FIT_S = 20.0
+FIT_GRID = (0.5, 0.7, 1.0, 1.4, 2.0)
+
+
+def fits(observer: ObserverParameters, friction_model: str,
+         friction_n: Iterable[float]) -> bool:
+    """Whether ``v_f`` is fitted: ``observer.friction_velocity_fit`` set, the file's friction
+    law ``tanh`` and some spring's friction ``friction_n`` (N) not 0."""
+    return (bool(observer.friction_velocity_fit) and friction_model == 'tanh'
+            and any(float(f) for f in friction_n))
+
+
+def fit_end(stamps_ns, run_end: int) -> int:
+    """The samples the fit takes, ``[0, fit_end)``: the first run (``run_end``, its end) up to
+    :data:`FIT_S` s after the first stamp (``stamps_ns``, ns increasing)."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    if stamps.size == 0:
+        return 0
+    return min(int(run_end), int(np.searchsorted(stamps, stamps[0] + round(FIT_S * 1e9))))
+
+
+def likeliest_velocity(v_file_mps: float, nll_terms: Callable[[float], list]) -> float:
+    """The ``v_f`` (m/s) of :data:`FIT_GRID` x ``v_file_mps`` whose innovations are likeliest:
+    ``nll_terms(v_f)`` each converged sample's ``(index, negative log-likelihood)``
+    (:attr:`.observer.online.ModelCore.nll_terms`), summed over the samples converged under
+    every ``v_f`` (the settling time depends on ``v_f``, and each sample adds ``log det S /
+    2``, tens of nats: unequal sets would favour the ``v_f`` that settles first); the first of
+    equals; the file's without a sample converged under every ``v_f``."""
+    terms = [dict(nll_terms(factor * v_file_mps)) for factor in FIT_GRID]
+    common = set(terms[0]).intersection(*terms[1:])
+    if not common:                 # (no sample converged under every v_f: nothing to tell)
+        return v_file_mps
+    best = (math.inf, v_file_mps)
+    for factor, t in zip(FIT_GRID, terms):
+        value = 0.0
+        for k in sorted(common):
+            value += t[k]
+        if value < best[0]:
+            best = (value, factor * v_file_mps)
+    return best[1]
