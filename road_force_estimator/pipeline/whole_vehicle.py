@@ -689,30 +689,48 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
 
 def _spilled_fused(source, vehicle) -> FusedRoad | None:
     """:func:`fused_profile` offline from a spilled estimate ``source``
-    (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path` per wheel path on
-    the distances, that side's roads and whether each wheel carried its share (as
-    :func:`~.estimation.articulated.fuse_roads` computes it), read back a piece at a time: the
-    one-block numbers bit for bit, one side's columns held at a time."""
-    from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION, fuse_path
+    (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path_pieces` per wheel
+    path on the spilled distances, that side's roads and whether each wheel carried its
+    share (as :func:`~.estimation.articulated.fuse_roads` computes it), :data:`SINK_ROWS`
+    samples at a time: the one-block numbers bit for bit; held whole only the fused profile
+    (its four numbers a point)."""
+    from road_force_estimator.estimation.articulated import (
+        LIFT_OFF_FRACTION, fuse_path_pieces)
 
     xi = [a.position_m for a in vehicle.axles]
-    x = source.column('distance_m')
-    keep = np.flatnonzero(x + max(xi) <= x[-1])
-    if not keep.size:
-        return None
-    paths = []
-    for side in (0, 1):
-        rows = list(range(side, 2 * len(xi), 2))
+    cols = source.cols
 
-        def grounded(wv, rows=rows):         # fuse_roads' static: load - (load - static)
-            load = wv.load_n[rows]
-            return load >= LIFT_OFF_FRACTION * (load - (load - wv.static_n[rows]))
+    def read_x(lo, hi):
+        return cols['distance_m'].read(lo, hi)
 
-        paths.append(fuse_path(x, source.column('road_m', rows),
-                               source.column_of(grounded, len(rows), bool), xi))
-    ok = np.isfinite(paths[0]) & np.isfinite(paths[1])
-    return FusedRoad(source.column('stamps_ns')[keep][ok], x[keep][ok], paths[0][ok],
-                     paths[1][ok], len(xi), float(vehicle.axles[0].wheel_half_track_m))
+    paths, m = [], 0
+    try:
+        for side in (0, 1):
+            rows = list(range(side, 2 * len(xi), 2))
+
+            def read(lo, hi, rows=rows):     # fuse_roads' static: load - (load - static)
+                load = cols['load_n'].read(lo, hi)[:, rows].T
+                static = cols['static_n'].read(lo, hi)[:, rows].T
+                return (cols['road_m'].read(lo, hi)[:, rows].T,
+                        load >= LIFT_OFF_FRACTION * (load - (load - static)))
+
+            m, path = fuse_path_pieces(source.n, read_x, read, xi, source.folder, SINK_ROWS)
+            paths.append(path)
+        if not m:
+            return None
+        out: list = [[], [], [], []]
+        for lo in range(0, m, SINK_ROWS):
+            hi = min(lo + SINK_ROWS, m)
+            left, right = paths[0].read(lo, hi), paths[1].read(lo, hi)
+            ok = np.isfinite(left) & np.isfinite(right)
+            for o, a in zip(out, (cols['stamps_ns'].read(lo, hi), read_x(lo, hi), left,
+                                  right)):
+                o.append(a[ok])
+    finally:
+        for path in paths:
+            path.close()
+    return FusedRoad(*(np.concatenate(o) for o in out), len(xi),
+                     float(vehicle.axles[0].wheel_half_track_m))
 
 
 def fused_streams(fused: FusedRoad | None) -> list:
