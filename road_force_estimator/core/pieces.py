@@ -24,8 +24,8 @@ import numpy as np
 __all__ = ['Interp', 'arange_size', 'arange_piece', 'median_positive_steps', 'sosfiltfilt',
            'PIECE_ROWS']
 
-#: The samples read at a time by default.
-PIECE_ROWS = 1 << 16
+#: The samples read at a time by default (a few MB of pieces held).
+PIECE_ROWS = 1 << 14
 
 
 class Interp:

@@ -344,8 +344,8 @@ def fuse_path_pieces(n: int, read_x, read, positions_m, folder=None,
                      rows: int | None = None):
     """:func:`fuse_path` (its numbers, bit for bit) from a source read ``rows`` samples at a
     time (:data:`~.core.pieces.PIECE_ROWS`): ``read_x(lo, hi)`` the front axle's distance
-    (m, non-decreasing) and ``read(lo, hi) -> (road_m, grounded)`` ((N, k) each) of the
-    samples ``lo:hi`` of ``n``. Returns ``(m, path)``: the fused road (m) of the first m
+    (m, non-decreasing) and ``read(lo, hi, j) -> (road_m, grounded)`` axle j's ((k,) each)
+    of the samples ``lo:hi`` of ``n``. Returns ``(m, path)``: the fused road (m) of the first m
     samples (those the last axle has passed) in a :class:`~.core.spill.SpillColumn` (m,) in
     ``folder`` (the caller closes it). Held: a piece's samples and the road ``positions_m``
     ahead of it; the median step by counting passes, the low pass's grid and zero-phase
@@ -365,22 +365,22 @@ def fuse_path_pieces(n: int, read_x, read, positions_m, folder=None,
             for lo in range(0, n, rows))
     dx = pieces.median_positive_steps(n, read_x, rows)
 
-    def both(lo, hi):                         # each axle's road then whether grounded
-        road, grounded = read(lo, hi)
-        return read_x(lo, hi), np.concatenate([np.asarray(road, float),
-                                               np.asarray(grounded, float)])
+    def axle(j: int):                         # axle j's road and whether grounded
+        def both(lo, hi):
+            road, grounded = read(lo, hi, j)
+            return read_x(lo, hi), np.array([road, grounded], float)
+        return both
 
     spilled: list = []
     try:
         reads = SpillColumn(float, 2 * na, folder)   # at p + xi_j: the road, grounded
         spilled.append(reads)
-        at = [pieces.Interp(n, both, rows) for _ in range(na)]
+        at = [pieces.Interp(n, axle(j), rows) for j in range(na)]
         for lo in range(0, m, rows):
             p = read_x(lo, min(lo + rows, m))
             r = [at[j](p + lag) for j, lag in enumerate(xi)]
-            reads.append(np.array([v[j] for j, v in enumerate(r)]
-                                  + [v[na + j] for j, v in enumerate(r)]).T)
-        del at
+            reads.append(np.array([v[0] for v in r] + [v[1] for v in r]).T)
+        del at, r
         p0, p1 = read_x(0, 1)[0], read_x(m - 1, m)[-1] if m else read_x(0, 1)[0]
         long = None
         if m and dx > 0.0 and p1 - p0 >= 4.0 * FUSION_SPLIT_WAVELENGTH_M:

@@ -690,15 +690,17 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
 def _spilled_fused(source, vehicle) -> FusedRoad | None:
     """:func:`fused_profile` offline from a spilled estimate ``source``
     (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path_pieces` per wheel
-    path on the spilled distances, that side's roads and whether each wheel carried its
-    share (as :func:`~.estimation.articulated.fuse_roads` computes it), :data:`SINK_ROWS`
-    samples at a time: the one-block numbers bit for bit; held whole only the fused profile
-    (its four numbers a point)."""
+    path on the spilled distances, each axle's road on that side and whether its wheel
+    carried its share (as :func:`~.estimation.articulated.fuse_roads` computes it), at most
+    :data:`SINK_ROWS` samples at a time: the one-block numbers bit for bit; held whole only
+    the fused profile (its four numbers a point)."""
+    from road_force_estimator.core.pieces import PIECE_ROWS
     from road_force_estimator.estimation.articulated import (
         LIFT_OFF_FRACTION, fuse_path_pieces)
 
     xi = [a.position_m for a in vehicle.axles]
     cols = source.cols
+    step = min(SINK_ROWS, PIECE_ROWS)
 
     def read_x(lo, hi):
         return cols['distance_m'].read(lo, hi)
@@ -706,31 +708,38 @@ def _spilled_fused(source, vehicle) -> FusedRoad | None:
     paths, m = [], 0
     try:
         for side in (0, 1):
-            rows = list(range(side, 2 * len(xi), 2))
-
-            def read(lo, hi, rows=rows):     # fuse_roads' static: load - (load - static)
-                load = cols['load_n'].read(lo, hi)[:, rows].T
-                static = cols['static_n'].read(lo, hi)[:, rows].T
-                return (cols['road_m'].read(lo, hi)[:, rows].T,
+            def read(lo, hi, j, side=side):  # axle j's wheel on this side
+                w = 2 * j + side
+                load = cols['load_n'].read(lo, hi)[:, w]
+                static = cols['static_n'].read(lo, hi)[:, w]   # fuse_roads' static
+                return (cols['road_m'].read(lo, hi)[:, w],
                         load >= LIFT_OFF_FRACTION * (load - (load - static)))
 
-            m, path = fuse_path_pieces(source.n, read_x, read, xi, source.folder, SINK_ROWS)
+            m, path = fuse_path_pieces(source.n, read_x, read, xi, source.folder, step)
             paths.append(path)
         if not m:
             return None
-        out: list = [[], [], [], []]
-        for lo in range(0, m, SINK_ROWS):
-            hi = min(lo + SINK_ROWS, m)
-            left, right = paths[0].read(lo, hi), paths[1].read(lo, hi)
-            ok = np.isfinite(left) & np.isfinite(right)
-            for o, a in zip(out, (cols['stamps_ns'].read(lo, hi), read_x(lo, hi), left,
-                                  right)):
-                o.append(a[ok])
+
+        def finite(lo, hi):
+            return np.isfinite(paths[0].read(lo, hi)) & np.isfinite(paths[1].read(lo, hi))
+
+        k = sum(int(np.count_nonzero(finite(lo, min(lo + step, m))))
+                for lo in range(0, m, step))
+        out = tuple(np.empty(k, d) for d in (cols['stamps_ns'].dtype, cols['distance_m'].dtype,
+                                              float, float))
+        at = 0
+        for lo in range(0, m, step):
+            hi = min(lo + step, m)
+            ok = finite(lo, hi)
+            got = int(np.count_nonzero(ok))
+            for o, a in zip(out, (cols['stamps_ns'].read(lo, hi), read_x(lo, hi),
+                                  paths[0].read(lo, hi), paths[1].read(lo, hi))):
+                o[at:at + got] = a[ok]
+            at += got
     finally:
         for path in paths:
             path.close()
-    return FusedRoad(*(np.concatenate(o) for o in out), len(xi),
-                     float(vehicle.axles[0].wheel_half_track_m))
+    return FusedRoad(*out, len(xi), float(vehicle.axles[0].wheel_half_track_m))
 
 
 def fused_streams(fused: FusedRoad | None) -> list:

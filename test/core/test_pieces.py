@@ -101,7 +101,9 @@ def test_fuse_path_in_pieces_is_fuse_path(tmp_path, n, rows):
     grounded = rng.random((5, n)) > 0.02
     grounded[2, n // 2:n // 2 + 200] = False
     want = fuse_path(x, road, grounded, xi)
-    m, got = fuse_path_pieces(n, reader(x), reader(road, grounded), xi, tmp_path, rows)
+    m, got = fuse_path_pieces(n, reader(x), lambda lo, hi, j: (road[j, lo:hi],
+                                                             grounded[j, lo:hi]),
+                              xi, tmp_path, rows)
     try:
         assert m == want.size > 0
         np.testing.assert_array_equal(got.array(), want)
