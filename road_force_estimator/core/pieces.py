@@ -9,7 +9,9 @@ the points of a float :func:`numpy.arange` (numpy's own fill: ``start + i * delt
 selection by counting, 16 bits of the float's pattern per pass), and :func:`sosfiltfilt`
 :func:`scipy.signal.sosfiltfilt` (odd padding, its default pad length: the forward pass with
 its state carried over the pieces and its output spilled, the backward pass over the pieces
-in reverse, as ``sosfiltfilt`` runs both over the padded array). What cannot go in pieces
+in reverse, as ``sosfiltfilt`` runs both over the padded array), :func:`gradient_piece`
+:func:`numpy.gradient` (its test for even spacing over the whole series first,
+:func:`uniform_step`). What cannot go in pieces
 with the same bits (an FFT over the whole series) is not here.
 
 A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
@@ -22,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ['Interp', 'arange_size', 'arange_piece', 'median_positive_steps', 'sosfiltfilt',
-           'PIECE_ROWS']
+           'uniform_step', 'gradient_piece', 'PIECE_ROWS']
 
 #: The samples read at a time by default (a few MB of pieces held).
 PIECE_ROWS = 1 << 14
@@ -172,4 +174,45 @@ def sosfiltfilt(sos: np.ndarray, n: int, read: Callable, width: int, folder=None
         raise
     finally:
         fwd.close()
+    return out
+
+
+def uniform_step(n: int, read: Callable, rows: int = PIECE_ROWS):
+    """:func:`numpy.gradient`'s test of its coordinates ``x`` (n,) from ``read(lo, hi)``:
+    every step equal to the first: that step (a numpy float), else None."""
+    first, last = None, None
+    for lo in range(0, n, rows):
+        x = np.asarray(read(lo, min(lo + rows, n)), float)
+        s = np.diff(x if last is None else np.concatenate([[last], x]))
+        last = x[-1] if x.size else last
+        if s.size and first is None:
+            first = s[0]
+        if s.size and not (s == first).all():
+            return None
+    return first
+
+
+def gradient_piece(read_f: Callable, read_x: Callable, n: int, lo: int, hi: int, step
+                   ) -> np.ndarray:
+    """``np.gradient(f, x)[lo:hi]`` (edge order 1) of ``f`` and ``x`` (n,) from
+    ``read_f(lo, hi)``, ``read_x(lo, hi)``; ``step``: :func:`uniform_step` of ``x``. numpy's
+    formulas on the same numbers (a sample either side read with the piece)."""
+    a, b = max(lo - 1, 0), min(hi + 1, n)
+    f = np.asarray(read_f(a, b), float)
+    d = np.diff(np.asarray(read_x(a, b), float))
+    out = np.empty(hi - lo)
+    i0, i1 = max(lo, 1), min(hi, n - 1)          # the interior points of lo:hi
+    if i1 > i0:
+        fm, f0, fp = f[i0 - 1 - a:i1 - 1 - a], f[i0 - a:i1 - a], f[i0 + 1 - a:i1 + 1 - a]
+        if step is not None:
+            out[i0 - lo:i1 - lo] = (fp - fm) / (2. * step)
+        else:
+            dx1, dx2 = d[i0 - 1 - a:i1 - 1 - a], d[i0 - a:i1 - a]
+            out[i0 - lo:i1 - lo] = (-(dx2) / (dx1 * (dx1 + dx2)) * fm
+                                    + (dx2 - dx1) / (dx1 * dx2) * f0
+                                    + dx1 / (dx2 * (dx1 + dx2)) * fp)
+    if lo == 0:
+        out[0] = (f[1] - f[0]) / (step if step is not None else d[0])
+    if hi == n:
+        out[-1] = (f[-1] - f[-2]) / (step if step is not None else d[-1])
     return out

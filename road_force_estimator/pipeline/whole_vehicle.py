@@ -206,22 +206,30 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
 
 def spilled_fit(spill: SpilledEstimate, vehicle):
     """:func:`~.estimation.whole_vehicle.fit_axles` of an offline estimate spilled in
-    ``spill`` (its numbers, bit for bit): the stamps, distances, instrumented wheels' roads
-    and whether each carried its share, read back a piece at a time into arrays of the
-    drive (~100 bytes a sample instead of the estimate's ~350)."""
+    ``spill`` (its numbers, bit for bit): :func:`~.estimation.axle_fit.assess_pieces` on
+    the spilled stamps, distances, instrumented wheels' roads and whether each carried its
+    share, at most :data:`SINK_ROWS` samples at a time (held whole: the distance grid's
+    arrays, not the samples' columns)."""
+    from road_force_estimator.core.pieces import PIECE_ROWS
     from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
-    from road_force_estimator.estimation.axle_fit import assess_axles
+    from road_force_estimator.estimation.axle_fit import assess_pieces
 
     axles = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
     if 'road_m' not in (spill.cols or {}) or len(axles) < 3 or spill.n < 2:
         return None
     rows = [2 * j + s for j in axles for s in (0, 1)]
-    grounded = spill.column_of(lambda wv: wv.load_n[rows]
-                               >= LIFT_OFF_FRACTION * wv.static_n[rows], len(rows), bool)
-    return assess_axles(spill.column('stamps_ns'), spill.column('distance_m'),
-                        spill.column('road_m', rows), None, None,
-                        [vehicle.axles[j].position_m for j in axles],
-                        [vehicle.axles[j].name for j in axles], grounded=grounded)
+    cols = spill.cols
+
+    def read(lo, hi, w):                     # the instrumented wheel w's road, grounded
+        r = rows[w]
+        return (cols['road_m'].read(lo, hi)[:, r],
+                cols['load_n'].read(lo, hi)[:, r]
+                >= LIFT_OFF_FRACTION * cols['static_n'].read(lo, hi)[:, r])
+
+    return assess_pieces(spill.n, cols['stamps_ns'].read, cols['distance_m'].read, read,
+                         [vehicle.axles[j].position_m for j in axles],
+                         [vehicle.axles[j].name for j in axles],
+                         rows=min(SINK_ROWS, PIECE_ROWS))
 
 
 def _counts(rejected: dict) -> dict[str, dict[str, int]]:
