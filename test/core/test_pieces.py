@@ -109,3 +109,17 @@ def test_fuse_path_in_pieces_is_fuse_path(tmp_path, n, rows):
         np.testing.assert_array_equal(got.array(), want)
     finally:
         got.close()
+
+
+@pytest.mark.parametrize('even', [True, False])
+@pytest.mark.parametrize('n, rows', [(1000, 1), (1000, 333), (1000, 1000), (2, 1), (3, 2)])
+def test_gradient_is_numpys(even, n, rows):
+    t = np.arange(n) * 0.5 if even else np.cumsum(
+        np.random.default_rng(n).uniform(5e-4, 2e-3, n))
+    f = stops(n, seed=n + 1)
+    step = pieces.uniform_step(n, reader(t), rows)
+    assert (step is not None) == (even or n == 2)        # one step: even
+    got = np.concatenate([pieces.gradient_piece(reader(f), reader(t), n, lo,
+                                                min(lo + rows, n), step)
+                          for lo in range(0, n, rows)])
+    np.testing.assert_array_equal(got, np.gradient(f, t))
