@@ -312,7 +312,13 @@ def fuse_path(distance_m: np.ndarray, road_m: np.ndarray, grounded: np.ndarray,
     reads = np.array([np.interp(p + lag, x, road_m[j]) for j, lag in enumerate(xi)])
     ok = np.array([np.interp(p + lag, x, np.asarray(grounded[j], float)) > 0.999
                    for j, lag in enumerate(xi)]).astype(float)
-    long = _low_pass(p, reads, dx)
+    return _fused(reads, ok, _low_pass(p, reads, dx))
+
+
+def _fused(reads: np.ndarray, ok: np.ndarray, long: np.ndarray) -> np.ndarray:
+    """:func:`fuse_path`'s sum at each point: the long waves ``long`` (N, k) averaged, the
+    short ones (``reads - long``) averaged over the axles ``ok`` (N, k, 0/1) or every
+    axle's where none is."""
     short = reads - long
     n_ok = ok.sum(axis=0)
     return long.mean(axis=0) + np.where(
@@ -332,3 +338,72 @@ def _low_pass(p: np.ndarray, reads: np.ndarray, dx: float) -> np.ndarray:
     sos = _signal().butter(2, 1.0 / FUSION_SPLIT_WAVELENGTH_M, fs=1.0 / dx, output='sos')
     smooth = _signal().sosfiltfilt(sos, even, axis=-1)
     return np.array([np.interp(p, grid, r) for r in smooth])
+
+
+def fuse_path_pieces(n: int, read_x, read, positions_m, folder=None,
+                     rows: int | None = None):
+    """:func:`fuse_path` (its numbers, bit for bit) from a source read ``rows`` samples at a
+    time (:data:`~.core.pieces.PIECE_ROWS`): ``read_x(lo, hi)`` the front axle's distance
+    (m, non-decreasing) and ``read(lo, hi, j) -> (road_m, grounded)`` axle j's ((k,) each)
+    of the samples ``lo:hi`` of ``n``. Returns ``(m, path)``: the fused road (m) of the first m
+    samples (those the last axle has passed) in a :class:`~.core.spill.SpillColumn` (m,) in
+    ``folder`` (the caller closes it). Held: a piece's samples and the road ``positions_m``
+    ahead of it; the median step by counting passes, the low pass's grid and zero-phase
+    filter in pieces over spilled columns (:mod:`~.core.pieces`)."""
+    from road_force_estimator.core import pieces
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    from road_force_estimator.core.spill import SpillColumn
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    xi = np.asarray(positions_m, float)
+    na = xi.size
+    path = SpillColumn(float, None, folder)
+    if not n:
+        return 0, path
+    x_end = read_x(n - 1, n)[-1]
+    m = sum(int(np.count_nonzero(read_x(lo, min(lo + rows, n)) + xi.max() <= x_end))
+            for lo in range(0, n, rows))
+    dx = pieces.median_positive_steps(n, read_x, rows)
+
+    def axle(j: int):                         # axle j's road and whether grounded
+        def both(lo, hi):
+            road, grounded = read(lo, hi, j)
+            return read_x(lo, hi), np.array([road, grounded], float)
+        return both
+
+    spilled: list = []
+    try:
+        reads = SpillColumn(float, 2 * na, folder)   # at p + xi_j: the road, grounded
+        spilled.append(reads)
+        at = [pieces.Interp(n, axle(j), rows) for j in range(na)]
+        for lo in range(0, m, rows):
+            p = read_x(lo, min(lo + rows, m))
+            r = [at[j](p + lag) for j, lag in enumerate(xi)]
+            reads.append(np.array([v[0] for v in r] + [v[1] for v in r]).T)
+        del at, r
+        p0, p1 = read_x(0, 1)[0], read_x(m - 1, m)[-1] if m else read_x(0, 1)[0]
+        long = None
+        if m and dx > 0.0 and p1 - p0 >= 4.0 * FUSION_SPLIT_WAVELENGTH_M:
+            g = pieces.arange_size(p0, p1 + 0.5 * dx, dx)
+            even = pieces.Interp(m, lambda lo, hi: (read_x(lo, hi),
+                                                    reads.read(lo, hi)[:, :na].T), rows)
+            sos = _signal().butter(2, 1.0 / FUSION_SPLIT_WAVELENGTH_M, fs=1.0 / dx,
+                                   output='sos')
+            smooth = pieces.sosfiltfilt(
+                sos, g, lambda lo, hi: even(pieces.arange_piece(p0, dx, lo, hi)), na,
+                folder, rows)
+            spilled.append(smooth)
+            long = pieces.Interp(g, lambda lo, hi: (pieces.arange_piece(p0, dx, lo, hi),
+                                                    smooth.read(lo, hi).T), rows)
+        for lo in range(0, m, rows):
+            r = reads.read(lo, min(lo + rows, m)).T
+            own = np.ascontiguousarray(r[:na])
+            low = own.copy() if long is None else long(read_x(lo, min(lo + rows, m)))
+            path.append(_fused(own, (r[na:] > 0.999).astype(float), low))
+    except BaseException:
+        path.close()
+        raise
+    finally:
+        for c in spilled:
+            c.close()
+    return m, path

@@ -54,7 +54,7 @@ __all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE
            'ONLINE_WINDOW_M', 'ONLINE_EVERY_M', 'ONLINE_THRESHOLD', 'ONLINE_SLICE_SAMPLES',
            'CAUSAL_THRESHOLD', 'CAUSAL_MAX_ACCEL_MPS2', 'CAUSAL_ACCEL_SPAN_S', 'CAUSAL_EDGE_M',
            'AxleFit', 'OnlineAxleFit',
-           'assess_axles', 'assess_steps']
+           'assess_axles', 'assess_steps', 'assess_pieces']
 
 #: The wavelength bands judged (m): the axles' own modes (wheel hop, 9-12 Hz) and the
 #: bodies' coupling over them at highway speeds. Longer waves are the bodies' motion,
@@ -204,7 +204,6 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     dropped down to a length of factors 2, 3 and 5 (at most a few %: the FFTs of the
     analytic signals several times faster; online); ``causal``: the roads are the causal
     ones (zero latency: module notes)."""
-    from road_force_estimator.core.scipy_signal import signal
     from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
 
     names = tuple(axle_names)
@@ -214,14 +213,12 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     if road.shape[0] != 2 * n or n < 3:
         raise ValueError(f'{road.shape[0]} roads for {n} axles: need 2 per axle, 3 axles '
                          'or more (a median of the others)')
-    misfit = np.full((n, 2, len(BANDS_M)), np.nan)
-    spread = np.full_like(misfit, np.nan)
     t = (np.asarray(stamps_ns, np.int64) - int(np.asarray(stamps_ns)[0])) * 1e-9
     x = np.asarray(distance_m, float)
     start = x[np.searchsorted(t, skip_s)] if t[-1] > skip_s else math.inf
     end = x[-1] - xi.max()
     if not end - start >= MIN_LENGTH_M:
-        return AxleFit(names, misfit, spread, (), (), max(end - start, 0.0), threshold)
+        return _unmeasured(names, start, end, threshold)
     grid = np.arange(start, end, GRID_M)
     if fast_grid:
         grid = grid[grid.size - _smooth_below(grid.size):]
@@ -234,6 +231,35 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
         steady &= np.abs(_acceleration(t, speed)) <= CAUSAL_MAX_ACCEL_MPS2
     fast = np.array([np.interp(grid + xi[j], x, steady.astype(float)) > 0.999
                      for j in range(n)])
+
+    def path_of(s: int):
+        """The side's roads read on the grid, whether every wheel on it carried its
+        share there."""
+        return (np.array([np.interp(grid + xi[j], x, road[2 * j + s]) for j in range(n)]),
+                np.all([np.interp(grid + xi[j], x, grounded[2 * j + s].astype(float)) > 0.999
+                        for j in range(n)], axis=0))
+
+    return (yield from _judge(names, xi, start, end, grid, fast, path_of, threshold, causal))
+
+
+def _unmeasured(names: tuple, start: float, end: float, threshold: float) -> AxleFit:
+    """No verdict: too short a drive."""
+    misfit = np.full((len(names), 2, len(BANDS_M)), np.nan)
+    return AxleFit(names, misfit, misfit.copy(), (), (), max(end - start, 0.0), threshold)
+
+
+def _judge(names: tuple, xi: np.ndarray, start: float, end: float, grid: np.ndarray | None,
+           fast: np.ndarray, path_of, threshold: float, causal: bool
+           ) -> Generator[None, None, AxleFit]:
+    """:func:`assess_steps` from the grid on (``grid``'s points read only ``causal``):
+    ``fast`` (N, grid) each axle passed at speed,
+    ``path_of(side) -> (reads (N, grid), grounded (grid,))`` a wheel path's roads on the
+    grid and whether every wheel on it carried its share."""
+    from road_force_estimator.core.scipy_signal import signal
+
+    n = xi.size
+    misfit = np.full((n, 2, len(BANDS_M)), np.nan)
+    spread = np.full_like(misfit, np.nan)
     moving = _eroded(np.all(fast, axis=0), CAUSAL_EDGE_M if causal else BANDS_M[-1][1])
     if causal:
         edge = int(math.ceil(CAUSAL_EDGE_M / GRID_M))
@@ -242,7 +268,7 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     sig = signal()
     kept: list = []                       # causal: each band's rows for the second pass
     for side in (0, 1):
-        reads = np.array([np.interp(grid + xi[j], x, road[2 * j + side]) for j in range(n)])
+        reads, on = path_of(side)
         if causal:
             for j in range(n):
                 if fast[j].any() and not fast[j].all():
@@ -250,9 +276,7 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
                                                    reads[j, fast[j]])
             reads = np.gradient(reads, axis=1) / GRID_M
         yield
-        ok = moving & _eroded(np.all([np.interp(grid + xi[j], x,
-                                                grounded[2 * j + side].astype(float)) > 0.999
-                                      for j in range(n)], axis=0), LIFT_OFF_MARGIN_M)
+        ok = moving & _eroded(on, LIFT_OFF_MARGIN_M)
         if np.count_nonzero(ok) * GRID_M < MIN_LENGTH_M:
             continue
         for b, (short, long) in enumerate(BANDS_M):
@@ -293,6 +317,83 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
             sensors.append(f'{names[j]}_{("left", "right")[hi]}_suspension')
     return AxleFit(names, misfit, spread, tuple(names[j] for j in bad), tuple(sensors),
                    float(end - start), threshold)
+
+
+def assess_pieces(n_samples: int, read_stamps, read_x, read, positions_m, axle_names, *,
+                  threshold: float = THRESHOLD, skip_s: float = SKIP_S,
+                  rows: int | None = None) -> AxleFit:
+    """:func:`assess_axles` (its numbers, bit for bit) from a drive's samples read ``rows``
+    at a time (:data:`~.core.pieces.PIECE_ROWS`): ``read_stamps(lo, hi)`` (ns),
+    ``read_x(lo, hi)`` the front axle's distance (m, non-decreasing) and ``read(lo, hi, w)
+    -> (road_m, grounded)`` wheel w's (``2 j + side``, (k,) each) of the samples ``lo:hi``
+    of ``n_samples`` (>= 2). The samples' columns are never held whole: the start, the
+    speed (:func:`numpy.gradient`'s), the grid's points and every wheel's road on it come a
+    piece at a time (:mod:`~.core.pieces`); held whole, as :func:`assess_steps` holds them,
+    the grid's arrays (the band-passed roads' analytic signals are FFTs over the grid)."""
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    names = tuple(axle_names)
+    xi = np.asarray(positions_m, float)
+    n, m = xi.size, int(n_samples)
+    if n < 3:
+        raise ValueError(f'{n} axles: need 3 or more (a median of the others)')
+    first = int(np.asarray(read_stamps(0, 1))[0])
+
+    def read_t(lo, hi):
+        return (np.asarray(read_stamps(lo, hi), np.int64) - first) * 1e-9
+
+    x_end = np.asarray(read_x(m - 1, m), float)[-1]
+    end = x_end - xi.max()
+    start = math.inf
+    if read_t(m - 1, m)[-1] > skip_s:
+        for lo in range(0, m, rows):
+            k = int(np.searchsorted(read_t(lo, min(lo + rows, m)), skip_s))
+            if k < min(rows, m - lo):
+                start = np.asarray(read_x(lo + k, lo + k + 1), float)[0]
+                break
+    if not end - start >= MIN_LENGTH_M:
+        return _unmeasured(names, start, end, threshold)
+    g = pieces.arange_size(start, end, GRID_M)
+    step = pieces.uniform_step(m, read_t, rows)
+
+    def steady(lo, hi):                  # the samples at speed, and their distances
+        x = np.asarray(read_x(lo, hi), float)
+        speed = pieces.gradient_piece(read_x, read_t, m, lo, hi, step)
+        return x, (speed >= MIN_SPEED_MPS).astype(float)[None, :]
+
+    def on_grid(source, what) -> np.ndarray:
+        """``what([values (w, k) of each axle]) -> (r, k)``, every axle j's ``source(j)``
+        (:class:`~.core.pieces.Interp`'s read) at the grid's points + xi_j, a piece of the
+        grid at a time: (r, grid)."""
+        at = [pieces.Interp(m, source(j), rows) for j in range(n)]
+        out = None
+        for lo in range(0, g, rows):
+            q = pieces.arange_piece(start, GRID_M, lo, min(lo + rows, g))
+            v = what([at[j](q + xi[j]) for j in range(n)])
+            if out is None:
+                out = np.empty(v.shape[:-1] + (g,), v.dtype)
+            out[..., lo:lo + q.size] = v
+        return out
+
+    fast = on_grid(lambda j: steady, lambda v: np.array([r[0] > 0.999 for r in v]))
+
+    def path_of(side: int):
+        def wheel(j):
+            def read_wheel(lo, hi):
+                road, grounded = read(lo, hi, 2 * j + side)
+                return read_x(lo, hi), np.array([road, grounded], float)
+            return read_wheel
+        out = on_grid(wheel, lambda v: np.array(
+            [r[0] for r in v] + [np.all([r[1] > 0.999 for r in v], axis=0)]))
+        return out[:n], out[n] > 0.5
+
+    steps = _judge(names, xi, start, end, None, fast, path_of, threshold, False)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
 
 
 class OnlineAxleFit:

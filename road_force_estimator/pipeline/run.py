@@ -66,6 +66,8 @@ def run_drive(folder: Path, output: Path, input_path: Path, vehicle, observer, o
         finally:
             if wv is not None:                 # its temporary files
                 wv.close()
+            if fused is not None and hasattr(fused, 'close'):
+                fused.close()
     else:
         stages.next('reading the bag')
         drive, speed, early = one_block.read(input_path, options['segment_length_m'])

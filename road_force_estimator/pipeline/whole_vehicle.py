@@ -42,7 +42,8 @@ __all__ = ['is_whole_vehicle', 'front_axle_vehicle', 'estimate', 'front_wheels',
            'bag_streams', 'fused_profile', 'fused_streams', 'fused_road',
            'FusedRoad', 'fit_values', 'imu_values', 'MISMATCH',
            'STATUS_NAME', 'with_rejections', 'rejection_values', 'sensor_status',
-           'BlockJoin', 'SpilledEstimate', 'bag_stream_pieces', 'SINK_ROWS', 'spilled_fit']
+           'BlockJoin', 'SpilledEstimate', 'SpilledFused', 'bag_stream_pieces', 'SINK_ROWS',
+           'spilled_fit']
 
 #: The samples of a spilled estimate the sinks read at a time (:class:`BlockJoin`).
 SINK_ROWS = 1 << 16
@@ -206,22 +207,30 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
 
 def spilled_fit(spill: SpilledEstimate, vehicle):
     """:func:`~.estimation.whole_vehicle.fit_axles` of an offline estimate spilled in
-    ``spill`` (its numbers, bit for bit): the stamps, distances, instrumented wheels' roads
-    and whether each carried its share, read back a piece at a time into arrays of the
-    drive (~100 bytes a sample instead of the estimate's ~350)."""
+    ``spill`` (its numbers, bit for bit): :func:`~.estimation.axle_fit.assess_pieces` on
+    the spilled stamps, distances, instrumented wheels' roads and whether each carried its
+    share, at most :data:`SINK_ROWS` samples at a time (held whole: the distance grid's
+    arrays, not the samples' columns)."""
+    from road_force_estimator.core.pieces import PIECE_ROWS
     from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
-    from road_force_estimator.estimation.axle_fit import assess_axles
+    from road_force_estimator.estimation.axle_fit import assess_pieces
 
     axles = [j for j, a in enumerate(vehicle.axles) if a.instrumented]
     if 'road_m' not in (spill.cols or {}) or len(axles) < 3 or spill.n < 2:
         return None
     rows = [2 * j + s for j in axles for s in (0, 1)]
-    grounded = spill.column_of(lambda wv: wv.load_n[rows]
-                               >= LIFT_OFF_FRACTION * wv.static_n[rows], len(rows), bool)
-    return assess_axles(spill.column('stamps_ns'), spill.column('distance_m'),
-                        spill.column('road_m', rows), None, None,
-                        [vehicle.axles[j].position_m for j in axles],
-                        [vehicle.axles[j].name for j in axles], grounded=grounded)
+    cols = spill.cols
+
+    def read(lo, hi, w):                     # the instrumented wheel w's road, grounded
+        r = rows[w]
+        return (cols['road_m'].read(lo, hi)[:, r],
+                cols['load_n'].read(lo, hi)[:, r]
+                >= LIFT_OFF_FRACTION * cols['static_n'].read(lo, hi)[:, r])
+
+    return assess_pieces(spill.n, cols['stamps_ns'].read, cols['distance_m'].read, read,
+                         [vehicle.axles[j].position_m for j in axles],
+                         [vehicle.axles[j].name for j in axles],
+                         rows=min(SINK_ROWS, PIECE_ROWS))
 
 
 def _counts(rejected: dict) -> dict[str, dict[str, int]]:
@@ -649,8 +658,9 @@ class FusedRoad:
 def fused_profile(wv, vehicle) -> FusedRoad | None:
     """Every axle's road fused by distance: online the points the estimator streamed
     (``wv.fused``, the node's), offline :func:`~.estimation.articulated.fuse_roads` (the
-    points the last axle has passed); None when ``wv`` holds no road or no point is passed by
-    every axle."""
+    points the last axle has passed; of a :class:`SpilledEstimate`, a :class:`SpilledFused`
+    the caller closes); None when ``wv`` holds no road or no point is passed by every
+    axle."""
     from road_force_estimator.estimation.articulated import ArticulatedEstimate, fuse_roads
 
     if hasattr(wv, 'rows'):                    # a source of rows: its drive's fields
@@ -687,32 +697,97 @@ def fused_profile(wv, vehicle) -> FusedRoad | None:
                      float(vehicle.axles[0].wheel_half_track_m))
 
 
-def _spilled_fused(source, vehicle) -> FusedRoad | None:
+def _spilled_fused(source, vehicle) -> SpilledFused | None:
     """:func:`fused_profile` offline from a spilled estimate ``source``
-    (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path` per wheel path on
-    the distances, that side's roads and whether each wheel carried its share (as
-    :func:`~.estimation.articulated.fuse_roads` computes it), read back a piece at a time: the
-    one-block numbers bit for bit, one side's columns held at a time."""
-    from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION, fuse_path
+    (:class:`SpilledEstimate`): :func:`~.estimation.articulated.fuse_path_pieces` per wheel
+    path on the spilled distances, each axle's road on that side and whether its wheel
+    carried its share (as :func:`~.estimation.articulated.fuse_roads` computes it), at most
+    :data:`SINK_ROWS` samples at a time: the one-block numbers bit for bit, in a
+    :class:`SpilledFused` (the caller closes it)."""
+    from road_force_estimator.core.pieces import PIECE_ROWS
+    from road_force_estimator.estimation.articulated import (
+        LIFT_OFF_FRACTION, fuse_path_pieces)
 
     xi = [a.position_m for a in vehicle.axles]
-    x = source.column('distance_m')
-    keep = np.flatnonzero(x + max(xi) <= x[-1])
-    if not keep.size:
-        return None
-    paths = []
-    for side in (0, 1):
-        rows = list(range(side, 2 * len(xi), 2))
+    cols = source.cols
+    step = min(SINK_ROWS, PIECE_ROWS)
 
-        def grounded(wv, rows=rows):         # fuse_roads' static: load - (load - static)
-            load = wv.load_n[rows]
-            return load >= LIFT_OFF_FRACTION * (load - (load - wv.static_n[rows]))
+    def read_x(lo, hi):
+        return cols['distance_m'].read(lo, hi)
 
-        paths.append(fuse_path(x, source.column('road_m', rows),
-                               source.column_of(grounded, len(rows), bool), xi))
-    ok = np.isfinite(paths[0]) & np.isfinite(paths[1])
-    return FusedRoad(source.column('stamps_ns')[keep][ok], x[keep][ok], paths[0][ok],
-                     paths[1][ok], len(xi), float(vehicle.axles[0].wheel_half_track_m))
+    paths, m = [], 0
+    try:
+        for side in (0, 1):
+            def read(lo, hi, j, side=side):  # axle j's wheel on this side
+                w = 2 * j + side
+                load = cols['load_n'].read(lo, hi)[:, w]
+                static = cols['static_n'].read(lo, hi)[:, w]   # fuse_roads' static
+                return (cols['road_m'].read(lo, hi)[:, w],
+                        load >= LIFT_OFF_FRACTION * (load - (load - static)))
+
+            m, path = fuse_path_pieces(source.n, read_x, read, xi, source.folder, step)
+            paths.append(path)
+        if not m:
+            return None
+        fused = SpilledFused(source.folder, len(xi),
+                             float(vehicle.axles[0].wheel_half_track_m))
+        try:
+            for lo in range(0, m, step):
+                hi = min(lo + step, m)
+                left, right = paths[0].read(lo, hi), paths[1].read(lo, hi)
+                ok = np.isfinite(left) & np.isfinite(right)
+                fused.append(cols['stamps_ns'].read(lo, hi)[ok], read_x(lo, hi)[ok],
+                             left[ok], right[ok])
+        except BaseException:
+            fused.close()
+            raise
+    finally:
+        for path in paths:
+            path.close()
+    return fused
+
+
+class SpilledFused:
+    """The fused profile of a spilled estimate (:func:`_spilled_fused`) in temporary files
+    in ``folder`` (:class:`~.core.spill.SpillColumn`), not in memory while the front axle's
+    stage runs: :class:`FusedRoad`'s fields read whole (the report's), a piece of points
+    (:meth:`read`) or those stamped within a range (:meth:`Cursor`); ``axles``,
+    ``half_track_m`` as there. :meth:`close` lets the files go."""
+
+    FIELDS = (('stamps_ns', np.int64), ('distance_m', float), ('left_m', float),
+              ('right_m', float))
+
+    def __init__(self, folder, axles: int, half_track_m: float) -> None:
+        from road_force_estimator.core.spill import SpillColumn
+
+        self.axles, self.half_track_m, self.n = int(axles), float(half_track_m), 0
+        self.cols: dict = {}
+        try:
+            for f, dtype in self.FIELDS:
+                self.cols[f] = SpillColumn(dtype, None, folder)
+        except BaseException:
+            self.close()
+            raise
+
+    def append(self, *fields) -> None:
+        """Points at the end (the four fields' values, stamps increasing)."""
+        for (f, _), a in zip(self.FIELDS, fields):
+            self.cols[f].append(a)
+        self.n += len(fields[0])
+
+    def read(self, lo: int, hi: int) -> FusedRoad:
+        """The points ``lo:hi``."""
+        return FusedRoad(*(self.cols[f].read(lo, hi) for f, _ in self.FIELDS), self.axles,
+                         self.half_track_m)
+
+    def __getattr__(self, name: str):
+        if name in dict(self.FIELDS) and 'cols' in self.__dict__:
+            return self.cols[name].array()       # a field whole: read back
+        raise AttributeError(name)
+
+    def close(self) -> None:
+        for col in self.cols.values():
+            col.close()
 
 
 def fused_streams(fused: FusedRoad | None) -> list:
@@ -847,6 +922,30 @@ class BlockJoin:
         self.rows = self.rows or SINK_ROWS
         self._buf = None
         self._lo = 0
+        self._fused = None                   # a spilled fused profile's points held
+        self._fused_lo = 0
+
+    def _fused_cover(self, first: int, last: int):
+        """The fused profile's points stamped ``first`` .. ``last`` and more: those of a
+        :class:`SpilledFused` read a piece at a time (those before ``first`` let go)."""
+        f = self.fused
+        if not isinstance(f, SpilledFused):
+            return f
+        names = [n for n, _ in SpilledFused.FIELDS]
+        if self._fused is None:
+            self._fused = f.read(0, min(self.rows, f.n))
+        while True:
+            buf = self._fused
+            cut = int(np.searchsorted(buf.stamps_ns, first))
+            if cut:                          # before ``first``: never needed again
+                buf = self._fused = replace(buf, **{n: getattr(buf, n)[cut:] for n in names})
+                self._fused_lo += cut
+            hi = self._fused_lo + len(buf.stamps_ns)
+            if (len(buf.stamps_ns) and int(buf.stamps_ns[-1]) >= last) or hi >= f.n:
+                return buf
+            more = f.read(hi, min(hi + self.rows, f.n))
+            self._fused = replace(buf, **{n: np.concatenate([getattr(buf, n), getattr(more, n)])
+                                          for n in names})
 
     def _cover(self, first: int, last: int):
         """The whole vehicle's samples of stamps ``first`` .. ``last`` and more (those
@@ -875,7 +974,9 @@ class BlockJoin:
             return est
         part = self._cover(int(stamps[0]), int(stamps[-1]))
         est = front_wheels(est, part)
-        return fused_road(est, part, self.fused) if len(part.stamps_ns) else est
+        if not len(part.stamps_ns):
+            return est
+        return fused_road(est, part, self._fused_cover(int(stamps[0]), int(stamps[-1])))
 
     def write_streams(self, bag) -> None:
         """The whole vehicle's topics and the fused profile's into ``bag`` (an
@@ -883,7 +984,12 @@ class BlockJoin:
         (:func:`bag_stream_pieces`, :func:`fused_streams`)."""
         for streams in bag_stream_pieces(self.source, self.rows):
             bag.write_streams(streams)
-        bag.write_streams(fused_streams(self.fused))
+        f = self.fused
+        if not isinstance(f, SpilledFused):
+            bag.write_streams(fused_streams(f))
+            return
+        for lo in range(0, max(f.n, 1), self.rows):    # (no point: the topics, empty)
+            bag.write_streams(fused_streams(f.read(lo, min(lo + self.rows, f.n))))
 
     def diagnostics(self, diagnostics: list) -> list:
         """The per-second statuses with the whole vehicle's (:func:`add_diagnostics`)."""

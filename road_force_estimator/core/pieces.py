@@ -1,0 +1,218 @@
+"""A long series' whole-array numbers a piece at a time, with the whole-array call's bits
+(issue 32: the whole vehicle's fused profile and model fit offline from spilled columns).
+
+Each helper here reproduces one numpy or scipy call on an array that is never held whole:
+:class:`Interp` is :func:`numpy.interp` over a source read in pieces (the same bracketing
+samples, so the same formula on the same numbers), :func:`arange_size` / :func:`arange_piece`
+the points of a float :func:`numpy.arange` (numpy's own fill: ``start + i * delta``),
+:func:`median_positive_steps` :func:`numpy.median` of a column's positive steps (exact:
+selection by counting, 16 bits of the float's pattern per pass), and :func:`sosfiltfilt`
+:func:`scipy.signal.sosfiltfilt` (odd padding, its default pad length: the forward pass with
+its state carried over the pieces and its output spilled, the backward pass over the pieces
+in reverse, as ``sosfiltfilt`` runs both over the padded array), :func:`gradient_piece`
+:func:`numpy.gradient` (its test for even spacing over the whole series first,
+:func:`uniform_step`). What cannot go in pieces
+with the same bits (an FFT over the whole series) is not here.
+
+A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+__all__ = ['Interp', 'arange_size', 'arange_piece', 'median_positive_steps', 'sosfiltfilt',
+           'uniform_step', 'gradient_piece', 'PIECE_ROWS']
+
+#: The samples read at a time by default (a few MB of pieces held).
+PIECE_ROWS = 1 << 14
+
+
+class Interp:
+    """``np.interp(q, x, f[r])`` for every row r, ``x`` (n,) non-decreasing and ``f`` (w, n)
+    read from ``read(lo, hi) -> (x[lo:hi], f[:, lo:hi])`` ``rows`` samples at a time: the
+    bits of the whole arrays' call (each query interpolated between the same two samples).
+    Held: from the last sample at or before the first query on, up to the first past the
+    last; queries that go back before it read the source again from its start."""
+
+    def __init__(self, n: int, read: Callable, rows: int = PIECE_ROWS) -> None:
+        self.n, self.read, self.rows = int(n), read, max(int(rows), 1)
+        self._start()
+
+    def _start(self) -> None:
+        self.lo = self.hi = 0                    # the samples held: lo:hi
+        self.x = np.empty(0)
+        self.f: np.ndarray | None = None
+
+    def _cut(self, q0: float) -> None:
+        """The samples before the last at or before ``q0`` let go."""
+        cut = int(np.searchsorted(self.x, q0, side='right')) - 1
+        if cut > 0:
+            self.x, self.f = self.x[cut:], self.f[:, cut:]
+            self.lo += cut
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        """(w, len(q)) the rows of ``f`` at ``q`` (non-decreasing)."""
+        q = np.asarray(q, float)
+        if self.lo and q.size and q[0] < self.x[0]:
+            self._start()                        # back before the samples held
+        while self.hi < self.n and (self.f is None or (q.size and not self.x[-1] > q[-1])):
+            x, f = self.read(self.hi, min(self.hi + self.rows, self.n))
+            self.hi += len(x)
+            f = np.asarray(f, float)
+            self.x = np.concatenate([self.x, x])
+            self.f = f if self.f is None else np.concatenate([self.f, f], axis=1)
+            if q.size:
+                self._cut(q[0])
+        if not q.size:
+            return np.empty((self.f.shape[0], 0))
+        self._cut(q[0])
+        return np.array([np.interp(q, self.x, r) for r in self.f]).reshape(-1, q.size)
+
+
+def arange_size(start: float, stop: float, step: float) -> int:
+    """``np.arange(start, stop, step).size`` (floats: ``ceil((stop - start) / step)``)."""
+    return max(0, math.ceil((stop - start) / step))
+
+
+def arange_piece(start: float, step: float, lo: int, hi: int) -> np.ndarray:
+    """``np.arange(start, stop, step)[lo:hi]`` for any ``stop`` past them: numpy sets the
+    first two points and fills the others with ``start + i * (points[1] - points[0])``."""
+    start, step = float(start), float(step)
+    out = start + np.arange(lo, hi) * ((start + step) - start)
+    if lo <= 0 < hi:
+        out[-lo] = start
+    if lo <= 1 < hi:
+        out[1 - lo] = start + step
+    return out
+
+
+def median_positive_steps(n: int, read: Callable, rows: int = PIECE_ROWS) -> float:
+    """``np.median(s[s > 0])`` of ``s = np.diff(x)``, ``x`` (n,) from ``read(lo, hi)``
+    (``rows`` at a time); 0.0 without a positive step. Exact: the middle steps selected
+    by their float patterns (positive floats sort as their bits), 16 bits per pass."""
+    def positive(prefix: int, bits: int):
+        last = None
+        for lo in range(0, n, rows):
+            x = np.asarray(read(lo, min(lo + rows, n)), float)
+            s = np.diff(x if last is None else np.concatenate([[last], x]))
+            last = x[-1] if x.size else last
+            s = s[s > 0.0].view(np.uint64)
+            if bits < 64:
+                s = s[(s >> np.uint64(bits)) == np.uint64(prefix)]
+            yield s
+
+    def select(k: int) -> float:
+        prefix = 0
+        for shift in (48, 32, 16, 0):
+            hist = np.zeros(1 << 16, np.int64)
+            for s in positive(prefix, shift + 16):
+                hist += np.bincount(((s >> np.uint64(shift)) & np.uint64(0xFFFF))
+                                    .astype(np.int64), minlength=1 << 16)
+            cum = np.cumsum(hist)
+            b = int(np.searchsorted(cum, k, side='right'))
+            k -= int(cum[b - 1]) if b else 0
+            prefix = (prefix << 16) | b
+        return float(np.array([prefix], np.uint64).view(np.float64)[0])
+
+    count = sum(int(s.size) for s in positive(0, 64))
+    if not count:
+        return 0.0
+    mid = [select(count // 2)] if count % 2 else [select(count // 2 - 1), select(count // 2)]
+    return float(np.mean(np.array(mid)))
+
+
+def sosfiltfilt(sos: np.ndarray, n: int, read: Callable, width: int, folder=None,
+                rows: int = PIECE_ROWS):
+    """``scipy.signal.sosfiltfilt(sos, X, axis=-1)`` (odd padding, its default pad length)
+    of ``X`` (width, n) from ``read(lo, hi) -> X[:, lo:hi]``, ``rows`` at a time: the output
+    in a :class:`~.spill.SpillColumn` (n, width) in ``folder`` (returned; the caller closes
+    it). The same bits.
+
+    Raises
+    ------
+    ValueError
+        ``n`` not above the pad length (as ``sosfiltfilt``).
+    """
+    from road_force_estimator.core.scipy_signal import signal
+    from road_force_estimator.core.spill import SpillColumn
+
+    sig = signal()
+    sos = np.asarray(sos, float)
+    ntaps = 2 * sos.shape[0] + 1 - min(int((sos[:, 2] == 0).sum()),
+                                       int((sos[:, 5] == 0).sum()))
+    edge = 3 * ntaps
+    if n <= edge:
+        raise ValueError('The length of the input vector x must be greater than padlen, '
+                         f'which is {edge}.')
+    head, tail = read(0, edge + 1), read(n - edge - 1, n)
+    left = 2 * head[:, 0:1] - head[:, edge:0:-1]
+    right = 2 * tail[:, -1:] - tail[:, -2:-(edge + 2):-1]
+    zi0 = sig.sosfilt_zi(sos)[:, None, :]                  # (sections, 1, 2)
+    bounds = [(lo, min(lo + rows, n)) for lo in range(0, n, max(int(rows), 1))]
+    fwd = SpillColumn(float, width, folder)
+    out = SpillColumn(float, width, folder)
+    try:
+        zi = zi0 * left[:, 0:1]
+        y, zi = sig.sosfilt(sos, left, axis=-1, zi=zi)
+        fwd.append(y.T)
+        for lo, hi in bounds:
+            y, zi = sig.sosfilt(sos, read(lo, hi), axis=-1, zi=zi)
+            fwd.append(y.T)
+        y, zi = sig.sosfilt(sos, right, axis=-1, zi=zi)
+        fwd.append(y.T)
+        zi = zi0 * y[:, -1:]
+        _, zi = sig.sosfilt(sos, y[:, ::-1], axis=-1, zi=zi)
+        for lo, hi in reversed(bounds):
+            f = fwd.read(edge + lo, edge + hi).T
+            z, zi = sig.sosfilt(sos, f[:, ::-1], axis=-1, zi=zi)
+            out.write(lo, z[:, ::-1].T)
+    except BaseException:
+        out.close()
+        raise
+    finally:
+        fwd.close()
+    return out
+
+
+def uniform_step(n: int, read: Callable, rows: int = PIECE_ROWS):
+    """:func:`numpy.gradient`'s test of its coordinates ``x`` (n,) from ``read(lo, hi)``:
+    every step equal to the first: that step (a numpy float), else None."""
+    first, last = None, None
+    for lo in range(0, n, rows):
+        x = np.asarray(read(lo, min(lo + rows, n)), float)
+        s = np.diff(x if last is None else np.concatenate([[last], x]))
+        last = x[-1] if x.size else last
+        if s.size and first is None:
+            first = s[0]
+        if s.size and not (s == first).all():
+            return None
+    return first
+
+
+def gradient_piece(read_f: Callable, read_x: Callable, n: int, lo: int, hi: int, step
+                   ) -> np.ndarray:
+    """``np.gradient(f, x)[lo:hi]`` (edge order 1) of ``f`` and ``x`` (n,) from
+    ``read_f(lo, hi)``, ``read_x(lo, hi)``; ``step``: :func:`uniform_step` of ``x``. numpy's
+    formulas on the same numbers (a sample either side read with the piece)."""
+    a, b = max(lo - 1, 0), min(hi + 1, n)
+    f = np.asarray(read_f(a, b), float)
+    d = np.diff(np.asarray(read_x(a, b), float))
+    out = np.empty(hi - lo)
+    i0, i1 = max(lo, 1), min(hi, n - 1)          # the interior points of lo:hi
+    if i1 > i0:
+        fm, f0, fp = f[i0 - 1 - a:i1 - 1 - a], f[i0 - a:i1 - a], f[i0 + 1 - a:i1 + 1 - a]
+        if step is not None:
+            out[i0 - lo:i1 - lo] = (fp - fm) / (2. * step)
+        else:
+            dx1, dx2 = d[i0 - 1 - a:i1 - 1 - a], d[i0 - a:i1 - a]
+            out[i0 - lo:i1 - lo] = (-(dx2) / (dx1 * (dx1 + dx2)) * fm
+                                    + (dx2 - dx1) / (dx1 * dx2) * f0
+                                    + dx1 / (dx2 * (dx1 + dx2)) * fp)
+    if lo == 0:
+        out[0] = (f[1] - f[0]) / (step if step is not None else d[0])
+    if hi == n:
+        out[-1] = (f[-1] - f[-2]) / (step if step is not None else d[-1])
+    return out
