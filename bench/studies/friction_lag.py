@@ -59,6 +59,11 @@ exact 10-sample fixed lag, tuned on the truth, with a lag state per channel on t
 under ``zero_load``: the v_f the fit would take on the first table's zero-load drives, on
 the static-load tracker's readings.
 
+``--fit-detail``: the whole vehicle's fit per v_f tried (:func:`fit_detail`): the samples
+converged and summed, each v_f's nll less the likeliest's and the nll a sample, on the
+test's drives (``test/estimation/test_whole_vehicle_friction_fit.py``), 8 s of them with
+the lag and the offline table's drive.
+
 Target (issue 30): ``friction+lag`` and ``friction+lag, truth v_f 0.005`` within 1.3 x the
 matched drive at 10 ms and offline. Prints a Markdown table: per drive the errors (mean over
 the seeds) and the ratio to the matched drive (the mean of the per-seed ratios, and the
@@ -517,6 +522,43 @@ def zero_load_fit(sims: dict, both: dict) -> list[str]:
     return lines
 
 
+def fit_detail() -> list[str]:
+    """The ``--fit-detail`` table (Markdown rows): the whole vehicle's v_f fit
+    (:func:`.whole_vehicle.fit_friction_velocity`, the file's 0.01 m/s, read from the
+    equilibrium) per v_f tried on drives of class C at 20 m/s, 10 um: the test's
+    (``test/estimation/test_whole_vehicle_friction_fit.py``: road seed 11, 1.5 kN of tanh
+    friction per spring, no lag; 6 s, the plant's v_f 0.005 and 0.02, and 8 s, 0.005), 8 s of
+    it with the 3 ms lag, and the offline table's 20 s drive (road seed 1, the lag, 0.005):
+    the samples converged under it and under every v_f (those summed), the sum less the
+    likeliest's (nats) and the sum per sample (nats), and the fit's CPU seconds (5 runs)."""
+    from bench.accuracy import articulated_wim as wim
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation.whole_vehicle import fit_friction_velocity
+
+    lines = ["| drive (C, 20 m/s, the file's v_f 0.01) | v_f tried (m/s) | converged | summed "
+             "| nll - the likeliest's (nats) | nll a sample (nats) | taken | CPU s |",
+             '|---|---:|---:|---:|---:|---:|---|---:|']
+    for name, seconds, seed, lag, v_true in (('6 s, seed 11, no lag', 6.0, 11, {}, 0.005),
+                                             ('6 s, seed 11, no lag', 6.0, 11, {}, 0.02),
+                                             ('8 s, seed 11, no lag', 8.0, 11, {}, 0.005),
+                                             ('8 s, seed 11, 3 ms lag', 8.0, 11, wim.LAG, 0.005),
+                                             ('20 s, seed 1, 3 ms lag', 20.0, 1, wim.LAG, 0.005)):
+        file_ = {**wim.TANH, **lag}
+        drive = wim.simulate('C', seconds, 1e-5,
+                             {**file_, 'vehicle.leaf_spring_friction_velocity': v_true}, seed)
+        table: list = []
+        c0 = time.process_time()
+        fitted = fit_friction_velocity(wim.file_vehicle(file_), ObserverParameters(),
+                                       drive['stamps'], drive['y'], drive['speed'], table=table)
+        cpu = time.process_time() - c0
+        least = min(row[3] for row in table)
+        for v_f, converged, summed, value in table:
+            taken = 'yes' if v_f == fitted.leaf_spring_friction_velocity_mps else ''
+            lines.append(f"| {name}, the truth's {v_true:g} | {v_f:g} | {converged} | {summed} "
+                         f'| {value - least:.1f} | {value / summed:.1f} | {taken} | {cpu:.0f} |')
+    return lines
+
+
 def lag_limit(duration_s: float) -> list[str]:
     """The ``--whole-vehicle`` lag drives beside the truth-tuned peer (module notes)."""
     from bench.accuracy import articulated_wim as wim
@@ -570,7 +612,14 @@ def main(argv: list[str] | None = None) -> int:
                         'only (road seeds as given)')
     p.add_argument('--whole-vehicle', action='store_true',
                    help='the whole vehicle at 10 ms only (--duration s)')
+    p.add_argument('--fit-detail', action='store_true',
+                   help="the whole vehicle's v_f fit per v_f tried only (its own drives)")
     args = p.parse_args(argv)
+    if args.fit_detail:
+        t0 = time.perf_counter()
+        print('\n'.join(fit_detail()))
+        print(f'\n({time.perf_counter() - t0:.0f} s)')
+        return 0
     if args.whole_vehicle:
         t0 = time.perf_counter()
         print('\n'.join(whole_vehicle(args.duration)))

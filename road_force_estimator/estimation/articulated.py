@@ -108,14 +108,17 @@ class ArticulatedOnline:
     that sample (``(stamp_ns, row)``, a latency's samples late), :meth:`finish` the rest.
     A step that is a gap (``gap_threshold_s``, module notes) restarts the run (:attr:`gaps`).
     ``imu``: the tractor IMU's a_y (m/s^2) is the readings' last channel
-    (:data:`.models.articulated.IMU_CHANNEL`)."""
+    (:data:`.models.articulated.IMU_CHANNEL`). ``rows`` False: the filter and its innovations
+    only, no row made (:attr:`.ModelCore.rows`; :meth:`step` returns none)."""
 
     def __init__(self, vehicle: ArticulatedParameters, latency_s: float = 0.0,
                  observer: ObserverParameters | None = None, *,
-                 gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False) -> None:
+                 gap_threshold_s: float = GAP_THRESHOLD_S, imu: bool = False,
+                 rows: bool = True) -> None:
         self.model = ArticulatedObserverModel(vehicle, imu)
         obs = ObserverParameters(latency_s=latency_s) if observer is None else observer
         self.core = ModelCore(self.model, obs)
+        self.core.rows = rows
         self.wheel_names = _wheel_names(vehicle)
         self.braking = self.model.braking_response()
         self.clock = StepGaps(gap_threshold_s)
@@ -157,6 +160,8 @@ class ArticulatedOnline:
         if not first and self.clock.take(dt):
             self.gaps += 1
         self._last = int(stamp_ns)
+        if not core.rows:
+            return []
         self._held.append(None if rest else brake.dynamic_n.tolist())
         return self._ready()
 

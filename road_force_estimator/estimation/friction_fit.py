@@ -44,22 +44,25 @@ def fit_end(stamps_ns, run_end: int) -> int:
     return min(int(run_end), int(np.searchsorted(stamps, stamps[0] + round(FIT_S * 1e9))))
 
 
-def likeliest_velocity(v_file_mps: float, nll_terms: Callable[[float], list]) -> float:
+def likeliest_velocity(v_file_mps: float, nll_terms: Callable[[float], list],
+                       table: list | None = None) -> float:
     """The ``v_f`` (m/s) of :data:`FIT_GRID` x ``v_file_mps`` whose innovations are likeliest:
     ``nll_terms(v_f)`` each converged sample's ``(index, negative log-likelihood)``
     (:attr:`.observer.online.ModelCore.nll_terms`), summed over the samples converged under
-    every ``v_f`` (the settling time depends on ``v_f``, and each sample adds ``log det S /
-    2``, tens of nats: unequal sets would favour the ``v_f`` that settles first); the first of
-    equals; the file's without a sample converged under every ``v_f``."""
+    every ``v_f`` (the settling time depends on ``v_f``, and each sample adds its nll, about
+    -125 nats on the whole vehicle (``python -m bench.studies.friction_lag --fit-detail``):
+    unequal sets would favour the ``v_f`` that settles first); the first of
+    equals; the file's without a sample converged under every ``v_f``. ``table``: a list,
+    one ``(v_f, samples converged, samples summed, the sum (nats))`` appended per ``v_f``."""
     terms = [dict(nll_terms(factor * v_file_mps)) for factor in FIT_GRID]
     common = set(terms[0]).intersection(*terms[1:])
-    if not common:                 # (no sample converged under every v_f: nothing to tell)
-        return v_file_mps
     best = (math.inf, v_file_mps)
     for factor, t in zip(FIT_GRID, terms):
         value = 0.0
         for k in sorted(common):
             value += t[k]
-        if value < best[0]:
+        if table is not None:
+            table.append((factor * v_file_mps, len(t), len(common), value))
+        if common and value < best[0]:
             best = (value, factor * v_file_mps)
-    return best[1]
+    return best[1]      # (no sample converged under every v_f: nothing to tell, the file's)

@@ -1046,8 +1046,8 @@ class WholeVehicleOfflineStream:
 
 
 def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverParameters,
-                          stamps_ns, readings, speed_mps, left=None, *, imu: bool = False
-                          ) -> ArticulatedParameters:
+                          stamps_ns, readings, speed_mps, left=None, *, imu: bool = False,
+                          table: list | None = None) -> ArticulatedParameters:
     """``vehicle`` with the tanh friction's ``v_f`` (``vehicle.leaf_spring_friction_velocity``,
     one for every spring) that makes the drive likeliest (:mod:`.friction_fit`'s rule), with
     ``observer.friction_velocity_fit`` and some spring's tanh friction stated, not under
@@ -1057,7 +1057,8 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
     over the first :data:`.friction_fit.FIT_S` s of ``stamps_ns`` (ns; the first run's:
     the caller gives no other), ``readings`` ((m, channels) from the equilibrium, as the
     smoother takes them), ``speed_mps`` ((m,), m/s); ``left`` ((m, channels) bool or None):
-    the channels the smoother leaves out of each sample, left out here too.
+    the channels the smoother leaves out of each sample, left out here too. ``table``: the
+    likelihood per ``v_f`` (:func:`.friction_fit.likeliest_velocity`), when fitted.
 
     Not under ``zero_load`` (as the front axle's): on the tracker's readings (less its
     offsets) the fit took one grid step more than the truth's v_f on 20 s of class C (the
@@ -1081,7 +1082,7 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
 
     def nll_terms(v_f: float) -> list:
         online = ArticulatedOnline(replace(vehicle, leaf_spring_friction_velocity_mps=v_f),
-                                   0.0, obs, imu=imu)
+                                   0.0, obs, imu=imu, rows=False)
         core, step = online.core, online.step
         terms = core.nll_terms = []
         for s, yi, vi, o in zip(stamps[:end].tolist(), y, v, out):
@@ -1089,7 +1090,7 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
             step(s, yi, vi)
         return terms
 
-    v_f = likeliest_velocity(vehicle.leaf_spring_friction_velocity_mps, nll_terms)
+    v_f = likeliest_velocity(vehicle.leaf_spring_friction_velocity_mps, nll_terms, table)
     if v_f == vehicle.leaf_spring_friction_velocity_mps:
         return vehicle
     return replace(vehicle, leaf_spring_friction_velocity_mps=v_f)

@@ -48,10 +48,11 @@ def _drive(truth_vf: float, duration_s: float) -> tuple:
 
 @pytest.mark.parametrize('truth_vf, found', [(0.005, (0.005, 0.007)), (0.02, (0.02,))])
 def test_the_fit_finds_the_plants_friction_velocity(truth_vf, found):
-    """6 s of drive (nll margins measured over the next grid value: 1.9 nats for 0.005 over
-    0.007, 9.6 for 0.02 over 0.014). For the truth's 0.005 either of the grid's two below the
-    file's is accepted: on 8 s (and 20 s with a 3 ms lag) the whole vehicle's likelihood
-    puts 0.007 ahead by 0.7-14 nats (docs/articulated.md)."""
+    """6 s of drive (nll margins over the next grid value: 1.9 nats for 0.005 over 0.007,
+    9.6 for 0.02 over 0.014). For the truth's 0.005 either of the grid's two below the file's
+    is accepted: on 8 s (and 20 s with a 3 ms lag) the whole vehicle's likelihood puts 0.007
+    ahead by 0.8-14 nats. The figures: ``python -m bench.studies.friction_lag --fit-detail``
+    (these drives, and the offline table's)."""
     stamps, y = _drive(truth_vf, 6.0)
     file_ = _vehicle(FRICTION)
     fitted = fit_friction_velocity(file_, ObserverParameters(), stamps, y, 20.0)

@@ -89,6 +89,8 @@ class LeafSpringFriction:
         tanh(dq_i / v_f)`` less the share ``-c_eq,i dq_i`` of the equivalent damping that the
         gains' linear model carries (:func:`friction_damping`)."""
         v_f = self.friction_velocity_mps
+        if isinstance(dq, np.ndarray):   # (floats: the same numbers, without numpy's scalars)
+            dq = dq.tolist()
         return np.array([-f * math.tanh(d / v_f) + c * d
                          for f, c, d in zip(self.friction_n, ceq, dq)])
 

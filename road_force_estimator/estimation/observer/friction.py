@@ -303,8 +303,8 @@ class KnownFriction:
         r0, r1 = x[rates], first[rates]
         f = 0.5 * (self.force(r0) + self.force(r1))
         # (the law's part: less the equivalent damping's share)
-        self.last_force = tuple(float(fk) - 0.5 * c * (a + b)
-                                for fk, c, a, b in zip(f, self.ceq, r0, r1))
+        self.last_force = tuple(fk - 0.5 * c * (a + b) for fk, c, a, b in zip(
+            f.tolist(), self.ceq, r0.tolist(), r1.tolist()))
         return sv + _dot(fm, f)
 
     def held(self, x: np.ndarray) -> np.ndarray:

@@ -134,6 +134,9 @@ class ModelCore:
         self._fr = KnownFriction(model, cm) if any(cm.friction_n) else None
         self.schedule = GainSchedule(model, observer)
         self.ready: deque = deque()
+        #: False: no row is made (:attr:`ready` stays empty, :attr:`last_row` None): the
+        #: filter and its innovations only (:attr:`nll_terms`, a fit: :mod:`..friction_fit`)
+        self.rows = True
         self.reset()
 
     @property
@@ -506,7 +509,9 @@ class ModelCore:
         if not self._lag_final and len(self._dts) >= LAG_STEPS:
             self._finalise_lag()
         lag = self.lag
-        if lag == 0:
+        if lag == 0 and not self.rows:
+            pass                        # (nothing to emit: the outputs not made either)
+        elif lag == 0:
             o = s[y0 - x0:]
             if rho is not None:
                 o = [a + b for a, b in zip(o, _dot(self._ht, rho).tolist())]
@@ -771,7 +776,9 @@ class ModelCore:
     def _emit(self, stamp: int, meta: tuple, o: list, op: list | None = None) -> None:
         """The row of the linear outputs o (the model's, friction's direct part added) by the
         model's reconstruction (:class:`.OnlineRows`); appended to ready. ``op``: the
-        zero-latency profile filter's outputs, or None."""
+        zero-latency profile filter's outputs, or None. None without :attr:`rows`."""
+        if not self.rows:
+            return
         fr = self._fr
         if fr is not None:
             fr.add_direct(o, stamp)
