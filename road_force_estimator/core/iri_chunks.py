@@ -6,7 +6,9 @@ arrays of the whole profile: the same steps in the same order (the slope over th
 golden car's modal first-order filters with their state carried from chunk to chunk, the sums
 per segment in interval order), so the same numbers bit for bit (test_iri_chunks). Profiles
 that are not evenly spaced (resampled by :func:`.iri.rectified_slope`) go through
-:func:`.iri.iri_segments` in one piece.
+:func:`.iri.iri_segments` in one piece. :func:`profile_iri` gives :func:`.iri.iri` of a
+profile read a piece at a time (issue 32: the whole vehicle's spilled fused profile), evenly
+spaced or not: the same filter (:func:`_filtered`) on the even grid made a piece at a time.
 
 This module imports numpy and scipy only (core).
 """
