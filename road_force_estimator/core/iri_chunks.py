@@ -6,18 +6,22 @@ arrays of the whole profile: the same steps in the same order (the slope over th
 golden car's modal first-order filters with their state carried from chunk to chunk, the sums
 per segment in interval order), so the same numbers bit for bit (test_iri_chunks). Profiles
 that are not evenly spaced (resampled by :func:`.iri.rectified_slope`) go through
-:func:`.iri.iri_segments` in one piece.
+:func:`.iri.iri_segments` in one piece. :func:`profile_iri` gives :func:`.iri.iri` of a
+profile read a piece at a time (issue 32: the whole vehicle's spilled fused profile), evenly
+spaced or not: the same filter (:func:`_filtered`) on the even grid made a piece at a time.
 
 This module imports numpy and scipy only (core).
 """
 from __future__ import annotations
+
+from typing import Callable, Iterator
 
 import numpy as np
 
 from road_force_estimator.core import iri as iri_mod
 from road_force_estimator.core.scipy_signal import signal as _signal
 
-__all__ = ['CHUNK', 'segment_iri']
+__all__ = ['CHUNK', 'segment_iri', 'profile_iri']
 
 #: Intervals per chunk.
 CHUNK = 1 << 18
@@ -60,12 +64,39 @@ def segment_iri(x: np.ndarray, z: np.ndarray, edges: np.ndarray
     dx = _uniform_step(x)
     if dx is None or not np.isfinite(h).all():
         return (iri_mod.iri_segments(x, h, edges), iri_mod.interval_counts(x, edges))
+    k = edges.size - 1
+    total = np.zeros(k)
+    count = np.zeros(k)
+    for a, b, rel in _filtered(lambda lo, hi: h[lo:hi], x.size, dx, float(x[-1] - x[0])):
+        position = x[0] + dx * (np.arange(a, b) + 0.5)
+        seg = np.searchsorted(edges, position, side='right') - 1
+        seg[position == edges[-1]] = k - 1
+        inside = (seg >= 0) & (seg < k)
+        _bins_add(total, seg[inside], np.abs(rel.real)[inside])
+        _bins_add(count, seg[inside], None)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(count > 0, 1000.0 * total / count, np.nan), count.astype(np.int64)
+
+
+def _filtered(read_h: Callable, size: int, dx: float, span_m: float
+              ) -> Iterator[tuple[int, int, np.ndarray]]:
+    """:func:`.iri.filtered_slope` of an evenly spaced profile of ``size`` points ``dx``
+    (m) apart (``read_h(lo, hi)``: their elevations ``lo:hi``, m; ``span_m`` its length):
+    ``(a, b, the signed output of intervals a:b)`` a chunk of :data:`CHUNK` intervals at a
+    time (the modal filters' state carried), its numbers bit for bit.
+
+    Raises
+    ------
+    ValueError
+        Shorter than the 11 m initialisation plus one slope base (as ``filtered_slope``).
+    """
     k_base = max(1, int(round(iri_mod.BASE_LENGTH_M / dx)))
     i11 = int(round(iri_mod.INIT_LENGTH_M / dx))
-    if x.size <= max(i11, k_base):
-        raise ValueError(f'profile length {x[-1] - x[0]:.3g} m: IRI needs at least '
+    if size <= max(i11, k_base):
+        raise ValueError(f'profile length {span_m:.3g} m: IRI needs at least '
                          f'{iri_mod.INIT_LENGTH_M:g} m (the initialisation length)')
-    s0 = (h[i11] - h[0]) / iri_mod.INIT_LENGTH_M
+    head = read_h(0, i11 + 1)
+    s0 = (head[i11] - head[0]) / iri_mod.INIT_LENGTH_M
     st, pr = iri_mod.transition(dx)
     lam, vec = np.linalg.eig(st)
     inv = np.linalg.inv(vec)
@@ -75,22 +106,127 @@ def segment_iri(x: np.ndarray, z: np.ndarray, edges: np.ndarray
     modes = [j for j in range(4) if not lam[j].imag < 0.0]
     zi = {j: [lam[j] * eta0[j]] for j in modes}
     lfilter = _signal().lfilter
-    k = edges.size - 1
-    total = np.zeros(k)
-    count = np.zeros(k)
-    m = x.size - k_base
+    m = size - k_base
     for a in range(0, m, CHUNK):
         b = min(m, a + CHUNK)
-        slope = (h[a + k_base:b + k_base] - h[a:b]) / (k_base * dx)
+        h = read_h(a, b + k_base)
+        slope = (h[k_base:] - h[:b - a]) / (k_base * dx)
         rel = np.zeros(slope.size)
         for j in modes:
             eta, zi[j] = lfilter([beta[j]], [1.0, -lam[j]], slope, zi=zi[j])
             rel += (2.0 if lam[j].imag > 0.0 else 1.0) * (out[j] * eta).real
-        position = x[0] + dx * (np.arange(a, b) + 0.5)
-        seg = np.searchsorted(edges, position, side='right') - 1
-        seg[position == edges[-1]] = k - 1
-        inside = (seg >= 0) & (seg < k)
-        _bins_add(total, seg[inside], np.abs(rel.real)[inside])
-        _bins_add(count, seg[inside], None)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(count > 0, 1000.0 * total / count, np.nan), count.astype(np.int64)
+        yield a, b, rel
+
+
+def _kept_pieces(n: int, read: Callable, rows: int
+                 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The points of a profile ``read(lo, hi) -> (x, z (k, w))`` of ``n`` that
+    :func:`.iri.evenly_spaced` keeps (the first of repeated distances), a piece (``rows``
+    read) at a time; checked as ``evenly_spaced`` checks (ValueError: a non-finite value,
+    a distance that decreases)."""
+    last = None
+    for lo in range(0, n, rows):
+        x, z = read(lo, min(lo + rows, n))
+        x = np.asarray(x, dtype=float)
+        z = np.asarray(z, dtype=float).reshape(x.size, -1)
+        if not (np.isfinite(x).all() and np.isfinite(z).all()):
+            raise ValueError('profile has non-finite values: remove them first')
+        if not x.size:
+            continue
+        steps = np.diff(x if last is None else np.concatenate([[last], x]))
+        if np.any(steps < 0.0):
+            raise ValueError('distance_m decreases: it must be non-decreasing')
+        keep = steps > 0.0 if last is not None else np.concatenate([[True], steps > 0.0])
+        last = x[-1]
+        if keep.any():
+            yield x[keep], z[keep]
+
+
+class _Kept:
+    """:func:`_kept_pieces` by their index among the kept: :meth:`__call__` ``(lo, hi) ->
+    (x, z (w, k))``, read forward (a read before the last starts over)."""
+
+    def __init__(self, n: int, read: Callable, rows: int) -> None:
+        self.n, self.read, self.rows = n, read, rows
+        self._start()
+
+    def _start(self) -> None:
+        self.pos = 0                              # the kept index of the buffer's first
+        self.x, self.z = np.empty(0), None
+        self.pieces = _kept_pieces(self.n, self.read, self.rows)
+
+    def __call__(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+        if lo < self.pos:
+            self._start()
+        while self.pos + self.x.size < hi:
+            x, z = next(self.pieces, (None, None))
+            if x is None:
+                break
+            self.x = np.concatenate([self.x, x])
+            self.z = z if self.z is None else np.concatenate([self.z, z])
+        cut = min(lo - self.pos, self.x.size)
+        self.x, self.z, self.pos = self.x[cut:], self.z[cut:], self.pos + cut
+        return self.x[:hi - lo], self.z[:hi - lo].T
+
+
+def profile_iri(n: int, read: Callable, rows: int | None = None) -> np.ndarray:
+    """:func:`.iri.iri` (m/km per track) of a profile of ``n`` points read ``rows`` at a
+    time (default :data:`.pieces.PIECE_ROWS`): ``read(lo, hi) -> (x[lo:hi] (m,
+    non-decreasing), z[lo:hi] (k, w) m)``: the same steps (a standstill's repeats dropped,
+    the test for even spacing, the median step by counting, the even grid interpolated a
+    piece at a time, the filter a chunk at a time, numpy's pairwise sum of the rectified
+    slope: :func:`.pieces.pairwise_sum`), so the same bits (test_iri_chunks).
+
+    Raises
+    ------
+    ValueError
+        Where ``iri`` raises (fewer than 2 points, non-finite values, a distance that
+        decreases, too short, a grid too fine for the points).
+    """
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    if n < 2:
+        raise ValueError(f'profile has {n} sample(s): need at least 2')
+    kept = _Kept(n, read, rows)
+    count, width, last, first = 0, 0, None, None
+    for x, z in _kept_pieces(n, read, rows):     # checked, counted
+        count += x.size
+        width = z.shape[1]
+        first = x[0] if first is None else first
+        last = x[-1]
+    if count < 2:
+        raise ValueError('profile covers no distance')
+    span = last - first
+    mean_step = span / (count - 1)
+    tol = iri_mod.EVEN_SPACING_RTOL * max(mean_step, abs(last))
+    prev, uniform = None, True
+    for x, _ in _kept_pieces(n, read, rows):     # the kept steps
+        steps = np.diff(x if prev is None else np.concatenate([[prev], x]))
+        prev = x[-1]
+        if not np.all(np.abs(steps - mean_step) <= tol):
+            uniform = False
+            break
+    if uniform:
+        dx, size = float(mean_step), count
+
+        def read_h(track):
+            return lambda lo, hi: kept(lo, hi)[1][track]
+    else:
+        med = pieces.median_positive_steps(n, lambda lo, hi: read(lo, hi)[0], rows)
+        dx = float(min(med, iri_mod.BASE_LENGTH_M))
+        size = int(np.floor(span / dx + 1e-9)) + 1
+        if size > max(iri_mod.MAX_RESAMPLE_FACTOR * count, iri_mod.MIN_RESAMPLE_BOUND):
+            raise ValueError(f'profile of {count} samples would need {size} points on a '
+                             f'{dx:g} m grid')
+        interp = pieces.Interp(count, kept, rows)
+
+        def read_h(track):
+            return lambda lo, hi: interp(first + dx * np.arange(lo, hi))[track]
+    out = []
+    for track in range(width):
+        m = size - max(1, int(round(iri_mod.BASE_LENGTH_M / dx)))
+        total = pieces.pairwise_sum(m, (np.abs(rel.real) for _, _, rel in
+                                        _filtered(read_h(track), size, dx, float(span))))
+        out.append(1000.0 * float(total / m))
+    return np.array(out)

@@ -11,7 +11,8 @@ selection by counting, 16 bits of the float's pattern per pass), and :func:`sosf
 its state carried over the pieces and its output spilled, the backward pass over the pieces
 in reverse, as ``sosfiltfilt`` runs both over the padded array), :func:`gradient_piece`
 :func:`numpy.gradient` (its test for even spacing over the whole series first,
-:func:`uniform_step`). What cannot go in pieces
+:func:`uniform_step`), :func:`pairwise_sum` the sum of :func:`numpy.add.reduce` (and so of
+:func:`numpy.mean`: that sum over the count). What cannot go in pieces
 with the same bits (an FFT over the whole series) is not here.
 
 A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
@@ -19,12 +20,12 @@ A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
 __all__ = ['Interp', 'arange_size', 'arange_piece', 'median_positive_steps', 'sosfiltfilt',
-           'uniform_step', 'gradient_piece', 'PIECE_ROWS']
+           'uniform_step', 'gradient_piece', 'pairwise_sum', 'PIECE_ROWS']
 
 #: The samples read at a time by default (a few MB of pieces held).
 PIECE_ROWS = 1 << 14
@@ -216,3 +217,35 @@ def gradient_piece(read_f: Callable, read_x: Callable, n: int, lo: int, hi: int,
     if hi == n:
         out[-1] = (f[-1] - f[-2]) / (step if step is not None else d[-1])
     return out
+
+
+#: numpy's pairwise summation: blocks of at most this many summed by numpy in one call.
+PAIRWISE_BLOCK = 128
+
+
+def pairwise_sum(n: int, pieces: Iterable[np.ndarray]) -> np.float64:
+    """``np.add.reduce(a)`` of a float64 ``a`` (n,) given as consecutive ``pieces`` (any
+    sizes): numpy's pairwise summation (a contiguous array halved, the first half a multiple
+    of 8, down to blocks of :data:`PAIRWISE_BLOCK` or fewer summed by ``np.add.reduce``
+    itself, the halves' sums added), so the same bits; held: a block and a piece."""
+    it = iter(pieces)
+    buf = np.empty(0)
+
+    def take(k: int) -> np.ndarray:
+        nonlocal buf
+        while buf.size < k:
+            buf = np.concatenate([buf, np.asarray(next(it), float)])
+        out, buf = buf[:k], buf[k:]
+        return out
+
+    def node(k: int) -> np.float64:
+        if k <= PAIRWISE_BLOCK:
+            return np.add.reduce(take(k))
+        half = k // 2
+        half -= half % 8
+        return node(half) + node(k - half)
+
+    try:
+        return node(int(n))
+    finally:
+        it = buf = None                          # let go (node's closure is a cycle)

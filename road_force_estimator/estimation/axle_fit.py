@@ -18,7 +18,12 @@ points where every wheel on that path carries at least :data:`.articulated.LIFT_
 of its static load and every axle passed at :data:`MIN_SPEED_MPS` or faster). The misfit
 is ``|H - 1|`` (amplitude and phase), judged by its lower bound: less :data:`Z_SCORE`
 standard errors (the residual's power over the reference's, per independent point of the
-band: length x bandwidth), so that the noise of a short or slow drive does not raise it. An
+band: length x bandwidth), so that the noise of a short or slow drive does not raise it.
+Offline over more than :data:`WINDOW_M` the least squares go in windows of the grid (each
+band-passed and transformed with :data:`WINDOW_OVERLAP_M` more either side, its own points
+only counted): the windows' sums ``ref* own``, ``|ref|^2``, ``|own|^2`` and points added, so
+``H`` is the power-weighted mean of the windows' gains and the residual the drive's about it
+(the same least squares over the same points but for the windows' edges). An
 axle whose worst wheel's bound over the bands exceeds :data:`THRESHOLD` does not fit; when
 one of its wheels' bound is more than :data:`SENSOR_FACTOR` times the other's, it is that
 wheel's deflection sensor (a gain error scales one side), else the axle.
@@ -53,7 +58,7 @@ __all__ = ['BANDS_M', 'GRID_M', 'THRESHOLD', 'SENSOR_FACTOR', 'Z_SCORE', 'ADVICE
            'MIN_LENGTH_M', 'MIN_SPEED_MPS', 'LIFT_OFF_MARGIN_M', 'ONLINE_MIN_LATENCY_S',
            'ONLINE_WINDOW_M', 'ONLINE_EVERY_M', 'ONLINE_THRESHOLD', 'ONLINE_SLICE_SAMPLES',
            'CAUSAL_THRESHOLD', 'CAUSAL_MAX_ACCEL_MPS2', 'CAUSAL_ACCEL_SPAN_S', 'CAUSAL_EDGE_M',
-           'AxleFit', 'OnlineAxleFit',
+           'WINDOW_M', 'WINDOW_OVERLAP_M', 'AxleFit', 'OnlineAxleFit',
            'assess_axles', 'assess_steps', 'assess_pieces']
 
 #: The wavelength bands judged (m): the axles' own modes (wheel hop, 9-12 Hz) and the
@@ -83,6 +88,14 @@ LIFT_OFF_MARGIN_M = 0.5
 #: within the longest band's wavelength of a slower one are left out too: through a stop
 #: the slow points raised a clean drive's misfit past the threshold (the bench's stop).
 MIN_SPEED_MPS = 5.0
+
+#: Offline, a drive judged over more than this (m) is judged in windows of it, each with
+#: :data:`WINDOW_OVERLAP_M` more either side for the band-pass's and the analytic signal's
+#: edges; the windows' least-squares sums are added (module notes): the grid's arrays held
+#: are a window's, not the drive's. The bench's drives are far shorter (one window: the
+#: whole grid, as before).
+WINDOW_M = 20_000.0
+WINDOW_OVERLAP_M = 10.0 * BANDS_M[-1][1]
 
 #: Online: the least ``observer.latency`` (s) for the fixed-lag road's statistic (below it
 #: the causal road's, ``causal``: module notes), the window judged and the distance between
@@ -168,7 +181,7 @@ class AxleFit:
 
 def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, axle_names,
                  *, threshold: float = THRESHOLD, skip_s: float = SKIP_S,
-                 grounded: np.ndarray | None = None) -> AxleFit:
+                 grounded: np.ndarray | None = None, window_m: float = WINDOW_M) -> AxleFit:
     """The axles' misfits and verdict (module notes): :func:`assess_steps` run through
     (``grounded``: as it takes it, then ``load_n`` and ``static_n`` are not read).
 
@@ -182,9 +195,11 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     axle_names : (N,) names
     threshold : the misfit above which an axle does not fit
     skip_s : the start left out (s)
+    window_m : the distance judged in one piece at most (m; :data:`WINDOW_M`)
     """
     steps = assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m,
-                         axle_names, threshold=threshold, skip_s=skip_s, grounded=grounded)
+                         axle_names, threshold=threshold, skip_s=skip_s, grounded=grounded,
+                         window_m=window_m)
     while True:
         try:
             next(steps)
@@ -195,7 +210,8 @@ def assess_axles(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
 def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, axle_names,
                  *, threshold: float = THRESHOLD, skip_s: float = SKIP_S,
                  grounded: np.ndarray | None = None, fast_grid: bool = False,
-                 causal: bool = False) -> Generator[None, None, AxleFit]:
+                 causal: bool = False, window_m: float = WINDOW_M
+                 ) -> Generator[None, None, AxleFit]:
     """:func:`assess_axles` in slices: a generator that yields after each step over the grid
     (a band of one wheel path, one axle's gain) and returns the :class:`AxleFit`, so that
     a caller that must keep its pace (:class:`OnlineAxleFit` in the node) can spread it.
@@ -203,7 +219,8 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     ``load_n`` and ``static_n`` are not read); ``fast_grid``: the grid's oldest points
     dropped down to a length of factors 2, 3 and 5 (at most a few %: the FFTs of the
     analytic signals several times faster; online); ``causal``: the roads are the causal
-    ones (zero latency: module notes)."""
+    ones (zero latency: module notes); ``window_m``: a grid longer than this judged in
+    windows (not ``fast_grid`` nor ``causal``: the online windows are short)."""
     from road_force_estimator.estimation.articulated import LIFT_OFF_FRACTION
 
     names = tuple(axle_names)
@@ -229,17 +246,96 @@ def assess_steps(stamps_ns, distance_m, road_m, load_n, static_n, positions_m, a
     steady = speed >= MIN_SPEED_MPS
     if causal:
         steady &= np.abs(_acceleration(t, speed)) <= CAUSAL_MAX_ACCEL_MPS2
-    fast = np.array([np.interp(grid + xi[j], x, steady.astype(float)) > 0.999
-                     for j in range(n)])
+    def fast_on(part):
+        return np.array([np.interp(part + xi[j], x, steady.astype(float)) > 0.999
+                         for j in range(n)])
 
-    def path_of(s: int):
-        """The side's roads read on the grid, whether every wheel on it carried its
-        share there."""
-        return (np.array([np.interp(grid + xi[j], x, road[2 * j + s]) for j in range(n)]),
-                np.all([np.interp(grid + xi[j], x, grounded[2 * j + s].astype(float)) > 0.999
-                        for j in range(n)], axis=0))
+    def path_on(part):
+        def path_of(s: int):
+            """The side's roads read on the grid ``part``, whether every wheel on it
+            carried its share there."""
+            return (np.array([np.interp(part + xi[j], x, road[2 * j + s]) for j in range(n)]),
+                    np.all([np.interp(part + xi[j], x, grounded[2 * j + s].astype(float))
+                            > 0.999 for j in range(n)], axis=0))
+        return path_of
 
-    return (yield from _judge(names, xi, start, end, grid, fast, path_of, threshold, causal))
+    if not (fast_grid or causal) and _windows(grid.size, window_m) is not None:
+        def window(lo, hi):
+            return fast_on(grid[lo:hi]), path_on(grid[lo:hi])
+        return (yield from _judge_windows(names, xi, start, end, grid.size, window_m, window,
+                                          threshold))
+    return (yield from _judge(names, xi, start, end, grid, fast_on(grid), path_on(grid),
+                              threshold, causal))
+
+
+def _windows(g: int, window_m: float) -> list | None:
+    """The windows of a grid of ``g`` points longer than ``window_m`` (m): ``(lo, hi, a,
+    b)`` the grid's points band-passed (``lo:hi``, :data:`WINDOW_OVERLAP_M` either side)
+    and counted (``a:b``); None for a grid judged in one piece."""
+    size = max(int(round(window_m / GRID_M)), 1)
+    if g <= size:
+        return None
+    over = int(math.ceil(WINDOW_OVERLAP_M / GRID_M))
+    return [(max(a - over, 0), min(a + size + over, g), a, min(a + size, g))
+            for a in range(0, g, size)]
+
+
+def _judge_windows(names: tuple, xi: np.ndarray, start: float, end: float, g: int,
+                   window_m: float, window, threshold: float
+                   ) -> Generator[None, None, AxleFit]:
+    """:func:`_judge` over the windows of a grid of ``g`` points (:func:`_windows`):
+    ``window(lo, hi) -> (fast, path_of)`` as :func:`_judge` takes them, of the grid's points
+    ``lo:hi``; the least-squares sums of each window's own points added (module notes)."""
+    from road_force_estimator.core.scipy_signal import signal
+
+    n = xi.size
+    shape = (n, 2, len(BANDS_M))
+    cross = np.zeros(shape, complex)
+    power = np.zeros(shape)
+    own_power = np.zeros(shape)
+    points = np.zeros(2)
+    sig = signal()
+    for lo, hi, a, b in _windows(g, window_m):
+        fast, path_of = window(lo, hi)
+        moving = _eroded(np.all(fast, axis=0), BANDS_M[-1][1])
+        counted = np.zeros(hi - lo, bool)
+        counted[a - lo:b - lo] = True
+        yield
+        for side in (0, 1):
+            reads, on = path_of(side)
+            ok = moving & _eroded(on, LIFT_OFF_MARGIN_M) & counted
+            points[side] += np.count_nonzero(ok)
+            yield
+            if not ok.any():
+                continue
+            for bb, (short, long) in enumerate(BANDS_M):
+                sos = sig.butter(2, (1.0 / long, 1.0 / short), btype='bandpass',
+                                 fs=1.0 / GRID_M, output='sos')
+                band = np.array([sig.sosfiltfilt(sos, r) for r in reads])
+                yield
+                for j in range(n):
+                    ref = sig.hilbert(np.median(np.delete(band, j, axis=0), axis=0))[ok]
+                    own = sig.hilbert(band[j])[ok]
+                    cross[j, side, bb] += np.vdot(ref, own)
+                    power[j, side, bb] += float(np.vdot(ref, ref).real)
+                    own_power[j, side, bb] += float(np.vdot(own, own).real)
+                    yield
+    misfit = np.full(shape, np.nan)
+    spread = np.full(shape, np.nan)
+    for side in (0, 1):
+        if points[side] * GRID_M < MIN_LENGTH_M:
+            continue
+        for bb, (short, long) in enumerate(BANDS_M):
+            dof = points[side] * GRID_M * (1.0 / short - 1.0 / long)
+            for j in range(n):
+                p = power[j, side, bb]
+                if not p > 0.0:
+                    continue
+                h = cross[j, side, bb] / p
+                rest = max(own_power[j, side, bb] - abs(cross[j, side, bb]) ** 2 / p, 0.0)
+                misfit[j, side, bb] = abs(h - 1.0)
+                spread[j, side, bb] = math.sqrt(rest / p / dof)
+    return _verdict(names, misfit, spread, start, end, threshold)
 
 
 def _unmeasured(names: tuple, start: float, end: float, threshold: float) -> AxleFit:
@@ -306,6 +402,14 @@ def _judge(names: tuple, xi: np.ndarray, start: float, end: float, grid: np.ndar
                         misfit[j, side, b], spread[j, side, b] = _gain(band[j], ref, ok, dof,
                                                                        causal)
                         yield
+    return _verdict(names, misfit, spread, start, end, threshold)
+
+
+def _verdict(names: tuple, misfit: np.ndarray, spread: np.ndarray, start: float, end: float,
+             threshold: float) -> AxleFit:
+    """The :class:`AxleFit` of these misfits and spreads: the axles whose worst bound is
+    above ``threshold`` (worst first), the sensor where one wheel's is
+    :data:`SENSOR_FACTOR` times the other's."""
     fit = AxleFit(names, misfit, spread, (), (), float(end - start), threshold)
     worst = fit.axle_misfit
     bad = [j for j in np.argsort(-np.nan_to_num(worst, nan=-1.0)) if worst[j] > threshold]
@@ -321,7 +425,7 @@ def _judge(names: tuple, xi: np.ndarray, start: float, end: float, grid: np.ndar
 
 def assess_pieces(n_samples: int, read_stamps, read_x, read, positions_m, axle_names, *,
                   threshold: float = THRESHOLD, skip_s: float = SKIP_S,
-                  rows: int | None = None) -> AxleFit:
+                  rows: int | None = None, window_m: float = WINDOW_M) -> AxleFit:
     """:func:`assess_axles` (its numbers, bit for bit) from a drive's samples read ``rows``
     at a time (:data:`~.core.pieces.PIECE_ROWS`): ``read_stamps(lo, hi)`` (ns),
     ``read_x(lo, hi)`` the front axle's distance (m, non-decreasing) and ``read(lo, hi, w)
@@ -329,7 +433,8 @@ def assess_pieces(n_samples: int, read_stamps, read_x, read, positions_m, axle_n
     of ``n_samples`` (>= 2). The samples' columns are never held whole: the start, the
     speed (:func:`numpy.gradient`'s), the grid's points and every wheel's road on it come a
     piece at a time (:mod:`~.core.pieces`); held whole, as :func:`assess_steps` holds them,
-    the grid's arrays (the band-passed roads' analytic signals are FFTs over the grid)."""
+    the grid's arrays (the band-passed roads' analytic signals are FFTs over the grid) of
+    one window (``window_m``, as :func:`assess_steps` takes it)."""
     from road_force_estimator.core import pieces
 
     rows = max(int(rows or pieces.PIECE_ROWS), 1)
@@ -362,33 +467,38 @@ def assess_pieces(n_samples: int, read_stamps, read_x, read, positions_m, axle_n
         speed = pieces.gradient_piece(read_x, read_t, m, lo, hi, step)
         return x, (speed >= MIN_SPEED_MPS).astype(float)[None, :]
 
-    def on_grid(source, what) -> np.ndarray:
+    def on_grid(source, what, a: int, b: int) -> np.ndarray:
         """``what([values (w, k) of each axle]) -> (r, k)``, every axle j's ``source(j)``
-        (:class:`~.core.pieces.Interp`'s read) at the grid's points + xi_j, a piece of the
-        grid at a time: (r, grid)."""
+        (:class:`~.core.pieces.Interp`'s read) at the grid's points ``a:b`` + xi_j, a piece
+        of the grid at a time: (r, b - a)."""
         at = [pieces.Interp(m, source(j), rows) for j in range(n)]
         out = None
-        for lo in range(0, g, rows):
-            q = pieces.arange_piece(start, GRID_M, lo, min(lo + rows, g))
+        for lo in range(a, b, rows):
+            q = pieces.arange_piece(start, GRID_M, lo, min(lo + rows, b))
             v = what([at[j](q + xi[j]) for j in range(n)])
             if out is None:
-                out = np.empty(v.shape[:-1] + (g,), v.dtype)
-            out[..., lo:lo + q.size] = v
+                out = np.empty(v.shape[:-1] + (b - a,), v.dtype)
+            out[..., lo - a:lo - a + q.size] = v
         return out
 
-    fast = on_grid(lambda j: steady, lambda v: np.array([r[0] > 0.999 for r in v]))
+    def window(a: int, b: int):
+        fast = on_grid(lambda j: steady, lambda v: np.array([r[0] > 0.999 for r in v]), a, b)
 
-    def path_of(side: int):
-        def wheel(j):
-            def read_wheel(lo, hi):
-                road, grounded = read(lo, hi, 2 * j + side)
-                return read_x(lo, hi), np.array([road, grounded], float)
-            return read_wheel
-        out = on_grid(wheel, lambda v: np.array(
-            [r[0] for r in v] + [np.all([r[1] > 0.999 for r in v], axis=0)]))
-        return out[:n], out[n] > 0.5
+        def path_of(side: int):
+            def wheel(j):
+                def read_wheel(lo, hi):
+                    road, grounded = read(lo, hi, 2 * j + side)
+                    return read_x(lo, hi), np.array([road, grounded], float)
+                return read_wheel
+            out = on_grid(wheel, lambda v: np.array(
+                [r[0] for r in v] + [np.all([r[1] > 0.999 for r in v], axis=0)]), a, b)
+            return out[:n], out[n] > 0.5
+        return fast, path_of
 
-    steps = _judge(names, xi, start, end, None, fast, path_of, threshold, False)
+    if _windows(g, window_m) is not None:
+        steps = _judge_windows(names, xi, start, end, g, window_m, window, threshold)
+    else:
+        steps = _judge(names, xi, start, end, None, *window(0, g), threshold, False)
     while True:
         try:
             next(steps)

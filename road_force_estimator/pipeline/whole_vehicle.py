@@ -750,9 +750,9 @@ def _spilled_fused(source, vehicle) -> SpilledFused | None:
 class SpilledFused:
     """The fused profile of a spilled estimate (:func:`_spilled_fused`) in temporary files
     in ``folder`` (:class:`~.core.spill.SpillColumn`), not in memory while the front axle's
-    stage runs: :class:`FusedRoad`'s fields read whole (the report's), a piece of points
-    (:meth:`read`) or those stamped within a range (:meth:`Cursor`); ``axles``,
-    ``half_track_m`` as there. :meth:`close` lets the files go."""
+    stage runs, never read whole: a piece of points (:meth:`read`, a :class:`FusedRoad`; the
+    sinks' and the report's IRI, :func:`~.report.whole_vehicle.append_estimate`), ``n``
+    of them; ``axles``, ``half_track_m`` as there. :meth:`close` lets the files go."""
 
     FIELDS = (('stamps_ns', np.int64), ('distance_m', float), ('left_m', float),
               ('right_m', float))
@@ -779,11 +779,6 @@ class SpilledFused:
         """The points ``lo:hi``."""
         return FusedRoad(*(self.cols[f].read(lo, hi) for f, _ in self.FIELDS), self.axles,
                          self.half_track_m)
-
-    def __getattr__(self, name: str):
-        if name in dict(self.FIELDS) and 'cols' in self.__dict__:
-            return self.cols[name].array()       # a field whole: read back
-        raise AttributeError(name)
 
     def close(self) -> None:
         for col in self.cols.values():

@@ -441,17 +441,34 @@ class _AccuracySums:
                 'ltr_trailer_quasi_static_max_error': self.d_max}
 
 
-def _fused_iri(fused) -> dict[str, Any]:
-    """The fused profile's extent and IRI (m/km, left and right; NaN when too short)."""
+def _fused_iri(fused, rows: int | None = None) -> dict[str, Any]:
+    """The fused profile's extent and IRI (m/km, left and right; NaN when too short):
+    :func:`~.core.iri.iri` of its arrays, or of a spilled one (``n`` points, ``read(lo,
+    hi)``: :class:`~.pipeline.whole_vehicle.SpilledFused`) ``rows`` points at a time
+    (:data:`SUM_ROWS` by default; :func:`~.core.iri_chunks.profile_iri`: the same bits)."""
     from road_force_estimator.core import iri as iri_mod
+    from road_force_estimator.core.iri_chunks import profile_iri
 
-    x = np.asarray(fused.distance_m, float)
-    out: dict[str, Any] = {'axles': int(fused.axles), 'points': int(x.size),
-                           'length_m': float(x[-1] - x[0]) if x.size else 0.0,
+    if hasattr(fused, 'read'):
+        n = int(fused.n)
+        ends = [fused.read(i, i + 1).distance_m for i in ((0, n - 1) if n else ())]
+    else:
+        x = np.asarray(fused.distance_m, float)
+        n = int(x.size)
+        ends = [x[:1], x[-1:]] if n else []
+    out: dict[str, Any] = {'axles': int(fused.axles), 'points': n,
+                           'length_m': float(ends[1][0] - ends[0][0]) if n else 0.0,
                            'iri_m_per_km': [float('nan')] * 2}
     try:
-        out['iri_m_per_km'] = [float(v) for v in iri_mod.iri(
-            x, np.column_stack([fused.left_m, fused.right_m]))]
+        if hasattr(fused, 'read'):
+            def read(lo, hi):
+                f = fused.read(lo, hi)
+                return f.distance_m, np.column_stack([f.left_m, f.right_m])
+
+            values = profile_iri(n, read, rows or SUM_ROWS)
+        else:
+            values = iri_mod.iri(x, np.column_stack([fused.left_m, fused.right_m]))
+        out['iri_m_per_km'] = [float(v) for v in values]
     except ValueError:                   # shorter than the quarter car's start
         pass
     return out

@@ -30,3 +30,61 @@ def test_uneven_and_short_profiles_as_core_iri():
     np.testing.assert_array_equal(counts, iri.interval_counts(x, edges))
     with pytest.raises(ValueError):
         iri_chunks.segment_iri(x[:100], z[:100], segment_bounds(x[0], x[99], 1.0))
+
+
+def _drive_profile(n, seed):
+    """Distances of an uneven drive with stops (repeated distances) and two tracks."""
+    rng = np.random.default_rng(seed)
+    step = rng.uniform(0.015, 0.025, n)
+    step[rng.random(n) < 0.02] = 0.0
+    step[n // 3:n // 3 + 50] = 0.0                     # a stop
+    x = 5.0 + np.cumsum(step)
+    z = 1e-4 * np.cumsum(rng.standard_normal((n, 2)), axis=0)
+    return x, z
+
+
+def _in_pieces(x, z, rows):
+    return iri_chunks.profile_iri(x.size, lambda lo, hi: (x[lo:hi], z[lo:hi]), rows)
+
+
+@pytest.mark.parametrize('chunk', [7, 1 << 18])
+@pytest.mark.parametrize('rows', [1, 3, 997, 4000, 4001, 10_000])
+def test_profile_iri_in_pieces_is_core_iri(monkeypatch, chunk, rows):
+    """The whole profile's IRI read ``rows`` points at a time (one point, fewer than a
+    stop's repeats, one piece: 4000 and more) against core.iri.iri on the arrays: the same
+    bits; an uneven profile with stops (resampled) and an even one (kept as it is)."""
+    monkeypatch.setattr(iri_chunks, 'CHUNK', chunk)
+    x, z = _drive_profile(4000, 5)
+    want = iri.iri(x, z)
+    assert np.isfinite(want).all() and want.min() > 0.0
+    assert _in_pieces(x, z, rows).tobytes() == want.tobytes()
+    even = 2.0 + 0.02 * np.arange(4000)
+    assert iri.evenly_spaced(even, z)[0] is not None and \
+        np.array_equal(iri.evenly_spaced(even, z)[0], even)        # not resampled
+    assert _in_pieces(even, z, rows).tobytes() == iri.iri(even, z).tobytes()
+
+
+@pytest.mark.parametrize('case', ['one point', 'no distance', 'short', 'decreasing',
+                                  'not finite', 'too fine'])
+def test_profile_iri_refuses_what_core_iri_refuses(case):
+    """The profiles core.iri.iri raises on (ValueError): the same in pieces."""
+    x, z = _drive_profile(2000, 6)
+    if case == 'one point':
+        x, z = x[:1], z[:1]
+    elif case == 'no distance':
+        x = np.full(x.size, 3.0)
+    elif case == 'short':
+        x, z = x[:400], z[:400]                          # ~8 m, under the 11 m start
+    elif case == 'decreasing':
+        x = x.copy()
+        x[1500] = x[1499] - 0.01
+    elif case == 'not finite':
+        z = z.copy()
+        z[1200, 1] = np.nan
+    else:                                                # a jump: a grid too fine
+        x = np.concatenate([[0.0], 1e9 + 1e-3 * np.arange(1999)])
+    with pytest.raises(ValueError):
+        iri.iri(x, z)
+    for rows in (1, 7, 5000):
+        with pytest.raises(ValueError):
+            _in_pieces(x, z, rows)

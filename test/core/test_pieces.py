@@ -123,3 +123,17 @@ def test_gradient_is_numpys(even, n, rows):
                                                 min(lo + rows, n), step)
                           for lo in range(0, n, rows)])
     np.testing.assert_array_equal(got, np.gradient(f, t))
+
+
+@pytest.mark.parametrize('n, rows', [(n, r) for n in (0, 1, 7, 128, 129, 1000)
+                                     for r in (1, 13, None)]
+                         + [(100_003, 13), (100_003, 4096), (100_003, None)])
+def test_pairwise_sum_is_numpys(n, rows):
+    """numpy's own sum (and mean: that sum over n) of a float64 array, given in pieces of
+    ``rows`` (None: one piece), to the bit; sizes across numpy's 128-point blocks."""
+    a = np.abs(np.random.default_rng(n).standard_normal(n)) * 1e-3
+    step = rows or max(n, 1)
+    total = pieces.pairwise_sum(n, (a[lo:lo + step] for lo in range(0, n, step)))
+    assert total.hex() == np.add.reduce(a).hex()
+    if n:
+        assert float(total / n) == float(np.mean(a))
