@@ -860,9 +860,12 @@ class WholeVehicleOfflineStream:
         self._statics = None
         #: with ``spill`` the readings in a file (the smoother reads them a piece at a time)
         self._y = None
+        # each sample's sensor flags (with ``spill`` in a file, read a piece at a time)
+        self._codes = _Columns([(np.int8, (ny,))], capacity)
         if spill:
             from road_force_estimator.core.spill import SpillColumn
             self._y = SpillColumn(float, ny, spill)
+            self._codes = SpillColumn(np.int8, ny, spill)
             self._in = _Columns([(np.int64, ()), (float, ())], capacity)
             if tracker is not None:
                 self._statics = SpillColumn(float, nw, spill)
@@ -873,7 +876,6 @@ class WholeVehicleOfflineStream:
         self._clock = StepGaps(gap_threshold_s)
         self._last: int | None = None
         self._last_row = None
-        self._codes = _Columns([(np.int8, (ny,))], capacity)    # each sample's sensor flags
         self._stale = _Columns([(bool, ())], capacity)       # each sample's a_y not fresh
         self._flags_before = list(self.est.faults.flags)
         #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
@@ -945,7 +947,7 @@ class WholeVehicleOfflineStream:
             from road_force_estimator.core.spill import SpillRows
 
             (stamps, v), y = self._in.arrays(), SpillRows(self._y)
-        codes = self._codes.arrays()[0]
+        codes = (self._codes.arrays()[0] if self._y is None else SpillRows(self._codes))
         statics = self._statics
         if isinstance(statics, _Columns):
             statics = statics.arrays()[0]
@@ -962,11 +964,13 @@ class WholeVehicleOfflineStream:
         starts = run_starts(stamps, self.gap_threshold_s)
         bounds = list(zip(starts.tolist(), starts[1:].tolist() + [stamps.size]))
         # a stuck channel's stretch not fed to the smoother (module notes)
-        left = left_out(codes, est.faults.stuck_since, stamps) if codes.size else None
+        since = est.faults.stuck_since          # (no stuck flag: no codes read whole)
+        left = (left_out(codes[0:len(codes)] if since else codes, since, stamps)
+                if len(codes) else None)
         stale = self._stale.arrays()[0]
         if est.imu_out and stale.any():        # no fresh a_y: its rows left out too
             if left is None:
-                left = np.zeros(codes.shape, bool)
+                left = np.zeros((len(codes), len(est.channel_names)), bool)
             left[np.ix_(stale, sorted(est.imu_out))] = True
         dist = 0.0
         prev: int | None = None
@@ -1019,9 +1023,9 @@ class WholeVehicleOfflineStream:
         self.close()
 
     def close(self) -> None:
-        """Close the files of ``spill`` (the readings, the static loads): after
+        """Close the files of ``spill`` (the readings, sensor flags, static loads): after
         :meth:`finish`, or on a failure before it ends."""
-        for f in (self._y, self._statics):
+        for f in (self._y, self._codes, self._statics):
             if f is not None and not isinstance(f, _Columns):
                 f.close()
 
