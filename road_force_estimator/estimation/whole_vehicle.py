@@ -835,9 +835,9 @@ class WholeVehicleOfflineStream:
     the braking response chunk by chunk, the load transfer carried from piece to piece. What
     is held whole: the stamps, readings, speeds and ``a_x`` of the drive (the smoother's
     inputs, 8 (3 + channels) bytes a sample), the road's profile pass columns and the static
-    loads unless spilled; with ``spill`` the readings are in a file too, the smoother reading
-    them a piece at a time (:class:`~.core.spill.SpillRows`: its statistics, windows and
-    profile pass; the same bits). Without windows the pieces are
+    loads unless spilled; with ``spill`` the readings and the sensor flags are in files too,
+    the smoother reading the readings a piece at a time (:class:`~.core.spill.SpillRows`: its
+    statistics, windows and profile pass; the same bits). Without windows the pieces are
     :func:`estimate_whole_vehicle`'s numbers bit for bit; with them within ~3e-4 of each
     field's RMS (:data:`STREAM_OVERLAP_S`; the road the same bits: its profile pass is over
     the whole run).
