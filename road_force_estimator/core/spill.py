@@ -5,7 +5,8 @@ per-sample columns that are needed only later, or only piece by piece).
 removed when closed or when the process ends, so a failure leaves nothing behind) and reads
 them back whole (:meth:`array`) or by row range (:meth:`read`), with plain reads (no memory
 map: the pages the kernel caches are not the process's memory). A full disk raises the
-``OSError`` of the write (``errno.ENOSPC``).
+``OSError`` of the write (``errno.ENOSPC``). :class:`SpillRows`: a range of a file's rows
+sliced as an array is (what a pass that reads a long run's rows a chunk at a time takes).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ['SpillColumn']
+__all__ = ['SpillColumn', 'SpillRows']
 
 
 class SpillColumn:
@@ -68,3 +69,37 @@ class SpillColumn:
 
     def close(self) -> None:
         self._file.close()
+
+
+class SpillRows:
+    """Rows ``start:stop`` of a :class:`SpillColumn` read as an array of them is indexed:
+    ``rows[a:b]`` (a new array of those rows, step 1), ``rows[k]`` (one row), ``shape``,
+    ``len``; :meth:`sub` a range of them. Nothing is held but the file."""
+
+    def __init__(self, file: SpillColumn, start: int = 0, stop: int | None = None) -> None:
+        self.file = file
+        self.start = int(start)
+        self.stop = file.size if stop is None else int(stop)
+        self.dtype = file.dtype
+        self.shape = (self.stop - self.start,) + file.shape
+        self.ndim = len(self.shape)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def sub(self, a: int, b: int) -> 'SpillRows':
+        """Rows ``a:b`` of these (0 <= a <= b <= len)."""
+        return SpillRows(self.file, self.start + a, self.start + b)
+
+    def __getitem__(self, key):
+        if isinstance(key, slice):
+            a, b, step = key.indices(self.shape[0])
+            if step != 1:
+                raise IndexError('spilled rows: slices of step 1 only')
+            return self.file.read(self.start + a, self.start + max(a, b))
+        k = int(key)
+        if k < 0:
+            k += self.shape[0]
+        if not 0 <= k < self.shape[0]:
+            raise IndexError(f'row {key} of {self.shape[0]}')
+        return self.file.read(self.start + k, self.start + k + 1)[0]

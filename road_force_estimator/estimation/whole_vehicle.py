@@ -842,10 +842,12 @@ class WholeVehicleOfflineStream:
     the braking response chunk by chunk, the load transfer carried from piece to piece. What
     is held whole: the stamps, readings, speeds and ``a_x`` of the drive (the smoother's
     inputs, 8 (3 + channels) bytes a sample), the road's profile pass columns and the static
-    loads unless spilled. Without windows the pieces are :func:`estimate_whole_vehicle`'s
-    numbers bit for bit; with them within ~3e-4 of each field's RMS
-    (:data:`STREAM_OVERLAP_S`; the road the same bits: its profile pass is over the whole
-    run).
+    loads unless spilled; with ``spill`` the readings and the sensor flags are in files too,
+    the smoother reading the readings a piece at a time (:class:`~.core.spill.SpillRows`: its
+    statistics, windows and profile pass; the same bits). Without windows the pieces are
+    :func:`estimate_whole_vehicle`'s numbers bit for bit; with them within ~3e-4 of each
+    field's RMS (:data:`STREAM_OVERLAP_S`; the road the same bits: its profile pass is over
+    the whole run).
     """
 
     def __init__(self, vehicle: ArticulatedParameters,
@@ -861,19 +863,26 @@ class WholeVehicleOfflineStream:
         self.window, self.eager, self.spill = window, eager, spill
         self.piece_rows = max(int(piece_rows), 1)
         ny, nw = len(self.est.channel_names), len(self.est.wheel_names)
-        self._in = _Columns([(np.int64, ()), (float, (ny,)), (float, ())], capacity)
         tracker = self.est.tracker
         self._statics = None
-        if tracker is not None:
-            if spill:
-                from road_force_estimator.core.spill import SpillColumn
+        #: with ``spill`` the readings in a file (the smoother reads them a piece at a time)
+        self._y = None
+        # each sample's sensor flags (with ``spill`` in a file, read a piece at a time)
+        self._codes = _Columns([(np.int8, (ny,))], capacity)
+        if spill:
+            from road_force_estimator.core.spill import SpillColumn
+            self._y = SpillColumn(float, ny, spill)
+            self._codes = SpillColumn(np.int8, ny, spill)
+            self._in = _Columns([(np.int64, ()), (float, ())], capacity)
+            if tracker is not None:
                 self._statics = SpillColumn(float, nw, spill)
-            else:
+        else:
+            self._in = _Columns([(np.int64, ()), (float, (ny,)), (float, ())], capacity)
+            if tracker is not None:
                 self._statics = _Columns([(float, (nw,))], capacity)
         self._clock = StepGaps(gap_threshold_s)
         self._last: int | None = None
         self._last_row = None
-        self._codes = _Columns([(np.int8, (ny,))], capacity)    # each sample's sensor flags
         self._stale = _Columns([(bool, ())], capacity)       # each sample's a_y not fresh
         self._flags_before = list(self.est.faults.flags)
         #: gated samples per channel so far (complete once :meth:`finish` is exhausted)
@@ -915,7 +924,11 @@ class WholeVehicleOfflineStream:
             self._statics.append(statics)
         if k:
             self._last = int(stamps[-1])
-        self._in.append(stamps, y, v)
+        if self._y is None:
+            self._in.append(stamps, y, v)
+        else:
+            self._y.append(y)
+            self._in.append(stamps, v)
         return []
 
     def _fault_codes(self, stamps: np.ndarray, y: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -938,8 +951,13 @@ class WholeVehicleOfflineStream:
         from road_force_estimator.estimation.smoothing.smoother import Smoother
         from road_force_estimator.estimation.models.articulated_rows import columns as cols_of
 
-        stamps, y, v = self._in.arrays()
-        codes = self._codes.arrays()[0]
+        if self._y is None:
+            stamps, y, v = self._in.arrays()
+        else:                                    # the readings read a piece at a time
+            from road_force_estimator.core.spill import SpillRows
+
+            (stamps, v), y = self._in.arrays(), SpillRows(self._y)
+        codes = (self._codes.arrays()[0] if self._y is None else SpillRows(self._codes))
         statics = self._statics
         if isinstance(statics, _Columns):
             statics = statics.arrays()[0]
@@ -953,14 +971,16 @@ class WholeVehicleOfflineStream:
         starts = run_starts(stamps, self.gap_threshold_s)
         bounds = list(zip(starts.tolist(), starts[1:].tolist() + [stamps.size]))
         # a stuck channel's stretch not fed to the smoother (module notes)
-        left = left_out(codes, est.faults.stuck_since, stamps) if codes.size else None
+        since = est.faults.stuck_since          # (no stuck flag: no codes read whole)
+        left = (left_out(codes[0:len(codes)] if since else codes, since, stamps)
+                if len(codes) else None)
         stale = self._stale.arrays()[0]
         if est.imu_out and stale.any():        # no fresh a_y: its rows left out too
             if left is None:
-                left = np.zeros(codes.shape, bool)
+                left = np.zeros((len(codes), len(est.channel_names)), bool)
             left[np.ix_(stale, sorted(est.imu_out))] = True
         # the friction's v_f fitted (module notes), on the readings the smoother takes
-        end = bounds[0][1] if bounds else 0
+        end = fit_end(stamps, bounds[0][1]) if bounds else 0   # (20 s: read, not the run)
         vehicle = fit_friction_velocity(est.vehicle, self.observer, stamps[:end], y[:end],
                                         v[:end], None if left is None else left[:end],
                                         imu=est.model.imu)
@@ -976,10 +996,14 @@ class WholeVehicleOfflineStream:
             tdts = np.diff(t)
             ax = braking.offline_ax(t, v[a0:b0])
             for a, b, off, _ in braking.responses(tdts, ax, self.piece_rows):
-                y[a0 + a:a0 + b] -= off                       # the known a_x's share
+                if self._y is None:
+                    y[a0 + a:a0 + b] -= off                   # the known a_x's share
+                else:
+                    self._y.write(a0 + a, self._y.read(a0 + a, a0 + b) - off)
             response = braking.responses(tdts, ax, self.piece_rows)
             held = None                                      # (a, dynamic) not used yet
-            for a, b, pc in smoother.pieces(t, y[a0:b0], v[a0:b0],
+            run_y = y[a0:b0] if self._y is None else y.sub(a0, b0)
+            for a, b, pc in smoother.pieces(t, run_y, v[a0:b0],
                                             left_out=None if left is None else left[a0:b0]):
                 rows = np.column_stack(pc)
                 dyn = np.empty((nw, b - a))
@@ -1013,8 +1037,14 @@ class WholeVehicleOfflineStream:
                                       smoother, codes[g0:g1])
                 del rows, dyn, pc         # (let go before the next window is computed)
         self.innovations_gated = tuple(int(g) for g in smoother.gated.tolist())
-        if self._statics is not None and not isinstance(self._statics, _Columns):
-            self._statics.close()                           # the spilled file
+        self.close()
+
+    def close(self) -> None:
+        """Close the files of ``spill`` (the readings, sensor flags, static loads): after
+        :meth:`finish`, or on a failure before it ends."""
+        for f in (self._y, self._codes, self._statics):
+            if f is not None and not isinstance(f, _Columns):
+                f.close()
 
     def _piece(self, stamps: np.ndarray, rows: np.ndarray, dist: np.ndarray, static,
                gaps: int, starts_run: bool, smoother, codes: np.ndarray | None = None

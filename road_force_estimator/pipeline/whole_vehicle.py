@@ -194,6 +194,8 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
             last = piece
     except BagReadError as err:
         raise InputError(str(err)) from None
+    finally:
+        stream.close()                         # its files (readings, flags, static loads)
     none = take_rows(last, 0, 0)               # no sample (copies: the piece let go)
     none = replace(none, **{f: np.array(getattr(none, f)) for f in ROW_FIELDS
                             if getattr(none, f) is not None})

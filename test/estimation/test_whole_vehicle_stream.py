@@ -123,19 +123,22 @@ def test_estimate_whole_vehicle_with_windows_is_the_eager_stream(drive, monkeypa
 
 @pytest.mark.parametrize('chunk, piece', [(None, None), (1000, 777)])
 def test_spilled_the_windows_are_the_same_bits(drive, tmp_path, monkeypatch, chunk, piece):
-    """With ``spill`` (estimate_bag offline in pieces) the static loads, a windowed run's
-    profile pass columns and its road (built over them in pieces: the double integral's
-    forward pass in order, its backward pass over the pieces reversed) go to temporary files
-    there (core.spill): every field the same bits as without, in 2 s windows with 1 s of
-    overlap and zero-load readings; every file closed after. ``chunk``: the smoother's
-    chunks (its profile pass's written from the end), ``piece``: the road's pieces (None: the
-    module's, one piece here)."""
+    """With ``spill`` (estimate_bag offline in pieces) the readings (the run's statistics
+    taken from them in pieces), the sensor flags, the static loads, a windowed run's profile
+    pass columns and its road (built over them in pieces: the double integral's forward pass
+    in order, its backward pass over the pieces reversed) go to temporary files there
+    (core.spill): every field the same bits as without, in 2 s windows with 1 s of overlap
+    and zero-load readings; every file closed after. ``chunk``: the smoother's chunks (its
+    profile pass's written from the end) and the statistics' pieces, ``piece``: the road's
+    pieces (None: the module's, one piece here)."""
     from road_force_estimator.core import spill as spill_module
     from road_force_estimator.estimation.models import articulated_rows
+    from road_force_estimator.estimation.observer import schedule
     from road_force_estimator.estimation.smoothing import smoother
 
     if chunk is not None:
         monkeypatch.setattr(smoother, '_SMOOTH_CHUNK', chunk)
+        monkeypatch.setattr(schedule, 'PIECE_ROWS', chunk)
         monkeypatch.setattr(articulated_rows, 'ROAD_PIECE_ROWS', piece)
 
     opened = []
@@ -151,8 +154,8 @@ def test_spilled_the_windows_are_the_same_bits(drive, tmp_path, monkeypatch, chu
     monkeypatch.setattr(spill_module.SpillColumn, '__init__', counted)
     got = concatenate_arrays(streamed(vehicle, stamps, y, window=(2000, 1000),
                                       spill=tmp_path))
-    # the static loads; the first run's profile pass columns, its integral's forward pass
-    # and its roads (the run after the gap, 2.8 s, is one window)
-    assert len(opened) == 4 and all(c._file.closed for c in opened)
+    # the readings, sensor flags, static loads; the first run's profile pass columns, its
+    # integral's forward pass and its roads (the run after the gap, 2.8 s, is one window)
+    assert len(opened) == 6 and all(c._file.closed for c in opened)
     for name in FIELDS + ('converged', 'gaps', 'fault_flags'):
         np.testing.assert_array_equal(getattr(got, name), getattr(one, name), err_msg=name)

@@ -9,10 +9,12 @@ import math
 
 import numpy as np
 
-__all__ = ['NOISE_DIFF_ORDER', 'noise_std', 'normalised_differences', 'mad_std']
+__all__ = ['NOISE_DIFF_ORDER', 'MAD_GAUSSIAN', 'noise_std', 'normalised_differences', 'mad_std']
 
 #: Order of the differences of the noise estimate.
 NOISE_DIFF_ORDER = 6
+#: The median absolute value of a zero-mean Gaussian, in standard deviations.
+MAD_GAUSSIAN = 0.6744897501960817
 
 
 def noise_std(x, t_s=None, order: int = NOISE_DIFF_ORDER) -> float:
@@ -68,5 +70,5 @@ def normalised_differences(x, t_s=None, order: int = NOISE_DIFF_ORDER) -> np.nda
 
 def mad_std(d: np.ndarray) -> float:
     """Standard deviation from the median absolute value (zero-mean Gaussian data)."""
-    return float(np.median(np.abs(d)) / 0.6744897501960817)
+    return float(np.median(np.abs(d)) / MAD_GAUSSIAN)
 

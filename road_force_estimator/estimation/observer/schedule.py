@@ -23,7 +23,9 @@ from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.protocol import VehicleModel, road_diffusion
 from road_force_estimator.estimation.observer.gains import NOISE_FLOOR_M, Gains, design
-from road_force_estimator.estimation.observer.noise import NOISE_DIFF_ORDER, mad_std, noise_std
+from road_force_estimator.core.piecewise import medians, pairwise_mean
+from road_force_estimator.estimation.observer.noise import (MAD_GAUSSIAN, NOISE_DIFF_ORDER,
+                                                            mad_std, noise_std)
 from road_force_estimator.estimation.observer.riccati import van_loan
 
 __all__ = [
@@ -31,9 +33,12 @@ __all__ = [
     'SPEED_LEVEL_RATIO', 'DT_LEVEL_RATIO', 'LEVEL_HYSTERESIS', 'MIN_SETTLE_S', 'MAX_GAINS',
     'DEFAULT_NOISE_M', 'DEFAULT_NOISE_RAD', 'DEFAULT_ROAD_GD_M3', 'MIN_ROAD_GD_M3',
     'ROUGHNESS_CORRELATION_M', 'DEFAULT_DQ_STD_MPS', 'NEUTRAL_TOLERANCE', 'requantise',
-    'dt_level', 'difference_covariance', 'GainSchedule',
+    'dt_level', 'difference_covariance', 'GainSchedule', 'PIECE_ROWS',
 ]
 
+#: Rows of a block in a file (:class:`~.core.spill.SpillRows`) that :meth:`GainSchedule.
+#: statistics` takes at a time (its temporaries: ~30 values a row).
+PIECE_ROWS = 1 << 16
 #: Blocks whose median is the current noise estimate.
 HISTORY_BLOCKS = 8
 #: Blocks whose median is the current roughness estimate (a block's roughness varies by a
@@ -327,35 +332,96 @@ class GainSchedule:
             self._var_dq[key] = val
         return val
 
-    def statistics(self, y: np.ndarray, dts: list, moving: bool = True) -> bool:
+    def statistics(self, y, dts: list, moving: bool = True) -> bool:
         """One block of consecutive measurements y (m, 3), steps dts (m - 1): noise and
         roughness estimates; True when the settling time restarts (see
         :meth:`requantise_noise`). A block that is not ``moving`` (some sample below the
-        speed floor: the road under the tires barely moves) updates the noise only."""
+        speed floor: the road under the tires barely moves) updates the noise only. ``y``
+        may be rows in a file (:class:`~.core.spill.SpillRows`): evenly stepped, taken a
+        piece at a time (:meth:`_block_in_pieces`, the same bits), else read whole."""
         if y.shape[0] < 8 * NOISE_DIFF_ORDER or len(dts) != y.shape[0] - 1:
             return False
-        self.blocks += 1
-        hq, hr, hg = self.history
         steps = np.asarray(dts)
         dt_mean = float(np.mean(steps))
+        if not isinstance(y, np.ndarray):
+            if _even_in_pieces(steps, dt_mean):
+                return self._take(*self._block_in_pieces(y, steps, dt_mean, moving),
+                                  dt_mean, moving)
+            y = y[0:y.shape[0]]
         even = float(np.max(np.abs(steps - dt_mean))) <= 1e-6 * dt_mean
         t = None if even else np.concatenate([[0.0], np.cumsum(steps)])
         model = self.model
-        hq.append(max(noise_std(y[:, ch], t) for ch in model.deflection_channels))
-        if model.roll_channels:           # (a vehicle without a roll sensor keeps the default)
-            hr.append(max(noise_std(y[:, ch], t) for ch in model.roll_channels))
+        noise_q = max(noise_std(y[:, ch], t) for ch in model.deflection_channels)
+        noise_r = (max(noise_std(y[:, ch], t) for ch in model.roll_channels)
+                   if model.roll_channels else None)
+        # first differences scaled to the typical step (a smooth signal's change is ~ dq dt)
+        scale = (dt_mean / steps)[:, None]
+        d1 = (np.diff(y[:, list(model.deflection_channels)], axis=0) * scale).reshape(-1)
+        rate2 = float(np.mean(d1 * d1)) if self.friction and moving else None
+        return self._take(noise_q, noise_r, mad_std(d1), float(np.mean(scale ** 2)), rate2,
+                          dt_mean, moving)
+
+    def _block_in_pieces(self, y, steps: np.ndarray, dt_mean: float, moving: bool
+                         ) -> tuple:
+        """:meth:`statistics`' numbers of an evenly stepped block of rows ``y`` (sliced
+        ``y[a:b]``) at most ``piece`` rows (and the differences' overlap) at a time: each
+        channel's noise (:func:`.noise.noise_std`) and the first differences' MAD as exact
+        medians over the pieces (:func:`~.core.piecewise.medians`), the means as numpy's
+        pairwise sums (:func:`~.core.piecewise.pairwise_mean`); the differences computed
+        per piece are the whole block's, element by element."""
+        m = y.shape[0]
+        model = self.model
+        defl = list(model.deflection_channels)
+        chans = defl + list(model.roll_channels)
+        n = NOISE_DIFF_ORDER
+        norm = math.sqrt(math.comb(2 * n, n))
+        piece = max(int(PIECE_ROWS), 1)
+
+        def first_differences(a: int, b: int, x: np.ndarray) -> np.ndarray:
+            """Rows a:b of the scaled first differences from the rows x (y[a:b + 1] on)."""
+            return np.diff(x[:b + 1 - a, defl], axis=0) * (dt_mean / steps[a:b])[:, None]
+
+        def passes():
+            for a in range(0, m - 1, piece):
+                b1, b6 = min(m - 1, a + piece), max(a, min(m - n, a + piece))
+                x = y[a:max(b1 + 1, b6 + n)]
+                d6 = np.diff(x[:b6 + n - a, chans], n, axis=0) / norm
+                yield [*np.abs(d6).T, np.abs(first_differences(a, b1, x)).reshape(-1)]
+
+        med = [v / MAD_GAUSSIAN for v in medians(passes, len(chans) + 1)]
+        noise_q = max(med[:len(defl)])
+        noise_r = max(med[len(defl):-1]) if len(chans) > len(defl) else None
+        mean_scale2 = pairwise_mean(lambda a, b: (dt_mean / steps[a:b]) ** 2, m - 1, piece)
+        rate2 = None
+        if self.friction and moving:
+            w = len(defl)
+
+            def rates2(lo: int, hi: int) -> np.ndarray:
+                r0, r1 = lo // w, -(-hi // w)
+                d = first_differences(r0, r1, y[r0:r1 + 1]).reshape(-1)
+                return (d * d)[lo - r0 * w:hi - r0 * w]
+
+            rate2 = pairwise_mean(rates2, (m - 1) * w, piece * w)
+        return noise_q, noise_r, med[-1], mean_scale2, rate2
+
+    def _take(self, noise_q: float, noise_r: float | None, mad_d1: float, mean_scale2: float,
+              rate2: float | None, dt_mean: float, moving: bool) -> bool:
+        """:meth:`statistics` of a block's numbers: the largest noise of the deflection and
+        of the roll channels (None: no roll sensor), the MAD (:func:`.noise.mad_std`) of the
+        scaled first differences of the deflections and the means of the scales squared and
+        (with friction, ``moving``; else None) of the differences squared."""
+        self.blocks += 1
+        hq, hr, hg = self.history
+        hq.append(noise_q)
+        if noise_r is not None:           # (a vehicle without a roll sensor keeps the default)
+            hr.append(noise_r)
         if not self.noise_fixed[0]:
             self.noise_deflection_m = float(np.median(hq))
         if not self.noise_fixed[1] and hr:
             self.noise_roll_rad = float(np.median(hr))
-        # first differences scaled to the typical step (a smooth signal's change is ~ dq dt)
-        scale = (dt_mean / steps)[:, None]
-        d1 = (np.diff(y[:, list(model.deflection_channels)], axis=0) * scale).reshape(-1)
-        signal_var = (mad_std(d1) ** 2
-                      - 2.0 * self.noise_deflection_m ** 2 * float(np.mean(scale ** 2)))
+        signal_var = mad_d1 ** 2 - 2.0 * self.noise_deflection_m ** 2 * mean_scale2
         if self.friction and moving:   # the RMS rate (not the MAD: friction: dq heavy-tailed)
-            rms2 = float(np.mean(d1 * d1)) - 2.0 * self.noise_deflection_m ** 2 * float(
-                np.mean(scale ** 2))
+            rms2 = rate2 - 2.0 * self.noise_deflection_m ** 2 * mean_scale2
             if rms2 > 0.0:
                 self.dq_history.append(math.sqrt(rms2) / dt_mean)
                 self.dq_std_mps = float(np.median(self.dq_history))
@@ -367,3 +433,11 @@ class GainSchedule:
         if hg and not self.roughness_fixed:
             self.road_gd_m3 = float(np.median(hg))
         return self.requantise_noise()
+
+
+def _even_in_pieces(steps: np.ndarray, dt_mean: float) -> bool:
+    """:meth:`GainSchedule.statistics`' test of even steps (s) without a temporary of them
+    all: every step within 1e-6 of their mean ``dt_mean`` (s)."""
+    piece = PIECE_ROWS
+    return all(float(np.max(np.abs(steps[a:a + piece] - dt_mean))) <= 1e-6 * dt_mean
+               for a in range(0, steps.size, piece))

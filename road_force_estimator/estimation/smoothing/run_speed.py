@@ -42,13 +42,16 @@ def run_statistics(sched: GainSchedule, y: np.ndarray, dts: np.ndarray, v: np.nd
     at speed: in an unsteady run (:func:`unsteady`) the slow samples are left out (their
     deflections barely move, so the roughness matched at the design speed would come out low),
     the stretches left joined (one step of the median dt across each join: a few outliers that
-    the medians of the estimates ignore). ``y`` (m, 3) measurements, ``dts`` (m - 1,) steps (s),
-    ``v`` (m,) speeds (m/s), ``speed`` the design speed (m/s)."""
+    the medians of the estimates ignore). ``y`` (m, 3) measurements (or rows in a file,
+    :class:`~.core.spill.SpillRows`: a steady run's taken in pieces, an unsteady one's read
+    whole), ``dts`` (m - 1,) steps (s), ``v`` (m,) speeds (m/s), ``speed`` the design speed
+    (m/s)."""
     fast = unsteady(v, speed)
     if fast is None or np.count_nonzero(fast) <= 8 * NOISE_DIFF_ORDER:
         sched.statistics(y, dts)
         return
     idx = np.flatnonzero(fast)
+    y = y if isinstance(y, np.ndarray) else y[0:y.shape[0]]
     steps = dts[idx[1:] - 1].copy()
     steps[np.diff(idx) > 1] = float(np.median(dts))
     sched.statistics(y[idx], steps)

@@ -121,6 +121,12 @@ class SpilledColumns(KeptColumns):
         raise TypeError('spilled columns: read them from the file')
 
 
+def _whole(y):
+    """The measurements y (m, ny) as an array: rows in a file (:class:`~.core.spill.
+    SpillRows`, what the offline stream in pieces hands over) read whole."""
+    return y if isinstance(y, np.ndarray) else y[0:y.shape[0]]
+
+
 def _rows(out, k0: int, k1: int) -> list:
     """Rows ``k0:k1`` of the columns ``out`` (a list of arrays or :class:`KeptColumns`)."""
     return out.rows(k0, k1) if isinstance(out, KeptColumns) else [col[k0:k1] for col in out]
@@ -243,7 +249,7 @@ class Smoother:
         """The readings the offline stop operator takes: each deflection channel of an element
         through the zero-phase low-pass at :data:`STICK_CUTOFF_HZ` (:func:`..chain.zero_phase.
         zero_phase_derivatives`, steps of the run's median dt), its sensor lag undone."""
-        out = np.array(y, dtype=float)
+        out = np.array(_whole(y), dtype=float)
         chans = sorted(set(self.stick.channels))
         low, rate, _ = zero_phase_derivatives(out[:, chans], self._stick_dt, STICK_CUTOFF_HZ)
         tau = np.array([self._tau[c] for c in chans])
@@ -258,7 +264,7 @@ class Smoother:
         steps = f.copy()
         steps[1:] = 0.5 * (f[:-1] + f[1:])
         r, _ = friction_response(self.model.continuous(1.0, DEFAULT_ROAD_GD_M3), dt, steps)
-        return y - r
+        return _whole(y) - r
 
     @property
     def vehicle(self):
@@ -289,7 +295,9 @@ class Smoother:
                left_out: np.ndarray | None = None) -> Iterator[tuple[int, int, list]]:
         """The estimates of one run (see :func:`smooth`) as ``(a, b, columns of rows a:b)``
         (the model's columns; the distance is the caller's), in order: ``t`` its times (s),
-        ``y`` (m, ny) its measurements, ``v`` its model speeds (m/s).
+        ``y`` (m, ny) its measurements (or rows in a file, :class:`~.core.spill.SpillRows`:
+        a windowed run's statistics, windows and profile pass read them a piece at a time,
+        the same bits; any other run reads them whole), ``v`` its model speeds (m/s).
 
         ``left_out`` (bool (m, ny), or None): the readings not fed (a stuck sensor,
         :func:`.sensor_health.left_out`): each stretch of samples with the same channels left
@@ -319,6 +327,7 @@ class Smoother:
         if run.windowed:
             yield from self._windowed(run, t, y, v, x0)
             return
+        y = _whole(y)
         out = rows.field_columns(m)[1] if out is None else out
         g, dt, speed, dts, steps = run.gains, run.dt, run.speed, run.dts, run.steps
         if run.uniform:
