@@ -1,31 +1,37 @@
 """A long series' whole-array numbers a piece at a time, with the whole-array call's bits
-(issue 32: the whole vehicle's fused profile and model fit offline from spilled columns).
+(issue 32: the whole vehicle's fused profile, model fit and statistics offline from spilled
+columns, without the drive, or its temporaries, held whole).
 
 Each helper here reproduces one numpy or scipy call on an array that is never held whole:
 :class:`Interp` is :func:`numpy.interp` over a source read in pieces (the same bracketing
 samples, so the same formula on the same numbers), :func:`arange_size` / :func:`arange_piece`
 the points of a float :func:`numpy.arange` (numpy's own fill: ``start + i * delta``),
-:func:`median_positive_steps` :func:`numpy.median` of a column's positive steps (exact:
-selection by counting, 16 bits of the float's pattern per pass), and :func:`sosfiltfilt`
+:func:`medians` / :func:`median` :func:`numpy.median` (the exact order statistics by counting
+passes over the pieces: a radix selection on the values' bits, 16 bits a pass, four passes,
+each a histogram of 65536 counts per series; then numpy's rule, the middle value or the
+:func:`numpy.mean` of the two middle values of an even count), :func:`median_positive_steps`
+that median of a column's positive steps, :func:`sosfiltfilt`
 :func:`scipy.signal.sosfiltfilt` (odd padding, its default pad length: the forward pass with
 its state carried over the pieces and its output spilled, the backward pass over the pieces
 in reverse, as ``sosfiltfilt`` runs both over the padded array), :func:`gradient_piece`
 :func:`numpy.gradient` (its test for even spacing over the whole series first,
-:func:`uniform_step`), :func:`pairwise_sum` the sum of :func:`numpy.add.reduce` (and so of
-:func:`numpy.mean`: that sum over the count). What cannot go in pieces
-with the same bits (an FFT over the whole series) is not here.
+:func:`uniform_step`), :func:`pairwise_sum` / :func:`pairwise_mean` :func:`numpy.add.reduce`
+and :func:`numpy.mean` (numpy's pairwise summation followed down its split points to ranges
+summed by numpy itself). What cannot go in pieces with the same bits (an FFT over the whole
+series) is not here.
 
 A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
 """
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-__all__ = ['Interp', 'arange_size', 'arange_piece', 'median_positive_steps', 'sosfiltfilt',
-           'uniform_step', 'gradient_piece', 'pairwise_sum', 'PIECE_ROWS']
+__all__ = ['Interp', 'arange_size', 'arange_piece', 'medians', 'median',
+           'median_positive_steps', 'sosfiltfilt', 'uniform_step', 'gradient_piece',
+           'pairwise_sum', 'pairwise_mean', 'PIECE_ROWS', 'PAIRWISE_BLOCK']
 
 #: The samples read at a time by default (a few MB of pieces held).
 PIECE_ROWS = 1 << 14
@@ -90,39 +96,94 @@ def arange_piece(start: float, step: float, lo: int, hi: int) -> np.ndarray:
     return out
 
 
+_DIGIT_BITS = 16
+_SIGN = np.uint64(1 << 63)
+
+
+def _keys(x: np.ndarray) -> np.ndarray:
+    """Unsigned 64-bit keys in the order of the float64 values x (NaN-free; -0.0 as +0.0)."""
+    u = (np.asarray(x, np.float64).reshape(-1) + 0.0).view(np.uint64)
+    neg = (u & _SIGN) != 0
+    return np.where(neg, ~u, u | _SIGN)
+
+
+def _value(key: int) -> float:
+    """The float64 of a key of :func:`_keys`."""
+    u = np.uint64(key)
+    u = (u & ~_SIGN) if (u & _SIGN) else ~u
+    return float(np.array([u], np.uint64).view(np.float64)[0])
+
+
+def medians(passes: Callable[[], Iterable[Sequence[np.ndarray]]], series: int
+            ) -> list[float]:
+    """:func:`numpy.median` of each of ``series`` float64 series (NaN if it holds a NaN or
+    nothing), without the series held whole: ``passes()`` yields, each time it is called, the
+    series' pieces in turn, a piece being one array per series (any length, any order of the
+    values; a series' values are those of all its pieces). Called four times."""
+    counts = np.zeros(series, np.int64)
+    nan = np.zeros(series, bool)
+    # the ranks wanted per series: numpy's kth ([n // 2 - 1, n // 2] or [(n - 1) // 2])
+    targets: list[list] = []
+    first = True
+    for shift in range(64 - _DIGIT_BITS, -1, -_DIGIT_BITS):
+        hists: list[dict] = [dict() for _ in range(series)]
+        for piece in passes():
+            for s, x in enumerate(piece):
+                if first:
+                    x = np.asarray(x, np.float64).reshape(-1)
+                    counts[s] += x.size
+                    nan[s] |= bool(np.isnan(x).any())
+                if nan[s]:
+                    continue
+                keys = _keys(x)
+                prefixes = ({None} if first else {p for p, _ in targets[s]})
+                for p in prefixes:
+                    k = keys if p is None else keys[(keys >> np.uint64(shift + _DIGIT_BITS))
+                                                    == np.uint64(p)]
+                    h = np.bincount(((k >> np.uint64(shift)) & np.uint64(0xFFFF)).astype(
+                        np.intp), minlength=1 << _DIGIT_BITS)
+                    hists[s][p] = hists[s][p] + h if p in hists[s] else h
+        if first:
+            targets = [[(None, r) for r in ((n // 2 - 1, n // 2) if n % 2 == 0 else
+                                             ((n - 1) // 2,))] if n and not bad else []
+                       for n, bad in zip(counts.tolist(), nan.tolist())]
+        for s in range(series):
+            step = []
+            for p, r in targets[s]:
+                cum = np.cumsum(hists[s][p])
+                d = int(np.searchsorted(cum, r, side='right'))
+                below = int(cum[d - 1]) if d else 0
+                step.append(((0 if p is None else p) << _DIGIT_BITS | d, r - below))
+            targets[s] = step
+        first = False
+    out = []
+    for s in range(series):
+        if not targets[s]:
+            out.append(float('nan'))
+            continue
+        # numpy's median: the mean of the middle value(s)
+        out.append(float(np.mean(np.array([_value(p) for p, _ in targets[s]]))))
+    return out
+
+
+def median(passes: Callable[[], Iterable[np.ndarray]]) -> float:
+    """:func:`medians` of one series: ``passes()`` yields its pieces (arrays)."""
+    return medians(lambda: ((x,) for x in passes()), 1)[0]
+
+
 def median_positive_steps(n: int, read: Callable, rows: int = PIECE_ROWS) -> float:
     """``np.median(s[s > 0])`` of ``s = np.diff(x)``, ``x`` (n,) from ``read(lo, hi)``
-    (``rows`` at a time); 0.0 without a positive step. Exact: the middle steps selected
-    by their float patterns (positive floats sort as their bits), 16 bits per pass."""
-    def positive(prefix: int, bits: int):
+    (``rows`` at a time); 0.0 without a positive step. Exact: :func:`median`."""
+    def positive():
         last = None
         for lo in range(0, n, rows):
             x = np.asarray(read(lo, min(lo + rows, n)), float)
             s = np.diff(x if last is None else np.concatenate([[last], x]))
             last = x[-1] if x.size else last
-            s = s[s > 0.0].view(np.uint64)
-            if bits < 64:
-                s = s[(s >> np.uint64(bits)) == np.uint64(prefix)]
-            yield s
+            yield s[s > 0.0]
 
-    def select(k: int) -> float:
-        prefix = 0
-        for shift in (48, 32, 16, 0):
-            hist = np.zeros(1 << 16, np.int64)
-            for s in positive(prefix, shift + 16):
-                hist += np.bincount(((s >> np.uint64(shift)) & np.uint64(0xFFFF))
-                                    .astype(np.int64), minlength=1 << 16)
-            cum = np.cumsum(hist)
-            b = int(np.searchsorted(cum, k, side='right'))
-            k -= int(cum[b - 1]) if b else 0
-            prefix = (prefix << 16) | b
-        return float(np.array([prefix], np.uint64).view(np.float64)[0])
-
-    count = sum(int(s.size) for s in positive(0, 64))
-    if not count:
-        return 0.0
-    mid = [select(count // 2)] if count % 2 else [select(count // 2 - 1), select(count // 2)]
-    return float(np.mean(np.array(mid)))
+    out = median(positive)
+    return 0.0 if math.isnan(out) else out        # NaN: no positive step (s > 0 has no NaN)
 
 
 def sosfiltfilt(sos: np.ndarray, n: int, read: Callable, width: int, folder=None,
@@ -219,28 +280,32 @@ def gradient_piece(read_f: Callable, read_x: Callable, n: int, lo: int, hi: int,
     return out
 
 
-#: numpy's pairwise summation: blocks of at most this many summed by numpy in one call.
+#: numpy's pairwise summation: blocks of at most this many summed eight-wise.
 PAIRWISE_BLOCK = 128
 
 
-def pairwise_sum(n: int, pieces: Iterable[np.ndarray]) -> np.float64:
+def pairwise_sum(n: int, pieces: Iterable[np.ndarray], hold: int = PIECE_ROWS
+                 ) -> np.float64:
     """``np.add.reduce(a)`` of a float64 ``a`` (n,) given as consecutive ``pieces`` (any
     sizes): numpy's pairwise summation (a contiguous array halved, the first half a multiple
-    of 8, down to blocks of :data:`PAIRWISE_BLOCK` or fewer summed by ``np.add.reduce``
-    itself, the halves' sums added), so the same bits; held: a block and a piece."""
+    of 8, down to blocks of :data:`PAIRWISE_BLOCK` or fewer, the halves' sums added)
+    followed down its split points to ranges of at most ``hold`` (>= 128) values, each summed
+    by ``np.add.reduce`` itself (which splits them the same way), so the same bits; held:
+    such a range and a piece."""
+    hold = max(int(hold), PAIRWISE_BLOCK)
     it = iter(pieces)
     buf = np.empty(0)
 
     def take(k: int) -> np.ndarray:
         nonlocal buf
         while buf.size < k:
-            buf = np.concatenate([buf, np.asarray(next(it), float)])
+            buf = np.concatenate([buf, np.asarray(next(it), float).reshape(-1)])
         out, buf = buf[:k], buf[k:]
         return out
 
     def node(k: int) -> np.float64:
-        if k <= PAIRWISE_BLOCK:
-            return np.add.reduce(take(k))
+        if k <= hold:
+            return np.add.reduce(np.ascontiguousarray(take(k)))
         half = k // 2
         half -= half % 8
         return node(half) + node(k - half)
@@ -249,3 +314,10 @@ def pairwise_sum(n: int, pieces: Iterable[np.ndarray]) -> np.float64:
         return node(int(n))
     finally:
         it = buf = None                          # let go (node's closure is a cycle)
+
+
+def pairwise_mean(n: int, pieces: Iterable[np.ndarray], hold: int = PIECE_ROWS) -> float:
+    """:func:`numpy.mean` of the series of :func:`pairwise_sum` (NaN for no values)."""
+    if n <= 0:
+        return float('nan')
+    return float(np.float64(pairwise_sum(n, pieces, hold)) / n)

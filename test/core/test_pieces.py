@@ -1,7 +1,9 @@
 """core.pieces against the whole-array numpy / scipy calls it reproduces (np.interp,
-np.arange, np.median, scipy.signal.sosfiltfilt), bit for bit, on awkward sizes: one piece
-for the whole series, many, pieces of one sample, a series just longer than the filter's
-pad; distances with stops (repeated values) and queries past both ends."""
+np.arange, np.median, np.add.reduce, np.mean, np.gradient, scipy.signal.sosfiltfilt), bit
+for bit, on awkward sizes: one piece for the whole series, many, pieces of one sample,
+uneven ones (some empty), a series just longer than the filter's pad; distances with stops
+(repeated values) and queries past both ends; medians of odd and even counts, ties, signs,
+zeros, several series at once."""
 import numpy as np
 import pytest
 from scipy import signal
@@ -130,10 +132,104 @@ def test_gradient_is_numpys(even, n, rows):
                          + [(100_003, 13), (100_003, 4096), (100_003, None)])
 def test_pairwise_sum_is_numpys(n, rows):
     """numpy's own sum (and mean: that sum over n) of a float64 array, given in pieces of
-    ``rows`` (None: one piece), to the bit; sizes across numpy's 128-point blocks."""
+    ``rows`` (None: one piece), to the bit; sizes across numpy's 128-point blocks, the
+    ranges summed at once numpy's blocks (``hold`` 128) or the default's."""
     a = np.abs(np.random.default_rng(n).standard_normal(n)) * 1e-3
     step = rows or max(n, 1)
-    total = pieces.pairwise_sum(n, (a[lo:lo + step] for lo in range(0, n, step)))
-    assert total.hex() == np.add.reduce(a).hex()
-    if n:
-        assert float(total / n) == float(np.mean(a))
+    for hold in (pieces.PAIRWISE_BLOCK, pieces.PIECE_ROWS):
+        total = pieces.pairwise_sum(n, (a[lo:lo + step] for lo in range(0, n, step)), hold)
+        assert total.hex() == np.add.reduce(a).hex()
+        if n:
+            assert float(total / n) == float(np.mean(a))
+
+
+def _bits(x) -> bytes:
+    return np.float64(x).tobytes()
+
+
+def _cuts(n: int, rng, k: int) -> list:
+    """k uneven cuts of range(n) (empty pieces among them)."""
+    inner = np.sort(rng.integers(0, n + 1, size=max(k - 1, 0)))
+    return list(zip([0, *inner.tolist()], [*inner.tolist(), n]))
+
+
+def _series(n: int, kind: str, rng) -> np.ndarray:
+    x = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 3, n)
+    if kind == 'ties':
+        x = np.round(rng.standard_normal(n), 1)       # few distinct values, many equal
+    elif kind == 'positive':
+        x = np.abs(x)
+    elif kind == 'zeros':
+        x[rng.random(n) < 0.5] = 0.0
+        x[rng.random(n) < 0.2] = -0.0
+    elif kind == 'constant':
+        x = np.full(n, 2.5e-5)
+    return x
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 4, 7, 8, 129, 1000, 1001, 65537])
+@pytest.mark.parametrize('kind', ['mixed', 'ties', 'positive', 'zeros', 'constant'])
+def test_median_is_numpys(n, kind):
+    rng = np.random.default_rng(n * 7 + len(kind))
+    x = _series(n, kind, rng)
+    ref = np.median(x)
+    for cuts in ([(0, n)], _cuts(n, rng, 2), _cuts(n, rng, 13)):
+        got = pieces.median(lambda: (x[a:b] for a, b in cuts))
+        assert got == ref and (_bits(got) == _bits(ref) or got == 0.0), (cuts, got, ref)
+
+
+def test_medians_of_several_series_at_once():
+    """Series of different lengths (odd, even, one empty) in the same pieces, as the
+    statistics take each channel's differences."""
+    rng = np.random.default_rng(4)
+    xs = [_series(n, k, rng) for n, k in ((5000, 'mixed'), (4999, 'ties'), (1, 'positive'),
+                                           (0, 'mixed'), (3000, 'zeros'))]
+    cuts = [_cuts(x.size, rng, 9) for x in xs]
+
+    def passes():
+        for i in range(9):
+            yield [x[c[i][0]:c[i][1]] for x, c in zip(xs, cuts)]
+
+    got = pieces.medians(passes, len(xs))
+    for x, g in zip(xs, got):
+        if x.size:
+            assert g == np.median(x)
+        else:
+            assert np.isnan(g)
+
+
+def test_median_of_a_series_with_nan_is_nan():
+    x = np.arange(11.0)
+    x[7] = np.nan
+    with np.errstate(invalid='ignore'):
+        assert np.isnan(np.median(x))
+    assert np.isnan(pieces.median(lambda: (x[:5], x[5:])))
+
+
+@pytest.mark.parametrize('n', [1, 7, 8, 9, 127, 128, 129, 1000, 8193, 65539, 300001])
+def test_pairwise_sum_and_mean_in_ranges_are_numpys(n):
+    rng = np.random.default_rng(n)
+    x = _series(n, 'mixed', rng)
+
+    for piece in (128, 1000, 65536, n):
+        cut = range(0, n, piece)
+        total = pieces.pairwise_sum(n, (x[a:a + piece] for a in cut), piece)
+        assert _bits(total) == _bits(np.add.reduce(x))
+        mean = pieces.pairwise_mean(n, (x[a:a + piece] for a in cut), piece)
+        assert _bits(mean) == _bits(np.mean(x))
+    uneven = _cuts(n, rng, 13)                          # pieces of any size, some empty
+    total = pieces.pairwise_sum(n, (x[a:b] for a, b in uneven), 1000)
+    assert _bits(total) == _bits(np.add.reduce(x))
+
+
+def test_the_sum_tests_tell_orders_of_summation_apart():
+    """The values above are such that another order of summation gives other bits (the
+    comparison is not vacuous): the sequential sum and a sum of 1000-value pieces differ
+    from numpy's on the 300001 values."""
+    rng = np.random.default_rng(300001)
+    x = _series(300001, 'mixed', rng)
+    sequential = 0.0
+    for v in x.tolist():
+        sequential += v
+    pieces = sum(float(np.add.reduce(x[a:a + 1000])) for a in range(0, x.size, 1000))
+    assert sequential != np.add.reduce(x) and pieces != np.add.reduce(x)

@@ -23,7 +23,7 @@ from road_force_estimator.core.parameters import ObserverParameters
 from road_force_estimator.estimation.body_heave import SPEED_FLOOR_MPS
 from road_force_estimator.estimation.models.protocol import VehicleModel, road_diffusion
 from road_force_estimator.estimation.observer.gains import NOISE_FLOOR_M, Gains, design
-from road_force_estimator.core.piecewise import medians, pairwise_mean
+from road_force_estimator.core.pieces import medians, pairwise_mean
 from road_force_estimator.estimation.observer.noise import (MAD_GAUSSIAN, NOISE_DIFF_ORDER,
                                                             mad_std, noise_std)
 from road_force_estimator.estimation.observer.riccati import van_loan
@@ -366,8 +366,8 @@ class GainSchedule:
         """:meth:`statistics`' numbers of an evenly stepped block of rows ``y`` (sliced
         ``y[a:b]``) at most ``piece`` rows (and the differences' overlap) at a time: each
         channel's noise (:func:`.noise.noise_std`) and the first differences' MAD as exact
-        medians over the pieces (:func:`~.core.piecewise.medians`), the means as numpy's
-        pairwise sums (:func:`~.core.piecewise.pairwise_mean`); the differences computed
+        medians over the pieces (:func:`~.core.pieces.medians`), the means as numpy's
+        pairwise sums (:func:`~.core.pieces.pairwise_mean`); the differences computed
         per piece are the whole block's, element by element."""
         m = y.shape[0]
         model = self.model
@@ -391,7 +391,13 @@ class GainSchedule:
         med = [v / MAD_GAUSSIAN for v in medians(passes, len(chans) + 1)]
         noise_q = max(med[:len(defl)])
         noise_r = max(med[len(defl):-1]) if len(chans) > len(defl) else None
-        mean_scale2 = pairwise_mean(lambda a, b: (dt_mean / steps[a:b]) ** 2, m - 1, piece)
+
+        def cut(read, k: int, rows: int):
+            """read(lo, hi) of k values as consecutive pieces of ``rows``."""
+            return (read(lo, min(lo + rows, k)) for lo in range(0, k, rows))
+
+        mean_scale2 = pairwise_mean(m - 1, cut(lambda a, b: (dt_mean / steps[a:b]) ** 2,
+                                               m - 1, piece), piece)
         rate2 = None
         if self.friction and moving:
             w = len(defl)
@@ -401,7 +407,7 @@ class GainSchedule:
                 d = first_differences(r0, r1, y[r0:r1 + 1]).reshape(-1)
                 return (d * d)[lo - r0 * w:hi - r0 * w]
 
-            rate2 = pairwise_mean(rates2, (m - 1) * w, piece * w)
+            rate2 = pairwise_mean((m - 1) * w, cut(rates2, (m - 1) * w, piece * w), piece * w)
         return noise_q, noise_r, med[-1], mean_scale2, rate2
 
     def _take(self, noise_q: float, noise_r: float | None, mad_d1: float, mean_scale2: float,
