@@ -375,12 +375,12 @@ def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
             for factor in FIT_GRID:
                 run = BatchRun(replace(truck, leaf_spring_friction_velocity_mps=0.01 * factor),
                                ObserverParameters())
-                run.estimator.core.nll = 0.0
+                terms = run.estimator.core.nll_terms = []
                 trace = []
                 for a in range(0, n, step):
                     run.feed(drive.stamps_ns[a:a + step], drive.q_m[a:a + step],
                              drive.roll_rad[a:a + step], drive.speed_mps[a:a + step])
-                    trace.append(run.estimator.core.nll)
+                    trace.append(sum(v for _, v in terms))
                 traces[factor] = np.asarray(trace)
             lead = {f: traces[1.0] - t for f, t in traces.items() if f != 1.0}
             best = max(lead, key=lambda f: lead[f][-1])

@@ -182,9 +182,6 @@ class ModelCore:
         self._compactions = 0
         #: samples whose innovation was gated, per channel
         self.gated = [0] * self._ny
-        #: the converged samples' innovation negative log-likelihood, when not None
-        #: (set it to 0 to have it summed)
-        self.nll: float | None = None
         #: when a list, each converged sample's ``(index in the run, its nll)`` appended
         #: (:mod:`..friction_fit`: the sum over the samples every v_f tried converged on)
         self.nll_terms: list | None = None
@@ -488,7 +485,7 @@ class ModelCore:
                 self._undo = (i, self._compactions, row.copy(), raw, self._m,
                               None if fr is None else fr.fm,
                               self._prow.copy() if self._profile else None)
-        if meta[3] and (self.nll is not None or self.nll_terms is not None):
+        if meta[3] and self.nll_terms is not None:
             self._add_nll(s)                      # the innovations' likelihood (a fit)
         if fr is not None:
             fr.record(self._n, self.lag + 1, stamp)
@@ -545,19 +542,16 @@ class ModelCore:
 
     def _add_nll(self, s: list) -> None:
         """Add this sample's negative log-likelihood ``(nu^T S^-1 nu + log det S) / 2`` of
-        its innovation (``s``: the step's product) under the gains in use to :attr:`nll`
-        and :attr:`nll_terms` (those not None)."""
+        its innovation (``s``: the step's product) under the gains in use to
+        :attr:`nll_terms`."""
         g = self.schedule.gains
         if g is not self._nll_gains:
             self._nll_gains = g
             self._nll_si = np.linalg.inv(g.s)
             self._nll_logdet = float(np.linalg.slogdet(g.s)[1])
         nu = np.array(s[self._nx:self._nx + self._ny])
-        value = 0.5 * (float(nu @ self._nll_si @ nu) + self._nll_logdet)
-        if self.nll is not None:
-            self.nll += value
-        if self.nll_terms is not None:
-            self.nll_terms.append((self._n, value))
+        self.nll_terms.append((self._n, 0.5 * (float(nu @ self._nll_si @ nu)
+                                               + self._nll_logdet)))
 
     def _innovation_gate(self, y: tuple, s: list) -> tuple | None:
         """The sample with each channel whose innovation (in ``s``, the step's product) lies
