@@ -1,5 +1,4 @@
-"""The offline v_f fit (the whole vehicle's, or the front axle's): the CPU and wall seconds it
-adds to a drive.
+"""The offline v_f fit (the whole vehicle's or the front axle's): the CPU seconds it adds.
 
     .venv/bin/python -m bench.probes.friction_fit_cost [--duration 20] [--repeats 1] [--front-axle]
 

@@ -15,7 +15,7 @@ A segment without data (no sample in it: a gap in the recording) has NaN in ever
 (spacings above :func:`max_step` do not count) has NaN IRI: a gap is never measured as a
 smooth road.
 
-This module imports numpy only (core).
+This module imports numpy only (core; :func:`coverage_pieces` :mod:`.pieces`).
 """
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ import numpy as np
 from road_force_estimator.core.gnss import positions_at
 
 __all__ = ['SEGMENT_COLUMNS', 'MIN_COVERAGE', 'segment_bounds', 'segment_table',
-           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coordinate_columns',
+           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coverage_pieces',
+           'coordinate_columns',
            'sample_spacing', 'check_segment_length']
 
 #: A segment's IRI needs samples over this fraction of its length.
@@ -200,6 +201,39 @@ def coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
         return cum[i] + part
 
     c = covered_to(np.asarray(edges, dtype=float))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.diff(c) / np.diff(edges)
+
+
+def coverage_pieces(n: int, read: Callable, edges: np.ndarray, rows: int | None = None
+                    ) -> np.ndarray:
+    """:func:`coverage` of distances ``x`` (n,) read ``read(lo, hi) -> x[lo:hi]`` ``rows`` at
+    a time (default :data:`.pieces.PIECE_ROWS`), without ``x`` held whole (issue 32: the
+    streamed report's spilled distances): its bits (:func:`max_step`'s median by counting,
+    :func:`.pieces.median_positive_steps`; the covered length's running sum carried from
+    piece to piece, as ``np.cumsum`` adds in order; each edge's bracketing step where it
+    falls)."""
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    edges = np.asarray(edges, dtype=float)
+    limit = max(0.5, 10.0 * pieces.median_positive_steps(n, read, rows))   # max_step
+    at = np.zeros(edges.size, np.int64)                # samples at or before each edge
+    for lo in range(0, n, rows):
+        at += np.searchsorted(read(lo, min(lo + rows, n)), edges, side='right')
+    i = np.clip(at - 1, 0, max(n - 2, 0))              # each edge's step
+    c = np.zeros(edges.size)
+    carry = 0.0
+    for lo in range(0, n - 1, rows):                   # steps lo:hi
+        hi = min(lo + rows, n - 1)
+        x = np.asarray(read(lo, hi + 1), dtype=float)
+        dx = np.diff(x)
+        good = (dx <= limit) & (dx > 0)
+        cum = np.cumsum(np.concatenate([[carry], np.where(good, dx, 0.0)]))
+        carry = cum[-1]
+        sel = (i >= lo) & (i < hi)
+        j = i[sel] - lo
+        c[sel] = cum[j] + np.where(good[j], np.clip(edges[sel] - x[j], 0.0, dx[j]), 0.0)
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.diff(c) / np.diff(edges)
 

@@ -30,9 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from road_force_estimator.core.iri_chunks import segment_iri
+from road_force_estimator.core.iri_chunks import profile_iri, profile_segment_iri
+from road_force_estimator.core.pieces import PIECE_ROWS
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage, segment_bounds)
+    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage_pieces,
+    segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary', 'Track', 'LoadAccuracy',
            'TRUTH_NOTE']
@@ -63,6 +65,10 @@ class GrowingArray:
 
     def array(self) -> np.ndarray:
         return self.data[:self.size]
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start:stop`` (a view; as :meth:`.core.spill.SpillColumn.read`)."""
+        return self.data[max(0, int(start)):min(self.size, int(stop))]
 
 
 def _seq_bins(acc: np.ndarray, idx: np.ndarray, w: np.ndarray, lo: int) -> None:
@@ -289,6 +295,8 @@ class StreamedSummary:
         #: the distance of every accepted sample (with_stamps: for the fleet's polylines)
         self.x_valid = column() if with_stamps else None
         self.speed = column()
+        #: the samples read at a time for the whole drive's IRI and coverage
+        self.piece_rows = PIECE_ROWS
 
     def add(self, piece, speed_mps: np.ndarray) -> None:
         """One piece of estimates and the recorded speed of its samples (m/s)."""
@@ -366,63 +374,90 @@ class StreamedSummary:
 
     def segment_table(self, fixes=None) -> dict[str, np.ndarray]:
         """:func:`.summary.drive_segments` of the drive (no truth); coordinates from
-        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept."""
-        x = self.x_up.array()
+        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept. The IRI and the
+        coverage read the distances and the road a piece at a time (:meth:`_iri`,
+        :func:`.core.segments.coverage_pieces`); only the coordinates, with fixes, read the
+        distances (and the stamps) whole."""
+        n = self.x_up.size
         empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
-        if x.size < 2:
+        if n < 2:
             return empty
         try:
-            edges, cols = self.segments.table(float(x[-1]))
+            edges, cols = self.segments.table(float(self.x_up.read(n - 1, n)[0]))
         except ValueError:
             return empty
         table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(),
                                         'end_m': edges[1:].copy()}
         counts = cols.pop('count')
         table.update(cols)
-        table.update(self._iri(x, edges))
-        blank_empty(table, coverage(x, edges) < MIN_COVERAGE, counts)
+        table.update(self._iri(edges))
+        blank_empty(table, coverage_pieces(n, self.x_up.read, edges, self.piece_rows)
+                    < MIN_COVERAGE, counts)
         have = fixes is not None and self.stamps_up is not None
         table.update(coordinate_columns(
-            x, edges, self.stamps_up.array() if have else None,
+            self.x_up.array() if have else None, edges,
+            self.stamps_up.array() if have else None,
             fixes.stamps_ns if have else None, fixes.latitude_deg if have else None,
             fixes.longitude_deg if have else None))
         return {name: table[name] for name in SEGMENT_COLUMNS}
 
-    def _iri(self, x: np.ndarray, edges: np.ndarray) -> dict[str, np.ndarray]:
-        """The IRI columns (:func:`.core.iri_chunks.segment_iri` per track: NaN where the
-        profile is too short, as :func:`.summary._iri_hook`); the intervals per segment kept
-        for :meth:`whole_iri`."""
+    def _profile(self, side: int | None = None):
+        """``read(lo, hi) -> (x, z)`` of the profile of the samples that advance: both tracks
+        ((k, 2)), or track ``side`` ((k, 1))."""
+        cols = slice(None) if side is None else slice(side, side + 1)
+        return lambda lo, hi: (self.x_up.read(lo, hi), self.road_up.read(lo, hi)[:, cols])
+
+    def _iri(self, edges: np.ndarray) -> dict[str, np.ndarray]:
+        """The IRI columns (:func:`.core.iri_chunks.profile_segment_iri` per track, read a
+        piece at a time: :func:`.core.iri.iri_segments`' bits; NaN where it raises, as
+        :func:`.summary._iri_hook`); the intervals per segment kept for :meth:`whole_iri`."""
         k = edges.size - 1
-        road = self.road_up.array()
         out = {f'true_iri_{name}_m_per_km': np.full(k, np.nan) for name in ('left', 'right')}
         self._counts = None
         for side, name in ((0, 'left'), (1, 'right')):
             try:
-                values, self._counts = segment_iri(x, road[:, side], edges)
+                values, self._counts = profile_segment_iri(
+                    self.x_up.size, self._profile(side), edges, self.piece_rows)
+                values = values[:, 0]
             except ValueError:
                 values = np.full(k, np.nan)
             out[f'iri_{name}_m_per_km'] = np.asarray(values, dtype=float)
         return out
 
+    def _whole(self) -> list[float] | None:
+        """:func:`.summary.whole_iri` of the estimated profile read a piece at a time
+        (:func:`.core.iri_chunks.profile_iri`, the same bits): None where it is not finite
+        or ``iri`` raises."""
+        if not self._road_finite():
+            return None
+        try:
+            return _floats(profile_iri(self.x_up.size, self._profile(), self.piece_rows))
+        except ValueError:
+            return None
+
+    def _road_finite(self) -> bool:
+        """Whether the road of every sample that advances is finite (read a piece at a time)."""
+        road, n, rows = self.road_up, self.road_up.size, self.piece_rows
+        return all(np.isfinite(road.read(lo, lo + rows)).all() for lo in range(0, n, rows))
+
     def whole_iri(self, segments: dict) -> list[float] | None:
         """:func:`.summary.whole_from_segments` of the estimated profile (the intervals per
-        segment from :meth:`segment_table`)."""
-        from road_force_estimator.report.summary import whole_from_segments, whole_iri
-
-        x = self.x_up.array()
-        if x.size < 2:
+        segment from :meth:`segment_table`), the profile read a piece at a time (where the
+        segments do not give it: :meth:`_whole`)."""
+        if self.x_up.size < 2:
             return None
-        z = self.road_up.array()
         start = segments.get('start_m')
         counts = getattr(self, '_counts', None)
+        # (no intervals: each track's segment IRI raised; where the profile is finite its
+        # IRI raises too: None, as summary.whole_from_segments gives)
         if (counts is None or start is None or len(start) == 0
-                or not np.isfinite(z).all()):
-            return whole_from_segments(x, z, segments, 'iri')
+                or not self._road_finite()):
+            return self._whole()
         values = np.column_stack([segments['iri_left_m_per_km'],
                                   segments['iri_right_m_per_km']])
         used = (counts > 0) & np.isfinite(values).all(axis=1)
         if not used.any():
-            return whole_iri(x, z) if np.isfinite(values).all() else None
+            return self._whole() if np.isfinite(values).all() else None
         return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
 
     def track(self) -> Track:

@@ -88,3 +88,42 @@ def test_profile_iri_refuses_what_core_iri_refuses(case):
     for rows in (1, 7, 5000):
         with pytest.raises(ValueError):
             _in_pieces(x, z, rows)
+
+
+def _segments_in_pieces(x, z, edges, rows):
+    return iri_chunks.profile_segment_iri(x.size, lambda lo, hi: (x[lo:hi], z[lo:hi]), edges,
+                                          rows)
+
+
+@pytest.mark.parametrize('chunk', [7, 1 << 18])
+@pytest.mark.parametrize('rows', [1, 997, 4001])
+def test_profile_segment_iri_in_pieces_is_core_iri_segments(monkeypatch, chunk, rows):
+    """The IRI per segment and the intervals per segment read ``rows`` points at a time
+    against core.iri.iri_segments (per track) and core.iri.interval_counts on the arrays:
+    the same bits; an uneven profile with stops (resampled) and an even one."""
+    monkeypatch.setattr(iri_chunks, 'CHUNK', chunk)
+    for x, z in (_drive_profile(4000, 5), (2.0 + 0.02 * np.arange(4000),
+                                           _drive_profile(4000, 5)[1])):
+        edges = segment_bounds(x[0], x[-1], 13.0)
+        values, counts = _segments_in_pieces(x, z, edges, rows)
+        want = np.column_stack([iri.iri_segments(x, z[:, j], edges) for j in (0, 1)])
+        assert np.isfinite(want).all() and want.min() > 0.0 and want.shape[0] > 4
+        assert values.tobytes() == want.tobytes()
+        assert counts.tobytes() == iri.interval_counts(x, edges).tobytes()
+
+
+@pytest.mark.parametrize('case', ['short', 'not finite', 'too fine'])
+def test_profile_segment_iri_refuses_what_iri_segments_refuses(case):
+    x, z = _drive_profile(2000, 6)
+    if case == 'short':
+        x, z = x[:400], z[:400]
+    elif case == 'not finite':
+        z = z.copy()
+        z[1200, 1] = np.nan
+    else:
+        x = np.concatenate([[0.0], 1e9 + 1e-3 * np.arange(1999)])
+    edges = segment_bounds(x[0], x[-1], 3.0) if case != 'too fine' else np.array([0.0, 2e9])
+    with pytest.raises(ValueError):
+        iri.iri_segments(x, z, edges)
+    with pytest.raises(ValueError):
+        _segments_in_pieces(x, z, edges, 7)

@@ -142,3 +142,26 @@ def test_max_abs_quasi_static_ltr_per_segment():
         inside = (x >= 100.0 * j) & ((x < 100.0 * (j + 1)) if j < 2 else (x <= 300.0))
         assert table['max_abs_ltr_quasi_static'][j] == np.abs(quasi[inside]).max()
     assert np.isnan(segment_table(*args)['max_abs_ltr_quasi_static']).all()
+
+
+@pytest.mark.parametrize('rows', [1, 2, 7, 1000, 5000])
+def test_coverage_in_pieces_is_coverage(rows):
+    """coverage_pieces (the distances read ``rows`` at a time) against coverage on the whole
+    array: the same bits; an uneven drive with stops, a gap (no data over 40 m) and edges
+    before the first and past the last sample."""
+    from road_force_estimator.core.segments import coverage, coverage_pieces
+
+    rng = np.random.default_rng(7)
+    step = rng.uniform(0.015, 0.025, 4000)
+    step[rng.random(step.size) < 0.02] = 0.0
+    step[2500] = 40.0                                  # a gap
+    x = 3.0 + np.cumsum(step)
+    for edges in (segment_bounds(x[0], x[-1], 7.0), np.array([0.0, 5.0, 50.0, 90.0, 200.0])):
+        want = coverage(x, edges)
+        assert np.nanmin(want) < 0.5 < np.nanmax(want)      # the gap and covered ones
+        got = coverage_pieces(x.size, lambda lo, hi: x[lo:hi], edges, rows)
+        assert got.tobytes() == want.tobytes()
+    for short in (x[:1], x[:2]):
+        edges = np.array([0.0, 3.01, 4.0])
+        got = coverage_pieces(short.size, lambda lo, hi: short[lo:hi], edges, rows)
+        assert got.tobytes() == coverage(short, edges).tobytes()
