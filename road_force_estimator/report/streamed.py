@@ -9,9 +9,12 @@ What each number needs of the whole drive is kept, and only that:
   previous ones), peaks, maxima and lift-off events, on the grid ``arange(x0, ., L)``; the
   last full segment also as continued by the remainder, for when the remainder is merged
   into it;
-- the travelled distance and the road of the samples that advance (16 + 8 bytes a sample),
+- the travelled distance and the road of the samples that advance (8 + 16 bytes a sample),
   for the IRI per segment and the coverage (the quarter-car runs over the whole profile at
-  its mean spacing, which only the whole drive gives);
+  its mean spacing, which only the whole drive gives), read back a piece at a time
+  (:data:`.core.pieces.PIECE_ROWS`: :func:`.core.iri_chunks.profile_segment_iri`,
+  :func:`.core.segments.coverage_pieces`; whole only for the segments' coordinates, with
+  fixes);
 - the stamps and speeds of the accepted samples (16 bytes a sample), for the mean and the
   medians of :func:`~.drive_info.run_description` and the model fit.
 
