@@ -1,15 +1,20 @@
 """Traced peak of the streamed report's whole-drive numbers: the segment table (IRI per
-segment, coverage) and the whole drive's IRI of a drive estimated in pieces.
+segment, coverage, with ``--fixes`` the segments' coordinates), the whole drive's IRI and
+the speed's statistics of a drive estimated in pieces.
 
     .venv/bin/python -m bench.probes.streamed_report_memory [--samples 1000000 2000000]
                                                            [--piece 65536] [--uniform]
+                                                           [--fixes]
 
 :class:`road_force_estimator.report.streamed.StreamedSummary` as ``estimate_bag`` builds it in
 blocks (100 m segments, its per-sample columns spilled to temporary files) fed a synthetic
 drive of ``--samples`` samples in pieces of ``--piece``: 1 kHz, the speed 20 +- 5 m/s (a
 sine of 60 s period; ``--uniform``: 20 m/s, evenly spaced), every sample accepted and
-converged, a random-walk road (seed 1). Per size: the peak traced by :mod:`tracemalloc`
-while :meth:`~.StreamedSummary.segment_table` and :meth:`~.StreamedSummary.whole_iri` run
+converged, a random-walk road (seed 1); ``--fixes``: the stamps kept (``with_stamps``) and
+GNSS fixes at 10 Hz from 0.05 s to the drive's last 0.1 s on a straight road heading 30 deg
+east of north (:func:`fixes`). Per size: the peak traced by :mod:`tracemalloc` while
+:meth:`~.StreamedSummary.segment_table`, :meth:`~.StreamedSummary.whole_iri` and
+:meth:`~.StreamedSummary.speed_stats` run
 (not the accumulators' own arrays, made before), and the growth per sample between the first
 two sizes (after a first run of 200 000 samples for the one-time caches: imports, the
 IRI filter's design); a SHA-256 of the table and the IRI (the same bits before and after a change).
@@ -27,6 +32,22 @@ from types import SimpleNamespace
 import numpy as np
 
 RATE_HZ = 1000.0
+#: The fixes' rate (Hz) and the road's heading (deg east of north) with ``--fixes``.
+FIX_HZ, HEADING_DEG = 10.0, 30.0
+
+
+def fixes(n: int, uniform: bool):
+    """:class:`~road_force_estimator.bagio.drive.Fixes` of the drive of ``n`` samples: every
+    0.1 s from 0.05 s on, before its last sample; the distance the speed's integral."""
+    from road_force_estimator.bagio.drive import Fixes
+
+    t = np.arange(0.05, (n - 1) / RATE_HZ, 1.0 / FIX_HZ)
+    x = 20.0 * t if uniform else 20.0 * t + 5.0 * 60.0 / (2.0 * np.pi) * (
+        1.0 - np.cos(2.0 * np.pi * t / 60.0))
+    north, east = x * np.cos(np.radians(HEADING_DEG)), x * np.sin(np.radians(HEADING_DEG))
+    lat = 48.0 + north / 111_195.0
+    lon = 11.0 + east / (111_195.0 * np.cos(np.radians(48.0)))
+    return Fixes(np.round(t * 1e9).astype(np.int64), lat, lon, np.full(t.size, np.nan))
 
 
 def feed(acc, n: int, piece: int, uniform: bool) -> None:
@@ -51,27 +72,32 @@ def feed(acc, n: int, piece: int, uniform: bool) -> None:
             speed_contradicted=np.zeros(k, bool)), v)
 
 
-def measure(n: int, piece: int, uniform: bool) -> tuple[int, str]:
-    """(traced peak in bytes, SHA-256 of the table and the IRI) of a drive of ``n``."""
+def measure(n: int, piece: int, uniform: bool, with_fixes: bool = False) -> tuple[int, str]:
+    """(traced peak in bytes, SHA-256 of the table, the IRI and the speed's statistics) of
+    a drive of ``n``."""
     from road_force_estimator.report.streamed import StreamedSummary
 
+    fix = fixes(n, uniform) if with_fixes else None
     with tempfile.TemporaryDirectory() as folder:
-        acc = StreamedSummary(100.0, capacity=n, spill=folder)
+        acc = StreamedSummary(100.0, with_stamps=with_fixes, capacity=n, spill=folder)
         feed(acc, n, piece, uniform)
         gc.collect()
         tracemalloc.start()
         try:
-            table = acc.segment_table()
+            table = acc.segment_table(fix)
             iri = acc.whole_iri(table)
+            speed = acc.speed_stats()
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
-        for col in (acc.x_up, acc.road_up, acc.stamps, acc.speed):
-            col.close()
+        for col in (acc.x_up, acc.road_up, acc.stamps, acc.speed, acc.stamps_up, acc.x_valid):
+            if col is not None:
+                col.close()
     h = hashlib.sha256()
     for name in sorted(table):
         h.update(name.encode() + np.ascontiguousarray(table[name]).tobytes())
     h.update(np.asarray(iri, float).tobytes())
+    h.update(np.array([speed[k] for k in sorted(speed)]).tobytes())
     return peak, h.hexdigest()[:12]
 
 
@@ -81,13 +107,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--samples', type=int, nargs='+', default=[1_000_000, 2_000_000])
     p.add_argument('--piece', type=int, default=65536)
     p.add_argument('--uniform', action='store_true', help='20 m/s: evenly spaced')
+    p.add_argument('--fixes', action='store_true',
+                   help="the stamps kept and GNSS fixes at 10 Hz: the segments' coordinates")
     args = p.parse_args(argv)
-    print('| samples | traced peak (MB) | bytes a sample | table and IRI (sha256) |')
+    print('| samples | traced peak (MB) | bytes a sample | table, IRI, speed (sha256) |')
     print('|---:|---:|---:|---|')
-    measure(200_000, args.piece, args.uniform)      # the one-time caches (imports, designs)
+    measure(200_000, args.piece, args.uniform, args.fixes)   # one-time caches (imports, designs)
     peaks = []
     for n in args.samples:
-        peak, digest = measure(n, args.piece, args.uniform)
+        peak, digest = measure(n, args.piece, args.uniform, args.fixes)
         peaks.append(peak)
         print(f'| {n} | {peak / 1e6:.1f} | {peak / n:.1f} | {digest} |')
     if len(peaks) > 1:

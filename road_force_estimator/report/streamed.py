@@ -13,10 +13,11 @@ What each number needs of the whole drive is kept, and only that:
   for the IRI per segment and the coverage (the quarter-car runs over the whole profile at
   its mean spacing, which only the whole drive gives), read back a piece at a time
   (:data:`.core.pieces.PIECE_ROWS`: :func:`.core.iri_chunks.profile_segment_iri`,
-  :func:`.core.segments.coverage_pieces`; whole only for the segments' coordinates, with
-  fixes);
-- the stamps and speeds of the accepted samples (16 bytes a sample), for the mean and the
-  medians of :func:`~.drive_info.run_description` and the model fit.
+  :func:`.core.segments.coverage_pieces`), with their stamps when the drive has fixes, for
+  the segments' coordinates (:func:`.core.segments.coordinate_columns_pieces`);
+- the stamps and speeds of the accepted samples (16 bytes a sample), for the speed's
+  statistics of :func:`~.drive_info.run_description` (read a piece at a time) and the
+  fleet's map of distance to stamp (:meth:`StreamedSummary.track`, whole).
 
 With a ground truth of the loads, :class:`LoadAccuracy` gives the load and LTR figures of
 :func:`.summary.accuracy` from sums over the converged samples (equal to one piece's to the
@@ -34,9 +35,9 @@ from typing import Any
 import numpy as np
 
 from road_force_estimator.core.iri_chunks import profile_iri, profile_segment_iri
-from road_force_estimator.core.pieces import PIECE_ROWS
+from road_force_estimator.core.pieces import PIECE_ROWS, pairwise_mean
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage_pieces,
+    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns_pieces, coverage_pieces,
     segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary', 'Track', 'LoadAccuracy',
@@ -377,10 +378,10 @@ class StreamedSummary:
 
     def segment_table(self, fixes=None) -> dict[str, np.ndarray]:
         """:func:`.summary.drive_segments` of the drive (no truth); coordinates from
-        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept. The IRI and the
-        coverage read the distances and the road a piece at a time (:meth:`_iri`,
-        :func:`.core.segments.coverage_pieces`); only the coordinates, with fixes, read the
-        distances (and the stamps) whole."""
+        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept. The IRI, the coverage
+        and the coordinates read the distances, the road and the stamps a piece at a time
+        (:meth:`_iri`, :func:`.core.segments.coverage_pieces`,
+        :func:`.core.segments.coordinate_columns_pieces`)."""
         n = self.x_up.size
         empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
         if n < 2:
@@ -397,11 +398,10 @@ class StreamedSummary:
         blank_empty(table, coverage_pieces(n, self.x_up.read, edges, self.piece_rows)
                     < MIN_COVERAGE, counts)
         have = fixes is not None and self.stamps_up is not None
-        table.update(coordinate_columns(
-            self.x_up.array() if have else None, edges,
-            self.stamps_up.array() if have else None,
+        table.update(coordinate_columns_pieces(
+            n, lambda lo, hi: (self.x_up.read(lo, hi), self.stamps_up.read(lo, hi)), edges,
             fixes.stamps_ns if have else None, fixes.latitude_deg if have else None,
-            fixes.longitude_deg if have else None))
+            fixes.longitude_deg if have else None, self.piece_rows))
         return {name: table[name] for name in SEGMENT_COLUMNS}
 
     def _profile(self, side: int | None = None):
@@ -472,8 +472,21 @@ class StreamedSummary:
         return Track(np.ones(x.size, bool), self.stamps.array(), x)
 
     def speed_stats(self) -> dict[str, float] | None:
-        v = self.speed.array()
-        v = v[np.isfinite(v)]
-        if not v.size:
+        """Mean, min and max (m/s) of the finite recorded speeds of the accepted samples
+        (None without one), read a piece at a time: ``np.mean``'s bits by
+        :func:`.core.pieces.pairwise_mean`, the extremes of the pieces' extremes."""
+        speed, n, rows = self.speed, self.speed.size, self.piece_rows
+
+        def finite():
+            for lo in range(0, n, rows):
+                v = speed.read(lo, lo + rows)
+                yield v[np.isfinite(v)]
+
+        count, low, high = 0, math.inf, -math.inf
+        for v in finite():
+            if v.size:
+                count += v.size
+                low, high = min(low, float(np.min(v))), max(high, float(np.max(v)))
+        if not count:
             return None
-        return {'mean': float(np.mean(v)), 'min': float(np.min(v)), 'max': float(np.max(v))}
+        return {'mean': pairwise_mean(count, finite()), 'min': low, 'max': high}

@@ -1,8 +1,8 @@
 """The streamed report's whole-drive numbers (report.streamed.StreamedSummary: the IRI per
-segment, the coverage that blanks it, the whole drive's IRI) from a drive fed in pieces and
-read back a piece at a time, against core.iri and core.segments on the whole arrays (the
-one-piece report's functions): the same bits; and its traced peak does not grow with the
-drive."""
+segment, the coverage that blanks it, the segments' coordinates, the whole drive's IRI, the
+speed's statistics) from a drive fed in pieces and read back a piece at a time, against
+core.iri and core.segments on the whole arrays (the one-piece report's functions) and numpy:
+the same bits; and its traced peak does not grow with the drive."""
 import gc
 from types import SimpleNamespace
 import tracemalloc
@@ -30,10 +30,12 @@ def _drive(n: int, seed: int, uneven: bool = True, gap: bool = True):
     return x, step * 1000.0, z
 
 
-def _fed(x, v, z, piece: int, spill=None, rows: int | None = None) -> StreamedSummary:
-    """A StreamedSummary (50 m segments) fed the drive ``piece`` samples at a time, every
-    sample accepted and converged; ``rows``: the samples it reads back at a time."""
-    acc = StreamedSummary(50.0, capacity=x.size, spill=spill)
+def _fed(x, v, z, piece: int, spill=None, rows: int | None = None,
+         with_stamps: bool = False) -> StreamedSummary:
+    """A StreamedSummary (50 m segments) fed the drive ``piece`` samples at a time (stamps
+    1 ms apart), every sample accepted and converged; ``rows``: the samples it reads back at
+    a time; ``with_stamps``: the stamps kept (for the coordinates)."""
+    acc = StreamedSummary(50.0, with_stamps=with_stamps, capacity=x.size, spill=spill)
     if rows is not None:
         acc.piece_rows = rows
     for lo in range(0, x.size, piece):
@@ -50,7 +52,7 @@ def _fed(x, v, z, piece: int, spill=None, rows: int | None = None) -> StreamedSu
 
 
 def _close(acc: StreamedSummary) -> None:
-    for col in (acc.x_up, acc.road_up, acc.stamps, acc.speed):
+    for col in (acc.x_up, acc.road_up, acc.stamps, acc.speed, acc.stamps_up, acc.x_valid):
         if hasattr(col, 'close'):
             col.close()
 
@@ -106,28 +108,76 @@ def test_a_track_not_finite(tmp_path):
     assert whole is None and whole_from_segments(x[up], z[up], table, 'iri') is None
 
 
+def _fixes(x, stamps):
+    """Fixes every ~0.1 s from 50 ms after the first stamp to 70 ms before the last (the
+    first and last segment ends placed beyond them) on a straight road 30 deg east of north,
+    at the travelled distance ``x`` (m) at ``stamps`` (ns)."""
+    a, b = stamps[0] + 50_000_000, stamps[-1] - 70_000_000
+    t = np.round(np.linspace(a, b, round((b - a) / 1e8) + 1))
+    along = np.interp(t, stamps, x)
+    lat = 48.0 + along * np.cos(np.radians(30.0)) / 111_195.0
+    lon = 11.0 + along * np.sin(np.radians(30.0)) / (111_195.0 * np.cos(np.radians(48.0)))
+    return SimpleNamespace(stamps_ns=t.astype(np.int64), latitude_deg=lat, longitude_deg=lon)
+
+
+@pytest.mark.parametrize('rows', [7, 1000, None])
+@pytest.mark.parametrize('spilled', [False, True])
+def test_coordinates_and_speed_in_pieces_equal_the_whole_arrays(tmp_path, rows, spilled):
+    """The segments' coordinates (GNSS fixes, the stamps kept) and the speed's statistics
+    (NaN speeds among them) of a drive fed in pieces of 4096 and read back ``rows`` at a
+    time, in memory or spilled, against coordinate_columns on the whole arrays of the samples
+    that advance and np.mean/min/max of the finite speeds: the same bits."""
+    from road_force_estimator.core.segments import coordinate_columns
+
+    x, v, z = _drive(30_000, 6)
+    v = v + np.random.default_rng(6).uniform(0.0, 1e-3, v.size)    # not in 8-bit steps
+    v[[10, 20_000, 29_999]] = np.nan
+    stamps = np.arange(x.size, dtype=np.int64) * 1_000_000
+    fixes = _fixes(x, stamps)
+    acc = _fed(x, v, z, 4096, tmp_path if spilled else None, rows, with_stamps=True)
+    try:
+        table = acc.segment_table(fixes)
+        speed = acc.speed_stats()
+    finally:
+        _close(acc)
+    up = np.concatenate([[True], np.diff(x) > 0])        # the samples that advance
+    edges = np.concatenate([table['start_m'], table['end_m'][-1:]])
+    want = coordinate_columns(x[up], edges, stamps[up], fixes.stamps_ns, fixes.latitude_deg,
+                              fixes.longitude_deg)
+    assert np.isfinite(want['start_lat']).all() and np.isfinite(want['end_lon']).all()
+    for name, column in want.items():
+        assert table[name].tobytes() == column.tobytes(), name
+    finite = v[np.isfinite(v)]
+    assert speed == {'mean': float(np.mean(finite)), 'min': float(np.min(finite)),
+                     'max': float(np.max(finite))}
+
+
 def test_the_whole_drives_numbers_do_not_hold_the_columns(tmp_path):
-    """The traced peak of segment_table and whole_iri on a spilled drive at 20 m/s (1 kHz) of
-    600 000 and 1 200 000 samples (the IRI filter's chunks full at both): it does not grow
-    with the drive (under 2 bytes a sample; measured 0.0) where the distance and road read
-    whole grew by 24 (before this: bench.probes.streamed_report_memory). A first run for the
-    one-time caches."""
+    """The traced peak of segment_table (with GNSS fixes: the coordinates too), whole_iri
+    and speed_stats on a spilled drive at 20 m/s (1 kHz) of 600 000 and 1 200 000 samples
+    (the IRI filter's chunks full at both): it does not grow with the drive (under 2 bytes a
+    sample; measured 0.0) where the distance, road, stamps and speeds read whole grew by 24
+    without fixes and 40 with them (before these: bench.probes.streamed_report_memory). A
+    first run for the one-time caches."""
     peaks = []
     for n in (200_000, 600_000, 1_200_000):
         x, v, z = _drive(n, 5, uneven=False, gap=False)
-        acc = _fed(x, v, z, 65536, tmp_path)
+        fixes = _fixes(x, np.arange(n, dtype=np.int64) * 1_000_000)
+        acc = _fed(x, v, z, 65536, tmp_path, with_stamps=True)
         del x, v, z
         try:
             gc.collect()
             tracemalloc.start()
             try:
-                table = acc.segment_table()
+                table = acc.segment_table(fixes)
                 whole = acc.whole_iri(table)
+                speed = acc.speed_stats()
                 peaks.append(tracemalloc.get_traced_memory()[1])
             finally:
                 tracemalloc.stop()
         finally:
             _close(acc)
         assert whole is not None and np.isfinite(whole).all()
+        assert np.isfinite(table['end_lat']).all() and speed['mean'] == 20.0
     growth = (peaks[2] - peaks[1]) / 600_000
     assert growth < 2.0, (growth, peaks)
