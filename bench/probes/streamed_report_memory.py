@@ -1,6 +1,6 @@
 """Traced peak of the streamed report's whole-drive numbers: the segment table (IRI per
-segment, coverage, with ``--fixes`` the segments' coordinates), the whole drive's IRI and
-the speed's statistics of a drive estimated in pieces.
+segment, coverage, with ``--fixes`` the segments' coordinates), the whole drive's IRI, the
+speed's statistics and the model fit's medians of a drive estimated in pieces.
 
     .venv/bin/python -m bench.probes.streamed_report_memory [--samples 1000000 2000000]
                                                            [--piece 65536] [--uniform]
@@ -13,11 +13,12 @@ sine of 60 s period; ``--uniform``: 20 m/s, evenly spaced), every sample accepte
 converged, a random-walk road (seed 1); ``--fixes``: the stamps kept (``with_stamps``) and
 GNSS fixes at 10 Hz from 0.05 s to the drive's last 0.1 s on a straight road heading 30 deg
 east of north (:func:`fixes`). Per size: the peak traced by :mod:`tracemalloc` while
-:meth:`~.StreamedSummary.segment_table`, :meth:`~.StreamedSummary.whole_iri` and
-:meth:`~.StreamedSummary.speed_stats` run
+:meth:`~.StreamedSummary.segment_table`, :meth:`~.StreamedSummary.whole_iri`,
+:meth:`~.StreamedSummary.speed_stats` and :meth:`~.StreamedSummary.fit_speed_and_step` run
 (not the accumulators' own arrays, made before), and the growth per sample between the first
 two sizes (after a first run of 200 000 samples for the one-time caches: imports, the
-IRI filter's design); a SHA-256 of the table and the IRI (the same bits before and after a change).
+IRI filter's design); a SHA-256 of the table, the IRI, the speed's statistics and the
+fit's medians (the same bits before and after a change).
 """
 from __future__ import annotations
 
@@ -87,6 +88,7 @@ def measure(n: int, piece: int, uniform: bool, with_fixes: bool = False) -> tupl
             table = acc.segment_table(fix)
             iri = acc.whole_iri(table)
             speed = acc.speed_stats()
+            fit = acc.fit_speed_and_step()
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
@@ -97,7 +99,7 @@ def measure(n: int, piece: int, uniform: bool, with_fixes: bool = False) -> tupl
     for name in sorted(table):
         h.update(name.encode() + np.ascontiguousarray(table[name]).tobytes())
     h.update(np.asarray(iri, float).tobytes())
-    h.update(np.array([speed[k] for k in sorted(speed)]).tobytes())
+    h.update(np.array([speed[k] for k in sorted(speed)] + list(fit)).tobytes())
     return peak, h.hexdigest()[:12]
 
 
@@ -110,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--fixes', action='store_true',
                    help="the stamps kept and GNSS fixes at 10 Hz: the segments' coordinates")
     args = p.parse_args(argv)
-    print('| samples | traced peak (MB) | bytes a sample | table, IRI, speed (sha256) |')
+    print('| samples | traced peak (MB) | bytes a sample | table, IRI, speed, fit (sha256) |')
     print('|---:|---:|---:|---|')
     measure(200_000, args.piece, args.uniform, args.fixes)   # one-time caches (imports, designs)
     peaks = []

@@ -16,8 +16,9 @@ What each number needs of the whole drive is kept, and only that:
   :func:`.core.segments.coverage_pieces`), with their stamps when the drive has fixes, for
   the segments' coordinates (:func:`.core.segments.coordinate_columns_pieces`);
 - the stamps and speeds of the accepted samples (16 bytes a sample), for the speed's
-  statistics of :func:`~.drive_info.run_description` (read a piece at a time) and the
-  fleet's map of distance to stamp (:meth:`StreamedSummary.track`, whole).
+  statistics of :func:`~.drive_info.run_description` and the medians of the model fit
+  (read a piece at a time) and the fleet's map of distance to stamp
+  (:meth:`StreamedSummary.track`, whole).
 
 With a ground truth of the loads, :class:`LoadAccuracy` gives the load and LTR figures of
 :func:`.summary.accuracy` from sums over the converged samples (equal to one piece's to the
@@ -35,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from road_force_estimator.core.iri_chunks import profile_iri, profile_segment_iri
-from road_force_estimator.core.pieces import PIECE_ROWS, pairwise_mean
+from road_force_estimator.core.pieces import PIECE_ROWS, median, pairwise_mean, steps
 from road_force_estimator.core.segments import (
     MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns_pieces, coverage_pieces,
     segment_bounds)
@@ -470,6 +471,23 @@ class StreamedSummary:
             return Track(np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0))
         x = self.x_valid.array()
         return Track(np.ones(x.size, bool), self.stamps.array(), x)
+
+    def fit_speed_and_step(self) -> tuple[float, float]:
+        """What :func:`.estimation.fit_check.assess` sets sigma_M with, of the accepted
+        samples: the median moving speed (m/s; ``|v| >= 1``, 1.0 without one) and the median
+        stamp step (s), read a piece at a time (:func:`.core.pieces.median`, exact; the steps
+        by :func:`.core.pieces.steps`)."""
+        speed, stamps, rows = self.speed, self.stamps, self.piece_rows
+
+        def moving():
+            for lo in range(0, speed.size, rows):
+                v = np.abs(speed.read(lo, lo + rows))
+                yield v[v >= 1.0]
+
+        moving_median = median(moving)           # NaN: none moving (|v| >= 1 has no NaN)
+        step = median(lambda: steps(stamps.size, lambda lo, hi: stamps.read(lo, hi) * 1e-9,
+                                    rows))
+        return (1.0 if math.isnan(moving_median) else moving_median), step
 
     def speed_stats(self) -> dict[str, float] | None:
         """Mean, min and max (m/s) of the finite recorded speeds of the accepted samples

@@ -31,11 +31,13 @@ def _drive(n: int, seed: int, uneven: bool = True, gap: bool = True):
 
 
 def _fed(x, v, z, piece: int, spill=None, rows: int | None = None,
-         with_stamps: bool = False) -> StreamedSummary:
-    """A StreamedSummary (50 m segments) fed the drive ``piece`` samples at a time (stamps
-    1 ms apart), every sample accepted and converged; ``rows``: the samples it reads back at
-    a time; ``with_stamps``: the stamps kept (for the coordinates)."""
+         with_stamps: bool = False, stamps=None) -> StreamedSummary:
+    """A StreamedSummary (50 m segments) fed the drive ``piece`` samples at a time (its
+    ``stamps``, ns; default 1 ms apart), every sample accepted and converged; ``rows``: the
+    samples it reads back at a time; ``with_stamps``: the stamps kept (for the coordinates)."""
     acc = StreamedSummary(50.0, with_stamps=with_stamps, capacity=x.size, spill=spill)
+    if stamps is None:
+        stamps = np.arange(x.size, dtype=np.int64) * 1_000_000
     if rows is not None:
         acc.piece_rows = rows
     for lo in range(0, x.size, piece):
@@ -43,7 +45,7 @@ def _fed(x, v, z, piece: int, spill=None, rows: int | None = None,
         ones = np.ones(k, bool)
         load = np.full((k, 2), 3e4) + np.arange(k)[:, None]
         acc.add(SimpleNamespace(
-            stamp_ns=np.arange(lo, lo + k, dtype=np.int64) * 1_000_000, valid=ones,
+            stamp_ns=stamps[lo:lo + k], valid=ones,
             converged=ones, distance_m=x[lo:lo + k], road_m=z[lo:lo + k], wheel_load_n=load,
             ltr=np.zeros(k), ltr_quasi_static=np.zeros(k), lift_off=np.zeros((k, 2), bool),
             load_clipped=np.zeros((k, 2), bool), static_load_n=np.full((k, 2), 3e4),
@@ -152,13 +154,39 @@ def test_coordinates_and_speed_in_pieces_equal_the_whole_arrays(tmp_path, rows, 
                      'max': float(np.max(finite))}
 
 
+@pytest.mark.parametrize('rows', [7, 1000, None])
+@pytest.mark.parametrize('n', [30_000, 30_001])
+def test_the_fits_medians_in_pieces_are_np_median(tmp_path, rows, n):
+    """The model fit's median moving speed and median stamp step (fit_speed_and_step) of a
+    spilled drive fed in pieces of 4096 (speeds of either sign, some under 1 m/s, NaN; stamps
+    jittered; an even and an odd count) against np.median on the arrays, as
+    estimation.fit_check.assess takes them; no speed over 1 m/s: 1.0."""
+    rng = np.random.default_rng(n)
+    x, _, z = _drive(n, 7, gap=False)
+    v = rng.uniform(-30.0, 30.0, n)
+    v[rng.random(n) < 0.1] = 0.5
+    v[[3, n // 2]] = np.nan
+    stamps = 7_000_000_000 + np.cumsum(rng.integers(990_000, 1_010_000, n))
+    t = stamps * 1e-9
+    moving = np.abs(v)[np.abs(v) >= 1.0]
+    want = (float(np.median(moving)), float(np.median(np.diff(t))))
+    for speeds, expected in ((v, want), (np.full(n, 0.5), (1.0, want[1]))):
+        acc = _fed(x, speeds, z, 4096, tmp_path, rows, stamps=stamps)
+        try:
+            got = acc.fit_speed_and_step()
+        finally:
+            _close(acc)
+        assert np.array(got).tobytes() == np.array(expected).tobytes()
+
+
 def test_the_whole_drives_numbers_do_not_hold_the_columns(tmp_path):
-    """The traced peak of segment_table (with GNSS fixes: the coordinates too), whole_iri
-    and speed_stats on a spilled drive at 20 m/s (1 kHz) of 600 000 and 1 200 000 samples
-    (the IRI filter's chunks full at both): it does not grow with the drive (under 2 bytes a
-    sample; measured 0.0) where the distance, road, stamps and speeds read whole grew by 24
-    without fixes and 40 with them (before these: bench.probes.streamed_report_memory). A
-    first run for the one-time caches."""
+    """The traced peak of segment_table (with GNSS fixes: the coordinates too), whole_iri,
+    speed_stats and fit_speed_and_step on a spilled drive at 20 m/s (1 kHz) of 600 000 and
+    1 200 000 samples (the IRI filter's chunks full at both): it does not grow with the
+    drive (under 2 bytes a sample; measured 0.06) where the distance, road, stamps and speeds
+    read whole grew by 24 without fixes and 40 with them, the fit's medians by 32 (before
+    these: bench.probes.streamed_report_memory; the medians: docs/articulated.md). A first
+    run for the one-time caches."""
     peaks = []
     for n in (200_000, 600_000, 1_200_000):
         x, v, z = _drive(n, 5, uneven=False, gap=False)
@@ -172,6 +200,7 @@ def test_the_whole_drives_numbers_do_not_hold_the_columns(tmp_path):
                 table = acc.segment_table(fixes)
                 whole = acc.whole_iri(table)
                 speed = acc.speed_stats()
+                fit = acc.fit_speed_and_step()
                 peaks.append(tracemalloc.get_traced_memory()[1])
             finally:
                 tracemalloc.stop()
@@ -179,5 +208,6 @@ def test_the_whole_drives_numbers_do_not_hold_the_columns(tmp_path):
             _close(acc)
         assert whole is not None and np.isfinite(whole).all()
         assert np.isfinite(table['end_lat']).all() and speed['mean'] == 20.0
+        assert fit[0] == 20.0 and abs(fit[1] - 1e-3) < 1e-12
     growth = (peaks[2] - peaks[1]) / 600_000
     assert growth < 2.0, (growth, peaks)
