@@ -1,8 +1,9 @@
 """The streamed report's whole-drive numbers (report.streamed.StreamedSummary: the IRI per
 segment, the coverage that blanks it, the segments' coordinates, the whole drive's IRI, the
-speed's statistics, the model fit's medians) from a drive fed in pieces and read back a piece at a time, against
-core.iri and core.segments on the whole arrays (the one-piece report's functions) and numpy:
-the same bits; and its traced peak does not grow with the drive."""
+speed's statistics, the model fit's medians) from a drive fed in pieces and read back a
+piece at a time, against core.iri and core.segments on the whole arrays (the one-piece
+report's functions) and numpy: the same bits; and its traced peak does not grow with the
+drive."""
 import gc
 from types import SimpleNamespace
 import tracemalloc
