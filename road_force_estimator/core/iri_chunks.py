@@ -1,14 +1,15 @@
-"""IRI per segment of a long profile, a chunk of intervals at a time (issue 21).
+"""IRI of a long profile read a piece at a time, with :mod:`.iri`'s bits (issues 21, 32).
 
-:func:`segment_iri` gives :func:`.iri.iri_segments` of one track and the intervals per
-segment (:func:`.iri.interval_counts`) with temporaries of one chunk instead of several
-arrays of the whole profile: the same steps in the same order (the slope over the base, the
-golden car's modal first-order filters with their state carried from chunk to chunk, the sums
-per segment in interval order), so the same numbers bit for bit (test_iri_chunks). Profiles
-that are not evenly spaced (resampled by :func:`.iri.rectified_slope`) go through
-:func:`.iri.iri_segments` in one piece. :func:`profile_iri` gives :func:`.iri.iri` of a
-profile read a piece at a time (issue 32: the whole vehicle's spilled fused profile), evenly
-spaced or not: the same filter (:func:`_filtered`) on the even grid made a piece at a time.
+:func:`profile_iri` gives :func:`.iri.iri` and :func:`profile_segment_iri`
+:func:`.iri.iri_segments` (per track) with :func:`.iri.interval_counts` of a profile of ``n``
+points read ``rows`` at a time (the whole vehicle's spilled fused profile, the streamed
+report's spilled profile), evenly spaced or not: the even grid of :func:`.iri.evenly_spaced`
+made a piece at a time (:func:`_grid`: a standstill's repeats dropped, the test for even
+spacing, the median step by counting, the points interpolated), the golden car's modal
+first-order filters a chunk of :data:`CHUNK` intervals at a time with their state carried
+(:func:`_filtered`), the sums per segment in interval order and the whole profile's mean by
+numpy's pairwise summation (:func:`.pieces.pairwise_sum`): the same steps in the same order,
+so the same numbers bit for bit (test_iri_chunks).
 
 This module imports numpy and scipy only (core).
 """
@@ -21,25 +22,10 @@ import numpy as np
 from road_force_estimator.core import iri as iri_mod
 from road_force_estimator.core.scipy_signal import signal as _signal
 
-__all__ = ['CHUNK', 'segment_iri', 'profile_iri']
+__all__ = ['CHUNK', 'profile_iri', 'profile_segment_iri']
 
 #: Intervals per chunk.
 CHUNK = 1 << 18
-
-
-def _uniform_step(x: np.ndarray) -> float | None:
-    """The mean spacing (m) of a strictly increasing profile that :func:`.iri.
-    _evenly_spaced` keeps as it is, else None (checked a chunk at a time)."""
-    if x.size < 2:
-        return None
-    span = x[-1] - x[0]
-    mean_step = span / (x.size - 1)
-    tol = iri_mod.EVEN_SPACING_RTOL * max(mean_step, abs(x[-1]))
-    for a in range(0, x.size - 1, CHUNK):
-        steps = np.diff(x[a:a + CHUNK + 1])
-        if np.any(steps <= 0.0) or not np.all(np.abs(steps - mean_step) <= tol):
-            return None
-    return float(mean_step)
 
 
 def _bins_add(acc: np.ndarray, seg: np.ndarray, w: np.ndarray | None) -> None:
@@ -51,31 +37,6 @@ def _bins_add(acc: np.ndarray, seg: np.ndarray, w: np.ndarray | None) -> None:
     ones = np.ones(seg.size) if w is None else w
     acc[lo:hi] = np.bincount(np.concatenate([np.arange(hi - lo), seg - lo]),
                              np.concatenate([carry, ones]), minlength=hi - lo)
-
-
-def segment_iri(x: np.ndarray, z: np.ndarray, edges: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """``(IRI (m/km) per segment, intervals per segment)`` of one track: ``z`` (m) at the
-    strictly increasing ``x`` (m), segments ``edges`` (m); as :func:`.iri.iri_segments` and
-    :func:`.iri.interval_counts` (ValueError where they raise)."""
-    x = np.asarray(x, dtype=float)
-    h = np.asarray(z, dtype=float)
-    edges = np.asarray(edges, dtype=float)
-    dx = _uniform_step(x)
-    if dx is None or not np.isfinite(h).all():
-        return (iri_mod.iri_segments(x, h, edges), iri_mod.interval_counts(x, edges))
-    k = edges.size - 1
-    total = np.zeros(k)
-    count = np.zeros(k)
-    for a, b, rel in _filtered(lambda lo, hi: h[lo:hi], x.size, dx, float(x[-1] - x[0])):
-        position = x[0] + dx * (np.arange(a, b) + 0.5)
-        seg = np.searchsorted(edges, position, side='right') - 1
-        seg[position == edges[-1]] = k - 1
-        inside = (seg >= 0) & (seg < k)
-        _bins_add(total, seg[inside], np.abs(rel.real)[inside])
-        _bins_add(count, seg[inside], None)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(count > 0, 1000.0 * total / count, np.nan), count.astype(np.int64)
 
 
 def _filtered(read_h: Callable, size: int, dx: float, span_m: float
@@ -169,23 +130,20 @@ class _Kept:
         return self.x[:hi - lo], self.z[:hi - lo].T
 
 
-def profile_iri(n: int, read: Callable, rows: int | None = None) -> np.ndarray:
-    """:func:`.iri.iri` (m/km per track) of a profile of ``n`` points read ``rows`` at a
-    time (default :data:`.pieces.PIECE_ROWS`): ``read(lo, hi) -> (x[lo:hi] (m,
-    non-decreasing), z[lo:hi] (k, w) m)``: the same steps (a standstill's repeats dropped,
-    the test for even spacing, the median step by counting, the even grid interpolated a
-    piece at a time, the filter a chunk at a time, numpy's pairwise sum of the rectified
-    slope: :func:`.pieces.pairwise_sum`), so the same bits (test_iri_chunks).
+def _grid(n: int, read: Callable, rows: int) -> tuple:
+    """The even grid :func:`.iri.evenly_spaced` puts a profile of ``n`` points on, the
+    profile read ``rows`` at a time (``read`` as :func:`profile_iri`'s): ``(dx (m), its
+    points, the span (m), the first kept distance (m), the tracks, read_h)``;
+    ``read_h(track)(lo, hi)``: that track's elevations at the grid's points ``lo:hi``.
 
     Raises
     ------
     ValueError
-        Where ``iri`` raises (fewer than 2 points, non-finite values, a distance that
-        decreases, too short, a grid too fine for the points).
+        Where ``evenly_spaced`` raises (fewer than 2 points, non-finite values, a distance
+        that decreases, no distance covered, a grid too fine for the points).
     """
     from road_force_estimator.core import pieces
 
-    rows = max(int(rows or pieces.PIECE_ROWS), 1)
     if n < 2:
         raise ValueError(f'profile has {n} sample(s): need at least 2')
     kept = _Kept(n, read, rows)
@@ -223,6 +181,27 @@ def profile_iri(n: int, read: Callable, rows: int | None = None) -> np.ndarray:
 
         def read_h(track):
             return lambda lo, hi: interp(first + dx * np.arange(lo, hi))[track]
+    return dx, size, span, first, width, read_h
+
+
+def profile_iri(n: int, read: Callable, rows: int | None = None) -> np.ndarray:
+    """:func:`.iri.iri` (m/km per track) of a profile of ``n`` points read ``rows`` at a
+    time (default :data:`.pieces.PIECE_ROWS`): ``read(lo, hi) -> (x[lo:hi] (m,
+    non-decreasing), z[lo:hi] (k, w) m)``: the same steps (a standstill's repeats dropped,
+    the test for even spacing, the median step by counting, the even grid interpolated a
+    piece at a time: :func:`_grid`, the filter a chunk at a time, numpy's pairwise sum of the
+    rectified slope: :func:`.pieces.pairwise_sum`), so the same bits (test_iri_chunks).
+
+    Raises
+    ------
+    ValueError
+        Where ``iri`` raises (fewer than 2 points, non-finite values, a distance that
+        decreases, too short, a grid too fine for the points).
+    """
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    dx, size, span, _, width, read_h = _grid(n, read, rows)
     out = []
     for track in range(width):
         m = size - max(1, int(round(iri_mod.BASE_LENGTH_M / dx)))
@@ -230,3 +209,40 @@ def profile_iri(n: int, read: Callable, rows: int | None = None) -> np.ndarray:
                                         _filtered(read_h(track), size, dx, float(span))))
         out.append(1000.0 * float(total / m))
     return np.array(out)
+
+
+def profile_segment_iri(n: int, read: Callable, edges: np.ndarray, rows: int | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """``(IRI (m/km) per segment (k, w), intervals per segment (k,))`` of a profile of ``n``
+    points read ``rows`` at a time (``read`` as :func:`profile_iri`'s), segments ``edges``
+    (m): :func:`.iri.iri_segments` per track and :func:`.iri.interval_counts`, bit for bit
+    (the grid of :func:`_grid`, the filter a chunk at a time, the sums per segment in interval
+    order, :func:`_bins_add`), evenly spaced or not (issue 32: the streamed report's
+    spilled profile).
+
+    Raises
+    ------
+    ValueError
+        Where ``iri_segments`` raises (fewer than 2 points, non-finite values, a distance
+        that decreases, too short, a grid too fine for the points).
+    """
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    edges = np.asarray(edges, dtype=float)
+    dx, size, span, first, width, read_h = _grid(n, read, rows)
+    k = edges.size - 1
+    total = np.zeros((width, k))
+    count = np.zeros(k)
+    for track in range(width):
+        for a, b, rel in _filtered(read_h(track), size, dx, float(span)):
+            position = first + dx * (np.arange(a, b) + 0.5)
+            seg = np.searchsorted(edges, position, side='right') - 1
+            seg[position == edges[-1]] = k - 1
+            inside = (seg >= 0) & (seg < k)
+            _bins_add(total[track], seg[inside], np.abs(rel.real)[inside])
+            if track == 0:
+                _bins_add(count, seg[inside], None)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        values = np.where(count > 0, 1000.0 * total / count, np.nan)
+    return values.T, count.astype(np.int64)

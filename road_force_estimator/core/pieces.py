@@ -9,8 +9,9 @@ the points of a float :func:`numpy.arange` (numpy's own fill: ``start + i * delt
 :func:`medians` / :func:`median` :func:`numpy.median` (the exact order statistics by counting
 passes over the pieces: a radix selection on the values' bits, 16 bits a pass, four passes,
 each a histogram of 65536 counts per series; then numpy's rule, the middle value or the
-:func:`numpy.mean` of the two middle values of an even count), :func:`median_positive_steps`
-that median of a column's positive steps, :func:`sosfiltfilt`
+:func:`numpy.mean` of the two middle values of an even count), :func:`steps`
+:func:`numpy.diff` in pieces, :func:`median_positive_steps` that median of a column's
+positive steps, :func:`sosfiltfilt`
 :func:`scipy.signal.sosfiltfilt` (odd padding, its default pad length: the forward pass with
 its state carried over the pieces and its output spilled, the backward pass over the pieces
 in reverse, as ``sosfiltfilt`` runs both over the padded array), :func:`gradient_piece`
@@ -25,11 +26,11 @@ A source is ``read(lo, hi)``: the rows ``lo:hi`` of a series of ``n``.
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ['Interp', 'arange_size', 'arange_piece', 'medians', 'median',
+__all__ = ['Interp', 'arange_size', 'arange_piece', 'medians', 'median', 'steps',
            'median_positive_steps', 'sosfiltfilt', 'uniform_step', 'gradient_piece',
            'pairwise_sum', 'pairwise_mean', 'PIECE_ROWS', 'PAIRWISE_BLOCK']
 
@@ -171,15 +172,21 @@ def median(passes: Callable[[], Iterable[np.ndarray]]) -> float:
     return medians(lambda: ((x,) for x in passes()), 1)[0]
 
 
+def steps(n: int, read: Callable, rows: int = PIECE_ROWS) -> Iterator[np.ndarray]:
+    """``np.diff(x)`` of ``x`` (n,) from ``read(lo, hi)`` (float64), in consecutive pieces
+    (``rows`` read at a time; each piece's first step from the last value before it)."""
+    last = None
+    for lo in range(0, n, rows):
+        x = np.asarray(read(lo, min(lo + rows, n)), float)
+        yield np.diff(x if last is None else np.concatenate([[last], x]))
+        last = x[-1] if x.size else last
+
+
 def median_positive_steps(n: int, read: Callable, rows: int = PIECE_ROWS) -> float:
     """``np.median(s[s > 0])`` of ``s = np.diff(x)``, ``x`` (n,) from ``read(lo, hi)``
     (``rows`` at a time); 0.0 without a positive step. Exact: :func:`median`."""
     def positive():
-        last = None
-        for lo in range(0, n, rows):
-            x = np.asarray(read(lo, min(lo + rows, n)), float)
-            s = np.diff(x if last is None else np.concatenate([[last], x]))
-            last = x[-1] if x.size else last
+        for s in steps(n, read, rows):
             yield s[s > 0.0]
 
     out = median(positive)
@@ -242,11 +249,8 @@ def sosfiltfilt(sos: np.ndarray, n: int, read: Callable, width: int, folder=None
 def uniform_step(n: int, read: Callable, rows: int = PIECE_ROWS):
     """:func:`numpy.gradient`'s test of its coordinates ``x`` (n,) from ``read(lo, hi)``:
     every step equal to the first: that step (a numpy float), else None."""
-    first, last = None, None
-    for lo in range(0, n, rows):
-        x = np.asarray(read(lo, min(lo + rows, n)), float)
-        s = np.diff(x if last is None else np.concatenate([[last], x]))
-        last = x[-1] if x.size else last
+    first = None
+    for s in steps(n, read, rows):
         if s.size and first is None:
             first = s[0]
         if s.size and not (s == first).all():

@@ -15,7 +15,8 @@ A segment without data (no sample in it: a gap in the recording) has NaN in ever
 (spacings above :func:`max_step` do not count) has NaN IRI: a gap is never measured as a
 smooth road.
 
-This module imports numpy only (core).
+This module imports numpy only (core; :func:`coverage_pieces` and
+:func:`coordinate_columns_pieces` :mod:`.pieces`).
 """
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ import numpy as np
 from road_force_estimator.core.gnss import positions_at
 
 __all__ = ['SEGMENT_COLUMNS', 'MIN_COVERAGE', 'segment_bounds', 'segment_table',
-           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coordinate_columns',
+           'segment_samples', 'max_step', 'blank_empty', 'coverage', 'coverage_pieces',
+           'coordinate_columns', 'coordinate_columns_pieces',
            'sample_spacing', 'check_segment_length']
 
 #: A segment's IRI needs samples over this fraction of its length.
@@ -204,6 +206,39 @@ def coverage(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
         return np.diff(c) / np.diff(edges)
 
 
+def coverage_pieces(n: int, read: Callable, edges: np.ndarray, rows: int | None = None
+                    ) -> np.ndarray:
+    """:func:`coverage` of distances ``x`` (n,) read ``read(lo, hi) -> x[lo:hi]`` ``rows`` at
+    a time (default :data:`.pieces.PIECE_ROWS`), without ``x`` held whole (issue 32: the
+    streamed report's spilled distances): its bits (:func:`max_step`'s median by counting,
+    :func:`.pieces.median_positive_steps`; the covered length's running sum carried from
+    piece to piece, as ``np.cumsum`` adds in order; each edge's bracketing step where it
+    falls)."""
+    from road_force_estimator.core import pieces
+
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    edges = np.asarray(edges, dtype=float)
+    limit = max(0.5, 10.0 * pieces.median_positive_steps(n, read, rows))   # max_step
+    at = np.zeros(edges.size, np.int64)                # samples at or before each edge
+    for lo in range(0, n, rows):
+        at += np.searchsorted(read(lo, min(lo + rows, n)), edges, side='right')
+    i = np.clip(at - 1, 0, max(n - 2, 0))              # each edge's step
+    c = np.zeros(edges.size)
+    carry = 0.0
+    for lo in range(0, n - 1, rows):                   # steps lo:hi
+        hi = min(lo + rows, n - 1)
+        x = np.asarray(read(lo, hi + 1), dtype=float)
+        dx = np.diff(x)
+        good = (dx <= limit) & (dx > 0)
+        cum = np.cumsum(np.concatenate([[carry], np.where(good, dx, 0.0)]))
+        carry = cum[-1]
+        sel = (i >= lo) & (i < hi)
+        j = i[sel] - lo
+        c[sel] = cum[j] + np.where(good[j], np.clip(edges[sel] - x[j], 0.0, dx[j]), 0.0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.diff(c) / np.diff(edges)
+
+
 def _load_columns(seg: np.ndarray, k: int, wheel_load_n, ltr, lift_off
                   ) -> dict[str, np.ndarray]:
     """DLC, peak load per wheel, max |LTR| and lift-off events of the ``k`` segments
@@ -251,7 +286,7 @@ def _iri_columns(px: np.ndarray, edges: np.ndarray, profile_m, true_profile_m,
 
 
 def coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_ns,
-                        fix_latitude_deg, fix_longitude_deg) -> dict[str, np.ndarray]:
+                       fix_latitude_deg, fix_longitude_deg) -> dict[str, np.ndarray]:
     """Latitude and longitude (deg) of each segment's ends, NaN without fixes."""
     k = edges.size - 1
     have_fixes = (stamps_ns is not None and fix_stamps_ns is not None
@@ -262,28 +297,95 @@ def coordinate_columns(x: np.ndarray, edges: np.ndarray, stamps_ns, fix_stamps_n
         rel = (stamps - stamps[0]).astype(float)
         edge_ns = stamps[0] + np.round(np.interp(edges, x, rel)).astype(np.int64)
         lat, lon = positions_at(fix_stamps_ns, fix_latitude_deg, fix_longitude_deg, edge_ns)
-        _beyond_fixes(lat, lon, edges, edge_ns, x, stamps, fix_stamps_ns, fix_latitude_deg,
+
+        def fix_x() -> dict[int, float]:
+            f = np.asarray(fix_stamps_ns, dtype=np.int64)
+            fx = np.interp((f - stamps[0]).astype(float), rel, x)     # distance at each fix
+            return {i: fx[i] for i in _END_FIXES}
+
+        _beyond_fixes(lat, lon, edges, edge_ns, fix_x, fix_stamps_ns, fix_latitude_deg,
                       fix_longitude_deg)
     else:
         lat = lon = np.full(k + 1, np.nan)
+    return _coordinates(lat, lon)
+
+
+def coordinate_columns_pieces(n: int, read: Callable, edges: np.ndarray, fix_stamps_ns,
+                              fix_latitude_deg, fix_longitude_deg, rows: int | None = None
+                              ) -> dict[str, np.ndarray]:
+    """:func:`coordinate_columns` of distances ``x`` (n,) and stamps (n,) read ``read(lo,
+    hi) -> (x[lo:hi] (m), stamps_ns[lo:hi])`` ``rows`` at a time (default
+    :data:`.pieces.PIECE_ROWS`), without them held whole (issue 32: the streamed report's
+    spilled columns): its bits (each edge's stamp and the end fixes' distances by
+    :class:`.pieces.Interp`, one query at a time: ``np.interp``'s bracketing samples and
+    formula; held: about two pieces)."""
+    from road_force_estimator.core import pieces
+
+    edges = np.asarray(edges, dtype=float)
+    if fix_stamps_ns is None or len(fix_stamps_ns) < 2:
+        return coordinate_columns(np.zeros(0), edges, None, None, None, None)
+    rows = max(int(rows or pieces.PIECE_ROWS), 1)
+    t0 = np.asarray(read(0, 1)[1], dtype=np.int64)[0]
+
+    def rel(stamps) -> np.ndarray:
+        return (np.asarray(stamps, dtype=np.int64) - t0).astype(float)
+
+    def x_rel(lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+        x, stamps = read(lo, hi)
+        return np.asarray(x, dtype=float), rel(stamps)[None]
+
+    at = pieces.Interp(n, x_rel, rows)
+    edge_rel = np.array([at(edges[j:j + 1])[0, 0] for j in range(edges.size)])
+    edge_ns = t0 + np.round(edge_rel).astype(np.int64)
+    lat, lon = positions_at(fix_stamps_ns, fix_latitude_deg, fix_longitude_deg, edge_ns)
+
+    def fix_x() -> dict[int, float]:
+        def rel_x(lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+            x, stamps = read(lo, hi)
+            return rel(stamps), np.asarray(x, dtype=float)[None]
+
+        f = np.asarray(fix_stamps_ns, dtype=np.int64)
+        q = (f[list(_END_FIXES)] - t0).astype(float)
+        by = pieces.Interp(n, rel_x, rows)
+        order = np.argsort(q, kind='stable')                  # forward: one pass
+        out = np.empty(q.size)
+        for j in order:
+            out[j] = by(q[j:j + 1])[0, 0]
+        return dict(zip(_END_FIXES, out))
+
+    _beyond_fixes(lat, lon, edges, edge_ns, fix_x, fix_stamps_ns, fix_latitude_deg,
+                  fix_longitude_deg)
+    return _coordinates(lat, lon)
+
+
+def _coordinates(lat: np.ndarray, lon: np.ndarray) -> dict[str, np.ndarray]:
+    """The coordinate columns of the ends' latitudes and longitudes (deg, (k + 1,))."""
     return {'start_lat': lat[:-1].copy(), 'start_lon': lon[:-1].copy(),
             'end_lat': lat[1:].copy(), 'end_lon': lon[1:].copy()}
 
 
+#: The fixes an end beyond the fixes is placed from (:func:`_beyond_fixes`).
+_END_FIXES = (0, 1, -2, -1)
+
+
 def _beyond_fixes(lat: np.ndarray, lon: np.ndarray, edges: np.ndarray, edge_ns: np.ndarray,
-                  x: np.ndarray, stamps: np.ndarray, fix_stamps_ns, fix_lat, fix_lon) -> None:
+                  fix_x: Callable[[], dict], fix_stamps_ns, fix_lat, fix_lon) -> None:
     """Place (in place) the ends up to one fix period before the first or after the last fix:
-    from that fix, along the heading of the two nearest fixes, at the travelled distance."""
+    from that fix, along the heading of the two nearest fixes, at the travelled distance
+    (``fix_x()``: the distance (m) at the fixes :data:`_END_FIXES`, by index; called once,
+    when an end is there)."""
     f = np.asarray(fix_stamps_ns, dtype=np.int64)
     flat, flon = np.asarray(fix_lat, dtype=float), np.asarray(fix_lon, dtype=float)
     period = float(np.median(np.diff(f)))
-    rel = (stamps - stamps[0]).astype(float)
-    fx = np.interp((f - stamps[0]).astype(float), rel, x)     # distance at each fix
+    fx = None
     for near, far, side in ((-1, -2, 1), (0, 1, -1)):
         gap = (edge_ns - f[near]) * side
         sel = ~np.isfinite(lat) & (gap > 0) & (gap <= period)
+        if not sel.any():
+            continue
+        fx = fix_x() if fx is None else fx
         span = fx[near] - fx[far]
-        if not sel.any() or span == 0.0:
+        if span == 0.0:
             continue
         along = (edges[sel] - fx[near]) / span
         lat[sel] = flat[near] + along * (flat[near] - flat[far])

@@ -300,12 +300,21 @@ class BatchRun:
     (with a latency some come with later blocks), :meth:`finish` the rest; the numbers are
     those of the per-sample path (the same step function, in order), whatever the blocks.
     Memory: the block's rows only (``(k, N_COLUMNS)`` floats), never the whole drive's.
+    ``rows`` False: the filter and its innovations only, no row made
+    (:attr:`.ModelCore.rows`, the model's core only; :meth:`feed` and :meth:`finish` return
+    none), for a fit that reads the innovations (:mod:`.friction_fit`).
     """
 
     def __init__(self, vehicle: VehicleParameters | None = None,
                  observer: ObserverParameters | None = None, *,
-                 gap_threshold_s: float = GAP_THRESHOLD_S) -> None:
+                 gap_threshold_s: float = GAP_THRESHOLD_S, rows: bool = True) -> None:
         self.estimator = Estimator(vehicle, observer, gap_threshold_s=gap_threshold_s)
+        if not rows:
+            if not hasattr(self.estimator.core, 'rows'):
+                raise ValueError(f'rows=False: the {self.estimator.observer.discretization!r} '
+                                 'core always makes its rows (the model core only)')
+            self.estimator.core.rows = False
+        self.rows = bool(rows)
         #: accepted samples so far and rows returned so far
         self.accepted = 0
         self.returned = 0
@@ -352,7 +361,7 @@ class BatchRun:
         rows = [row for _, row in est._ready]
         est._ready.clear()
         out = self._table(rows)
-        if self.returned != self.accepted:   # never: one estimate per accepted sample
+        if self.rows and self.returned != self.accepted:   # never: one per accepted sample
             raise RuntimeError(f'{self.returned} estimates for {self.accepted} accepted samples')
         return out
 

@@ -241,10 +241,11 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
 
     The front axle's online observer (no latency, :class:`.estimator.BatchRun`) over the first
     run's first :data:`.friction_fit.FIT_S` seconds of the accepted samples (``stamps_ns``,
-    ``q``, ``phi``, ``speed``, ``restart``: per accepted sample). Not under ``zero_load``
-    (the whole vehicle fits there): the readings here are the tracker's, less its offset,
-    which a ``zero_load`` vehicle's :class:`.BatchRun` would track again, and the tracker's
-    offset lag (:data:`.static_load.TIME_CONSTANT_S`, 10 s) is half the fit's seconds.
+    ``q``, ``phi``, ``speed``, ``restart``: per accepted sample), making no rows (``rows``
+    False: the filter and its innovations only, as the whole vehicle's fit). Not under
+    ``zero_load`` (the whole vehicle fits there): the readings here are the tracker's, less
+    its offset, which a ``zero_load`` vehicle's :class:`.BatchRun` would track again, and the
+    tracker's offset lag (:data:`.static_load.TIME_CONSTANT_S`, 10 s) is half the fit's seconds.
     """
     from dataclasses import replace
 
@@ -259,7 +260,7 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
     obs = replace(observer, latency_s=0.0)
 
     def nll_terms(v_f: float) -> list:
-        run = BatchRun(replace(vehicle, leaf_spring_friction_velocity_mps=v_f), obs)
+        run = BatchRun(replace(vehicle, leaf_spring_friction_velocity_mps=v_f), obs, rows=False)
         terms = run.estimator.core.nll_terms = []
         run.feed(stamps[:end], q[:end], phi[:end], speed[:end])
         return terms

@@ -98,10 +98,7 @@ class ModelFitSink:
         if self.count < 16:
             ratio, word = math.nan, OK
         else:
-            v = np.abs(summary.speed.array())
-            moving = v[v >= 1.0]
-            speed = float(np.median(moving)) if moving.size else 1.0
-            dt = float(np.median(np.diff(summary.stamps.array() * 1e-9)))
+            speed, dt = summary.fit_speed_and_step()      # read a piece at a time
             sigma = moment_std_nm(vehicle, observer, status, dt, speed)
             ratio = self.monitor.ratio(sigma)
             word = verdict(ratio)

@@ -9,11 +9,16 @@ What each number needs of the whole drive is kept, and only that:
   previous ones), peaks, maxima and lift-off events, on the grid ``arange(x0, ., L)``; the
   last full segment also as continued by the remainder, for when the remainder is merged
   into it;
-- the travelled distance and the road of the samples that advance (16 + 8 bytes a sample),
+- the travelled distance and the road of the samples that advance (8 + 16 bytes a sample),
   for the IRI per segment and the coverage (the quarter-car runs over the whole profile at
-  its mean spacing, which only the whole drive gives);
-- the stamps and speeds of the accepted samples (16 bytes a sample), for the mean and the
-  medians of :func:`~.drive_info.run_description` and the model fit.
+  its mean spacing, which only the whole drive gives), read back a piece at a time
+  (:data:`.core.pieces.PIECE_ROWS`: :func:`.core.iri_chunks.profile_segment_iri`,
+  :func:`.core.segments.coverage_pieces`), with their stamps when the drive has fixes, for
+  the segments' coordinates (:func:`.core.segments.coordinate_columns_pieces`);
+- the stamps and speeds of the accepted samples (16 bytes a sample), for the speed's
+  statistics of :func:`~.drive_info.run_description` and the medians of the model fit
+  (read a piece at a time) and the fleet's map of distance to stamp
+  (:meth:`StreamedSummary.track`, whole).
 
 With a ground truth of the loads, :class:`LoadAccuracy` gives the load and LTR figures of
 :func:`.summary.accuracy` from sums over the converged samples (equal to one piece's to the
@@ -30,9 +35,11 @@ from typing import Any
 
 import numpy as np
 
-from road_force_estimator.core.iri_chunks import segment_iri
+from road_force_estimator.core.iri_chunks import profile_iri, profile_segment_iri
+from road_force_estimator.core.pieces import PIECE_ROWS, median, pairwise_mean, steps
 from road_force_estimator.core.segments import (
-    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns, coverage, segment_bounds)
+    MIN_COVERAGE, SEGMENT_COLUMNS, blank_empty, coordinate_columns_pieces, coverage_pieces,
+    segment_bounds)
 
 __all__ = ['GrowingArray', 'SegmentAccumulator', 'StreamedSummary', 'Track', 'LoadAccuracy',
            'TRUTH_NOTE']
@@ -63,6 +70,10 @@ class GrowingArray:
 
     def array(self) -> np.ndarray:
         return self.data[:self.size]
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start:stop`` (a view; as :meth:`.core.spill.SpillColumn.read`)."""
+        return self.data[max(0, int(start)):min(self.size, int(stop))]
 
 
 def _seq_bins(acc: np.ndarray, idx: np.ndarray, w: np.ndarray, lo: int) -> None:
@@ -289,6 +300,8 @@ class StreamedSummary:
         #: the distance of every accepted sample (with_stamps: for the fleet's polylines)
         self.x_valid = column() if with_stamps else None
         self.speed = column()
+        #: the samples read at a time for the whole drive's IRI and coverage
+        self.piece_rows = PIECE_ROWS
 
     def add(self, piece, speed_mps: np.ndarray) -> None:
         """One piece of estimates and the recorded speed of its samples (m/s)."""
@@ -366,63 +379,89 @@ class StreamedSummary:
 
     def segment_table(self, fixes=None) -> dict[str, np.ndarray]:
         """:func:`.summary.drive_segments` of the drive (no truth); coordinates from
-        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept."""
-        x = self.x_up.array()
+        ``fixes`` (:class:`.bagio.Fixes`) when the stamps were kept. The IRI, the coverage
+        and the coordinates read the distances, the road and the stamps a piece at a time
+        (:meth:`_iri`, :func:`.core.segments.coverage_pieces`,
+        :func:`.core.segments.coordinate_columns_pieces`)."""
+        n = self.x_up.size
         empty = {name: np.zeros(0) for name in SEGMENT_COLUMNS}
-        if x.size < 2:
+        if n < 2:
             return empty
         try:
-            edges, cols = self.segments.table(float(x[-1]))
+            edges, cols = self.segments.table(float(self.x_up.read(n - 1, n)[0]))
         except ValueError:
             return empty
         table: dict[str, np.ndarray] = {'start_m': edges[:-1].copy(),
                                         'end_m': edges[1:].copy()}
         counts = cols.pop('count')
         table.update(cols)
-        table.update(self._iri(x, edges))
-        blank_empty(table, coverage(x, edges) < MIN_COVERAGE, counts)
+        table.update(self._iri(edges))
+        blank_empty(table, coverage_pieces(n, self.x_up.read, edges, self.piece_rows)
+                    < MIN_COVERAGE, counts)
         have = fixes is not None and self.stamps_up is not None
-        table.update(coordinate_columns(
-            x, edges, self.stamps_up.array() if have else None,
+        table.update(coordinate_columns_pieces(
+            n, lambda lo, hi: (self.x_up.read(lo, hi), self.stamps_up.read(lo, hi)), edges,
             fixes.stamps_ns if have else None, fixes.latitude_deg if have else None,
-            fixes.longitude_deg if have else None))
+            fixes.longitude_deg if have else None, self.piece_rows))
         return {name: table[name] for name in SEGMENT_COLUMNS}
 
-    def _iri(self, x: np.ndarray, edges: np.ndarray) -> dict[str, np.ndarray]:
-        """The IRI columns (:func:`.core.iri_chunks.segment_iri` per track: NaN where the
-        profile is too short, as :func:`.summary._iri_hook`); the intervals per segment kept
-        for :meth:`whole_iri`."""
+    def _profile(self, side: int | None = None):
+        """``read(lo, hi) -> (x, z)`` of the profile of the samples that advance: both tracks
+        ((k, 2)), or track ``side`` ((k, 1))."""
+        cols = slice(None) if side is None else slice(side, side + 1)
+        return lambda lo, hi: (self.x_up.read(lo, hi), self.road_up.read(lo, hi)[:, cols])
+
+    def _iri(self, edges: np.ndarray) -> dict[str, np.ndarray]:
+        """The IRI columns (:func:`.core.iri_chunks.profile_segment_iri` per track, read a
+        piece at a time: :func:`.core.iri.iri_segments`' bits; NaN where it raises, as
+        :func:`.summary._iri_hook`); the intervals per segment kept for :meth:`whole_iri`."""
         k = edges.size - 1
-        road = self.road_up.array()
         out = {f'true_iri_{name}_m_per_km': np.full(k, np.nan) for name in ('left', 'right')}
         self._counts = None
         for side, name in ((0, 'left'), (1, 'right')):
             try:
-                values, self._counts = segment_iri(x, road[:, side], edges)
+                values, self._counts = profile_segment_iri(
+                    self.x_up.size, self._profile(side), edges, self.piece_rows)
+                values = values[:, 0]
             except ValueError:
                 values = np.full(k, np.nan)
             out[f'iri_{name}_m_per_km'] = np.asarray(values, dtype=float)
         return out
 
+    def _whole(self) -> list[float] | None:
+        """:func:`.summary.whole_iri` of the estimated profile read a piece at a time
+        (:func:`.core.iri_chunks.profile_iri`, the same bits): None where it is not finite
+        or ``iri`` raises."""
+        if not self._road_finite():
+            return None
+        try:
+            return _floats(profile_iri(self.x_up.size, self._profile(), self.piece_rows))
+        except ValueError:
+            return None
+
+    def _road_finite(self) -> bool:
+        """Whether the road of every sample that advances is finite (read a piece at a time)."""
+        road, n, rows = self.road_up, self.road_up.size, self.piece_rows
+        return all(np.isfinite(road.read(lo, lo + rows)).all() for lo in range(0, n, rows))
+
     def whole_iri(self, segments: dict) -> list[float] | None:
         """:func:`.summary.whole_from_segments` of the estimated profile (the intervals per
-        segment from :meth:`segment_table`)."""
-        from road_force_estimator.report.summary import whole_from_segments, whole_iri
-
-        x = self.x_up.array()
-        if x.size < 2:
+        segment from :meth:`segment_table`), the profile read a piece at a time (where the
+        segments do not give it: :meth:`_whole`)."""
+        if self.x_up.size < 2:
             return None
-        z = self.road_up.array()
         start = segments.get('start_m')
         counts = getattr(self, '_counts', None)
+        # (no intervals: each track's segment IRI raised; where the profile is finite its
+        # IRI raises too: None, as summary.whole_from_segments gives)
         if (counts is None or start is None or len(start) == 0
-                or not np.isfinite(z).all()):
-            return whole_from_segments(x, z, segments, 'iri')
+                or not self._road_finite()):
+            return self._whole()
         values = np.column_stack([segments['iri_left_m_per_km'],
                                   segments['iri_right_m_per_km']])
         used = (counts > 0) & np.isfinite(values).all(axis=1)
         if not used.any():
-            return whole_iri(x, z) if np.isfinite(values).all() else None
+            return self._whole() if np.isfinite(values).all() else None
         return [float(v) for v in values[used].T @ counts[used] / counts[used].sum()]
 
     def track(self) -> Track:
@@ -433,9 +472,39 @@ class StreamedSummary:
         x = self.x_valid.array()
         return Track(np.ones(x.size, bool), self.stamps.array(), x)
 
+    def fit_speed_and_step(self) -> tuple[float, float]:
+        """What :func:`.estimation.fit_check.assess` sets sigma_M with, of the accepted
+        samples: the median moving speed (m/s; ``|v| >= 1``, 1.0 without one) and the median
+        stamp step (s), read a piece at a time (:func:`.core.pieces.median`, exact; the steps
+        by :func:`.core.pieces.steps`)."""
+        speed, stamps, rows = self.speed, self.stamps, self.piece_rows
+
+        def moving():
+            for lo in range(0, speed.size, rows):
+                v = np.abs(speed.read(lo, lo + rows))
+                yield v[v >= 1.0]
+
+        moving_median = median(moving)           # NaN: none moving (|v| >= 1 has no NaN)
+        step = median(lambda: steps(stamps.size, lambda lo, hi: stamps.read(lo, hi) * 1e-9,
+                                    rows))
+        return (1.0 if math.isnan(moving_median) else moving_median), step
+
     def speed_stats(self) -> dict[str, float] | None:
-        v = self.speed.array()
-        v = v[np.isfinite(v)]
-        if not v.size:
+        """Mean, min and max (m/s) of the finite recorded speeds of the accepted samples
+        (None without one), read a piece at a time: ``np.mean``'s bits by
+        :func:`.core.pieces.pairwise_mean`, the extremes of the pieces' extremes."""
+        speed, n, rows = self.speed, self.speed.size, self.piece_rows
+
+        def finite():
+            for lo in range(0, n, rows):
+                v = speed.read(lo, lo + rows)
+                yield v[np.isfinite(v)]
+
+        count, low, high = 0, math.inf, -math.inf
+        for v in finite():
+            if v.size:
+                count += v.size
+                low, high = min(low, float(np.min(v))), max(high, float(np.max(v)))
+        if not count:
             return None
-        return {'mean': float(np.mean(v)), 'min': float(np.min(v)), 'max': float(np.max(v))}
+        return {'mean': pairwise_mean(count, finite()), 'min': low, 'max': high}

@@ -1,35 +1,11 @@
-"""IRI per segment a chunk at a time (core.iri_chunks) against core.iri in one piece."""
+"""The IRI of a profile read in pieces, a chunk at a time (core.iri_chunks), against
+core.iri on the whole arrays."""
 import numpy as np
 import pytest
 
 from road_force_estimator.core import iri, iri_chunks
 from road_force_estimator.core.road import iso8608_profile
 from road_force_estimator.core.segments import segment_bounds
-
-
-@pytest.mark.parametrize('chunk', [7, 1000, 1 << 18])
-def test_chunks_equal_one_piece(monkeypatch, chunk):
-    monkeypatch.setattr(iri_chunks, 'CHUNK', chunk)
-    road = iso8608_profile('C', 400.0, seed=2)
-    x = np.asarray(road.distance_m, dtype=float)[::4] + 3.0
-    z = np.asarray(road.elevation_m, dtype=float)[::4, 0]
-    edges = segment_bounds(x[0], x[-1], 37.0)
-    values, counts = iri_chunks.segment_iri(x, z, edges)
-    np.testing.assert_array_equal(values, iri.iri_segments(x, z, edges))
-    np.testing.assert_array_equal(counts, iri.interval_counts(x, edges))
-    assert np.isfinite(values).all() and values.min() > 0.5
-
-
-def test_uneven_and_short_profiles_as_core_iri():
-    rng = np.random.default_rng(1)
-    x = np.cumsum(rng.uniform(0.01, 0.05, 20000))
-    z = 1e-3 * rng.standard_normal(x.size)
-    edges = segment_bounds(x[0], x[-1], 100.0)
-    values, counts = iri_chunks.segment_iri(x, z, edges)
-    np.testing.assert_array_equal(values, iri.iri_segments(x, z, edges))
-    np.testing.assert_array_equal(counts, iri.interval_counts(x, edges))
-    with pytest.raises(ValueError):
-        iri_chunks.segment_iri(x[:100], z[:100], segment_bounds(x[0], x[99], 1.0))
 
 
 def _drive_profile(n, seed):
@@ -88,3 +64,84 @@ def test_profile_iri_refuses_what_core_iri_refuses(case):
     for rows in (1, 7, 5000):
         with pytest.raises(ValueError):
             _in_pieces(x, z, rows)
+
+
+def _segments_in_pieces(x, z, edges, rows):
+    return iri_chunks.profile_segment_iri(x.size, lambda lo, hi: (x[lo:hi], z[lo:hi]), edges,
+                                          rows)
+
+
+@pytest.mark.parametrize('chunk', [7, 1 << 18])
+@pytest.mark.parametrize('rows', [1, 997, 4001])
+def test_profile_segment_iri_in_pieces_is_core_iri_segments(monkeypatch, chunk, rows):
+    """The IRI per segment and the intervals per segment read ``rows`` points at a time
+    against core.iri.iri_segments (per track) and core.iri.interval_counts on the arrays:
+    the same bits; an uneven profile with stops (resampled) and an even one."""
+    monkeypatch.setattr(iri_chunks, 'CHUNK', chunk)
+    for x, z in (_drive_profile(4000, 5), (2.0 + 0.02 * np.arange(4000),
+                                           _drive_profile(4000, 5)[1])):
+        edges = segment_bounds(x[0], x[-1], 13.0)
+        values, counts = _segments_in_pieces(x, z, edges, rows)
+        want = np.column_stack([iri.iri_segments(x, z[:, j], edges) for j in (0, 1)])
+        assert np.isfinite(want).all() and want.min() > 0.0 and want.shape[0] > 4
+        assert values.tobytes() == want.tobytes()
+        assert counts.tobytes() == iri.interval_counts(x, edges).tobytes()
+
+
+@pytest.mark.parametrize('case', ['short', 'not finite', 'NaN distance', 'too fine'])
+def test_profile_segment_iri_refuses_what_iri_segments_refuses(case):
+    x, z = _drive_profile(2000, 6)
+    if case == 'short':
+        x, z = x[:400], z[:400]
+    elif case == 'not finite':
+        z = z.copy()
+        z[1200, 1] = np.nan
+    elif case == 'NaN distance':
+        x = x.copy()
+        x[700] = np.nan
+    else:
+        x = np.concatenate([[0.0], 1e9 + 1e-3 * np.arange(1999)])
+    edges = segment_bounds(x[0], x[-1], 3.0) if case != 'too fine' else np.array([0.0, 2e9])
+    with pytest.raises(ValueError):
+        iri.iri_segments(x, z, edges)
+    with pytest.raises(ValueError):
+        _segments_in_pieces(x, z, edges, 7)
+
+
+@pytest.mark.parametrize('chunk', [7, 1000, 1 << 18])
+@pytest.mark.parametrize('rows', [5, 4096, 1 << 20])
+def test_profile_segment_iri_of_an_iso_road_is_iri_segments(monkeypatch, chunk, rows):
+    """An even ISO 8608 class C road (one track, 400 m at 4 cm, not from 0 m), 37 m
+    segments (the last shorter), filtered in chunks of 7, 1000 and 2^18 intervals and read
+    5, 4096 and all points at a time: core.iri.iri_segments and interval_counts' bits."""
+    monkeypatch.setattr(iri_chunks, 'CHUNK', chunk)
+    road = iso8608_profile('C', 400.0, seed=2)
+    x = np.asarray(road.distance_m, dtype=float)[::4] + 3.0
+    z = np.asarray(road.elevation_m, dtype=float)[::4, :1]
+    edges = segment_bounds(x[0], x[-1], 37.0)
+    values, counts = _segments_in_pieces(x, z, edges, rows)
+    want = iri.iri_segments(x, z[:, 0], edges)
+    assert np.isfinite(want).all() and want.min() > 0.5 and want.size > 9
+    assert values.shape == (want.size, 1)
+    assert values[:, 0].tobytes() == want.tobytes()
+    assert counts.tobytes() == iri.interval_counts(x, edges).tobytes()
+
+
+@pytest.mark.parametrize('rows', [3, 1000, 20000])
+def test_profile_segment_iri_resampled_and_empty_segments_as_iri_segments(rows):
+    """An unevenly spaced profile (steps 1-5 cm: resampled on the median step) and edges
+    that reach past both of its ends (segments without an interval: NaN, no count): the
+    same bits as core.iri.iri_segments and interval_counts."""
+    rng = np.random.default_rng(1)
+    x = np.cumsum(rng.uniform(0.01, 0.05, 20000))
+    z = 1e-3 * rng.standard_normal((x.size, 1))
+    assert not np.array_equal(iri.evenly_spaced(x, z[:, 0])[0], x)       # resampled
+    edges = np.concatenate([[x[0] - 250.0, x[0] - 120.0],
+                            segment_bounds(x[0], x[-1], 100.0), [x[-1] + 80.0]])
+    values, counts = _segments_in_pieces(x, z, edges, rows)
+    want = iri.iri_segments(x, z[:, 0], edges)
+    assert np.isnan(want[[0, 1, -1]]).all() and np.isfinite(want[2:-1]).all()
+    assert values[:, 0].tobytes() == want.tobytes()
+    want_counts = iri.interval_counts(x, edges)
+    assert want_counts[[0, 1, -1]].tolist() == [0, 0, 0]
+    assert counts.tobytes() == want_counts.tobytes()

@@ -142,3 +142,70 @@ def test_max_abs_quasi_static_ltr_per_segment():
         inside = (x >= 100.0 * j) & ((x < 100.0 * (j + 1)) if j < 2 else (x <= 300.0))
         assert table['max_abs_ltr_quasi_static'][j] == np.abs(quasi[inside]).max()
     assert np.isnan(segment_table(*args)['max_abs_ltr_quasi_static']).all()
+
+
+@pytest.mark.parametrize('rows', [1, 2, 7, 1000, 5000])
+def test_coverage_in_pieces_is_coverage(rows):
+    """coverage_pieces (the distances read ``rows`` at a time) against coverage on the whole
+    array: the same bits; an uneven drive with stops, a gap (no data over 40 m) and edges
+    before the first and past the last sample."""
+    from road_force_estimator.core.segments import coverage, coverage_pieces
+
+    rng = np.random.default_rng(7)
+    step = rng.uniform(0.015, 0.025, 4000)
+    step[rng.random(step.size) < 0.02] = 0.0
+    step[2500] = 40.0                                  # a gap
+    x = 3.0 + np.cumsum(step)
+    for edges in (segment_bounds(x[0], x[-1], 7.0), np.array([0.0, 5.0, 50.0, 90.0, 200.0])):
+        want = coverage(x, edges)
+        assert np.nanmin(want) < 0.5 < np.nanmax(want)      # the gap and covered ones
+        got = coverage_pieces(x.size, lambda lo, hi: x[lo:hi], edges, rows)
+        assert got.tobytes() == want.tobytes()
+    for short in (x[:1], x[:2]):
+        edges = np.array([0.0, 3.01, 4.0])
+        got = coverage_pieces(short.size, lambda lo, hi: short[lo:hi], edges, rows)
+        assert got.tobytes() == coverage(short, edges).tobytes()
+
+
+def _fixed_drive(seed):
+    """An uneven drive (1-2.5 cm steps, ~1 kHz with jittered stamps, ~4 s) and a curved
+    track of fixes every ~0.1 s from 60 ms after its first stamp to 70 ms before its last."""
+    rng = np.random.default_rng(seed)
+    x = 3.0 + np.cumsum(rng.uniform(0.01, 0.025, 4000))
+    stamps = 5_000_000_000 + np.cumsum(rng.integers(900_000, 1_100_000, x.size))
+    a, b = stamps[0] + 60_000_000, stamps[-1] - 70_000_000
+    fix_ns = np.round(np.linspace(a, b, round((b - a) / 1e8) + 1)).astype(np.int64)
+    t = (fix_ns - fix_ns[0]) * 1e-9
+    return x, stamps, fix_ns, 48.0 + 1e-5 * t + 1e-6 * np.sin(t), 11.0 + 2e-5 * t
+
+
+@pytest.mark.parametrize('rows', [1, 2, 7, 1000, 5000])
+def test_coordinates_in_pieces_are_coordinate_columns(rows):
+    """coordinate_columns_pieces (distances and stamps read ``rows`` at a time) against
+    coordinate_columns on the whole arrays: the same bits; the first and last ends placed
+    beyond the fixes, an end more than a period past them (NaN), edges outside the drive,
+    fewer than two fixes (NaN)."""
+    from road_force_estimator.core.segments import coordinate_columns, coordinate_columns_pieces
+
+    x, stamps, fix_ns, lat, lon = _fixed_drive(3)
+
+    def read(lo, hi):
+        return x[lo:hi], stamps[lo:hi]
+
+    bounds = segment_bounds(x[0], x[-1], 7.0)
+    cases = [(bounds, fix_ns, lat, lon),
+             (np.array([0.0, 5.0, 30.0, 90.0, 200.0]), fix_ns, lat, lon),
+             (bounds, fix_ns[:-3], lat[:-3], lon[:-3]),           # the end 0.37 s past them
+             (bounds, fix_ns[:1], lat[:1], lon[:1]), (bounds, None, None, None)]
+    for j, (edges, f, la, lo_) in enumerate(cases):
+        want = coordinate_columns(x, edges, stamps, f, la, lo_)
+        got = coordinate_columns_pieces(x.size, read, edges, f, la, lo_, rows)
+        assert sorted(got) == sorted(want)
+        for name in want:
+            assert got[name].tobytes() == want[name].tobytes(), (j, name)
+        if j == 0:                     # both ends beyond the fixes, placed from them
+            assert np.isfinite(want['start_lat']).all() and np.isfinite(want['end_lon']).all()
+        elif j == 2:
+            assert np.isnan(want['end_lat'][-1]) and np.isfinite(want['end_lat'][:-1]).all()
+        elif j > 2:
+            assert np.isnan(want['start_lat']).all()

@@ -37,3 +37,48 @@ def test_the_fit_finds_the_plants_friction_velocity(truth_vf):
     off = fit_friction_velocity(FILE, ObserverParameters(friction_velocity_fit=0), stamps,
                                 q, phi, np.full(stamps.size, 20.0), restart)
     assert off is FILE
+
+
+def test_the_fits_runs_make_no_rows_and_the_same_innovations():
+    """The fit's runs (BatchRun(rows=False): no output row made) give each v_f's innovation
+    terms bit for bit as runs that make every row (the reference: BatchRun as it was), so the
+    same v_f; on a plant drive with tanh friction and a sensor lag (v_f 0.005, the file's
+    0.01), 6 s."""
+    from road_force_estimator.estimation.estimator import BatchRun
+    from road_force_estimator.estimation.friction_fit import FIT_GRID, likeliest_velocity
+
+    plant = replace(FILE, leaf_spring_friction_velocity_mps=0.005)
+    tr = simulate(plant, iso8608_profile('C', 200.0, seed=4), speed_mps=20.0, rate_hz=1000.0,
+                  duration_s=6.0, tire_envelope_m=0.25)
+    q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5,
+                         time_constant_s=plant.sensor_time_constant_s,
+                         rate_hz=1000.0).measure(tr.q_m, tr.roll_rad)
+    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    speed = np.full(stamps.size, 20.0)
+    obs = ObserverParameters()
+
+    def terms(v_f: float, rows: bool) -> list:
+        run = BatchRun(replace(FILE, leaf_spring_friction_velocity_mps=v_f), obs, rows=rows)
+        out = run.estimator.core.nll_terms = []
+        valid, _, made = run.feed(stamps, q, phi, speed)
+        assert valid.all()
+        assert made.shape[0] == (stamps.size if rows else 0)
+        return out
+
+    for factor in (FIT_GRID[0], FIT_GRID[-1]):
+        with_rows, without = terms(0.01 * factor, True), terms(0.01 * factor, False)
+        assert len(with_rows) > 1000
+        assert without == with_rows              # (index, nats): the same floats
+    reference = likeliest_velocity(0.01, lambda v_f: terms(v_f, True))
+    restart = np.zeros(stamps.size, bool)
+    restart[0] = True
+    fitted = fit_friction_velocity(FILE, obs, stamps, q, phi, speed, restart)
+    assert fitted.leaf_spring_friction_velocity_mps == reference
+
+
+def test_no_rows_is_the_model_cores_only():
+    """rows=False on a core that always makes its rows (the differentiator chain) refuses."""
+    from road_force_estimator.estimation.estimator import BatchRun
+
+    with pytest.raises(ValueError, match='model core'):
+        BatchRun(FILE, ObserverParameters(discretization='euler'), rows=False)

@@ -8,6 +8,7 @@ a gap, with the tractor IMU and with tanh friction whose v_f is fitted (the plan
 file's 0.01), the smoother's windows made small (the same in both runs);
 every spilled file closed at the end and on a failure. And the spilled fit and fused profile
 alone against fit_axles and fuse_roads on the whole arrays: the same bits."""
+from contextlib import closing
 import json
 from pathlib import Path
 import sys
@@ -286,12 +287,11 @@ def test_the_report_reads_the_spilled_fused_profile_in_pieces(offline_estimate, 
 
     vehicle, wv = offline_estimate
     one = whole_vehicle.fused_profile(wv, vehicle)
-    spilled = whole_vehicle.SpilledFused(tmp_path, one.axles, one.half_track_m)
-    step = 1000
-    for lo in range(0, one.distance_m.size, step):
-        spilled.append(*(getattr(one, f)[lo:lo + step] for f, _ in spilled.FIELDS))
     texts = []
-    try:
+    with closing(whole_vehicle.SpilledFused(tmp_path, one.axles, one.half_track_m)) as spilled:
+        step = 1000
+        for lo in range(0, one.distance_m.size, step):
+            spilled.append(*(getattr(one, f)[lo:lo + step] for f, _ in spilled.FIELDS))
         for name, fused in (('whole', one), ('pieces', spilled)):
             if name == 'pieces':
                 monkeypatch.setattr(iri_chunks, 'CHUNK', 1000)
@@ -302,8 +302,6 @@ def test_the_report_reads_the_spilled_fused_profile_in_pieces(offline_estimate, 
             (folder / 'report.json').write_text('{}\n')
             report.append_estimate(folder, wv, fused=fused)
             texts.append([(folder / f).read_bytes() for f in ('report.md', 'report.json')])
-    finally:
-        spilled.close()
     assert texts[0] == texts[1]
     fp = json.loads(texts[0][1])['whole_vehicle_estimate']['fused_profile']
     assert fp['points'] == one.distance_m.size > 6000
@@ -332,9 +330,8 @@ def test_the_reports_fused_iri_does_not_hold_the_profile(tmp_path, monkeypatch):
     peaks: dict = {'pieces': [], 'whole': []}
     sizes = (150_000, 150_000, 300_000)
     for n in sizes:
-        f = SpilledFused(tmp_path, 5, 0.9)
-        f.append(np.arange(n, dtype=np.int64), x[:n], z[:n, 0], z[:n, 1])
-        try:
+        with closing(SpilledFused(tmp_path, 5, 0.9)) as f:
+            f.append(np.arange(n, dtype=np.int64), x[:n], z[:n, 0], z[:n, 1])
             for how in ('pieces', 'whole'):
                 gc.collect()
                 tracemalloc.start()
@@ -344,8 +341,6 @@ def test_the_reports_fused_iri_does_not_hold_the_profile(tmp_path, monkeypatch):
                 finally:
                     tracemalloc.stop()
                 assert got['points'] == n and np.isfinite(got['iri_m_per_km']).all()
-        finally:
-            f.close()
     growth = {k: (p[2] - p[1]) / (sizes[2] - sizes[1]) for k, p in peaks.items()}
     assert growth['whole'] > 64.0, growth        # measured 127
     assert growth['pieces'] < 4.0, growth       # measured -3 (where the chunks fall)
