@@ -104,6 +104,7 @@ class OfflineStream:
                 prep.stamps_out, self.spill)
         smoother = Smoother(FrontAxleModel(prep.vehicle), prep.observer, self.window,
                             eager=self.eager)
+        smoother.spill = self.spill     # a windowed run's profile pass and road in files
         self.status = EstimatorStatus(**prep.counts)
         out = _Pieces(prep, self.status)
         for rows, part in smoothed_rows(prep, smoother):
