@@ -2,6 +2,7 @@
 piece, the chunked RTS pass (estimation.rts_pass) against the textbook sample loop, and the
 static loads' rows in pieces (Reconstruction.restatic) against one call."""
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -81,6 +82,43 @@ def test_pieces_equal_one_piece(case, window, monkeypatch):
     assert stream.last_stamp_ns == whole.status.last_stamp_ns
     np.testing.assert_array_equal(np.concatenate([p.fault_flags for p in pieces]),
                                   whole.fault_flags)      # (estimation.sensor_health)
+
+
+@pytest.mark.parametrize('case', list(CASES))
+def test_spilled_pieces_equal_one_piece(case, tmp_path, monkeypatch):
+    """With ``spill`` (estimate_bag in pieces) a windowed run's profile pass keeps its
+    columns in a file and its road is built over pieces (OfflineRows.road_pieces, here
+    pieces and the cubic's chunks of 1000 samples; a run with a stop reads them whole):
+    the pieces are smooth()'s arrays bit for bit, and no file is left open."""
+    from road_force_estimator.estimation import body_heave
+    from road_force_estimator.estimation.models import front_axle_rows
+
+    vehicle, profile, defects = CASES[case]
+    stamps, q, phi, v = _drive(vehicle, 8.0 if case == 'friction' else 10.0, profile)
+    if defects:
+        stamps, q = _defects(stamps, q)
+    monkeypatch.setattr(body_heave, 'CHUNK', 1000)
+    calls = []
+    road_pieces = front_axle_rows.OfflineRows.road_pieces
+
+    def counted(self, *args, **kwargs):
+        calls.append(args[1])
+        return road_pieces(self, *args, **kwargs)
+
+    monkeypatch.setattr(front_axle_rows.OfflineRows, 'road_pieces', counted)
+    whole = smooth(stamps, q, phi, v, vehicle, window=(1500, 700))
+    assert calls == []
+    fds = len(os.listdir('/proc/self/fd'))
+    stream = OfflineStream(vehicle, window=(1500, 700), capacity=100, spill=tmp_path)
+    for a in range(0, stamps.size, 777):
+        stream.feed(stamps[a:a + 777], q[a:a + 777], phi[a:a + 777], v[a:a + 777])
+    pieces = list(stream.finish())
+    assert calls and max(calls) > 2000                    # the windowed runs' roads
+    assert len(os.listdir('/proc/self/fd')) == fds
+    for name in ['stamp_ns', 'valid', 'speed_contradicted', *FIELD_COLUMNS]:
+        got = np.concatenate([getattr(p, name) for p in pieces])
+        np.testing.assert_array_equal(got, getattr(whole, name), err_msg=name)
+    assert dataclasses.asdict(stream.status) == dataclasses.asdict(whole.status)
 
 
 def test_a_long_stretch_of_rejected_samples_comes_in_pieces(monkeypatch):
