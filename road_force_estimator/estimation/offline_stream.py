@@ -32,7 +32,7 @@ from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, Column, EstimateArrays, EstimatorStatus, arrays_from_table)
 from road_force_estimator.estimation.offline import (
-    LAST_ROW_FIELDS, FaultRows, fill_status, prepare, rows_of, smoothed_rows)
+    LAST_ROW_FIELDS, FaultRows, fill_status, prepare, rows_of, smoothed_rows, spill_readings)
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['PIECE_ROWS', 'OfflineStream']
@@ -102,6 +102,7 @@ class OfflineStream:
         if self.spill:            # needed only piece by piece: out of memory until then
             prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
                 prep.stamps_out, self.spill)
+            spill_readings(prep, self.spill)    # the smoother's rows in a file too
         smoother = Smoother(FrontAxleModel(prep.vehicle), prep.observer, self.window,
                             eager=self.eager)
         smoother.spill = self.spill     # a windowed run's profile pass and road in files
