@@ -17,6 +17,12 @@ and the windows' own difference from a smoother over the whole run in one go is 
 each field's RMS (:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m
 bench.studies.offline_windows``).
 
+With ``spill`` (``estimate_bag`` in pieces) what the smoother needs only piece by piece waits
+in temporary files (:mod:`.core.spill`): the distance and output stamps, the readings
+(:func:`.offline.spill_readings`: the smoother reads them as rows in a file, the fault
+detector a piece's range), and a windowed run's profile pass (its columns, the road built
+over them in pieces, :meth:`.front_axle_rows.OfflineRows.road_pieces`): the same bits.
+
 Only the model's smoother (``observer.discretization: model``, the default) streams; the
 differentiator schemes' zero-phase chain (:func:`.offline.estimate_offline`) is one piece.
 """
