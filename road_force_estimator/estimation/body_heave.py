@@ -44,7 +44,8 @@ from road_force_estimator.estimation.speed_check import STANDING_MPS
 __all__ = ['STANDING_MPS', 'SPEED_FLOOR_MPS', 'ORDER', 'ZERO_PHASE_ORDER', 'cutoff_per_speed',
            'start', 'step', 'step_matrix', 'zero_phase', 'in_distance', 'rest_stretches',
            'offline_profile', 'MIN_REST_SAMPLES', 'CHUNK', 'polynomial_fit',
-           'polynomial_values', 'subtract_polynomial', 'zero_phase_sections']
+           'polynomial_values', 'subtract_polynomial', 'zero_phase_sections',
+           'zero_phase_pieces', 'polynomial_fit_pieces', 'offline_profile_way']
 
 #: Speed floor of the cutoff (m/s): w >= 2 pi v_floor / lambda_c.
 SPEED_FLOOR_MPS = 1.0
@@ -250,6 +251,47 @@ def zero_phase(accel, dt_s: float, w: float, order: int = ZERO_PHASE_ORDER):
     return out
 
 
+def zero_phase_pieces(m: int, read, width: int, dt_s: float, w: float, folder=None,
+                      piece: int = CHUNK, order: int = ZERO_PHASE_ORDER):
+    """:func:`zero_phase` of ``width`` series of ``m`` samples (m >= 8) read ``piece`` rows at a
+    time, ``read(i, j) -> (j - i, width)`` accelerations (m/s^2): the forward pass over the
+    pieces in order, its state carried, its output in a file in ``folder``, the backward pass
+    over the pieces in reverse, written over it. Returns that file (a
+    :class:`~.core.spill.SpillColumn` (m, width) of displacements, m; the caller closes it):
+    each column :func:`zero_phase`'s bits, none held whole."""
+    import numpy as np
+    from road_force_estimator.core.scipy_signal import signal as _signal
+    from road_force_estimator.core.spill import SpillColumn
+
+    sosfilt, sosfilt_zi = _signal().sosfilt, _signal().sosfilt_zi
+    piece = max(int(piece), 1)
+    bounds = [(i, min(m, i + piece)) for i in range(0, m, piece)]
+    fwd_sos, back_sos = zero_phase_sections(dt_s, w, order)
+    out = SpillColumn(float, width, folder)
+    try:
+        zi = None
+        for i, j in bounds:
+            a = np.asarray(read(i, j), dtype=float)
+            if zi is None:
+                zi = [sosfilt_zi(fwd_sos) * a[0, k] for k in range(width)]
+            f = np.empty_like(a)
+            for k in range(width):
+                f[:, k], zi[k] = sosfilt(fwd_sos, a[:, k], zi=zi[k])
+            out.append(f)
+        last = out.read(m - 1, m)[0]
+        zi = [sosfilt_zi(back_sos) * last[k] for k in range(width)]
+        for i, j in reversed(bounds):
+            f = out.read(i, j)
+            z = np.empty_like(f)
+            for k in range(width):
+                z[::-1, k], zi[k] = sosfilt(back_sos, f[::-1, k], zi=zi[k])
+            out.write(i, z)
+    except BaseException:
+        out.close()
+        raise
+    return out
+
+
 def zero_phase_sections(dt_s: float, w: float, order: int = ZERO_PHASE_ORDER) -> tuple:
     """The second-order sections of :func:`zero_phase`'s forward pass (``s^(n-2) / D(s)``)
     and backward pass (``s^n / D(s)``), bilinear at the step ``dt_s`` (s), cutoff ``w``
@@ -315,16 +357,23 @@ def polynomial_fit(z, degree: int):
     """
     import numpy as np
 
+    z = np.asarray(z, dtype=float)
+    return polynomial_fit_pieces(z.size, lambda i, j: z[i:j], degree)
+
+
+def polynomial_fit_pieces(m: int, read, degree: int):
+    """:func:`polynomial_fit` of a series of ``m`` values read a :data:`CHUNK` at a time,
+    ``read(i, j) -> z[i:j]`` (m,), in order (from a file: the same chunks, the same bits)."""
+    import numpy as np
+
     if degree < 0:
         raise ValueError('expected deg >= 0')
-    z = np.asarray(z, dtype=float)
-    m = z.size
     gram = np.zeros((degree + 1, degree + 1))
     dot = np.zeros(degree + 1)
     for i, j in _chunks(m):
         p = _legendre(_linspace_part(-1.0, 1.0, m, i, j), degree)
         gram += p @ p.T
-        dot += p @ z[i:j]
+        dot += p @ np.asarray(read(i, j), dtype=float)
     if m > degree:
         return np.linalg.solve(gram, dot)
     return np.linalg.lstsq(gram, dot, rcond=None)[0]       # interpolates: any solution
@@ -621,11 +670,24 @@ def offline_profile(accel, level, t_s, v_mps, dt_s: float, speed_mps: float,
     if a.size < 8:
         return 0.0
     v = np.asarray(v_mps, dtype=float)
-    wavelength = ratio * cutoff_wavelength_m
+    way = offline_profile_way(v, speed_mps, cutoff_wavelength_m, ratio)
+    if way is None:
+        return in_distance(a, t_s, v, ratio * cutoff_wavelength_m, level=level, degree=degree)
+    w, detrend = way
+    z = zero_phase(a, dt_s, w)
+    return subtract_polynomial(z, degree) if detrend else z
+
+
+def offline_profile_way(v_mps, speed_mps: float, cutoff_wavelength_m: float, ratio: float):
+    """How :func:`offline_profile` integrates a run of model speeds ``v_mps`` (m/s, median
+    |v| ``speed_mps``): None in distance (a stop), else ``(w, detrend)``, :func:`zero_phase`'s
+    cutoff (rad/s) and whether the run's polynomial is subtracted (steady speed)."""
+    import numpy as np
+
+    v = np.asarray(v_mps, dtype=float)
     steady = float(np.percentile(np.abs(v), 5.0, overwrite_input=True)) >= 0.5 * speed_mps
     if not steady and rest_stretches(v):
-        return in_distance(a, t_s, v, wavelength, level=level, degree=degree)
+        return None
     speed = max(speed_mps, SPEED_FLOOR_MPS)
-    if not steady:
-        return zero_phase(a, dt_s, 2.0 * math.pi * speed / cutoff_wavelength_m)
-    return subtract_polynomial(zero_phase(a, dt_s, 2.0 * math.pi * speed / wavelength), degree)
+    wavelength = ratio * cutoff_wavelength_m if steady else cutoff_wavelength_m
+    return 2.0 * math.pi * speed / wavelength, steady

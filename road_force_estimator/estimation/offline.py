@@ -32,7 +32,7 @@ from road_force_estimator.estimation.static_load import track_recording
 
 __all__ = ['estimate_recording', 'fused_speed', 'attach_distance_source', 'smooth', 'prepare',
            'smoothed_rows', 'fill_status', 'last_row', 'LAST_ROW_FIELDS', 'rows_of',
-           'left_out_rows']
+           'left_out_rows', 'readings', 'spill_readings']
 
 
 
@@ -168,7 +168,7 @@ class FaultRows:
         det, prep = self.detector, self.prep
         idx = np.flatnonzero(ok) + a
         stamps = rows_of(prep.stamps_out, a, b)[ok].tolist()
-        values = np.column_stack([prep.q[idx], prep.phi[idx]]).tolist()
+        values = readings(prep, idx).tolist()
         k0, seen = det.samples, len(det.events)
         for stamp, v, r in zip(stamps, values, np.asarray(rates, dtype=float).tolist()):
             det.step(stamp, v, r)
@@ -269,6 +269,44 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
         vehicle.leaf_spring_friction_velocity_mps, nll_terms))
 
 
+def readings(prep: SimpleNamespace, rows, *, rows_in_file: bool = False):
+    """The readings ``[q_1, q_2, phi]`` ((k, 3), m and rad) of a recording's input rows
+    ``rows`` (:func:`prepare`; ascending indices or a slice): from ``prep.y`` (the (n, 3)
+    array, or a :class:`~.core.spill.SpillColumn` of it, :func:`spill_readings`: the rows'
+    range read and indexed), else ``prep.q`` and ``prep.phi``. ``rows_in_file`` (a slice of
+    a file's rows): a :class:`~.core.spill.SpillRows` of them, read when they are needed."""
+    y = prep.y
+    if y is None:
+        return np.column_stack([prep.q[rows], prep.phi[rows]])
+    if isinstance(y, np.ndarray):
+        return y[rows]
+    from road_force_estimator.core.spill import SpillRows
+
+    if isinstance(rows, slice):
+        return (SpillRows(y, rows.start, rows.stop) if rows_in_file
+                else y.read(rows.start, rows.stop))
+    if rows.size == 0:
+        return np.empty((0,) + y.shape)
+    lo = int(rows[0])
+    return y.read(lo, int(rows[-1]) + 1)[rows - lo]
+
+
+def spill_readings(prep: SimpleNamespace, folder) -> None:
+    """``prep``'s readings (:func:`prepare`) moved into a :class:`~.core.spill.SpillColumn`
+    (n, 3) in ``folder`` (``prep.y``; ``prep.q`` and ``prep.phi`` None): :func:`readings`
+    reads them back, the same numbers (the offline stream in pieces)."""
+    from road_force_estimator.core.spill import SpillColumn
+
+    out = SpillColumn(float, 3, folder)
+    try:
+        for a in range(0, prep.n, _REPEAT_CHUNK):
+            out.append(readings(prep, slice(a, a + _REPEAT_CHUNK)))
+    except BaseException:
+        out.close()
+        raise
+    prep.y, prep.q, prep.phi = out, None, None
+
+
 def rows_of(column, a: int, b: int) -> np.ndarray:
     """Rows ``a:b`` of an array or of a :class:`.core.spill.SpillColumn`."""
     return column[a:b] if isinstance(column, np.ndarray) else column.read(a, b)
@@ -305,8 +343,7 @@ def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | Non
         src = slice(idx[0], idx[-1] + 1) if whole else idx      # views when whole
         direct = [col[src] for col in columns] if whole and columns is not None else None
         t = t_all[r0:r1]
-        y = (prep.y[src] if whole and prep.y is not None
-             else np.column_stack([prep.q[src], prep.phi[src]]))
+        y = readings(prep, src, rows_in_file=whole)
         for a, b, part in smoother.pieces(t, y, prep.v_model[r0:r1], direct,
                                           None if left is None else left[r0:r1]):
             part[Column.DISTANCE][:] = rows_of(prep.dist, r0 + a, r0 + b)
@@ -345,7 +382,7 @@ def left_out_rows(prep: SimpleNamespace) -> np.ndarray | None:
     repeated = False
     for a in range(0, max(acc.size - 1, 0), _REPEAT_CHUNK):
         idx = acc[a:a + _REPEAT_CHUNK + 1]
-        vals = np.column_stack([prep.q[idx], prep.phi[idx]])
+        vals = readings(prep, idx)
         if np.any(np.abs(np.diff(vals, axis=0)) <= tol):
             repeated = True
             break
@@ -361,8 +398,10 @@ def left_out_rows(prep: SimpleNamespace) -> np.ndarray | None:
         stamps[k:k + part.size] = part
         k += part.size
     step = det.step
-    for stamp, v in zip(stamps.tolist(), np.column_stack([prep.q[acc], prep.phi[acc]]).tolist()):
-        step(stamp, v)
+    for a in range(0, acc.size, _REPEAT_CHUNK):
+        b = min(acc.size, a + _REPEAT_CHUNK)
+        for stamp, v in zip(stamps[a:b].tolist(), readings(prep, acc[a:b]).tolist()):
+            step(stamp, v)
     return left_out(flag_codes(det.events, acc.size, det.n), det.stuck_since, stamps)
 
 

@@ -17,6 +17,12 @@ and the windows' own difference from a smoother over the whole run in one go is 
 each field's RMS (:data:`.smoother.WINDOW_OVERLAP_TAUS`, ``python -m
 bench.studies.offline_windows``).
 
+With ``spill`` (``estimate_bag`` in pieces) what the smoother needs only piece by piece waits
+in temporary files (:mod:`.core.spill`): the distance and output stamps, the readings
+(:func:`.offline.spill_readings`: the smoother reads them as rows in a file, the fault
+detector a piece's range), and a windowed run's profile pass (its columns, the road built
+over them in pieces, :meth:`.front_axle_rows.OfflineRows.road_pieces`): the same bits.
+
 Only the model's smoother (``observer.discretization: model``, the default) streams; the
 differentiator schemes' zero-phase chain (:func:`.offline.estimate_offline`) is one piece.
 """
@@ -32,7 +38,7 @@ from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
     N_COLUMNS, Column, EstimateArrays, EstimatorStatus, arrays_from_table)
 from road_force_estimator.estimation.offline import (
-    LAST_ROW_FIELDS, FaultRows, fill_status, prepare, rows_of, smoothed_rows)
+    LAST_ROW_FIELDS, FaultRows, fill_status, prepare, rows_of, smoothed_rows, spill_readings)
 from road_force_estimator.estimation.smoothing.smoother import Smoother
 
 __all__ = ['PIECE_ROWS', 'OfflineStream']
@@ -102,8 +108,10 @@ class OfflineStream:
         if self.spill:            # needed only piece by piece: out of memory until then
             prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
                 prep.stamps_out, self.spill)
+            spill_readings(prep, self.spill)    # the smoother's rows in a file too
         smoother = Smoother(FrontAxleModel(prep.vehicle), prep.observer, self.window,
                             eager=self.eager)
+        smoother.spill = self.spill     # a windowed run's profile pass and road in files
         self.status = EstimatorStatus(**prep.counts)
         out = _Pieces(prep, self.status)
         for rows, part in smoothed_rows(prep, smoother):

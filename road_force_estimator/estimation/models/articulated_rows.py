@@ -355,18 +355,17 @@ class ArticulatedOfflineRows:
         return PROFILE_OFFLINE_ROLL_MOMENT_PSD
 
     def road_pieces(self, kept, m: int, dt: float, speed: float, folder,
-                    piece: int | None = None):
+                    piece: int | None = None, v=None):
         """:meth:`road` of an evenly sampled run (``pos`` None) from the profile pass's
         columns in a file, ``kept`` (:class:`~.core.spill.SpillColumn` (m, 2 wheels): every
         wheel's tire deflection then its acceleration, :attr:`profile_columns`' order),
-        ``piece`` rows at a time (:data:`ROAD_PIECE_ROWS`): the double integral's forward
-        pass over them in order, its state carried and its output in a file in ``folder``,
-        the backward pass over them in reverse; the roads (m, wheels) in a file there
-        (returned). The same bits as :meth:`road` on the columns in memory."""
-        from road_force_estimator.core.scipy_signal import signal as _signal
+        ``piece`` rows at a time (:data:`ROAD_PIECE_ROWS`): the double integral over them
+        (:func:`.body_heave.zero_phase_pieces`: the forward pass in order, its state carried
+        and its output in a file in ``folder``, the backward pass over them in reverse); the
+        roads (m, wheels) in a file there (returned). The same bits as :meth:`road` on the
+        columns in memory (``v``, the model speeds, not needed: the road in time)."""
         from road_force_estimator.core.spill import SpillColumn
 
-        sosfilt, sosfilt_zi = _signal().sosfilt, _signal().sosfilt_zi
         nw = self.static.size
         w_c = 2.0 * math.pi * max(speed, SPEED_FLOOR_MPS) / self.cutoff_m
         n0 = min(int(round(ROAD_START_S / dt)), m)
@@ -388,31 +387,19 @@ class ArticulatedOfflineRows:
             for i, j in bounds:
                 roads.append(kept.read(i, j)[:, :nw] + 0.0)
             return roads
-        fwd_sos, back_sos = body_heave.zero_phase_sections(dt, w_c)
-        fwd = SpillColumn(float, nw, folder)
+        zs = None
         try:
-            zi = None
+            zs = body_heave.zero_phase_pieces(
+                m, lambda i, j: kept.read(i, j)[:, nw:] * ramp(i, j)[:, None], nw, dt, w_c,
+                folder, piece)
             for i, j in bounds:
-                a = kept.read(i, j)[:, nw:] * ramp(i, j)[:, None]
-                if zi is None:
-                    zi = [sosfilt_zi(fwd_sos) * a[0, k] for k in range(nw)]
-                out = np.empty_like(a)
-                for k in range(nw):
-                    out[:, k], zi[k] = sosfilt(fwd_sos, a[:, k], zi=zi[k])
-                fwd.append(out)
-            last = fwd.read(m - 1, m)[0]
-            zi = [sosfilt_zi(back_sos) * last[k] for k in range(nw)]
-            for i, j in reversed(bounds):
-                f = fwd.read(i, j)
-                z = np.empty_like(f)
-                for k in range(nw):
-                    z[::-1, k], zi[k] = sosfilt(back_sos, f[::-1, k], zi=zi[k])
-                roads.write(i, kept.read(i, j)[:, :nw] + z)
+                roads.append(kept.read(i, j)[:, :nw] + zs.read(i, j))
         except BaseException:
             roads.close()
             raise
         finally:
-            fwd.close()
+            if zs is not None:
+                zs.close()
         return roads
 
     def road(self, cols, dt: float, speed: float, dts, uniform: bool, pos, v) -> tuple:

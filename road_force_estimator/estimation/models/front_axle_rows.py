@@ -247,6 +247,72 @@ class OfflineRows:
             road.append(u)
         return road[0], road[1]
 
+    def road_pieces(self, kept, m: int, dt: float, speed: float, folder,
+                    piece: int | None = None, v: np.ndarray | None = None):
+        """:meth:`road` of an evenly sampled run (``pos`` None) from the profile pass's columns
+        in a file, ``kept`` (:class:`~.core.spill.SpillColumn` (m, 3): u_1, u_2, dd z_s,
+        :attr:`profile_columns`' order), ``piece`` rows at a time (default
+        :data:`.body_heave.CHUNK`), the model speeds ``v`` (m/s, (m,)): the body heave's
+        zero-phase integral in a file (:func:`.body_heave.zero_phase_pieces`), its cubic fitted
+        over it (:func:`.body_heave.polynomial_fit_pieces`), then ``u_i = w_i + z_s`` a piece
+        at a time, held where the model stands (the steps' running sum carried from piece to
+        piece, as ``np.cumsum``). Returns the roads (m, 2), m, in a file in ``folder``: the
+        same bits as :meth:`road` on the columns in memory, none held whole. A run with a stop
+        (the integral in distance, :func:`.body_heave.in_distance`) reads the columns whole
+        and is :meth:`road` itself."""
+        from road_force_estimator.core.spill import SpillColumn
+
+        piece = max(int(piece or body_heave.CHUNK), 1)
+        bounds = [(i, min(m, i + piece)) for i in range(0, m, piece)]
+        way = (body_heave.offline_profile_way(
+            v, speed, self.observer.profile_cutoff_wavelength_m, PROFILE_CUTOFF_RATIO)
+            if m >= 8 else (None, False))
+        roads = SpillColumn(float, 2, folder)
+        zs = coef = None
+        try:
+            if way is None:                      # in distance: over the whole run
+                cols = {j: np.ascontiguousarray(c) for j, c in zip(self.profile_columns,
+                                                                kept.array().T)}
+                roads.append(np.column_stack(self.road(cols, dt, speed, None, True, None, v)))
+                return roads
+            w, detrend = way
+            if w is not None:
+                zs = body_heave.zero_phase_pieces(
+                    m, lambda i, j: kept.read(i, j)[:, 2:], 1, dt, w, folder, piece)
+                if detrend:
+                    coef = body_heave.polynomial_fit_pieces(
+                        m, lambda i, j: zs.read(i, j)[:, 0], PROFILE_DETREND_DEGREE)
+            standing = (v[1:] == 0.0) & (v[:-1] == 0.0)
+            held = bool(standing.any())
+            u0 = last = total = None
+            for i, j in bounds:
+                z = 0.0 if zs is None else zs.read(i, j)[:, 0]
+                if coef is not None:
+                    z -= body_heave.polynomial_values(coef, m, i, j)
+                u = kept.read(i, j)[:, :2] + (z if np.ndim(z) == 0 else z[:, None])
+                if held:                         # standing: the road does not change
+                    du = np.diff(u if last is None else np.vstack([last, u]), axis=0)
+                    last = u[-1:].copy()
+                    du[standing[max(i - 1, 0):j - 1]] = 0.0
+                    if u0 is None:
+                        u0 = u[0].copy()
+                        run = np.cumsum(du, axis=0)
+                        u = u0 + np.vstack([np.zeros((1, 2)), run])
+                    else:
+                        run = np.cumsum(du if total is None else np.vstack([total, du]),
+                                        axis=0)[0 if total is None else 1:]
+                        u = u0 + run
+                    if run.shape[0]:
+                        total = run[-1:].copy()
+                roads.append(u)
+        except BaseException:
+            roads.close()
+            raise
+        finally:
+            if zs is not None:
+                zs.close()
+        return roads
+
     def _profile_heave(self, cols: list, dt: float, speed: float, dts: np.ndarray | None,
                        uniform: bool, pos: np.ndarray | None, v: np.ndarray):
         """The profile's body heave (m) from the profile pass's columns ``cols`` (on the grid

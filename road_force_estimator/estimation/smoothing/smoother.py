@@ -461,7 +461,7 @@ class Smoother:
                 self._uniform(g, dt, y, x0, cols, segments=segs,
                               gate_from=self._gate_start(dt))
                 cols.flush()
-                return recon.road_pieces(cols.file, y.shape[0], dt, speed, self.spill)
+                return recon.road_pieces(cols.file, y.shape[0], dt, speed, self.spill, v=v)
             finally:
                 cols.file.close()
         if uniform or steps is not None:        # only the road's columns held whole
