@@ -356,6 +356,7 @@ def smoothed_rows(prep: SimpleNamespace, smoother: Smoother, columns: list | Non
                 yield slice(idx[a], idx[b - 1] + 1), part
             else:
                 yield idx[a:b], part
+            del part                  # (let go before the next window is computed)
 
 
 #: Accepted samples :func:`left_out_rows` looks at a time for a repeated reading.
