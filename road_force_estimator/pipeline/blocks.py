@@ -166,6 +166,7 @@ class BlockRun:
                     else self.stream.finish())
             for piece in rest:
                 self._consume(piece)
+                del piece       # not held while the next window is smoothed
             problem = self._problem()
         except BagReadError as err:
             self.bag.abort()
