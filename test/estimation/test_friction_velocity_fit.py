@@ -20,15 +20,21 @@ FILE = replace(VehicleParameters(), leaf_spring_friction_n=(1500.0, 1500.0),
                sensor_time_constant_s=(0.003, 0.003))
 
 
-@pytest.mark.parametrize('truth_vf', [0.005, 0.01, 0.02])
-def test_the_fit_finds_the_plants_friction_velocity(truth_vf):
+def _drive(truth_vf: float, road_m: float, duration_s: float):
+    """The plant's drive at 20 m/s, 1 kHz over class C with v_f ``truth_vf`` (the file's
+    friction and lag otherwise), read by lagging noisy sensors: (stamps ns, q, phi)."""
     plant = replace(FILE, leaf_spring_friction_velocity_mps=truth_vf)
-    tr = simulate(plant, iso8608_profile('C', 300.0, seed=4), speed_mps=20.0, rate_hz=1000.0,
-                  duration_s=12.0, tire_envelope_m=0.25)
+    tr = simulate(plant, iso8608_profile('C', road_m, seed=4), speed_mps=20.0, rate_hz=1000.0,
+                  duration_s=duration_s, tire_envelope_m=0.25)
     q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5,
                          time_constant_s=plant.sensor_time_constant_s,
                          rate_hz=1000.0).measure(tr.q_m, tr.roll_rad)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    return np.round(tr.t_s * 1e9).astype(np.int64), q, phi
+
+
+@pytest.mark.parametrize('truth_vf', [0.005, 0.01, 0.02])
+def test_the_fit_finds_the_plants_friction_velocity(truth_vf):
+    stamps, q, phi = _drive(truth_vf, 300.0, 12.0)
     restart = np.zeros(stamps.size, bool)
     restart[0] = True
     fitted = fit_friction_velocity(FILE, ObserverParameters(), stamps, q, phi,
@@ -47,13 +53,7 @@ def test_the_fits_runs_make_no_rows_and_the_same_innovations():
     from road_force_estimator.estimation.estimator import BatchRun
     from road_force_estimator.estimation.friction_fit import FIT_GRID, likeliest_velocity
 
-    plant = replace(FILE, leaf_spring_friction_velocity_mps=0.005)
-    tr = simulate(plant, iso8608_profile('C', 200.0, seed=4), speed_mps=20.0, rate_hz=1000.0,
-                  duration_s=6.0, tire_envelope_m=0.25)
-    q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5,
-                         time_constant_s=plant.sensor_time_constant_s,
-                         rate_hz=1000.0).measure(tr.q_m, tr.roll_rad)
-    stamps = np.round(tr.t_s * 1e9).astype(np.int64)
+    stamps, q, phi = _drive(0.005, 200.0, 6.0)
     speed = np.full(stamps.size, 20.0)
     obs = ObserverParameters()
 
