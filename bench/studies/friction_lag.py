@@ -2,7 +2,7 @@
 error at zero latency, at 10 ms and offline against the matched drive (no friction, no lag).
 
 ``.venv/bin/python -m bench.studies.friction_lag [--duration S] [--road-seeds N ...] [--only NAME
-...] [--decompose | --whole-vehicle]``
+...] [--decompose | --whole-vehicle | --fit-detail | --fit-bias]``
 
 Drives (:func:`bench.studies.truck_effects.build`): ISO 8608 class C, 20 m/s, 1 kHz, 10 um of
 deflection noise (100 urad of roll), the scoring of :func:`bench.accuracy.scenarios.score` (load
@@ -59,6 +59,10 @@ exact 10-sample fixed lag, tuned on the truth, with a lag state per channel on t
 under ``zero_load``: the v_f the fit would take on the first table's zero-load drives, on
 the static-load tracker's readings.
 
+``--fit-bias``: the front axle's fit per drive and road seed (:func:`fit_bias`): with a lag the
+zero-latency likelihood leans sharper than the truth, so the file's v_f stands unless the
+likeliest leads it by ``FIT_LEAD_NATS``.
+
 ``--fit-detail``: the whole vehicle's fit per v_f tried (:func:`fit_detail`): the samples
 converged and summed, each v_f's nll less the likeliest's and the nll a sample, on the
 test's drives (``test/estimation/test_whole_vehicle_friction_fit.py``), 8 s of them with
@@ -81,6 +85,7 @@ import time
 import numpy as np
 
 from road_force_estimator.core.parameters import VehicleParameters
+from road_force_estimator.estimation.friction_fit import FIT_LEAD_NATS
 
 NOMINAL = VehicleParameters()
 FRICTION = replace(NOMINAL, leaf_spring_friction_n=(1500.0, 1500.0))
@@ -205,8 +210,9 @@ CANDIDATES = ('package', 'expect-forward', 'expect-correction', 'damping 0.25', 
 #: s^2) ~ ``tanh(m / sqrt(v^2 + pi/2 s^2))`` (tanh ~ erf(sqrt(pi) x / 2) and the probit
 #: integral).
 RATE_SPREAD = np.pi / 2
-#: The log-likelihood lead (nats) taken as a decision of a causal fit (:func:`fit_lead`).
-LEAD_NATS = 10.0
+#: The log-likelihood lead (nats) taken as a decision of a causal fit (:func:`fit_lead`): the
+#: offline fit's own.
+LEAD_NATS = FIT_LEAD_NATS
 
 
 def _estimate(drive, vehicle: VehicleParameters, latency_s: float):
@@ -398,6 +404,56 @@ def fit_lead(duration_s: float, road_seeds, chunk_s: float = 0.5) -> list[str]:
             if over.size and v_true != 0.01:
                 line += '; ' + _spliced(drive, truck, v_true, (over[0] + 1) * step, duration_s, s)
             lines.append(line)
+    return lines
+
+
+#: ``--fit-bias``'s front-axle drives: (name, the truck, the truth's v_f, the file's v_f)
+FIT_BIAS_DRIVES = (
+    ('friction+lag, truth 0.005, file 0.005', BOTH, 0.005, 0.005),
+    ('friction+lag, truth 0.005, file 0.01', BOTH, 0.005, 0.01),
+    ('friction, truth 0.005, file 0.005', FRICTION, 0.005, 0.005),
+)
+
+
+def fit_bias(duration_s: float, road_seeds) -> list[str]:
+    """The ``--fit-bias`` table (Markdown rows): the front axle's offline v_f fit
+    (:func:`road_force_estimator.estimation.offline.fit_friction_velocity`) per drive of
+    :data:`FIT_BIAS_DRIVES` and road seed: each v_f's lead over the file's in the innovations'
+    log-likelihood (nats, > 0 ahead), the likeliest, the v_f the rule takes (the likeliest
+    only where it leads the file's by ``FIT_LEAD_NATS``), and the offline load error (% dyn)
+    with the likeliest and with the rule's v_f (the fit then off, the same smoother)."""
+    from bench.accuracy.run_benchmark import per_sample
+    from bench.accuracy.scenarios import score
+    from road_force_estimator.core.parameters import ObserverParameters
+    from road_force_estimator.estimation import estimate_recording
+    from road_force_estimator.estimation.offline import fit_friction_velocity
+
+    lines = ["| drive (front axle, C, 20 m/s) | road seed | lead over the file's per v_f "
+             '(nats) | the likeliest | taken | offline, the likeliest / taken (% dyn) |',
+             '|---|---:|---|---:|---:|---|']
+    for name, truck, v_true, v_file in FIT_BIAS_DRIVES:
+        file_ = replace(truck, leaf_spring_friction_velocity_mps=v_file)
+        for seed in road_seeds:
+            d = build(truck, v_true, duration_s, seed)
+            restart = np.zeros(d.stamps_ns.size, bool)
+            restart[0] = True
+            table: list = []
+            taken = fit_friction_velocity(file_, ObserverParameters(), d.stamps_ns, d.q_m,
+                                          d.roll_rad, d.speed_mps, restart, table)
+            at_file = next(row[3] for row in table if row[0] == v_file)
+            likeliest = min(table, key=lambda row: row[3])[0]
+            pct = {}
+            for v in {likeliest, taken.leaf_spring_friction_velocity_mps}:
+                est = estimate_recording(
+                    d.stamps_ns, d.q_m, d.roll_rad, d.speed_mps,
+                    replace(truck, leaf_spring_friction_velocity_mps=v),
+                    ObserverParameters(friction_velocity_fit=0))
+                pct[v] = score(d, per_sample(est, d.stamps_ns))['load_rms_pct_dyn']
+            v_taken = taken.leaf_spring_friction_velocity_mps
+            lines.append(f'| {name} | {seed} | ' + ', '.join(
+                f'{row[0]:g}: {at_file - row[3]:+.1f}' for row in table)
+                + f' | {likeliest:g} | {v_taken:g} | {pct[likeliest]:.2f} / '
+                f'{pct[v_taken]:.2f} |')
     return lines
 
 
@@ -614,7 +670,15 @@ def main(argv: list[str] | None = None) -> int:
                    help='the whole vehicle at 10 ms only (--duration s)')
     p.add_argument('--fit-detail', action='store_true',
                    help="the whole vehicle's v_f fit per v_f tried only (its own drives)")
+    p.add_argument('--fit-bias', action='store_true',
+                   help="the front axle's v_f fit per drive and road seed only")
     args = p.parse_args(argv)
+    if args.fit_bias:
+        t0 = time.perf_counter()
+        print('\n'.join(fit_bias(args.duration, args.road_seeds)))
+        print(f'\n({time.perf_counter() - t0:.0f} s; road seeds {args.road_seeds}, '
+              f'{args.duration:g} s each)')
+        return 0
     if args.fit_detail:
         t0 = time.perf_counter()
         print('\n'.join(fit_detail()))

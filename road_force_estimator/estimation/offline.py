@@ -233,7 +233,8 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
 
 
 def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParameters, stamps_ns,
-                          q, phi, speed, restart) -> VehicleParameters:
+                          q, phi, speed, restart, table: list | None = None
+                          ) -> VehicleParameters:
     """``vehicle`` with the tanh friction's ``v_f`` (``vehicle.leaf_spring_friction_velocity``)
     that makes the drive likeliest (:mod:`.friction_fit`'s rule), with
     ``observer.friction_velocity_fit`` (else, and without tanh friction, or under
@@ -246,6 +247,8 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
     ``zero_load`` (the whole vehicle fits there): the readings here are the tracker's, less
     its offset, which a ``zero_load`` vehicle's :class:`.BatchRun` would track again, and the
     tracker's offset lag (:data:`.static_load.TIME_CONSTANT_S`, 10 s) is half the fit's seconds.
+    ``table``: the likelihood per ``v_f`` (:func:`.friction_fit.likeliest_velocity`), when
+    fitted.
     """
     from dataclasses import replace
 
@@ -266,7 +269,7 @@ def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParamete
         return terms
 
     return replace(vehicle, leaf_spring_friction_velocity_mps=likeliest_velocity(
-        vehicle.leaf_spring_friction_velocity_mps, nll_terms))
+        vehicle.leaf_spring_friction_velocity_mps, nll_terms, table))
 
 
 def readings(prep: SimpleNamespace, rows, *, rows_in_file: bool = False):

@@ -20,12 +20,16 @@ FILE = replace(VehicleParameters(), leaf_spring_friction_n=(1500.0, 1500.0),
                sensor_time_constant_s=(0.003, 0.003))
 
 
-def _drive(truth_vf: float, road_m: float, duration_s: float):
-    """The plant's drive at 20 m/s, 1 kHz over class C with v_f ``truth_vf`` (the file's
-    friction and lag otherwise), read by lagging noisy sensors: (stamps ns, q, phi)."""
+def _drive(truth_vf: float, road_m: float, duration_s: float, road_seed: int = 4,
+           plant_out: list | None = None):
+    """The plant's drive at 20 m/s, 1 kHz over class C (``road_seed``) with v_f ``truth_vf``
+    (the file's friction and lag otherwise), read by lagging noisy sensors: (stamps ns, q,
+    phi); ``plant_out``: the plant's trace appended."""
     plant = replace(FILE, leaf_spring_friction_velocity_mps=truth_vf)
-    tr = simulate(plant, iso8608_profile('C', road_m, seed=4), speed_mps=20.0, rate_hz=1000.0,
-                  duration_s=duration_s, tire_envelope_m=0.25)
+    tr = simulate(plant, iso8608_profile('C', road_m, seed=road_seed), speed_mps=20.0,
+                  rate_hz=1000.0, duration_s=duration_s, tire_envelope_m=0.25)
+    if plant_out is not None:
+        plant_out.append(tr)
     q, phi = SensorModel(deflection_std_m=1e-5, roll_std_rad=1e-4, seed=5,
                          time_constant_s=plant.sensor_time_constant_s,
                          rate_hz=1000.0).measure(tr.q_m, tr.roll_rad)
@@ -43,6 +47,41 @@ def test_the_fit_finds_the_plants_friction_velocity(truth_vf):
     off = fit_friction_velocity(FILE, ObserverParameters(friction_velocity_fit=0), stamps,
                                 q, phi, np.full(stamps.size, 20.0), restart)
     assert off is FILE
+
+
+def test_a_file_told_the_truth_stands_where_a_sharper_v_f_leads_by_little():
+    """With a 3 ms lag the zero-latency likelihood leans sharper than the truth: on this drive
+    (road seed 5, 12 s, the plant's and the file's v_f 0.005) 0.0035 is likeliest, by less
+    than FIT_LEAD_NATS, and the file's v_f stands. Against the plant's wheel loads the file's
+    v_f gives the smaller offline load error, so standing is the better estimate."""
+    from road_force_estimator.estimation import estimate_recording
+    from road_force_estimator.estimation.friction_fit import FIT_LEAD_NATS
+
+    told = replace(FILE, leaf_spring_friction_velocity_mps=0.005)
+    plant: list = []
+    stamps, q, phi = _drive(0.005, 300.0, 12.0, road_seed=5, plant_out=plant)
+    speed = np.full(stamps.size, 20.0)
+    restart = np.zeros(stamps.size, bool)
+    restart[0] = True
+    table: list = []
+    taken = fit_friction_velocity(told, ObserverParameters(), stamps, q, phi, speed, restart,
+                                  table)
+    nll = {row[0]: row[3] for row in table}
+    likeliest = min(nll, key=nll.get)
+    assert likeliest == pytest.approx(0.0035)           # the lean this test is about
+    assert 0.0 < nll[0.005] - nll[likeliest] < FIT_LEAD_NATS
+    assert taken.leaf_spring_friction_velocity_mps == 0.005
+    truth = np.asarray(plant[0].wheel_load_n)
+    skip = 2000                                          # the first 2 s: settling
+
+    def error(v_f: float) -> float:
+        est = estimate_recording(stamps, q, phi, speed,
+                                 replace(FILE, leaf_spring_friction_velocity_mps=v_f),
+                                 ObserverParameters(friction_velocity_fit=0))
+        return float(np.sqrt(np.mean((np.asarray(est.wheel_load_n)[skip:]
+                                      - truth[skip:]) ** 2)))
+
+    assert error(0.005) < error(likeliest)
 
 
 def test_the_fits_runs_make_no_rows_and_the_same_innovations():
