@@ -157,7 +157,7 @@ def _grid(n: int, read: Callable, rows: int) -> tuple:
         raise ValueError('profile covers no distance')
     span = last - first
     mean_step = span / (count - 1)
-    tol = iri_mod.EVEN_SPACING_RTOL * max(mean_step, abs(last))
+    tol = iri_mod.even_spacing_tolerance(mean_step, max(abs(first), abs(last)))
     prev, uniform = None, True
     for x, _ in _kept_pieces(n, read, rows):     # the kept steps
         steps = np.diff(x if prev is None else np.concatenate([[prev], x]))

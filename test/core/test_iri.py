@@ -177,3 +177,30 @@ def test_a_distance_jump_is_refused_before_resampling():
     z = np.zeros_like(x_bad)
     with pytest.raises(ValueError, match=r'largest distance step is 1e\+09 m \(samples 4999'):
         iri(x_bad, z)
+
+
+@pytest.mark.parametrize('start_m', [0.0, 40_000.0])
+def test_speed_changes_far_into_a_survey_are_resampled(start_m):
+    """A 1 kHz drive whose speed alternates 15 / 25 m/s every 100 m (steps 1.5 / 2.5 cm) over
+    a class B road, its distance starting at 0 and at 40 km: per 100 m segment the IRI of the
+    road on its own 5 cm grid (the reference, evenly spaced), and the same at either start.
+    The old test for even spacing (1e-6 of the distance: 4 cm at 40 km) took this drive as
+    even at 40 km, its segments then 0.82-1.19 x the resampled figure."""
+    from road_force_estimator.core.road import iso8608_profile
+
+    road = iso8608_profile('B', 3050.0, seed=3, coherence='identical')
+    steps, d = [], 0.0
+    while d < 3000.0:
+        steps.append((15.0 if int(d // 100.0) % 2 == 0 else 25.0) / 1000.0)
+        d += steps[-1]
+    x = np.concatenate([[0.0], np.cumsum(steps)])
+    z = np.interp(x, road.distance_m, road.elevation_m[:, 0])
+    edges = np.arange(0.0, 3000.0, 100.0)
+    got = iri_segments(start_m + x, z, start_m + edges)
+    fine = road.distance_m <= x[-1]
+    want = iri_segments(start_m + road.distance_m[fine], road.elevation_m[fine, 0],
+                        start_m + edges)
+    assert np.all(np.isfinite(got)) and got.size == 29
+    np.testing.assert_allclose(got, want, rtol=0.03)
+    at_zero = iri_segments(x, z, edges)
+    np.testing.assert_allclose(got, at_zero, rtol=1e-6)
