@@ -15,15 +15,26 @@ drive). Instead only the rates are sampled: given the rates dq at every sub-step
 linear-Gaussian (the friction a known input), so each particle carries a Kalman mean of the
 state conditioned on its sampled rates and the measurements, and all particles share one
 covariance (it depends on neither). Per sub-step: draw dq ~ N(H m, H P H^T) per particle,
-condition the mean on it (an exact pseudo-measurement), predict with the friction
-``f(dq)``; per sample: weigh by ``p(y | the particle's rates, y so far) = N(y; C m, S)``,
-resample (systematic, when the effective sample size is below half the particles), update.
+condition the mean on it (an exact pseudo-measurement), predict with the friction ``f(dq)``;
+per sample: weigh by ``p(y | the particle's rates, y so far) = N(y; C m, S)``, update,
+resample (systematic, when the effective sample size is below half the particles).
 
-Fixed lag L: the Kalman state is augmented with the last L + 1 loads (a ring of slots, their
-covariance shared too), so each particle's mean of the load of sample j given y up to j + L
-is exact for its rates; the estimate is the weighted mean at j + L (the last L samples: at the
-record's end, a shorter lag). The rates (and so the friction) of sample j: the particles'
-draws at j, weighed at j + L.
+Look-ahead: a particle whose rates went wrong keeps them (its own covariance says it knows
+them) and only the weights of later samples find it out; alone, such particles ran away
+within a second (tried: loads of 1e20 N). So the weights carry a look-ahead (Lin, Chen & Liu
+2013): the target at sample k is the posterior times ``p^(y_{k+1..k+A} | the particle)``, each
+particle's mean rolled out A samples with its friction and the linear model's covariance,
+and the weight's step is ``p(y_{k+1} | ...) p^_{k+1} / p^_k``.
+
+Fixed lag L: the population at sample k has seen y up to k + A, so sample j is read out at
+j + L - A: each particle's mean of (load, rate) at j, kept in a ring of slots augmenting the
+Kalman state (their covariance shared too), moved by the linear smoother's step over the
+look-ahead's residuals, and weighted by the target's weights: nothing after j + L is used.
+(Reading out at j + L with the look-ahead divided out of the weights read past the lag: on
+the linear drive with L = 0 its error was half the Kalman filter's.) Exact as N grows when
+the model is linear; with friction, the last A samples enter through each particle's
+rollout (its friction along its own mean path), so A = L is the most approximate and the
+study compares A = L with a shorter one.
 
 Without friction the model is linear-Gaussian and the estimate tends to the Kalman fixed-lag
 smoother's (:class:`.SteadyStateKalman`; the particles start from its stationary posterior).
@@ -44,7 +55,7 @@ from road_force_estimator.estimation.reconstruction import load_transfer_ratios
 
 @dataclass
 class ParticleResult:
-    """Row j of every array is the estimate for sample j (its weighted mean at j + lag).
+    """Row j of every array is the estimate for sample j given y up to j + lag.
 
     Attributes
     ----------
@@ -52,7 +63,8 @@ class ParticleResult:
     road_m : (n, 2) NaN (only the loads are estimated).
     ltr : (n,) load transfer ratio.
     dq_mps : (n, 2) suspension rates (m/s, > 0 extending).
-    friction_n : (n, 2) posterior mean of the friction force on the body (N, > 0 upward).
+    friction_n : (n, 2) the friction force on the body at each particle's rate, weighted (N,
+        > 0 upward).
     ess : (n,) effective sample size after each sample's weighing (before any resampling).
     resampled : number of resamplings.
     cpu_s : CPU seconds of the run.
@@ -142,6 +154,8 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
     arguments, :mod:`bench.accuracy.peers`: uniform ``t_s`` (s), ``q_m`` (n, 2) m,
     ``roll_rad`` (n,), speed m/s), ``vehicle`` the truth's (friction included).
 
+    ``lookahead`` (samples, at most ``lag_samples``): the look-ahead of the weights; sample j
+    is read out at j + lag - lookahead (nothing after j + lag used).
     ``tuning``: :class:`RollPlaneKalman`'s keyword arguments (``noise_deflection_m``,
     ``noise_roll_rad``, ``force_psd``, ...); ``profile_cutoff_wavelength_m`` is ignored.
     """
@@ -155,11 +169,13 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
     lin, kf = model.linear, model.linear.kf
     y = np.column_stack([q_m, roll_rad])
     n, big_n, lag = y.shape[0], int(n_particles), int(lag_samples)
-    nx, slots = model.nx, lag + 1
-    nz = nx + 2 * slots                      # the state and the ring of loads
+    ahead = min(max(int(lookahead), 0), lag)
+    behind = lag - ahead                      # sample j is read out at j + behind
+    nx, slots = model.nx, behind + 1
+    nz = nx + 4 * slots                       # the state and a ring of (load, rate) per sample
     rng = np.random.default_rng(seed)
     static = np.asarray(vehicle.static_load_n, dtype=float)
-    h_load = lin.h_force                      # dF = h_load x (N)
+    h_slot = np.vstack([lin.h_force, model.rate_map])     # dF (N), dq (m/s) of the state
     hq = np.zeros((2, nz))
     hq[:, :nx] = model.rate_map
     cz = np.zeros((3, nz))
@@ -168,44 +184,29 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
     a_z[:nx, :nx] = model.a_h
     q_z = np.zeros((nz, nz))
     q_z[:nx, :nx] = model.q_h
-
-    def slot(j: int) -> slice:
-        return slice(nx + 2 * (j % slots), nx + 2 * (j % slots) + 2)
-
-    def store_load(j: int, m: np.ndarray, p: np.ndarray) -> None:
-        """Put the load of sample j (a linear function of the state) in its ring slot."""
-        s = slot(j)
-        m[:, s] = m[:, :nx] @ h_load.T
-        p[s, :] = h_load @ p[:nx, :]
-        p[:, s] = p[s, :].T
-        p[s, s] = h_load @ p[:nx, :nx] @ h_load.T
-
-    # start: the Kalman filter's stationary posterior given y_0, the same for every particle
-    x0 = lin.prior(y[0])
-    x0 = x0 + kf.k @ (y[0] - kf.c @ x0)
-    m = np.zeros((big_n, nz))
-    m[:, :nx] = x0
-    p = np.zeros((nz, nz))
-    p[:nx, :nx] = kf.p_post
-    store_load(0, m, p)
-    dq_ring = np.empty((slots, big_n, 2))
-    est = np.empty((n, 6))                    # load (2), dq (2), friction (2)
-    ess = np.empty(n)
-    ess[0] = big_n
-    resampled = 0
     a_zt, a_ht, b_t = a_z.T, model.a_h.T, model.b_h.T
     fric = bool(np.any(model.friction_n > 0.0))
-
-    ahead = max(int(lookahead), 0)
     obs, noise_y = model.lookahead_noise(max(ahead, 1))
     a1t, b1t, ct = model.a_1.T, model.b_1.T, model.c.T
 
-    def look(k: int) -> np.ndarray:
-        """log p^(y_{k+1..k+ahead} | the particle): each mean rolled out with its friction,
-        the linear model's covariance (constants dropped)."""
+    def slot(j: int) -> slice:
+        return slice(nx + 4 * (j % slots), nx + 4 * (j % slots) + 4)
+
+    def store(j: int) -> None:
+        """Put the load and rate of sample j (linear in the state) in its ring slot."""
+        s = slot(j)
+        m[:, s] = m[:, :nx] @ h_slot.T
+        p[s, :] = h_slot @ p[:nx, :]
+        p[:, s] = p[s, :].T
+        p[s, s] = h_slot @ p[:nx, :nx] @ h_slot.T
+
+    def look(k: int):
+        """log p^(y_{k+1..k+ahead} | the particle) (constants dropped), each mean rolled out
+        with its friction and the linear model's covariance, and for the read-out the
+        residuals whitened ``z`` and the covariance's Cholesky factor and rows ``O``."""
         steps = min(ahead, n - 1 - k)
         if steps <= 0:
-            return np.zeros(big_n)
+            return np.zeros(big_n), None
         o = obs[:3 * steps]
         cov = o @ p[:nx, :nx] @ o.T + noise_y[:3 * steps, :3 * steps]
         root = np.linalg.cholesky(0.5 * (cov + cov.T))
@@ -217,38 +218,49 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
                 xr += model.friction(xr @ model.rate_map.T) @ b1t
             res[:, 3 * j:3 * j + 3] = y[k + 1 + j] - xr @ ct
         z = linalg.solve_triangular(root, res.T, lower=True)
-        return -0.5 * np.einsum('ij,ij->j', z, z)
+        return -0.5 * np.einsum('ij,ij->j', z, z), (z, root, o)
 
-    def weights_now() -> np.ndarray:
-        """The posterior weights: the look-ahead's factor taken out."""
-        lw = logw - ahead_ll
-        v = np.exp(lw - lw.max())
-        return v / v.sum()
+    def read_out(j: int, w: np.ndarray, ahead_fit) -> None:
+        """Sample j from the ring, each particle's mean moved by the look-ahead's residuals
+        (the linear smoother's step over them), weighted."""
+        mean = m[:, slot(j)]
+        if ahead_fit is not None:
+            z, root, o = ahead_fit
+            gain = p[slot(j), :nx] @ o.T                          # (4, 3 steps)
+            mean = mean + (gain @ linalg.solve_triangular(root.T, z, lower=False)).T
+        est[j, 0:2] = static + w @ mean[:, 0:2]
+        est[j, 2:4] = w @ mean[:, 2:4]
+        est[j, 4:6] = w @ model.friction(mean[:, 2:4])
 
-    def read_out(j: int) -> None:
-        dq = dq_ring[j % slots]
-        we = weights_now()
-        est[j, 0:2] = static + we @ m[:, slot(j)]
-        est[j, 2:4] = we @ dq
-        est[j, 4:6] = we @ model.friction(dq)
-
-    ahead_ll = look(0)
+    # start: the Kalman filter's stationary posterior given y_0, the same for every particle
+    x0 = lin.prior(y[0])
+    x0 = x0 + kf.k @ (y[0] - kf.c @ x0)
+    m = np.zeros((big_n, nz))
+    m[:, :nx] = x0
+    p = np.zeros((nz, nz))
+    p[:nx, :nx] = kf.p_post
+    store(0)
+    est = np.full((n, 6), np.nan)             # load (2), dq (2), friction (2)
+    ess = np.empty(n)
+    ess[0] = big_n
+    resampled = 0
+    ahead_ll, fit = look(0)
     logw = ahead_ll.copy()
-
+    w = np.full(big_n, 1.0 / big_n)
+    if behind == 0:
+        read_out(0, w, fit)
     for k in range(n - 1):
         # the sub-steps from sample k to k + 1: draw the rates, condition on them, predict
-        for i in range(model.substeps):
-            s_dq = hq @ p @ hq.T
+        for _ in range(model.substeps):
+            s_dq = hq @ p @ hq.T + 1e-18 * np.eye(2)
             s_dq = 0.5 * (s_dq + s_dq.T)
-            root = np.linalg.cholesky(s_dq + 1e-18 * np.eye(2))
+            root = np.linalg.cholesky(s_dq)
+            gain = np.linalg.solve(s_dq, hq @ p).T                  # (nz, 2)
             eps = rng.standard_normal((big_n, 2))
-            gain = np.linalg.solve(s_dq + 1e-18 * np.eye(2), hq @ p).T     # (nz, 2)
             dq = m @ hq.T + eps @ root.T
-            if i == 0:
-                dq_ring[k % slots] = dq
             m += eps @ (gain @ root).T
             p = p - gain @ (hq @ p)
-            m[:, :nx] = m[:, :nx] @ a_ht        # the ring of loads stays
+            m[:, :nx] = m[:, :nx] @ a_ht        # the ring stays
             if fric:
                 m[:, :nx] += model.friction(dq) @ b_t
             p = a_z @ p @ a_zt + q_z
@@ -262,7 +274,8 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
         m += innov @ gain.T
         p = p - gain @ (cz @ p)
         p = 0.5 * (p + p.T)
-        ahead_ll = look(k + 1)
+        store(k + 1)
+        ahead_ll, fit = look(k + 1)
         logw += ahead_ll
         logw -= logw.max()
         w = np.exp(logw)
@@ -270,21 +283,22 @@ def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters
         ess[k + 1] = 1.0 / float(w @ w)
         if ess[k + 1] < 0.5 * big_n:
             idx = _systematic(w, rng)
-            m, dq_ring, ahead_ll = m[idx], dq_ring[:, idx], ahead_ll[idx]
+            m, ahead_ll = m[idx], ahead_ll[idx]
+            if fit is not None:
+                fit = (fit[0][:, idx], fit[1], fit[2])
             logw = np.zeros(big_n)
+            w = np.full(big_n, 1.0 / big_n)
             resampled += 1
-        if k + 1 >= lag:
-            read_out(k + 1 - lag)
-        store_load(k + 1, m, p)
-    # the last rows: at the record's end (their rates drawn from the last mean)
-    dq_ring[(n - 1) % slots] = m[:, :nx] @ model.rate_map.T
-    for j in range(max(n - lag, 0), n):
-        read_out(j)
+        if k + 1 >= behind:
+            read_out(k + 1 - behind, w, fit)
+    for j in range(max(n - behind, 0), n):    # the record's end: what there is
+        read_out(j, w, fit)
     load = est[:, 0:2]
     return ParticleResult(load, np.full((n, 2), np.nan),
                           load_transfer_ratios(load[:, 0], load[:, 1], 1.0), est[:, 2:4],
                           est[:, 4:6], ess, resampled, time.process_time() - c0, lag,
-                          {'n_particles': big_n, 'substeps': model.substeps, 'seed': seed})
+                          {'n_particles': big_n, 'substeps': model.substeps, 'seed': seed,
+                           'lookahead': ahead})
 
 
 def _systematic(w: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -15,8 +15,9 @@ the 2 s skip), at 10 ms (the particle reference's fixed lag of 10 samples, the K
 Parts:
 
 - ``check``: on the matched and the lag drives (linear-Gaussian), the particle reference
-  beside the Kalman peer (``--particles``, the first), road seed 1: they should agree within
-  a few percent;
+  beside the Kalman peer (``--particles``, the first), road seed 1, at the fixed lag of 10
+  samples and at 3 (a look-ahead reading past the lag would show there most): they
+  should agree within a few percent;
 - ``converge``: the sharper truth told (``friction+lag, truth v_f 0.005, file v_f 0.005``),
   road seed 1, at each ``--particles``;
 - ``drives``: per road seed, the matched drive, the lag, ``friction+lag`` (v_f 0.01) and the
@@ -78,26 +79,26 @@ def ours(drive, vehicle) -> tuple[float, object]:
     return score(drive, per_sample(est, drive.stamps_ns))['load_rms_pct_dyn'], est
 
 
-def peer(drive, vehicle) -> float:
-    """The Kalman peer's (``kf-model-lag10ms``, lag states where the file has a lag) 10 ms
-    load error (% dyn)."""
+def peer(drive, vehicle, lag: int = 10) -> float:
+    """The Kalman peer's (``kf-model-lag10ms``'s settings, lag states where the file has a
+    lag) load error (% dyn) at a fixed lag of ``lag`` samples (0: its filter)."""
     from bench.accuracy import peers
     from bench.accuracy.scenarios import score
 
     settings = tuning(drive.scenario.noise_deflection_m)
     res = peers.kf_model_lag(drive.t_s, drive.q_m, drive.roll_rad, drive.speed_mps, vehicle,
-                             lag_s=0.01, **settings)
+                             lag_s=lag * 1e-3, **settings)
     return score(replace(drive, vehicle_observer=vehicle), res)['load_rms_pct_dyn']
 
 
-def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0):
-    """The particle reference's 10 ms load error (% dyn), its result and a line of its
-    effective sample size and CPU time."""
+def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0, lag: int = 10):
+    """The particle reference's load error (% dyn) at a fixed lag of ``lag`` samples, its
+    result and a line of its effective sample size and CPU time."""
     from bench.accuracy.particle_peer import particle_fixed_lag
     from bench.accuracy.scenarios import score
 
     res = particle_fixed_lag(drive.t_s, drive.q_m, drive.roll_rad, drive.speed_mps, vehicle,
-                             n_particles=n_particles, lag_samples=10, seed=seed,
+                             n_particles=n_particles, lag_samples=lag, seed=seed,
                              substeps=substeps, **tuning(drive.scenario.noise_deflection_m))
     ess = res.ess[drive.skip:] / n_particles
     note = (f'N {n_particles}: ESS/N mean {ess.mean():.2f}, 5th pct {np.percentile(ess, 5):.2f}, '
@@ -108,14 +109,15 @@ def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0):
 
 def check(args, log) -> list[str]:
     """Part ``check`` (module notes)."""
-    lines = ['| drive (road seed 1, 10 ms) | Kalman peer (% dyn) | particle (% dyn) | '
-             'particle / peer | the particle run |', '|---|---:|---:|---:|---|']
+    lines = ['| drive (road seed 1) | lag (samples) | Kalman peer (% dyn) | particle (% dyn) | '
+             'particle / peer | the particle run |', '|---|---:|---:|---:|---:|---|']
     for name in (MATCHED, LAG):
         drive, vehicle = drive_of(name, args.duration, 1)
-        kf = peer(drive, vehicle)
-        pf, _, note = particle(drive, vehicle, args.particles[0], args.substeps)
-        lines.append(f'| {name} | {kf:.3f} | {pf:.3f} | {pf / kf:.3f} | {note} |')
-        log(lines[-1])
+        for lag in (10, 3):
+            kf = peer(drive, vehicle, lag)
+            pf, _, note = particle(drive, vehicle, args.particles[0], args.substeps, lag=lag)
+            lines.append(f'| {name} | {lag} | {kf:.3f} | {pf:.3f} | {pf / kf:.3f} | {note} |')
+            log(lines[-1])
     return lines
 
 
