@@ -3,7 +3,8 @@
 :mod:`bench.studies.friction_lag`, told the truth.
 
 ``.venv/bin/python -m bench.studies.friction_lag_bound [--part check|converge|drives|decompose]
-[--road-seeds N ...] [--particles N ...] [--duration S] [--substeps N] [--lookahead N]``
+[--road-seeds N ...] [--particles N ...] [--duration S] [--substeps N] [--lookahead N]
+[--seed N]``
 
 Drives: :func:`bench.studies.friction_lag.build` (class C, 20 m/s, 1 kHz, 10 um, 20 s), scored
 by :func:`bench.accuracy.scenarios.score` (load error in % of the true dynamic-load RMS after
@@ -102,7 +103,7 @@ def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0, lag
                              substeps=substeps, lookahead=lookahead,
                              **tuning(drive.scenario.noise_deflection_m))
     ess = res.ess[drive.skip:] / n_particles
-    note = (f'N {n_particles}, look-ahead {res.extra["lookahead"]}, {substeps} sub-steps: '
+    note = (f'N {n_particles}, seed {seed}, look-ahead {res.extra["lookahead"]}, {substeps} sub-steps: '
             f'ESS/N mean {ess.mean():.2f}, 5th pct {np.percentile(ess, 5):.2f}, '
             f'least {ess.min():.3f}; resampled at {100 * res.resampled / len(res.ess):.0f} % '
             f'of the samples; {res.cpu_s:.0f} s CPU')
@@ -118,7 +119,7 @@ def check(args, log) -> list[str]:
         for lag in (10,):
             kf = peer(drive, vehicle, lag)
             pf, _, note = particle(drive, vehicle, args.particles[0], args.substeps, lag=lag,
-                                   lookahead=args.lookahead)
+                                   lookahead=args.lookahead, seed=args.seed)
             lines.append(f'| {name} | {lag} | {kf:.3f} | {pf:.3f} | {pf / kf:.3f} | {note} |')
             log(lines[-1])
     return lines
@@ -131,7 +132,7 @@ def converge(args, log) -> list[str]:
              '|---|---:|---|']
     for n in args.particles:
         pf, _, note = particle(drive, vehicle, n, args.substeps,
-                               lookahead=args.lookahead)
+                               lookahead=args.lookahead, seed=args.seed)
         lines.append(f'| N {n} | {pf:.3f} | {note} |')
         log(lines[-1])
     return lines
@@ -150,7 +151,7 @@ def drives(args, log) -> list[str]:
             o, _ = ours(drive, vehicle)
             kf = peer(drive, vehicle)
             pf, _, note = particle(drive, vehicle, n, args.substeps,
-                               lookahead=args.lookahead)
+                               lookahead=args.lookahead, seed=args.seed)
             ref = ref or {'ours': o, 'pf': pf}
             lines.append(f'| {name} | {seed} | {o:.3f} | {kf:.3f} | {pf:.3f} | '
                          f'{pf / ref["ours"]:.3f} | {pf / ref["pf"]:.3f} | '
@@ -169,7 +170,7 @@ def decompose(args, log) -> list[str]:
     slow = np.abs(dq_true) < 0.02
     o, est = ours(drive, vehicle)
     pf, res, note = particle(drive, vehicle, args.particles[-1], args.substeps,
-                               lookahead=args.lookahead)
+                               lookahead=args.lookahead, seed=args.seed)
     candidates = (('ours', o, np.asarray(est.dq)[k0:],
                    -f_n * np.tanh(np.asarray(est.dq)[k0:] / v_f)),
                   ('particle', pf, res.dq_mps[k0:], res.friction_n[k0:]))
@@ -203,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
                    help='sub-steps of a sample (the friction held over each)')
     p.add_argument('--lookahead', type=int, default=10, metavar='N',
                    help="samples of the weights' look-ahead (at most the lag, 10)")
+    p.add_argument('--seed', type=int, default=0, metavar='N', help="the particles' seed")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     for part in args.part:
