@@ -103,7 +103,8 @@ def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0, lag
                              substeps=substeps, lookahead=lookahead,
                              **tuning(drive.scenario.noise_deflection_m))
     ess = res.ess[drive.skip:] / n_particles
-    note = (f'N {n_particles}, seed {seed}, look-ahead {res.extra["lookahead"]}, {substeps} sub-steps: '
+    note = (f'N {n_particles}, seed {seed}, look-ahead {res.extra["lookahead"]}, '
+            f'{substeps} sub-steps: '
             f'ESS/N mean {ess.mean():.2f}, 5th pct {np.percentile(ess, 5):.2f}, '
             f'least {ess.min():.3f}; resampled at {100 * res.resampled / len(res.ess):.0f} % '
             f'of the samples; {res.cpu_s:.0f} s CPU')
