@@ -8,7 +8,8 @@
 
 Drives: :func:`bench.studies.friction_lag.build` (class C, 20 m/s, 1 kHz, 10 um, 20 s), scored
 by :func:`bench.accuracy.scenarios.score` (load error in % of the true dynamic-load RMS after
-the 2 s skip), at 10 ms (the particle reference's fixed lag of 10 samples, the Kalman peer's
+the 2 s skip), at 10 ms (the particle reference's fixed lag of 10 samples, its look-ahead 7
+by default, the Kalman peer's
 ``kf-model-lag10ms``, ours at ``observer.latency`` 0.01 s), each given the truth's file
 (friction, lag and v_f). The particle reference has the peer's tuned settings
 (``tuned_peers.json``, ``kf-model-lag10ms`` at 10 um).
@@ -92,7 +93,7 @@ def peer(drive, vehicle, lag: int = 10) -> float:
 
 
 def particle(drive, vehicle, n_particles: int, substeps: int, seed: int = 0, lag: int = 10,
-             lookahead: int = 10):
+             lookahead: int = 7):
     """The particle reference's load error (% dyn) at a fixed lag of ``lag`` samples, its
     result and a line of its effective sample size and CPU time."""
     from bench.accuracy.particle_peer import particle_fixed_lag
@@ -203,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
                    help='check: the first; converge: each; drives, decompose: the last')
     p.add_argument('--substeps', type=int, default=4, metavar='N',
                    help='sub-steps of a sample (the friction held over each)')
-    p.add_argument('--lookahead', type=int, default=10, metavar='N',
+    p.add_argument('--lookahead', type=int, default=7, metavar='N',
                    help="samples of the weights' look-ahead (at most the lag, 10)")
     p.add_argument('--seed', type=int, default=0, metavar='N', help="the particles' seed")
     args = p.parse_args(argv)
