@@ -20,7 +20,7 @@ Parts:
   beside the Kalman peer (``--particles``, the first), road seed 1: they should agree within
   a few percent (the reference below the peer would read past the lag);
 - ``converge``: the sharper truth told (``friction+lag, truth v_f 0.005, file v_f 0.005``),
-  road seed 1, at each ``--particles``;
+  on the road seeds given, at each ``--particles``;
 - ``drives``: per road seed, the matched drive, the lag, ``friction+lag`` (v_f 0.01) and the
   sharper truth told, ours, the peer and the particle reference (``--particles``, the last),
   each one's ratio to our matched drive (issue 30's) and to its own matched drive;
@@ -129,14 +129,15 @@ def check(args, log) -> list[str]:
 
 def converge(args, log) -> list[str]:
     """Part ``converge`` (module notes)."""
-    drive, vehicle = drive_of(SHARP, args.duration, 1)
-    lines = [f'| {SHARP}, road seed 1, 10 ms | particle (% dyn) | the particle run |',
-             '|---|---:|---|']
-    for n in args.particles:
-        pf, _, note = particle(drive, vehicle, n, args.substeps,
-                               lookahead=args.lookahead, seed=args.seed)
-        lines.append(f'| N {n} | {pf:.3f} | {note} |')
-        log(lines[-1])
+    lines = [f'| {SHARP}, 10 ms | road seed | particle (% dyn) | the particle run |',
+             '|---|---:|---:|---|']
+    for seed in args.road_seeds:
+        drive, vehicle = drive_of(SHARP, args.duration, seed)
+        for n in args.particles:
+            pf, _, note = particle(drive, vehicle, n, args.substeps,
+                                   lookahead=args.lookahead, seed=args.seed)
+            lines.append(f'| N {n} | {seed} | {pf:.3f} | {note} |')
+            log(lines[-1])
     return lines
 
 
