@@ -676,6 +676,12 @@ class RollPlaneKalman:
             scale[idist] = 1e3
         a, g, cm, scale = _with_sensor_lag(a, g, cm, scale, vehicle.sensor_time_constant_s)
         nx = a.shape[0]
+        #: the continuous model ``dx = A x dt + G dW``, ``E[dW dW^T] = Qc dt`` (lag states
+        #: included), the deflection map ``q = D p`` (2 x 4, p = [z_s, phi, z_u1, z_u2]) and the
+        #: generalised masses [M, I_x, m_u1, m_u2] (kg, kg m^2): what a nonlinear model on this
+        #: one needs
+        self.a_continuous, self.g_continuous, self.q_continuous = a, g, qc
+        self.deflection_map, self.masses = d, mass
         a_d, q_d = van_loan(a, g, qc, dt_s)
         #: measurement-noise floor actually used (raised x10 while the Riccati equation is too
         #: ill-conditioned to solve in double precision, as a user would)
