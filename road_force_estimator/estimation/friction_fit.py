@@ -14,14 +14,16 @@ rate (docs/method.md "Offline, v_f fitted from the drive").
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
 from road_force_estimator.core.parameters import ObserverParameters
 
-__all__ = ['FIT_S', 'FIT_GRID', 'FIT_LEAD_NATS', 'fits', 'fit_end', 'likeliest_velocity']
+__all__ = ['FIT_S', 'FIT_GRID', 'FIT_LEAD_NATS', 'states_friction', 'fits', 'fit_end',
+           'likeliest_velocity', 'FrictionVelocity']
 
 #: The seconds of the first run the fit takes, and the v_f tried, relative to the file's.
 FIT_S = 20.0
@@ -34,12 +36,17 @@ FIT_GRID = (0.5, 0.7, 1.0, 1.4, 2.0)
 FIT_LEAD_NATS = 10.0
 
 
+def states_friction(friction_model: str, friction_n: Iterable[float]) -> bool:
+    """Whether the file states a tanh friction, and so a ``v_f``: the friction law ``tanh``
+    and some spring's friction ``friction_n`` (N) not 0."""
+    return friction_model == 'tanh' and any(float(f) for f in friction_n)
+
+
 def fits(observer: ObserverParameters, friction_model: str,
          friction_n: Iterable[float]) -> bool:
-    """Whether ``v_f`` is fitted: ``observer.friction_velocity_fit`` set, the file's friction
-    law ``tanh`` and some spring's friction ``friction_n`` (N) not 0."""
-    return (bool(observer.friction_velocity_fit) and friction_model == 'tanh'
-            and any(float(f) for f in friction_n))
+    """Whether ``v_f`` is fitted: ``observer.friction_velocity_fit`` set and the file states
+    a tanh friction (:func:`states_friction`)."""
+    return bool(observer.friction_velocity_fit) and states_friction(friction_model, friction_n)
 
 
 def fit_end(stamps_ns, run_end: int) -> int:
@@ -79,3 +86,66 @@ def likeliest_velocity(v_file_mps: float, nll_terms: Callable[[float], list],
     if not common or file_value - best[0] < FIT_LEAD_NATS:
         return v_file_mps   # (nothing to tell, or not told clearly enough: the file's)
     return best[1]
+
+
+@dataclass(frozen=True)
+class FrictionVelocity:
+    """The tanh friction's ``v_f`` an offline estimate took, as its report states it
+    (``report.json`` ``friction_velocity``, a line in ``report.md``): ``taken_mps`` (m/s) the
+    smoother's, ``file_mps`` the file's (``vehicle.leaf_spring_friction_velocity``),
+    ``fitted`` whether the fit ran (:func:`fits`, not under ``zero_load``; it may keep the
+    file's), ``reason`` why not ('' when it ran)."""
+
+    taken_mps: float
+    file_mps: float
+    fitted: bool
+    reason: str = ''
+
+    @classmethod
+    def of(cls, file_mps: float, taken_mps: float, observer: ObserverParameters,
+           friction_model: str, friction_n: Iterable[float], zero_load: bool
+           ) -> FrictionVelocity | None:
+        """The ``v_f`` taken (``taken_mps``, the fit's result: the smoother's vehicle) against
+        the file's; None where the file states no tanh friction (:func:`states_friction`)."""
+        if not states_friction(friction_model, friction_n):
+            return None
+        reason = ('observer.friction_velocity_fit is 0' if not observer.friction_velocity_fit
+                  else 'under vehicle.zero_load' if zero_load else '')
+        return cls(float(taken_mps), float(file_mps), not reason, reason)
+
+    @property
+    def changed(self) -> bool:
+        """The fit took another ``v_f`` than the file's."""
+        return self.taken_mps != self.file_mps
+
+    def as_dict(self) -> dict[str, Any]:
+        """``report.json``'s ``friction_velocity``: ``taken_mps``, ``file_mps``, ``fitted``,
+        ``changed``, ``reason``."""
+        return {'taken_mps': self.taken_mps, 'file_mps': self.file_mps, 'fitted': self.fitted,
+                'changed': self.changed, 'reason': self.reason}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FrictionVelocity:
+        """Back from :meth:`as_dict` (the report's summary)."""
+        return cls(float(d['taken_mps']), float(d['file_mps']), bool(d['fitted']),
+                   str(d.get('reason') or ''))
+
+    def markdown(self) -> str:
+        """The report's line."""
+        head = f'Leaf-spring friction v_f: {self.taken_mps:g} m/s'
+        if not self.fitted:
+            return f"{head}, the file's (not fitted: {self.reason})."
+        if not self.changed:
+            return (f"{head}, the file's: fitted from the drive, no v_f of "
+                    f'{FIT_GRID[0]:g}-{FIT_GRID[-1]:g} x it was likelier by '
+                    f'{FIT_LEAD_NATS:g} nats.')
+        return (f"{head} fitted from the drive (the file's {self.file_mps:g}; put it in the "
+                'file for the online node: `vehicle.leaf_spring_friction_velocity`).')
+
+    def note(self) -> str | None:
+        """estimate_bag's line on stderr when the fit changed ``v_f`` (else None)."""
+        if not self.changed:
+            return None
+        return (f"leaf-spring friction v_f {self.taken_mps:g} m/s fitted from the drive (the "
+                f"file's {self.file_mps:g} m/s); the online node takes it from "
+                'vehicle.leaf_spring_friction_velocity')

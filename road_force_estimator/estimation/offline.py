@@ -21,7 +21,7 @@ from road_force_estimator.estimation.acceptance import (
     GAP_THRESHOLD_S, accept_arrays, batch_inputs, output_stamps)
 from road_force_estimator.estimation.chain.zero_phase import estimate_offline
 from road_force_estimator.estimation.friction_fit import (
-    fit_end, fits, likeliest_velocity)
+    FrictionVelocity, fit_end, fits, likeliest_velocity)
 from road_force_estimator.estimation.models.front_axle import FrontAxleModel
 from road_force_estimator.estimation.outputs import (
     Column, EstimateArrays, EstimatorStatus, field_columns, hold_rejected)
@@ -143,6 +143,7 @@ def smooth(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | Non
         [out.body_heave_rate[acc], out.droll[acc]]))
     faults.fill_status(status)
     status.negative_load_samples = out.negative_load_samples()
+    out.friction_velocity = prep.friction_velocity
     return out
 
 
@@ -206,7 +207,9 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
     (the (n, 3) array of both when ``q`` and ``phi`` are its views, else None),
     ``static`` (N, (acc.size, 2), or None), ``vehicle``, ``observer``, ``t`` (s from the first
     accepted stamp, per accepted sample), ``dist`` (m), ``v_model`` (m/s), ``contradicted``,
-    ``starts`` (each run's first index into ``acc``, then ``acc.size``)."""
+    ``starts`` (each run's first index into ``acc``, then ``acc.size``), ``friction_velocity``
+    (the tanh friction's ``v_f`` taken and the file's, :class:`.friction_fit.FrictionVelocity`,
+    or None: no tanh friction stated)."""
     vehicle = VehicleParameters() if vehicle is None else vehicle
     observer = ObserverParameters() if observer is None else observer
     stamps, q, phi, speed = batch_inputs(stamps_ns, q_m, roll_rad, speed_mps)
@@ -222,14 +225,18 @@ def prepare(stamps_ns, q_m, roll_rad, speed_mps, vehicle: VehicleParameters | No
     steps[1:] = np.diff(stamp_int[acc]) * 1e-9
     contradicted, v_model = check_arrays(steps, q[acc], v_all, restart[acc])
     del steps
+    file_vf = vehicle.leaf_spring_friction_velocity_mps
     vehicle = fit_friction_velocity(vehicle, observer, stamp_int[acc], q[acc], phi[acc],
                                     v_model, restart[acc])
+    friction = FrictionVelocity.of(
+        file_vf, vehicle.leaf_spring_friction_velocity_mps, observer,
+        vehicle.leaf_spring_friction_model, vehicle.leaf_spring_friction_n, vehicle.zero_load)
     return SimpleNamespace(
         n=stamps.shape[0], stamps_out=output_stamps(stamps), valid=valid, counts=cnt, acc=acc,
         last_stamp_ns=int(stamp_int[acc[-1]]) if acc.size else None, q=q, phi=phi,
         y=_joined(q, phi), static=static, vehicle=vehicle, observer=observer, t=t_all,
         dist=distance_m(np.diff(t_all), v_all), v_model=v_model, contradicted=contradicted,
-        starts=np.flatnonzero(restart[acc]).tolist() + [acc.size])
+        starts=np.flatnonzero(restart[acc]).tolist() + [acc.size], friction_velocity=friction)
 
 
 def fit_friction_velocity(vehicle: VehicleParameters, observer: ObserverParameters, stamps_ns,

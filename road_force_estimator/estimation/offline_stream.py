@@ -80,6 +80,9 @@ class OfflineStream:
         self.odometer = None
         self.fused = False
         self.distance_source = None
+        #: the tanh friction's ``v_f`` taken and the file's (:class:`.friction_fit.
+        #: FrictionVelocity`, once :meth:`finish` has begun; None: no tanh friction stated)
+        self.friction_velocity = None
         #: the last accepted stamp (ns; None before :meth:`finish` or without one)
         self.last_stamp_ns: int | None = None
 
@@ -105,6 +108,7 @@ class OfflineStream:
                        gap_threshold_s=self.gap_threshold_s)
         del stamps, q, phi, v
         self.last_stamp_ns = prep.last_stamp_ns
+        self.friction_velocity = prep.friction_velocity
         if self.spill:            # needed only piece by piece: out of memory until then
             prep.dist, prep.stamps_out = _spilled(prep.dist, self.spill), _spilled(
                 prep.stamps_out, self.spill)

@@ -228,6 +228,9 @@ class EstimateArrays:
     #: (n, channels) int8: each sample's sensor flags (:mod:`.sensor_health` CODES: 0 ok,
     #: 1 stuck, 2 drift; channels in the model's order), or None: not judged
     fault_flags: np.ndarray | None = None
+    #: offline (the model's smoother), the tanh friction's ``v_f`` taken and the file's
+    #: (:class:`.friction_fit.FrictionVelocity`); None: online, or no tanh friction stated
+    friction_velocity: Any = None
 
     def __post_init__(self) -> None:
         if self.speed_contradicted is None:

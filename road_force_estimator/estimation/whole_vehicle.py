@@ -78,7 +78,8 @@ from road_force_estimator.estimation.articulated import (
     ArticulatedOnline, run_starts)
 from road_force_estimator.estimation.axle_fit import (
     ONLINE_MIN_LATENCY_S, AxleFit, OnlineAxleFit, assess_axles)
-from road_force_estimator.estimation.friction_fit import fit_end, fits, likeliest_velocity
+from road_force_estimator.estimation.friction_fit import (
+    FrictionVelocity, fit_end, fits, likeliest_velocity)
 from road_force_estimator.estimation.fused_stream import FusedPoints, FusedStream
 from road_force_estimator.estimation.rollover_warning import LtrPredictor, predicted_ltr
 from road_force_estimator.estimation.models.articulated import ArticulatedObserverModel
@@ -209,6 +210,10 @@ class WholeVehicleArrays:
     rejected: dict | None = None
     #: the input messages its reader read, topic -> count (the caller's), or None
     messages: dict | None = None
+    #: offline, the tanh friction's ``v_f`` taken and the file's
+    #: (:class:`.friction_fit.FrictionVelocity`, :attr:`WholeVehicleOfflineStream.
+    #: friction_velocity`); None: online, or no tanh friction stated
+    friction_velocity: FrictionVelocity | None = None
 
     @property
     def axle_load_n(self) -> np.ndarray:
@@ -536,7 +541,8 @@ def estimate_whole_vehicle(vehicle: ArticulatedParameters, stamps_ns, readings, 
                                        eager=bool(windows), imu=imu)
     stream.feed(stamps, readings, v, imu_codes)
     out = concatenate_arrays(list(stream.finish()))
-    return replace(out, axle_fit=fit_axles(vehicle, out))
+    return replace(out, axle_fit=fit_axles(vehicle, out),
+                   friction_velocity=stream.friction_velocity)
 
 
 def estimate_online_blocks(vehicle: ArticulatedParameters, blocks: Iterable[tuple], *,
@@ -890,6 +896,9 @@ class WholeVehicleOfflineStream:
         #: the tanh friction's v_f (m/s) the smoother takes: the file's, once :meth:`finish`
         #: has begun the fitted one (:func:`fit_friction_velocity`)
         self.friction_velocity_mps = vehicle.leaf_spring_friction_velocity_mps
+        #: the same as the report states it, with the file's (:class:`.friction_fit.
+        #: FrictionVelocity`; None: no tanh friction stated), once :meth:`finish` has begun
+        self.friction_velocity: FrictionVelocity | None = None
 
     @property
     def fed(self) -> int:
@@ -985,6 +994,11 @@ class WholeVehicleOfflineStream:
                                         v[:end], None if left is None else left[:end],
                                         imu=est.model.imu)
         self.friction_velocity_mps = vehicle.leaf_spring_friction_velocity_mps
+        self.friction_velocity = FrictionVelocity.of(
+            est.vehicle.leaf_spring_friction_velocity_mps, self.friction_velocity_mps,
+            self.observer, est.vehicle.leaf_spring_friction_model,
+            [f for a in est.vehicle.axles for f in a.leaf_spring_friction_n],
+            est.vehicle.zero_load)
         model = (est.model if vehicle is est.vehicle else est.model.with_vehicle(vehicle))
         braking = est.online.braking if model is est.model else model.braking_response()
         smoother = Smoother(model, self.observer, window, eager=self.eager)

@@ -303,7 +303,8 @@ def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str
     reported, None: ``stream.status``)."""
     from road_force_estimator import __version__
     from road_force_estimator.report.summary import (
-        convergence_summary, notes, rejections, segment_counts, sensor_summary)
+        convergence_summary, friction_summary, notes, rejections, segment_counts,
+        sensor_summary)
 
     st = stream.status if status is None else status
     rejected = rejections(drive, st)
@@ -350,6 +351,8 @@ def _summary(acc, stream, drive, vehicle, observer, extra: dict, input_name: str
         source = distance_speed(observer.distance_source, (), (), drive.fixes,
                                 offline=False)[1]
     summary['distance'] = source.as_dict()
+    if offline:                                   # the friction's v_f the smoother took
+        summary.update(friction_summary(stream))
     summary.update(acc.speed_findings())
     summary['accuracy'] = None
     segments = acc.segment_table(drive.fixes)

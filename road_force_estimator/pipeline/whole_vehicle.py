@@ -200,7 +200,8 @@ def _offline(input_path: Path, vehicle, observer, names: tuple, imu: bool,
     none = replace(none, **{f: np.array(getattr(none, f)) for f in ROW_FIELDS
                             if getattr(none, f) is not None})
     meta = replace(none, innovations_gated=stream.innovations_gated,
-                   rejected=_counts(reader.rejected), messages=dict(reader.messages))
+                   rejected=_counts(reader.rejected), messages=dict(reader.messages),
+                   friction_velocity=stream.friction_velocity)
     del stream, last
     spill.meta = meta if not imu else replace(meta, imu_codes=np.zeros(0, np.int8))
     spill.meta = replace(spill.meta, axle_fit=spilled_fit(spill, vehicle))

@@ -23,7 +23,7 @@ from road_force_estimator.report.alignment import Aligned, align
 from road_force_estimator.report.correlation import correlation_figures
 
 __all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'CONVERGENCE_HOLD_S',
-           'accuracy', 'drive_segments', 'summarize', 'convergence']
+           'accuracy', 'drive_segments', 'summarize', 'convergence', 'friction_summary']
 
 #: Default segment length (m).
 DEFAULT_SEGMENT_LENGTH_M = 100.0
@@ -299,6 +299,7 @@ def summarize(est, drive=None, vehicle: VehicleParameters | None = None,
     stamps = np.asarray(est.stamp_ns, dtype=np.int64)
     summary['sensors'] = sensor_summary(st, int(stamps[0]) if stamps.size else 0)
     summary.update(_odometer_summary(est))
+    summary.update(friction_summary(est))
     summary.update(_speed_findings(est))
     summary['accuracy'] = accuracy(est, al, vehicle)
     segments = drive_segments(est, al, drive, segment_length_m=segment_length_m)
@@ -318,6 +319,14 @@ def _odometer_summary(est) -> dict[str, Any]:
     if est.fused:
         out['odometer'] = est.odometer.as_dict() if est.odometer is not None else None
     return out
+
+
+def friction_summary(est) -> dict[str, Any]:
+    """``{'friction_velocity': the tanh friction's v_f taken and the file's}``
+    (:meth:`.friction_fit.FrictionVelocity.as_dict`) of an offline estimate (its arrays or
+    its :class:`.OfflineStream`) whose file states a tanh friction, else {}."""
+    fv = getattr(est, 'friction_velocity', None)
+    return {} if fv is None else {'friction_velocity': fv.as_dict()}
 
 
 def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segments: dict,

@@ -377,6 +377,9 @@ def summarize_estimate(wv, truth=None, rows: int | None = None) -> dict[str, Any
                                                (float(m) for m in fit.axle_misfit))),
                             'online_verdicts': len(fits),
                             'online_mismatches': sum(bool(f.culprits) for f in fits)}
+    friction = getattr(meta, 'friction_velocity', None)     # offline, tanh friction stated
+    if friction is not None:
+        out['friction_velocity'] = friction.as_dict()
     if acc is not None:
         out['accuracy'] = acc.result(names)
     return out
@@ -521,6 +524,10 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
                       "The road, its figures and the segments' IRI above are the fused "
                       "profile's, the last metres (where the trailer's axles have not passed) "
                       "the whole vehicle's front wheels' road.")]
+    if s.get('friction_velocity'):
+        from road_force_estimator.estimation.friction_fit import FrictionVelocity
+        lines += ['', FrictionVelocity.from_dict(s['friction_velocity']).markdown()
+                  + ' One v_f for every spring.']
     fit = s.get('model_fit')
     if fit:
         from road_force_estimator.estimation.axle_fit import ADVICE

@@ -219,6 +219,22 @@ def _headline(result: EstimateResult, units: str = 'si') -> list[str]:
     return lines
 
 
+def _friction_notes(summary: dict) -> list[str]:
+    """A line where the offline fit changed the tanh friction's ``v_f`` (the front axle's
+    ``friction_velocity``, the whole vehicle's ``whole_vehicle_estimate.friction_velocity``:
+    :class:`.friction_fit.FrictionVelocity`)."""
+    from road_force_estimator.estimation.friction_fit import FrictionVelocity
+
+    out = []
+    for who, s in (('', summary), ("the whole vehicle's ",
+                                   summary.get('whole_vehicle_estimate') or {})):
+        fv = s.get('friction_velocity')
+        note = FrictionVelocity.from_dict(fv).note() if fv else None
+        if note:
+            out.append(who + note)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``estimate_bag``; the exit status (0 ok, 1 bad input, 2 bad command line)."""
     from road_force_estimator.bagio import BagReadError, BagWriteError
@@ -253,6 +269,8 @@ def _main(args: argparse.Namespace, argv: list[str] | None) -> int:
     for line in result.warnings:
         print(f'{PROG}: warning: {line}; processed up to the break', file=sys.stderr)
     for line in result.notes:
+        print(f'{PROG}: note: {line}', file=sys.stderr)
+    for line in _friction_notes(result.summary):
         print(f'{PROG}: note: {line}', file=sys.stderr)
     for line in _headline(result, args.units):
         print(f'{PROG}: {line}')
