@@ -123,3 +123,45 @@ def test_in_pieces_the_same_v_f_is_reported(drive, tmp_path, monkeypatch):
     assert many.summary['friction_velocity'] == one.summary['friction_velocity']
     assert _line((tmp_path / 'many' / 'report' / 'report.md').read_text()) == \
         _line((tmp_path / 'one' / 'report' / 'report.md').read_text())
+
+
+def test_the_whole_vehicles_report_states_its_fitted_v_f(tmp_path, capsys, monkeypatch):
+    """A 5-axle drive (simulate_bag, 6 s of class C, 1.5 kN of tanh friction per spring, the
+    plant's v_f 0.02 m/s: test_whole_vehicle_friction_fit's) and the file's 0.01: its section
+    states the plant's 0.02, fitted, in one block and in pieces; the front axle's (the package
+    defaults: no friction) no v_f."""
+    import pathlib
+    import subprocess
+    import sys
+
+    config = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'tractor_semitrailer.yaml'
+    text = config.read_text(encoding='utf-8')
+    assert text.count('leaf_spring_friction: [0.0, 0.0]') == 1
+    params = tmp_path / 'friction.yaml'
+    params.write_text(text.replace('leaf_spring_friction: [0.0, 0.0]',
+                                   'leaf_spring_friction: [1500.0, 1500.0]'), encoding='utf-8')
+    bag = tmp_path / 'drive'
+    sim = subprocess.run([str(pathlib.Path(sys.executable).parent / 'simulate_bag'),
+                          '--params-file', str(params), '-p',
+                          'vehicle.leaf_spring_friction_velocity:=0.02', '--road',
+                          'iso8608:C:seed=11', '--speed', '20', '--rate', '1000', '--duration',
+                          '6', '--gnss-rate', '0', '--no-progress', '--output', str(bag)],
+                         capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    one, md, err = _run(bag, tmp_path / 'one', ['--params-file', str(params)], capsys)
+    assert 'friction_velocity' not in one
+    fv = one['whole_vehicle_estimate']['friction_velocity']
+    assert fv['taken_mps'] == pytest.approx(0.02)                # the plant's
+    assert fv['file_mps'] == FILE_VF and fv['fitted'] and fv['changed']
+    assert '0.02 m/s fitted from the drive' in _line(md)
+    notes = [a for a in err.splitlines() if 'friction v_f' in a]
+    assert len(notes) == 1 and "the whole vehicle's" in notes[0] and '0.02 m/s' in notes[0]
+    monkeypatch.setattr(plan, 'STREAM_MIN_SAMPLES', 1)
+    monkeypatch.setattr(drive_blocks, 'BLOCK_SAMPLES', 2500)
+    from road_force_estimator.pipeline import whole_vehicle as stage
+    spilled, offline = [], stage._offline                 # the stage in pieces
+    monkeypatch.setattr(stage, '_offline', lambda *a, **k: spilled.append(1) or offline(*a, **k))
+    many, md_many, _ = _run(bag, tmp_path / 'many', ['--params-file', str(params)], capsys)
+    assert spilled
+    assert many['whole_vehicle_estimate']['friction_velocity'] == fv
+    assert _line(md_many) == _line(md)
