@@ -117,6 +117,10 @@ class DriveOutcome:
     #: ``whole_vehicle_estimate.model_fit``: ``verdict``, ``culprits``, ``misfit`` per axle,
     #: online the verdicts), else {} (no verdict: a front-axle drive, too short)
     model_fit: dict = field(default_factory=dict)
+    #: offline, where the file states tanh friction: the friction's ``v_f`` taken
+    #: (``report.json`` ``friction_velocity``, an articulated drive's
+    #: ``whole_vehicle_estimate.friction_velocity``: ``taken_mps``, ``file_mps``, ...), else {}
+    friction_velocity: dict = field(default_factory=dict)
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -473,14 +477,16 @@ def load_done(output_dir: str | Path, drive: DriveInput, key: str) -> DriveOutco
 def report_counts(summary: dict) -> dict[str, dict]:
     """The counts of a drive's report summary (``report.json``) that the fleet's tables
     carry, as :class:`DriveOutcome`'s fields: ``sensors``, ``rejected``, ``tractor_imu``,
-    ``model_fit`` ({} each where the summary has none)."""
+    ``model_fit``, ``friction_velocity`` ({} each where the summary has none)."""
     def part(value) -> dict:
         return dict(value) if isinstance(value, dict) else {}
 
     whole = part(summary.get('whole_vehicle_estimate'))
     return {'sensors': part(summary.get('sensors')), 'rejected': part(summary.get('rejected')),
             'tractor_imu': part(whole.get('tractor_imu')),
-            'model_fit': part(whole.get('model_fit'))}
+            'model_fit': part(whole.get('model_fit')),
+            'friction_velocity': part(whole.get('friction_velocity')
+                                      or summary.get('friction_velocity'))}
 
 
 def _report_summary(folder: Path) -> dict:

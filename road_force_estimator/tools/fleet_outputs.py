@@ -5,6 +5,7 @@ failures and ``summary.md``.
 per segment of every drive done, drives in id order (coordinates NaN without ``/fix``), then
 an articulated drive's columns and its model fit per axle (:data:`FIT_COLUMN`, repeated on
 its rows: :func:`fleet_table`);
+then :data:`FRICTION_COLUMN` where a drive's offline estimate states it;
 ``segments.geojson`` one LineString per segment (:mod:`road_force_estimator.report.fleet_map`);
 ``segments_map.png`` the segments coloured by IRI, when any has coordinates; ``failures.csv``
 ``drive,reason``. Every file is written to a temporary name and renamed into place.
@@ -25,8 +26,8 @@ import numpy as np
 
 from road_force_estimator.tools.fleet_drives import FLEET_COLUMNS, INT_COLUMNS, DriveOutcome
 
-__all__ = ['ROUGHEST', 'FIT_COLUMN', 'FleetResult', 'fleet_table', 'summary_markdown',
-           'write_outputs']
+__all__ = ['ROUGHEST', 'FIT_COLUMN', 'FRICTION_COLUMN', 'FleetResult', 'fleet_table',
+           'summary_markdown', 'write_outputs']
 
 #: Number of roughest segments listed in summary.md.
 ROUGHEST = 10
@@ -36,6 +37,11 @@ ROUGHEST = 10
 #: an axle or sensor, else 0), then ``model_fit_misfit_<axle>`` (the misfit's bound, a
 #: fraction) per axle; the culprits by name in ``summary.md``.
 FIT_COLUMN = 'model_fit_'
+#: The fleet table's column of the tanh friction's ``v_f`` (m/s) a drive's offline estimate
+#: took (``report.json`` ``friction_velocity.taken_mps``, the whole vehicle's where
+#: articulated: :attr:`.DriveOutcome.friction_velocity`), on every row of the drive, NaN in a
+#: drive without it (online, no tanh friction in the file); only when some drive has it.
+FRICTION_COLUMN = 'friction_velocity_mps'
 
 
 @dataclass
@@ -64,14 +70,18 @@ class FleetResult:
 def fleet_table(outcomes: Sequence[DriveOutcome]) -> dict[str, np.ndarray]:
     """The fleet table (:data:`~.fleet_drives.FLEET_COLUMNS`, then the whole vehicle's
     columns of the articulated drives in the order first met, then their model fit's
-    (:data:`FIT_COLUMN`), NaN in a drive without them): the segments of every drive done, in
-    the order of ``outcomes``."""
+    (:data:`FIT_COLUMN`), then the friction's ``v_f`` (:data:`FRICTION_COLUMN`), NaN in a
+    drive without them): the segments of every drive done, in the order of ``outcomes``."""
     done = [o for o in outcomes if o.status != 'failed' and o.table is not None]
     table: dict[str, np.ndarray] = {'drive': np.array(
         [o.drive_id for o in done for _ in range(len(o.table['start_m']))], dtype=object)}
     fits = [_fit_columns(o) for o in done]
     names = list(dict.fromkeys([*FLEET_COLUMNS[1:], *(c for o in done for c in o.table),
                                 *(c for f in fits for c in f)]))
+    friction = [_friction_column(o) for o in done]
+    if any(friction):
+        names.append(FRICTION_COLUMN)
+        fits = [{**f, **v} for f, v in zip(fits, friction)]
     for name in names:
         dtype = np.int64 if name in INT_COLUMNS else float
         parts = [np.asarray(o.table[name], dtype=dtype) if name in o.table
@@ -91,6 +101,13 @@ def _fit_columns(o: DriveOutcome) -> dict[str, float]:
     for axle, m in dict(fit.get('misfit') or {}).items():
         out[f'{FIT_COLUMN}misfit_{axle}'] = math.nan if m is None else float(m)
     return out
+
+
+def _friction_column(o: DriveOutcome) -> dict[str, float]:
+    """A drive's friction ``v_f`` taken as the fleet table's value (:data:`FRICTION_COLUMN`;
+    {} without one)."""
+    taken = o.friction_velocity.get('taken_mps')
+    return {} if taken is None else {FRICTION_COLUMN: float(taken)}
 
 
 def _atomic_write(path: Path, data: bytes | str) -> None:

@@ -63,7 +63,8 @@ def _run(drive, out, args, capsys):
     assert code == 0
     err = capsys.readouterr().err
     report = out / 'report'
-    return json.loads((report / 'report.json').read_text()), (report / 'report.md').read_text(), err
+    md = (report / 'report.md').read_text()
+    return json.loads((report / 'report.json').read_text()), md, err
 
 
 def _line(md: str) -> str:
@@ -165,3 +166,29 @@ def test_the_whole_vehicles_report_states_its_fitted_v_f(tmp_path, capsys, monke
     assert spilled
     assert many['whole_vehicle_estimate']['friction_velocity'] == fv
     assert _line(md_many) == _line(md)
+
+
+def test_the_fleet_table_gets_the_v_f_taken(drive, tmp_path):
+    """estimate_fleet's table (fleet_outputs.fleet_table, from each drive's report as
+    fleet_drives.report_counts reads it): ``friction_velocity_mps`` the plant's 0.005 on every
+    row of the drive whose file states friction, NaN on the other's; no such column in a
+    fleet without it."""
+    from road_force_estimator.tools.fleet_drives import (
+        DriveOutcome, read_segments_csv, report_counts)
+    from road_force_estimator.tools.fleet_outputs import FRICTION_COLUMN, fleet_table
+
+    outcomes = []
+    for name, args in (('fit', FRICTION[1::2]), ('none', [])):
+        vehicle, observer = estimate_bag.load_parameters(None, args)
+        r = estimate_bag.run(drive, tmp_path / name, vehicle=vehicle, observer=observer,
+                             mode='offline', figures=False, segment_length_m=50.0)
+        table = read_segments_csv(tmp_path / name / 'report' / 'segments.csv')
+        outcomes.append(DriveOutcome(name, 'processed', table=table,
+                                     **report_counts(r.summary)))
+    table = fleet_table(outcomes)
+    rows = table['drive'] == 'fit'
+    assert rows.sum() >= 4 and (~rows).sum() >= 4
+    np.testing.assert_allclose(table[FRICTION_COLUMN][rows], PLANT_VF)
+    assert np.isnan(table[FRICTION_COLUMN][~rows]).all()
+    assert FRICTION_COLUMN not in fleet_table(outcomes[1:])
+
