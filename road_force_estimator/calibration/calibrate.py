@@ -46,6 +46,7 @@ from road_force_estimator.core.parameters import (
     GRAVITY_MPS2, ObserverParameters, VehicleParameters)
 from road_force_estimator.core.road import RoadProfile
 from road_force_estimator.estimation.estimator import estimate_batch
+from road_force_estimator.estimation.friction_fit import states_friction
 from road_force_estimator.calibration.alignment import (
     Alignment, AlignmentError, align)
 from road_force_estimator.calibration.fit import (
@@ -228,11 +229,17 @@ def _final_covariance(problem, scale, theta, cov, scaled):
 
 def _free_slots(nominal: VehicleParameters, hold: set[str], auto: set[Slot],
                 reference: Slot | None) -> list[Slot]:
+    """The slots the fit frees: not held (by name, or ``auto``), not the force reference nor
+    an offset, a physical value > 0 in ``nominal``, and the friction's ``v_f`` (kind
+    ``'velocity'``) only where ``nominal`` states a tanh friction (else it acts on nothing)."""
     free = []
     for slot in SLOTS:
         if slot.name in hold or slot in auto or slot == reference or slot.kind == 'offset':
             continue
         if slot.physical and slot_value(nominal, slot) <= 0.0:
+            continue
+        if slot.kind == 'velocity' and not states_friction(
+                nominal.leaf_spring_friction_model, nominal.leaf_spring_friction_n):
             continue
         free.append(slot)
     return free

@@ -12,8 +12,10 @@ damping rates, forces) all scale with the one force factor the kinematics cannot
 "Calibration"); ``'geometry'`` values (the CG height) and ``'time'`` values (a sensor time
 constant) do not; ``'offset'`` values are the sensor offsets (m, m, rad) and ``'alignment'``
 the fine start offset (m) and odometer scale refined by the fit. Positive physical values are
-fitted as ``log(value / nominal)``. ``vehicle.leaf_spring_friction`` (kind ``'scale'``) and
-``vehicle.sensor_time_constant`` (kind ``'time'``) are in :data:`OPTIONAL`: they join
+fitted as ``log(value / nominal)``. ``vehicle.leaf_spring_friction`` (kind ``'scale'``),
+``vehicle.sensor_time_constant`` (kind ``'time'``) and the tanh friction's
+``vehicle.leaf_spring_friction_velocity`` (kind ``'velocity'``, not scaled; freed only where
+the file states a tanh friction, ``calibrate._free_slots``) are in :data:`OPTIONAL`: they join
 :data:`SLOTS` (one row per side) as soon as :data:`road_force_estimator.core.parameters.SPECS`
 has them, as ``plant_only`` slots: the linear model does not see them, the plant does (its
 defect's derivative is their Jacobian column, :meth:`.calibration_fit.FitProblem.update_defect`),
@@ -62,7 +64,8 @@ class Slot:
 
     ``name`` is the parameter (``vehicle.*``) or a pseudo-name (``sensor.offset.*``,
     ``alignment.*``); ``index`` 0/1 picks a side of a pair (None for a scalar); ``kind`` is
-    ``'scale'``, ``'geometry'``, ``'time'``, ``'offset'`` or ``'alignment'``; ``unit`` for
+    ``'scale'``, ``'geometry'``, ``'time'``, ``'velocity'``, ``'offset'`` or ``'alignment'``;
+    ``unit`` for
     reports; ``plant_only``: the linear model does not depend on it (its effect, and its
     Jacobian column, come from the plant's defect).
     """
@@ -83,7 +86,7 @@ class Slot:
     @property
     def physical(self) -> bool:
         """True for a vehicle parameter (fitted in log scale)."""
-        return self.kind in ('scale', 'geometry', 'time')
+        return self.kind in ('scale', 'geometry', 'time', 'velocity')
 
 
 def _pair(name: str, kind: str, unit: str) -> tuple[Slot, Slot]:
@@ -95,6 +98,7 @@ def _pair(name: str, kind: str, unit: str) -> tuple[Slot, Slot]:
 OPTIONAL: tuple[tuple[str, str, str], ...] = (
     ('vehicle.leaf_spring_friction', 'scale', 'N'),
     ('vehicle.sensor_time_constant', 'time', 's'),
+    ('vehicle.leaf_spring_friction_velocity', 'velocity', 'm/s'),
 )
 
 

@@ -15,6 +15,8 @@ masses are known only up to a factor. ``--hold`` keeps parameters (e.g.
 ``vehicle.leaf_spring_friction`` and ``vehicle.sensor_time_constant`` are fitted when the
 file's value is > 0; a 0 stays fixed (reported 'fixed') unless ``--free NAME`` asks: then the
 fit starts from 500 N per side / 2 ms (reaching 50-5000 N / 0.2-20 ms), reported as nominal.
+``vehicle.leaf_spring_friction_velocity`` (the tanh friction's v_f) is fitted where the file
+states a tanh friction (the online node then takes the fitted value from FILE).
 The survey is followed under the tire envelope ``simulator.tire_envelope_length``.
 
 Writes FILE, a ``/**: ros__parameters:`` parameter file with every key of the input file (the

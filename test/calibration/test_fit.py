@@ -44,7 +44,8 @@ def test_optional_parameters_join_once_the_table_has_them():
     assert [s.label for s in slots] == ['vehicle.leaf_spring_friction[left]',
                                         'vehicle.leaf_spring_friction[right]']
     assert all(s.plant_only and s.kind == 'scale' for s in slots)
-    assert names == ['vehicle.leaf_spring_friction', 'vehicle.sensor_time_constant']
+    assert names == ['vehicle.leaf_spring_friction', 'vehicle.sensor_time_constant',
+                     'vehicle.leaf_spring_friction_velocity']
 
 
 def test_a_parameter_only_the_plant_sees_is_fitted_through_its_defect(monkeypatch):
