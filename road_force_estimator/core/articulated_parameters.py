@@ -161,6 +161,11 @@ class ArticulatedParameters:
         """True when the deflections are read from a mechanical zero."""
         return self.deflection_reference == 'zero_load'
 
+    @property
+    def spring_friction_n(self) -> tuple[float, ...]:
+        """Every spring's friction F_f (N), axle by axle, left then right."""
+        return tuple(f for a in self.axles for f in a.leaf_spring_friction_n)
+
     def body(self, name: str) -> BodyParameters:
         return self.tractor if name == 'tractor' else self.trailer
 

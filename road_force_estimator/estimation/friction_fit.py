@@ -94,7 +94,8 @@ class FrictionVelocity:
     (``report.json`` ``friction_velocity``, a line in ``report.md``): ``taken_mps`` (m/s) the
     smoother's, ``file_mps`` the file's (``vehicle.leaf_spring_friction_velocity``),
     ``fitted`` whether the fit ran (:func:`fits`, not under ``zero_load``; it may keep the
-    file's), ``reason`` why not ('' when it ran)."""
+    file's), ``reason`` why not ('' when it ran). Its words in the report:
+    :func:`road_force_estimator.report.summary.friction_velocity_line`."""
 
     taken_mps: float
     file_mps: float
@@ -123,29 +124,3 @@ class FrictionVelocity:
         ``changed``, ``reason``."""
         return {'taken_mps': self.taken_mps, 'file_mps': self.file_mps, 'fitted': self.fitted,
                 'changed': self.changed, 'reason': self.reason}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> FrictionVelocity:
-        """Back from :meth:`as_dict` (the report's summary)."""
-        return cls(float(d['taken_mps']), float(d['file_mps']), bool(d['fitted']),
-                   str(d.get('reason') or ''))
-
-    def markdown(self) -> str:
-        """The report's line."""
-        head = f'Leaf-spring friction v_f: {self.taken_mps:g} m/s'
-        if not self.fitted:
-            return f"{head}, the file's (not fitted: {self.reason})."
-        if not self.changed:
-            return (f"{head}, the file's: fitted from the drive, no v_f of "
-                    f'{FIT_GRID[0]:g}-{FIT_GRID[-1]:g} x it was likelier by '
-                    f'{FIT_LEAD_NATS:g} nats.')
-        return (f"{head} fitted from the drive (the file's {self.file_mps:g}; put it in the "
-                'file for the online node: `vehicle.leaf_spring_friction_velocity`).')
-
-    def note(self) -> str | None:
-        """estimate_bag's line on stderr when the fit changed ``v_f`` (else None)."""
-        if not self.changed:
-            return None
-        return (f"leaf-spring friction v_f {self.taken_mps:g} m/s fitted from the drive (the "
-                f"file's {self.file_mps:g} m/s); the online node takes it from "
-                'vehicle.leaf_spring_friction_velocity')

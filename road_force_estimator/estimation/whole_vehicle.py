@@ -997,7 +997,7 @@ class WholeVehicleOfflineStream:
         self.friction_velocity = FrictionVelocity.of(
             est.vehicle.leaf_spring_friction_velocity_mps, self.friction_velocity_mps,
             self.observer, est.vehicle.leaf_spring_friction_model,
-            [f for a in est.vehicle.axles for f in a.leaf_spring_friction_n],
+            est.vehicle.spring_friction_n,
             est.vehicle.zero_load)
         model = (est.model if vehicle is est.vehicle else est.model.with_vehicle(vehicle))
         braking = est.online.braking if model is est.model else model.braking_response()
@@ -1112,7 +1112,7 @@ def fit_friction_velocity(vehicle: ArticulatedParameters, observer: ObserverPara
     """
     if (vehicle.zero_load or not fits(
             observer, vehicle.leaf_spring_friction_model,
-            [f for a in vehicle.axles for f in a.leaf_spring_friction_n])):
+            vehicle.spring_friction_n)):
         return vehicle
     stamps = np.asarray(stamps_ns, np.int64)
     end = fit_end(stamps, stamps.size)

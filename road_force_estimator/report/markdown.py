@@ -296,8 +296,8 @@ def _summary_notes(s: dict[str, Any], u: Units) -> list[str]:
              '- Restarts: the estimator starts again from rest after a gap in the stamps '
              '(longer than its gap threshold) or a reset; 0 (0) = it ran through once.']
     if s.get('friction_velocity'):              # offline, a file stating tanh friction
-        from road_force_estimator.estimation.friction_fit import FrictionVelocity
-        notes.append('- ' + FrictionVelocity.from_dict(s['friction_velocity']).markdown())
+        from road_force_estimator.report.summary import friction_velocity_line
+        notes.append('- ' + friction_velocity_line(s['friction_velocity']))
     ref = (s['iri_m_per_km'] or {}).get('reference')
     if ref == 'enveloped':
         notes.append('- True IRI: of the ground-truth profile, which is the road enveloped by '

@@ -23,7 +23,8 @@ from road_force_estimator.report.alignment import Aligned, align
 from road_force_estimator.report.correlation import correlation_figures
 
 __all__ = ['DEFAULT_SEGMENT_LENGTH_M', 'CONVERGENCE_WINDOW_S', 'CONVERGENCE_HOLD_S',
-           'accuracy', 'drive_segments', 'summarize', 'convergence', 'friction_summary']
+           'accuracy', 'drive_segments', 'summarize', 'convergence', 'friction_summary',
+           'friction_velocity_line', 'friction_velocity_note']
 
 #: Default segment length (m).
 DEFAULT_SEGMENT_LENGTH_M = 100.0
@@ -327,6 +328,32 @@ def friction_summary(est) -> dict[str, Any]:
     its :class:`.OfflineStream`) whose file states a tanh friction, else {}."""
     fv = getattr(est, 'friction_velocity', None)
     return {} if fv is None else {'friction_velocity': fv.as_dict()}
+
+
+def friction_velocity_line(fv: dict[str, Any]) -> str:
+    """The report's line of ``report.json``'s ``friction_velocity`` (:func:`friction_summary`):
+    the v_f taken, and whether it was fitted from the drive or is the file's."""
+    from road_force_estimator.estimation.friction_fit import FIT_GRID, FIT_LEAD_NATS
+
+    head = f"Leaf-spring friction v_f: {fv['taken_mps']:g} m/s"
+    if not fv['fitted']:
+        return f"{head}, the file's (not fitted: {fv['reason']})."
+    if fv['taken_mps'] == fv['file_mps']:
+        return (f"{head}, the file's: fitted from the drive, no v_f of "
+                f'{FIT_GRID[0]:g}-{FIT_GRID[-1]:g} x it was likelier by '
+                f'{FIT_LEAD_NATS:g} nats.')
+    return (f"{head} fitted from the drive (the file's {fv['file_mps']:g}; put it in the "
+            'file for the online node: `vehicle.leaf_spring_friction_velocity`).')
+
+
+def friction_velocity_note(fv: dict[str, Any]) -> str | None:
+    """estimate_bag's line on stderr where the fit changed ``v_f`` (``fv``: ``report.json``'s
+    ``friction_velocity``), else None."""
+    if fv['taken_mps'] == fv['file_mps']:
+        return None
+    return (f"leaf-spring friction v_f {fv['taken_mps']:g} m/s fitted from the drive (the "
+            f"file's {fv['file_mps']:g} m/s); the online node takes it from "
+            'vehicle.leaf_spring_friction_velocity')
 
 
 def _add_correlation(acc: dict[str, Any] | None, est, al: Aligned, drive, segments: dict,

@@ -525,8 +525,8 @@ def estimate_markdown(s: dict[str, Any]) -> list[str]:
                       "profile's, the last metres (where the trailer's axles have not passed) "
                       "the whole vehicle's front wheels' road.")]
     if s.get('friction_velocity'):
-        from road_force_estimator.estimation.friction_fit import FrictionVelocity
-        lines += ['', FrictionVelocity.from_dict(s['friction_velocity']).markdown()
+        from road_force_estimator.report.summary import friction_velocity_line
+        lines += ['', friction_velocity_line(s['friction_velocity'])
                   + ' One v_f for every spring.']
     fit = s.get('model_fit')
     if fit:

@@ -222,14 +222,14 @@ def _headline(result: EstimateResult, units: str = 'si') -> list[str]:
 def _friction_notes(summary: dict) -> list[str]:
     """A line where the offline fit changed the tanh friction's ``v_f`` (the front axle's
     ``friction_velocity``, the whole vehicle's ``whole_vehicle_estimate.friction_velocity``:
-    :class:`.friction_fit.FrictionVelocity`)."""
-    from road_force_estimator.estimation.friction_fit import FrictionVelocity
+    :func:`.report.summary.friction_velocity_note`)."""
+    from road_force_estimator.report.summary import friction_velocity_note
 
     out = []
     for who, s in (('', summary), ("the whole vehicle's ",
                                    summary.get('whole_vehicle_estimate') or {})):
         fv = s.get('friction_velocity')
-        note = FrictionVelocity.from_dict(fv).note() if fv else None
+        note = friction_velocity_note(fv) if fv else None
         if note:
             out.append(who + note)
     return out
