@@ -48,6 +48,7 @@ import numpy as np
 from scipy import linalg
 
 from bench.accuracy.peers import RollPlaneKalman
+from road_force_estimator.core.friction import tanh_forces
 from road_force_estimator.core.parameters import VehicleParameters
 from road_force_estimator.estimation.observer.riccati import van_loan
 from road_force_estimator.estimation.reconstruction import load_transfer_ratios
@@ -144,7 +145,7 @@ class FrictionRollPlane:
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
         """The friction forces on the body (N, > 0 upward) at rates dq (m/s), (..., 2)."""
-        return -self.friction_n * np.tanh(dq / self.v_f)
+        return tanh_forces(self.friction_n, dq, self.v_f)
 
 
 def particle_fixed_lag(t_s, q_m, roll_rad, speed_mps, vehicle: VehicleParameters, *,
